@@ -1,0 +1,87 @@
+#include "render/renderer.h"
+
+#include <algorithm>
+#include <stdexcept>
+#include <vector>
+
+#include "estimators/error.h"
+#include "render/gl_context.h"
+
+namespace flexbench::render {
+
+RenderMode ParseRenderMode(const std::string& text, const std::string& key) {
+  if (text == "quality") return RenderMode::kQuality;
+  if (text == "fast") return RenderMode::kFast;
+  throw InputError(key + ": unknown render mode '" + text + "' (expected quality or fast)");
+}
+
+struct Renderer::Impl {
+  mjvScene scene;
+  mjvCamera camera;
+  mjvOption option;
+  mjrContext context;
+  std::vector<unsigned char> rgb_flipped;
+};
+
+Renderer::Renderer(const mjModel* m, RenderMode mode)
+    : impl_(std::make_unique<Impl>()),
+      model_(m),
+      width_(m->vis.global.offwidth),
+      height_(m->vis.global.offheight) {
+  gl_renderer_ = EnsureGlContext();
+  mjv_defaultScene(&impl_->scene);
+  mjv_defaultCamera(&impl_->camera);
+  mjv_defaultOption(&impl_->option);
+  mjr_defaultContext(&impl_->context);
+  mjv_makeScene(m, &impl_->scene, 2000);
+  // Multisampling is a property of the offscreen buffer, fixed at context creation; MuJoCo
+  // reads it from the model, so set it for the call and restore it.
+  mjModel* mutable_model = const_cast<mjModel*>(m);
+  const int samples = m->vis.quality.offsamples;
+  if (mode == RenderMode::kFast) mutable_model->vis.quality.offsamples = 0;
+  mjr_makeContext(m, &impl_->context, mjFONTSCALE_100);
+  mutable_model->vis.quality.offsamples = samples;
+  mjr_setBuffer(mjFB_OFFSCREEN, &impl_->context);
+  if (impl_->context.currentBuffer != mjFB_OFFSCREEN) {
+    throw std::runtime_error("OSMesa: offscreen framebuffer not available");
+  }
+  if (impl_->context.offWidth < width_ || impl_->context.offHeight < height_) {
+    throw std::runtime_error("offscreen buffer smaller than the model's offwidth/offheight");
+  }
+  impl_->scene.flags[mjRND_SHADOW] = mode == RenderMode::kQuality ? 1 : 0;
+  impl_->camera.type = mjCAMERA_FIXED;
+  impl_->rgb_flipped.resize(static_cast<size_t>(width_) * height_ * 3);
+}
+
+Renderer::~Renderer() {
+  mjr_freeContext(&impl_->context);
+  mjv_freeScene(&impl_->scene);
+}
+
+void Renderer::UploadTexture(int tex_id) {
+  EnsureGlContext();
+  mjr_uploadTexture(model_, &impl_->context, tex_id);
+}
+
+Image Renderer::RenderRgb(mjData* d, int cam_id) {
+  EnsureGlContext();
+  mjr_setBuffer(mjFB_OFFSCREEN, &impl_->context);
+  impl_->camera.fixedcamid = cam_id;
+  const mjrRect viewport{0, 0, width_, height_};
+  mjv_updateScene(model_, d, &impl_->option, nullptr, &impl_->camera, mjCAT_ALL, &impl_->scene);
+  mjr_render(viewport, &impl_->scene, &impl_->context);
+  mjr_readPixels(impl_->rgb_flipped.data(), nullptr, viewport, &impl_->context);
+  // OpenGL's first row is the bottom of the picture.
+  Image image{width_, height_, 3, std::vector<std::uint8_t>(impl_->rgb_flipped.size())};
+  const size_t row = static_cast<size_t>(width_) * 3;
+  for (int r = 0; r < height_; ++r) {
+    std::copy_n(impl_->rgb_flipped.data() + (height_ - 1 - r) * row, row, image.Row(r));
+  }
+  if (IsConstant(image)) {
+    throw std::runtime_error("rendered frame is constant: nothing was drawn (GL renderer: " +
+                             gl_renderer_ + ")");
+  }
+  return image;
+}
+
+}  // namespace flexbench::render

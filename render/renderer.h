@@ -1,0 +1,50 @@
+// Offscreen rendering of MuJoCo scenes from MJCF cameras through OSMesa.
+#pragma once
+
+#include <mujoco/mujoco.h>
+
+#include <memory>
+#include <string>
+
+#include "render/image.h"
+
+namespace flexbench::render {
+
+// quality: MuJoCo's defaults (multisampling, shadows). fast: no multisampling, no shadows;
+// several times faster on the software rasteriser.
+enum class RenderMode { kQuality, kFast };
+
+// Parses "quality" / "fast"; throws InputError naming `key` otherwise.
+RenderMode ParseRenderMode(const std::string& text, const std::string& key);
+
+// Renders one model. The model must outlive the renderer; textures changed after construction
+// (e.g. by ApplyTagTextures) need UploadTexture. Frame size is the model's offwidth/offheight.
+class Renderer {
+ public:
+  Renderer(const mjModel* m, RenderMode mode);
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  // Renders camera `cam_id` for the state in `d` (positions must be current: mj_forward or
+  // mj_kinematics). Returns RGB, top row first. Throws std::runtime_error when the frame is
+  // constant (nothing was drawn).
+  Image RenderRgb(mjData* d, int cam_id);
+
+  void UploadTexture(int tex_id);
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  // GL_RENDERER of the context, for the run's log.
+  const std::string& gl_renderer() const { return gl_renderer_; }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  const mjModel* model_;
+  int width_;
+  int height_;
+  std::string gl_renderer_;
+};
+
+}  // namespace flexbench::render

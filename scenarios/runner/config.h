@@ -1,0 +1,83 @@
+// Scenario and declared-model files: YAML with errors that name the file, the line and the
+// key, and detection of unknown keys (every key a reader does not consume is an error).
+#pragma once
+
+#include <yaml-cpp/yaml.h>
+
+#include <memory>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "estimators/error.h"
+
+namespace flexbench::scenarios {
+
+class ConfigNode {
+ public:
+  // Parses a YAML file. Throws InputError "<file>: not found" or "<file>:<line>: YAML syntax
+  // error: ...".
+  static ConfigNode LoadFile(const std::string& path);
+  // Parses YAML text; `name` stands for the file in messages.
+  static ConfigNode LoadString(const std::string& text, const std::string& name);
+
+  bool Has(const std::string& key) const;
+  // Required child; throws "<file>:<line>: missing key '<path>'".
+  ConfigNode Child(const std::string& key) const;
+  std::optional<ConfigNode> Optional(const std::string& key) const;
+
+  // Scalar conversions; throw "<file>:<line>: key '<path>': expected <type>".
+  double AsDouble() const;
+  int AsInt() const;
+  bool AsBool() const;
+  std::string AsString() const;
+  std::vector<double> AsDoubleList() const;
+
+  double GetDouble(const std::string& key) const { return Child(key).AsDouble(); }
+  int GetInt(const std::string& key) const { return Child(key).AsInt(); }
+  std::string GetString(const std::string& key) const { return Child(key).AsString(); }
+  double GetDouble(const std::string& key, double fallback) const;
+  int GetInt(const std::string& key, int fallback) const;
+  bool GetBool(const std::string& key, bool fallback) const;
+  std::string GetString(const std::string& key, const std::string& fallback) const;
+
+  bool IsMap() const { return node_.IsMap(); }
+  bool IsSequence() const { return node_.IsSequence(); }
+  bool IsScalar() const { return node_.IsScalar(); }
+  // Keys of a map in file order (each one is consumed by the Child call that follows).
+  std::vector<std::string> Keys() const;
+  // Elements of a sequence.
+  std::vector<ConfigNode> Items() const;
+
+  // Throws "<file>:<line>: unknown key '<path>'" for the first key nothing consumed.
+  void CheckNoUnknownKeys() const;
+
+  // "<file>:<line>" of this node, and "<file>:<line>: key '<path>'".
+  std::string Where() const;
+  std::string WhereKey() const;
+  [[noreturn]] void Fail(const std::string& message) const;
+
+  const std::string& file() const { return state_->file; }
+  const std::string& key_path() const { return path_; }
+  // Directory of the file, for resolving relative paths in it.
+  std::string Directory() const;
+  // `value` relative to the file's directory unless absolute.
+  std::string ResolvePath(const std::string& value) const;
+
+ private:
+  struct State {
+    std::string file;
+    std::set<std::string> consumed;
+  };
+  ConfigNode(std::shared_ptr<State> state, YAML::Node node, std::string path)
+      : state_(std::move(state)), node_(std::move(node)), path_(std::move(path)) {}
+  ConfigNode MakeChild(const YAML::Node& node, const std::string& child_path) const;
+  void CheckUnknown(const YAML::Node& node, const std::string& path) const;
+
+  std::shared_ptr<State> state_;
+  YAML::Node node_;
+  std::string path_;
+};
+
+}  // namespace flexbench::scenarios

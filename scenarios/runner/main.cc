@@ -1,0 +1,43 @@
+// flexbench: run scenarios that score pose estimators of flexible arms against MuJoCo's truth.
+#include <CLI/CLI.hpp>
+
+#include <filesystem>
+#include <iostream>
+
+#include "scenarios/runner/runner.h"
+
+int main(int argc, char** argv) {
+  using flexbench::scenarios::RunOptions;
+  CLI::App app{"flexbench: pose estimation of flexible robot arms, scored against MuJoCo"};
+  app.set_version_flag("--version", std::string("flexbench ") + FLEXBENCH_VERSION);
+  app.require_subcommand(1);
+
+  RunOptions run;
+  std::uint64_t seed = 0;
+  CLI::App* run_cmd = app.add_subcommand("run", "run a scenario file");
+  run_cmd->add_option("scenario", run.scenario_path, "scenario YAML file")->required();
+  run_cmd->add_option("--out", run.out_dir, "output folder (default: out/<scenario>)");
+  CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "override the scenario's seed");
+  run_cmd->add_flag("--check-gates", run.check_gates, "exit 3 when a gate fails");
+
+  std::string list_dir = "scenarios";
+  CLI::App* list_cmd = app.add_subcommand("list", "list scenario kinds and scenario files");
+  list_cmd->add_option("--dir", list_dir, "folder with scenario files");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? 0 : flexbench::scenarios::kExitBadInput;
+  }
+  if (*seed_opt) run.seed = seed;
+  if (*run_cmd) return flexbench::scenarios::RunScenario(run);
+  if (*list_cmd) {
+    if (!std::filesystem::is_directory(list_dir) &&
+        std::filesystem::is_directory(std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios")) {
+      list_dir = std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios";
+    }
+    return flexbench::scenarios::ListScenarios(list_dir);
+  }
+  return 0;
+}

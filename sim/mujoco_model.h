@@ -1,0 +1,44 @@
+// Loading MuJoCo models (MJCF, and URDF through MuJoCo's own importer) with errors that name
+// the file, and RAII ownership of mjModel / mjData.
+#pragma once
+
+#include <mujoco/mujoco.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace flexbench::sim {
+
+struct MjModelDeleter {
+  void operator()(mjModel* m) const { mj_deleteModel(m); }
+};
+struct MjDataDeleter {
+  void operator()(mjData* d) const { mj_deleteData(d); }
+};
+using MjModelPtr = std::unique_ptr<mjModel, MjModelDeleter>;
+using MjDataPtr = std::unique_ptr<mjData, MjDataDeleter>;
+
+// Loads an MJCF or URDF file. Throws InputError("<path>: <MuJoCo's message>") when the file is
+// missing or MuJoCo rejects it. Warnings MuJoCo emits while compiling are appended to
+// `warnings` when given (e.g. URDF meshes it cannot read).
+MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings = nullptr);
+
+// Loads a model from an in-memory MJCF string (tests use inline models). `name` is used in
+// error messages. Inline models must not reference asset files.
+MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name = "inline.xml",
+                               std::vector<std::string>* warnings = nullptr);
+
+MjDataPtr MakeData(const mjModel* m);
+
+// Name -> id lookups that throw InputError naming the model and the missing name.
+int JointId(const mjModel* m, const std::string& name, const std::string& model_name = "model");
+int BodyId(const mjModel* m, const std::string& name, const std::string& model_name = "model");
+int SiteId(const mjModel* m, const std::string& name, const std::string& model_name = "model");
+int GeomId(const mjModel* m, const std::string& name, const std::string& model_name = "model");
+int CameraId(const mjModel* m, const std::string& name, const std::string& model_name = "model");
+
+// MuJoCo's name of an object, or "" for unnamed ones.
+std::string ObjectName(const mjModel* m, mjtObj type, int id);
+
+}  // namespace flexbench::sim
