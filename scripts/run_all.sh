@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The main job: sets up, builds and runs every scenario in scenarios/ with its gates, writing
+# results/<scenario>/{summary.json, *.csv, frames/*.png}, then the plots.
+# Usage: scripts/run_all.sh [output folder, default results]
+set -uo pipefail
+cd "$(dirname "$0")/.."
+
+bash scripts/setup.sh || exit 1
+bash scripts/build.sh || exit 1
+out=${1:-results}
+mkdir -p "$out"
+
+failed=()
+for scenario in scenarios/*.yaml; do
+  name=$(basename "$scenario" .yaml)
+  echo "== $name"
+  build/bin/flexbench run "$scenario" --out "$out/$name" --check-gates
+  rc=$?
+  [ $rc -eq 0 ] || failed+=("$name (exit $rc)")
+done
+
+if [ -f scripts/plots.py ]; then
+  /usr/bin/python3 scripts/plots.py "$out" || failed+=("plots")
+fi
+
+echo
+if [ ${#failed[@]} -eq 0 ]; then
+  echo "all scenarios passed their gates; results in $out/"
+else
+  echo "failed: ${failed[*]}"
+  exit 1
+fi

@@ -1,0 +1,107 @@
+// Scenario-file parsing: errors name file, line and key; unknown keys are caught; gates.
+#include <gtest/gtest.h>
+
+#include "scenarios/runner/config.h"
+#include "scenarios/runner/gates.h"
+
+namespace flexbench::scenarios {
+namespace {
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(ConfigNode, ReadsTypedValues) {
+  const ConfigNode root =
+      ConfigNode::LoadString("a: 1.5\nb: 3\nc: true\nd: text\ne: [1, 2.5]\n", "f.yaml");
+  EXPECT_DOUBLE_EQ(root.GetDouble("a"), 1.5);
+  EXPECT_EQ(root.GetInt("b"), 3);
+  EXPECT_TRUE(root.GetBool("c", false));
+  EXPECT_EQ(root.GetString("d"), "text");
+  EXPECT_EQ(root.Child("e").AsDoubleList(), (std::vector<double>{1.0, 2.5}));
+  EXPECT_EQ(root.GetInt("missing", 7), 7);
+  EXPECT_NO_THROW(root.CheckNoUnknownKeys());
+}
+
+TEST(ConfigNode, SyntaxErrorNamesFileAndLine) {
+  const std::string e = ErrorOf([] { ConfigNode::LoadString("a: 1\nb: [1,\n", "f.yaml"); });
+  EXPECT_NE(e.find("f.yaml:"), std::string::npos) << e;
+  EXPECT_NE(e.find("YAML syntax error"), std::string::npos) << e;
+}
+
+TEST(ConfigNode, MissingKeyIsNamed) {
+  const ConfigNode root = ConfigNode::LoadString("outer:\n  x: 1\n", "f.yaml");
+  const std::string e = ErrorOf([&] { root.Child("outer").GetDouble("y"); });
+  EXPECT_NE(e.find("f.yaml:2: missing key 'outer.y'"), std::string::npos) << e;
+}
+
+TEST(ConfigNode, WrongTypeNamesKeyAndLine) {
+  const ConfigNode root = ConfigNode::LoadString("a: 1\nb: abc\n", "f.yaml");
+  const std::string e = ErrorOf([&] { root.GetDouble("b"); });
+  EXPECT_NE(e.find("f.yaml:2: key 'b': expected a number"), std::string::npos) << e;
+}
+
+TEST(ConfigNode, NonFiniteNumbersAreRejected) {
+  const ConfigNode root = ConfigNode::LoadString("a: .nan\nb: .inf\n", "f.yaml");
+  EXPECT_THROW(root.GetDouble("a"), InputError);
+  EXPECT_THROW(root.GetDouble("b"), InputError);
+}
+
+TEST(ConfigNode, UnknownKeysAreReportedWithLine) {
+  const ConfigNode root =
+      ConfigNode::LoadString("a: 1\nsub:\n  known: 2\n  typo: 3\nlist:\n  - {k: 1, z: 2}\n",
+                             "f.yaml");
+  root.GetDouble("a");
+  root.Child("sub").GetDouble("known");
+  std::string e = ErrorOf([&] { root.CheckNoUnknownKeys(); });
+  EXPECT_NE(e.find("f.yaml:4: unknown key 'sub.typo'"), std::string::npos) << e;
+  root.Child("sub").GetDouble("typo");
+  e = ErrorOf([&] { root.CheckNoUnknownKeys(); });
+  EXPECT_NE(e.find("unknown key 'list'"), std::string::npos) << e;
+  for (const ConfigNode& item : root.Child("list").Items()) item.GetDouble("k");
+  e = ErrorOf([&] { root.CheckNoUnknownKeys(); });
+  EXPECT_NE(e.find("f.yaml:6: unknown key 'list[0].z'"), std::string::npos) << e;
+}
+
+TEST(ConfigNode, ResolvesPathsAgainstTheFile) {
+  const ConfigNode root = ConfigNode::LoadString("m: ../models/a.xml\n", "/x/scenarios/s.yaml");
+  EXPECT_EQ(root.ResolvePath(root.GetString("m")), "/x/models/a.xml");
+  EXPECT_EQ(root.ResolvePath("/abs/b.xml"), "/abs/b.xml");
+}
+
+TEST(Gates, EvaluatesNumbersBooleansAndRelativeThresholds) {
+  const ConfigNode root = ConfigNode::LoadString(
+      "gates:\n"
+      "  - {name: a, metric: x, op: '<', threshold: 1.0}\n"
+      "  - {name: b, metric: estimators.p.metrics.e, op: '<', "
+      "threshold: {metric: estimators.n.metrics.e, scale: 0.8}}\n"
+      "  - {name: c, metric: ok, op: '==', threshold: true}\n"
+      "  - {name: d, metric: absent, op: '>', threshold: 0}\n",
+      "f.yaml");
+  const auto gates = ParseGates(root);
+  ASSERT_EQ(gates.size(), 4u);
+  Json summary;
+  summary["metrics"]["x"] = 0.5;
+  summary["metrics"]["ok"] = true;
+  summary["estimators"]["p"]["metrics"]["e"] = 0.7;
+  summary["estimators"]["n"]["metrics"]["e"] = 1.0;
+  bool all = true;
+  const Json out = EvaluateGates(gates, summary, &all);
+  EXPECT_TRUE(out[0]["passed"].get<bool>());
+  EXPECT_TRUE(out[1]["passed"].get<bool>());
+  EXPECT_DOUBLE_EQ(out[1]["threshold"].get<double>(), 0.8);
+  EXPECT_TRUE(out[2]["passed"].get<bool>());
+  EXPECT_FALSE(out[3]["passed"].get<bool>());  // a missing metric never passes
+  EXPECT_TRUE(out[3]["value"].is_null());
+  EXPECT_FALSE(all);
+  summary["estimators"]["p"]["metrics"]["e"] = 0.9;  // not below 0.8 x naive
+  EXPECT_FALSE(EvaluateGates(gates, summary, &all)[1]["passed"].get<bool>());
+}
+
+}  // namespace
+}  // namespace flexbench::scenarios
