@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "scenarios/runner/config.h"
+#include "sim/config.h"
 #include "scenarios/runner/scenario_kind.h"
 
 namespace flexbench::scenarios {

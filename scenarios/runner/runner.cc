@@ -8,7 +8,7 @@
 #include <iostream>
 
 #include "estimators/error.h"
-#include "scenarios/runner/config.h"
+#include "sim/config.h"
 #include "scenarios/runner/gates.h"
 #include "scenarios/runner/output.h"
 #include "scenarios/runner/scenario_kind.h"

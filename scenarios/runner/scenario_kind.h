@@ -10,10 +10,11 @@
 #include <string>
 #include <vector>
 
-#include "scenarios/runner/config.h"
+#include "sim/config.h"
 #include "scenarios/runner/output.h"
 
 namespace flexbench::scenarios {
+using flexbench::ConfigNode;
 
 using Json = nlohmann::ordered_json;
 

@@ -1,7 +1,7 @@
 // Scenario-file parsing: errors name file, line and key; unknown keys are caught; gates.
 #include <gtest/gtest.h>
 
-#include "scenarios/runner/config.h"
+#include "sim/config.h"
 #include "scenarios/runner/gates.h"
 
 namespace flexbench::scenarios {

@@ -1,11 +1,11 @@
-#include "scenarios/runner/config.h"
+#include "sim/config.h"
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 
-namespace flexbench::scenarios {
+namespace flexbench {
 namespace {
 
 std::string JoinPath(const std::string& parent, const std::string& key) {
@@ -183,4 +183,4 @@ std::string ConfigNode::ResolvePath(const std::string& value) const {
   return (std::filesystem::path(Directory()) / p).lexically_normal().string();
 }
 
-}  // namespace flexbench::scenarios
+}  // namespace flexbench

@@ -12,7 +12,7 @@
 
 #include "estimators/error.h"
 
-namespace flexbench::scenarios {
+namespace flexbench {
 
 class ConfigNode {
  public:
@@ -80,4 +80,4 @@ class ConfigNode {
   std::string path_;
 };
 
-}  // namespace flexbench::scenarios
+}  // namespace flexbench
