@@ -1,0 +1,51 @@
+// Declared-model files: what an estimator may know about a robot (models/<name>.declared.yaml).
+//
+//   model: rover_arm.xml            # MJCF or URDF, relative to this file
+//   base: world                     # body where the chains start (default world)
+//   actuated_joints: [j1, j2]       # hinge/slide joints an estimator reads
+//   end_effector: ee                # MJCF site (or body)
+//   observed_frames: [tag_ee_top]   # sites, bodies, geoms or cameras an estimator may predict
+//   sources:                        # PPOE perturbation sources (PPOE paper, eq. 16)
+//     - at: plate_pitch             # a joint (frame at its anchor, axes of its body) or a body
+//       std_rot_deg: [0, 5, 0]      # rotation std about x, y, z of that frame
+//       std_trans_m: [0, 0, 0]      # translation std
+//       about_axis_deg: 0.5         # rotation std about the joint's own axis (joints only)
+//       covariance: [36 numbers]    # or a full 6x6, [rho; theta] order, SI units
+//
+// Passive joints that are not actuated are held at their reference angle (qpos0): the declared
+// model does not know they move. A source at such a joint is how the model admits it.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "estimators/conventions.h"
+#include "sim/config.h"
+
+namespace flexbench::sim {
+
+struct DeclaredSource {
+  std::string at;       // joint or body name
+  Mat6 cov = Mat6::Zero();
+  // Rotation std about the joint axis, applied once the axis is known (about_axis_deg).
+  double about_axis_rad = 0.0;
+  std::string where;    // "<file>:<line>" for messages
+};
+
+struct DeclaredModel {
+  std::string file;        // the declared-model file
+  std::string model_path;  // resolved MJCF/URDF path
+  std::string base = "world";
+  std::vector<std::string> actuated_joints;
+  std::string end_effector;
+  std::vector<std::string> observed_frames;
+  std::vector<DeclaredSource> sources;
+};
+
+// Reads and checks the format (not the names: see BuildDeclaredChain). Throws InputError
+// naming the file, line and key.
+DeclaredModel LoadDeclaredModel(const std::string& path);
+// Reads a declared model from a `declared:` block inside another file (e.g. a scenario).
+DeclaredModel ParseDeclaredModel(const ConfigNode& node);
+
+}  // namespace flexbench::sim

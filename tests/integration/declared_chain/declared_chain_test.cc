@@ -1,0 +1,207 @@
+// The PPOE chain extracted from an MJCF equals MuJoCo's own kinematics (passive joints at their
+// reference), for every model in models/ that has a declared-model file, and for inline models
+// with the joint layouts MuJoCo allows (anchors off the body origin, several joints per body,
+// slides, references, trees).
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <random>
+
+#include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
+#include "sim/camera.h"
+#include "sim/declared_chain.h"
+#include "sim/mujoco_model.h"
+#include "tests/common/test_util.h"
+
+namespace flexbench::sim {
+namespace {
+
+namespace fs = std::filesystem;
+using kinematics::FrameId;
+
+// Largest pose difference (translation m + rotation rad) between every typed PPOE frame and
+// MuJoCo's pose of the same object.
+double MaxPoseError(const mjModel* m, const mjData* d, const DeclaredChain& chain,
+                    const kinematics::PpoeData& data, int* compared) {
+  // The PPOE base is the base body's frame.
+  const lie::SE3 T_w_base(RotFromRowMajor(d->xmat + 9 * chain.base_body),
+                          Eigen::Map<const Vec3>(d->xpos + 3 * chain.base_body));
+  double worst = 0.0;
+  *compared = 0;
+  for (FrameId f = 1; f < chain.model.num_frames(); ++f) {
+    const std::string& name = chain.model.frame(f).name;
+    const std::string kind = name.substr(0, name.find('/'));
+    const std::string object = name.substr(name.find('/') + 1);
+    lie::SE3 truth;
+    if (kind == "body") {
+      const int b = BodyId(m, object);
+      truth = lie::SE3(RotFromRowMajor(d->xmat + 9 * b), Eigen::Map<const Vec3>(d->xpos + 3 * b));
+    } else if (kind == "site") {
+      const int s = SiteId(m, object);
+      truth = lie::SE3(RotFromRowMajor(d->site_xmat + 9 * s),
+                       Eigen::Map<const Vec3>(d->site_xpos + 3 * s));
+    } else if (kind == "geom") {
+      const int g = GeomId(m, object);
+      truth = lie::SE3(RotFromRowMajor(d->geom_xmat + 9 * g),
+                       Eigen::Map<const Vec3>(d->geom_xpos + 3 * g));
+    } else if (kind == "camera") {
+      const Eigen::Isometry3d T = WorldFromOptical(d, CameraId(m, object));
+      truth = lie::SE3(T.linear(), T.translation());
+    } else {
+      continue;  // joint frames sit at anchors; their bodies are compared
+    }
+    const lie::SE3 ppoe = T_w_base * data.T_base_frame[f];
+    const double err = (ppoe.translation() - truth.translation()).norm() +
+                       (ppoe.rotation() - truth.rotation()).norm();
+    worst = std::max(worst, err);
+    ++*compared;
+  }
+  return worst;
+}
+
+// Random actuated configurations; passive joints stay at qpos0.
+void ExpectChainMatchesMujoco(const mjModel* m, const DeclaredChain& chain, int trials) {
+  MjDataPtr data = MakeData(m);
+  kinematics::PpoeData ppoe_data(chain.model);
+  std::mt19937_64 rng(42);
+  std::uniform_real_distribution<double> angle(-M_PI, M_PI);
+  for (int t = 0; t < trials; ++t) {
+    mju_copy(data->qpos, m->qpos0, m->nq);
+    Eigen::VectorXd q(chain.model.nq());
+    for (int k = 0; k < q.size(); ++k) q[k] = t == 0 ? 0.0 : angle(rng);
+    chain.WriteQpos(q, data->qpos);
+    mj_kinematics(m, data.get());
+    mj_comPos(m, data.get());
+    mj_camlight(m, data.get());
+    EXPECT_TRUE(chain.QFromQpos(data->qpos).isApprox(q, 1e-15) || q.isZero());
+    kinematics::ForwardKinematics(chain.model, ppoe_data, q);
+    int compared = 0;
+    EXPECT_LT(MaxPoseError(m, data.get(), chain, ppoe_data, &compared), 1e-9) << "trial " << t;
+    EXPECT_GT(compared, 1);
+  }
+}
+
+TEST(DeclaredChain, EveryModelInModelsMatchesMujoco) {
+  int models = 0;
+  for (const auto& entry : fs::directory_iterator(testing::SourceDir() + "/models")) {
+    const std::string path = entry.path().string();
+    if (path.size() < 14 || path.substr(path.size() - 14) != ".declared.yaml") continue;
+    SCOPED_TRACE(path);
+    const DeclaredModel declared = LoadDeclaredModel(path);
+    MjModelPtr m = LoadModel(declared.model_path);
+    const DeclaredChain chain = BuildDeclaredChain(m.get(), declared);
+    EXPECT_EQ(chain.model.nq(), static_cast<int>(declared.actuated_joints.size()));
+    ExpectChainMatchesMujoco(m.get(), chain, 20);
+    ++models;
+  }
+  EXPECT_GE(models, 1);
+}
+
+// Anchors away from the body origin, two hinges and a slide in one body, a reference angle, a
+// passive joint (held at its reference), a tree with two branches and a camera.
+constexpr char kAwkwardXml[] = R"(<mujoco><compiler angle="radian"/>
+  <worldbody>
+    <body name="torso" pos="0.1 0.2 0.3" euler="0.1 0.2 0.3">
+      <joint name="waist" type="hinge" axis="0 0.6 0.8" pos="0.05 -0.02 0.1" ref="0.3"/>
+      <geom type="box" size=".1 .1 .1"/>
+      <body name="arm" pos="0.3 0 0" quat="0.9 0.1 0.3 0.2">
+        <joint name="a1" type="hinge" axis="1 0 0" pos="0 0.1 0"/>
+        <joint name="a2" type="hinge" axis="0 1 1" pos="0.02 0 0.03"/>
+        <joint name="a3" type="slide" axis="1 1 0"/>
+        <joint name="flex" type="hinge" axis="0 0 1" pos="0.1 0 0" stiffness="100"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02"/>
+        <site name="tip" pos="0.3 0.01 -0.02" euler="0.3 0.2 0.1"/>
+      </body>
+      <body name="head" pos="0 0 0.2">
+        <joint name="neck" type="hinge" axis="0 0 1"/>
+        <geom name="visor" type="box" pos="0.05 0 0" euler="0 0.4 0" size=".02 .05 .03"/>
+        <camera name="eye" pos="0.05 0 0.02" xyaxes="0 -1 0 0.2 0 1"/>
+      </body>
+    </body>
+  </worldbody></mujoco>)";
+
+DeclaredModel AwkwardDeclared() {
+  DeclaredModel d;
+  d.file = "awkward.declared.yaml";
+  d.model_path = "awkward.xml";
+  d.actuated_joints = {"waist", "a1", "a2", "a3", "neck"};
+  d.end_effector = "tip";
+  d.observed_frames = {"eye", "visor"};
+  DeclaredSource s;
+  s.at = "flex";
+  s.about_axis_rad = 0.05;
+  s.where = "awkward.declared.yaml:9";
+  d.sources.push_back(s);
+  return d;
+}
+
+TEST(DeclaredChain, AwkwardJointLayoutsMatchMujoco) {
+  MjModelPtr m = LoadModelFromString(kAwkwardXml);
+  const DeclaredChain chain = BuildDeclaredChain(m.get(), AwkwardDeclared());
+  EXPECT_EQ(chain.model.nq(), 5);
+  EXPECT_EQ(chain.q_joints.front(), "waist");
+  EXPECT_DOUBLE_EQ(chain.q_qpos0.front(), 0.3);
+  // The passive joint carries its declared source about its own axis and no q.
+  const auto& flex = chain.model.frame(chain.model.FindFrame("joint/flex"));
+  EXPECT_EQ(flex.q_index, -1);
+  EXPECT_NEAR(flex.source_cov(5, 5), 0.05 * 0.05, 1e-15);
+  ExpectChainMatchesMujoco(m.get(), chain, 30);
+}
+
+std::string BuildError(DeclaredModel d) {
+  MjModelPtr m = LoadModelFromString(kAwkwardXml);
+  try {
+    BuildDeclaredChain(m.get(), d);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(DeclaredChain, BadNamesAreReportedWithTheFile) {
+  DeclaredModel d = AwkwardDeclared();
+  d.actuated_joints.push_back("elbow");
+  EXPECT_NE(BuildError(d).find("awkward.declared.yaml: actuated_joints: no joint named 'elbow'"),
+            std::string::npos)
+      << BuildError(d);
+  d = AwkwardDeclared();
+  d.end_effector = "gripper";
+  EXPECT_NE(BuildError(d).find("end_effector: no site, geom, camera or body named 'gripper'"),
+            std::string::npos);
+  d = AwkwardDeclared();
+  d.sources[0].at = "wrist";
+  EXPECT_NE(BuildError(d).find("awkward.declared.yaml:9: source at 'wrist': no joint or body"),
+            std::string::npos);
+  d = AwkwardDeclared();
+  d.end_effector = "visor";  // the arm's joints no longer move anything declared
+  d.observed_frames = {};
+  EXPECT_NE(BuildError(d).find("does not move the end effector"), std::string::npos);
+}
+
+TEST(DeclaredModelFile, FormatErrorsNameFileLineAndKey) {
+  testing::TempDir tmp;
+  const auto path = tmp.path() / "x.declared.yaml";
+  testing::WriteFile(path, "model: planar3.xml\nactuated_joints: [j1]\nend_effector: ee\n"
+                           "sources:\n  - {at: j1, std_rot_deg: [1, 2]}\n");
+  try {
+    LoadDeclaredModel(path.string());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(path.string() + ":5: key 'sources[0].std_rot_deg'"),
+              std::string::npos)
+        << e.what();
+  }
+  testing::WriteFile(path, "model: planar3.xml\nactuated_joints: [j1]\nend_effector: ee\n"
+                           "colour: red\n");
+  try {
+    LoadDeclaredModel(path.string());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(":4: unknown key 'colour'"), std::string::npos)
+        << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace flexbench::sim
