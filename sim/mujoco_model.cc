@@ -1,6 +1,9 @@
 #include "sim/mujoco_model.h"
 
+#include <cctype>
 #include <cstring>
+#include <fstream>
+#include <sstream>
 #include <filesystem>
 #include <mutex>
 
@@ -47,11 +50,90 @@ int IdOrThrow(const mjModel* m, mjtObj type, const char* what, const std::string
   return id;
 }
 
+bool EndsWith(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
 }  // namespace
+
+std::string PrepareUrdf(const std::string& urdf, const std::string& path,
+                        std::vector<std::string>* warnings) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(path).parent_path();
+  std::string out;
+  size_t pos = 0;
+  // Drop <visual>/<collision> elements whose mesh MuJoCo cannot read (missing file, or a format
+  // other than STL/OBJ/MSH such as COLLADA): they carry no kinematics.
+  for (;;) {
+    size_t start = std::string::npos;
+    std::string tag;
+    for (const char* t : {"<visual", "<collision"}) {
+      const size_t p = urdf.find(t, pos);
+      if (p < start) {
+        start = p;
+        tag = t + 1;
+      }
+    }
+    if (start == std::string::npos) break;
+    const std::string close = "</" + tag + ">";
+    const size_t end_self = urdf.find("/>", start);
+    const size_t end_open = urdf.find('>', start);
+    size_t end = urdf.find(close, start);
+    if (end_open != std::string::npos && end_self != std::string::npos && end_self + 1 == end_open) {
+      end = end_open + 1;  // <visual .../>
+    } else if (end != std::string::npos) {
+      end += close.size();
+    } else {
+      break;
+    }
+    const std::string element = urdf.substr(start, end - start);
+    bool drop = false;
+    const size_t mesh = element.find("filename=\"");
+    if (mesh != std::string::npos) {
+      const size_t q0 = mesh + 10;
+      const std::string file = element.substr(q0, element.find('"', q0) - q0);
+      std::string lower = file;
+      for (char& c : lower) c = static_cast<char>(std::tolower(c));
+      const bool readable_format =
+          EndsWith(lower, ".stl") || EndsWith(lower, ".obj") || EndsWith(lower, ".msh");
+      if (!readable_format || !fs::exists(dir / file)) {
+        drop = true;
+        warnings->push_back(path + ": mesh '" + file + "' cannot be read; its " + tag +
+                            " geometry is dropped (the kinematics are kept)");
+      }
+    }
+    out += urdf.substr(pos, start - pos);
+    if (!drop) out += element;
+    pos = end;
+  }
+  out += urdf.substr(pos);
+  // Kinematics-only import: keep fixed links as bodies (a tool or ball frame must survive), and
+  // give massless links a tiny inertia so the compiler accepts them.
+  if (out.find("<mujoco>") == std::string::npos) {
+    const size_t robot = out.find("<robot");
+    const size_t open_end = robot == std::string::npos ? robot : out.find('>', robot);
+    if (open_end != std::string::npos) {
+      out.insert(open_end + 1,
+                 "\n  <mujoco><compiler fusestatic=\"false\" discardvisual=\"false\" "
+                 "boundmass=\"1e-6\" boundinertia=\"1e-9\"/></mujoco>");
+    }
+  }
+  return out;
+}
 
 MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings) {
   if (!std::filesystem::is_regular_file(path)) {
     throw InputError(path + ": model file not found");
+  }
+  const std::string ext = std::filesystem::path(path).extension().string();
+  if (ext == ".urdf" || ext == ".URDF") {
+    std::ifstream in(path);
+    std::stringstream text;
+    text << in.rdbuf();
+    std::vector<std::string> local;
+    std::vector<std::string>* sink = warnings ? warnings : &local;
+    const std::string prepared = PrepareUrdf(text.str(), path, sink);
+    return LoadModelFromString(prepared, path, sink);
   }
   std::lock_guard<std::mutex> lock(g_load_mutex);
   std::vector<std::string> local;

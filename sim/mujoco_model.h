@@ -19,7 +19,7 @@ struct MjDataDeleter {
 using MjModelPtr = std::unique_ptr<mjModel, MjModelDeleter>;
 using MjDataPtr = std::unique_ptr<mjData, MjDataDeleter>;
 
-// Loads an MJCF or URDF file. Throws InputError("<path>: <MuJoCo's message>") when the file is
+// Loads an MJCF or URDF file. URDF goes through MuJoCo's own importer after PrepareUrdf. Throws InputError("<path>: <MuJoCo's message>") when the file is
 // missing or MuJoCo rejects it. Warnings MuJoCo emits while compiling are appended to
 // `warnings` when given (e.g. URDF meshes it cannot read).
 MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings = nullptr);
@@ -30,6 +30,12 @@ MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name =
                                std::vector<std::string>* warnings = nullptr);
 
 MjDataPtr MakeData(const mjModel* m);
+
+// URDF text made loadable for kinematics: <visual>/<collision> elements with meshes MuJoCo
+// cannot read (missing, or not STL/OBJ/MSH) are dropped with a warning each, fixed links stay
+// bodies (fusestatic off) and massless links get a tiny inertia. `path` resolves mesh files.
+std::string PrepareUrdf(const std::string& urdf, const std::string& path,
+                        std::vector<std::string>* warnings);
 
 // Name -> id lookups that throw InputError naming the model and the missing name.
 int JointId(const mjModel* m, const std::string& name, const std::string& model_name = "model");

@@ -205,3 +205,49 @@ TEST(DeclaredModelFile, FormatErrorsNameFileLineAndKey) {
 
 }  // namespace
 }  // namespace flexbench::sim
+
+namespace flexbench::sim {
+namespace {
+
+constexpr char kUrdf[] = R"(<?xml version="1.0"?>
+<robot name="two">
+  <link name="base"><visual><geometry><mesh filename="missing/base.dae"/></geometry></visual></link>
+  <link name="l1"/>
+  <link name="tool"><visual><geometry><sphere radius="0.01"/></geometry></visual></link>
+  <joint name="j1" type="revolute"><origin xyz="0 0 0.3" rpy="0.1 0 0"/><parent link="base"/>
+    <child link="l1"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="fixed_tool" type="fixed"><origin xyz="0.2 0 0.05" rpy="0 0.3 0"/>
+    <parent link="l1"/><child link="tool"/></joint>
+</robot>)";
+
+TEST(UrdfImport, UnreadableMeshesAreDroppedWithAWarningAndFixedLinksStay) {
+  testing::TempDir tmp;
+  testing::WriteFile(tmp.path() / "two.urdf", kUrdf);
+  std::vector<std::string> warnings;
+  MjModelPtr m = LoadModel((tmp.path() / "two.urdf").string(), &warnings);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("missing/base.dae"), std::string::npos) << warnings[0];
+  EXPECT_GE(mj_name2id(m.get(), mjOBJ_BODY, "tool"), 0) << "fixed link fused away";
+  DeclaredModel d;
+  d.file = "two.declared";
+  d.actuated_joints = {"j1"};
+  d.end_effector = "tool";
+  const DeclaredChain chain = BuildDeclaredChain(m.get(), d);
+  ExpectChainMatchesMujoco(m.get(), chain, 10);
+}
+
+TEST(UrdfImport, MukcaPandaChainMatchesMujoco) {
+  const std::string path = testing::SourceDir() + "/../shared/data/mukca/urdf/panda.urdf";
+  if (!fs::exists(path)) GTEST_SKIP() << "MUKCa data not found at " << path;
+  MjModelPtr m = LoadModel(path);
+  DeclaredModel d;
+  d.file = "panda.declared";
+  for (int k = 1; k <= 7; ++k) d.actuated_joints.push_back("panda_joint" + std::to_string(k));
+  d.end_effector = "ball_link";
+  const DeclaredChain chain = BuildDeclaredChain(m.get(), d);
+  EXPECT_EQ(chain.model.nq(), 7);
+  ExpectChainMatchesMujoco(m.get(), chain, 20);
+}
+
+}  // namespace
+}  // namespace flexbench::sim
