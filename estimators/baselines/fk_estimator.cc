@@ -1,0 +1,62 @@
+#include "estimators/baselines/fk_estimator.h"
+
+#include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
+
+namespace flexbench::estimators {
+namespace {
+
+class FkEstimator : public Estimator {
+ public:
+  explicit FkEstimator(const EstimatorSetup& setup)
+      : model_(*setup.model), data_(*setup.model), ee_(setup.end_effector) {
+    const double order = setup.params.Scalar("covariance_order", 2.0);
+    if (order != 2.0 && order != 4.0) {
+      throw InputError("fk: covariance_order must be 2 or 4");
+    }
+    order_ = order == 4.0 ? lie::CompoundOrder::kFourth : lie::CompoundOrder::kSecond;
+    setup.params.CheckAllUsed("fk");
+    Reset();
+  }
+
+  void Reset() override {
+    belief_ = Belief{};
+  }
+
+  void Predict(double t) override { belief_.t = t; }
+
+  UpdateStatus Update(const Measurement& z) override {
+    const auto* joints = std::get_if<JointReading>(&z);
+    if (!joints) return UpdateStatus::kIgnored;
+    if (joints->q.size() != model_.nq()) {
+      throw InputError("fk: joint reading has " + std::to_string(joints->q.size()) +
+                       " angles, the declared model " + std::to_string(model_.nq()));
+    }
+    if (!joints->q.allFinite()) return UpdateStatus::kRejectedNonFinite;
+    kinematics::ForwardKinematicsWithCovariance(model_, data_, joints->q, order_);
+    belief_.t = joints->t;
+    belief_.T_base_ee = data_.T_base_frame[ee_];
+    belief_.cov = data_.Sigma_frame[ee_];
+    belief_.has_joints = true;
+    belief_.q = joints->q;
+    belief_.q_std = joints->std;
+    return UpdateStatus::kAccepted;
+  }
+
+  Belief Estimate() const override { return belief_; }
+
+ private:
+  const kinematics::PpoeModel& model_;
+  kinematics::PpoeData data_;
+  FrameId ee_;
+  lie::CompoundOrder order_ = lie::CompoundOrder::kSecond;
+  Belief belief_;
+};
+
+}  // namespace
+
+std::unique_ptr<Estimator> MakeFkEstimator(const EstimatorSetup& setup) {
+  return std::make_unique<FkEstimator>(setup);
+}
+
+}  // namespace flexbench::estimators

@@ -1,0 +1,106 @@
+// The runtime interface of every estimator and the explicit registry (DESIGN.md, "Plug-ins").
+//
+// An estimator knows only its declared PPOE model, the sensors' set-up (camera intrinsics and
+// frames, IMU frames) and its parameters; it sees typed measurements (measurement.h) and
+// returns beliefs. It never sees ground truth, MuJoCo, images or YAML: the scenario layer
+// parses parameters into `Params` and the estimator validates them.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "estimators/camera/pinhole.h"
+#include "estimators/kinematics/ppoe_model.h"
+#include "estimators/measurement.h"
+
+namespace flexbench::estimators {
+
+// Named numeric parameters from the scenario file (scalars are 1-element lists).
+class Params {
+ public:
+  Params() = default;
+  explicit Params(std::map<std::string, std::vector<double>> values, std::string where = "")
+      : values_(std::move(values)), where_(std::move(where)) {}
+
+  // Throws InputError naming the parameter (and where it came from) when missing or of the
+  // wrong length.
+  double Scalar(const std::string& key) const;
+  double Scalar(const std::string& key, double fallback) const;
+  std::vector<double> List(const std::string& key, size_t size) const;
+  std::vector<double> List(const std::string& key, const std::vector<double>& fallback) const;
+  bool Has(const std::string& key) const { return values_.count(key) > 0; }
+  // Throws InputError for the first parameter nothing read (a typo must not pass silently).
+  void CheckAllUsed(const std::string& estimator) const;
+
+ private:
+  std::map<std::string, std::vector<double>> values_;
+  std::string where_;
+  mutable std::set<std::string> used_;
+};
+
+struct CameraSetup {
+  PinholeCamera intrinsics;
+  FrameId frame = -1;  // the camera's optical frame in the declared model
+};
+
+struct ImuSetup {
+  FrameId frame = -1;  // the IMU's frame in the declared model
+};
+
+struct EstimatorSetup {
+  const kinematics::PpoeModel* model = nullptr;
+  FrameId end_effector = -1;
+  std::vector<CameraSetup> cameras;
+  std::vector<ImuSetup> imus;
+  Params params;
+  std::uint64_t seed = 0;
+};
+
+// What an estimator believes: the end-effector pose in the base frame with a covariance in its
+// local tangent space, and optionally the joint angles.
+struct Belief {
+  double t = 0.0;
+  lie::SE3 T_base_ee;
+  Mat6 cov = Mat6::Zero();
+  bool has_joints = false;
+  JointVector q;
+  JointVector q_std;
+};
+
+enum class UpdateStatus {
+  kAccepted,
+  kIgnored,           // a measurement type this estimator does not use
+  kRejectedNonFinite, // NaN or infinite values
+  kRejectedOutside,   // e.g. pixels outside the image, behind the camera
+  kRejectedGating,    // failed an innovation gate
+};
+const char* ToString(UpdateStatus s);
+
+class Estimator {
+ public:
+  virtual ~Estimator() = default;
+  // Back to the prior (no measurement seen).
+  virtual void Reset() = 0;
+  // Propagates the belief to time t (static-state estimators: nothing to do).
+  virtual void Predict(double t) = 0;
+  virtual UpdateStatus Update(const Measurement& z) = 0;
+  virtual Belief Estimate() const = 0;
+};
+
+struct EstimatorEntry {
+  const char* name;
+  const char* description;
+  std::unique_ptr<Estimator> (*make)(const EstimatorSetup& setup);
+};
+
+// The explicit list of estimators (registry.cc), one line each.
+const std::vector<EstimatorEntry>& EstimatorRegistry();
+
+// Throws InputError naming the unknown estimator and the known ones.
+std::unique_ptr<Estimator> MakeEstimator(const std::string& name, const EstimatorSetup& setup);
+
+}  // namespace flexbench::estimators

@@ -1,0 +1,15 @@
+// The explicit list of estimators: one line each, chosen by name from scenario files.
+#include "estimators/baselines/fk_estimator.h"
+#include "estimators/estimator.h"
+
+namespace flexbench::estimators {
+
+const std::vector<EstimatorEntry>& EstimatorRegistry() {
+  static const std::vector<EstimatorEntry> entries = {
+      {"fk", "forward kinematics of the declared model, with its PPOE covariance",
+       MakeFkEstimator},
+  };
+  return entries;
+}
+
+}  // namespace flexbench::estimators
