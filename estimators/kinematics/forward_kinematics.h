@@ -1,0 +1,39 @@
+// Probabilistic forward kinematics of a PPOE model (PPOE paper sec. IV-B).
+//
+// All functions read a constant PpoeModel and write into a PpoeData built for it; with the data
+// preallocated they do not allocate (error paths excepted: they throw InputError).
+#pragma once
+
+#include <Eigen/Core>
+
+#include "estimators/kinematics/ppoe_data.h"
+#include "estimators/kinematics/ppoe_model.h"
+#include "estimators/lie/compound.h"
+
+namespace flexbench::kinematics {
+
+using Matrix6Xd = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+
+// Mean poses of all frames, eqs. 16-17 with xi = 0: data.T_base_frame. Throws InputError if
+// q.size() != model.nq(), if any q is NaN or infinite (naming the joint), or if data was built
+// for another model.
+void ForwardKinematics(const PpoeModel& model, PpoeData& data,
+                       const Eigen::Ref<const Eigen::VectorXd>& q);
+
+// Mean poses and local covariances of all frames: data.T_base_frame and data.Sigma_frame.
+// Covariances are compounded source by source along the tree (eq. 14): the fixed parts of
+// eq. 16 move the accumulated covariance exactly by the adjoint (eq. 11b); at each source the
+// accumulated and the new perturbation are combined with eq. 15 / eq. 18 (kSecond) or the
+// 4th-order BCH moments (kFourth, see lie/compound.h), assuming sources are independent.
+void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
+                                     const Eigen::Ref<const Eigen::VectorXd>& q,
+                                     lie::CompoundOrder order);
+
+// J_frame_q (6 x nq): T_base_frame(q + dq) = T_base_frame(q) * Exp(J_frame_q dq) to first
+// order (right/local tangent, xi = [rho; theta]). Column k is Ad_{T_frame_j} zeta_j for the
+// frame j moved by q[k] if j is `frame` or one of its ancestors, else zero. Reads the mean poses
+// in `data`: call ForwardKinematics* with the same q first.
+void ComputeFrameJacobian(const PpoeModel& model, const PpoeData& data, FrameId frame,
+                          Eigen::Ref<Matrix6Xd> J_frame_q);
+
+}  // namespace flexbench::kinematics

@@ -1,0 +1,398 @@
+#include "estimators/kinematics/forward_kinematics.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <unsupported/Eigen/MatrixFunctions>
+#include <vector>
+
+#include "estimators/lie/sampling.h"
+#include "tests/unit/kinematics/ppoe_test_models.h"
+#include "tests/unit/lie/lie_test_util.h"
+
+namespace flexbench::kinematics {
+namespace {
+
+using lie::CompoundOrder;
+using lie::SE3;
+using testing::kDeg;
+
+// ---------------------------------------------------------------------------------------------
+// Oracles.
+
+// Mean poses by a direct product of 4x4 matrices, eq. 16-17 with xi = 0; the joint factor by
+// Eigen's matrix exponential of hat(zeta q), independent of lie::SE3::Exp.
+std::vector<Mat4> MeanPosesBy4x4(const PpoeModel& model, const Eigen::VectorXd& q) {
+  std::vector<Mat4> T(model.num_frames(), Mat4::Identity());
+  for (FrameId i = 1; i < model.num_frames(); ++i) {
+    const PpoeFrame& f = model.frame(i);
+    const double q_i = f.q_index >= 0 ? q[f.q_index] : 0.0;
+    T[i] = T[f.parent] * f.T_parent_ip.Matrix() * lie::SE3Hat(f.zeta * q_i).exp();
+  }
+  return T;
+}
+
+// Monte Carlo over all sources: second moments of Log(mean^-1 * sample) at every frame.
+std::vector<Mat6> SampleFrameCovariances(const PpoeModel& model, const Eigen::VectorXd& q, int n,
+                                         std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  const int nf = model.num_frames();
+  std::vector<lie::GaussianSampler<6>> samplers;
+  for (FrameId i = 0; i < nf; ++i) samplers.emplace_back(model.frame(i).source_cov);
+  std::vector<SE3> mean(nf), T(nf), joint(nf);
+  for (FrameId i = 1; i < nf; ++i) {
+    const PpoeFrame& f = model.frame(i);
+    const double q_i = f.q_index >= 0 ? q[f.q_index] : 0.0;
+    joint[i] = SE3::Exp(f.zeta * q_i);
+    mean[i] = mean[f.parent] * f.T_parent_ip * joint[i];
+  }
+  std::vector<SE3> mean_inv(nf);
+  for (FrameId i = 0; i < nf; ++i) mean_inv[i] = mean[i].Inverse();
+  std::vector<Mat6> S(nf, Mat6::Zero());
+  for (int s = 0; s < n; ++s) {
+    for (FrameId i = 1; i < nf; ++i) {
+      const PpoeFrame& f = model.frame(i);
+      const SE3 source = f.has_source ? SE3::Exp(samplers[i].Sample(rng)) : SE3();
+      T[i] = T[f.parent] * f.T_parent_ip * source * joint[i];
+      const Vec6 xi = (mean_inv[i] * T[i]).Log();
+      S[i] += xi * xi.transpose();
+    }
+  }
+  for (Mat6& m : S) m /= n;
+  return S;
+}
+
+// Covariance difference in units of the reference's standard deviations, over the DoFs the
+// reference excites (a planar arm has exactly-zero out-of-plane moments).
+double NormalizedError(const Mat6& S, const Mat6& S_ref) {
+  std::vector<int> idx;
+  const double max_diag = S_ref.diagonal().maxCoeff();
+  for (int k = 0; k < 6; ++k) {
+    if (S_ref(k, k) > 1e-12 * max_diag) idx.push_back(k);
+  }
+  double sum = 0.0;
+  for (int a : idx) {
+    for (int b : idx) {
+      const double e = (S(a, b) - S_ref(a, b)) / std::sqrt(S_ref(a, a) * S_ref(b, b));
+      sum += e * e;
+    }
+  }
+  return std::sqrt(sum);
+}
+
+void Record(const std::string& key, double value) {
+  ::testing::Test::RecordProperty(key, std::to_string(value));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Mean forward kinematics.
+
+TEST(ForwardKinematics, MeanMatchesProductOf4x4Matrices) {
+  std::mt19937_64 rng(1);
+  testing::RandomChainOptions o;
+  o.dof = 7;
+  o.trans_sd = 0.01;
+  o.rot_sd = 0.05;
+  o.mixed_joints = true;
+  o.fixed_base_source = true;
+  o.grasp = true;
+  const PpoeModel model = testing::RandomChain(rng, o);
+  PpoeData data(model);
+  for (int trial = 0; trial < 20; ++trial) {
+    const Eigen::VectorXd q = testing::RandomQ(rng, model);
+    const std::vector<Mat4> expected = MeanPosesBy4x4(model, q);
+    ForwardKinematics(model, data, q);
+    for (FrameId i = 0; i < model.num_frames(); ++i) {
+      EXPECT_LT((data.T_base_frame[i].Matrix() - expected[i]).cwiseAbs().maxCoeff(), 1e-12)
+          << model.frame(i).name;
+    }
+    // The covariance variant computes the same means.
+    PpoeData data_cov(model);
+    ForwardKinematicsWithCovariance(model, data_cov, q, CompoundOrder::kFourth);
+    for (FrameId i = 0; i < model.num_frames(); ++i) {
+      EXPECT_TRUE(data_cov.T_base_frame[i].IsApprox(data.T_base_frame[i], 1e-15));
+    }
+  }
+}
+
+TEST(ForwardKinematics, PlanarArmGeometry) {
+  const PpoeModel model = testing::PlanarArm3R(10 * kDeg);
+  PpoeData data(model);
+  Eigen::VectorXd q(3);
+  q << M_PI / 2, -M_PI / 2, 0.0;
+  ForwardKinematics(model, data, q);
+  // Up 1 m along y, then 2 m along x.
+  const SE3& T_base_ee = data.T_base_frame[model.FindFrame("ee")];
+  EXPECT_LT((T_base_ee.translation() - Vec3(2.0, 1.0, 0.0)).norm(), 1e-15);
+  EXPECT_LT((T_base_ee.rotation() - Mat3::Identity()).cwiseAbs().maxCoeff(), 1e-15);
+  EXPECT_EQ(model.nq(), 3);
+  EXPECT_EQ(model.num_frames(), 5);  // base, 3 links, ee
+}
+
+TEST(ForwardKinematics, JointTypes) {
+  PpoeModel model("joints");
+  const FrameId slide = model.AddLink(kBaseFrame, "slide", SE3(), Joint::Prismatic(Vec3(0, 0, 2)));
+  const FrameId hinge = model.AddLink(slide, "hinge", SE3::Translation(Vec3(1, 0, 0)),
+                                      Joint::Revolute(Vec3::UnitZ(), Vec3(0, 1, 0)));
+  const FrameId fixed = model.AddFrame(hinge, "tip", SE3::Translation(Vec3(0, 0, 0.5)));
+  EXPECT_EQ(model.nq(), 2);
+  EXPECT_EQ(model.frame(fixed).q_index, -1);
+  EXPECT_EQ(model.joint_frame(1), hinge);
+  // The axis is normalised and the twist is [r x w; w].
+  EXPECT_TRUE(model.frame(slide).joint.axis.isApprox(Vec3::UnitZ(), 0.0));
+  EXPECT_TRUE(model.frame(hinge).zeta.isApprox(
+      (Vec6() << Vec3(0, 1, 0).cross(Vec3::UnitZ()), Vec3::UnitZ()).finished(), 0.0));
+  PpoeData data(model);
+  Eigen::VectorXd q(2);
+  q << 0.3, M_PI;  // slide up 0.3 m; rotate 180 deg about the axis through (0, 1, 0)
+  ForwardKinematics(model, data, q);
+  // The hinge frame origin (1, 0, 0.3) rotates about (1, 1, *) to (1, 2, 0.3).
+  EXPECT_LT((data.T_base_frame[hinge].translation() - Vec3(1.0, 2.0, 0.3)).norm(), 1e-15);
+  EXPECT_LT((data.T_base_frame[fixed].translation() - Vec3(1.0, 2.0, 0.8)).norm(), 1e-15);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Covariances.
+
+TEST(ForwardKinematicsCovariance, SecondOrderIsTheSumOfAdjointMappedSources) {
+  // eq. 18 unrolled: Sigma_frame = sum over upstream sources s of
+  // Ad_{T_frame^-1 T_{s,p}} Sigma_s Ad^T, with T_{s,p} the source's mean frame.
+  std::mt19937_64 rng(2);
+  testing::RandomChainOptions o;
+  o.trans_sd = 0.01;
+  o.rot_sd = 0.05;
+  o.mixed_joints = true;
+  o.fixed_base_source = true;
+  o.grasp = true;
+  const PpoeModel model = testing::RandomChain(rng, o);
+  PpoeData data(model);
+  const Eigen::VectorXd q = testing::RandomQ(rng, model);
+  ForwardKinematicsWithCovariance(model, data, q, CompoundOrder::kSecond);
+  for (FrameId i = 1; i < model.num_frames(); ++i) {
+    Mat6 expected = Mat6::Zero();
+    const SE3 T_frame_base = data.T_base_frame[i].Inverse();
+    for (FrameId s = i; s != kBaseFrame; s = model.frame(s).parent) {
+      const PpoeFrame& f = model.frame(s);
+      const SE3 T_base_sp = data.T_base_frame[f.parent] * f.T_parent_ip;
+      const Mat6 Ad = (T_frame_base * T_base_sp).Adjoint();
+      expected += Ad * f.source_cov * Ad.transpose();
+    }
+    EXPECT_LT((data.Sigma_frame[i] - expected).cwiseAbs().maxCoeff(),
+              1e-12 * expected.cwiseAbs().maxCoeff())
+        << model.frame(i).name;
+  }
+}
+
+TEST(ForwardKinematicsCovariance, SingleSourceIsExactAtBothOrders) {
+  // Only the first joint is uncertain (paper Fig. 3a): every frame's covariance is the exactly
+  // transported source, so both orders agree with each other and with Monte Carlo.
+  PpoeModel model("one_source");
+  FrameId parent = kBaseFrame;
+  for (int i = 0; i < 3; ++i) {
+    const SE3 p = i == 0 ? SE3() : SE3::Translation(Vec3(1.0, 0.0, 0.0));
+    const Mat6 cov = i == 0 ? testing::AxisSource(Vec3::UnitZ(), 10 * kDeg) : Mat6::Zero();
+    parent = model.AddLink(parent, "link" + std::to_string(i + 1), p,
+                           Joint::Revolute(Vec3::UnitZ()), cov);
+  }
+  const FrameId ee = model.AddFrame(parent, "ee", SE3::Translation(Vec3(1.0, 0.0, 0.0)));
+  Eigen::VectorXd q(3);
+  q << 0.3, 0.6, -0.4;
+  PpoeData d2(model), d4(model);
+  ForwardKinematicsWithCovariance(model, d2, q, CompoundOrder::kSecond);
+  ForwardKinematicsWithCovariance(model, d4, q, CompoundOrder::kFourth);
+  EXPECT_LT((d2.Sigma_frame[ee] - d4.Sigma_frame[ee]).cwiseAbs().maxCoeff(), 1e-15);
+  const std::vector<Mat6> mc = SampleFrameCovariances(model, q, 200000, 3);
+  Record("err", NormalizedError(d2.Sigma_frame[ee], mc[ee]));
+  EXPECT_LT(NormalizedError(d2.Sigma_frame[ee], mc[ee]), 0.03);
+}
+
+// The paper's planar 3R example with 10 deg perturbations about every joint axis: the 4th
+// order is closer to Monte Carlo than eq. 18 in the stretched (singular, Fig. 3b) and bent
+// (Fig. 3c, d) configurations.
+class PlanarArmMonteCarlo : public ::testing::TestWithParam<Eigen::Vector3d> {};
+
+TEST_P(PlanarArmMonteCarlo, FourthOrderIsCloserThanSecond) {
+  const PpoeModel model = testing::PlanarArm3R(10 * kDeg);
+  const Eigen::VectorXd q = GetParam();
+  PpoeData d2(model), d4(model);
+  ForwardKinematicsWithCovariance(model, d2, q, CompoundOrder::kSecond);
+  ForwardKinematicsWithCovariance(model, d4, q, CompoundOrder::kFourth);
+  // 10^6 samples: sampling error ~0.004 in this metric, well below the 2nd-order bias.
+  const std::vector<Mat6> mc = SampleFrameCovariances(model, q, 1000000, 4);
+  const FrameId ee = model.FindFrame("ee");
+  const double err2 = NormalizedError(d2.Sigma_frame[ee], mc[ee]);
+  const double err4 = NormalizedError(d4.Sigma_frame[ee], mc[ee]);
+  Record("err2", err2);
+  Record("err4", err4);
+  EXPECT_LT(err4, 0.5 * err2) << "2nd: " << err2 << " 4th: " << err4;
+  EXPECT_LT(err4, 0.01);
+  // The planar structure is kept exactly: no out-of-plane moments.
+  for (int k : {2, 3, 4}) {
+    EXPECT_EQ(d4.Sigma_frame[ee].row(k).cwiseAbs().maxCoeff(), 0.0);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Configurations, PlanarArmMonteCarlo,
+                         ::testing::Values(Eigen::Vector3d(0.0, 0.0, 0.0),
+                                           Eigen::Vector3d(0.5, 0.5, 0.5),
+                                           Eigen::Vector3d(1.0, -1.5, 1.2)));
+
+TEST(ForwardKinematicsCovariance, SevenDofChainSmallPerturbationsAllFrames) {
+  // 1 mm / 0.5 deg sources, a passive base compliance and an uncertain grasp: both orders match
+  // Monte Carlo at every frame within sampling error.
+  std::mt19937_64 rng(5);
+  testing::RandomChainOptions o;
+  o.trans_sd = 1e-3;
+  o.rot_sd = 0.5 * kDeg;
+  o.mixed_joints = true;
+  o.fixed_base_source = true;
+  o.grasp = true;
+  const PpoeModel model = testing::RandomChain(rng, o);
+  const Eigen::VectorXd q = testing::RandomQ(rng, model);
+  PpoeData d2(model), d4(model);
+  ForwardKinematicsWithCovariance(model, d2, q, CompoundOrder::kSecond);
+  ForwardKinematicsWithCovariance(model, d4, q, CompoundOrder::kFourth);
+  const std::vector<Mat6> mc = SampleFrameCovariances(model, q, 100000, 6);
+  for (FrameId i = 1; i < model.num_frames(); ++i) {
+    EXPECT_LT(NormalizedError(d2.Sigma_frame[i], mc[i]), 0.06) << model.frame(i).name;
+    EXPECT_LT(NormalizedError(d4.Sigma_frame[i], mc[i]), 0.06) << model.frame(i).name;
+  }
+}
+
+TEST(ForwardKinematicsCovariance, SevenDofChainLargePerturbationsFourthIsCloser) {
+  std::mt19937_64 rng(7);
+  testing::RandomChainOptions o;
+  o.trans_sd = 0.01;
+  o.rot_sd = 10 * kDeg;
+  o.fixed_base_source = true;
+  o.grasp = true;
+  const PpoeModel model = testing::RandomChain(rng, o);
+  const Eigen::VectorXd q = testing::RandomQ(rng, model);
+  PpoeData d2(model), d4(model);
+  ForwardKinematicsWithCovariance(model, d2, q, CompoundOrder::kSecond);
+  ForwardKinematicsWithCovariance(model, d4, q, CompoundOrder::kFourth);
+  const std::vector<Mat6> mc = SampleFrameCovariances(model, q, 200000, 8);
+  for (const char* name : {"ee", "grasp"}) {
+    const FrameId f = model.FindFrame(name);
+    const double err2 = NormalizedError(d2.Sigma_frame[f], mc[f]);
+    const double err4 = NormalizedError(d4.Sigma_frame[f], mc[f]);
+    Record(std::string(name) + "_err2", err2);
+    Record(std::string(name) + "_err4", err4);
+    EXPECT_LT(err4, 0.5 * err2) << name << " 2nd: " << err2 << " 4th: " << err4;
+  }
+}
+
+TEST(ForwardKinematicsCovariance, TreeBranchesShareOnlyTheTrunk) {
+  // Two arms on a common torso: a tip's covariance depends on its own branch and the trunk only,
+  // exactly as in the chain made of those links.
+  std::mt19937_64 rng(9);
+  const auto build = [&](bool with_left) {
+    std::mt19937_64 r(10);
+    PpoeModel m("tree");
+    FrameId torso = m.AddLink(kBaseFrame, "torso", lie::RandomSE3(r, 0.3),
+                              Joint::Revolute(Vec3::UnitZ()), testing::RandomSource(r, 0.01, 0.05));
+    std::mt19937_64 r_left(11);
+    if (with_left) {
+      FrameId p = torso;
+      for (int i = 0; i < 3; ++i) {
+        p = m.AddLink(p, "left" + std::to_string(i), lie::RandomSE3(r_left, 0.3),
+                      Joint::Revolute(testing::UniformVec3(r_left)),
+                      testing::RandomSource(r_left, 0.01, 0.05));
+      }
+      m.AddFrame(p, "left_tip", SE3::Translation(Vec3(0.1, 0, 0)));
+    }
+    FrameId p = torso;
+    for (int i = 0; i < 3; ++i) {
+      p = m.AddLink(p, "right" + std::to_string(i), lie::RandomSE3(r, 0.3),
+                    Joint::Revolute(testing::UniformVec3(r)), testing::RandomSource(r, 0.01, 0.05));
+    }
+    m.AddFrame(p, "right_tip", SE3::Translation(Vec3(0.1, 0, 0)));
+    return m;
+  };
+  const PpoeModel tree = build(true);
+  const PpoeModel chain = build(false);
+  ASSERT_EQ(tree.nq(), 7);
+  ASSERT_EQ(chain.nq(), 4);
+  Eigen::VectorXd q_tree = testing::RandomQ(rng, tree);
+  Eigen::VectorXd q_chain(4);
+  q_chain << q_tree[0], q_tree.tail<3>();
+  for (CompoundOrder order : {CompoundOrder::kSecond, CompoundOrder::kFourth}) {
+    PpoeData dt(tree), dc(chain);
+    ForwardKinematicsWithCovariance(tree, dt, q_tree, order);
+    ForwardKinematicsWithCovariance(chain, dc, q_chain, order);
+    const FrameId rt = tree.FindFrame("right_tip");
+    const FrameId rc = chain.FindFrame("right_tip");
+    EXPECT_TRUE(dt.T_base_frame[rt].IsApprox(dc.T_base_frame[rc], 1e-15));
+    EXPECT_LT((dt.Sigma_frame[rt] - dc.Sigma_frame[rc]).cwiseAbs().maxCoeff(), 1e-15);
+  }
+  PpoeData d4(tree);
+  ForwardKinematicsWithCovariance(tree, d4, q_tree, CompoundOrder::kFourth);
+  const std::vector<Mat6> mc = SampleFrameCovariances(tree, q_tree, 100000, 12);
+  for (const char* name : {"left_tip", "right_tip"}) {
+    const FrameId f = tree.FindFrame(name);
+    EXPECT_LT(NormalizedError(d4.Sigma_frame[f], mc[f]), 0.06) << name;
+  }
+}
+
+TEST(ForwardKinematicsCovariance, SingularSourcesStayPsdAndSymmetric) {
+  const PpoeModel model = testing::PlanarArm3R(10 * kDeg);
+  PpoeData data(model);
+  Eigen::VectorXd q(3);
+  q << 0.2, -0.7, 1.1;
+  ForwardKinematicsWithCovariance(model, data, q, CompoundOrder::kFourth);
+  for (FrameId i = 1; i < model.num_frames(); ++i) {
+    const Mat6& S = data.Sigma_frame[i];
+    EXPECT_LT((S - S.transpose()).cwiseAbs().maxCoeff(), 1e-15);
+    const double min_eig = Eigen::SelfAdjointEigenSolver<Mat6>(S).eigenvalues().minCoeff();
+    EXPECT_GT(min_eig, -1e-15 * S.norm()) << model.frame(i).name;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Jacobian w.r.t. q.
+
+TEST(FrameJacobian, MatchesFiniteDifferencesOnTheManifold) {
+  std::mt19937_64 rng(13);
+  testing::RandomChainOptions o;
+  o.mixed_joints = true;
+  o.fixed_base_source = true;
+  o.grasp = true;
+  const PpoeModel model = testing::RandomChain(rng, o);
+  PpoeData data(model), data_h(model);
+  Matrix6Xd J(6, model.nq());
+  for (int trial = 0; trial < 5; ++trial) {
+    const Eigen::VectorXd q = testing::RandomQ(rng, model);
+    ForwardKinematics(model, data, q);
+    for (FrameId f = 0; f < model.num_frames(); ++f) {
+      ComputeFrameJacobian(model, data, f, J);
+      const auto pose = [&](const Eigen::VectorXd& q_in) {
+        ForwardKinematics(model, data_h, q_in);
+        return data_h.T_base_frame[f];
+      };
+      for (double h : lie::testing::kFdSteps) {
+        const Eigen::MatrixXd J_num = lie::testing::NumericalJacobian(pose, q, h);
+        EXPECT_LT(lie::testing::JacobianError(J, J_num), 1e-7)
+            << model.frame(f).name << " h = " << h;
+      }
+    }
+  }
+}
+
+TEST(FrameJacobian, ColumnsOfOtherBranchesAreZero) {
+  const PpoeModel model = testing::PlanarArm3R(0.0);
+  PpoeData data(model);
+  Eigen::VectorXd q(3);
+  q << 0.1, 0.2, 0.3;
+  ForwardKinematics(model, data, q);
+  Matrix6Xd J(6, 3);
+  ComputeFrameJacobian(model, data, model.FindFrame("link1"), J);
+  EXPECT_TRUE(J.rightCols<2>().isZero(0.0));
+  EXPECT_FALSE(J.col(0).isZero(0.0));
+  ComputeFrameJacobian(model, data, kBaseFrame, J);
+  EXPECT_TRUE(J.isZero(0.0));
+}
+
+}  // namespace
+}  // namespace flexbench::kinematics

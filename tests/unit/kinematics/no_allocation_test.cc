@@ -1,0 +1,100 @@
+// The FK calls must not touch the heap once PpoeData exists. This binary replaces the global
+// operator new/delete with counting versions (they forward to malloc/free, so sanitizers still
+// see every allocation).
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
+#include <random>
+#include <vector>
+
+#include "estimators/kinematics/forward_kinematics.h"
+#include "tests/unit/kinematics/ppoe_test_models.h"
+
+namespace {
+
+std::atomic<long> g_allocations{0};
+
+void* CountedAlloc(std::size_t size) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+
+void* CountedAlignedAlloc(std::size_t size, std::align_val_t align) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  const std::size_t a = static_cast<std::size_t>(align);
+  const std::size_t rounded = (size + a - 1) / a * a;
+  if (void* p = std::aligned_alloc(a, rounded == 0 ? a : rounded)) return p;
+  throw std::bad_alloc();
+}
+
+}  // namespace
+
+void* operator new(std::size_t size) { return CountedAlloc(size); }
+void* operator new[](std::size_t size) { return CountedAlloc(size); }
+void* operator new(std::size_t size, std::align_val_t a) { return CountedAlignedAlloc(size, a); }
+void* operator new[](std::size_t size, std::align_val_t a) { return CountedAlignedAlloc(size, a); }
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+
+namespace flexbench::kinematics {
+namespace {
+
+using lie::CompoundOrder;
+
+// Allocations made while running f.
+template <class F>
+long CountAllocations(const F& f) {
+  const long before = g_allocations.load();
+  f();
+  return g_allocations.load() - before;
+}
+
+TEST(NoAllocation, CounterSeesAllocations) {
+  // The check has teeth: a vector growing inside the counted region is seen.
+  EXPECT_GE(CountAllocations([] {
+              std::vector<double> v;
+              v.push_back(1.0);
+            }),
+            1);
+}
+
+TEST(NoAllocation, ForwardKinematicsCallsDoNotAllocate) {
+  std::mt19937_64 rng(1);
+  testing::RandomChainOptions o;
+  o.dof = 27;
+  o.trans_sd = 0.01;
+  o.rot_sd = 0.05;
+  o.mixed_joints = true;
+  o.fixed_base_source = true;
+  o.grasp = true;
+  const PpoeModel model = testing::RandomChain(rng, o);
+  PpoeData data(model);
+  const Eigen::VectorXd q = testing::RandomQ(rng, model);
+  Matrix6Xd J(6, model.nq());
+  const FrameId ee = model.FindFrame("ee");
+
+  EXPECT_EQ(CountAllocations([&] { ForwardKinematics(model, data, q); }), 0);
+  EXPECT_EQ(CountAllocations(
+                [&] { ForwardKinematicsWithCovariance(model, data, q, CompoundOrder::kSecond); }),
+            0);
+  EXPECT_EQ(CountAllocations(
+                [&] { ForwardKinematicsWithCovariance(model, data, q, CompoundOrder::kFourth); }),
+            0);
+  EXPECT_EQ(CountAllocations([&] { ComputeFrameJacobian(model, data, ee, J); }), 0);
+  // A segment of a larger vector binds to Eigen::Ref without a copy.
+  Eigen::VectorXd q_long(model.nq() + 3);
+  q_long.setZero();
+  EXPECT_EQ(CountAllocations([&] { ForwardKinematics(model, data, q_long.head(model.nq())); }), 0);
+}
+
+}  // namespace
+}  // namespace flexbench::kinematics
