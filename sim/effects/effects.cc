@@ -1,0 +1,483 @@
+// The effects catalogue. Each class edits only the TruthSetup; the simulation does the rest.
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <sstream>
+
+#include "estimators/error.h"
+#include "sim/effects/effect.h"
+#include "sim/mujoco_model.h"
+
+namespace flexbench::sim {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+std::string Num(double v) {
+  std::ostringstream s;
+  s.precision(6);
+  s << v;
+  return s.str();
+}
+
+int ActuatedJointOrFail(const TruthSetup& setup, const Effect& effect, const std::string& joint) {
+  const int j = mj_name2id(setup.model, mjOBJ_JOINT, joint.c_str());
+  if (j < 0) {
+    throw InputError(effect.where() + ": " + setup.model_name + " has no joint named '" + joint +
+                     "'");
+  }
+  if (setup.catalog->Joint(j).role != JointRole::kActuated) {
+    throw InputError(effect.where() + ": joint '" + joint + "' of " + setup.model_name +
+                     " is not an actuated joint");
+  }
+  return j;
+}
+
+int BodyOrFail(const TruthSetup& setup, const Effect& effect, const std::string& body) {
+  const int b = mj_name2id(setup.model, mjOBJ_BODY, body.c_str());
+  if (b <= 0) {
+    throw InputError(effect.where() + ": " + setup.model_name + " has no body named '" + body +
+                     "'");
+  }
+  return b;
+}
+
+// ---- Passive compliance joints listed by the model (base plate, links, neck, camera mount).
+class JointGroupEffect : public Effect {
+ public:
+  explicit JointGroupEffect(std::string group) : group_(std::move(group)) {}
+  void Configure(const Params& p) override { scale_ = p.GetPositive("stiffness_scale", 1.0); }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (!c.JointsOfEffect(group_).empty()) return true;
+    *why = "no <custom><text name=\"effect:" + group_ + "\"> listing passive joints";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    const std::vector<int> joints = s.catalog->JointsOfEffect(group_);
+    if (joints.empty()) {
+      throw InputError(where() + ": " + s.model_name + " has no passive joints for effect '" +
+                       group_ + "' (no <custom><text name=\"effect:" + group_ + "\">)");
+    }
+    for (int j : joints) {
+      if (s.catalog->Joint(j).role == JointRole::kCoupled) {
+        // A linkage: follows its equality constraint; stiffness_scale scales the polynomial.
+        const int eq = s.catalog->Joint(j).coupling_eq;
+        for (int k = 0; k < 5; ++k) s.model->eq_data[eq * mjNEQDATA + k] *= scale_;
+      } else {
+        s.model->jnt_stiffness[j] *= scale_;
+      }
+      s.released[j] = 1;
+    }
+  }
+  std::string Describe() const override { return "stiffness_scale=" + Num(scale_); }
+
+ private:
+  std::string group_;
+  double scale_ = 1.0;
+};
+
+template <const char* kGroup>
+std::unique_ptr<Effect> MakeGroup() {
+  return std::make_unique<JointGroupEffect>(kGroup);
+}
+
+// ---- Gear elasticity between motor (encoder) and link: a torsional spring per actuated joint.
+class JointElasticityEffect : public Effect {
+ public:
+  void Configure(const Params& p) override {
+    scale_ = p.GetPositive("stiffness_scale", 1.0);
+    if (const auto c = p.Optional("stiffness_Nm_per_rad")) {
+      if (c->IsMap()) {
+        for (const std::string& j : c->Keys()) {
+          const ConfigNode v = c->Child(j);
+          if (v.AsDouble() <= 0) v.Fail("must be > 0");
+          per_joint_[j] = v.AsDouble();
+        }
+      } else {
+        all_ = c->AsDouble();
+        if (all_ <= 0) c->Fail("must be > 0");
+      }
+    }
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (c.actuated.empty()) {
+      *why = "no actuated joints";
+      return false;
+    }
+    return true;
+  }
+  void Apply(TruthSetup& s) const override {
+    std::map<std::string, double> k = per_joint_;
+    if (all_ > 0) {
+      for (int j : s.catalog->actuated) k[s.catalog->Joint(j).name] = all_;
+    }
+    if (k.empty()) {
+      // The model's own values: effect:joint_elasticity (joints) + :stiffness (numbers).
+      const auto parts = s.catalog->effect_parts.find("joint_elasticity");
+      const auto nums = s.catalog->effect_numbers.find("joint_elasticity:stiffness");
+      if (parts == s.catalog->effect_parts.end() || nums == s.catalog->effect_numbers.end() ||
+          parts->second.size() != nums->second.size()) {
+        throw InputError(where() + ": " + s.model_name +
+                         " declares no gear stiffness (effect:joint_elasticity with "
+                         "effect:joint_elasticity:stiffness); give stiffness_Nm_per_rad");
+      }
+      for (size_t i = 0; i < parts->second.size(); ++i) k[parts->second[i]] = nums->second[i];
+    }
+    for (const auto& [joint, value] : k) {
+      const int j = ActuatedJointOrFail(s, *this, joint);
+      s.gear[j].stiffness = value * scale_;
+    }
+  }
+  std::string Describe() const override {
+    std::string d = "stiffness_scale=" + Num(scale_);
+    if (all_ > 0) d += " stiffness_Nm_per_rad=" + Num(all_);
+    for (const auto& [j, v] : per_joint_) d += " " + j + "=" + Num(v);
+    return d;
+  }
+
+ private:
+  double scale_ = 1.0;
+  double all_ = 0.0;
+  std::map<std::string, double> per_joint_;
+};
+
+// ---- Backlash: play between motor and link; the load holds the link against one flank.
+class BacklashEffect : public Effect {
+ public:
+  void Configure(const Params& p) override {
+    const ConfigNode c = p.Require("width_deg");
+    if (c.IsMap()) {
+      for (const std::string& j : c.Keys()) {
+        const ConfigNode v = c.Child(j);
+        if (v.AsDouble() < 0) v.Fail("must be >= 0");
+        per_joint_[j] = v.AsDouble();
+      }
+    } else {
+      all_ = c.AsDouble();
+      if (all_ < 0) c.Fail("must be >= 0");
+    }
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    for (int j : c.actuated) {
+      if (c.Joint(j).type == mjJNT_HINGE) return true;
+    }
+    *why = "no actuated hinge joints";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    std::map<std::string, double> w = per_joint_;
+    if (w.empty()) {
+      for (int j : s.catalog->actuated) {
+        if (s.catalog->Joint(j).type == mjJNT_HINGE) w[s.catalog->Joint(j).name] = all_;
+      }
+    }
+    for (const auto& [joint, deg] : w) {
+      const int j = ActuatedJointOrFail(s, *this, joint);
+      if (s.catalog->Joint(j).type != mjJNT_HINGE) {
+        throw InputError(where() + ": backlash needs a hinge joint; '" + joint + "' is a slide");
+      }
+      s.gear[j].backlash = deg * kDeg;
+    }
+  }
+  std::string Describe() const override {
+    std::string d;
+    if (per_joint_.empty()) d = "width_deg=" + Num(all_);
+    for (const auto& [j, v] : per_joint_) d += (d.empty() ? "" : " ") + j + "=" + Num(v);
+    return d;
+  }
+
+ private:
+  double all_ = 0.0;
+  std::map<std::string, double> per_joint_;
+};
+
+// ---- Payload: a solid sphere of mass_kg at offset_m in the end-effector body's frame.
+class PayloadEffect : public Effect {
+ public:
+  void Configure(const Params& p) override {
+    mass_ = p.RequireDouble("mass_kg");
+    if (mass_ < 0) p.FailKey("mass_kg", "must be >= 0");
+    offset_ = p.GetVec3("offset_m", Vec3::Zero());
+    radius_ = p.GetPositive("radius_m", 0.03, true);
+    body_ = p.GetString("body", "");
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel* m, std::string* why) const override {
+    const auto it = c.effect_parts.find("payload");
+    if (it != c.effect_parts.end() && !it->second.empty()) return true;
+    *why = "no <custom><text name=\"effect:payload\"> naming the end-effector body (or give body)";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    std::string body = body_;
+    if (body.empty()) {
+      const auto it = s.catalog->effect_parts.find("payload");
+      if (it == s.catalog->effect_parts.end() || it->second.empty()) {
+        throw InputError(where() + ": " + s.model_name +
+                         " names no payload body (effect:payload); give body");
+      }
+      body = it->second.front();
+    }
+    const int b = BodyOrFail(s, *this, body);
+    if (mass_ == 0.0) return;
+    mjModel* m = s.model;
+    const double M = m->body_mass[b];
+    const Vec3 c(m->body_ipos + 3 * b);
+    const Mat3 R = QuatFromWxyz(m->body_iquat + 4 * b).toRotationMatrix();
+    const Vec3 I(m->body_inertia + 3 * b);
+    const double Mt = M + mass_;
+    const Vec3 c_new = (M * c + mass_ * offset_) / Mt;
+    const auto shift = [](double mass, const Vec3& d) {
+      return (mass * (d.squaredNorm() * Mat3::Identity() - d * d.transpose())).eval();
+    };
+    const Mat3 I_new = R * I.asDiagonal() * R.transpose() + shift(M, c - c_new) +
+                       (0.4 * mass_ * radius_ * radius_) * Mat3::Identity() +
+                       shift(mass_, offset_ - c_new);
+    Eigen::SelfAdjointEigenSolver<Mat3> eig(I_new);
+    Mat3 axes = eig.eigenvectors();
+    if (axes.determinant() < 0) axes.col(2) *= -1.0;
+    m->body_mass[b] = Mt;
+    Eigen::Map<Vec3>(m->body_ipos + 3 * b) = c_new;
+    Eigen::Map<Vec3>(m->body_inertia + 3 * b) = eig.eigenvalues();
+    QuatToWxyz(Quat(axes).normalized(), m->body_iquat + 4 * b);
+    s.constants_changed = true;
+  }
+  std::string Describe() const override {
+    return "mass_kg=" + Num(mass_) + " offset_m=[" + Num(offset_.x()) + "," + Num(offset_.y()) +
+           "," + Num(offset_.z()) + "]" + (body_.empty() ? "" : " body=" + body_);
+  }
+
+ private:
+  double mass_ = 0.0;
+  Vec3 offset_ = Vec3::Zero();
+  double radius_ = 0.03;
+  std::string body_;
+};
+
+// ---- Encoder offset: a calibration error added to both encoders of a joint.
+class EncoderOffsetEffect : public Effect {
+ public:
+  void Configure(const Params& p) override {
+    const ConfigNode c = p.Require("offset_deg");
+    if (c.IsMap()) {
+      for (const std::string& j : c.Keys()) per_joint_[j] = c.GetDouble(j);
+    } else {
+      all_ = c.AsDouble();
+      has_all_ = true;
+    }
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (!c.actuated.empty()) return true;
+    *why = "no actuated joints";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    if (has_all_) {
+      for (int j : s.catalog->actuated) s.encoder_offset[j] += all_ * kDeg;
+    }
+    for (const auto& [joint, deg] : per_joint_) {
+      const int j = ActuatedJointOrFail(s, *this, joint);
+      s.encoder_offset[j] += deg * kDeg;
+    }
+  }
+  std::string Describe() const override {
+    std::string d = has_all_ ? "offset_deg=" + Num(all_) : "";
+    for (const auto& [j, v] : per_joint_) d += (d.empty() ? "" : " ") + j + "=" + Num(v);
+    return d;
+  }
+
+ private:
+  bool has_all_ = false;
+  double all_ = 0.0;
+  std::map<std::string, double> per_joint_;
+};
+
+// ---- Thermal expansion: the listed link bodies grow by alpha * delta_T along every offset.
+class ThermalExpansionEffect : public Effect {
+ public:
+  void Configure(const Params& p) override {
+    delta_t_ = p.RequireDouble("delta_T_K");
+    alpha_ = p.GetPositive("alpha_per_K", 2.3e-5);  // aluminium
+    bodies_ = p.GetStringList("bodies", {});
+    if (1.0 + alpha_ * delta_t_ <= 0.0) p.FailKey("delta_T_K", "shrinks the link to nothing");
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (c.HasEffectParts("thermal_expansion")) return true;
+    *why = "no <custom><text name=\"effect:thermal_expansion\"> listing link bodies (or give bodies)";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    std::vector<std::string> bodies = bodies_;
+    if (bodies.empty()) {
+      const auto it = s.catalog->effect_parts.find("thermal_expansion");
+      if (it == s.catalog->effect_parts.end()) {
+        throw InputError(where() + ": " + s.model_name +
+                         " lists no bodies for thermal_expansion; give bodies");
+      }
+      bodies = it->second;
+    }
+    mjModel* m = s.model;
+    const double k = 1.0 + alpha_ * delta_t_;
+    const auto scale = [k](mjtNum* v) {
+      for (int i = 0; i < 3; ++i) v[i] *= k;
+    };
+    for (const std::string& name : bodies) {
+      const int b = BodyOrFail(s, *this, name);
+      scale(m->body_ipos + 3 * b);
+      for (int i = 0; i < 3; ++i) m->body_inertia[3 * b + i] *= k * k;
+      for (int c = 0; c < m->nbody; ++c) {
+        if (c != b && m->body_parentid[c] == b) scale(m->body_pos + 3 * c);
+      }
+      for (int g = 0; g < m->ngeom; ++g) {
+        if (m->geom_bodyid[g] != b) continue;
+        scale(m->geom_pos + 3 * g);
+        if (m->geom_type[g] == mjGEOM_CAPSULE || m->geom_type[g] == mjGEOM_CYLINDER) {
+          m->geom_size[3 * g + 1] *= k;
+        }
+      }
+      for (int i = 0; i < m->nsite; ++i) {
+        if (m->site_bodyid[i] == b) scale(m->site_pos + 3 * i);
+      }
+      for (int i = 0; i < m->ncam; ++i) {
+        if (m->cam_bodyid[i] == b) scale(m->cam_pos + 3 * i);
+      }
+      for (int j = 0; j < m->njnt; ++j) {
+        if (m->jnt_bodyid[j] == b) scale(m->jnt_pos + 3 * j);
+      }
+    }
+    s.constants_changed = true;
+  }
+  std::string Describe() const override {
+    return "delta_T_K=" + Num(delta_t_) + " alpha_per_K=" + Num(alpha_);
+  }
+
+ private:
+  double delta_t_ = 0.0;
+  double alpha_ = 2.3e-5;
+  std::vector<std::string> bodies_;
+};
+
+// ---- IMU bias and yaw drift: constant biases plus bias random walks. With no magnetometer,
+// integrated yaw drifts with the gyro bias about the vertical.
+class ImuBiasEffect : public Effect {
+ public:
+  void Configure(const Params& p) override {
+    spec_.gyro_bias = p.GetVec3("gyro_bias_rad_s", Vec3::Zero());
+    spec_.accel_bias = p.GetVec3("accel_bias_m_s2", Vec3::Zero());
+    spec_.gyro_walk = p.GetPositive("gyro_walk_rad_s_sqrt_s", 0.0, true);
+    spec_.accel_walk = p.GetPositive("accel_walk_m_s2_sqrt_s", 0.0, true);
+    sites_ = p.GetStringList("sites", {});
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (!c.imu_sites.empty()) return true;
+    *why = "no IMU site (a site with MJCF gyro and accelerometer)";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    if (sites_.empty()) {
+      s.imu_bias["*"] = spec_;
+      return;
+    }
+    for (const std::string& site : sites_) {
+      if (mj_name2id(s.model, mjOBJ_SITE, site.c_str()) < 0) {
+        throw InputError(where() + ": " + s.model_name + " has no site named '" + site + "'");
+      }
+      s.imu_bias[site] = spec_;
+    }
+  }
+  std::string Describe() const override {
+    return "gyro_bias_rad_s=[" + Num(spec_.gyro_bias.x()) + "," + Num(spec_.gyro_bias.y()) + "," +
+           Num(spec_.gyro_bias.z()) + "] gyro_walk=" + Num(spec_.gyro_walk);
+  }
+
+ private:
+  ImuBiasSpec spec_;
+  std::vector<std::string> sites_;
+};
+
+constexpr char kBasePlate[] = "base_plate_compliance";
+constexpr char kLinks[] = "link_elasticity";
+constexpr char kNeck[] = "neck_elasticity";
+constexpr char kCameraSag[] = "camera_mount_sag";
+constexpr char kWrist[] = "nonlinear_wrist";
+
+template <class T>
+std::unique_ptr<Effect> Make() {
+  return std::make_unique<T>();
+}
+
+}  // namespace
+
+const std::vector<EffectEntry>& EffectRegistry() {
+  // One line per effect.
+  static const std::vector<EffectEntry> effects = {
+      {kBasePlate, "base plate bends under load: passive tilt joints (stiffness_scale)",
+       MakeGroup<kBasePlate>},
+      {kLinks, "elastic links: passive bending hinges between link segments (stiffness_scale)",
+       MakeGroup<kLinks>},
+      {kNeck, "continuum-elastic neck: chain of passive spring joints (stiffness_scale)",
+       MakeGroup<kNeck>},
+      {kCameraSag, "camera mount sags under the camera's weight: passive joint (stiffness_scale)",
+       MakeGroup<kCameraSag>},
+      {kWrist, "wrist is a nonlinear linkage: coupled joints follow the actuated ones (scale)",
+       MakeGroup<kWrist>},
+      {"joint_elasticity", "gear elasticity between motor encoder and link (stiffness_Nm_per_rad)",
+       Make<JointElasticityEffect>},
+      {"backlash", "play between motor and link, load holds the link on one flank (width_deg)",
+       Make<BacklashEffect>},
+      {"payload", "extra mass at the end effector (mass_kg, offset_m, radius_m, body)",
+       Make<PayloadEffect>},
+      {"encoder_offset", "calibration offset of the joint encoders (offset_deg)",
+       Make<EncoderOffsetEffect>},
+      {"thermal_expansion", "links grow by alpha * delta_T (delta_T_K, alpha_per_K, bodies)",
+       Make<ThermalExpansionEffect>},
+      {"imu_bias", "IMU constant bias and bias random walk, hence yaw drift (gyro_bias_rad_s, ...)",
+       Make<ImuBiasEffect>},
+  };
+  return effects;
+}
+
+namespace {
+
+const EffectEntry* FindEffect(const std::string& name, std::string* known) {
+  for (const EffectEntry& e : EffectRegistry()) {
+    if (name == e.name) return &e;
+    *known += std::string(known->empty() ? "" : ", ") + e.name;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+std::unique_ptr<Effect> MakeEffect(const std::string& name, const Params& params) {
+  std::string known;
+  const EffectEntry* entry = FindEffect(name, &known);
+  if (!entry) {
+    throw InputError(params.where() + ": unknown effect '" + name + "' (known: " + known + ")");
+  }
+  std::unique_ptr<Effect> effect = entry->make();
+  effect->set_identity(name, params.where());
+  effect->Configure(params);
+  return effect;
+}
+
+std::unique_ptr<Effect> MakeEffect(const std::string& name, const std::string& params_yaml) {
+  return MakeEffect(name, Params::FromYaml(params_yaml, "effect '" + name + "'"));
+}
+
+std::vector<std::unique_ptr<Effect>> ParseEffects(const ConfigNode& effects) {
+  std::vector<std::unique_ptr<Effect>> out;
+  if (!effects.IsMap()) effects.Fail("expected a mapping {effect name: {parameters}}");
+  for (const std::string& name : effects.Keys()) {
+    std::optional<ConfigNode> params = effects.Optional(name);
+    std::string known;
+    if (!FindEffect(name, &known)) {
+      throw InputError((params ? params->Where() : effects.Where()) + ": unknown effect '" + name +
+                       "' (known: " + known + ")");
+    }
+    const std::string where =
+        (params ? params->Where() : effects.Where()) + ": effect '" + name + "'";
+    out.push_back(MakeEffect(name, Params(params, where)));
+  }
+  return out;
+}
+
+}  // namespace flexbench::sim

@@ -1,0 +1,45 @@
+// What effects change in the truth: a copy of the model whose parameters they may edit, and
+// switches the simulation reads. Everything here starts as "nominal": passive compliance joints
+// locked at their reference position, rigid gears without play, no sensor errors.
+#pragma once
+
+#include <mujoco/mujoco.h>
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "estimators/conventions.h"
+#include "sim/model_catalog.h"
+
+namespace flexbench::sim {
+
+// Transmission between motor and link of one actuated joint.
+struct GearSpec {
+  double stiffness = 0.0;  // Nm/rad (N/m for slides); 0 = rigid
+  double backlash = 0.0;   // total play, rad (m)
+};
+
+// Errors of one 6-axis IMU beyond its white noise.
+struct ImuBiasSpec {
+  Vec3 gyro_bias = Vec3::Zero();    // rad/s, constant
+  Vec3 accel_bias = Vec3::Zero();   // m/s^2, constant
+  double gyro_walk = 0.0;           // rad/s/sqrt(s): bias random walk density
+  double accel_walk = 0.0;          // m/s^2/sqrt(s)
+};
+
+struct TruthSetup {
+  mjModel* model = nullptr;  // the truth model (a copy; the file's model stays nominal)
+  const ModelCatalog* catalog = nullptr;
+  std::string model_name;
+  // Per joint id: the joint moves (passive: spring-loaded; coupled: follows its linkage).
+  // Joints that are not released are held at qpos0, i.e. at the nominal model's value.
+  std::vector<char> released;
+  std::vector<GearSpec> gear;            // per joint id (actuated joints)
+  std::vector<double> encoder_offset;    // per joint id, rad (m)
+  std::map<std::string, ImuBiasSpec> imu_bias;  // by IMU site; "*" applies to every IMU
+  // Set by effects that change masses or geometry: the simulation then calls mj_setConst.
+  bool constants_changed = false;
+};
+
+}  // namespace flexbench::sim

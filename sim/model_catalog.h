@@ -1,0 +1,59 @@
+// What a truth model contains, read from the compiled mjModel: which joints are actuated
+// (position servos), which are passive compliance joints and which are kinematically coupled,
+// and which model parts each effect acts on.
+//
+// MJCF convention (models/*.xml): effects name their parts in <custom> fields,
+//   <text name="effect:base_plate_compliance" data="plate_pitch plate_roll"/>
+//   <numeric name="effect:joint_elasticity:stiffness" data="120 80"/>
+// A passive joint is a hinge or slide without an actuator; a coupled joint is joint1 of an
+// active two-joint <equality><joint> (its value is a polynomial of joint2, e.g. a linkage).
+#pragma once
+
+#include <mujoco/mujoco.h>
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace flexbench::sim {
+
+enum class JointRole { kActuated, kPassive, kCoupled };
+const char* JointRoleName(JointRole role);
+
+struct JointEntry {
+  std::string name;
+  int id = -1;
+  int type = mjJNT_HINGE;  // mjJNT_HINGE or mjJNT_SLIDE
+  int qpos_adr = -1;
+  int dof_adr = -1;
+  JointRole role = JointRole::kPassive;
+  int actuator = -1;     // position actuator driving the joint (actuated joints)
+  int coupling_eq = -1;  // equality constraint defining the joint (coupled joints)
+  int coupled_to = -1;   // joint2 of that constraint
+  std::string effect;    // effect whose custom field lists the joint ("" when none)
+};
+
+struct ModelCatalog {
+  std::string model_name;
+  std::vector<JointEntry> joints;  // indexed by joint id
+  std::vector<int> actuated;       // joint ids in actuator order: the command vector's order
+  // "effect:<name>" text fields: effect -> listed names, in file order.
+  std::map<std::string, std::vector<std::string>> effect_parts;
+  // "effect:<name>:<param>" numeric fields.
+  std::map<std::string, std::vector<double>> effect_numbers;
+  // Sites carrying both an MJCF gyro and an accelerometer (6-axis IMU mounts).
+  std::vector<std::string> imu_sites;
+
+  // Reads `m`. Throws InputError naming `model_name` for ball or free joints, actuators that
+  // are not position servos on a joint, and effect fields naming missing or unsuitable parts.
+  static ModelCatalog Build(const mjModel* m, const std::string& model_name);
+
+  const JointEntry& Joint(int id) const { return joints.at(id); }
+  // Joint ids listed under "effect:<effect>" (empty when the model lacks the field).
+  std::vector<int> JointsOfEffect(const std::string& effect) const;
+  bool HasEffectParts(const std::string& effect) const { return effect_parts.count(effect) > 0; }
+  // Actuated joint names in command order.
+  std::vector<std::string> ActuatedNames() const;
+};
+
+}  // namespace flexbench::sim

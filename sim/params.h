@@ -1,0 +1,53 @@
+// Parameters of one effect or one sensor in a scenario file. The block may be absent
+// (`payload:` with no value); errors then name the entry that lacks the key.
+#pragma once
+
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "estimators/conventions.h"
+#include "sim/config.h"
+
+namespace flexbench::sim {
+
+class Params {
+ public:
+  // `node` is the parameter map (nullopt when the entry has no value); `where` names the entry
+  // in messages, e.g. "rover.yaml:12: effect 'payload'".
+  Params(std::optional<ConfigNode> node, std::string where);
+  // Parameters given as text (tests, programmatic set-ups): `yaml` is a flow or block map.
+  static Params FromYaml(const std::string& yaml, const std::string& where);
+
+  bool Has(const std::string& key) const;
+  std::optional<ConfigNode> Optional(const std::string& key) const;
+  ConfigNode Require(const std::string& key) const;
+
+  double GetDouble(const std::string& key, double fallback) const;
+  double RequireDouble(const std::string& key) const;
+  // A number that must be > 0 (or >= 0 with allow_zero).
+  double GetPositive(const std::string& key, double fallback, bool allow_zero = false) const;
+  int GetInt(const std::string& key, int fallback) const;
+  std::string GetString(const std::string& key, const std::string& fallback) const;
+  std::string RequireString(const std::string& key) const;
+  Vec3 GetVec3(const std::string& key, const Vec3& fallback) const;
+  std::vector<std::string> GetStringList(const std::string& key,
+                                         const std::vector<std::string>& fallback) const;
+  // A number for every name, or a map {name: number}. `names` is the default set for the scalar
+  // form; map keys are returned as written (callers check that they exist).
+  std::map<std::string, double> GetPerName(const std::string& key,
+                                           const std::vector<std::string>& names) const;
+
+  [[noreturn]] void Fail(const std::string& message) const;
+  // Fails naming `key` (its file line when present).
+  [[noreturn]] void FailKey(const std::string& key, const std::string& message) const;
+  const std::string& where() const { return where_; }
+  const std::optional<ConfigNode>& node() const { return node_; }
+
+ private:
+  std::optional<ConfigNode> node_;
+  std::string where_;
+};
+
+}  // namespace flexbench::sim

@@ -1,0 +1,579 @@
+#include "sim/simulation.h"
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <set>
+#include <stdexcept>
+
+#include "estimators/error.h"
+#include "sim/camera.h"
+
+namespace flexbench::sim {
+namespace {
+
+// Armature added to the DoF of a locked joint in dynamic runs: the rigid limit (its
+// acceleration vanishes, the other DoFs see the locked dynamics); the joint is also projected
+// back to qpos0 after every step.
+constexpr double kLockArmature = 1e6;
+// Finite-difference step of the static solve's Jacobian (rad or m).
+constexpr double kJacobianStep = 1e-7;
+// A load below this (Nm) does not pick a backlash flank.
+constexpr double kBacklashLoadEps = 1e-9;
+constexpr int kMaxBacklashPasses = 8;
+
+// MuJoCo prints its first warning of each kind through mju_user_warning (and writes
+// MUJOCO_LOG.TXT by default). While stepping, keep the text for our error message instead.
+thread_local std::string* g_step_warning = nullptr;
+void CaptureWarning(const char* msg) {
+  if (g_step_warning) *g_step_warning = msg;
+}
+struct StepWarningScope {
+  explicit StepWarningScope(std::string* sink) : previous(mju_user_warning) {
+    g_step_warning = sink;
+    mju_user_warning = CaptureWarning;
+  }
+  ~StepWarningScope() {
+    mju_user_warning = previous;
+    g_step_warning = nullptr;
+  }
+  void (*previous)(const char*);
+};
+
+std::string Fmt(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), "%.6g", v);
+  return buf;
+}
+
+double DeadZone(double x, double half_width) {
+  if (x > half_width) return x - half_width;
+  if (x < -half_width) return x + half_width;
+  return 0.0;
+}
+
+// Value and derivative of MuJoCo's joint-equality polynomial: y - y0 = sum_k a_k (x - x0)^k.
+void CouplingPolynomial(const mjModel* m, int eq, double dx, double* dy, double* slope) {
+  const mjtNum* a = m->eq_data + eq * mjNEQDATA;
+  *dy = a[0] + dx * (a[1] + dx * (a[2] + dx * (a[3] + dx * a[4])));
+  *slope = a[1] + dx * (2 * a[2] + dx * (3 * a[3] + dx * 4 * a[4]));
+}
+
+Eigen::Isometry3d MakePose(const mjtNum* pos, const mjtNum* mat) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = RotFromRowMajor(mat);
+  T.translation() = Vec3(pos[0], pos[1], pos[2]);
+  return T;
+}
+
+Eigen::Isometry3d FramePoseIn(const mjData* d, const FrameRef& f) {
+  switch (f.type) {
+    case FrameType::kSite:
+      return MakePose(d->site_xpos + 3 * f.id, d->site_xmat + 9 * f.id);
+    case FrameType::kCamera:
+      return WorldFromOptical(d, f.id);
+    case FrameType::kGeom:
+      return MakePose(d->geom_xpos + 3 * f.id, d->geom_xmat + 9 * f.id);
+    case FrameType::kBody:
+      return MakePose(d->xpos + 3 * f.id, d->xmat + 9 * f.id);
+  }
+  return Eigen::Isometry3d::Identity();
+}
+
+}  // namespace
+
+Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectList& effects)
+    : model_name_(std::move(model_name)), nominal_(std::move(model)) {
+  const mjModel* nm = nominal_.get();
+  catalog_ = ModelCatalog::Build(nm, model_name_);
+  truth_.reset(mj_copyModel(nullptr, nm));
+  mjModel* m = truth_.get();
+  setup_.model = m;
+  setup_.catalog = &catalog_;
+  setup_.model_name = model_name_;
+  setup_.released.assign(m->njnt, 0);
+  setup_.gear.assign(m->njnt, GearSpec{});
+  setup_.encoder_offset.assign(m->njnt, 0.0);
+  // Passive joints no effect claims are part of the model's own physics: always free.
+  for (const JointEntry& j : catalog_.joints) {
+    if (j.role == JointRole::kPassive && j.effect.empty()) setup_.released[j.id] = 1;
+  }
+  std::set<std::string> seen;
+  for (const auto& effect : effects) {
+    if (!seen.insert(effect->name()).second) {
+      throw InputError(effect->where() + ": effect '" + effect->name() + "' given twice");
+    }
+    effect->Apply(setup_);
+    effect_names_.push_back(effect->name());
+  }
+  if (setup_.constants_changed) {
+    MjDataPtr tmp = MakeData(m);
+    mj_setConst(m, tmp.get());
+  }
+  for (const JointEntry& j : catalog_.joints) {
+    const bool released = setup_.released[j.id] != 0;
+    if (j.role == JointRole::kCoupled) {
+      m->eq_active[j.coupling_eq] = released ? 1 : 0;
+      const JointEntry& driver = catalog_.Joint(j.coupled_to);
+      if (released && driver.role != JointRole::kActuated) {
+        throw InputError(model_name_ + ": coupled joint '" + j.name + "' follows '" + driver.name +
+                         "', which is not actuated (only actuated drivers are supported)");
+      }
+    }
+    if (j.role != JointRole::kActuated && !released) locked_joints_.push_back(j.id);
+    if (j.role == JointRole::kPassive && released) free_joints_.push_back(j.id);
+    if (j.role == JointRole::kActuated && setup_.gear[j.id].stiffness > 0) {
+      free_joints_.push_back(j.id);
+    }
+  }
+  for (int j : locked_joints_) m->dof_armature[m->jnt_dofadr[j]] += kLockArmature;
+  actuated_names_ = catalog_.ActuatedNames();
+  data_ = MakeData(m);
+  nominal_data_ = MakeData(nm);
+  command_.resize(num_actuated());
+  for (int i = 0; i < num_actuated(); ++i) {
+    command_[i] = m->qpos0[m->jnt_qposadr[catalog_.actuated[i]]];
+  }
+  mj_forward(m, data_.get());
+  kinematics_current_ = true;
+}
+
+Simulation::~Simulation() = default;
+
+std::unique_ptr<Simulation> Simulation::Load(const std::string& path, const EffectList& effects) {
+  return std::make_unique<Simulation>(LoadModel(path), path, effects);
+}
+
+std::unique_ptr<Simulation> Simulation::FromString(const std::string& xml, const std::string& name,
+                                                   const EffectList& effects) {
+  return std::make_unique<Simulation>(LoadModelFromString(xml, name), name, effects);
+}
+
+// ---------------------------------------------------------------- commands
+
+void Simulation::SetCommand(const Eigen::VectorXd& q_motor) {
+  if (q_motor.size() != num_actuated()) {
+    throw std::invalid_argument(model_name_ + ": command has " + std::to_string(q_motor.size()) +
+                                " values for " + std::to_string(num_actuated()) +
+                                " actuated joints");
+  }
+  command_ = q_motor;
+}
+
+void Simulation::SetCommand(const std::string& joint, double q_motor) {
+  for (int i = 0; i < num_actuated(); ++i) {
+    if (actuated_names_[i] == joint) {
+      command_[i] = q_motor;
+      return;
+    }
+  }
+  throw InputError(model_name_ + ": no actuated joint named '" + joint + "'");
+}
+
+// ---------------------------------------------------------------- static solve
+
+// Writes the held joints into qpos: actuated joints with rigid gears at their command (minus
+// half the play on the loaded flank), locked joints at qpos0. Coupled joints are updated with
+// the free values in ComputeStaticForces.
+void Simulation::SetHeldPositions(const std::vector<int>& backlash_sign) const {
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  for (int i = 0; i < num_actuated(); ++i) {
+    const int j = catalog_.actuated[i];
+    const GearSpec& g = setup_.gear[j];
+    // Rigid: held there. Elastic: the spring's unloaded position, the Newton start.
+    d->qpos[m->jnt_qposadr[j]] = command_[i] - backlash_sign[j] * 0.5 * g.backlash;
+  }
+  for (int j : locked_joints_) d->qpos[m->jnt_qposadr[j]] = m->qpos0[m->jnt_qposadr[j]];
+}
+
+// Residual generalised force of the free DoFs at free positions x: what the springs fail to
+// hold, qfrc_bias - qfrc_passive - tau_gear, at zero velocity.
+void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const Eigen::VectorXd& x,
+                                     Eigen::VectorXd* residual) const {
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  for (size_t k = 0; k < free_joints.size(); ++k) {
+    d->qpos[m->jnt_qposadr[free_joints[k]]] = x[k];
+  }
+  std::vector<std::pair<int, double>> couplings;  // (coupled joint, d q_coupled / d q_driver)
+  for (const JointEntry& j : catalog_.joints) {
+    if (j.role != JointRole::kCoupled || !setup_.released[j.id]) continue;
+    const int a2 = m->jnt_qposadr[j.coupled_to];
+    double dy, slope;
+    CouplingPolynomial(m, j.coupling_eq, d->qpos[a2] - m->qpos0[a2], &dy, &slope);
+    d->qpos[j.qpos_adr] = m->qpos0[j.qpos_adr] + dy;
+    couplings.emplace_back(j.id, slope);
+  }
+  mju_zero(d->qvel, m->nv);
+  mj_kinematics(m, d);
+  mj_comPos(m, d);
+  if (m->ntendon) mj_tendon(m, d);
+  mj_comVel(m, d);
+  mj_passive(m, d);
+  mj_rne(m, d, 0, d->qfrc_bias);
+  residual->resize(static_cast<int>(free_joints.size()));
+  for (size_t k = 0; k < free_joints.size(); ++k) {
+    const int j = free_joints[k];
+    const int dof = m->jnt_dofadr[j];
+    double r = d->qfrc_bias[dof] - d->qfrc_passive[dof];
+    if (catalog_.Joint(j).role == JointRole::kActuated) {
+      const int i = static_cast<int>(std::find(catalog_.actuated.begin(), catalog_.actuated.end(),
+                                               j) -
+                                     catalog_.actuated.begin());
+      // The gear spring around the flank the load presses on (set by the backlash pass through
+      // the unloaded position stored in qpos0 of the pass, see Settle).
+      r -= setup_.gear[j].stiffness * (gear_reference_[i] - x[k]);
+    }
+    (*residual)[static_cast<int>(k)] = r;
+  }
+  // A linkage driven by a free (elastic) joint passes its load on: virtual work, chain rule.
+  for (const auto& [c, slope] : couplings) {
+    const auto it = std::find(free_joints.begin(), free_joints.end(), catalog_.Joint(c).coupled_to);
+    if (it == free_joints.end()) continue;
+    const int dof = m->jnt_dofadr[c];
+    (*residual)[static_cast<int>(it - free_joints.begin())] +=
+        slope * (d->qfrc_bias[dof] - d->qfrc_passive[dof]);
+  }
+}
+
+SettleReport Simulation::Settle(const SettleOptions& options) {
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  SettleReport report;
+  report.free_dofs = static_cast<int>(free_joints_.size());
+  std::vector<int> sign(m->njnt, 0);
+  bool has_backlash = false;
+  for (int j : catalog_.actuated) has_backlash |= setup_.gear[j].backlash > 0;
+  gear_reference_.resize(num_actuated());
+
+  const int n = static_cast<int>(free_joints_.size());
+  Eigen::VectorXd x(n), r(n), r_try(n), x_try(n);
+  for (int pass = 0; pass < kMaxBacklashPasses; ++pass) {
+    SetHeldPositions(sign);
+    for (int i = 0; i < num_actuated(); ++i) {
+      const int j = catalog_.actuated[i];
+      gear_reference_[i] = command_[i] - sign[j] * 0.5 * setup_.gear[j].backlash;
+    }
+    // Start from the nominal state: the result does not depend on the previous configuration.
+    for (int k = 0; k < n; ++k) {
+      const int j = free_joints_[k];
+      x[k] = catalog_.Joint(j).role == JointRole::kActuated
+                 ? d->qpos[m->jnt_qposadr[j]]
+                 : m->qpos0[m->jnt_qposadr[j]];
+    }
+    ComputeStaticForces(free_joints_, x, &r);
+    int it = 0;
+    for (;; ++it) {
+      const double err = n ? r.cwiseAbs().maxCoeff() : 0.0;
+      if (!std::isfinite(err)) {
+        throw SimulationError(model_name_ + ": quasi-static settle diverged at iteration " +
+                              std::to_string(report.iterations + it) +
+                              ": non-finite residual torque");
+      }
+      report.residual = err;
+      if (err <= options.tolerance) break;
+      if (it >= options.max_iterations) {
+        int worst = 0;
+        r.cwiseAbs().maxCoeff(&worst);
+        throw SimulationError(model_name_ + ": quasi-static settle did not converge in " +
+                              std::to_string(options.max_iterations) + " iterations (residual " +
+                              Fmt(err) + " Nm at joint '" +
+                              catalog_.Joint(free_joints_[worst]).name + "', iteration " +
+                              std::to_string(report.iterations + it) + ")");
+      }
+      Eigen::MatrixXd J(n, n);
+      for (int k = 0; k < n; ++k) {
+        x_try = x;
+        x_try[k] += kJacobianStep;
+        ComputeStaticForces(free_joints_, x_try, &r_try);
+        J.col(k) = (r_try - r) / kJacobianStep;
+      }
+      Eigen::FullPivLU<Eigen::MatrixXd> lu(J);
+      if (!lu.isInvertible()) {
+        throw SimulationError(model_name_ + ": quasi-static settle has a singular stiffness at "
+                              "iteration " + std::to_string(report.iterations + it) +
+                              " (a free joint without stiffness?)");
+      }
+      const Eigen::VectorXd dx = lu.solve(-r);
+      // Damped Newton: halve the step until the residual decreases.
+      double alpha = 1.0;
+      for (int ls = 0; ls < 30; ++ls, alpha *= 0.5) {
+        x_try = x + alpha * dx;
+        ComputeStaticForces(free_joints_, x_try, &r_try);
+        if (r_try.allFinite() && r_try.cwiseAbs().maxCoeff() < err) break;
+      }
+      x = x_try;
+      r = r_try;
+    }
+    report.iterations += it;
+    ComputeStaticForces(free_joints_, x, &r);
+    if (!has_backlash) break;
+    // The load each backlashed gear carries picks its flank; repeat until the flanks agree.
+    bool changed = false;
+    for (int j : catalog_.actuated) {
+      if (setup_.gear[j].backlash <= 0) continue;
+      const int dof = m->jnt_dofadr[j];
+      const double load = d->qfrc_bias[dof] - d->qfrc_passive[dof];
+      const int s = load > kBacklashLoadEps ? 1 : (load < -kBacklashLoadEps ? -1 : 0);
+      changed |= s != sign[j];
+      sign[j] = s;
+    }
+    if (!changed) break;
+  }
+  mju_zero(d->qvel, m->nv);
+  mju_zero(d->qacc_warmstart, m->nv);
+  mj_forward(m, d);
+  ApplyServo();
+  mj_forwardSkip(m, d, mjSTAGE_VEL, 0);
+  at_rest_ = true;
+  kinematics_current_ = true;
+  accelerations_current_ = true;
+  return report;
+}
+
+// ---------------------------------------------------------------- dynamics
+
+// Position servos towards the command. Rigid gear: the MJCF servo plus feed-forward of
+// qfrc_bias (so it holds the command at rest). Elastic gear and/or backlash: the transmission
+// torque K * deadzone(command - q) through the servo's ctrl (force = kp (ctrl - q)).
+void Simulation::ApplyServo() const {
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  for (int i = 0; i < num_actuated(); ++i) {
+    const int j = catalog_.actuated[i];
+    const int a = catalog_.Joint(j).actuator;
+    const int dof = m->jnt_dofadr[j];
+    const double q = d->qpos[m->jnt_qposadr[j]];
+    const double kp = m->actuator_gainprm[a * mjNGAIN];
+    const GearSpec& g = setup_.gear[j];
+    if (g.stiffness <= 0 && g.backlash <= 0) {
+      d->ctrl[a] = command_[i];
+      d->qfrc_applied[dof] = d->qfrc_bias[dof];
+    } else {
+      const double k = g.stiffness > 0 ? g.stiffness : kp;
+      const double tau = k * DeadZone(command_[i] - q, 0.5 * g.backlash);
+      d->ctrl[a] = q + tau / kp;
+      d->qfrc_applied[dof] = 0.0;
+    }
+  }
+}
+
+void Simulation::ProjectLocked() const {
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  for (int j : locked_joints_) {
+    d->qpos[m->jnt_qposadr[j]] = m->qpos0[m->jnt_qposadr[j]];
+    d->qvel[m->jnt_dofadr[j]] = 0.0;
+  }
+}
+
+void Simulation::CheckStep() const {
+  const mjModel* m = truth_.get();
+  const mjData* d = data_.get();
+  std::string reason;
+  for (int w : {mjWARN_BADQACC, mjWARN_BADQVEL, mjWARN_BADQPOS}) {
+    if (d->warning[w].number != warning_counts_[w]) {
+      const int dof = d->warning[w].lastinfo;
+      const char* what = w == mjWARN_BADQACC ? "acceleration" : w == mjWARN_BADQVEL ? "velocity"
+                                                                                     : "position";
+      std::string joint = "?";
+      if (w != mjWARN_BADQPOS && dof >= 0 && dof < m->nv) {
+        joint = ObjectName(m, mjOBJ_JOINT, m->dof_jntid[dof]);
+      }
+      reason = std::string("NaN, Inf or huge ") + what + " (MuJoCo reset the state) at joint '" +
+               joint + "'";
+    }
+  }
+  if (reason.empty()) {
+    for (int i = 0; i < m->nv; ++i) {
+      if (!std::isfinite(d->qvel[i]) || !std::isfinite(d->qacc[i])) {
+        reason = "non-finite velocity or acceleration at joint '" +
+                 ObjectName(m, mjOBJ_JOINT, m->dof_jntid[i]) + "'";
+        break;
+      }
+    }
+  }
+  if (!reason.empty()) {
+    throw SimulationError(model_name_ + ": simulation diverged at step " + std::to_string(steps_) +
+                          " (t = " + Fmt(steps_ * m->opt.timestep) + " s): " + reason);
+  }
+}
+
+void Simulation::Step(int steps) {
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  std::string warning;
+  StepWarningScope scope(&warning);
+  for (int w = 0; w < mjNWARNING; ++w) warning_counts_[w] = d->warning[w].number;
+  for (int k = 0; k < steps; ++k) {
+    mj_step1(m, d);
+    ApplyServo();
+    mj_step2(m, d);
+    ProjectLocked();
+    ++steps_;
+    CheckStep();
+  }
+  at_rest_ = false;
+  kinematics_current_ = false;
+  accelerations_current_ = false;
+}
+
+double Simulation::SettleDynamic(double max_time_s, double velocity_tol) {
+  const mjModel* m = truth_.get();
+  const double t0 = time();
+  double worst = 0.0;
+  int worst_dof = 0;
+  while (time() - t0 < max_time_s) {
+    Step(1);
+    worst = 0.0;
+    for (int i = 0; i < m->nv; ++i) {
+      if (std::abs(data_->qvel[i]) > worst) {
+        worst = std::abs(data_->qvel[i]);
+        worst_dof = i;
+      }
+    }
+    if (worst < velocity_tol) return time() - t0;
+  }
+  throw SimulationError(model_name_ + ": no equilibrium within " + Fmt(max_time_s) +
+                        " s (step " + std::to_string(steps_) + ", |qvel| = " + Fmt(worst) +
+                        " at joint '" + ObjectName(m, mjOBJ_JOINT, m->dof_jntid[worst_dof]) + "')");
+}
+
+// ---------------------------------------------------------------- ground truth
+
+void Simulation::EnsureKinematics() const {
+  if (kinematics_current_) return;
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  mj_kinematics(m, d);
+  mj_comPos(m, d);
+  mj_camlight(m, d);
+  kinematics_current_ = true;
+}
+
+// Accelerations of the current state as the next step will see them, without changing the
+// trajectory (the constraint solver's warm start is restored).
+void Simulation::EnsureAccelerations() const {
+  if (accelerations_current_) return;
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  std::vector<mjtNum> warmstart(d->qacc_warmstart, d->qacc_warmstart + m->nv);
+  mj_forward(m, d);
+  ApplyServo();
+  mj_forwardSkip(m, d, mjSTAGE_VEL, 0);
+  mj_rnePostConstraint(m, d);
+  std::copy(warmstart.begin(), warmstart.end(), d->qacc_warmstart);
+  kinematics_current_ = true;
+  accelerations_current_ = true;
+}
+
+FrameRef Simulation::Frame(const std::string& name) const {
+  const mjModel* m = truth_.get();
+  const std::pair<mjtObj, FrameType> order[] = {{mjOBJ_SITE, FrameType::kSite},
+                                                {mjOBJ_CAMERA, FrameType::kCamera},
+                                                {mjOBJ_GEOM, FrameType::kGeom},
+                                                {mjOBJ_BODY, FrameType::kBody}};
+  for (const auto& [obj, type] : order) {
+    const int id = mj_name2id(m, obj, name.c_str());
+    if (id >= 0) return FrameRef{type, id, name};
+  }
+  throw InputError(model_name_ + ": no site, camera, geom or body named '" + name + "'");
+}
+
+Eigen::Isometry3d Simulation::Pose(const FrameRef& frame) const {
+  EnsureKinematics();
+  return FramePoseIn(data_.get(), frame);
+}
+
+Eigen::Isometry3d Simulation::BodyPose(const std::string& body) const {
+  return Pose(FrameRef{FrameType::kBody, BodyId(truth_.get(), body, model_name_), body});
+}
+
+Eigen::Isometry3d Simulation::SitePose(const std::string& site) const {
+  return Pose(FrameRef{FrameType::kSite, SiteId(truth_.get(), site, model_name_), site});
+}
+
+double Simulation::JointPosition(const std::string& joint) const {
+  return JointPosition(JointId(truth_.get(), joint, model_name_));
+}
+
+double Simulation::JointPosition(int joint_id) const {
+  return data_->qpos[truth_->jnt_qposadr[joint_id]];
+}
+
+double Simulation::MotorPosition(int joint_id) const {
+  const JointEntry& j = catalog_.Joint(joint_id);
+  if (j.role != JointRole::kActuated) return JointPosition(joint_id);
+  const GearSpec& g = setup_.gear[joint_id];
+  if (g.stiffness <= 0 && g.backlash <= 0) return JointPosition(joint_id);
+  const auto it = std::find(catalog_.actuated.begin(), catalog_.actuated.end(), joint_id);
+  return command_[static_cast<int>(it - catalog_.actuated.begin())];
+}
+
+Vec3 Simulation::SiteAngularVelocity(int site_id) const {
+  if (at_rest_) return Vec3::Zero();
+  EnsureAccelerations();
+  mjtNum v[6];
+  mj_objectVelocity(truth_.get(), data_.get(), mjOBJ_SITE, site_id, v, 1);
+  return Vec3(v[0], v[1], v[2]);
+}
+
+Vec3 Simulation::SiteSpecificForce(int site_id) const {
+  if (at_rest_) {
+    EnsureKinematics();
+    const Mat3 R = RotFromRowMajor(data_->site_xmat + 9 * site_id);
+    const Vec3 g(truth_->opt.gravity[0], truth_->opt.gravity[1], truth_->opt.gravity[2]);
+    return R.transpose() * (-g);
+  }
+  EnsureAccelerations();
+  mjtNum a[6];
+  mj_objectAcceleration(truth_.get(), data_.get(), mjOBJ_SITE, site_id, a, 1);
+  return Vec3(a[3], a[4], a[5]);
+}
+
+ImuBiasSpec Simulation::ImuBias(const std::string& site) const {
+  auto it = setup_.imu_bias.find(site);
+  if (it == setup_.imu_bias.end()) it = setup_.imu_bias.find("*");
+  return it == setup_.imu_bias.end() ? ImuBiasSpec{} : it->second;
+}
+
+// ---------------------------------------------------------------- nominal model
+
+Eigen::Isometry3d Simulation::NominalPose(const FrameRef& frame, const Eigen::VectorXd& q) const {
+  if (q.size() != num_actuated()) {
+    throw std::invalid_argument(model_name_ + ": NominalPose needs " +
+                                std::to_string(num_actuated()) + " actuated angles");
+  }
+  const mjModel* m = nominal_.get();
+  mjData* d = nominal_data_.get();
+  mju_copy(d->qpos, m->qpos0, m->nq);
+  for (int i = 0; i < num_actuated(); ++i) d->qpos[m->jnt_qposadr[catalog_.actuated[i]]] = q[i];
+  mj_kinematics(m, d);
+  mj_comPos(m, d);
+  mj_camlight(m, d);
+  return FramePoseIn(d, frame);
+}
+
+Eigen::VectorXd Simulation::GravityTorque(const Eigen::VectorXd& q) const {
+  if (q.size() != num_actuated()) {
+    throw std::invalid_argument(model_name_ + ": GravityTorque needs " +
+                                std::to_string(num_actuated()) + " actuated angles");
+  }
+  const mjModel* m = nominal_.get();
+  mjData* d = nominal_data_.get();
+  mju_copy(d->qpos, m->qpos0, m->nq);
+  mju_zero(d->qvel, m->nv);
+  for (int i = 0; i < num_actuated(); ++i) d->qpos[m->jnt_qposadr[catalog_.actuated[i]]] = q[i];
+  mj_kinematics(m, d);
+  mj_comPos(m, d);
+  mj_comVel(m, d);
+  std::vector<mjtNum> bias(m->nv);
+  mj_rne(m, d, 0, bias.data());
+  Eigen::VectorXd g(num_actuated());
+  for (int i = 0; i < num_actuated(); ++i) g[i] = bias[m->jnt_dofadr[catalog_.actuated[i]]];
+  return g;
+}
+
+}  // namespace flexbench::sim
