@@ -14,6 +14,7 @@ void CheckInputs(const PpoeModel& model, const PpoeData& data,
                  const Eigen::Ref<const Eigen::VectorXd>& q, const char* caller) {
   if (data.num_frames != model.num_frames() || data.nq != model.nq() ||
       static_cast<int>(data.T_base_frame.size()) != model.num_frames() ||
+      static_cast<int>(data.T_parent_frame.size()) != model.num_frames() ||
       static_cast<int>(data.Sigma_frame.size()) != model.num_frames() ||
       static_cast<int>(data.sigma_is_zero.size()) != model.num_frames()) {
     std::ostringstream msg;
@@ -45,34 +46,56 @@ double JointValue(const PpoeFrame& f, const Eigen::Ref<const Eigen::VectorXd>& q
   return f.q_index >= 0 ? q[f.q_index] : 0.0;
 }
 
-// T_parent_i at the mean: T_parent_ip * Exp(zeta q) with the precomputed Rodrigues terms.
-SE3 RelativeMean(const PpoeFrame& f, double q) {
-  const Mat3& R_p = f.T_parent_ip.rotation();
-  switch (f.joint.type) {
-    case JointType::kRevolute: {
-      const double s = std::sin(q);
-      const double sh = std::sin(0.5 * q);
-      const Mat3 R = R_p + s * f.K1 + (2.0 * sh * sh) * f.K2;
-      return SE3(R, f.u0 - R * f.joint.point);
-    }
-    case JointType::kPrismatic:
-      return SE3(R_p, f.T_parent_ip.translation() + q * f.u1);
-    case JointType::kFixed:
-      break;
+// The two coefficients of PpoeFrame's precomputed form: (sin q, 1 - cos q) for a revolute joint,
+// from one sincos of q/2 (GCC fuses the pair; 1 - cos q = 2 sin^2(q/2) keeps full precision for
+// small q), (q, 0) for a prismatic joint, (0, 0) for a fixed frame.
+struct JointTrig {
+  double a = 0.0;
+  double b = 0.0;
+};
+
+JointTrig ComputeTrig(const PpoeFrame& f, double q) {
+  JointTrig t;
+  if (f.joint.type == JointType::kRevolute) {
+    const double sh = std::sin(0.5 * q);
+    const double ch = std::cos(0.5 * q);
+    t.a = 2.0 * sh * ch;
+    t.b = 2.0 * sh * sh;
+  } else if (f.joint.type == JointType::kPrismatic) {
+    t.a = q;
   }
-  return f.T_parent_ip;
+  return t;
+}
+
+// T_parent_i at the mean: T_parent_ip * Exp(zeta q) with the precomputed Rodrigues terms.
+SE3 RelativeMean(const PpoeFrame& f, const JointTrig& t) {
+  if (f.joint.type == JointType::kFixed) return f.T_parent_ip;
+  return SE3(f.T_parent_ip.rotation() + t.a * f.K1 + t.b * f.K2, f.u0 + t.a * f.u1 + t.b * f.u2);
 }
 
 // Exp(zeta q) alone, for moving a covariance across the joint.
-SE3 JointTransform(const PpoeFrame& f, double q) {
-  if (f.joint.type == JointType::kPrismatic) {
-    return SE3::Translation(q * f.joint.axis);
+SE3 JointTransform(const PpoeFrame& f, const JointTrig& t) {
+  switch (f.joint.type) {
+    case JointType::kRevolute: {
+      const Mat3 R = Mat3::Identity() + t.a * lie::Skew(f.joint.axis) + t.b * f.W2;
+      return SE3(R, f.joint.point - R * f.joint.point);
+    }
+    case JointType::kPrismatic:
+      return SE3::Translation(t.a * f.joint.axis);
+    case JointType::kFixed:
+      break;
   }
-  const double s = std::sin(q);
-  const double sh = std::sin(0.5 * q);
-  const Mat3 W = lie::Skew(f.joint.axis);
-  const Mat3 R = Mat3::Identity() + s * W + (2.0 * sh * sh) * (W * W);
-  return SE3(R, f.joint.point - R * f.joint.point);
+  return SE3();
+}
+
+// First pass: every T_parent_i(q). The frames are independent here, so the sincos calls and
+// the small matrix products overlap; the serial parent-to-child products come after.
+void RelativeMeans(const std::vector<PpoeFrame>& frames, const Eigen::Ref<const Eigen::VectorXd>& q,
+                   PpoeData& data) {
+  for (int i = 1; i < data.num_frames; ++i) {
+    const PpoeFrame& f = frames[i];
+    data.T_parent_frame[i] = RelativeMean(f, ComputeTrig(f, JointValue(f, q)));
+  }
 }
 
 }  // namespace
@@ -81,10 +104,10 @@ void ForwardKinematics(const PpoeModel& model, PpoeData& data,
                        const Eigen::Ref<const Eigen::VectorXd>& q) {
   CheckInputs(model, data, q, "ForwardKinematics");
   const std::vector<PpoeFrame>& frames = model.frames();
+  RelativeMeans(frames, q, data);
   data.T_base_frame[kBaseFrame] = SE3::Identity();
   for (int i = 1; i < data.num_frames; ++i) {
-    const PpoeFrame& f = frames[i];
-    data.T_base_frame[i] = data.T_base_frame[f.parent] * RelativeMean(f, JointValue(f, q));
+    data.T_base_frame[i] = data.T_base_frame[frames[i].parent] * data.T_parent_frame[i];
   }
 }
 
@@ -96,38 +119,49 @@ void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
     throw InputError("ForwardKinematicsWithCovariance: order must be kSecond or kFourth, got " +
                      std::to_string(static_cast<int>(order)));
   }
+  const bool fourth = order == lie::CompoundOrder::kFourth;
   const std::vector<PpoeFrame>& frames = model.frames();
   data.T_base_frame[kBaseFrame] = SE3::Identity();
   data.Sigma_frame[kBaseFrame].setZero();
   data.sigma_is_zero[kBaseFrame] = 1;
+  RelativeMeans(frames, q, data);
   for (int i = 1; i < data.num_frames; ++i) {
     const PpoeFrame& f = frames[i];
-    const double q_i = JointValue(f, q);
-    const SE3 T_parent_i = RelativeMean(f, q_i);
+    const SE3& T_parent_i = data.T_parent_frame[i];
     data.T_base_frame[i] = data.T_base_frame[f.parent] * T_parent_i;
 
     const bool parent_zero = data.sigma_is_zero[f.parent] != 0;
     const Mat6& Sigma_parent = data.Sigma_frame[f.parent];
     Mat6& Sigma_i = data.Sigma_frame[i];
     data.sigma_is_zero[i] = parent_zero && !f.has_source;
+
     if (!f.has_source) {
       // No source: the whole of eq. 16 is a fixed transform, moved exactly (eq. 11b).
       if (parent_zero) {
         Sigma_i.setZero();
       } else {
-        Sigma_i = lie::TransportCovariance(T_parent_i, Sigma_parent);
+        lie::TransportCovariance(T_parent_i, Sigma_parent, &Sigma_i);
       }
       continue;
     }
-    // Accumulated covariance at F_{i,p}, then the source (eq. 18 or its 4th-order form).
-    const Mat6 Sigma_ixi =
-        parent_zero ? f.source_cov
-                    : lie::BchSecondMoment(lie::TransportCovariance(f.T_parent_ip, Sigma_parent),
-                                           f.source_cov, order);
+    if (parent_zero || !fourth) {
+      // eq. 18: without the BCH terms the source adds linearly, so it joins the upstream
+      // covariance at the parent frame and both cross T_parent_i(q) in one exact transport.
+      if (parent_zero) {
+        lie::TransportCovariance(T_parent_i, f.source_cov_parent, &Sigma_i);
+      } else {
+        lie::TransportCovariance(T_parent_i, Sigma_parent + f.source_cov_parent, &Sigma_i);
+      }
+      continue;
+    }
+    // 4th order: compound at F_{i,p}, where the source sits, then cross the joint.
+    const JointTrig trig = ComputeTrig(f, JointValue(f, q));
+    const Mat6 Sigma_ixi = lie::BchSecondMoment(
+        lie::TransportCovariance(f.T_parent_ip, Sigma_parent), f.source_cov, order);
     if (f.joint.type == JointType::kFixed) {
       Sigma_i = Sigma_ixi;
     } else {
-      Sigma_i = lie::TransportCovariance(JointTransform(f, q_i), Sigma_ixi);
+      Sigma_i = lie::TransportCovariance(JointTransform(f, trig), Sigma_ixi);
     }
   }
 }

@@ -17,6 +17,9 @@ struct PpoeData {
   // Mean pose of every frame in the base frame (eq. 17 evaluated with all xi = 0), indexed by
   // FrameId; T_base_frame[kBaseFrame] is the identity.
   std::vector<lie::SE3> T_base_frame;
+  // Mean pose of every frame in its parent, T_parent_i(q) (eq. 16 with xi = 0). Computed in a
+  // first pass over all frames, which has no serial dependency and pipelines well.
+  std::vector<lie::SE3> T_parent_frame;
   // Covariance of every frame in its own local (right) tangent space: the true pose is
   // T_base_frame[i] * Exp(xi), E[xi xi^T] = Sigma_frame[i] (eqs. 9, 18). Only written by
   // ForwardKinematicsWithCovariance. Use lie::TransformCovariance for the global form (eq. 10).

@@ -107,7 +107,7 @@ FrameId PpoeModel::AddLink(FrameId parent, const std::string& name, const lie::S
   f.joint = joint;
 
   const Mat3& R_p = T_parent_ip.rotation();
-  const Vec3& t_p = T_parent_ip.translation();
+  f.u0 = T_parent_ip.translation();
   if (joint.type != JointType::kFixed) {
     const double norm = joint.axis.norm();
     if (!std::isfinite(norm) || !AllFinite(joint.point) || norm < kMinAxisNorm) {
@@ -125,15 +125,18 @@ FrameId PpoeModel::AddLink(FrameId parent, const std::string& name, const lie::S
       const Mat3 W = lie::Skew(w);
       f.K1 = R_p * W;
       f.K2 = f.K1 * W;
-      f.u0 = t_p + R_p * r;
+      f.W2 = W * W;
+      f.u1 = -(f.K1 * r);
+      f.u2 = -(f.K2 * r);
     } else {
       f.joint.point.setZero();
       f.zeta.segment<3>(kTransIdx) = w;
       f.u1 = R_p * w;
     }
     f.q_index = nq();
-    q_frames_.push_back(num_frames());
   }
+  f.source_cov_parent = lie::TransformCovariance(T_parent_ip, f.source_cov);
+  if (f.q_index >= 0) q_frames_.push_back(num_frames());
   frames_.push_back(f);
   return num_frames() - 1;
 }

@@ -70,13 +70,26 @@ struct PpoeFrame {
   Vec6 zeta = Vec6::Zero();        // unit twist [r x w; w], [w; 0] or 0
   int q_index = -1;                // -1 for fixed frames
 
-  // T_parent_ip * Exp(zeta q) = (K0 + sin q K1 + (1 - cos q) K2, u0 - R r) for a revolute joint
-  // about w through r: K0 = R_p, K1 = R_p [w]x, K2 = R_p [w]x^2, u0 = t_p + R_p r.
-  // For a prismatic joint t = t_p + q R_p w, with R_p w in u1.
+  // T_parent_ip * Exp(zeta q) = (R_p + a K1 + b K2, u0 + a u1 + b u2), precomputed:
+  // revolute about w through r: a = sin q, b = 1 - cos q, K1 = R_p [w]x, K2 = R_p [w]x^2,
+  //   u0 = t_p, u1 = -K1 r, u2 = -K2 r;
+  // prismatic along w: a = q, b = 0, K1 = K2 = 0, u0 = t_p, u1 = R_p w; fixed: a = b = 0.
   Mat3 K1 = Mat3::Zero();
   Mat3 K2 = Mat3::Zero();
   Vec3 u0 = Vec3::Zero();
   Vec3 u1 = Vec3::Zero();
+  Vec3 u2 = Vec3::Zero();
+  // [w]x^2 of the joint axis, for Exp(zeta q) alone.
+  Mat3 W2 = Mat3::Zero();
+
+  // The source expressed at the parent frame, Ad_{T_parent_ip} Sigma_i Ad^T: T_parent Exp(eta)
+  // T_parent_ip Exp(xi_i) = T_parent Exp(eta) Exp(Ad xi_i) T_parent_ip exactly, so to 2nd order
+  // (eq. 18) a frame's covariance is one transport of (Sigma_parent + this) through
+  // T_parent_i(q): one 6x6 congruence per frame.
+  Mat6 source_cov_parent = Mat6::Zero();
+
+  // Exp(zeta q) (the joint motion alone).
+  lie::SE3 JointMotion(double q) const { return lie::SE3::Exp(zeta * q); }
 };
 
 class PpoeModel {

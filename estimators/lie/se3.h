@@ -94,20 +94,42 @@ Mat6 SE3LeftJacobian(const Vec6& xi);
 Mat6 SE3RightJacobianInverse(const Vec6& xi);
 Mat6 SE3LeftJacobianInverse(const Vec6& xi);
 
-// Ad Sigma Ad^T for Ad = Ad_{(R, t)}, in 3x3 blocks: Ad = [[I, [t]x], [0, I]] diag(R, R), so the
-// congruence is three 3x3 rotations and a shear, about half the work of two 6x6 products.
-// Inline because the kinematics calls it once or twice per link.
+// Ad Sigma Ad^T for Ad = Ad_{(R, t)} and a symmetric Sigma, in 3x3 blocks: Ad = [[I, [t]x],
+// [0, I]] diag(R, R), so the congruence is three block rotations (two of them symmetric) and a
+// shear done with cross products: ~200 multiplications instead of ~430 for two dense 6x6
+// products. Sigma must be symmetric (its lower-left block is not read); only the upper triangles
+// of the symmetric blocks are computed and mirrored, so the result is exactly symmetric. `out`
+// may alias Sigma. Inline because the kinematics calls it once per frame.
+inline void CongruenceAdjoint(const Mat3& R, const Vec3& t, const Mat6& Sigma, Mat6* out) {
+  Mat3 RA, RB, RC, B, C, D;
+  RA.noalias() = R * Sigma.topLeftCorner<3, 3>();
+  RB.noalias() = R * Sigma.topRightCorner<3, 3>();
+  RC.noalias() = R * Sigma.bottomRightCorner<3, 3>();
+  B.noalias() = RB * R.transpose();
+  for (int i = 0; i < 3; ++i) {
+    for (int j = i; j < 3; ++j) C(i, j) = C(j, i) = RC.row(i).dot(R.row(j));
+  }
+  // D = B + [t]x C, row by row.
+  D.row(0) = B.row(0) + t[1] * C.row(2) - t[2] * C.row(1);
+  D.row(1) = B.row(1) + t[2] * C.row(0) - t[0] * C.row(2);
+  D.row(2) = B.row(2) + t[0] * C.row(1) - t[1] * C.row(0);
+  // Top-left: R A R^T + [t]x B^T - D [t]x; column j of [t]x B^T is t x B.row(j), row i of
+  // -D [t]x is t x D.row(i).
+  Mat3 G;
+  for (int j = 0; j < 3; ++j) G.col(j) = t.cross(Vec3(B.row(j).transpose()));
+  for (int i = 0; i < 3; ++i) G.row(i) += t.cross(Vec3(D.row(i).transpose())).transpose();
+  Mat6& o = *out;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = i; j < 3; ++j) o(i, j) = o(j, i) = RA.row(i).dot(R.row(j)) + G(i, j);
+  }
+  o.topRightCorner<3, 3>() = D;
+  o.bottomLeftCorner<3, 3>() = D.transpose();
+  o.bottomRightCorner<3, 3>() = C;
+}
+
 inline Mat6 CongruenceAdjoint(const Mat3& R, const Vec3& t, const Mat6& Sigma) {
-  const Mat3 A = R * Sigma.topLeftCorner<3, 3>() * R.transpose();
-  const Mat3 B = R * Sigma.topRightCorner<3, 3>() * R.transpose();
-  const Mat3 C = R * Sigma.bottomRightCorner<3, 3>() * R.transpose();
-  const Mat3 S = Skew(t);
-  const Mat3 D = B + S * C;
   Mat6 out;
-  out.topLeftCorner<3, 3>() = A + S * B.transpose() - D * S;  // S^T = -S
-  out.topRightCorner<3, 3>() = D;
-  out.bottomLeftCorner<3, 3>() = D.transpose();
-  out.bottomRightCorner<3, 3>() = C;
+  CongruenceAdjoint(R, t, Sigma, &out);
   return out;
 }
 
@@ -121,6 +143,10 @@ inline Mat6 TransformCovariance(const SE3& X, const Mat6& Sigma) {
 inline Mat6 TransportCovariance(const SE3& X, const Mat6& Sigma) {
   const Mat3 Rt = X.rotation().transpose();
   return CongruenceAdjoint(Rt, -(Rt * X.translation()), Sigma);
+}
+inline void TransportCovariance(const SE3& X, const Mat6& Sigma, Mat6* out) {
+  const Mat3 Rt = X.rotation().transpose();
+  CongruenceAdjoint(Rt, -(Rt * X.translation()), Sigma, out);
 }
 
 }  // namespace flexbench::lie

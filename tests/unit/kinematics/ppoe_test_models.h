@@ -66,11 +66,12 @@ struct RandomChainOptions {
   bool mixed_joints = false;       // revolute axes through off-origin points and prismatic joints
   bool fixed_base_source = false;  // a passive, non-actuated compliance at the base
   bool grasp = false;              // an uncertain grasp frame below the end effector
+  bool tag = true;                 // a rigid "tag" frame on link N-2
 };
 
 // A serial chain with random geometry (links ~0.3 m) and a 6-DoF source at every joint. Frames:
-// "base_plate" (if requested), "link1".."linkN", "ee", "tag" (a rigid frame on link N-2),
-// "grasp" (if requested).
+// "base_plate" (if requested), "link1".."linkN", "ee", "tag" (a rigid frame on link N-2, if
+// requested), "grasp" (if requested).
 inline PpoeModel RandomChain(std::mt19937_64& rng, const RandomChainOptions& o) {
   PpoeModel model("random" + std::to_string(o.dof));
   const bool sources = o.trans_sd > 0.0 || o.rot_sd > 0.0;
@@ -92,7 +93,8 @@ inline PpoeModel RandomChain(std::mt19937_64& rng, const RandomChainOptions& o) 
     if (i == o.dof - 3) tag_parent = parent;
   }
   const FrameId ee = model.AddFrame(parent, "ee", lie::RandomSE3(rng, 0.1));
-  model.AddFrame(tag_parent, "tag", lie::RandomSE3(rng, 0.1));
+  const lie::SE3 T_link_tag = lie::RandomSE3(rng, 0.1);
+  if (o.tag) model.AddFrame(tag_parent, "tag", T_link_tag);
   if (o.grasp) {
     model.AddFrame(ee, "grasp", lie::SE3::Translation(Vec3(0.0, 0.0, 0.1)),
                    RandomSource(rng, 0.5 * o.trans_sd + 1e-4, 0.5 * o.rot_sd + 1e-3));

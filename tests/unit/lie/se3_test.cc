@@ -262,6 +262,18 @@ TEST_P(SE3AtPose, CovarianceTransformsMatchTheAdjointCongruence) {
       1e-12 * (1.0 + (Ad_inv * Sigma * Ad_inv.transpose()).cwiseAbs().maxCoeff()));
 }
 
+TEST_P(SE3AtPose, CongruenceIsSymmetricAndMayAlias) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> n(0.0, 1.0);
+  Mat6 A;
+  for (int i = 0; i < 36; ++i) A(i) = n(rng);
+  Mat6 Sigma = A * A.transpose();
+  const Mat6 expected = TransportCovariance(X(), Sigma);
+  EXPECT_TRUE(expected.isApprox(expected.transpose(), 0.0));  // exactly symmetric
+  TransportCovariance(X(), Sigma, &Sigma);                    // in place
+  EXPECT_TRUE(Sigma.isApprox(expected, 0.0));
+}
+
 INSTANTIATE_TEST_SUITE_P(Poses, SE3AtPose, ::testing::ValuesIn(testing::StandardPoseCases()),
                          [](const auto& info) { return info.param.name; });
 
