@@ -57,11 +57,10 @@ class ChainBuilder {
     for (const std::string& name : d_.observed_frames) {
       out_->observed.emplace_back(name, AddTarget(name, "observed_frames"));
     }
+    // Actuated joints off those chains (a gripper's finger joint) still get their branch, so
+    // q always holds every declared joint, in a stable order.
     for (const int j : actuated_) {
-      if (!used_joints_.count(j)) {
-        Fail("actuated_joints: joint '" + ObjectName(m_, mjOBJ_JOINT, j) +
-             "' does not move the end effector or an observed frame");
-      }
+      if (!used_joints_.count(j)) EnsureBody(m_->jnt_bodyid[j]);
     }
     for (const auto& [j, sources] : joint_sources_) {
       if (!used_joints_.count(j)) {

@@ -8,6 +8,10 @@ const std::vector<KindEntry>& ScenarioKinds() {
   static const std::vector<KindEntry> kinds = {
       {"smoke", "one rendered frame through every layer: MJCF, OSMesa, libapriltag, truth",
        MakeSmokeKind},
+      {"ppoe_covariance", "PPOE end-effector covariance (2nd, 4th order) against Monte Carlo",
+       MakePpoeCovarianceKind},
+      {"tag_fusion", "rendered AprilTags fused with kinematics by each estimator (Table I)",
+       MakeTagFusionKind},
   };
   return kinds;
 }

@@ -173,10 +173,17 @@ TEST(DeclaredChain, BadNamesAreReportedWithTheFile) {
   d.sources[0].at = "wrist";
   EXPECT_NE(BuildError(d).find("awkward.declared.yaml:9: source at 'wrist': no joint or body"),
             std::string::npos);
-  d = AwkwardDeclared();
-  d.end_effector = "visor";  // the arm's joints no longer move anything declared
+}
+
+TEST(DeclaredChain, ActuatedJointsOffTheChainsStillGetTheirBranch) {
+  MjModelPtr m = LoadModelFromString(kAwkwardXml);
+  DeclaredModel d = AwkwardDeclared();
+  d.end_effector = "visor";  // the arm's joints move nothing declared, yet stay in q
   d.observed_frames = {};
-  EXPECT_NE(BuildError(d).find("does not move the end effector"), std::string::npos);
+  const DeclaredChain chain = BuildDeclaredChain(m.get(), d);
+  EXPECT_EQ(chain.model.nq(), 5);
+  EXPECT_NO_THROW(chain.QIndex("a2"));
+  ExpectChainMatchesMujoco(m.get(), chain, 5);
 }
 
 TEST(DeclaredModelFile, FormatErrorsNameFileLineAndKey) {

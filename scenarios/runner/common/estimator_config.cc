@@ -1,0 +1,107 @@
+#include "scenarios/runner/common/estimator_config.h"
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <numeric>
+
+#include "estimators/stats/chi_square.h"
+
+namespace flexbench::scenarios {
+namespace {
+
+void MeanStdMax(const std::vector<double>& v, double* mean, double* stdev, double* max) {
+  *mean = std::accumulate(v.begin(), v.end(), 0.0) / v.size();
+  double ss = 0.0;
+  *max = 0.0;
+  for (double x : v) {
+    ss += (x - *mean) * (x - *mean);
+    *max = std::max(*max, x);
+  }
+  *stdev = v.size() > 1 ? std::sqrt(ss / (v.size() - 1)) : 0.0;
+}
+
+}  // namespace
+
+std::vector<EstimatorSpec> ParseEstimators(const ConfigNode& node) {
+  std::vector<EstimatorSpec> specs;
+  for (const std::string& name : node.Keys()) {
+    const ConfigNode entry = node.Child(name);
+    bool known = false;
+    for (const auto& e : estimators::EstimatorRegistry()) known = known || name == e.name;
+    if (!known) {
+      std::string list;
+      for (const auto& e : estimators::EstimatorRegistry()) {
+        list += std::string(list.empty() ? "" : ", ") + e.name;
+      }
+      entry.Fail("unknown estimator '" + name + "' (known: " + list + ")");
+    }
+    std::map<std::string, std::vector<double>> values;
+    if (entry.IsMap()) {
+      for (const std::string& key : entry.Keys()) {
+        const ConfigNode v = entry.Child(key);
+        values[key] = v.IsSequence() ? v.AsDoubleList() : std::vector<double>{v.AsDouble()};
+      }
+    } else if (!(entry.IsScalar() && entry.AsString().empty())) {
+      entry.Fail("expected a mapping of parameters ({} for none)");
+    }
+    specs.push_back({name, estimators::Params(values, entry.WhereKey())});
+  }
+  return specs;
+}
+
+double Nees(const Vec6& e, const Mat6& cov, int* dof) {
+  Eigen::SelfAdjointEigenSolver<Mat6> eig(0.5 * (cov + cov.transpose()));
+  const double tol = 1e-12 * std::max(eig.eigenvalues().maxCoeff(), 1e-300);
+  double d2 = 0.0;
+  *dof = 0;
+  for (int i = 0; i < 6; ++i) {
+    const double l = eig.eigenvalues()[i];
+    if (l <= tol) continue;
+    const double y = eig.eigenvectors().col(i).dot(e);
+    d2 += y * y / l;
+    ++*dof;
+  }
+  return d2;
+}
+
+void ErrorStats::Add(const lie::SE3& T_est, const Mat6& cov, const lie::SE3& T_true) {
+  const Vec3 d = T_est.translation() - T_true.translation();
+  const Vec3 axis = T_true.rotation().col(2);
+  pos_.push_back(d.norm());
+  lateral_.push_back((d - axis * axis.dot(d)).norm());
+  const Vec6 e = T_est.Between(T_true).Log();
+  rot_deg_.push_back(e.tail<3>().norm() * 180.0 / M_PI);
+  int dof = 0;
+  nees_.push_back(Nees(e, cov, &dof));
+  dof_.push_back(dof);
+}
+
+void ErrorStats::WriteMetrics(Json* metrics) const {
+  if (pos_.empty()) return;
+  double mean, sd, mx;
+  MeanStdMax(pos_, &mean, &sd, &mx);
+  (*metrics)["pos_err_mean_m"] = mean;
+  (*metrics)["pos_err_std_m"] = sd;
+  (*metrics)["pos_err_max_m"] = mx;
+  MeanStdMax(lateral_, &mean, &sd, &mx);
+  (*metrics)["lateral_err_mean_m"] = mean;
+  (*metrics)["lateral_err_std_m"] = sd;
+  (*metrics)["lateral_err_max_m"] = mx;
+  MeanStdMax(rot_deg_, &mean, &sd, &mx);
+  (*metrics)["rot_err_mean_deg"] = mean;
+  (*metrics)["rot_err_max_deg"] = mx;
+  MeanStdMax(nees_, &mean, &sd, &mx);
+  (*metrics)["nees_mean"] = mean;
+  // The mean NEES of n runs lies within these 95% bounds when the covariance is consistent;
+  // dof is the covariance's rank (averaged when it varies).
+  const double dof = std::accumulate(dof_.begin(), dof_.end(), 0.0) / dof_.size();
+  if (dof > 0) {
+    const auto b = stats::MeanChiSquareBounds(dof, static_cast<int>(nees_.size()), 0.05);
+    (*metrics)["nees_dof"] = dof;
+    (*metrics)["nees_bound_low"] = b.lower;
+    (*metrics)["nees_bound_high"] = b.upper;
+    (*metrics)["nees_consistent"] = mean >= b.lower && mean <= b.upper;
+  }
+}
+
+}  // namespace flexbench::scenarios

@@ -1,0 +1,50 @@
+// Reading estimators from scenario files and scoring their beliefs against the truth.
+//
+//   estimators:
+//     fk: {}
+//     naive_ekf: {std_trans_m: [0.07, 0.07, 0.03], std_rot_deg: [5, 5, 15]}
+#pragma once
+
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "estimators/estimator.h"
+#include "scenarios/runner/scenario_kind.h"
+
+namespace flexbench::scenarios {
+
+struct EstimatorSpec {
+  std::string name;
+  estimators::Params params;
+};
+
+// Reads the `estimators:` mapping; every value is a number or a list of numbers. Checks the
+// names against the registry (InputError naming file, line and estimator).
+std::vector<EstimatorSpec> ParseEstimators(const ConfigNode& node);
+
+// Accumulates per-configuration errors of one estimator and writes its metrics.
+class ErrorStats {
+ public:
+  // e = Log(T_est^-1 T_true) in the estimate's tangent space (covariance `cov`), position
+  // error split along/across the end effector's axis (the true z axis).
+  void Add(const lie::SE3& T_est, const Mat6& cov, const lie::SE3& T_true);
+  int count() const { return static_cast<int>(pos_.size()); }
+  // Writes pos/lateral/rot error means, std, max and NEES with its chi-square bounds.
+  void WriteMetrics(Json* metrics) const;
+
+  double last_pos() const { return pos_.back(); }
+  double last_lateral() const { return lateral_.back(); }
+  double last_rot_deg() const { return rot_deg_.back(); }
+  double last_nees() const { return nees_.back(); }
+
+ private:
+  std::vector<double> pos_, lateral_, rot_deg_, nees_;
+  std::vector<int> dof_;
+};
+
+// NEES of error e against a possibly singular covariance: Mahalanobis distance on the
+// covariance's range (eigenvalues above 1e-12 of the largest), with that rank as dof.
+double Nees(const Vec6& e, const Mat6& cov, int* dof);
+
+}  // namespace flexbench::scenarios
