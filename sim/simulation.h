@@ -68,6 +68,9 @@ class Simulation {
   const std::string& model_name() const { return model_name_; }
   const ModelCatalog& catalog() const { return catalog_; }
   const mjModel* model() const { return truth_.get(); }        // truth
+  // The truth model for renderers that fill textures (render::ApplyTagTextures); physics
+  // parameters must not be changed through it.
+  mjModel* mutable_model() { return truth_.get(); }
   const mjData* data() const { return data_.get(); }
   const mjModel* nominal_model() const { return nominal_.get(); }
   const TruthSetup& setup() const { return setup_; }

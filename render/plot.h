@@ -1,0 +1,103 @@
+// A small deterministic PNG plotter (OpenCV drawing): figures with one or more axes, line and
+// scatter series with optional error bars, reference lines, ticks, labels, legends. The same
+// data gives the same bytes. Non-finite points are skipped (they break a line).
+//
+//   render::Figure fig(900, 600);
+//   render::Axes& ax = fig.axes();
+//   ax.title = "End-effector deflection";
+//   ax.x_label = "reach [m]";
+//   ax.y_label = "deflection [cm]";
+//   ax.AddLine("forward", reach, defl_cm).marker = render::Marker::kCircle;
+//   ax.AddHLine(3.0, "gate");
+//   fig.SavePng("deflection.png");
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "render/image.h"
+
+namespace flexbench::render {
+
+struct Rgb {
+  std::uint8_t r = 0;
+  std::uint8_t g = 0;
+  std::uint8_t b = 0;
+};
+
+// Ten distinguishable colours (matplotlib's tab10), cycled.
+Rgb PaletteColor(int index);
+
+enum class Marker { kNone, kCircle, kSquare, kTriangle, kDiamond, kCross };
+enum class LineStyle { kNone, kSolid, kDashed };
+enum class LegendPosition { kTopLeft, kTopRight, kBottomLeft, kBottomRight };
+
+struct Series {
+  std::string label;  // empty: not in the legend
+  std::vector<double> x;
+  std::vector<double> y;
+  std::vector<double> y_err;  // symmetric error bars; empty: none
+  Rgb color;
+  LineStyle line = LineStyle::kSolid;
+  Marker marker = Marker::kNone;
+  int line_width = 2;
+  int marker_size = 4;  // radius in pixels
+};
+
+// A horizontal (or vertical) reference line across the axes, e.g. a gate threshold.
+struct RefLine {
+  double value = 0.0;
+  bool vertical = false;
+  std::string label;
+  Rgb color{120, 120, 120};
+  LineStyle line = LineStyle::kDashed;
+};
+
+struct Axes {
+  std::string title;
+  std::string x_label;
+  std::string y_label;
+  // Fixed limits; unset: from the data (and reference lines), padded and snapped to ticks.
+  std::optional<double> x_min, x_max, y_min, y_max;
+  std::vector<Series> series;
+  std::vector<RefLine> ref_lines;
+  bool grid = true;
+  bool legend = true;
+  LegendPosition legend_position = LegendPosition::kTopLeft;
+
+  // Adds a series with the next palette colour.
+  Series& AddLine(const std::string& label, std::vector<double> x, std::vector<double> y);
+  Series& AddScatter(const std::string& label, std::vector<double> x, std::vector<double> y);
+  RefLine& AddHLine(double y, const std::string& label = "");
+  RefLine& AddVLine(double x, const std::string& label = "");
+};
+
+class Figure {
+ public:
+  // A figure of width x height pixels holding a rows x cols grid of axes.
+  Figure(int width_px, int height_px, int rows = 1, int cols = 1);
+
+  Axes& axes(int row = 0, int col = 0);
+  const Axes& axes(int row = 0, int col = 0) const;
+  std::string title;  // across the top, optional
+
+  // RGB image of the figure.
+  Image Render() const;
+  // Render() written as PNG; throws InputError naming the path when it cannot be written.
+  void SavePng(const std::string& path) const;
+
+ private:
+  int width_;
+  int height_;
+  int rows_;
+  int cols_;
+  std::vector<Axes> axes_;
+};
+
+// "Nice" tick values covering [lo, hi] (steps of 1, 2 or 5 times a power of ten), about
+// `target` of them.
+std::vector<double> NiceTicks(double lo, double hi, int target = 6);
+
+}  // namespace flexbench::render
