@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <iostream>
 
+#include "scenarios/runner/inspect.h"
 #include "scenarios/runner/runner.h"
 
 int main(int argc, char** argv) {
@@ -24,6 +25,10 @@ int main(int argc, char** argv) {
   CLI::App* list_cmd = app.add_subcommand("list", "list scenario kinds and scenario files");
   list_cmd->add_option("--dir", list_dir, "folder with scenario files");
 
+  std::string inspect_path;
+  CLI::App* inspect_cmd = app.add_subcommand("inspect", "print a model's joints, sensors, cameras, tags and effects as JSON");
+  inspect_cmd->add_option("model", inspect_path, "MJCF model or declared-model YAML")->required();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -32,6 +37,7 @@ int main(int argc, char** argv) {
   }
   if (*seed_opt) run.seed = seed;
   if (*run_cmd) return flexbench::scenarios::RunScenario(run);
+  if (*inspect_cmd) return flexbench::scenarios::InspectCommand(inspect_path);
   if (*list_cmd) {
     if (!std::filesystem::is_directory(list_dir) &&
         std::filesystem::is_directory(std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios")) {

@@ -8,6 +8,8 @@ const std::vector<KindEntry>& ScenarioKinds() {
   static const std::vector<KindEntry> kinds = {
       {"smoke", "one rendered frame through every layer: MJCF, OSMesa, libapriltag, truth",
        MakeSmokeKind},
+      {"rover_deflection", "rover arm folded to stretched out: plate tilt, EE deflection",
+       MakeRoverDeflectionKind},
       {"ppoe_covariance", "PPOE end-effector covariance (2nd, 4th order) against Monte Carlo",
        MakePpoeCovarianceKind},
       {"tag_fusion", "rendered AprilTags fused with kinematics by each estimator (Table I)",

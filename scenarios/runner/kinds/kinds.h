@@ -8,6 +8,7 @@
 namespace flexbench::scenarios {
 
 std::unique_ptr<ScenarioKind> MakeSmokeKind();
+std::unique_ptr<ScenarioKind> MakeRoverDeflectionKind();
 std::unique_ptr<ScenarioKind> MakePpoeCovarianceKind();
 std::unique_ptr<ScenarioKind> MakeTagFusionKind();
 
