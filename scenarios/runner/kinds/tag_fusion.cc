@@ -6,7 +6,9 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <algorithm>
 #include <map>
+#include <random>
 
 #include "estimators/estimator.h"
 #include "render/renderer.h"
@@ -35,6 +37,13 @@ class TagFusionKind : public ScenarioKind {
     effects_ = sim::ParseEffects(root.Child("effects"));
     camera_ = root.GetString("camera");
     pixel_std_ = root.GetDouble("pixel_noise_std_px", 0.5);
+    // The paper fuses 2-D bearings: the tag centre's pixel (eq. 25). All four corners (8-D)
+    // pin the pose almost alone, which hides the prior's role.
+    const std::string measurement = root.GetString("measurement", "center");
+    if (measurement != "center" && measurement != "corners") {
+      root.Child("measurement").Fail("expected center or corners");
+    }
+    use_corners_ = measurement == "corners";
     if (!(pixel_std_ > 0.0)) root.Child("pixel_noise_std_px").Fail("must be > 0");
     if (const auto r = root.Optional("render")) {
       const ConfigNode mode = r->Child("mode");
@@ -50,13 +59,37 @@ class TagFusionKind : public ScenarioKind {
     if (const auto fixed = root.Optional("fixed_joints_deg")) {
       for (const std::string& j : fixed->Keys()) fixed_.emplace_back(j, fixed->GetDouble(j));
     }
-    const ConfigNode configs = root.Child("configurations_deg");
-    for (const ConfigNode& c : configs.Items()) {
-      std::vector<std::pair<std::string, double>> cfg;
-      for (const std::string& j : c.Keys()) cfg.emplace_back(j, c.GetDouble(j));
-      configurations_.push_back(cfg);
+    if (const auto configs = root.Optional("configurations_deg")) {
+      for (const ConfigNode& c : configs->Items()) {
+        std::vector<std::pair<std::string, double>> cfg;
+        for (const std::string& j : c.Keys()) cfg.emplace_back(j, c.GetDouble(j));
+        configurations_.push_back(cfg);
+      }
     }
-    if (configurations_.empty()) configs.Fail("needs at least one configuration");
+    // Seeded random configurations within joint ranges, kept when the camera sees at least
+    // `min_tags` tags (the paper chose poses in which the markers were visible).
+    if (const auto rnd = root.Optional("random_configurations")) {
+      random_count_ = rnd->GetInt("count");
+      min_tags_ = rnd->GetInt("min_tags", 1);
+      max_attempts_ = rnd->GetInt("max_attempts", 50 * random_count_);
+      const ConfigNode ranges = rnd->Child("ranges_deg");
+      for (const std::string& j : ranges.Keys()) {
+        const ConfigNode r = ranges.Child(j);
+        const std::vector<double> lohi = r.AsDoubleList();
+        if (lohi.size() != 2 || lohi[0] > lohi[1]) r.Fail("expected [low, high]");
+        ranges_.push_back({j, lohi[0], lohi[1]});
+      }
+      if (random_count_ < 1) rnd->Child("count").Fail("must be >= 1");
+    }
+    if (configurations_.empty() && random_count_ == 0) {
+      root.Fail("needs configurations_deg or random_configurations");
+    }
+    // Point a pan-tilt camera at a frame of the nominal arm (the rover looks at its hand).
+    if (const auto aim = root.Optional("aim_camera")) {
+      aim_pan_ = aim->GetString("pan");
+      aim_tilt_ = aim->GetString("tilt");
+      aim_at_ = aim->GetString("at");
+    }
     save_frames_ = root.GetBool("save_frames", true);
     estimators_ = ParseEstimators(root.Child("estimators"));
 
@@ -66,6 +99,12 @@ class TagFusionKind : public ScenarioKind {
       for (const auto& [j, v] : cfg) sim_->SetCommand(j, 0.0);
     }
     for (const auto& [j, v] : fixed_) sim_->SetCommand(j, 0.0);
+    for (const auto& r : ranges_) sim_->SetCommand(r.joint, 0.0);
+    if (!aim_pan_.empty()) {
+      sim_->SetCommand(aim_pan_, 0.0);
+      sim_->SetCommand(aim_tilt_, 0.0);
+      sim_->Frame(aim_at_);
+    }
     chain_ = std::make_unique<sim::DeclaredChain>(
         sim::BuildDeclaredChain(sim_->nominal_model(), declared_));
     camera_id_ = sim::CameraId(sim_->model(), camera_, model_path_);
@@ -96,6 +135,7 @@ class TagFusionKind : public ScenarioKind {
   void Run(RunContext& ctx) override {
     render::Renderer renderer(sim_->model(), mode_);
     ctx.log("GL_RENDERER: " + renderer.gl_renderer());
+    if (random_count_ > 0) SampleConfigurations(renderer, ctx);
     const PinholeCamera& cam = setup_.cameras[0].intrinsics;
     std::vector<ErrorStats> stats(instances_.size());
     std::vector<std::map<std::string, int>> status_counts(instances_.size());
@@ -105,9 +145,7 @@ class TagFusionKind : public ScenarioKind {
     int configs_without_tags = 0;
     const double sigma2 = pixel_std_ * pixel_std_;
     for (size_t c = 0; c < configurations_.size(); ++c) {
-      for (const auto& [j, deg] : fixed_) sim_->SetCommand(j, deg * M_PI / 180.0);
-      for (const auto& [j, deg] : configurations_[c]) sim_->SetCommand(j, deg * M_PI / 180.0);
-      sim_->Settle();
+      Command(configurations_[c]);
       const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
       if (save_frames_) {
         char name[64];
@@ -125,7 +163,7 @@ class TagFusionKind : public ScenarioKind {
         const int jid = sim::JointId(sim_->model(), chain_->q_joints[k]);
         joints.q[k] = sim_->MotorPosition(jid) + sim_->EncoderOffset(jid) - chain_->q_qpos0[k];
       }
-      std::vector<estimators::TagCorners> measurements;
+      std::vector<estimators::Measurement> measurements;
       for (const render::TagDetection& d : det.detections) {
         const auto frame_it = tag_frames_.find(d.id);
         if (frame_it == tag_frames_.end()) continue;
@@ -133,17 +171,31 @@ class TagFusionKind : public ScenarioKind {
         for (const auto& t : tags_) {
           if (t.id == d.id) tag = &t;
         }
-        estimators::TagCorners m;
-        m.t = joints.t;
-        m.camera = 0;
-        m.tag_id = d.id;
-        m.frame = frame_it->second;
-        for (int k = 0; k < 4; ++k) {
-          m.p_frame[k] = tag->corners_geom[k];
-          m.uv[k] = d.corners[k];
+        if (use_corners_) {
+          estimators::TagCorners m;
+          m.t = joints.t;
+          m.camera = 0;
+          m.tag_id = d.id;
+          m.frame = frame_it->second;
+          for (int k = 0; k < 4; ++k) {
+            m.p_frame[k] = tag->corners_geom[k];
+            m.uv[k] = d.corners[k];
+          }
+          m.cov = Eigen::Matrix<double, 8, 8>::Identity() * sigma2;
+          measurements.push_back(m);
+        } else {
+          // libapriltag's centre is the homography image of the tag centre, i.e. the
+          // projection of the 3-D centre (incidence is preserved by projection).
+          estimators::PixelPoint m;
+          m.t = joints.t;
+          m.camera = 0;
+          m.frame = frame_it->second;
+          m.p_frame = 0.25 * (tag->corners_geom[0] + tag->corners_geom[1] + tag->corners_geom[2] +
+                              tag->corners_geom[3]);
+          m.uv = d.center;
+          m.cov = Eigen::Matrix2d::Identity() * sigma2;
+          measurements.push_back(m);
         }
-        m.cov = Eigen::Matrix<double, 8, 8>::Identity() * sigma2;
-        measurements.push_back(m);
       }
       total_tags += static_cast<int>(measurements.size());
       configs_without_tags += measurements.empty();
@@ -175,6 +227,7 @@ class TagFusionKind : public ScenarioKind {
     }
     Json& metrics = (*ctx.summary)["metrics"];
     metrics["configurations"] = static_cast<int>(configurations_.size());
+    if (random_count_ > 0) metrics["configuration_attempts"] = attempts_;
     metrics["tags_detected_total"] = total_tags;
     metrics["configurations_without_tags"] = configs_without_tags;
     for (size_t e = 0; e < instances_.size(); ++e) {
@@ -183,9 +236,79 @@ class TagFusionKind : public ScenarioKind {
       Json& counts = (*ctx.summary)["estimators"][estimators_[e].name]["updates"];
       for (const auto& [status, n] : status_counts[e]) counts[status] = n;
     }
+    // The paper's exp. II finding is that PPOE and naive end up alike: |ppoe - naive|.
+    const Json& est = (*ctx.summary)["estimators"];
+    if (est.contains("ppoe_ekf") && est.contains("naive_ekf")) {
+      metrics["ppoe_naive_lateral_abs_diff_m"] =
+          std::abs(est["ppoe_ekf"]["metrics"]["lateral_err_mean_m"].get<double>() -
+                   est["naive_ekf"]["metrics"]["lateral_err_mean_m"].get<double>());
+    }
   }
 
  private:
+  struct Range {
+    std::string joint;
+    double lo_deg, hi_deg;
+  };
+
+  // Commands a configuration (after the fixed joints), aims the camera, settles the truth.
+  void Command(const std::vector<std::pair<std::string, double>>& cfg) {
+    for (const auto& [j, deg] : fixed_) sim_->SetCommand(j, deg * M_PI / 180.0);
+    for (const auto& [j, deg] : cfg) sim_->SetCommand(j, deg * M_PI / 180.0);
+    if (!aim_pan_.empty()) Aim();
+    sim_->Settle();
+  }
+
+  // Pan and tilt so the camera's optical axis passes through the nominal target (two fixed-
+  // point passes: the camera sits off the pan and tilt axes).
+  void Aim() {
+    // Start from the centred head so the result depends on the arm's command only.
+    sim_->SetCommand(aim_pan_, 0.0);
+    sim_->SetCommand(aim_tilt_, 0.0);
+    for (int pass = 0; pass < 3; ++pass) {
+      const Eigen::VectorXd q = sim_->command();
+      const Vec3 target = sim_->NominalPose(aim_at_, q).translation();
+      const Eigen::Isometry3d T_w_cam = sim_->NominalPose(camera_, q);
+      const Vec3 d_cam = T_w_cam.inverse() * target;  // optical frame: x right, y down, z fwd
+      const double pan = std::atan2(-d_cam.x(), d_cam.z());
+      const double tilt = std::atan2(d_cam.y(), d_cam.z());
+      const int k_pan = Index(aim_pan_), k_tilt = Index(aim_tilt_);
+      sim_->SetCommand(aim_pan_, q[k_pan] + pan);
+      sim_->SetCommand(aim_tilt_, q[k_tilt] + tilt);
+    }
+  }
+
+  int Index(const std::string& joint) const {
+    const auto& names = sim_->actuated_joints();
+    return static_cast<int>(std::find(names.begin(), names.end(), joint) - names.begin());
+  }
+
+  void SampleConfigurations(render::Renderer& renderer, RunContext& ctx) {
+    std::mt19937_64 rng(ctx.seed * 7919ULL + 17);
+    while (static_cast<int>(configurations_.size()) < random_count_) {
+      if (attempts_ >= max_attempts_) {
+        throw InputError("random_configurations: only " +
+                         std::to_string(configurations_.size()) + " of " +
+                         std::to_string(random_count_) + " configurations show " +
+                         std::to_string(min_tags_) + " tag(s) after " +
+                         std::to_string(attempts_) + " attempts; widen ranges_deg");
+      }
+      ++attempts_;
+      std::vector<std::pair<std::string, double>> cfg;
+      for (const Range& r : ranges_) {
+        std::uniform_real_distribution<double> u(r.lo_deg, r.hi_deg);
+        cfg.emplace_back(r.joint, u(rng));
+      }
+      Command(cfg);
+      const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
+      int seen = 0;
+      for (const auto& d : detector_instance_->Detect(frame).detections) {
+        seen += tag_frames_.count(d.id) > 0;
+      }
+      if (seen >= min_tags_) configurations_.push_back(cfg);
+    }
+  }
+
   std::string model_path_;
   sim::DeclaredModel declared_;
   sim::EffectList effects_;
@@ -196,6 +319,13 @@ class TagFusionKind : public ScenarioKind {
   std::vector<std::pair<std::string, double>> fixed_;
   std::vector<std::vector<std::pair<std::string, double>>> configurations_;
   bool save_frames_ = true;
+  bool use_corners_ = false;
+  int random_count_ = 0;
+  int min_tags_ = 1;
+  int max_attempts_ = 0;
+  int attempts_ = 0;
+  std::vector<Range> ranges_;
+  std::string aim_pan_, aim_tilt_, aim_at_;
   std::vector<EstimatorSpec> estimators_;
 
   std::unique_ptr<sim::Simulation> sim_;
