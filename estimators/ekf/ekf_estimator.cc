@@ -25,6 +25,9 @@ class EkfEstimator : public Estimator {
       const double order = p.Scalar("covariance_order", 2.0);
       if (order != 2.0 && order != 4.0) throw InputError(name_ + ": covariance_order must be 2 or 4");
       order_ = order == 4.0 ? lie::CompoundOrder::kFourth : lie::CompoundOrder::kSecond;
+    } else if (p.Scalar("ppoe_diagonal", 0.0) != 0.0) {
+      // The paper's sec. V-B baseline: the PPOE covariance with its correlations dropped.
+      ppoe_diagonal_ = true;
     } else {
       const std::vector<double> t = p.List("std_trans_m", 3);
       const std::vector<double> r = p.List("std_rot_deg", 3);
@@ -80,6 +83,9 @@ class EkfEstimator : public Estimator {
         if ((repaired - belief_.cov).cwiseAbs().maxCoeff() > 1e-9 * scale) ++prior_repairs_;
         belief_.cov = repaired;
       }
+    } else if (ppoe_diagonal_) {
+      kinematics::ForwardKinematicsWithCovariance(model_, data_, j.q, order_);
+      belief_.cov = data_.Sigma_frame[ee_].diagonal().asDiagonal();
     } else {
       kinematics::ForwardKinematics(model_, data_, j.q);
       belief_.cov = naive_cov_;
@@ -179,6 +185,7 @@ class EkfEstimator : public Estimator {
   std::string name_;
   lie::CompoundOrder order_ = lie::CompoundOrder::kSecond;
   Mat6 naive_cov_ = Mat6::Zero();
+  bool ppoe_diagonal_ = false;
   LgEkfOptions options_;
   Belief belief_;
   bool have_prior_ = false;

@@ -3,7 +3,9 @@
 //   ppoe_ekf:  prior covariance from the PPOE model (eq. 18), so it changes with the
 //              configuration and carries the correlations of the chain.
 //   naive_ekf: a static diagonal covariance attached to the end effector (the paper's 'naive'
-//              baseline; params std_trans_m, std_rot_deg in the end-effector frame).
+//              baseline of sec. V-C; params std_trans_m, std_rot_deg in the end-effector
+//              frame), or with ppoe_diagonal: 1 the PPOE covariance without its off-diagonal
+//              entries (the naive baseline of sec. V-B).
 #pragma once
 
 #include <memory>

@@ -14,6 +14,8 @@ const std::vector<KindEntry>& ScenarioKinds() {
        MakePpoeCovarianceKind},
       {"tag_fusion", "rendered AprilTags fused with kinematics by each estimator (Table I)",
        MakeTagFusionKind},
+      {"contact_fusion", "a fingertip's 1-D table contact fused iteratively (Fig. 5)",
+       MakeContactFusionKind},
   };
   return kinds;
 }

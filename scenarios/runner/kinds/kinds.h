@@ -11,5 +11,6 @@ std::unique_ptr<ScenarioKind> MakeSmokeKind();
 std::unique_ptr<ScenarioKind> MakeRoverDeflectionKind();
 std::unique_ptr<ScenarioKind> MakePpoeCovarianceKind();
 std::unique_ptr<ScenarioKind> MakeTagFusionKind();
+std::unique_ptr<ScenarioKind> MakeContactFusionKind();
 
 }  // namespace flexbench::scenarios
