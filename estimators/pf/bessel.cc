@@ -1,0 +1,118 @@
+#include "estimators/pf/bessel.h"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "estimators/error.h"
+
+namespace flexbench::pf {
+namespace {
+
+constexpr double kRelTol = 1e-17;
+
+void CheckArgument(double x, const char* fn) {
+  if (!(x >= 0.0)) {  // also rejects NaN
+    std::ostringstream msg;
+    msg << fn << ": argument must be >= 0, got " << x;
+    throw InputError(msg.str());
+  }
+}
+
+// log of sum_k (x^2/4)^k / (k! (k+nu)!) * nu!, i.e. log(I_nu(x) / ((x/2)^nu / nu!)).
+double LogSeriesSum(int nu, double x) {
+  const double q = 0.25 * x * x;
+  double term = 1.0;
+  double sum = 1.0;
+  for (int k = 1; k < 500; ++k) {
+    term *= q / (static_cast<double>(k) * static_cast<double>(k + nu));
+    sum += term;
+    if (term < kRelTol * sum && k > 0.5 * x) break;
+  }
+  return std::log(sum);
+}
+
+// The asymptotic series sum_k (-1)^k a_k(nu) / x^k, truncated at its smallest term.
+double AsymptoticSum(int nu, double x) {
+  const double mu = 4.0 * nu * nu;
+  double term = 1.0;
+  double sum = 1.0;
+  for (int k = 1; k < 200; ++k) {
+    const double odd = 2.0 * k - 1.0;
+    const double next = term * (odd * odd - mu) / (8.0 * k * x);
+    if (std::abs(next) >= std::abs(term)) break;  // the series starts to diverge
+    term = next;
+    sum += term;
+    if (std::abs(term) < kRelTol * std::abs(sum)) break;
+  }
+  return sum;
+}
+
+double LogAsymptoticPrefactor(double x) { return x - 0.5 * std::log(2.0 * M_PI * x); }
+
+}  // namespace
+
+double LogBesselI0(double x) {
+  CheckArgument(x, "LogBesselI0");
+  if (x < kBesselSeriesLimit) return LogSeriesSum(0, x);
+  if (std::isinf(x)) return x;
+  return LogAsymptoticPrefactor(x) + std::log(AsymptoticSum(0, x));
+}
+
+double LogBesselI1(double x) {
+  CheckArgument(x, "LogBesselI1");
+  if (x == 0.0) return -std::numeric_limits<double>::infinity();
+  if (x < kBesselSeriesLimit) return std::log(0.5 * x) + LogSeriesSum(1, x);
+  if (std::isinf(x)) return x;
+  return LogAsymptoticPrefactor(x) + std::log(AsymptoticSum(1, x));
+}
+
+double BesselI0Scaled(double x) {
+  CheckArgument(x, "BesselI0Scaled");
+  if (x < kBesselSeriesLimit) return std::exp(LogSeriesSum(0, x) - x);
+  if (std::isinf(x)) return 0.0;
+  return AsymptoticSum(0, x) / std::sqrt(2.0 * M_PI * x);
+}
+
+double BesselRatioA1(double x) {
+  CheckArgument(x, "BesselRatioA1");
+  if (x == 0.0) return 0.0;
+  if (std::isinf(x)) return 1.0;
+  if (x < kBesselSeriesLimit) {
+    return 0.5 * x * std::exp(LogSeriesSum(1, x) - LogSeriesSum(0, x));
+  }
+  // The common prefactor e^x / sqrt(2 pi x) cancels exactly.
+  return AsymptoticSum(1, x) / AsymptoticSum(0, x);
+}
+
+double InverseBesselRatioA1(double r) {
+  if (std::isnan(r) || r < 0.0) {
+    std::ostringstream msg;
+    msg << "InverseBesselRatioA1: mean resultant length must be in [0, 1], got " << r;
+    throw InputError(msg.str());
+  }
+  if (r == 0.0) return 0.0;
+  if (r >= 1.0) return std::numeric_limits<double>::infinity();
+  // Best and Fisher's piecewise approximation as the starting point.
+  double k;
+  if (r < 0.53) {
+    k = 2.0 * r + r * r * r + 5.0 * std::pow(r, 5) / 6.0;
+  } else if (r < 0.85) {
+    k = -0.4 + 1.39 * r + 0.43 / (1.0 - r);
+  } else {
+    k = 1.0 / (r * r * r - 4.0 * r * r + 3.0 * r);
+  }
+  for (int it = 0; it < 100; ++it) {
+    const double a = BesselRatioA1(k);
+    const double da = 1.0 - a / k - a * a;
+    if (!(da > 0.0)) break;
+    double step = (a - r) / da;
+    // Keep kappa positive: never step past half of the way to zero.
+    if (step > 0.5 * k) step = 0.5 * k;
+    k -= step;
+    if (std::abs(step) <= 1e-14 * k) break;
+  }
+  return k;
+}
+
+}  // namespace flexbench::pf

@@ -1,0 +1,32 @@
+// Modified Bessel functions of the first kind, orders 0 and 1, in log form: what the von Mises
+// density (particle-filter paper, eq. 3), its mean resultant length and the Bingham normaliser
+// on S^3 (bingham.h) need, stable from kappa = 0 to kappa = 1e300.
+//
+// Method: the power series sum_k (x^2/4)^k / (k! (k+nu)!) for x < kSeriesLimit (all terms
+// positive, so no cancellation), and above it the asymptotic (Hankel) expansion
+//   I_nu(x) = e^x / sqrt(2 pi x) * sum_k (-1)^k a_k(nu) / x^k,
+//   a_k(nu) = prod_{j=1..k} (4 nu^2 - (2j - 1)^2) / (k! 8^k),
+// truncated at its smallest term, which is below e^{-2x} < 1e-17 for x >= 20. Both branches are
+// accurate to a few ulp; the log form never overflows (I0(800) ~ 1e346 does in double).
+#pragma once
+
+namespace flexbench::pf {
+
+// The switch between the two branches.
+inline constexpr double kBesselSeriesLimit = 20.0;
+
+// log I0(x) for x >= 0 (I0(0) = 1). Throws InputError for negative or NaN x.
+double LogBesselI0(double x);
+// log I1(x) for x > 0 (-inf at x = 0). Throws InputError for negative or NaN x.
+double LogBesselI1(double x);
+// The exponentially scaled I0e(x) = exp(-x) I0(x), in (0, 1] for x >= 0.
+double BesselI0Scaled(double x);
+// A1(x) = I1(x) / I0(x), the mean resultant length of vM(x): 0 at 0, -> 1 - 1/(2x) as x -> inf.
+double BesselRatioA1(double x);
+// The inverse of A1 on [0, 1): the kappa with A1(kappa) = r (maximum-likelihood kappa of a
+// sample with mean resultant length r). r = 0 gives 0; r >= 1 gives +inf. Newton iterations on
+// A1(k) - r with A1'(k) = 1 - A1/k - A1^2, started from Best and Fisher's approximation, to
+// relative accuracy 1e-14.
+double InverseBesselRatioA1(double r);
+
+}  // namespace flexbench::pf

@@ -1,0 +1,126 @@
+#include "estimators/pf/von_mises.h"
+
+#include <algorithm>
+#include <sstream>
+
+#include "estimators/conventions.h"
+#include "estimators/error.h"
+
+namespace flexbench::pf {
+
+void CheckKappa(double kappa, const char* what) {
+  if (!(kappa > 0.0) || !std::isfinite(kappa)) {
+    std::ostringstream msg;
+    msg << what << ": kappa must be finite and > 0, got " << kappa;
+    throw InputError(msg.str());
+  }
+}
+
+VonMisesSampler::VonMisesSampler(double kappa) : kappa_(kappa) {
+  CheckKappa(kappa, "VonMisesSampler");
+  // Best-Fisher: tau = 1 + s, s = sqrt(1 + 4 kappa^2), rho = (tau - sqrt(2 tau)) / (2 kappa),
+  // r = (1 + rho^2) / (2 rho), r - 1 = (1 - rho)^2 / (2 rho). Both rho and 1 - rho are formed
+  // without cancellation: tau - sqrt(2 tau) = tau (s - 1) / (tau + sqrt(2 tau)) with
+  // s - 1 = 4 kappa^2 / (s + 1); and 2 kappa - tau = -1 - 1 / (s + 2 kappa).
+  const double s = std::sqrt(1.0 + 4.0 * kappa * kappa);
+  const double tau = 1.0 + s;
+  const double sqrt_2tau = std::sqrt(2.0 * tau);
+  const double rho = 2.0 * kappa * tau / ((s + 1.0) * (tau + sqrt_2tau));
+  const double one_minus_rho =
+      kappa < 1.0 ? 1.0 - rho : (sqrt_2tau - 1.0 - 1.0 / (s + 2.0 * kappa)) / (2.0 * kappa);
+  r_minus_1_ = one_minus_rho * (one_minus_rho / (2.0 * rho));
+  r_ = 1.0 + r_minus_1_;
+  sqrt_r2_minus_1_ = std::sqrt(r_minus_1_) * std::sqrt(r_ + 1.0);
+}
+
+VonMises::VonMises(double kappa, double theta0)
+    : kappa_(kappa),
+      theta0_(0.0),
+      log_norm_(0.0),
+      sampler_((CheckKappa(kappa, "VonMises"), kappa)) {
+  if (!std::isfinite(theta0)) {
+    std::ostringstream msg;
+    msg << "VonMises: theta0 must be finite, got " << theta0;
+    throw InputError(msg.str());
+  }
+  theta0_ = WrapAngle(theta0);
+  log_norm_ = std::log(2.0 * M_PI) + LogBesselI0(kappa);
+}
+
+double VonMises::CircularStd() const { return std::sqrt(-2.0 * std::log(MeanResultantLength())); }
+
+double VonMises::Sample(std::mt19937_64& rng) const {
+  return WrapAngle(theta0_ + sampler_.Sample(rng));
+}
+
+CircularSummary SummariseAngles(const std::vector<double>& angles,
+                                const std::vector<double>& weights) {
+  if (angles.empty()) throw InputError("SummariseAngles: no angles");
+  if (!weights.empty() && weights.size() != angles.size()) {
+    throw InputError("SummariseAngles: " + std::to_string(weights.size()) + " weights for " +
+                     std::to_string(angles.size()) + " angles");
+  }
+  double sw = 0.0;
+  double sc = 0.0;
+  double ss = 0.0;
+  for (size_t i = 0; i < angles.size(); ++i) {
+    const double w = weights.empty() ? 1.0 : weights[i];
+    if (!(w >= 0.0) || !std::isfinite(w) || !std::isfinite(angles[i])) {
+      throw InputError("SummariseAngles: angle or weight " + std::to_string(i) +
+                       " is not finite or the weight is negative");
+    }
+    sw += w;
+    sc += w * std::cos(angles[i]);
+    ss += w * std::sin(angles[i]);
+  }
+  if (!(sw > 0.0)) throw InputError("SummariseAngles: the weights sum to zero");
+  CircularSummary out;
+  out.mean = WrapAngle(std::atan2(ss, sc));
+  out.mean_resultant_length = std::min(1.0, std::hypot(sc, ss) / sw);
+  out.kappa_mle = InverseBesselRatioA1(out.mean_resultant_length);
+  out.circular_std = std::sqrt(-2.0 * std::log(out.mean_resultant_length));
+  return out;
+}
+
+double CircularMean(const std::vector<double>& angles, const std::vector<double>& weights) {
+  return SummariseAngles(angles, weights).mean;
+}
+
+double NaiveMean(const std::vector<double>& angles) {
+  if (angles.empty()) throw InputError("NaiveMean: no angles");
+  double sum = 0.0;
+  for (double a : angles) sum += a;
+  return sum / static_cast<double>(angles.size());
+}
+
+VonMisesProduct::VonMisesProduct(std::vector<double> kappas, std::vector<double> theta0s) {
+  if (kappas.size() != theta0s.size() || kappas.empty()) {
+    throw InputError("VonMisesProduct: need as many kappas as theta0s (got " +
+                     std::to_string(kappas.size()) + " and " + std::to_string(theta0s.size()) +
+                     ")");
+  }
+  components_.reserve(kappas.size());
+  for (size_t j = 0; j < kappas.size(); ++j) components_.emplace_back(kappas[j], theta0s[j]);
+}
+
+VonMisesProduct VonMisesProduct::Iid(int m, double kappa, double theta0) {
+  if (m <= 0) throw InputError("VonMisesProduct: need at least one component");
+  return VonMisesProduct(std::vector<double>(m, kappa), std::vector<double>(m, theta0));
+}
+
+double VonMisesProduct::LogDensity(const std::vector<double>& x) const {
+  if (static_cast<int>(x.size()) != size()) {
+    throw InputError("VonMisesProduct: x has " + std::to_string(x.size()) + " entries, expected " +
+                     std::to_string(size()));
+  }
+  double sum = 0.0;
+  for (int j = 0; j < size(); ++j) sum += components_[j].LogDensity(x[j]);
+  return sum;
+}
+
+void VonMisesProduct::Sample(std::mt19937_64& rng, std::vector<double>* x) const {
+  x->resize(components_.size());
+  for (int j = 0; j < size(); ++j) (*x)[j] = components_[j].Sample(rng);
+}
+
+}  // namespace flexbench::pf
