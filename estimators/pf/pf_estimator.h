@@ -1,0 +1,79 @@
+// The particle filter (particle_filter.h) as a flexbench Estimator. The registry names choose
+// which readings enter the likelihood (eq. 23); the scenario's parameters set the numbers.
+//
+//   pf_encoders          reference angles only (eq. 28)
+//   pf_encoders_ee       + the end-effector position (eq. 26)
+//   pf_encoders_imu      + the orientation of every IMU frame (eq. 27), lambda (-800,-800,0,0)
+//   pf_all               + both
+//   pf_bingham_unimodal  encoders + IMU orientations with lambda (-800,-800,-800,0)
+//   pf_bingham_axisym    encoders + IMU orientations with lambda (-800,-800,0,0)
+//
+// Measurements:
+//   JointReading        -> reference angles u (its `std` is not used: kappa_w is the model of
+//                          "the actual joint is close to the reference", eq. 28)
+//   OrientationReading  -> Bingham term of its frame, if that frame is an orientation frame
+//   PositionReading     -> Gaussian term with R_w = diag(ee_variance), if its frame is in F_P (the
+//                          reading's own cov is not used: R_w is the paper's hyperparameter)
+//   anything else       -> kIgnored. IMUs reach the filter as OrientationReading: the scenario
+//                          runs one Madgwick filter per IMU (estimators/imu/madgwick.h) on the
+//                          raw gyro/accelerometer data and sends its orientation once per step,
+//                          as in the paper's Fig. 5 (one Bingham term per IMU per step).
+//
+// Parameters (all optional; Params holds numbers, flags are 0 or 1):
+//   particles (2048), kappa_w (15), kappa_v (5), kappa_0 (0.1)          Table I, eq. 29
+//   bingham_lambda [4] (per name above; sorted ascending, largest 0)     eqs. 9, 27
+//   ee_variance [1 or 3] (0.01 m^2)                                      eq. 26, R_w
+//   imus [indices into setup.imus] (all IMUs for the names that use them, else none)
+//   ee_position (0/1) (per name above)
+//   ess_threshold (0.5): resample when ESS < ess_threshold * N
+//   systematic_resampling (0): 1 = systematic instead of stratified
+//   conjugate_proposal (0): 1 = the encoder-conjugate proposal (particle_filter.h)
+//
+// Predict(t) makes one system-model step (eq. 30) when t is later than the last step.
+#pragma once
+
+#include <memory>
+
+#include "estimators/estimator.h"
+#include "estimators/pf/particle_filter.h"
+
+namespace flexbench::estimators {
+
+class PfEstimator : public Estimator {
+ public:
+  struct Variant {
+    const char* name;
+    bool ee_position;
+    bool imus;
+    Vec4 lambda;
+  };
+  PfEstimator(const EstimatorSetup& setup, const Variant& variant);
+
+  void Reset() override;
+  void Predict(double t) override;
+  UpdateStatus Update(const Measurement& z) override;
+  Belief Estimate() const override;
+
+  const pf::ParticleFilter& filter() const { return *filter_; }
+  const pf::ParticleFilterConfig& config() const { return filter_->config(); }
+
+ private:
+  std::string name_;
+  std::unique_ptr<pf::ParticleFilter> filter_;
+  bool has_t_ = false;
+  double t_ = 0.0;
+};
+
+// Builds the filter configuration of `variant` from the setup and its Params (InputError with
+// the estimator's name for bad values); exposed for tests.
+pf::ParticleFilterConfig MakePfConfig(const EstimatorSetup& setup,
+                                      const PfEstimator::Variant& variant);
+
+std::unique_ptr<Estimator> MakePfEncoders(const EstimatorSetup& setup);
+std::unique_ptr<Estimator> MakePfEncodersEe(const EstimatorSetup& setup);
+std::unique_ptr<Estimator> MakePfEncodersImu(const EstimatorSetup& setup);
+std::unique_ptr<Estimator> MakePfAll(const EstimatorSetup& setup);
+std::unique_ptr<Estimator> MakePfBinghamUnimodal(const EstimatorSetup& setup);
+std::unique_ptr<Estimator> MakePfBinghamAxisym(const EstimatorSetup& setup);
+
+}  // namespace flexbench::estimators
