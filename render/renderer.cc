@@ -63,7 +63,7 @@ void Renderer::UploadTexture(int tex_id) {
   mjr_uploadTexture(model_, &impl_->context, tex_id);
 }
 
-Image Renderer::RenderRgb(mjData* d, int cam_id) {
+void Renderer::Draw(mjData* d, int cam_id) {
   EnsureGlContext();
   mjr_setBuffer(mjFB_OFFSCREEN, &impl_->context);
   impl_->camera.fixedcamid = cam_id;
@@ -71,17 +71,56 @@ Image Renderer::RenderRgb(mjData* d, int cam_id) {
   mjv_updateScene(model_, d, &impl_->option, nullptr, &impl_->camera, mjCAT_ALL, &impl_->scene);
   mjr_render(viewport, &impl_->scene, &impl_->context);
   mjr_readPixels(impl_->rgb_flipped.data(), nullptr, viewport, &impl_->context);
+}
+
+Image Renderer::RenderRgb(mjData* d, int cam_id) {
+  Image image;
+  RenderRgbInto(d, cam_id, &image);
+  return image;
+}
+
+void Renderer::RenderRgbInto(mjData* d, int cam_id, Image* image) {
+  Draw(d, cam_id);
+  image->width = width_;
+  image->height = height_;
+  image->channels = 3;
+  image->data.resize(impl_->rgb_flipped.size());
   // OpenGL's first row is the bottom of the picture.
-  Image image{width_, height_, 3, std::vector<std::uint8_t>(impl_->rgb_flipped.size())};
   const size_t row = static_cast<size_t>(width_) * 3;
   for (int r = 0; r < height_; ++r) {
-    std::copy_n(impl_->rgb_flipped.data() + (height_ - 1 - r) * row, row, image.Row(r));
+    std::copy_n(impl_->rgb_flipped.data() + (height_ - 1 - r) * row, row, image->Row(r));
   }
-  if (IsConstant(image)) {
+  if (IsConstant(*image)) {
     throw std::runtime_error("rendered frame is constant: nothing was drawn (GL renderer: " +
                              gl_renderer_ + ")");
   }
+}
+
+Image Renderer::RenderGray(mjData* d, int cam_id) {
+  Image image;
+  RenderGrayInto(d, cam_id, &image);
   return image;
+}
+
+void Renderer::RenderGrayInto(mjData* d, int cam_id, Image* gray) {
+  Draw(d, cam_id);
+  // Flip and convert in one pass with ToGray's conversion (OpenCV's fixed-point BT.601), so
+  // the result equals ToGray(RenderRgb(...)) byte for byte.
+  Image bottom_up{width_, height_, 3, {}};
+  bottom_up.data.swap(impl_->rgb_flipped);  // borrow the readback buffer, no copy
+  const Image g = ToGray(bottom_up);
+  bottom_up.data.swap(impl_->rgb_flipped);
+  gray->width = width_;
+  gray->height = height_;
+  gray->channels = 1;
+  gray->data.resize(static_cast<size_t>(width_) * height_);
+  for (int r = 0; r < height_; ++r) {
+    std::copy_n(g.Row(height_ - 1 - r), width_, gray->Row(r));
+  }
+  if (IsConstant(*gray)) {
+    throw std::runtime_error("rendered frame is constant: nothing was drawn (GL renderer: " +
+                             gl_renderer_ + ")");
+  }
 }
 
 }  // namespace flexbench::render

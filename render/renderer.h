@@ -30,6 +30,11 @@ class Renderer {
   // mj_kinematics). Returns RGB, top row first. Throws std::runtime_error when the frame is
   // constant (nothing was drawn).
   Image RenderRgb(mjData* d, int cam_id);
+  // The same into a caller-owned image whose buffer is reused from frame to frame.
+  void RenderRgbInto(mjData* d, int cam_id, Image* rgb);
+  // Grayscale (BT.601, as ToGray) straight from the readback: one pass, no RGB copy.
+  void RenderGrayInto(mjData* d, int cam_id, Image* gray);
+  Image RenderGray(mjData* d, int cam_id);
 
   void UploadTexture(int tex_id);
 
@@ -39,6 +44,9 @@ class Renderer {
   const std::string& gl_renderer() const { return gl_renderer_; }
 
  private:
+  // Renders and reads the frame back (bottom row first) into the readback buffer.
+  void Draw(mjData* d, int cam_id);
+
   struct Impl;
   std::unique_ptr<Impl> impl_;
   const mjModel* model_;

@@ -2,11 +2,13 @@
 
 #include <apriltag/apriltag.h>
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 
 #include "estimators/error.h"
 #include "render/apriltag_family.h"
+#include "render/tag_covariance.h"
 
 namespace flexbench::render {
 
@@ -20,6 +22,16 @@ TagDetector::TagDetector(const DetectorSettings& settings)
   if (!(settings.decimate >= 1.0)) throw InputError("detector.decimate: must be >= 1");
   if (!(settings.sigma >= 0.0)) throw InputError("detector.sigma: must be >= 0");
   if (settings.threads < 1) throw InputError("detector.threads: must be >= 1");
+  if (!(settings.min_edge_px >= 0.0)) throw InputError("detector.min_edge_px: must be >= 0");
+  if (!(settings.max_view_angle_deg > 0.0 && settings.max_view_angle_deg <= 90.0)) {
+    throw InputError("detector.max_view_angle_deg: must be in (0, 90]");
+  }
+  if (!(settings.border_margin_px >= 0.0)) {
+    throw InputError("detector.border_margin_px: must be >= 0");
+  }
+  if (!(settings.pixel_noise_std >= 0.0)) {
+    throw InputError("detector.pixel_noise_std: must be >= 0");
+  }
   impl_->family = MakeFamily(settings.family, "detector.family");
   impl_->detector = apriltag_detector_create();
   apriltag_detector_add_family(impl_->detector, impl_->family.get());
@@ -34,7 +46,10 @@ TagDetector::~TagDetector() {
 }
 
 DetectionResult TagDetector::Detect(const Image& image) const {
-  const Image gray = ToGray(image);
+  // Gray input is used in place; RGB is converted once.
+  Image converted;
+  if (image.channels != 1) converted = ToGray(image);
+  const Image& gray = image.channels == 1 ? image : converted;
   image_u8_t im{gray.width, gray.height, gray.width, const_cast<uint8_t*>(gray.data.data())};
   zarray_t* found = apriltag_detector_detect(impl_->detector, &im);
   DetectionResult result;
@@ -54,9 +69,24 @@ DetectionResult TagDetector::Detect(const Image& image) const {
     for (int k = 0; k < 4; ++k) {
       min_edge = std::min(min_edge, (d.corners[(k + 1) % 4] - d.corners[k]).norm());
     }
+    d.view_angle_deg = ViewAngleFromHomography(d.homography);
+    bool near_border = false;
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::Vector2d& p = d.corners[k];
+      const double m = settings_.border_margin_px;
+      near_border = near_border || p.x() < m || p.y() < m || p.x() > gray.width - m ||
+                    p.y() > gray.height - m;
+    }
     if (min_edge < settings_.min_edge_px) {
       ++result.dropped_small;
+    } else if (d.view_angle_deg > settings_.max_view_angle_deg) {
+      ++result.dropped_grazing;
+    } else if (settings_.border_margin_px > 0.0 && near_border) {
+      ++result.dropped_border;
     } else {
+      const TagCovariance cov = EstimateTagCovariance(gray, d, settings_.pixel_noise_std);
+      d.corners_cov = cov.corners;
+      d.center_cov = cov.center;
       result.detections.push_back(d);
     }
   }
@@ -64,6 +94,18 @@ DetectionResult TagDetector::Detect(const Image& image) const {
   std::sort(result.detections.begin(), result.detections.end(),
             [](const TagDetection& a, const TagDetection& b) { return a.id < b.id; });
   return result;
+}
+
+double ViewAngleFromHomography(const Eigen::Matrix3d& H) {
+  // d/d(x, y) of (H [x y 1]^T) dehomogenised, at (0, 0).
+  const double w = H(2, 2);
+  Eigen::Matrix2d J;
+  for (int r = 0; r < 2; ++r) {
+    for (int c = 0; c < 2; ++c) J(r, c) = (H(r, c) * w - H(r, 2) * H(2, c)) / (w * w);
+  }
+  const Eigen::Vector2d sv = Eigen::JacobiSVD<Eigen::Matrix2d>(J).singularValues();
+  if (!(sv[0] > 0.0)) return 90.0;
+  return std::acos(std::clamp(sv[1] / sv[0], 0.0, 1.0)) * 180.0 / M_PI;
 }
 
 }  // namespace flexbench::render

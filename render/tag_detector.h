@@ -20,6 +20,18 @@ struct DetectorSettings {
   // Detections whose shortest edge is below this many pixels are dropped and counted: tiny tags
   // decode but their corners are unreliable.
   double min_edge_px = 0.0;
+  // Grazing-view gate: a detection seen more obliquely than this is dropped and counted.
+  // libapriltag still decodes tags at 78-85 deg, with corner errors of 1-8 px (a wrong pose).
+  // The angle is estimated from the homography alone (no intrinsics): the ratio of the singular
+  // values of its Jacobian at the tag centre is cos(view angle) for a weak-perspective view,
+  // whatever the in-plane rotation. 90 keeps every detection.
+  double max_view_angle_deg = 90.0;
+  // Visibility gate: a detection with a corner closer than this to the image border (a tag
+  // partly outside the frame) is dropped and counted. 0 keeps every detection.
+  double border_margin_px = 0.0;
+  // Standard deviation of the pixel noise of the detector's gray input (gray levels), for the
+  // corner and centre covariances (render/tag_covariance.h). 0 for a clean render.
+  double pixel_noise_std = 0.0;
 };
 
 struct TagDetection {
@@ -32,12 +44,28 @@ struct TagDetection {
   Eigen::Vector2d center;
   // Maps tag coordinates [-1, 1]^2 to pixels (libapriltag's det->H).
   Eigen::Matrix3d homography;
+  // Covariances (pixels^2) from the pixel-noise model of render/tag_covariance.h: the four
+  // corners stacked (u0, v0, ..., u3, v3), and the centre.
+  Eigen::Matrix<double, 8, 8> corners_cov = Eigen::Matrix<double, 8, 8>::Zero();
+  Eigen::Matrix2d center_cov = Eigen::Matrix2d::Zero();
+  // View angle estimated from the homography (see DetectorSettings::max_view_angle_deg).
+  double view_angle_deg = 0.0;
+
+  Eigen::Matrix2d CornerCov(int k) const { return corners_cov.block<2, 2>(2 * k, 2 * k); }
 };
 
 struct DetectionResult {
   std::vector<TagDetection> detections;
-  int dropped_small = 0;  // detections below min_edge_px
+  int dropped_small = 0;     // detections below min_edge_px
+  int dropped_grazing = 0;   // detections beyond max_view_angle_deg
+  int dropped_border = 0;    // detections within border_margin_px of the image border
+
+  int dropped() const { return dropped_small + dropped_grazing + dropped_border; }
 };
+
+// The view angle (deg) of a tag from its homography (tag [-1, 1]^2 -> pixels): acos of the
+// ratio of the singular values of the homography's Jacobian at the tag centre.
+double ViewAngleFromHomography(const Eigen::Matrix3d& H);
 
 class TagDetector {
  public:

@@ -133,6 +133,7 @@ std::vector<TagInModel> ApplyTagTextures(mjModel* m, int quiet_cells) {
       tag.id = id;
       tag.geom_id = g;
       tag.texture_id = t;
+      tag.border_cells = family->width_at_border;
       tags.push_back(tag);
     }
   }

@@ -23,6 +23,8 @@ struct TagInModel {
   int id = -1;
   int geom_id = -1;
   int texture_id = -1;
+  // Cells across the black border square (libapriltag's width_at_border, 8 for tag36h11).
+  int border_cells = 0;
   // Edge length of the black border square, the size libapriltag's pose estimation expects.
   double size_m = 0.0;
   // Corners of the black border square in the geom frame, in libapriltag's order (det->p):
