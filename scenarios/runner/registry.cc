@@ -16,6 +16,8 @@ const std::vector<KindEntry>& ScenarioKinds() {
        MakeTagFusionKind},
       {"contact_fusion", "a fingertip's 1-D table contact fused iteratively (Fig. 5)",
        MakeContactFusionKind},
+      {"tag_detection_sweep", "one tag swept over distance, view angle and rotation: detection",
+       MakeTagDetectionSweepKind},
   };
   return kinds;
 }

@@ -12,5 +12,6 @@ std::unique_ptr<ScenarioKind> MakeRoverDeflectionKind();
 std::unique_ptr<ScenarioKind> MakePpoeCovarianceKind();
 std::unique_ptr<ScenarioKind> MakeTagFusionKind();
 std::unique_ptr<ScenarioKind> MakeContactFusionKind();
+std::unique_ptr<ScenarioKind> MakeTagDetectionSweepKind();
 
 }  // namespace flexbench::scenarios
