@@ -152,9 +152,9 @@ std::vector<double> ResolveLimits(Range r, std::optional<double> fixed_lo,
   *lo = a;
   *hi = b;
   std::vector<double> ticks;
-  for (double t = std::ceil(a / step - 1e-9) * step; t <= b + step * 1e-9; t += step) {
-    ticks.push_back(t);
-  }
+  const long k0 = static_cast<long>(std::ceil(a / step - 1e-9));
+  const long k1 = static_cast<long>(std::floor(b / step + 1e-9));
+  for (long k = k0; k <= k1; ++k) ticks.push_back(k * step);
   return ticks;
 }
 
@@ -379,9 +379,9 @@ std::vector<double> NiceTicks(double lo, double hi, int target) {
   if (!(hi > lo)) return {lo};
   const double step = NiceStep((hi - lo) / std::max(1, target));
   std::vector<double> ticks;
-  for (double t = std::ceil(lo / step - 1e-9) * step; t <= hi + step * 1e-9; t += step) {
-    ticks.push_back(std::abs(t) < step * 1e-9 ? 0.0 : t);
-  }
+  const long k0 = static_cast<long>(std::ceil(lo / step - 1e-9));
+  const long k1 = static_cast<long>(std::floor(hi / step + 1e-9));
+  for (long k = k0; k <= k1; ++k) ticks.push_back(k * step);
   return ticks;
 }
 

@@ -1,0 +1,87 @@
+// render/plot: deterministic bytes, ticks, what gets drawn where.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "render/plot.h"
+#include "tests/common/test_util.h"
+
+namespace flexbench::render {
+namespace {
+
+Figure MakeFigure() {
+  Figure fig(800, 400, 1, 2);
+  fig.title = "test figure";
+  Axes& a = fig.axes(0, 0);
+  a.title = "lines";
+  a.x_label = "x [m]";
+  a.y_label = "y [cm]";
+  std::vector<double> x, y, e;
+  for (int i = 0; i < 20; ++i) {
+    x.push_back(0.05 * i);
+    y.push_back(std::sin(0.3 * i));
+    e.push_back(0.1);
+  }
+  a.AddLine("sine", x, y).marker = Marker::kCircle;
+  a.AddScatter("points", x, std::vector<double>(x.size(), 0.5)).y_err = e;
+  a.AddHLine(0.8, "limit");
+  Axes& b = fig.axes(0, 1);
+  b.AddLine("dashed", {0, 1, 2}, {3, 1, 2}).line = LineStyle::kDashed;
+  b.legend_position = LegendPosition::kBottomRight;
+  return fig;
+}
+
+TEST(Plot, SameDataSameBytes) {
+  const Image a = MakeFigure().Render();
+  const Image b = MakeFigure().Render();
+  EXPECT_EQ(a.data, b.data);
+  testing::TempDir tmp;
+  MakeFigure().SavePng((tmp.path() / "a.png").string());
+  MakeFigure().SavePng((tmp.path() / "b.png").string());
+  const std::string pa = testing::ReadFile(tmp.path() / "a.png");
+  EXPECT_GT(pa.size(), 1000u);
+  EXPECT_EQ(pa, testing::ReadFile(tmp.path() / "b.png"));
+}
+
+TEST(Plot, DrawsSeriesInTheirColours) {
+  const Image img = MakeFigure().Render();
+  ASSERT_EQ(img.width, 800);
+  ASSERT_EQ(img.height, 400);
+  ASSERT_EQ(img.channels, 3);
+  const auto count = [&](Rgb c) {
+    int n = 0;
+    for (size_t i = 0; i + 2 < img.data.size(); i += 3) {
+      n += img.data[i] == c.r && img.data[i + 1] == c.g && img.data[i + 2] == c.b;
+    }
+    return n;
+  };
+  EXPECT_GT(count(PaletteColor(0)), 200);  // first series, left axes
+  EXPECT_GT(count(PaletteColor(1)), 50);   // scatter
+  EXPECT_FALSE(IsConstant(img));
+  // White background in the corners.
+  EXPECT_EQ(img.data[0], 255);
+  EXPECT_EQ(img.data[img.data.size() - 1], 255);
+}
+
+TEST(Plot, NonFinitePointsAreSkipped) {
+  Figure fig(300, 200);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  fig.axes().AddLine("gappy", {0, 1, 2, 3}, {0, nan, 2, 3});
+  EXPECT_NO_THROW(fig.Render());
+  Figure empty(300, 200);
+  EXPECT_NO_THROW(empty.Render());  // no data: default limits
+}
+
+TEST(Plot, NiceTicks) {
+  const auto expect_ticks = [](const std::vector<double>& got, const std::vector<double>& want) {
+    ASSERT_EQ(got.size(), want.size());
+    for (size_t i = 0; i < got.size(); ++i) EXPECT_NEAR(got[i], want[i], 1e-12);
+  };
+  expect_ticks(NiceTicks(0.0, 1.0, 5), {0.0, 0.2, 0.4, 0.6, 0.8, 1.0});
+  expect_ticks(NiceTicks(-3.2, 7.9, 6), {-2.0, 0.0, 2.0, 4.0, 6.0});
+  expect_ticks(NiceTicks(0.013, 0.0191, 4), {0.014, 0.016, 0.018});
+}
+
+}  // namespace
+}  // namespace flexbench::render
