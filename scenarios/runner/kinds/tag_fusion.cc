@@ -11,6 +11,7 @@
 #include <random>
 
 #include "estimators/estimator.h"
+#include "render/overlay.h"
 #include "render/renderer.h"
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
@@ -147,12 +148,8 @@ class TagFusionKind : public ScenarioKind {
     for (size_t c = 0; c < configurations_.size(); ++c) {
       Command(configurations_[c]);
       const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
-      if (save_frames_) {
-        char name[64];
-        std::snprintf(name, sizeof(name), "config_%02zu.png", c);
-        render::WritePng(frame, (ctx.out->FramesDir() / name).string());
-      }
       const render::DetectionResult det = detector_instance_->Detect(frame);
+      render::Image overlay = frame;
 
       // Encoders: the motor-side angles of the declared actuated joints (plus any offset).
       estimators::JointReading joints;
@@ -206,6 +203,22 @@ class TagFusionKind : public ScenarioKind {
               ? lie::SE3()
               : ToSE3(sim_->BodyPose(sim::ObjectName(sim_->model(), mjOBJ_BODY, chain_->base_body)));
       const lie::SE3 T_base_ee = T_w_base.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
+      const Eigen::Isometry3d T_cam_w = sim_->Pose(camera_).inverse();
+      const auto to_cam = [&](const lie::SE3& T_base_x) {
+        Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+        const lie::SE3 T_w_x = T_w_base * T_base_x;
+        T.linear() = T_w_x.rotation();
+        T.translation() = T_w_x.translation();
+        return Eigen::Isometry3d(T_cam_w * T);
+      };
+      // Evaluation overlay: truth axes, then each estimate's axes and its 95% position ellipse.
+      render::DrawFrameAxes(&overlay, cam, to_cam(T_base_ee), 0.06, 2);
+      render::DrawText(&overlay, "truth: axes   estimates: + and 95% ellipse", {8, 18},
+                       render::kWhite);
+      for (const render::TagDetection& d : det.detections) {
+        render::DrawPolyline(&overlay, {d.corners.begin(), d.corners.end()}, true,
+                             render::kYellow, 1);
+      }
       for (size_t e = 0; e < instances_.size(); ++e) {
         estimators::Estimator& est = *instances_[e];
         est.Reset();
@@ -216,11 +229,32 @@ class TagFusionKind : public ScenarioKind {
         }
         const estimators::Belief b = est.Estimate();
         stats[e].Add(b.T_base_ee, b.cov, T_base_ee);
+        {
+          const render::Color colors[] = {render::kMagenta, render::kCyan, render::kYellow,
+                                          render::kGreen, render::kRed};
+          const render::Color color = colors[e % 5];
+          const Eigen::Isometry3d T_cam_est = to_cam(b.T_base_ee);
+          // Right perturbation: the position part of the local covariance turns with R.
+          const Mat3 R_cam_est = T_cam_est.linear();
+          const Mat3 cov_cam = R_cam_est * b.cov.topLeftCorner<3, 3>() * R_cam_est.transpose();
+          Eigen::Vector2d uv;
+          if (cam.Project(T_cam_est.translation(), &uv)) {
+            render::DrawMarker(&overlay, uv, color, 5, 1);
+            render::DrawPositionCovariance(&overlay, cam, T_cam_est.translation(), cov_cam, 0.95,
+                                           color, 1);
+            render::DrawText(&overlay, estimators_[e].name, {8, 38.0 + 18.0 * e}, color);
+          }
+        }
         char line[256];
         std::snprintf(line, sizeof(line), "%zu,%s,%zu,%.9g,%.9g,%.9g,%.9g\n", c,
                       estimators_[e].name.c_str(), measurements.size(), stats[e].last_pos(),
                       stats[e].last_lateral(), stats[e].last_rot_deg(), stats[e].last_nees());
         csv << line;
+      }
+      if (save_frames_) {
+        char name[64];
+        std::snprintf(name, sizeof(name), "config_%02zu.png", c);
+        render::WritePng(overlay, (ctx.out->FramesDir() / name).string());
       }
       ctx.progress("configurations", static_cast<int>(c + 1),
                    static_cast<int>(configurations_.size()));
