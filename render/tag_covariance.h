@@ -13,32 +13,43 @@
 //
 // Error model of one sample's normal offset e_j (pixels), three independent parts:
 //
-//    e_j = a cos(2 pi phi_j) + b sin(2 pi phi_j)   sub-pixel phase error ("pixel locking"):
-//          + eps_j                                 per-sample discretisation error
-//          + eta_j                                 pixel noise
+//    e_j = sum_{m=1,2} sum_{axis=x,y} |n_axis| (a cos(2 pi m |t_axis| s_j) + b sin(...))
+//          + eps_j + eta_j
 //
-//    a, b ~ N(0, sigma_lock^2); eps_j ~ N(0, sigma_sample^2); eta_j ~ N(0, kappa sigma_n^2 / c^2)
+//    a, b ~ N(0, sigma_lock_m^2)   sub-pixel phase error ("pixel locking") of harmonic m
+//    eps_j ~ N(0, sigma_sample^2)  per-sample discretisation error
+//    eta_j ~ N(0, kappa var_n / c^2)  pixel noise
 //
-//  - The integer truncation makes a sample's offset error a periodic function of where the edge
-//    crosses the pixel grid (period 1 px along the axis closest to the normal). Along an edge at
-//    angle psi from that axis, the phase advances by phi_j = s_j sin(psi) cycles at arc length
-//    s_j. Samples of an axis-aligned edge (or one whose sample spacing aliases the grid) share
-//    their phase, so their errors do not average out; the first harmonic with a random phase
-//    models that correlation exactly for a sinusoidal error.
-//  - eta: to first order, the weighted-mean offset moves by (noise / contrast) times a factor
-//    kappa set by the gradient stencil; c is the edge's local contrast measured in the image,
-//    sigma_n the pixel-noise standard deviation of the gray image.
+//  - The integer truncation of the sample coordinates makes a sample's offset error a periodic
+//    function of where the edge crosses the pixel grid (period 1 px on each axis). Along an
+//    edge with unit direction t and normal n, the x phase advances by |t_x| cycles per pixel of
+//    arc and moves the normal offset by |n_x| (same for y). The samples of an axis-aligned edge
+//    therefore share their phase and their errors do not average out (measured: 2-4x the
+//    corner error of a slanted edge), and a sample spacing that is a multiple of a period
+//    aliases in the same way; a random-phase Fourier series truncated after the second
+//    harmonic captures both.
+//  - eta: to first order the weighted-mean offset moves by (noise / contrast) times a factor
+//    kappa set by the gradient stencil. c is the edge's contrast measured in the image; var_n
+//    is the pixel-noise variance after 8-bit clipping at the measured gray levels on either
+//    side (a black border at level 0 keeps half of its noise).
 //
 // Each line's offset and angle errors follow from the least-squares fit (offset = mean of e_j,
 // angle = sum s_j e_j / sum s_j^2, s_j centred), the four corners' 8x8 covariance from the
 // first-order change of the intersection of two lines (adjacent corners share a line, so they
 // are correlated), and the centre's from the Jacobian of the diagonals' intersection.
 //
-// Constants (kCalibrated...): sigma_lock and sigma_sample were calibrated once, on noise-free
-// fast-mode frames of a frontal tag 0.8 m from a 640x480, 45 deg camera (about 58 px edges);
-// kappa once, at the same geometry with noise 8 gray levels and exposure gain 0.5. They are
-// validated elsewhere (other distances, view angles, noise levels, render modes):
-// tests/accuracy/tag_covariance/.
+// Constants (CornerNoiseModel::Calibrated, by maximum likelihood of the corner errors):
+// sigma_lock = 0.10 px, sigma_lock2 = 0.04 px and sigma_sample = 0.06 px once, on 600
+// noise-free fast-mode frames of a near-frontal tag 0.8 m from the 640x480, 45 deg camera of
+// models/tag_board.xml (about 58 px edges, random in-plane rotation); kappa = 2.4 once, at the
+// same geometry with noise 8 gray levels and exposure gain 0.5. Validated at other distances,
+// view angles, noise levels and exposures in tests/accuracy/tag_covariance/.
+//
+// Domain: fast render mode (the quality mode's multisample resolve erodes the black border by
+// about 0.1 px, a bias this zero-mean model does not describe), tags with at least ~4 px per
+// cell and views up to ~55 deg. Smaller or steeper tags have larger errors than predicted
+// (tag_detection_sweep: corner NEES about 8x its expected value below 3 px per cell), and the
+// centre's covariance is about 10-15% conservative.
 #pragma once
 
 #include <Eigen/Core>
