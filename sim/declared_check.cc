@@ -57,14 +57,18 @@ DeclaredCheckSummary CheckDeclaredFile(const std::string& path) {
   }
   const ConfigNode ee = root.Child("end_effector");
   s.end_effector = ee.AsString();
-  if (mj_name2id(m, mjOBJ_SITE, s.end_effector.c_str()) < 0) missing(ee, "site", s.end_effector);
+  if (mj_name2id(m, mjOBJ_SITE, s.end_effector.c_str()) < 0 &&
+      mj_name2id(m, mjOBJ_BODY, s.end_effector.c_str()) < 0) {
+    missing(ee, "site or body", s.end_effector);
+  }
   if (const auto frames = root.Optional("observed_frames")) {
     for (const ConfigNode& item : StringItems(*frames)) {
       const std::string name = item.AsString();
       if (mj_name2id(m, mjOBJ_SITE, name.c_str()) < 0 &&
           mj_name2id(m, mjOBJ_CAMERA, name.c_str()) < 0 &&
-          mj_name2id(m, mjOBJ_GEOM, name.c_str()) < 0) {
-        missing(item, "site, camera or geom", name);
+          mj_name2id(m, mjOBJ_GEOM, name.c_str()) < 0 &&
+          mj_name2id(m, mjOBJ_BODY, name.c_str()) < 0) {
+        missing(item, "site, camera, geom or body", name);
       }
       s.observed_frames.push_back(name);
     }

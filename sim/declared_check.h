@@ -1,7 +1,8 @@
 // A minimal validator of declared-model files (models/<name>.declared.yaml) against their MJCF:
-// every key known, every name present in the model with the right kind. The full parser into a
-// PPOE chain lives elsewhere (sim/declared_model.*); this only answers "is the file consistent
-// with the model", for `flexbench inspect` and the tests.
+// every key known, every name present in the model with the right kind (end effector: a site
+// or body; observed frames: sites, cameras, geoms or bodies; sources: joints or bodies). The
+// full parser into a PPOE chain lives elsewhere (sim/declared_model.*); this only answers "is
+// the file consistent with the model", for `flexbench inspect` and the tests.
 #pragma once
 
 #include <string>

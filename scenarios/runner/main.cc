@@ -26,7 +26,8 @@ int main(int argc, char** argv) {
   list_cmd->add_option("--dir", list_dir, "folder with scenario files");
 
   std::string inspect_path;
-  CLI::App* inspect_cmd = app.add_subcommand("inspect", "print a model's joints, sensors, cameras, tags and effects as JSON");
+  CLI::App* inspect_cmd = app.add_subcommand(
+      "inspect", "print a model's joints, sensors, cameras, tags and effects as JSON");
   inspect_cmd->add_option("model", inspect_path, "MJCF model or declared-model YAML")->required();
 
   try {

@@ -152,9 +152,9 @@ TEST(DeclaredFiles, NamesTheMissingJointOrFrameWithFileAndLine) {
   };
   expect_error(write("actuated_joints: [j1, j9]\nend_effector: ee\n"), ":2: key 'actuated_joints[1]'");
   expect_error(write("actuated_joints: [j1, j9]\nend_effector: ee\n"), "no hinge or slide joint named 'j9'");
-  expect_error(write("actuated_joints: [j1]\nend_effector: nowhere\n"), "no site named 'nowhere'");
+  expect_error(write("actuated_joints: [j1]\nend_effector: nowhere\n"), "no site or body named 'nowhere'");
   expect_error(write("actuated_joints: [j1]\nend_effector: ee\nobserved_frames: [tag_99]\n"),
-               "no site, camera or geom named 'tag_99'");
+               "no site, camera, geom or body named 'tag_99'");
   expect_error(write("actuated_joints: [j1]\nend_effector: ee\nsources:\n  - {at: plate_yaw, "
                      "about_axis_deg: 1}\n"),
                "no joint or body named 'plate_yaw'");
