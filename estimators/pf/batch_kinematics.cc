@@ -27,11 +27,81 @@ std::pair<FrameId, lie::SE3> NearestJointFrame(const PpoeModel& model, FrameId f
   return {kinematics::kBaseFrame, T};
 }
 
+// One non-root node for a block of particles: R = Rp Rrel, t = Rp trel + tp, Rrel and trel in
+// registers, every entry written out so that the loop vectorises.
+void NodeProduct(const double* __restrict c, const double* __restrict s, const double* __restrict a,
+                 double* __restrict d, int m, const double* k0, const double* k1, const double* k2,
+                 double u0, double u1, double u2, double p0, double p1, double p2) {
+  constexpr int B = BatchKinematics::kBlock;
+  // R = Rp Rrel, t = Rp trel + tp, with Rrel and trel in registers (written out so that the
+  // loop vectorises).
+  const double k000 = k0[0], k001 = k0[1], k002 = k0[2], k010 = k0[3], k011 = k0[4], k012 = k0[5],
+               k020 = k0[6], k021 = k0[7], k022 = k0[8];
+  const double k100 = k1[0], k101 = k1[1], k102 = k1[2], k110 = k1[3], k111 = k1[4], k112 = k1[5],
+               k120 = k1[6], k121 = k1[7], k122 = k1[8];
+  const double k200 = k2[0], k201 = k2[1], k202 = k2[2], k210 = k2[3], k211 = k2[4], k212 = k2[5],
+               k220 = k2[6], k221 = k2[7], k222 = k2[8];
+  const double* __restrict a00 = a + 0 * B;
+  const double* __restrict a01 = a + 1 * B;
+  const double* __restrict a02 = a + 2 * B;
+  const double* __restrict a10 = a + 3 * B;
+  const double* __restrict a11 = a + 4 * B;
+  const double* __restrict a12 = a + 5 * B;
+  const double* __restrict a20 = a + 6 * B;
+  const double* __restrict a21 = a + 7 * B;
+  const double* __restrict a22 = a + 8 * B;
+  const double* __restrict at0 = a + 9 * B;
+  const double* __restrict at1 = a + 10 * B;
+  const double* __restrict at2 = a + 11 * B;
+  double* __restrict d00 = d + 0 * B;
+  double* __restrict d01 = d + 1 * B;
+  double* __restrict d02 = d + 2 * B;
+  double* __restrict d10 = d + 3 * B;
+  double* __restrict d11 = d + 4 * B;
+  double* __restrict d12 = d + 5 * B;
+  double* __restrict d20 = d + 6 * B;
+  double* __restrict d21 = d + 7 * B;
+  double* __restrict d22 = d + 8 * B;
+  double* __restrict dt0 = d + 9 * B;
+  double* __restrict dt1 = d + 10 * B;
+  double* __restrict dt2 = d + 11 * B;
+  for (int i = 0; i < m; ++i) {
+    const double si = s[i], vi = 1.0 - c[i];
+    const double r00 = k000 + si * k100 + vi * k200, r01 = k001 + si * k101 + vi * k201,
+                 r02 = k002 + si * k102 + vi * k202;
+    const double r10 = k010 + si * k110 + vi * k210, r11 = k011 + si * k111 + vi * k211,
+                 r12 = k012 + si * k112 + vi * k212;
+    const double r20 = k020 + si * k120 + vi * k220, r21 = k021 + si * k121 + vi * k221,
+                 r22 = k022 + si * k122 + vi * k222;
+    const double t0 = u0 - (r00 * p0 + r01 * p1 + r02 * p2);
+    const double t1 = u1 - (r10 * p0 + r11 * p1 + r12 * p2);
+    const double t2 = u2 - (r20 * p0 + r21 * p1 + r22 * p2);
+    const double b00 = a00[i], b01 = a01[i], b02 = a02[i];
+    const double b10 = a10[i], b11 = a11[i], b12 = a12[i];
+    const double b20 = a20[i], b21 = a21[i], b22 = a22[i];
+    d00[i] = b00 * r00 + b01 * r10 + b02 * r20;
+    d01[i] = b00 * r01 + b01 * r11 + b02 * r21;
+    d02[i] = b00 * r02 + b01 * r12 + b02 * r22;
+    d10[i] = b10 * r00 + b11 * r10 + b12 * r20;
+    d11[i] = b10 * r01 + b11 * r11 + b12 * r21;
+    d12[i] = b10 * r02 + b11 * r12 + b12 * r22;
+    d20[i] = b20 * r00 + b21 * r10 + b22 * r20;
+    d21[i] = b20 * r01 + b21 * r11 + b22 * r21;
+    d22[i] = b20 * r02 + b21 * r12 + b22 * r22;
+    dt0[i] = b00 * t0 + b01 * t1 + b02 * t2 + at0[i];
+    dt1[i] = b10 * t0 + b11 * t1 + b12 * t2 + at1[i];
+    dt2[i] = b20 * t0 + b21 * t1 + b22 * t2 + at2[i];
+  }
+}
+
 }  // namespace
 
 BatchKinematics::BatchKinematics(const PpoeModel& model, const std::vector<FrameId>& outputs,
-                                 int capacity)
+                                 int capacity, const std::vector<bool>& translation_needed)
     : capacity_(capacity) {
+  if (!translation_needed.empty() && translation_needed.size() != outputs.size()) {
+    throw InputError("BatchKinematics: translation_needed must have one flag per output");
+  }
   if (capacity <= 0) throw InputError("BatchKinematics: capacity must be > 0");
   std::map<FrameId, int> node_of_frame;
   std::function<int(FrameId)> node_for = [&](FrameId joint_frame) -> int {
@@ -69,11 +139,11 @@ BatchKinematics::BatchKinematics(const PpoeModel& model, const std::vector<Frame
     o.frame = frame;
     o.node = node_for(joint_frame);
     o.T_node_frame = T;
-    o.identity = T.IsApprox(lie::SE3::Identity(), 0.0);
+    o.rotation_identity = T.rotation() == Mat3::Identity();
+    o.translation = translation_needed.empty() || translation_needed[outputs_.size()];
     outputs_.push_back(o);
   }
   node_buf_.assign(nodes_.size() * 12 * kBlock, 0.0);
-  rel_buf_.assign(12 * kBlock, 0.0);
   out_.assign(outputs_.size() * 12 * static_cast<size_t>(capacity_), 0.0);
 }
 
@@ -90,55 +160,36 @@ void BatchKinematics::Compute(const double* cos_q, const double* sin_q, int stri
                      std::to_string(capacity_));
   }
   constexpr int B = kBlock;
-  double* rel = rel_buf_.data();
   for (int start = 0; start < n; start += B) {
     const int m = std::min(B, n - start);
     for (size_t ni = 0; ni < nodes_.size(); ++ni) {
       const Node& node = nodes_[ni];
       const double* __restrict c = cos_q + node.q_index * stride + start;
       const double* __restrict s = sin_q + node.q_index * stride + start;
-      // Relative pose of the node: R = K0 + s K1 + (1 - c) K2, t = u0 - R r.
+      double k0[9], k1[9], k2[9];
       for (int e = 0; e < 9; ++e) {
-        const int r = e / 3, col = e % 3;
-        const double k0 = node.K0(r, col), k1 = node.K1(r, col), k2 = node.K2(r, col);
-        double* __restrict out = rel + e * B;
-        for (int i = 0; i < m; ++i) out[i] = k0 + s[i] * k1 + (1.0 - c[i]) * k2;
+        k0[e] = node.K0(e / 3, e % 3);
+        k1[e] = node.K1(e / 3, e % 3);
+        k2[e] = node.K2(e / 3, e % 3);
       }
-      for (int a = 0; a < 3; ++a) {
-        double* __restrict out = rel + (9 + a) * B;
-        const double* __restrict r0 = rel + (a * 3 + 0) * B;
-        const double* __restrict r1 = rel + (a * 3 + 1) * B;
-        const double* __restrict r2 = rel + (a * 3 + 2) * B;
-        const double u = node.u0(a), p0 = node.r(0), p1 = node.r(1), p2 = node.r(2);
-        for (int i = 0; i < m; ++i) out[i] = u - (r0[i] * p0 + r1[i] * p1 + r2[i] * p2);
-      }
-      double* __restrict dst = node_buf_.data() + ni * 12 * B;
+      const double u0 = node.u0(0), u1 = node.u0(1), u2 = node.u0(2);
+      const double p0 = node.r(0), p1 = node.r(1), p2 = node.r(2);
+      double* __restrict d = node_buf_.data() + ni * 12 * B;
       if (node.parent < 0) {
-        for (int e = 0; e < 12; ++e) {
-          for (int i = 0; i < m; ++i) dst[e * B + i] = rel[e * B + i];
+        // Relative pose of the node: R = K0 + s K1 + (1 - c) K2, t = u0 - R r.
+        for (int i = 0; i < m; ++i) {
+          const double si = s[i], vi = 1.0 - c[i];
+          double r[9];
+          for (int e = 0; e < 9; ++e) r[e] = k0[e] + si * k1[e] + vi * k2[e];
+          for (int e = 0; e < 9; ++e) d[e * B + i] = r[e];
+          d[9 * B + i] = u0 - (r[0] * p0 + r[1] * p1 + r[2] * p2);
+          d[10 * B + i] = u1 - (r[3] * p0 + r[4] * p1 + r[5] * p2);
+          d[11 * B + i] = u2 - (r[6] * p0 + r[7] * p1 + r[8] * p2);
         }
         continue;
       }
-      const double* __restrict p = node_buf_.data() + node.parent * 12 * B;
-      // R = Rp Rrel, t = Rp trel + tp.
-      for (int r = 0; r < 3; ++r) {
-        const double* __restrict a0 = p + (r * 3 + 0) * B;
-        const double* __restrict a1 = p + (r * 3 + 1) * B;
-        const double* __restrict a2 = p + (r * 3 + 2) * B;
-        for (int col = 0; col < 3; ++col) {
-          const double* __restrict b0 = rel + (0 * 3 + col) * B;
-          const double* __restrict b1 = rel + (1 * 3 + col) * B;
-          const double* __restrict b2 = rel + (2 * 3 + col) * B;
-          double* __restrict o = dst + (r * 3 + col) * B;
-          for (int i = 0; i < m; ++i) o[i] = a0[i] * b0[i] + a1[i] * b1[i] + a2[i] * b2[i];
-        }
-        const double* __restrict t0 = rel + 9 * B;
-        const double* __restrict t1 = rel + 10 * B;
-        const double* __restrict t2 = rel + 11 * B;
-        const double* __restrict tp = p + (9 + r) * B;
-        double* __restrict o = dst + (9 + r) * B;
-        for (int i = 0; i < m; ++i) o[i] = a0[i] * t0[i] + a1[i] * t1[i] + a2[i] * t2[i] + tp[i];
-      }
+      NodeProduct(c, s, node_buf_.data() + node.parent * 12 * B, d, m, k0, k1, k2, u0, u1, u2, p0,
+                  p1, p2);
     }
     for (size_t k = 0; k < outputs_.size(); ++k) {
       const Output& o = outputs_[k];
@@ -155,26 +206,36 @@ void BatchKinematics::Compute(const double* cos_q, const double* sin_q, int stri
         continue;
       }
       const double* __restrict src = node_buf_.data() + o.node * 12 * B;
-      if (o.identity) {
-        for (int e = 0; e < 12; ++e) {
-          for (int i = 0; i < m; ++i) base[e * capacity_ + i] = src[e * B + i];
-        }
-        continue;
-      }
       const Mat3& Rc = o.T_node_frame.rotation();
       const Vec3& tc = o.T_node_frame.translation();
+      if (o.rotation_identity) {
+        // A site aligned with its link: copy R, offset t.
+        for (int e = 0; e < 9; ++e) {
+          double* __restrict dst = base + e * capacity_;
+          const double* __restrict from = src + e * B;
+          for (int i = 0; i < m; ++i) dst[i] = from[i];
+        }
+      } else {
+        for (int r = 0; r < 3; ++r) {
+          const double* __restrict a0 = src + (r * 3 + 0) * B;
+          const double* __restrict a1 = src + (r * 3 + 1) * B;
+          const double* __restrict a2 = src + (r * 3 + 2) * B;
+          for (int col = 0; col < 3; ++col) {
+            const double b0 = Rc(0, col), b1 = Rc(1, col), b2 = Rc(2, col);
+            double* __restrict dst = base + (r * 3 + col) * capacity_;
+            for (int i = 0; i < m; ++i) dst[i] = a0[i] * b0 + a1[i] * b1 + a2[i] * b2;
+          }
+        }
+      }
+      if (!o.translation) continue;
       for (int r = 0; r < 3; ++r) {
         const double* __restrict a0 = src + (r * 3 + 0) * B;
         const double* __restrict a1 = src + (r * 3 + 1) * B;
         const double* __restrict a2 = src + (r * 3 + 2) * B;
-        for (int col = 0; col < 3; ++col) {
-          const double b0 = Rc(0, col), b1 = Rc(1, col), b2 = Rc(2, col);
-          double* __restrict dst = base + (r * 3 + col) * capacity_;
-          for (int i = 0; i < m; ++i) dst[i] = a0[i] * b0 + a1[i] * b1 + a2[i] * b2;
-        }
         const double* __restrict tn = src + (9 + r) * B;
         double* __restrict dst = base + (9 + r) * capacity_;
-        for (int i = 0; i < m; ++i) dst[i] = a0[i] * tc(0) + a1[i] * tc(1) + a2[i] * tc(2) + tn[i];
+        const double c0 = tc(0), c1 = tc(1), c2 = tc(2);
+        for (int i = 0; i < m; ++i) dst[i] = a0[i] * c0 + a1[i] * c1 + a2[i] * c2 + tn[i];
       }
     }
   }

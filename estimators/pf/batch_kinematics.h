@@ -30,9 +30,10 @@ class BatchKinematics {
  public:
   static constexpr int kBlock = 64;
 
-  // Poses of `outputs` (frame ids of `model`) for up to `capacity` particles.
+  // Poses of `outputs` (frame ids of `model`) for up to `capacity` particles. When given,
+  // `translation_needed[k] == false` skips output k's translation (an orientation-only frame).
   BatchKinematics(const kinematics::PpoeModel& model, const std::vector<FrameId>& outputs,
-                  int capacity);
+                  int capacity, const std::vector<bool>& translation_needed = {});
 
   int num_outputs() const { return static_cast<int>(outputs_.size()); }
   int capacity() const { return capacity_; }
@@ -60,16 +61,16 @@ class BatchKinematics {
   };
   struct Output {
     FrameId frame = -1;
-    int node = -1;          // -1: a constant pose (no joint on its path)
-    lie::SE3 T_node_frame;  // constant offset from the node (or the base)
-    bool identity = false;
+    int node = -1;                   // -1: a constant pose (no joint on its path)
+    lie::SE3 T_node_frame;           // constant offset from the node (or the base)
+    bool rotation_identity = false;  // R_node_frame = I exactly
+    bool translation = true;         // compute the translation
   };
 
   int capacity_;
   std::vector<Node> nodes_;
   std::vector<Output> outputs_;
   std::vector<double> node_buf_;  // [node][12][kBlock]
-  std::vector<double> rel_buf_;   // [12][kBlock]
   std::vector<double> out_;       // [output][12][capacity]
 };
 

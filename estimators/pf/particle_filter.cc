@@ -80,6 +80,24 @@ void ValidateConfig(const ParticleFilterConfig& config, const kinematics::PpoeMo
 }
 
 namespace {
+// Orientation-only frames need no translation.
+std::vector<bool> TranslationNeeded(const ParticleFilterConfig& c) {
+  std::vector<bool> out;
+  std::vector<FrameId> frames;
+  const auto add = [&](FrameId f) {
+    if (f < 0 || std::find(frames.begin(), frames.end(), f) != frames.end()) return;
+    frames.push_back(f);
+    const bool position =
+        f == c.end_effector ||
+        std::find(c.position_frames.begin(), c.position_frames.end(), f) != c.position_frames.end();
+    out.push_back(position);
+  };
+  for (FrameId f : c.position_frames) add(f);
+  for (FrameId f : c.orientation_frames) add(f);
+  add(c.end_effector);
+  return out;
+}
+
 std::vector<FrameId> KinematicOutputs(const ParticleFilterConfig& c) {
   std::vector<FrameId> out;
   const auto add = [&](FrameId f) {
@@ -109,7 +127,7 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
       system_noise_(config.kappa_v),
       initial_(config.kappa_0),
       bingham_(config.bingham_lambda, config.bingham_M),
-      fk_(model, KinematicOutputs(config), config.num_particles) {
+      fk_(model, KinematicOutputs(config), config.num_particles, TranslationNeeded(config)) {
   position_info_ = config_.position_cov.inverse();
   log_norm_position_ = -0.5 * std::log((2.0 * M_PI * config_.position_cov).determinant());
   log_norm_reference_ = -(std::log(2.0 * M_PI) + LogBesselI0(config_.kappa_w));
@@ -124,6 +142,7 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
   ll_.assign(n_, 0.0);
   w_.assign(n_, 0.0);
   ancestors_.assign(n_, 0);
+  bits_.assign(n_, 0);
   for (FrameId f : config_.position_frames) position_outputs_.push_back(fk_.OutputIndex(f));
   for (FrameId f : config_.orientation_frames) orientation_outputs_.push_back(fk_.OutputIndex(f));
   ee_output_ = config_.end_effector >= 0 ? fk_.OutputIndex(config_.end_effector) : -1;
@@ -194,16 +213,8 @@ void ParticleFilter::ResampleIfNeeded() {
 
 void ParticleFilter::PropagateBootstrap() {
   for (int j = 0; j < nq_; ++j) {
-    double* __restrict c = cos_.data() + static_cast<size_t>(j) * n_;
-    double* __restrict s = sin_.data() + static_cast<size_t>(j) * n_;
-    for (int i = 0; i < n_; ++i) {
-      const UnitAngle v = system_noise_.SampleUnit(rng_);
-      double cn = c[i] * v.c - s[i] * v.s;
-      double sn = s[i] * v.c + c[i] * v.s;
-      Renormalise(cn, sn);
-      c[i] = cn;
-      s[i] = sn;
-    }
+    const size_t off = static_cast<size_t>(j) * n_;
+    system_noise_.RotateByNoise(rng_, cos_.data() + off, sin_.data() + off, n_, bits_.data());
   }
 }
 
@@ -258,15 +269,17 @@ void ParticleFilter::EnsurePropagated() {
 }
 
 bool ParticleFilter::ApplyLogLikelihood(double constant) {
+  double* __restrict lw = log_w_.data();
+  double* __restrict ll = ll_.data();
   double m = kNegInf;
   for (int i = 0; i < n_; ++i) {
-    double v = log_w_[i] + ll_[i];
+    double v = lw[i] + ll[i];
     if (std::isnan(v)) v = kNegInf;
-    ll_[i] = v;
+    ll[i] = v;
     m = std::max(m, v);
   }
   if (!std::isfinite(m)) return false;
-  for (int i = 0; i < n_; ++i) log_w_[i] = ll_[i] - m;
+  for (int i = 0; i < n_; ++i) lw[i] = ll[i] - m;
   shift_ += m + constant;
   summary_valid_ = false;
   return true;
@@ -310,21 +323,40 @@ PfStatus ParticleFilter::UpdatePosition(FrameId frame, const Vec3& p_frame, cons
   if (k < 0) return PfStatus::kIgnored;
   if (!p_frame.allFinite() || !p_base.allFinite()) return PfStatus::kRejectedNonFinite;
   EnsurePropagated();
-  const Mat3& I = position_info_;
-  const double *R[3][3], *t[3];
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) R[r][c] = fk_.R(k, r, c);
-    t[r] = fk_.t(k, r);
-  }
+  const double i00 = position_info_(0, 0), i11 = position_info_(1, 1), i22 = position_info_(2, 2);
+  const double i01 = 2.0 * position_info_(0, 1), i02 = 2.0 * position_info_(0, 2),
+               i12 = 2.0 * position_info_(1, 2);
+  const double* __restrict R00 = fk_.R(k, 0, 0);
+  const double* __restrict R01 = fk_.R(k, 0, 1);
+  const double* __restrict R02 = fk_.R(k, 0, 2);
+  const double* __restrict R10 = fk_.R(k, 1, 0);
+  const double* __restrict R11 = fk_.R(k, 1, 1);
+  const double* __restrict R12 = fk_.R(k, 1, 2);
+  const double* __restrict R20 = fk_.R(k, 2, 0);
+  const double* __restrict R21 = fk_.R(k, 2, 1);
+  const double* __restrict R22 = fk_.R(k, 2, 2);
+  const double* __restrict t0 = fk_.t(k, 0);
+  const double* __restrict t1 = fk_.t(k, 1);
+  const double* __restrict t2 = fk_.t(k, 2);
+  double* __restrict ll = ll_.data();
   const double px = p_frame.x(), py = p_frame.y(), pz = p_frame.z();
+  const double bx = p_base.x(), by = p_base.y(), bz = p_base.z();
+  if (px == 0.0 && py == 0.0 && pz == 0.0) {  // the frame's origin: no rotation needed
+    for (int i = 0; i < n_; ++i) {
+      const double dx = bx - t0[i], dy = by - t1[i], dz = bz - t2[i];
+      ll[i] = -0.5 *
+              (dx * (i00 * dx + i01 * dy + i02 * dz) + dy * (i11 * dy + i12 * dz) + i22 * dz * dz);
+    }
+    return ApplyLogLikelihood(log_norm_position_) ? PfStatus::kAccepted
+                                                  : PfStatus::kRejectedAllZero;
+  }
   for (int i = 0; i < n_; ++i) {
-    // d = p_base - (R p_frame + t)
-    const double dx = p_base.x() - (R[0][0][i] * px + R[0][1][i] * py + R[0][2][i] * pz + t[0][i]);
-    const double dy = p_base.y() - (R[1][0][i] * px + R[1][1][i] * py + R[1][2][i] * pz + t[1][i]);
-    const double dz = p_base.z() - (R[2][0][i] * px + R[2][1][i] * py + R[2][2][i] * pz + t[2][i]);
-    const double q = dx * (I(0, 0) * dx + 2.0 * I(0, 1) * dy + 2.0 * I(0, 2) * dz) +
-                     dy * (I(1, 1) * dy + 2.0 * I(1, 2) * dz) + dz * I(2, 2) * dz;
-    ll_[i] = -0.5 * q;
+    // d = p_base - (R p_frame + t); ll = -1/2 d^T R_w^-1 d.
+    const double dx = bx - (R00[i] * px + R01[i] * py + R02[i] * pz + t0[i]);
+    const double dy = by - (R10[i] * px + R11[i] * py + R12[i] * pz + t1[i]);
+    const double dz = bz - (R20[i] * px + R21[i] * py + R22[i] * pz + t2[i]);
+    ll[i] =
+        -0.5 * (dx * (i00 * dx + i01 * dy + i02 * dz) + dy * (i11 * dy + i12 * dz) + i22 * dz * dz);
   }
   return ApplyLogLikelihood(log_norm_position_) ? PfStatus::kAccepted : PfStatus::kRejectedAllZero;
 }
@@ -340,15 +372,23 @@ PfStatus ParticleFilter::UpdateOrientation(FrameId frame, const Quat& q_base_fra
   if (std::abs(xyzw.norm() - 1.0) > kUnitQuaternionTol) return PfStatus::kRejectedOutside;
   EnsurePropagated();
   const BinghamRotationForm form = bingham_.RotationForm(q_base_frame);
-  const double* R[9];
-  double C[9];
-  for (int e = 0; e < 9; ++e) {
-    R[e] = fk_.R(k, e / 3, e % 3);
-    C[e] = form.C(e / 3, e % 3);
-  }
+  const double c0 = form.c0;
+  const double C00 = form.C(0, 0), C01 = form.C(0, 1), C02 = form.C(0, 2);
+  const double C10 = form.C(1, 0), C11 = form.C(1, 1), C12 = form.C(1, 2);
+  const double C20 = form.C(2, 0), C21 = form.C(2, 1), C22 = form.C(2, 2);
+  const double* __restrict R00 = fk_.R(k, 0, 0);
+  const double* __restrict R01 = fk_.R(k, 0, 1);
+  const double* __restrict R02 = fk_.R(k, 0, 2);
+  const double* __restrict R10 = fk_.R(k, 1, 0);
+  const double* __restrict R11 = fk_.R(k, 1, 1);
+  const double* __restrict R12 = fk_.R(k, 1, 2);
+  const double* __restrict R20 = fk_.R(k, 2, 0);
+  const double* __restrict R21 = fk_.R(k, 2, 1);
+  const double* __restrict R22 = fk_.R(k, 2, 2);
+  double* __restrict ll = ll_.data();
   for (int i = 0; i < n_; ++i) {
-    ll_[i] = form.c0 + C[0] * R[0][i] + C[1] * R[1][i] + C[2] * R[2][i] + C[3] * R[3][i] +
-             C[4] * R[4][i] + C[5] * R[5][i] + C[6] * R[6][i] + C[7] * R[7][i] + C[8] * R[8][i];
+    ll[i] = c0 + C00 * R00[i] + C01 * R01[i] + C02 * R02[i] + C10 * R10[i] + C11 * R11[i] +
+            C12 * R12[i] + C20 * R20[i] + C21 * R21[i] + C22 * R22[i];
   }
   return ApplyLogLikelihood(-bingham_.LogNormaliser()) ? PfStatus::kAccepted
                                                        : PfStatus::kRejectedAllZero;

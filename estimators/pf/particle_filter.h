@@ -151,8 +151,8 @@ class ParticleFilter {
   int n_;
   int nq_;
   std::mt19937_64 rng_;
-  VonMisesSampler system_noise_;
-  VonMisesSampler initial_;
+  VonMisesTableSampler system_noise_;  // eq. 30, the hot loop
+  VonMisesTableSampler initial_;       // eq. 29
   Bingham bingham_;
   Mat3 position_info_;               // R_w^-1
   double log_norm_position_ = 0.0;   // -1/2 log det(2 pi R_w)
@@ -165,6 +165,7 @@ class ParticleFilter {
   std::vector<double> ll_;           // scratch: this term's log-likelihood per particle
   std::vector<double> w_;            // scratch: exp(log_w_)
   std::vector<int> ancestors_;
+  std::vector<std::uint64_t> bits_;  // scratch of the system-noise sampler
   BatchKinematics fk_;
   std::vector<int> position_outputs_;     // fk_ output index per position frame
   std::vector<int> orientation_outputs_;  // fk_ output index per orientation frame

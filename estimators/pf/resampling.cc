@@ -1,5 +1,7 @@
 #include "estimators/pf/resampling.h"
 
+#include <cstdint>
+
 #include "estimators/pf/von_mises.h"
 
 namespace flexbench::pf {
@@ -13,13 +15,22 @@ void Resample(ResamplingScheme scheme, const double* weights, int n, std::mt1993
     if (weights[i] > 0.0) last = i;
   }
   const double step = total / n;
+  // Stratified: one uniform per stratum, 32 bits each (two per draw): the offset inside a stratum
+  // of width 1/N needs no more. Systematic: one 53-bit uniform for all.
   const double common = scheme == ResamplingScheme::kSystematic ? Uniform53(rng) : 0.0;
+  std::uint64_t bits = 0;
   // Walk the cumulative sum once; u_k increases with k.
   int i = 0;
   double cumulative = weights[0];
   for (int k = 0; k < n; ++k) {
-    const double u =
-        (k + (scheme == ResamplingScheme::kSystematic ? common : Uniform53(rng))) * step;
+    double offset = common;
+    if (scheme == ResamplingScheme::kStratified) {
+      if ((k & 1) == 0) bits = rng();
+      const std::uint32_t half =
+          (k & 1) == 0 ? static_cast<std::uint32_t>(bits >> 32) : static_cast<std::uint32_t>(bits);
+      offset = (static_cast<double>(half) + 0.5) * (1.0 / 4294967296.0);
+    }
+    const double u = (k + offset) * step;
     while (cumulative <= u && i < last) {
       ++i;
       cumulative += weights[i];

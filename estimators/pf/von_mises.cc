@@ -33,6 +33,116 @@ VonMisesSampler::VonMisesSampler(double kappa) : kappa_(kappa) {
   sqrt_r2_minus_1_ = std::sqrt(r_minus_1_) * std::sqrt(r_ + 1.0);
 }
 
+VonMisesTableSampler::VonMisesTableSampler(double kappa) : kappa_(kappa) {
+  CheckKappa(kappa, "VonMisesTableSampler");
+  x_max_ = std::min(M_PI, 12.0 / std::sqrt(kappa));
+  h_ = x_max_ / kBins;
+  // f(x) = exp(kappa (cos x - 1)) <= 1, decreasing on [0, pi].
+  const auto f = [&](double x) { return std::exp(kappa * (std::cos(x) - 1.0)); };
+  constexpr int kSlots = 512;
+  double mass[kSlots] = {};
+  for (int k = 0; k < kBins; ++k) {
+    const double a = k * h_;
+    const double b = (k + 1) * h_;
+    cos_a_[k] = std::cos(a);
+    sin_a_[k] = std::sin(a);
+    f_left_[k] = f(a);
+    f_right_[k] = f(b);
+    mass[k] = h_ * f_right_[k];                         // accepted without a test
+    mass[kBins + k] = h_ * (f_left_[k] - f_right_[k]);  // the cap
+  }
+  f_tail_ = f(x_max_);
+  mass[2 * kBins] = x_max_ < M_PI ? (M_PI - x_max_) * f_tail_ : 0.0;
+  // Walker's alias table (Vose's construction) over the 2 kBins + 1 pieces; slot 511 is empty.
+  double total = 0.0;
+  for (double m : mass) total += m;
+  double scaled[kSlots];
+  int small[kSlots], large[kSlots];
+  int ns = 0, nl = 0;
+  for (int i = 0; i < kSlots; ++i) {
+    scaled[i] = mass[i] * kSlots / total;
+    (scaled[i] < 1.0 ? small[ns++] : large[nl++]) = i;
+  }
+  constexpr double kScale = 4194304.0;  // 2^22
+  while (ns > 0 && nl > 0) {
+    const int s = small[--ns];
+    const int l = large[--nl];
+    threshold_[s] = static_cast<std::uint32_t>(std::llround(scaled[s] * kScale));
+    alias_[s] = static_cast<std::uint16_t>(l);
+    scaled[l] -= 1.0 - scaled[s];
+    (scaled[l] < 1.0 ? small[ns++] : large[nl++]) = l;
+  }
+  while (nl > 0) {
+    const int l = large[--nl];
+    threshold_[l] = static_cast<std::uint32_t>(kScale);
+    alias_[l] = static_cast<std::uint16_t>(l);
+  }
+  while (ns > 0) {  // rounding leftovers: probability 1 of themselves
+    const int s = small[--ns];
+    threshold_[s] = static_cast<std::uint32_t>(kScale);
+    alias_[s] = static_cast<std::uint16_t>(s);
+  }
+}
+
+void VonMisesTableSampler::RotateByNoise(std::mt19937_64& rng, double* c, double* s, int n,
+                                         std::uint64_t* scratch) const {
+  for (int i = 0; i < n; ++i) scratch[i] = rng();
+  int pending = 0;  // indices whose draw needs the exact test, compacted into scratch's front
+  for (int i = 0; i < n; ++i) {
+    const std::uint64_t r = scratch[i];
+    const unsigned slot = static_cast<unsigned>(r >> 55);
+    const std::uint32_t coin = static_cast<std::uint32_t>(r >> 33) & 0x3fffffu;
+    const unsigned piece = coin < threshold_[slot] ? slot : alias_[slot];
+    if (piece >= static_cast<unsigned>(kBins)) {
+      // Keep the piece bits (high word) with the index in place of the position bits, which
+      // are redrawn below (they are independent of the piece choice).
+      scratch[pending++] = (r & ~std::uint64_t{0xffffffffu}) | static_cast<std::uint32_t>(i);
+      continue;
+    }
+    const double t = (static_cast<double>(r & 0xffffffffu) + 0.5) * (1.0 / 4294967296.0);
+    UnitAngle v = Rotate(piece, t);
+    if ((r >> 32) & 1u) v.s = -v.s;
+    double cn = c[i] * v.c - s[i] * v.s;
+    double sn = s[i] * v.c + c[i] * v.s;
+    const double k = 0.5 * (3.0 - (cn * cn + sn * sn));
+    c[i] = cn * k;
+    s[i] = sn * k;
+  }
+  for (int p = 0; p < pending; ++p) {
+    const std::uint64_t r = scratch[p];
+    const int i = static_cast<int>(r & 0xffffffffu);
+    const unsigned slot = static_cast<unsigned>(r >> 55);
+    const std::uint32_t coin = static_cast<std::uint32_t>(r >> 33) & 0x3fffffu;
+    const unsigned piece = coin < threshold_[slot] ? slot : alias_[slot];
+    const bool negative = ((r >> 32) & 1u) != 0;
+    // The position inside the piece: fresh bits (independent of the piece choice).
+    const double t = (static_cast<double>(rng() >> 32) + 0.5) * (1.0 / 4294967296.0);
+    const double u = Uniform53(rng);
+    UnitAngle v{1.0, 0.0};
+    bool accepted = false;
+    if (piece < static_cast<unsigned>(2 * kBins)) {
+      const unsigned bin = piece - kBins;
+      v = Rotate(bin, t);
+      accepted =
+          f_right_[bin] + u * (f_left_[bin] - f_right_[bin]) < std::exp(kappa_ * (v.c - 1.0));
+    } else if (piece == static_cast<unsigned>(2 * kBins)) {
+      const double x = x_max_ + t * (M_PI - x_max_);
+      v = UnitAngle{std::cos(x), std::sin(x)};
+      accepted = u * f_tail_ < std::exp(kappa_ * (v.c - 1.0));
+    }
+    if (accepted) {
+      if (negative) v.s = -v.s;
+    } else {
+      v = SampleUnit(rng);  // rejected: the sampler starts over
+    }
+    double cn = c[i] * v.c - s[i] * v.s;
+    double sn = s[i] * v.c + c[i] * v.s;
+    const double k = 0.5 * (3.0 - (cn * cn + sn * sn));
+    c[i] = cn * k;
+    s[i] = sn * k;
+  }
+}
+
 VonMises::VonMises(double kappa, double theta0)
     : kappa_(kappa),
       theta0_(0.0),

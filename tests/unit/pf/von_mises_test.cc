@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <random>
+#include <tuple>
 #include <vector>
 
 #include "estimators/conventions.h"
@@ -56,11 +58,50 @@ TEST(VonMises, LogDensityIsStableForHugeKappa) {
   EXPECT_TRUE(std::isfinite(vm.LogDensity(0.3 + M_PI)));
 }
 
-class VonMisesSamplerTest : public ::testing::TestWithParam<double> {};
+// Both exact samplers: Best-Fisher (VonMisesSampler) and the table sampler the filter uses.
+enum class Kind { kBestFisher, kTable, kTableBatch };
+
+struct AnySampler {
+  AnySampler(Kind kind, double kappa) {
+    if (kind == Kind::kBestFisher) {
+      bf = std::make_unique<VonMisesSampler>(kappa);
+    } else {
+      table = std::make_unique<VonMisesTableSampler>(kappa);
+      batch = kind == Kind::kTableBatch;
+    }
+  }
+  UnitAngle SampleUnit(std::mt19937_64& rng) {
+    if (bf) return bf->SampleUnit(rng);
+    if (!batch) return table->SampleUnit(rng);
+    // RotateByNoise applied to (1, 0) in batches of 1000.
+    if (next == 1000) {
+      std::fill(c.begin(), c.end(), 1.0);
+      std::fill(s.begin(), s.end(), 0.0);
+      table->RotateByNoise(rng, c.data(), s.data(), 1000, scratch.data());
+      next = 0;
+    }
+    const UnitAngle a{c[next], s[next]};
+    ++next;
+    return a;
+  }
+  double Sample(std::mt19937_64& rng) {
+    const UnitAngle a = SampleUnit(rng);
+    const double x = std::atan2(a.s, a.c);
+    return x >= M_PI ? -M_PI : x;
+  }
+  std::unique_ptr<VonMisesSampler> bf;
+  std::unique_ptr<VonMisesTableSampler> table;
+  bool batch = false;
+  int next = 1000;
+  std::vector<double> c = std::vector<double>(1000), s = std::vector<double>(1000);
+  std::vector<std::uint64_t> scratch = std::vector<std::uint64_t>(1000);
+};
+
+class VonMisesSamplerTest : public ::testing::TestWithParam<std::tuple<Kind, double>> {};
 
 TEST_P(VonMisesSamplerTest, MomentsMatch) {
-  const double kappa = GetParam();
-  const VonMisesSampler sampler(kappa);
+  const double kappa = std::get<1>(GetParam());
+  AnySampler sampler(std::get<0>(GetParam()), kappa);
   std::mt19937_64 rng(1234);
   const int n = 200000;
   double sc = 0.0, ss = 0.0, sc2 = 0.0, sx2 = 0.0;
@@ -88,18 +129,18 @@ TEST_P(VonMisesSamplerTest, MomentsMatch) {
 }
 
 TEST_P(VonMisesSamplerTest, KolmogorovSmirnovAndChiSquare) {
-  const double kappa = GetParam();
+  const double kappa = std::get<1>(GetParam());
   // The oracle CDF: the tabulated density, or for kappa >= 1e3 the Gaussian limit of eq. 4
   // (N(0, 1/kappa), whose CDF differs from the von Mises one by O(1/kappa)).
   const VonMisesCdf table(std::min(kappa, 1e3));
   const auto cdf = [&](double x) {
     return kappa < 1e3 ? table(x) : 0.5 * std::erfc(-x * std::sqrt(0.5 * kappa));
   };
-  const VonMises vm(kappa, 0.0);
+  AnySampler sampler(std::get<0>(GetParam()), kappa);
   std::mt19937_64 rng(99);
   const int n = 50000;
   std::vector<double> x(n);
-  for (double& v : x) v = vm.Sample(rng);
+  for (double& v : x) v = sampler.Sample(rng);
   for (double v : x) ASSERT_TRUE(v >= -M_PI && v < M_PI) << v;
   std::sort(x.begin(), x.end());
   double d = 0.0;
@@ -134,8 +175,10 @@ TEST_P(VonMisesSamplerTest, KolmogorovSmirnovAndChiSquare) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Kappas, VonMisesSamplerTest,
-                         ::testing::Values(1e-300, 1e-3, 0.1, 1.0, 5.0, 15.0, 100.0, 1e4, 1e8,
-                                           1e12));
+                         ::testing::Combine(::testing::Values(Kind::kBestFisher, Kind::kTable,
+                                                              Kind::kTableBatch),
+                                            ::testing::Values(1e-300, 1e-3, 0.1, 1.0, 5.0, 15.0,
+                                                              100.0, 1e4, 1e8, 1e12)));
 
 TEST(VonMises, SampleIsDeterministicAndWrapped) {
   const VonMises vm(0.5, 3.0);
