@@ -12,6 +12,7 @@
 #include "estimators/estimator.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/simulation.h"
@@ -70,13 +71,7 @@ class ContactFusionKind : public ScenarioKind {
     const lie::SE3 T_w_table_known(Mat3::Identity(), T_w_tip.translation());
     std::normal_distribution<double> distance_noise(0.0, sensor_std_);
 
-    estimators::JointReading joints;
-    joints.q.resize(chain_->model.nq());
-    joints.std.setZero(chain_->model.nq());
-    for (int k = 0; k < chain_->model.nq(); ++k) {
-      const int jid = sim::JointId(sim_->model(), chain_->q_joints[k]);
-      joints.q[k] = sim_->MotorPosition(jid) + sim_->EncoderOffset(jid) - chain_->q_qpos0[k];
-    }
+    const estimators::JointReading joints = EncoderReading(*sim_, *chain_, 0.0);
     std::vector<double> distances(iterations_);
     for (double& d : distances) d = distance_noise(rng);
 

@@ -9,6 +9,7 @@
 #include "render/renderer.h"
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
+#include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/mujoco_model.h"
@@ -27,17 +28,8 @@ class SmokeKind : public ScenarioKind {
         configuration_.emplace_back(joint, cfg->GetDouble(joint));
       }
     }
-    if (const auto r = root.Optional("render")) {
-      const ConfigNode mode = r->Child("mode");
-      mode_ = render::ParseRenderMode(mode.AsString(), mode.WhereKey());
-    }
-    if (const auto d = root.Optional("detector")) {
-      detector_.family = d->GetString("family", detector_.family);
-      detector_.decimate = d->GetDouble("decimate", detector_.decimate);
-      detector_.sigma = d->GetDouble("sigma", detector_.sigma);
-      detector_.threads = d->GetInt("threads", detector_.threads);
-      detector_.min_edge_px = d->GetDouble("min_edge_px", detector_.min_edge_px);
-    }
+    mode_ = ParseRenderMode(root, render::RenderMode::kQuality);
+    detector_ = ParseDetectorSettings(root);
     // Load now: a model MuJoCo rejects, a missing camera or joint is bad input, found before
     // any output is created.
     model_ = sim::LoadModel(model_path_);

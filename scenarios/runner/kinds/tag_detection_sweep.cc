@@ -28,6 +28,7 @@
 #include "render/tag_detector.h"
 #include "render/tag_pose.h"
 #include "render/tag_texture.h"
+#include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/mujoco_model.h"
@@ -75,19 +76,8 @@ class TagDetectionSweepKind : public ScenarioKind {
     model_path_ = model.ResolvePath(model.AsString());
     camera_ = root.GetString("camera");
     board_body_ = root.GetString("board_body");
-    if (const auto r = root.Optional("render")) {
-      const ConfigNode mode = r->Child("mode");
-      mode_ = render::ParseRenderMode(mode.AsString(), mode.WhereKey());
-    }
-    if (const auto d = root.Optional("detector")) {
-      detector_.family = d->GetString("family", detector_.family);
-      detector_.decimate = d->GetDouble("decimate", detector_.decimate);
-      detector_.sigma = d->GetDouble("sigma", detector_.sigma);
-      detector_.threads = d->GetInt("threads", detector_.threads);
-      detector_.min_edge_px = d->GetDouble("min_edge_px", detector_.min_edge_px);
-      detector_.max_view_angle_deg = d->GetDouble("max_view_angle_deg", 90.0);
-      detector_.border_margin_px = d->GetDouble("border_margin_px", 0.0);
-    }
+    mode_ = ParseRenderMode(root, render::RenderMode::kFast);
+    detector_ = ParseDetectorSettings(root);
     if (const auto g = root.Optional("degradation")) {
       degradation_.noise_std = g->GetDouble("noise_std", 0.0);
       degradation_.blur_sigma_px = g->GetDouble("blur_sigma_px", 0.0);

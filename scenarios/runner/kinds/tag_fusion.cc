@@ -17,6 +17,8 @@
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/render_config.h"
+#include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/declared_chain.h"
@@ -47,17 +49,8 @@ class TagFusionKind : public ScenarioKind {
     }
     use_corners_ = measurement == "corners";
     if (!(pixel_std_ > 0.0)) root.Child("pixel_noise_std_px").Fail("must be > 0");
-    if (const auto r = root.Optional("render")) {
-      const ConfigNode mode = r->Child("mode");
-      mode_ = render::ParseRenderMode(mode.AsString(), mode.WhereKey());
-    }
-    if (const auto d = root.Optional("detector")) {
-      detector_.family = d->GetString("family", detector_.family);
-      detector_.decimate = d->GetDouble("decimate", detector_.decimate);
-      detector_.sigma = d->GetDouble("sigma", detector_.sigma);
-      detector_.threads = d->GetInt("threads", detector_.threads);
-      detector_.min_edge_px = d->GetDouble("min_edge_px", detector_.min_edge_px);
-    }
+    mode_ = ParseRenderMode(root, render::RenderMode::kFast);
+    detector_ = ParseDetectorSettings(root);
     if (const auto fixed = root.Optional("fixed_joints_deg")) {
       for (const std::string& j : fixed->Keys()) fixed_.emplace_back(j, fixed->GetDouble(j));
     }
@@ -152,15 +145,8 @@ class TagFusionKind : public ScenarioKind {
       const render::DetectionResult det = detector_instance_->Detect(frame);
       render::Image overlay = frame;
 
-      // Encoders: the motor-side angles of the declared actuated joints (plus any offset).
-      estimators::JointReading joints;
-      joints.t = static_cast<double>(c);
-      joints.q.resize(chain_->model.nq());
-      joints.std.setZero(chain_->model.nq());
-      for (int k = 0; k < chain_->model.nq(); ++k) {
-        const int jid = sim::JointId(sim_->model(), chain_->q_joints[k]);
-        joints.q[k] = sim_->MotorPosition(jid) + sim_->EncoderOffset(jid) - chain_->q_qpos0[k];
-      }
+      const estimators::JointReading joints =
+          EncoderReading(*sim_, *chain_, static_cast<double>(c));
       std::vector<estimators::Measurement> measurements;
       for (const render::TagDetection& d : det.detections) {
         const auto frame_it = tag_frames_.find(d.id);

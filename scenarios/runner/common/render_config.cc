@@ -1,0 +1,26 @@
+#include "scenarios/runner/common/render_config.h"
+
+namespace flexbench::scenarios {
+
+render::RenderMode ParseRenderMode(const ConfigNode& root, render::RenderMode fallback) {
+  const auto r = root.Optional("render");
+  if (!r) return fallback;
+  const ConfigNode mode = r->Child("mode");
+  return render::ParseRenderMode(mode.AsString(), mode.WhereKey());
+}
+
+render::DetectorSettings ParseDetectorSettings(const ConfigNode& root) {
+  render::DetectorSettings s;
+  const auto d = root.Optional("detector");
+  if (!d) return s;
+  s.family = d->GetString("family", s.family);
+  s.decimate = d->GetDouble("decimate", s.decimate);
+  s.sigma = d->GetDouble("sigma", s.sigma);
+  s.threads = d->GetInt("threads", s.threads);
+  s.min_edge_px = d->GetDouble("min_edge_px", s.min_edge_px);
+  s.max_view_angle_deg = d->GetDouble("max_view_angle_deg", s.max_view_angle_deg);
+  s.border_margin_px = d->GetDouble("border_margin_px", s.border_margin_px);
+  return s;
+}
+
+}  // namespace flexbench::scenarios

@@ -1,0 +1,20 @@
+#include "scenarios/runner/common/sim_readings.h"
+
+#include "sim/mujoco_model.h"
+
+namespace flexbench::scenarios {
+
+estimators::JointReading EncoderReading(const sim::Simulation& sim,
+                                        const sim::DeclaredChain& chain, double t) {
+  estimators::JointReading r;
+  r.t = t;
+  r.q.resize(chain.model.nq());
+  r.std.setZero(chain.model.nq());
+  for (int k = 0; k < chain.model.nq(); ++k) {
+    const int jid = sim::JointId(sim.model(), chain.q_joints[k]);
+    r.q[k] = sim.MotorPosition(jid) + sim.EncoderOffset(jid) - chain.q_qpos0[k];
+  }
+  return r;
+}
+
+}  // namespace flexbench::scenarios
