@@ -150,7 +150,7 @@ void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
       if (parent_zero) {
         lie::TransportCovariance(T_parent_i, f.source_cov_parent, &Sigma_i);
       } else {
-        lie::TransportCovariance(T_parent_i, Sigma_parent + f.source_cov_parent, &Sigma_i);
+        lie::TransportCovarianceSum(T_parent_i, Sigma_parent, f.source_cov_parent, &Sigma_i);
       }
       continue;
     }

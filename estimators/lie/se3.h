@@ -138,15 +138,61 @@ inline Mat6 TransformCovariance(const SE3& X, const Mat6& Sigma) {
   return CongruenceAdjoint(X.rotation(), X.translation(), Sigma);
 }
 
+namespace internal {
+
+// [[R^T, 0], [0, R^T]] [[I, -[t]x], [0, I]] Sigma (...)^T for Sigma = [[A, B], [B^T, C]]: the
+// congruence by Ad_{(R, t)^-1}, sheared in the input frame and then rotated, so neither R^T t
+// nor a copy of R^T is needed. Same ~200 multiplications as CongruenceAdjoint.
+inline void TransportBlocks(const Mat3& R, const Vec3& t, const Mat3& A, const Mat3& B,
+                            const Mat3& C, Mat6* out) {
+  const Vec3 s = -t;
+  // Shear: D = B + [s]x C, TL = A + [s]x B^T - D [s]x (see CongruenceAdjoint).
+  Mat3 D, G;
+  D.row(0) = B.row(0) + s[1] * C.row(2) - s[2] * C.row(1);
+  D.row(1) = B.row(1) + s[2] * C.row(0) - s[0] * C.row(2);
+  D.row(2) = B.row(2) + s[0] * C.row(1) - s[1] * C.row(0);
+  for (int j = 0; j < 3; ++j) G.col(j) = s.cross(Vec3(B.row(j).transpose()));
+  for (int i = 0; i < 3; ++i) G.row(i) += s.cross(Vec3(D.row(i).transpose())).transpose();
+  G += A;
+  // Rotate: R^T M R per block, upper triangles only for the symmetric ones.
+  Mat3 RtG, RtD, RtC, D_out;
+  RtG.noalias() = R.transpose() * G;
+  RtD.noalias() = R.transpose() * D;
+  RtC.noalias() = R.transpose() * C;
+  D_out.noalias() = RtD * R;
+  Mat6& o = *out;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = i; j < 3; ++j) {
+      o(i, j) = o(j, i) = RtG.row(i).dot(R.col(j));
+      o(3 + i, 3 + j) = o(3 + j, 3 + i) = RtC.row(i).dot(R.col(j));
+    }
+  }
+  o.topRightCorner<3, 3>() = D_out;
+  o.bottomLeftCorner<3, 3>() = D_out.transpose();
+}
+
+}  // namespace internal
+
 // Sigma -> Ad_{X^-1} Sigma Ad_{X^-1}^T: moves a local covariance at Y to the local tangent space
 // at Y * X, exactly (Y Exp(xi) X = Y X Exp(Ad_{X^-1} xi)); the transport step of eqs. 15, 18.
-inline Mat6 TransportCovariance(const SE3& X, const Mat6& Sigma) {
-  const Mat3 Rt = X.rotation().transpose();
-  return CongruenceAdjoint(Rt, -(Rt * X.translation()), Sigma);
-}
+// Sigma must be symmetric; `out` may alias it.
 inline void TransportCovariance(const SE3& X, const Mat6& Sigma, Mat6* out) {
-  const Mat3 Rt = X.rotation().transpose();
-  CongruenceAdjoint(Rt, -(Rt * X.translation()), Sigma, out);
+  internal::TransportBlocks(X.rotation(), X.translation(), Sigma.topLeftCorner<3, 3>(),
+                            Sigma.topRightCorner<3, 3>(), Sigma.bottomRightCorner<3, 3>(), out);
+}
+inline Mat6 TransportCovariance(const SE3& X, const Mat6& Sigma) {
+  Mat6 out;
+  TransportCovariance(X, Sigma, &out);
+  return out;
+}
+
+// Ad_{X^-1} (Sigma1 + Sigma2) Ad_{X^-1}^T without forming the sum; the hot step of eq. 18.
+inline void TransportCovarianceSum(const SE3& X, const Mat6& Sigma1, const Mat6& Sigma2,
+                                   Mat6* out) {
+  internal::TransportBlocks(
+      X.rotation(), X.translation(), Sigma1.topLeftCorner<3, 3>() + Sigma2.topLeftCorner<3, 3>(),
+      Sigma1.topRightCorner<3, 3>() + Sigma2.topRightCorner<3, 3>(),
+      Sigma1.bottomRightCorner<3, 3>() + Sigma2.bottomRightCorner<3, 3>(), out);
 }
 
 }  // namespace flexbench::lie

@@ -272,6 +272,16 @@ TEST_P(SE3AtPose, CongruenceIsSymmetricAndMayAlias) {
   EXPECT_TRUE(expected.isApprox(expected.transpose(), 0.0));  // exactly symmetric
   TransportCovariance(X(), Sigma, &Sigma);                    // in place
   EXPECT_TRUE(Sigma.isApprox(expected, 0.0));
+  // The fused sum form equals transporting the sum.
+  for (int i = 0; i < 36; ++i) A(i) = n(rng);
+  const Mat6 Sigma2 = A * A.transpose();
+  const Mat6 Ad_inv = X().Inverse().Adjoint();
+  const Mat6 sum_expected = Ad_inv * (Sigma + Sigma2) * Ad_inv.transpose();
+  Mat6 sum;
+  TransportCovarianceSum(X(), Sigma, Sigma2, &sum);
+  EXPECT_LT((sum - sum_expected).cwiseAbs().maxCoeff(),
+            1e-12 * (1.0 + sum_expected.cwiseAbs().maxCoeff()));
+  EXPECT_TRUE(sum.isApprox(sum.transpose(), 0.0));
 }
 
 INSTANTIATE_TEST_SUITE_P(Poses, SE3AtPose, ::testing::ValuesIn(testing::StandardPoseCases()),
