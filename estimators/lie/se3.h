@@ -142,9 +142,10 @@ namespace internal {
 
 // [[R^T, 0], [0, R^T]] [[I, -[t]x], [0, I]] Sigma (...)^T for Sigma = [[A, B], [B^T, C]]: the
 // congruence by Ad_{(R, t)^-1}, sheared in the input frame and then rotated, so neither R^T t
-// nor a copy of R^T is needed. Same ~200 multiplications as CongruenceAdjoint.
-inline void TransportBlocks(const Mat3& R, const Vec3& t, const Mat3& A, const Mat3& B,
-                            const Mat3& C, Mat6* out) {
+// nor a copy of R^T is needed. Same ~200 multiplications as CongruenceAdjoint. Forced inline:
+// in the FK loop this lets the compiler overlap it with the mean-pose products (~10%).
+EIGEN_ALWAYS_INLINE void TransportBlocks(const Mat3& R, const Vec3& t, const Mat3& A, const Mat3& B,
+                                         const Mat3& C, Mat6* out) {
   const Vec3 s = -t;
   // Shear: D = B + [s]x C, TL = A + [s]x B^T - D [s]x (see CongruenceAdjoint).
   Mat3 D, G;
