@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/lie/so3.h"
 #include "estimators/pf/bessel.h"
 
@@ -127,7 +128,8 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
       system_noise_(config.kappa_v),
       initial_(config.kappa_0),
       bingham_(config.bingham_lambda, config.bingham_M),
-      fk_(model, KinematicOutputs(config), config.num_particles, TranslationNeeded(config)) {
+      fk_(model, KinematicOutputs(config), config.num_particles, TranslationNeeded(config)),
+      fk_data_(model) {
   position_info_ = config_.position_cov.inverse();
   log_norm_position_ = -0.5 * std::log((2.0 * M_PI * config_.position_cov).determinant());
   log_norm_reference_ = -(std::log(2.0 * M_PI) + LogBesselI0(config_.kappa_w));
@@ -148,6 +150,7 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
   ee_output_ = config_.end_effector >= 0 ? fk_.OutputIndex(config_.end_effector) : -1;
   scratch_pairs_.reserve(n_);
   scratch_w_.assign(n_, 0.0);
+  q_mean_ = Eigen::VectorXd::Zero(nq_);
   Reset();
 }
 
@@ -486,18 +489,15 @@ const ParticleSummary& ParticleFilter::Summary() const {
   }
   out.has_end_effector = ee_output_ >= 0;
   if (out.has_end_effector) {
+    // The pose at the estimated effective angles (the paper's sec. IV-C: the gripper position
+    // "from estimated effective joint angles"), not the centroid of the particles' poses,
+    // which a broad angular posterior pulls towards the base.
     const int k = ee_output_;
-    Vec3 t = Vec3::Zero();
-    Mat3 Rsum = Mat3::Zero();
-    for (int i = 0; i < n_; ++i) {
-      if (w[i] < negligible) continue;
-      for (int a = 0; a < 3; ++a) {
-        t(a) += w[i] * fk_.t(k, a)[i];
-        for (int b = 0; b < 3; ++b) Rsum(a, b) += w[i] * fk_.R(k, a, b)[i];
-      }
-    }
-    const lie::SE3 mean(lie::SO3Project(Rsum), t);
+    for (int j = 0; j < nq_; ++j) q_mean_[j] = out.mean[j];
+    kinematics::ForwardKinematics(model_, fk_data_, q_mean_);
+    const lie::SE3 mean = fk_data_.T_base_frame[config_.end_effector];
     const lie::SE3 mean_inv = mean.Inverse();
+    // The particles' spread about it, in its local tangent space.
     Mat6 cov = Mat6::Zero();
     for (int i = 0; i < n_; ++i) {
       if (w[i] < negligible) continue;

@@ -29,8 +29,9 @@
 //
 // Output (Summary): per-joint circular mean (eq. 5), circular standard deviation and 95%
 // interval (2.5% and 97.5% weighted quantiles of the deviations from the mean), and the
-// end-effector pose (weighted mean position, chordal mean rotation) with the covariance of the
-// particles in its local tangent space (xi = [rho; theta], conventions.h).
+// end-effector pose at the mean angles (the paper's gripper "from estimated effective joint
+// angles") with the second moment of the particles' poses about it, in its local tangent space
+// (xi = [rho; theta], conventions.h).
 //
 // Memory is allocated at construction; Reset, Predict, the Update* calls and Summary do not touch
 // the heap (tests/unit/pf_alloc/).
@@ -40,6 +41,7 @@
 #include <vector>
 
 #include "estimators/conventions.h"
+#include "estimators/kinematics/ppoe_data.h"
 #include "estimators/kinematics/ppoe_model.h"
 #include "estimators/lie/se3.h"
 #include "estimators/pf/batch_kinematics.h"
@@ -182,6 +184,8 @@ class ParticleFilter {
   mutable ParticleSummary summary_;
   mutable std::vector<std::pair<double, double>> scratch_pairs_;
   mutable std::vector<double> scratch_w_;
+  mutable kinematics::PpoeData fk_data_;  // the end effector at the mean angles
+  mutable Eigen::VectorXd q_mean_;
 };
 
 }  // namespace flexbench::pf

@@ -93,7 +93,7 @@ pf::ParticleFilterConfig MakePfConfig(const EstimatorSetup& setup,
   if (variant.imus) {
     for (size_t k = 0; k < setup.imus.size(); ++k) imus.push_back(static_cast<double>(k));
   }
-  imus = p.List("imus", imus);
+  if (p.Has("imus")) imus = p.List("imus", 0);  // any length, unlike the fallback form
   for (double v : imus) {
     const int k = Integer(v, "imus", name);
     if (k < 0 || k >= static_cast<int>(setup.imus.size())) {

@@ -1,0 +1,141 @@
+// The pf_* estimators through the Estimator interface: registry names choose the sensor sets,
+// Params set the numbers and are validated with clear messages; the interface's measurements
+// reach the filter and the belief carries the joint means and the end-effector pose.
+#include "estimators/pf/pf_estimator.h"
+
+#include <gtest/gtest.h>
+
+#include "estimators/error.h"
+#include "estimators/estimator.h"
+#include "estimators/kinematics/forward_kinematics.h"
+#include "tests/unit/pf/pf_test_models.h"
+
+namespace flexbench::estimators {
+namespace {
+
+struct Rig {
+  pf::testing::JskLikeArm arm;
+  EstimatorSetup Setup(std::map<std::string, std::vector<double>> params = {}) const {
+    EstimatorSetup s;
+    s.model = &arm.model;
+    s.end_effector = arm.grasp;
+    s.imus = {ImuSetup{arm.imu2}, ImuSetup{arm.imu3}};
+    s.params = Params(std::move(params), "test.yaml:1");
+    s.seed = 9;
+    return s;
+  }
+};
+
+std::string ErrorOf(const std::string& name, const EstimatorSetup& setup) {
+  try {
+    MakeEstimator(name, setup);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+TEST(PfEstimator, RegistryNamesChooseTheSensors) {
+  Rig rig;
+  const EstimatorSetup s = rig.Setup();
+  const auto config = [&](const char* name) {
+    return dynamic_cast<const PfEstimator&>(*MakeEstimator(name, s)).config();
+  };
+  EXPECT_TRUE(config("pf_encoders").orientation_frames.empty());
+  EXPECT_TRUE(config("pf_encoders").position_frames.empty());
+  EXPECT_EQ(config("pf_encoders_ee").position_frames, std::vector<FrameId>{rig.arm.grasp});
+  EXPECT_EQ(config("pf_encoders_imu").orientation_frames.size(), 2u);
+  EXPECT_EQ(config("pf_all").position_frames.size(), 1u);
+  EXPECT_EQ(config("pf_all").orientation_frames.size(), 2u);
+  EXPECT_EQ(config("pf_bingham_unimodal").bingham_lambda, Vec4(-800, -800, -800, 0));
+  EXPECT_EQ(config("pf_bingham_axisym").bingham_lambda, Vec4(-800, -800, 0, 0));
+  // Table I defaults.
+  const pf::ParticleFilterConfig c = config("pf_all");
+  EXPECT_EQ(c.num_particles, 2048);
+  EXPECT_EQ(c.kappa_w, 15.0);
+  EXPECT_EQ(c.kappa_v, 5.0);
+  EXPECT_EQ(c.kappa_0, 0.1);
+  EXPECT_TRUE(c.position_cov.isApprox(0.01 * Mat3::Identity()));
+  EXPECT_EQ(c.proposal, pf::Proposal::kBootstrap);
+  EXPECT_EQ(c.resampling, pf::ResamplingScheme::kStratified);
+}
+
+TEST(PfEstimator, ParametersAreValidatedWithClearMessages) {
+  Rig rig;
+  EXPECT_NE(
+      ErrorOf("pf_all", rig.Setup({{"kappa_v", {0.0}}})).find("kappa_v must be finite and > 0"),
+      std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"kappa_w", {-1.0}}})).find("kappa_w"), std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"bingham_lambda", {0, 0, -800, -800}}}))
+                .find("sorted ascending"),
+            std::string::npos);
+  EXPECT_NE(
+      ErrorOf("pf_all", rig.Setup({{"bingham_lambda", {-700, -700, 100, 100}}})).find("shifted"),
+      std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"bingham_lambda", {-800, 0}}})).find("needs 4 value(s)"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"particles", {100.5}}})).find("must be an integer"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"ee_variance", {0.01, 0.01}}})).find("1 or 3 values"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"ee_variance", {-0.01}}})).find("ee_variance"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"imus", {2}}})).find("names IMU 2"), std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"conjugate_proposal", {2}}})).find("must be 0 or 1"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"ess_threshold", {0.0}}})).find("ess_threshold"),
+            std::string::npos);
+  const std::string typo = ErrorOf("pf_all", rig.Setup({{"kapa_v", {5.0}}}));
+  EXPECT_NE(typo.find("unknown parameter 'kapa_v'"), std::string::npos) << typo;
+  EXPECT_NE(typo.find("test.yaml:1"), std::string::npos) << typo;
+  EstimatorSetup no_imu = rig.Setup();
+  no_imu.imus.clear();
+  EXPECT_NE(ErrorOf("pf_encoders_imu", no_imu).find("needs at least one IMU"), std::string::npos);
+}
+
+TEST(PfEstimator, MeasurementsReachTheFilter) {
+  Rig rig;
+  auto est =
+      MakeEstimator("pf_all", rig.Setup({{"particles", {512}}, {"conjugate_proposal", {1}}}));
+  Eigen::VectorXd q(4);
+  q << 0.2, 0.7, 0.4, 0.1;
+  kinematics::PpoeData data(rig.arm.model);
+  kinematics::ForwardKinematics(rig.arm.model, data, q);
+  for (int step = 0; step < 20; ++step) {
+    est->Predict(step);
+    JointReading j;
+    j.q = q;
+    EXPECT_EQ(est->Update(j), UpdateStatus::kAccepted);
+    for (FrameId f : {rig.arm.imu2, rig.arm.imu3}) {
+      OrientationReading o;
+      o.frame = f;
+      o.q_base_frame = Quat(data.T_base_frame[f].rotation());
+      EXPECT_EQ(est->Update(o), UpdateStatus::kAccepted);
+    }
+    PositionReading p;
+    p.frame = rig.arm.grasp;
+    p.p_base = data.T_base_frame[rig.arm.grasp].translation();
+    EXPECT_EQ(est->Update(p), UpdateStatus::kAccepted);
+    EXPECT_EQ(est->Update(ImuReading{}), UpdateStatus::kIgnored);
+    OrientationReading bad;
+    bad.frame = rig.arm.imu2;
+    bad.q_base_frame = Quat(1.5, 0.0, 0.0, 0.0);
+    EXPECT_EQ(est->Update(bad), UpdateStatus::kRejectedOutside);
+  }
+  const Belief b = est->Estimate();
+  ASSERT_TRUE(b.has_joints);
+  ASSERT_EQ(b.q.size(), 4);
+  EXPECT_NEAR(b.q(1), q(1), 0.02);
+  EXPECT_NEAR(b.q(2), q(2), 0.02);
+  EXPECT_GT(b.q_std(0), 0.0);
+  EXPECT_LT((b.T_base_ee.translation() - data.T_base_frame[rig.arm.grasp].translation()).norm(),
+            0.03);
+  EXPECT_TRUE(b.cov.allFinite());
+  // Predict at the same time does not step again; Reset starts over with the same stream.
+  const Belief again = est->Estimate();
+  est->Predict(19);
+  EXPECT_EQ(est->Estimate().q(0), again.q(0));
+}
+
+}  // namespace
+}  // namespace flexbench::estimators
