@@ -13,5 +13,10 @@ std::unique_ptr<ScenarioKind> MakePpoeCovarianceKind();
 std::unique_ptr<ScenarioKind> MakeTagFusionKind();
 std::unique_ptr<ScenarioKind> MakeContactFusionKind();
 std::unique_ptr<ScenarioKind> MakeTagDetectionSweepKind();
+std::unique_ptr<ScenarioKind> MakeJskSimDeflectionKind();
+std::unique_ptr<ScenarioKind> MakeJskFlexibleArmKind();
+std::unique_ptr<ScenarioKind> MakeJskImuYawDriftKind();
+std::unique_ptr<ScenarioKind> MakeJskDirectFusionKind();
+std::unique_ptr<ScenarioKind> MakeJskParticleSweepKind();
 
 }  // namespace flexbench::scenarios
