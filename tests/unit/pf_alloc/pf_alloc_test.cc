@@ -87,6 +87,45 @@ TEST_P(NoAllocationTest, FilterStepsDoNotAllocate) {
   EXPECT_EQ(n, 0);
 }
 
+TEST_P(NoAllocationTest, EstimatorInterfaceDoesNotAllocate) {
+  // The same through estimators::Estimator: typed measurements in, Belief out.
+  testing::JskLikeArm arm;
+  estimators::EstimatorSetup setup;
+  setup.model = &arm.model;
+  setup.end_effector = arm.grasp;
+  setup.imus = {estimators::ImuSetup{arm.imu2}, estimators::ImuSetup{arm.imu3}};
+  setup.params = estimators::Params(
+      {{"conjugate_proposal", {GetParam() == Proposal::kEncoderConjugate ? 1.0 : 0.0}}});
+  auto est = estimators::MakeEstimator("pf_all", setup);
+  Eigen::VectorXd q(4);
+  q << 0.3, 0.6, 0.2, 0.0;
+  kinematics::PpoeData data(arm.model);
+  kinematics::ForwardKinematics(arm.model, data, q);
+  estimators::Measurement joints =
+      estimators::JointReading{0.0, q, estimators::JointVector::Zero(4)};
+  estimators::Measurement o2 =
+      estimators::OrientationReading{0.0, arm.imu2, Quat(data.T_base_frame[arm.imu2].rotation())};
+  estimators::Measurement o3 =
+      estimators::OrientationReading{0.0, arm.imu3, Quat(data.T_base_frame[arm.imu3].rotation())};
+  estimators::PositionReading pr;
+  pr.frame = arm.grasp;
+  pr.p_base = data.T_base_frame[arm.grasp].translation();
+  estimators::Measurement p = pr;
+  double sink = 0.0;
+  const long n = CountAllocations([&] {
+    for (int step = 1; step <= 5; ++step) {
+      est->Predict(step);
+      est->Update(joints);
+      est->Update(o2);
+      est->Update(o3);
+      est->Update(p);
+      sink += est->Estimate().q[1];
+    }
+  });
+  EXPECT_EQ(n, 0);
+  EXPECT_TRUE(std::isfinite(sink));
+}
+
 INSTANTIATE_TEST_SUITE_P(Proposals, NoAllocationTest,
                          ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate));
 
