@@ -369,6 +369,23 @@ void PlotJointBands(const Rig& rig, const std::string& title, const std::vector<
       for (double v : traces[k].ess) ess_max = std::max(ess_max, v);
     }
     e.y_max = 1.3 * ess_max;
+  } else if (nq + 1 < rows * cols) {
+    // Estimators without particles: the angle each one adds to the reference (its estimate of
+    // the deflection, or its failure).
+    render::Axes& d = fig.axes((nq + 1) / cols, (nq + 1) % cols);
+    d.title = "estimate minus reference";
+    d.x_label = x_label;
+    d.y_label = "angle [deg]";
+    for (int j = 0; j < nq; ++j) {
+      for (const Trace& tr : traces) {
+        std::vector<double> diff(tr.t.size());
+        for (size_t i = 0; i < diff.size(); ++i) {
+          diff[i] = Deg(AngleError(tr.mean[j][i], reference[j][i]));
+        }
+        d.AddLine(rig.joint_names()[j], tr.t, diff).color = render::PaletteColor(j);
+      }
+    }
+    FitAxes(&d, 0, 0.5, /*from_zero=*/false);
   }
   fig.SavePng(path);
 }
