@@ -144,7 +144,11 @@ BatchKinematics::BatchKinematics(const PpoeModel& model, const std::vector<Frame
     outputs_.push_back(o);
   }
   node_buf_.assign(nodes_.size() * 12 * kBlock, 0.0);
-  out_.assign(outputs_.size() * 12 * static_cast<size_t>(capacity_), 0.0);
+  // The distance between two output arrays: capacity rounded up to a cache line, plus one line,
+  // so that the 12 arrays of a pose do not all start at the same offset modulo 4 KiB (they
+  // would evict each other from the same L1 sets when N is a power of two).
+  ld_ = (static_cast<std::size_t>(capacity_) + 7) / 8 * 8 + 8;
+  out_.assign(outputs_.size() * 12 * ld_, 0.0);
 }
 
 int BatchKinematics::OutputIndex(FrameId frame) const {
@@ -193,15 +197,15 @@ void BatchKinematics::Compute(const double* cos_q, const double* sin_q, int stri
     }
     for (size_t k = 0; k < outputs_.size(); ++k) {
       const Output& o = outputs_[k];
-      double* __restrict base = out_.data() + k * 12 * static_cast<size_t>(capacity_) + start;
+      double* __restrict base = out_.data() + k * 12 * ld_ + start;
       if (o.node < 0) {
         const Mat3& R = o.T_node_frame.rotation();
         const Vec3& t = o.T_node_frame.translation();
         for (int e = 0; e < 9; ++e) {
-          for (int i = 0; i < m; ++i) base[e * capacity_ + i] = R(e / 3, e % 3);
+          for (int i = 0; i < m; ++i) base[e * ld_ + i] = R(e / 3, e % 3);
         }
         for (int a = 0; a < 3; ++a) {
-          for (int i = 0; i < m; ++i) base[(9 + a) * capacity_ + i] = t(a);
+          for (int i = 0; i < m; ++i) base[(9 + a) * ld_ + i] = t(a);
         }
         continue;
       }
@@ -211,7 +215,7 @@ void BatchKinematics::Compute(const double* cos_q, const double* sin_q, int stri
       if (o.rotation_identity) {
         // A site aligned with its link: copy R, offset t.
         for (int e = 0; e < 9; ++e) {
-          double* __restrict dst = base + e * capacity_;
+          double* __restrict dst = base + e * ld_;
           const double* __restrict from = src + e * B;
           for (int i = 0; i < m; ++i) dst[i] = from[i];
         }
@@ -222,7 +226,7 @@ void BatchKinematics::Compute(const double* cos_q, const double* sin_q, int stri
           const double* __restrict a2 = src + (r * 3 + 2) * B;
           for (int col = 0; col < 3; ++col) {
             const double b0 = Rc(0, col), b1 = Rc(1, col), b2 = Rc(2, col);
-            double* __restrict dst = base + (r * 3 + col) * capacity_;
+            double* __restrict dst = base + (r * 3 + col) * ld_;
             for (int i = 0; i < m; ++i) dst[i] = a0[i] * b0 + a1[i] * b1 + a2[i] * b2;
           }
         }
@@ -233,7 +237,7 @@ void BatchKinematics::Compute(const double* cos_q, const double* sin_q, int stri
         const double* __restrict a1 = src + (r * 3 + 1) * B;
         const double* __restrict a2 = src + (r * 3 + 2) * B;
         const double* __restrict tn = src + (9 + r) * B;
-        double* __restrict dst = base + (9 + r) * capacity_;
+        double* __restrict dst = base + (9 + r) * ld_;
         const double c0 = tc(0), c1 = tc(1), c2 = tc(2);
         for (int i = 0; i < m; ++i) dst[i] = a0[i] * c0 + a1[i] * c1 + a2[i] * c2 + tn[i];
       }

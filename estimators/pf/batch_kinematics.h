@@ -46,9 +46,9 @@ class BatchKinematics {
   void Compute(const double* cos_q, const double* sin_q, int stride, int n);
 
   // Entry (r, c) of output k's rotation for every particle (contiguous, capacity long).
-  const double* R(int k, int r, int c) const { return &out_[(k * 12 + r * 3 + c) * capacity_]; }
+  const double* R(int k, int r, int c) const { return &out_[(k * 12 + r * 3 + c) * ld_]; }
   // Entry i of output k's translation.
-  const double* t(int k, int i) const { return &out_[(k * 12 + 9 + i) * capacity_]; }
+  const double* t(int k, int i) const { return &out_[(k * 12 + 9 + i) * ld_]; }
   // Output k of particle i as an SE3.
   lie::SE3 Pose(int k, int i) const;
 
@@ -68,10 +68,11 @@ class BatchKinematics {
   };
 
   int capacity_;
+  std::size_t ld_ = 0;  // distance between two output arrays (padded capacity)
   std::vector<Node> nodes_;
   std::vector<Output> outputs_;
   std::vector<double> node_buf_;  // [node][12][kBlock]
-  std::vector<double> out_;       // [output][12][capacity]
+  std::vector<double> out_;       // [output][12][ld_]
 };
 
 }  // namespace flexbench::pf

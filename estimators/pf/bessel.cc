@@ -1,5 +1,6 @@
 #include "estimators/pf/bessel.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -113,6 +114,79 @@ double InverseBesselRatioA1(double r) {
     if (std::abs(step) <= 1e-14 * k) break;
   }
   return k;
+}
+
+void LogBesselI0Interpolant::AddTo(const double* x, double* acc, int n) const {
+  if (!interpolated_) {
+    for (int i = 0; i < n; ++i) acc[i] += LogBesselI0(x[i]);
+    return;
+  }
+  const double slack = 1e-12 * (b_ - a_);
+  for (int i = 0; i < n; ++i) {
+    if (x[i] < a_ - slack || x[i] > b_ + slack) {  // not rounding: exact, then done
+      for (int k = 0; k < n; ++k) acc[k] += Evaluate(x[k]);
+      return;
+    }
+  }
+  // Clenshaw's recurrence for blocks of points at once: the inner loops run over the points.
+  const double mid = a_ + b_;
+  const double scale = 0.5 * inv_half_width_;
+  constexpr int kBlock = 64;
+  double t[kBlock], b1[kBlock], b2[kBlock];
+  for (int start = 0; start < n; start += kBlock) {
+    const int m = std::min(kBlock, n - start);
+    const double* __restrict xs = x + start;
+    for (int i = 0; i < m; ++i) {
+      const double ti = (2.0 * xs[i] - mid) * scale;
+      t[i] = ti < -1.0 ? -1.0 : (ti > 1.0 ? 1.0 : ti);
+      b1[i] = 0.0;
+      b2[i] = 0.0;
+    }
+    for (int k = degree_; k >= 1; --k) {
+      const double ck = coef_[k];
+      for (int i = 0; i < m; ++i) {
+        const double b0 = ck + 2.0 * t[i] * b1[i] - b2[i];
+        b2[i] = b1[i];
+        b1[i] = b0;
+      }
+    }
+    double* __restrict out = acc + start;
+    for (int i = 0; i < m; ++i) out[i] += coef_[0] + t[i] * b1[i] - b2[i];
+  }
+}
+
+LogBesselI0Interpolant::LogBesselI0Interpolant(double a, double b) : a_(a), b_(b) {
+  if (!(a >= 0.0) || !(b > a) || !std::isfinite(b)) {
+    std::ostringstream msg;
+    msg << "LogBesselI0Interpolant: need 0 <= a < b < inf, got [" << a << ", " << b << "]";
+    throw InputError(msg.str());
+  }
+  inv_half_width_ = 2.0 / (b - a);
+  for (int n = 8; n <= 64; n *= 2) {
+    // Chebyshev coefficients from the values at the n + 1 Chebyshev (Gauss) nodes.
+    const int m = n + 1;
+    double f[65];
+    for (int j = 0; j < m; ++j) {
+      const double t = std::cos(M_PI * (j + 0.5) / m);
+      f[j] = LogBesselI0(0.5 * (a + b) + 0.5 * (b - a) * t);
+    }
+    for (int k = 0; k < m; ++k) {
+      double sum = 0.0;
+      for (int j = 0; j < m; ++j) sum += f[j] * std::cos(M_PI * k * (j + 0.5) / m);
+      coef_[k] = (k == 0 ? 1.0 : 2.0) * sum / m;
+    }
+    degree_ = n;
+    interpolated_ = true;
+    double worst = 0.0;
+    for (int i = 0; i <= 2000; ++i) {
+      const double x = a + (b - a) * i / 2000.0;
+      const double exact = LogBesselI0(x);
+      worst = std::max(worst, std::abs(Evaluate(x) - exact) / std::max(1.0, std::abs(exact)));
+    }
+    max_error_ = worst;
+    if (worst <= 1e-14) return;
+  }
+  interpolated_ = false;  // not accurate enough: Evaluate uses LogBesselI0
 }
 
 }  // namespace flexbench::pf

@@ -29,4 +29,42 @@ double BesselRatioA1(double x);
 // relative accuracy 1e-14.
 double InverseBesselRatioA1(double r);
 
+// log I0 on a fixed interval [a, b] by a Chebyshev interpolant of degree up to 64, built at
+// construction from LogBesselI0 and checked there against it at 2001 points: the degree grows
+// until the largest error is below 1e-14 * max(1, |log I0|); if even degree 64 does not reach
+// that, Evaluate falls back to LogBesselI0 (exact() reports which). For the particle filter's
+// encoder-conjugate proposal, whose weights need log I0(k) with k in [|kappa_v - kappa_w|,
+// kappa_v + kappa_w] once per particle and joint.
+class LogBesselI0Interpolant {
+ public:
+  LogBesselI0Interpolant(double a, double b);
+  double Evaluate(double x) const {
+    if (!interpolated_ || x < a_ || x > b_) return LogBesselI0(x);
+    // Clenshaw's recurrence on t in [-1, 1].
+    const double t = (2.0 * x - a_ - b_) * inv_half_width_ * 0.5;
+    const double t2 = 2.0 * t;
+    double b1 = 0.0, b2 = 0.0;
+    for (int k = degree_; k >= 1; --k) {
+      const double b0 = coef_[k] + t2 * b1 - b2;
+      b2 = b1;
+      b1 = b0;
+    }
+    return coef_[0] + t * b1 - b2;
+  }
+  // acc[i] += log I0(x[i]) for i < n, in a loop over i that vectorises (the recurrences of
+  // different points are independent). x outside [a, b] by rounding is clamped; further out it
+  // is evaluated exactly.
+  void AddTo(const double* x, double* acc, int n) const;
+  bool interpolated() const { return interpolated_; }
+  int degree() const { return degree_; }
+  double max_error() const { return max_error_; }
+
+ private:
+  double a_, b_, inv_half_width_;
+  int degree_ = 0;
+  bool interpolated_ = false;
+  double max_error_ = 0.0;
+  double coef_[65] = {};
+};
+
 }  // namespace flexbench::pf

@@ -128,6 +128,9 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
       system_noise_(config.kappa_v),
       initial_(config.kappa_0),
       bingham_(config.bingham_lambda, config.bingham_M),
+      conjugate_sampler_(std::abs(config.kappa_v - config.kappa_w),
+                         config.kappa_v + config.kappa_w),
+      log_i0_(std::abs(config.kappa_v - config.kappa_w), config.kappa_v + config.kappa_w),
       fk_(model, KinematicOutputs(config), config.num_particles, TranslationNeeded(config)),
       fk_data_(model) {
   position_info_ = config_.position_cov.inverse();
@@ -135,7 +138,9 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
   log_norm_reference_ = -(std::log(2.0 * M_PI) + LogBesselI0(config_.kappa_w));
   log_norm_conjugate_ =
       -(std::log(2.0 * M_PI) + LogBesselI0(config_.kappa_v) + LogBesselI0(config_.kappa_w));
-  const size_t total = static_cast<size_t>(nq_) * n_;
+  // Joint arrays a padded N apart (see BatchKinematics: no 4 KiB aliasing between joints).
+  stride_ = (static_cast<size_t>(n_) + 7) / 8 * 8 + 8;
+  const size_t total = static_cast<size_t>(nq_) * stride_;
   cos_.assign(total, 1.0);
   sin_.assign(total, 0.0);
   cos2_.assign(total, 1.0);
@@ -158,8 +163,8 @@ void ParticleFilter::Reset() {
   rng_.seed(seed_);
   // Eq. 29: every joint of every particle from vM(kappa_0, 0), joint by joint.
   for (int j = 0; j < nq_; ++j) {
-    double* c = cos_.data() + static_cast<size_t>(j) * n_;
-    double* s = sin_.data() + static_cast<size_t>(j) * n_;
+    double* c = cos_.data() + static_cast<size_t>(j) * stride_;
+    double* s = sin_.data() + static_cast<size_t>(j) * stride_;
     for (int i = 0; i < n_; ++i) {
       const UnitAngle a = initial_.SampleUnit(rng_);
       c[i] = a.c;
@@ -177,7 +182,7 @@ void ParticleFilter::Reset() {
 }
 
 void ParticleFilter::ComputeKinematics() {
-  if (fk_.num_outputs() > 0) fk_.Compute(cos_.data(), sin_.data(), n_, n_);
+  if (fk_.num_outputs() > 0) fk_.Compute(cos_.data(), sin_.data(), static_cast<int>(stride_), n_);
   summary_valid_ = false;
 }
 
@@ -197,7 +202,7 @@ void ParticleFilter::ResampleIfNeeded() {
   if (!last_resampled_) return;
   Resample(config_.resampling, w_.data(), n_, rng_, ancestors_.data());
   for (int j = 0; j < nq_; ++j) {
-    const size_t off = static_cast<size_t>(j) * n_;
+    const size_t off = static_cast<size_t>(j) * stride_;
     const double* c = cos_.data() + off;
     const double* s = sin_.data() + off;
     double* c2 = cos2_.data() + off;
@@ -216,7 +221,7 @@ void ParticleFilter::ResampleIfNeeded() {
 
 void ParticleFilter::PropagateBootstrap() {
   for (int j = 0; j < nq_; ++j) {
-    const size_t off = static_cast<size_t>(j) * n_;
+    const size_t off = static_cast<size_t>(j) * stride_;
     system_noise_.RotateByNoise(rng_, cos_.data() + off, sin_.data() + off, n_, bits_.data());
   }
 }
@@ -225,31 +230,24 @@ void ParticleFilter::PropagateConjugate(const double* u) {
   std::fill(ll_.begin(), ll_.end(), 0.0);
   const double kv = config_.kappa_v;
   const double kw = config_.kappa_w;
+  double* __restrict k = w_.data();  // scratch: the concentrations of this joint's draws
   for (int j = 0; j < nq_; ++j) {
     const double cu = kw * std::cos(u[j]);
     const double su = kw * std::sin(u[j]);
-    double* __restrict c = cos_.data() + static_cast<size_t>(j) * n_;
-    double* __restrict s = sin_.data() + static_cast<size_t>(j) * n_;
+    double* __restrict c = cos_.data() + static_cast<size_t>(j) * stride_;
+    double* __restrict s = sin_.data() + static_cast<size_t>(j) * stride_;
+    // k e^{i mu} = kappa_v e^{i x_prev} + kappa_w e^{i u}; (c, s) becomes e^{i mu}.
     for (int i = 0; i < n_; ++i) {
       const double zc = kv * c[i] + cu;
       const double zs = kv * s[i] + su;
-      double k = std::sqrt(zc * zc + zs * zs);
-      double mc = 1.0, ms = 0.0;
-      if (k > 1e-300) {
-        mc = zc / k;
-        ms = zs / k;
-      } else {
-        k = 1e-300;  // kappa_v = kappa_w and opposite directions: uniform
-      }
-      const VonMisesSampler sampler(k);
-      const UnitAngle v = sampler.SampleUnit(rng_);
-      double cn = mc * v.c - ms * v.s;
-      double sn = ms * v.c + mc * v.s;
-      Renormalise(cn, sn);
-      c[i] = cn;
-      s[i] = sn;
-      ll_[i] += LogBesselI0(k);
+      const double ki = std::sqrt(zc * zc + zs * zs);
+      const bool ok = ki > 1e-300;  // kappa_v = kappa_w and opposite directions: uniform
+      k[i] = ok ? ki : 1e-300;
+      c[i] = ok ? zc / ki : 1.0;
+      s[i] = ok ? zs / ki : 0.0;
     }
+    log_i0_.AddTo(k, ll_.data(), n_);  // the weight I0(k) (the constant is in the normaliser)
+    conjugate_sampler_.RotateBatch(k, c, s, n_, rng_);
   }
 }
 
@@ -310,8 +308,8 @@ PfStatus ParticleFilter::UpdateReference(const double* u, int n) {
   for (int j = 0; j < nq_; ++j) {
     const double cu = kw * std::cos(u[j]);
     const double su = kw * std::sin(u[j]);
-    const double* __restrict c = cos_.data() + static_cast<size_t>(j) * n_;
-    const double* __restrict s = sin_.data() + static_cast<size_t>(j) * n_;
+    const double* __restrict c = cos_.data() + static_cast<size_t>(j) * stride_;
+    const double* __restrict s = sin_.data() + static_cast<size_t>(j) * stride_;
     for (int i = 0; i < n_; ++i) ll_[i] += cu * c[i] + su * s[i];  // kappa_w cos(u - x)
   }
   return ApplyLogLikelihood(nq_ * log_norm_reference_) ? PfStatus::kAccepted
@@ -419,7 +417,7 @@ double ParticleFilter::EffectiveSampleSize() const {
 }
 
 double ParticleFilter::Angle(int j, int i) const {
-  const size_t idx = static_cast<size_t>(j) * n_ + i;
+  const size_t idx = static_cast<size_t>(j) * stride_ + i;
   return std::atan2(sin_[idx], cos_[idx]);
 }
 
@@ -444,8 +442,8 @@ const ParticleSummary& ParticleFilter::Summary() const {
   // Particles below this normalised weight do not move a quantile or a covariance.
   const double negligible = 1e-14;
   for (int j = 0; j < nq_; ++j) {
-    const double* c = cos_.data() + static_cast<size_t>(j) * n_;
-    const double* s = sin_.data() + static_cast<size_t>(j) * n_;
+    const double* c = cos_.data() + static_cast<size_t>(j) * stride_;
+    const double* s = sin_.data() + static_cast<size_t>(j) * stride_;
     double sc = 0.0, ss = 0.0;
     for (int i = 0; i < n_; ++i) {
       sc += w[i] * c[i];

@@ -3,8 +3,9 @@
 //
 // State: the effective joint angles x in [-pi, pi)^m of the rigid model (eq. 22), one particle =
 // one point of the torus, stored as (cos x_j, sin x_j) in structure-of-arrays form
-// (cos[j * N + i]). Propagating x + v is then a rotation of the unit vector, the batch forward
-// kinematics (batch_kinematics.h) needs no trigonometry, and the circular mean (eq. 5) is a sum.
+// (cos[j * stride + i], stride >= N). Propagating x + v is then a rotation of the unit vector, the
+// batch forward kinematics (batch_kinematics.h) needs no trigonometry, and the circular mean (eq.
+// 5) is a sum.
 //
 // Initial particles: vM(kappa_0, 0)^m (eq. 29). System model: x_t = x_{t-1} + v_t,
 // v_t ~ vM(kappa_v, 0)^m (eq. 30), one draw per Predict step (the paper's quasi-static model has
@@ -156,12 +157,17 @@ class ParticleFilter {
   VonMisesTableSampler system_noise_;  // eq. 30, the hot loop
   VonMisesTableSampler initial_;       // eq. 29
   Bingham bingham_;
+  // The encoder-conjugate proposal: vM(k, mu) draws and log I0(k) weights for
+  // k in [|kappa_v - kappa_w|, kappa_v + kappa_w].
+  VonMisesFamilySampler conjugate_sampler_;
+  LogBesselI0Interpolant log_i0_;
   Mat3 position_info_;               // R_w^-1
   double log_norm_position_ = 0.0;   // -1/2 log det(2 pi R_w)
   double log_norm_reference_ = 0.0;  // -log(2 pi I0(kappa_w)) per joint
   double log_norm_conjugate_ = 0.0;  // -log(2 pi I0(kappa_v) I0(kappa_w)) per joint
 
-  std::vector<double> cos_, sin_;    // [nq][N]
+  size_t stride_ = 0;                // distance between two joints' arrays (>= N)
+  std::vector<double> cos_, sin_;    // [nq][stride_]
   std::vector<double> cos2_, sin2_;  // resampling targets
   std::vector<double> log_w_;        // max-normalised log weights
   std::vector<double> ll_;           // scratch: this term's log-likelihood per particle

@@ -16,9 +16,8 @@ void CheckKappa(double kappa, const char* what) {
   }
 }
 
-VonMisesSampler::VonMisesSampler(double kappa) : kappa_(kappa) {
-  CheckKappa(kappa, "VonMisesSampler");
-  // Best-Fisher: tau = 1 + s, s = sqrt(1 + 4 kappa^2), rho = (tau - sqrt(2 tau)) / (2 kappa),
+BestFisherEnvelope OptimalBestFisherEnvelope(double kappa) {
+  // tau = 1 + s, s = sqrt(1 + 4 kappa^2), rho = (tau - sqrt(2 tau)) / (2 kappa),
   // r = (1 + rho^2) / (2 rho), r - 1 = (1 - rho)^2 / (2 rho). Both rho and 1 - rho are formed
   // without cancellation: tau - sqrt(2 tau) = tau (s - 1) / (tau + sqrt(2 tau)) with
   // s - 1 = 4 kappa^2 / (s + 1); and 2 kappa - tau = -1 - 1 / (s + 2 kappa).
@@ -28,9 +27,16 @@ VonMisesSampler::VonMisesSampler(double kappa) : kappa_(kappa) {
   const double rho = 2.0 * kappa * tau / ((s + 1.0) * (tau + sqrt_2tau));
   const double one_minus_rho =
       kappa < 1.0 ? 1.0 - rho : (sqrt_2tau - 1.0 - 1.0 / (s + 2.0 * kappa)) / (2.0 * kappa);
-  r_minus_1_ = one_minus_rho * (one_minus_rho / (2.0 * rho));
-  r_ = 1.0 + r_minus_1_;
-  sqrt_r2_minus_1_ = std::sqrt(r_minus_1_) * std::sqrt(r_ + 1.0);
+  BestFisherEnvelope env;
+  env.r_minus_1 = one_minus_rho * (one_minus_rho / (2.0 * rho));
+  env.r = 1.0 + env.r_minus_1;
+  env.sqrt_r2_minus_1 = std::sqrt(env.r_minus_1) * std::sqrt(env.r + 1.0);
+  return env;
+}
+
+VonMisesSampler::VonMisesSampler(double kappa) : kappa_(kappa) {
+  CheckKappa(kappa, "VonMisesSampler");
+  env_ = OptimalBestFisherEnvelope(kappa);
 }
 
 VonMisesTableSampler::VonMisesTableSampler(double kappa) : kappa_(kappa) {
@@ -102,11 +108,10 @@ void VonMisesTableSampler::RotateByNoise(std::mt19937_64& rng, double* c, double
     const double t = (static_cast<double>(r & 0xffffffffu) + 0.5) * (1.0 / 4294967296.0);
     UnitAngle v = Rotate(piece, t);
     if ((r >> 32) & 1u) v.s = -v.s;
-    double cn = c[i] * v.c - s[i] * v.s;
-    double sn = s[i] * v.c + c[i] * v.s;
-    const double k = 0.5 * (3.0 - (cn * cn + sn * sn));
-    c[i] = cn * k;
-    s[i] = sn * k;
+    const double cn = c[i] * v.c - s[i] * v.s;
+    const double sn = s[i] * v.c + c[i] * v.s;
+    c[i] = cn;
+    s[i] = sn;
   }
   for (int p = 0; p < pending; ++p) {
     const std::uint64_t r = scratch[p];
@@ -135,11 +140,54 @@ void VonMisesTableSampler::RotateByNoise(std::mt19937_64& rng, double* c, double
     } else {
       v = SampleUnit(rng);  // rejected: the sampler starts over
     }
-    double cn = c[i] * v.c - s[i] * v.s;
-    double sn = s[i] * v.c + c[i] * v.s;
-    const double k = 0.5 * (3.0 - (cn * cn + sn * sn));
-    c[i] = cn * k;
-    s[i] = sn * k;
+    const double cn = c[i] * v.c - s[i] * v.s;
+    const double sn = s[i] * v.c + c[i] * v.s;
+    c[i] = cn;
+    s[i] = sn;
+  }
+  // One Newton step of 1/sqrt at 1 puts every |(c, s)| back to 1 (the rotations above move it by
+  // an ulp or so; this pass vectorises).
+  for (int i = 0; i < n; ++i) {
+    const double k = 0.5 * (3.0 - (c[i] * c[i] + s[i] * s[i]));
+    c[i] *= k;
+    s[i] *= k;
+  }
+}
+
+VonMisesFamilySampler::VonMisesFamilySampler(double k_min, double k_max) : k_min_(k_min) {
+  CheckKappa(k_max, "VonMisesFamilySampler");
+  if (!(k_min >= 0.0) || !(k_max > k_min)) {
+    throw InputError("VonMisesFamilySampler: need 0 <= k_min < k_max");
+  }
+  width_ = (k_max - k_min) / kBins;
+  inv_width_ = 1.0 / width_;
+  first_ = k_min > 0.0 ? 0 : 1;
+  tables_.reserve(kBins);
+  for (int b = 0; b < kBins; ++b) tables_.emplace_back(std::max(k_min + b * width_, 1e-300));
+}
+
+UnitAngle VonMisesFamilySampler::SampleUnit(double k, std::mt19937_64& rng) const {
+  const double pos = (k - k_min_) * inv_width_;
+  const int b = pos >= 0.0 ? static_cast<int>(pos) : -1;
+  if (b < first_ || b >= kBins) return BestFisherDraw(k, OptimalBestFisherEnvelope(k), rng);
+  const double kb = k_min_ + b * width_;
+  for (;;) {
+    const UnitAngle a = tables_[b].SampleUnit(rng);
+    const double y = (k - kb) * (1.0 - a.c);  // >= 0
+    const double u = Uniform53(rng);
+    if (u <= 1.0 - y || u <= std::exp(-y)) return a;
+  }
+}
+
+void VonMisesFamilySampler::RotateBatch(const double* k, double* c, double* s, int n,
+                                        std::mt19937_64& rng) const {
+  for (int i = 0; i < n; ++i) {
+    const UnitAngle v = SampleUnit(k[i], rng);
+    const double cn = c[i] * v.c - s[i] * v.s;
+    const double sn = s[i] * v.c + c[i] * v.s;
+    const double r = 0.5 * (3.0 - (cn * cn + sn * sn));
+    c[i] = cn * r;
+    s[i] = sn * r;
   }
 }
 

@@ -35,13 +35,54 @@ struct UnitAngle {
 // Throws InputError "<what>: kappa must be finite and > 0, got <kappa>".
 void CheckKappa(double kappa, const char* what);
 
-// Best and Fisher's (1979) rejection sampler for vM(kappa, 0), written so that it needs no
-// trigonometric function: the wrapped-Cauchy candidate cos(pi U) comes from a point uniform in a
-// disc (whose squared radius is the acceptance uniform and whose sign is the sign of the angle),
-// and the sample is returned as (cos x, sin x), both computed from 1 - cos x and 1 + cos x in
-// factored form so that small angles keep full relative precision at any kappa (1e-300 to 1e12
-// tested). One 64-bit draw per candidate (two 32-bit disc coordinates); acceptance of the disc
-// point is pi/4, Best-Fisher's own acceptance is >= 0.66 for every kappa (0.9 near kappa = 5).
+// Best-Fisher's envelope: the wrapped Cauchy with r = (1 + rho^2) / (2 rho), stored as r - 1,
+// r and sqrt(r^2 - 1) without cancellation. Any r > 1 gives an exact sampler; the optimal one
+// for kappa (BestFisherEnvelope) maximises the acceptance rate.
+struct BestFisherEnvelope {
+  double r_minus_1 = 1.0;
+  double r = 2.0;
+  double sqrt_r2_minus_1 = 1.7320508075688772;
+};
+BestFisherEnvelope OptimalBestFisherEnvelope(double kappa);
+
+// One exact draw of vM(kappa, 0) as (cos x, sin x) by Best and Fisher's algorithm with envelope
+// `env`, written without trigonometric calls: the candidate cos(pi U) comes from a point uniform
+// in a disc (its squared radius is the acceptance uniform, the sign of one coordinate the sign of
+// the angle), 1 - cos x and sin x come in factored form (full relative precision for small
+// angles at any kappa), and the acceptance test u <= c e^{1 - c} is decided by polynomial bounds
+// (c (2 - c) below, c / (1 + y + y^2/2 + y^3/6), y = c - 1, above) before the exact log test.
+inline UnitAngle BestFisherDraw(double kappa, const BestFisherEnvelope& env, std::mt19937_64& rng) {
+  constexpr double kInv32 = 1.0 / 4294967296.0;
+  for (;;) {
+    const std::uint64_t bits = rng();
+    // Two coordinates uniform in (-0.5, 0.5) from the two 32-bit halves.
+    const double v = (static_cast<double>(bits >> 32) + 0.5) * kInv32 - 0.5;
+    const double w = (static_cast<double>(bits & 0xffffffffu) + 0.5) * kInv32 - 0.5;
+    const double d = v * v;
+    const double e = w * w;
+    const double de = d + e;
+    if (de > 0.25) continue;        // outside the disc
+    const double u = 4.0 * de;      // uniform in (0, 1]
+    const double z = (e - d) / de;  // cos(pi U), U uniform
+    const double rz = env.r + z;
+    const double one_minus_f = env.r_minus_1 * (2.0 * d / de) / rz;  // 1 - cos x
+    const double c = kappa * (env.r_minus_1 + one_minus_f);          // kappa (r - f)
+    bool accept = c * (2.0 - c) > u;
+    if (!accept) {
+      const double y = c - 1.0;
+      if (y > 0.0 && u * (1.0 + y * (1.0 + y * (0.5 + y * (1.0 / 6.0)))) > c) continue;
+      accept = std::log(c / u) + 1.0 - c >= 0.0;
+      if (!accept) continue;
+    }
+    // sin^2 x = (1 - f)(1 + f) = (r^2 - 1)(1 - z^2) / (r + z)^2, 1 - z^2 = 4 d e / de^2.
+    const double s = 2.0 * env.sqrt_r2_minus_1 * std::sqrt(d * e) / (de * rz);
+    return UnitAngle{1.0 - one_minus_f, v < 0.0 ? -s : s};
+  }
+}
+
+// Best and Fisher's (1979) rejection sampler for vM(kappa, 0) (BestFisherDraw with the optimal
+// envelope): exact for every kappa (1e-300 to 1e12 tested); acceptance of the disc point is
+// pi/4, Best-Fisher's own acceptance is >= 0.66 for every kappa (0.9 near kappa = 5).
 class VonMisesSampler {
  public:
   explicit VonMisesSampler(double kappa);
@@ -49,27 +90,7 @@ class VonMisesSampler {
   double kappa() const { return kappa_; }
 
   // A deviation v ~ vM(kappa, 0) as (cos v, sin v).
-  UnitAngle SampleUnit(std::mt19937_64& rng) const {
-    for (;;) {
-      const std::uint64_t bits = rng();
-      // Two coordinates uniform in (-0.5, 0.5) from the two 32-bit halves.
-      const double v = (static_cast<double>(bits >> 32) + 0.5) * kInv32 - 0.5;
-      const double w = (static_cast<double>(bits & 0xffffffffu) + 0.5) * kInv32 - 0.5;
-      const double d = v * v;
-      const double e = w * w;
-      const double de = d + e;
-      if (de > 0.25) continue;        // outside the disc
-      const double u = 4.0 * de;      // uniform in (0, 1]
-      const double z = (e - d) / de;  // cos(pi U), U uniform
-      const double rz = r_ + z;
-      const double one_minus_f = r_minus_1_ * (2.0 * d / de) / rz;  // 1 - cos x
-      const double c = kappa_ * (r_minus_1_ + one_minus_f);         // kappa (r - f)
-      if (!(c * (2.0 - c) > u) && !(std::log(c / u) + 1.0 - c >= 0.0)) continue;
-      // sin^2 x = (1 - f)(1 + f) = (r^2 - 1)(1 - z^2) / (r + z)^2, 1 - z^2 = 4 d e / de^2.
-      const double s = 2.0 * sqrt_r2_minus_1_ * std::sqrt(d * e) / (de * rz);
-      return UnitAngle{1.0 - one_minus_f, v < 0.0 ? -s : s};
-    }
-  }
+  UnitAngle SampleUnit(std::mt19937_64& rng) const { return BestFisherDraw(kappa_, env_, rng); }
 
   // A deviation v ~ vM(kappa, 0) in [-pi, pi).
   double Sample(std::mt19937_64& rng) const {
@@ -80,11 +101,8 @@ class VonMisesSampler {
   }
 
  private:
-  static constexpr double kInv32 = 1.0 / 4294967296.0;
   double kappa_;
-  double r_minus_1_;  // r - 1 of Best-Fisher's r = (1 + rho^2) / (2 rho), without cancellation
-  double r_;
-  double sqrt_r2_minus_1_;  // sqrt(r - 1) sqrt(r + 1): no overflow for r ~ 1/kappa ~ 1e300
+  BestFisherEnvelope env_;
 };
 
 // An exact sampler of vM(kappa, 0) for a fixed kappa, built for the filter's hot loop (the
@@ -107,11 +125,11 @@ class VonMisesTableSampler {
   double kappa() const { return kappa_; }
 
   // Rotates each (c[i], s[i]), i < n, by its own independent draw v ~ vM(kappa, 0): the
-  // system model x + v of eq. 30 on unit vectors, renormalised. Same distribution as SampleUnit,
-  // organised for throughput: all first draws are made up front into `scratch` (n words), the
-  // ~98% of them that land under the envelope's lower part are used directly in a loop free of
-  // the generator's state, and the rest finish their rejection test (restarting with SampleUnit
-  // when rejected, which is the same rejection sampler).
+  // system model x + v of eq. 30 on unit vectors, renormalised (in a separate pass). Same
+  // distribution as SampleUnit, organised for throughput: all first draws are made up front into
+  // `scratch` (n words), the ~98% of them that land under the envelope's lower part are used
+  // directly in a loop free of the generator's state, and the rest finish their rejection test
+  // (restarting with SampleUnit when rejected, which is the same rejection sampler).
   void RotateByNoise(std::mt19937_64& rng, double* c, double* s, int n,
                      std::uint64_t* scratch) const;
 
@@ -166,6 +184,30 @@ class VonMisesTableSampler {
   double cos_a_[kBins], sin_a_[kBins], f_left_[kBins], f_right_[kBins];
   std::uint32_t threshold_[512];
   std::uint16_t alias_[512];
+};
+
+// Exact draws of vM(k, 0) for many different k in [k_min, k_max] (the encoder-conjugate
+// proposal draws each particle's joint from its own concentration). The range is cut into
+// kBins bins; a draw for k in the bin starting at k_b is a draw x of the table sampler at k_b
+// (broader than vM(k)) accepted with probability exp(-(k - k_b)(1 - cos x)) <= 1, which makes it
+// exactly vM(k) (acceptance ~ 1 - (k - k_b) / (2 k), about 98% here); the test uses the bound
+// exp(-y) >= 1 - y first. k outside the range (rounding) and the lowest bin when it starts at 0
+// use Best-Fisher with the optimal envelope.
+class VonMisesFamilySampler {
+ public:
+  static constexpr int kBins = 16;
+
+  VonMisesFamilySampler(double k_min, double k_max);
+
+  // Rotates each (c[i], s[i]) by its own draw v ~ vM(k[i], 0) and renormalises it.
+  void RotateBatch(const double* k, double* c, double* s, int n, std::mt19937_64& rng) const;
+  // One draw of vM(k, 0).
+  UnitAngle SampleUnit(double k, std::mt19937_64& rng) const;
+
+ private:
+  double k_min_, width_, inv_width_;
+  std::vector<VonMisesTableSampler> tables_;  // tables_[b] at k_min + b * width (b >= first_)
+  int first_ = 0;                             // 1 when k_min = 0 (no table at kappa 0)
 };
 
 class VonMises {

@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "estimators/error.h"
@@ -84,6 +86,33 @@ TEST(Bessel, BadArgumentsThrow) {
   EXPECT_THROW(LogBesselI1(-1e-300), InputError);
   EXPECT_THROW(InverseBesselRatioA1(-0.1), InputError);
   EXPECT_THROW(InverseBesselRatioA1(NAN), InputError);
+}
+
+}  // namespace
+}  // namespace flexbench::pf
+
+namespace flexbench::pf {
+namespace {
+
+TEST(Bessel, InterpolantMatchesLogI0) {
+  for (const auto& [a, b] :
+       {std::pair<double, double>{10.0, 20.0}, {0.1, 2.0}, {100.0, 200.0}, {0.0, 30.0}}) {
+    const LogBesselI0Interpolant f(a, b);
+    std::vector<double> x, acc;
+    for (int i = 0; i <= 997; ++i) {
+      x.push_back(a + (b - a) * i / 997.0);
+      acc.push_back(1.0);
+    }
+    f.AddTo(x.data(), acc.data(), static_cast<int>(x.size()));
+    for (size_t i = 0; i < x.size(); ++i) {
+      const double exact = LogBesselI0(x[i]);
+      EXPECT_NEAR(f.Evaluate(x[i]), exact, 2e-14 * std::max(1.0, exact)) << x[i];
+      EXPECT_NEAR(acc[i] - 1.0, exact, 3e-14 * std::max(1.0, exact)) << x[i];
+    }
+    // Outside the range it is exact too.
+    EXPECT_EQ(f.Evaluate(b + 1.0), LogBesselI0(b + 1.0));
+  }
+  EXPECT_THROW(LogBesselI0Interpolant(2.0, 1.0), InputError);
 }
 
 }  // namespace

@@ -255,3 +255,58 @@ TEST(VonMises, BadKappaIsAClearError) {
 
 }  // namespace
 }  // namespace flexbench::pf
+
+namespace flexbench::pf {
+namespace {
+
+// The family sampler of the encoder-conjugate proposal: exact for every k of its range, at bin
+// edges, inside bins, below the first table (k_min = 0) and just outside the range.
+TEST(VonMisesFamily, EveryConcentrationIsExact) {
+  const VonMisesFamilySampler narrow(10.0, 20.0);
+  const VonMisesFamilySampler wide(0.0, 30.0);
+  struct Case {
+    const VonMisesFamilySampler* sampler;
+    double k;
+  };
+  const Case cases[] = {{&narrow, 10.0},  {&narrow, 10.3}, {&narrow, 12.5},         {&narrow, 15.0},
+                        {&narrow, 19.99}, {&narrow, 20.0}, {&narrow, 20.0 + 1e-13}, {&wide, 0.01},
+                        {&wide, 1.0},     {&wide, 29.0}};
+  for (const Case& c : cases) {
+    std::mt19937_64 rng(21);
+    const int n = 40000;
+    std::vector<double> x(n);
+    double sc = 0.0;
+    for (double& v : x) {
+      const UnitAngle a = c.sampler->SampleUnit(c.k, rng);
+      ASSERT_NEAR(a.c * a.c + a.s * a.s, 1.0, 1e-14);
+      v = std::atan2(a.s, a.c);
+      sc += a.c;
+    }
+    const double a1 = BesselRatioA1(c.k);
+    const double a2 = 1.0 - 2.0 * a1 / c.k;
+    EXPECT_NEAR(sc / n, a1, 5.0 * std::sqrt(std::max(0.0, 0.5 * (1.0 + a2) - a1 * a1) / n) + 1e-12)
+        << c.k;
+    const VonMisesCdf cdf(c.k);
+    std::sort(x.begin(), x.end());
+    double d = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const double f = cdf(x[i]);
+      d = std::max({d, f - double(i) / n, double(i + 1) / n - f});
+    }
+    EXPECT_LT(d, 1.95 / std::sqrt(double(n))) << c.k;
+  }
+  // The batch form rotates given unit vectors by such draws.
+  std::vector<double> k(1000, 14.0), cs(1000, 0.0), sn(1000, 1.0);
+  std::mt19937_64 rng(3);
+  narrow.RotateBatch(k.data(), cs.data(), sn.data(), 1000, rng);
+  double mean_sin = 0.0;
+  for (int i = 0; i < 1000; ++i) {
+    EXPECT_NEAR(cs[i] * cs[i] + sn[i] * sn[i], 1.0, 1e-15);
+    mean_sin += sn[i] / 1000;  // e^{i pi/2} rotated: E[sin] = A1(14)
+  }
+  EXPECT_NEAR(mean_sin, BesselRatioA1(14.0), 0.01);
+  EXPECT_THROW(VonMisesFamilySampler(5.0, 5.0), InputError);
+}
+
+}  // namespace
+}  // namespace flexbench::pf
