@@ -35,13 +35,6 @@ void CheckFrames(const std::vector<FrameId>& frames, const kinematics::PpoeModel
   }
 }
 
-// Keeps |(c, s)| = 1 after a product of unit vectors: one Newton step of 1/sqrt at 1.
-inline void Renormalise(double& c, double& s) {
-  const double k = 0.5 * (3.0 - (c * c + s * s));
-  c *= k;
-  s *= k;
-}
-
 }  // namespace
 
 void ValidateConfig(const ParticleFilterConfig& config, const kinematics::PpoeModel& model,
