@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "estimators/error.h"
+#include "estimators/pf/particle_loop.h"
 
 namespace flexbench::pf {
 namespace {
@@ -29,9 +30,11 @@ std::pair<FrameId, lie::SE3> NearestJointFrame(const PpoeModel& model, FrameId f
 
 // One non-root node for a block of particles: R = Rp Rrel, t = Rp trel + tp, Rrel and trel in
 // registers, every entry written out so that the loop vectorises.
-void NodeProduct(const double* __restrict c, const double* __restrict s, const double* __restrict a,
-                 double* __restrict d, int m, const double* k0, const double* k1, const double* k2,
-                 double u0, double u1, double u2, double p0, double p1, double p2) {
+FLEXBENCH_PARTICLE_LOOP void NodeProduct(const double* __restrict c, const double* __restrict s,
+                                         const double* __restrict a, double* __restrict d, int m,
+                                         const double* k0, const double* k1, const double* k2,
+                                         double u0, double u1, double u2, double p0, double p1,
+                                         double p2) {
   constexpr int B = BatchKinematics::kBlock;
   // R = Rp Rrel, t = Rp trel + tp, with Rrel and trel in registers (written out so that the
   // loop vectorises).
@@ -158,7 +161,8 @@ int BatchKinematics::OutputIndex(FrameId frame) const {
   return -1;
 }
 
-void BatchKinematics::Compute(const double* cos_q, const double* sin_q, int stride, int n) {
+FLEXBENCH_PARTICLE_LOOP void BatchKinematics::Compute(const double* cos_q, const double* sin_q,
+                                                      int stride, int n) {
   if (n > capacity_ || n < 0) {
     throw InputError("BatchKinematics: " + std::to_string(n) + " particles for a capacity of " +
                      std::to_string(capacity_));

@@ -11,6 +11,7 @@
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/lie/so3.h"
 #include "estimators/pf/bessel.h"
+#include "estimators/pf/particle_loop.h"
 
 namespace flexbench::pf {
 namespace {
@@ -166,6 +167,7 @@ void ParticleFilter::Reset() {
   }
   std::fill(log_w_.begin(), log_w_.end(), 0.0);
   pending_move_ = false;
+  moves_ = 0;
   log_norm_at_step_start_ = std::log(static_cast<double>(n_));
   shift_ = 0.0;
   last_ess_ = n_;
@@ -179,14 +181,15 @@ void ParticleFilter::ComputeKinematics() {
   summary_valid_ = false;
 }
 
-void ParticleFilter::ResampleIfNeeded() {
+FLEXBENCH_PARTICLE_LOOP void ParticleFilter::ResampleIfNeeded() {
   double sum = 0.0;
   double sum2 = 0.0;
+  const double* __restrict lw = log_w_.data();
+  double* __restrict w = w_.data();
+  for (int i = 0; i < n_; ++i) w[i] = std::exp(lw[i]);
   for (int i = 0; i < n_; ++i) {
-    const double w = std::exp(log_w_[i]);
-    w_[i] = w;
-    sum += w;
-    sum2 += w * w;
+    sum += w[i];
+    sum2 += w[i] * w[i];
   }
   last_ess_ = sum * sum / sum2;
   log_norm_at_step_start_ = std::log(sum);
@@ -213,9 +216,12 @@ void ParticleFilter::ResampleIfNeeded() {
 }
 
 void ParticleFilter::PropagateBootstrap() {
+  // Rounding moves |(cos, sin)| by about an ulp per rotation: renormalise every 16 steps.
+  const bool renormalise = (++moves_ & 15) == 0;
   for (int j = 0; j < nq_; ++j) {
     const size_t off = static_cast<size_t>(j) * stride_;
     system_noise_.RotateByNoise(rng_, cos_.data() + off, sin_.data() + off, n_, bits_.data());
+    if (renormalise) RenormaliseUnit(cos_.data() + off, sin_.data() + off, n_);
   }
 }
 
@@ -262,7 +268,7 @@ void ParticleFilter::EnsurePropagated() {
   ComputeKinematics();
 }
 
-bool ParticleFilter::ApplyLogLikelihood(double constant) {
+FLEXBENCH_PARTICLE_LOOP bool ParticleFilter::ApplyLogLikelihood(double constant) {
   double* __restrict lw = log_w_.data();
   double* __restrict ll = ll_.data();
   double m = kNegInf;
@@ -279,7 +285,7 @@ bool ParticleFilter::ApplyLogLikelihood(double constant) {
   return true;
 }
 
-PfStatus ParticleFilter::UpdateReference(const double* u, int n) {
+FLEXBENCH_PARTICLE_LOOP PfStatus ParticleFilter::UpdateReference(const double* u, int n) {
   if (n != nq_) {
     throw InputError("particle filter: joint reading has " + std::to_string(n) +
                      " angles, PPOE model '" + model_.name() + "' has " + std::to_string(nq_));
@@ -296,20 +302,25 @@ PfStatus ParticleFilter::UpdateReference(const double* u, int n) {
                                                          : PfStatus::kRejectedAllZero;
   }
   EnsurePropagated();
-  std::fill(ll_.begin(), ll_.end(), 0.0);
   const double kw = config_.kappa_w;
+  double* __restrict ll = ll_.data();
   for (int j = 0; j < nq_; ++j) {
     const double cu = kw * std::cos(u[j]);
     const double su = kw * std::sin(u[j]);
     const double* __restrict c = cos_.data() + static_cast<size_t>(j) * stride_;
     const double* __restrict s = sin_.data() + static_cast<size_t>(j) * stride_;
-    for (int i = 0; i < n_; ++i) ll_[i] += cu * c[i] + su * s[i];  // kappa_w cos(u - x)
+    if (j == 0) {
+      for (int i = 0; i < n_; ++i) ll[i] = cu * c[i] + su * s[i];  // kappa_w cos(u - x)
+    } else {
+      for (int i = 0; i < n_; ++i) ll[i] += cu * c[i] + su * s[i];
+    }
   }
   return ApplyLogLikelihood(nq_ * log_norm_reference_) ? PfStatus::kAccepted
                                                        : PfStatus::kRejectedAllZero;
 }
 
-PfStatus ParticleFilter::UpdatePosition(FrameId frame, const Vec3& p_frame, const Vec3& p_base) {
+FLEXBENCH_PARTICLE_LOOP PfStatus ParticleFilter::UpdatePosition(FrameId frame, const Vec3& p_frame,
+                                                                const Vec3& p_base) {
   int k = -1;
   for (size_t a = 0; a < config_.position_frames.size(); ++a) {
     if (config_.position_frames[a] == frame) k = position_outputs_[a];
@@ -355,7 +366,8 @@ PfStatus ParticleFilter::UpdatePosition(FrameId frame, const Vec3& p_frame, cons
   return ApplyLogLikelihood(log_norm_position_) ? PfStatus::kAccepted : PfStatus::kRejectedAllZero;
 }
 
-PfStatus ParticleFilter::UpdateOrientation(FrameId frame, const Quat& q_base_frame) {
+FLEXBENCH_PARTICLE_LOOP PfStatus ParticleFilter::UpdateOrientation(FrameId frame,
+                                                                   const Quat& q_base_frame) {
   int k = -1;
   for (size_t a = 0; a < config_.orientation_frames.size(); ++a) {
     if (config_.orientation_frames[a] == frame) k = orientation_outputs_[a];

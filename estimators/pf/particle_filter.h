@@ -180,6 +180,7 @@ class ParticleFilter {
   int ee_output_ = -1;
 
   bool pending_move_ = false;
+  long moves_ = 0;  // bootstrap moves since Reset (for the periodic renormalisation)
   double log_norm_at_step_start_ = 0.0;  // logsumexp(log_w_) when the step's move happened
   double shift_ = 0.0;                   // maxima removed from log_w_ since then, + constants
   double last_ess_ = 0.0;

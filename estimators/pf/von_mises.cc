@@ -5,6 +5,7 @@
 
 #include "estimators/conventions.h"
 #include "estimators/error.h"
+#include "estimators/pf/particle_loop.h"
 
 namespace flexbench::pf {
 
@@ -90,8 +91,20 @@ VonMisesTableSampler::VonMisesTableSampler(double kappa) : kappa_(kappa) {
   }
 }
 
-void VonMisesTableSampler::RotateByNoise(std::mt19937_64& rng, double* c, double* s, int n,
-                                         std::uint64_t* scratch) const {
+FLEXBENCH_PARTICLE_LOOP void RenormaliseUnit(double* c, double* s, int n) {
+  // One Newton step of 1/sqrt at 1: |(c, s)| = 1 + e becomes 1 + O(e^2).
+  double* __restrict cc = c;
+  double* __restrict ss = s;
+  for (int i = 0; i < n; ++i) {
+    const double k = 0.5 * (3.0 - (cc[i] * cc[i] + ss[i] * ss[i]));
+    cc[i] *= k;
+    ss[i] *= k;
+  }
+}
+
+FLEXBENCH_PARTICLE_LOOP void VonMisesTableSampler::RotateByNoise(std::mt19937_64& rng, double* c,
+                                                                 double* s, int n,
+                                                                 std::uint64_t* scratch) const {
   for (int i = 0; i < n; ++i) scratch[i] = rng();
   int pending = 0;  // indices whose draw needs the exact test, compacted into scratch's front
   for (int i = 0; i < n; ++i) {
@@ -144,13 +157,6 @@ void VonMisesTableSampler::RotateByNoise(std::mt19937_64& rng, double* c, double
     const double sn = s[i] * v.c + c[i] * v.s;
     c[i] = cn;
     s[i] = sn;
-  }
-  // One Newton step of 1/sqrt at 1 puts every |(c, s)| back to 1 (the rotations above move it by
-  // an ulp or so; this pass vectorises).
-  for (int i = 0; i < n; ++i) {
-    const double k = 0.5 * (3.0 - (c[i] * c[i] + s[i] * s[i]));
-    c[i] *= k;
-    s[i] *= k;
   }
 }
 

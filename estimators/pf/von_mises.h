@@ -105,6 +105,9 @@ class VonMisesSampler {
   BestFisherEnvelope env_;
 };
 
+// Puts every (c[i], s[i]) back on the unit circle (one Newton step; vectorises).
+void RenormaliseUnit(double* c, double* s, int n);
+
 // An exact sampler of vM(kappa, 0) for a fixed kappa, built for the filter's hot loop (the
 // system noise of eq. 30 is drawn N * m times per step). Rejection from a piecewise-constant
 // envelope of the density on [0, pi] (the density is symmetric and decreasing there):
@@ -125,8 +128,9 @@ class VonMisesTableSampler {
   double kappa() const { return kappa_; }
 
   // Rotates each (c[i], s[i]), i < n, by its own independent draw v ~ vM(kappa, 0): the
-  // system model x + v of eq. 30 on unit vectors, renormalised (in a separate pass). Same
-  // distribution as SampleUnit, organised for throughput: all first draws are made up front into
+  // system model x + v of eq. 30 on unit vectors. Each rotation moves |(c, s)| by an ulp or
+  // so; callers put the vectors back with RenormaliseUnit every few moves. Same distribution as
+  // SampleUnit, organised for throughput: all first draws are made up front into
   // `scratch` (n words), the ~98% of them that land under the envelope's lower part are used
   // directly in a loop free of the generator's state, and the rest finish their rejection test
   // (restarting with SampleUnit when rejected, which is the same rejection sampler).

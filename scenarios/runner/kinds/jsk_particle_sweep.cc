@@ -16,7 +16,9 @@
 //
 // Metrics (means over seeds; '.' in numbers spelled 'p'): <variant>.particles.<N>.joint_rmse_deg
 // / joint_err_max_deg / ess_mean and <variant>.kappa_v.<k>.{...}; every run also under
-// estimators.<variant>_n<N>_s<seed> and estimators.<variant>_kv<k>_s<seed>.
+// estimators.<variant>_n<N>_s<seed> and estimators.<variant>_kv<k>_s<seed>. Files: sweep.csv (one
+// row per run) and traces.csv (per step of each run: worst joint error, ESS).
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -99,6 +101,12 @@ class JskParticleSweepKind : public ScenarioKind {
       std::vector<double> x, rmse, max, ess;
     };
     std::vector<Curve> n_curves(variants_.size()), k_curves(variants_.size());
+    // sweep.csv: one row per run; traces.csv: per step of every run, the worst joint error and
+    // the ESS (where a filter degenerates shows up as ESS collapsing before the error grows).
+    std::string sweep_csv =
+        "variant,sweep,particles,kappa_v,seed,joint_rmse_deg,joint_err_max_deg,ess_mean,rejected\n";
+    std::string traces_csv = "label,step,t_s,joint_err_max_deg,ess\n";
+    char line[256];
     for (size_t var = 0; var < variants_.size(); ++var) {
       const std::string& vlabel = variants_[var].first;
       for (int pass = 0; pass < 2; ++pass) {
@@ -115,6 +123,21 @@ class JskParticleSweepKind : public ScenarioKind {
             const jsk::Trace tr =
                 jsk::RunSynthetic(rig_, Make(var, n, k, label), runs[s], seed, &rejected);
             const RunMetrics r = Score(tr, runs[s]);
+            std::snprintf(line, sizeof(line), "%s,%s,%d,%.9g,%d,%.9g,%.9g,%.9g,%d\n",
+                          vlabel.c_str(), pass == 0 ? "particles" : "kappa_v", static_cast<int>(n),
+                          k, s, r.rmse_deg, r.err_max_deg, r.ess_mean, rejected);
+            sweep_csv += line;
+            for (int step = 0; step < runs[s].steps(); ++step) {
+              double worst = 0.0;
+              for (int j = 0; j < rig_.nq(); ++j) {
+                worst = std::max(
+                    worst,
+                    std::abs(jsk::Deg(jsk::AngleError(tr.mean[j][step], runs[s].truth[j][step]))));
+              }
+              std::snprintf(line, sizeof(line), "%s,%d,%.9g,%.9g,%.9g\n", label.c_str(), step,
+                            tr.t[step], worst, tr.ess[step]);
+              traces_csv += line;
+            }
             Json& m = all[label]["metrics"];
             m["joint_rmse_deg"] = r.rmse_deg;
             m["joint_err_max_deg"] = r.err_max_deg;
@@ -136,6 +159,8 @@ class JskParticleSweepKind : public ScenarioKind {
         }
       }
     }
+    WriteFileAtomic(ctx.out->File("sweep.csv"), sweep_csv);
+    WriteFileAtomic(ctx.out->File("traces.csv"), traces_csv);
     metrics["seeds"] = seeds_;
     metrics["base_particles"] = base_n_;
     metrics["base_kappa_v"] = base_kappa_;
