@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The main job: sets up, builds and runs every scenario in scenarios/ with its gates, writing
-# results/<scenario>/{summary.json, *.csv, frames/*.png}, then the plots.
+# results/<scenario>/{summary.json, *.csv, frames/*.png} (plots included).
 # Usage: scripts/run_all.sh [output folder, default results]
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -18,10 +18,6 @@ for scenario in scenarios/*.yaml; do
   rc=$?
   [ $rc -eq 0 ] || failed+=("$name (exit $rc)")
 done
-
-if [ -f scripts/plots.py ]; then
-  /usr/bin/python3 scripts/plots.py "$out" || failed+=("plots")
-fi
 
 echo
 if [ ${#failed[@]} -eq 0 ]; then

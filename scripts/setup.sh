@@ -13,7 +13,6 @@ PACKAGES=(
   libapriltag-dev apriltag        # AprilTag 3.3 (libapriltag + libapriltag-utils)
   libgtest-dev libbenchmark-dev   # GoogleTest, Google Benchmark
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev
-  python3 python3-matplotlib python3-numpy   # plots (Debian's python3, /usr/bin/python3)
 )
 
 missing=()
