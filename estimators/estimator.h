@@ -56,12 +56,19 @@ struct EstimatorSetup {
   FrameId end_effector = -1;
   std::vector<CameraSetup> cameras;
   std::vector<ImuSetup> imus;
+  // The frame the estimate is made in (PPOE paper eq. 25: X is the end effector in the camera
+  // frame). Default: the model's base. When set, Belief::T_base_ee is T_ref_ee, its prior
+  // covariance counts only the sources not shared by ref and end effector
+  // (kinematics::RelativeCovariance, 2nd order), and poses carried by measurements
+  // (PlaneContact::T_base_plane, PositionReading::p_base, PoseReading::T_base_frame) are in ref.
+  FrameId reference_frame = kinematics::kBaseFrame;
   Params params;
   std::uint64_t seed = 0;
 };
 
-// What an estimator believes: the end-effector pose in the base frame with a covariance in its
-// local tangent space, and optionally the joint angles.
+// What an estimator believes: the end-effector pose in the base frame (or in
+// EstimatorSetup::reference_frame) with a covariance in its local tangent space, and optionally
+// the joint angles.
 struct Belief {
   double t = 0.0;
   lie::SE3 T_base_ee;
@@ -73,10 +80,10 @@ struct Belief {
 
 enum class UpdateStatus {
   kAccepted,
-  kIgnored,           // a measurement type this estimator does not use
-  kRejectedNonFinite, // NaN or infinite values
-  kRejectedOutside,   // e.g. pixels outside the image, behind the camera
-  kRejectedGating,    // failed an innovation gate
+  kIgnored,            // a measurement type this estimator does not use
+  kRejectedNonFinite,  // NaN or infinite values
+  kRejectedOutside,    // e.g. pixels outside the image, behind the camera
+  kRejectedGating,     // failed an innovation gate
 };
 const char* ToString(UpdateStatus s);
 
@@ -89,6 +96,9 @@ class Estimator {
   virtual void Predict(double t) = 0;
   virtual UpdateStatus Update(const Measurement& z) = 0;
   virtual Belief Estimate() const = 0;
+  // How many priors or covariances this estimator has repaired (not positive semi-definite
+  // beyond rounding) since it was made; scenarios report it next to the update counts.
+  virtual int covariance_repairs() const { return 0; }
 };
 
 struct EstimatorEntry {

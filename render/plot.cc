@@ -1,12 +1,11 @@
 #include "render/plot.h"
 
-#include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
 namespace flexbench::render {
@@ -23,6 +22,10 @@ const cv::Scalar kWhite(255, 255, 255);
 
 // The Mat holds RGB (not OpenCV's usual BGR): colours are given in RGB order.
 cv::Scalar ToScalar(const Rgb& c) { return cv::Scalar(c.r, c.g, c.b); }
+// A bar's fill: the series colour 60% of the way to white, so error bars and outlines show.
+cv::Scalar Tint(const Rgb& c) {
+  return cv::Scalar(c.r + 0.6 * (255 - c.r), c.g + 0.6 * (255 - c.g), c.b + 0.6 * (255 - c.b));
+}
 
 double NiceStep(double raw) {
   const double p = std::pow(10.0, std::floor(std::log10(raw)));
@@ -171,6 +174,11 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
     for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
       if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
       xr.Add(s.x[i]);
+      if (s.bar_width > 0.0) {
+        xr.Add(s.x[i] - 0.5 * s.bar_width);
+        xr.Add(s.x[i] + 0.5 * s.bar_width);
+        yr.Add(0.0);
+      }
       const double e = i < s.y_err.size() && std::isfinite(s.y_err[i]) ? s.y_err[i] : 0.0;
       yr.Add(s.y[i] - e);
       yr.Add(s.y[i] + e);
@@ -224,10 +232,19 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
     }
   }
 
-  // Series: error bars, lines, markers.
+  // Series: bars, error bars, lines, markers.
   for (const Series& s : ax.series) {
     const cv::Scalar c = ToScalar(s.color);
     const size_t n = std::min(s.x.size(), s.y.size());
+    for (size_t i = 0; s.bar_width > 0.0 && i < n; ++i) {
+      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
+      const cv::Rect bar = cv::Rect(cv::Point(px(s.x[i] - 0.5 * s.bar_width), py(0.0)),
+                                    cv::Point(px(s.x[i] + 0.5 * s.bar_width), py(s.y[i]))) &
+                           area;
+      if (bar.area() == 0) continue;
+      cv::rectangle(img, bar, Tint(s.color), cv::FILLED);
+      cv::rectangle(img, bar, c, 1);
+    }
     for (size_t i = 0; i < n && i < s.y_err.size(); ++i) {
       if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i]) || !std::isfinite(s.y_err[i])) continue;
       const int x = px(s.x[i]);
@@ -236,13 +253,13 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
       DrawSegment(img, {x - 3, a.y}, {x + 3, a.y}, c, 1, LineStyle::kSolid, area);
       DrawSegment(img, {x - 3, b.y}, {x + 3, b.y}, c, 1, LineStyle::kSolid, area);
     }
-    for (size_t i = 1; i < n; ++i) {
+    for (size_t i = 1; s.bar_width <= 0.0 && i < n; ++i) {
       if (!std::isfinite(s.x[i - 1]) || !std::isfinite(s.y[i - 1]) || !std::isfinite(s.x[i]) ||
           !std::isfinite(s.y[i])) {
         continue;
       }
-      DrawSegment(img, {px(s.x[i - 1]), py(s.y[i - 1])}, {px(s.x[i]), py(s.y[i])}, c,
-                  s.line_width, s.line, area);
+      DrawSegment(img, {px(s.x[i - 1]), py(s.y[i - 1])}, {px(s.x[i]), py(s.y[i])}, c, s.line_width,
+                  s.line, area);
     }
     for (size_t i = 0; i < n; ++i) {
       if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
@@ -289,8 +306,14 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
     const Series& s = *entries[i];
     const int y = by + 4 + row_h * static_cast<int>(i) + row_h / 2;
     const cv::Scalar c = ToScalar(s.color);
-    DrawSegment(img, {bx + 6, y}, {bx + 32, y}, c, s.line_width,
-                s.line == LineStyle::kNone ? LineStyle::kNone : s.line, box);
+    if (s.bar_width > 0.0) {
+      const cv::Rect swatch(bx + 10, y - 6, 18, 12);
+      cv::rectangle(img, swatch, Tint(s.color), cv::FILLED);
+      cv::rectangle(img, swatch, c, 1);
+    } else {
+      DrawSegment(img, {bx + 6, y}, {bx + 32, y}, c, s.line_width,
+                  s.line == LineStyle::kNone ? LineStyle::kNone : s.line, box);
+    }
     DrawMarker(img, {bx + 19, y}, s.marker, s.marker_size, c);
     PutText(img, s.label, {bx + 38, y + 5}, kTickFont);
   }
@@ -299,8 +322,8 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
 }  // namespace
 
 Rgb PaletteColor(int index) {
-  static const Rgb kPalette[] = {{31, 119, 180}, {255, 127, 14}, {44, 160, 44},  {214, 39, 40},
-                                 {148, 103, 189}, {140, 86, 75}, {227, 119, 194}, {127, 127, 127},
+  static const Rgb kPalette[] = {{31, 119, 180},  {255, 127, 14}, {44, 160, 44},   {214, 39, 40},
+                                 {148, 103, 189}, {140, 86, 75},  {227, 119, 194}, {127, 127, 127},
                                  {188, 189, 34},  {23, 190, 207}};
   const int n = static_cast<int>(sizeof(kPalette) / sizeof(kPalette[0]));
   return kPalette[((index % n) + n) % n];
@@ -320,6 +343,14 @@ Series& Axes::AddScatter(const std::string& label, std::vector<double> x, std::v
   Series& s = AddLine(label, std::move(x), std::move(y));
   s.line = LineStyle::kNone;
   s.marker = Marker::kCircle;
+  return s;
+}
+
+Series& Axes::AddBars(const std::string& label, std::vector<double> x, std::vector<double> y,
+                      double width) {
+  Series& s = AddLine(label, std::move(x), std::move(y));
+  s.line = LineStyle::kNone;
+  s.bar_width = width;
   return s;
 }
 

@@ -44,6 +44,9 @@ struct Series {
   Marker marker = Marker::kNone;
   int line_width = 2;
   int marker_size = 4;  // radius in pixels
+  // > 0: each point is a bar from 0 to y this wide (x units), filled with a light tint of
+  // `color` (no line is drawn between points; error bars still are).
+  double bar_width = 0.0;
 };
 
 // A horizontal (or vertical) reference line across the axes, e.g. a gate threshold.
@@ -70,6 +73,8 @@ struct Axes {
   // Adds a series with the next palette colour.
   Series& AddLine(const std::string& label, std::vector<double> x, std::vector<double> y);
   Series& AddScatter(const std::string& label, std::vector<double> x, std::vector<double> y);
+  Series& AddBars(const std::string& label, std::vector<double> x, std::vector<double> y,
+                  double width = 0.6);
   RefLine& AddHLine(double y, const std::string& label = "");
   RefLine& AddVLine(double x, const std::string& label = "");
 };

@@ -9,19 +9,26 @@ namespace {
 class FkEstimator : public Estimator {
  public:
   explicit FkEstimator(const EstimatorSetup& setup)
-      : model_(*setup.model), data_(*setup.model), ee_(setup.end_effector) {
+      : model_(*setup.model),
+        data_(*setup.model),
+        ee_(setup.end_effector),
+        ref_(setup.reference_frame) {
     const double order = setup.params.Scalar("covariance_order", 2.0);
     if (order != 2.0 && order != 4.0) {
       throw InputError("fk: covariance_order must be 2 or 4");
     }
     order_ = order == 4.0 ? lie::CompoundOrder::kFourth : lie::CompoundOrder::kSecond;
+    if (ref_ < 0 || ref_ >= model_.num_frames()) {
+      throw InputError("fk: reference frame " + std::to_string(ref_) + " not in the model");
+    }
+    if (ref_ != kinematics::kBaseFrame && order_ == lie::CompoundOrder::kFourth) {
+      throw InputError("fk: covariance_order 4 is not available in a reference frame");
+    }
     setup.params.CheckAllUsed("fk");
     Reset();
   }
 
-  void Reset() override {
-    belief_ = Belief{};
-  }
+  void Reset() override { belief_ = Belief{}; }
 
   void Predict(double t) override { belief_.t = t; }
 
@@ -35,8 +42,13 @@ class FkEstimator : public Estimator {
     if (!joints->q.allFinite()) return UpdateStatus::kRejectedNonFinite;
     kinematics::ForwardKinematicsWithCovariance(model_, data_, joints->q, order_);
     belief_.t = joints->t;
-    belief_.T_base_ee = data_.T_base_frame[ee_];
-    belief_.cov = data_.Sigma_frame[ee_];
+    if (ref_ == kinematics::kBaseFrame) {
+      belief_.T_base_ee = data_.T_base_frame[ee_];
+      belief_.cov = data_.Sigma_frame[ee_];
+    } else {  // the end effector seen from the reference frame
+      belief_.T_base_ee = data_.T_base_frame[ref_].Between(data_.T_base_frame[ee_]);
+      kinematics::RelativeCovariance(model_, data_, ref_, ee_, &belief_.cov);
+    }
     belief_.has_joints = true;
     belief_.q = joints->q;
     belief_.q_std = joints->std;
@@ -49,6 +61,7 @@ class FkEstimator : public Estimator {
   const kinematics::PpoeModel& model_;
   kinematics::PpoeData data_;
   FrameId ee_;
+  FrameId ref_;
   lie::CompoundOrder order_ = lie::CompoundOrder::kSecond;
   Belief belief_;
 };

@@ -17,13 +17,15 @@ class EkfEstimator : public Estimator {
       : model_(*setup.model),
         data_(*setup.model),
         ee_(setup.end_effector),
+        ref_(setup.reference_frame),
         cameras_(setup.cameras),
         kind_(kind),
         name_(name) {
     const Params& p = setup.params;
     if (kind == PriorKind::kPpoe) {
       const double order = p.Scalar("covariance_order", 2.0);
-      if (order != 2.0 && order != 4.0) throw InputError(name_ + ": covariance_order must be 2 or 4");
+      if (order != 2.0 && order != 4.0)
+        throw InputError(name_ + ": covariance_order must be 2 or 4");
       order_ = order == 4.0 ? lie::CompoundOrder::kFourth : lie::CompoundOrder::kSecond;
     } else if (p.Scalar("ppoe_diagonal", 0.0) != 0.0) {
       // The paper's sec. V-B baseline: the PPOE covariance with its correlations dropped.
@@ -39,6 +41,12 @@ class EkfEstimator : public Estimator {
         naive_cov_(i, i) = t[i] * t[i];
         naive_cov_(3 + i, 3 + i) = std::pow(r[i] * M_PI / 180.0, 2);
       }
+    }
+    if (ref_ < 0 || ref_ >= model_.num_frames()) {
+      throw InputError(name_ + ": reference frame " + std::to_string(ref_) + " not in the model");
+    }
+    if (ref_ != kinematics::kBaseFrame && order_ == lie::CompoundOrder::kFourth) {
+      throw InputError(name_ + ": covariance_order 4 is not available in a reference frame");
     }
     options_.max_iterations = static_cast<int>(p.Scalar("max_iterations", 10));
     options_.numeric_jacobians = p.Scalar("numeric_jacobians", 0.0) != 0.0;
@@ -63,7 +71,7 @@ class EkfEstimator : public Estimator {
 
   Belief Estimate() const override { return belief_; }
 
-  int prior_repairs() const { return prior_repairs_; }
+  int covariance_repairs() const override { return prior_repairs_; }
 
  private:
   UpdateStatus SetPrior(const JointReading& j) {
@@ -74,7 +82,7 @@ class EkfEstimator : public Estimator {
     if (!j.q.allFinite()) return UpdateStatus::kRejectedNonFinite;
     if (kind_ == PriorKind::kPpoe) {
       kinematics::ForwardKinematicsWithCovariance(model_, data_, j.q, order_);
-      belief_.cov = data_.Sigma_frame[ee_];
+      belief_.cov = PriorCovariance();
       // PPOE covariances are PSD by construction (often singular: rotational sources only);
       // a negative eigenvalue beyond rounding would mean a broken model: repair and count.
       Mat6 repaired = belief_.cov;
@@ -85,18 +93,32 @@ class EkfEstimator : public Estimator {
       }
     } else if (ppoe_diagonal_) {
       kinematics::ForwardKinematicsWithCovariance(model_, data_, j.q, order_);
-      belief_.cov = data_.Sigma_frame[ee_].diagonal().asDiagonal();
+      belief_.cov = PriorCovariance().diagonal().asDiagonal();
     } else {
       kinematics::ForwardKinematics(model_, data_, j.q);
       belief_.cov = naive_cov_;
     }
     belief_.t = j.t;
-    belief_.T_base_ee = data_.T_base_frame[ee_];
+    belief_.T_base_ee = InRef(ee_);
     belief_.has_joints = true;
     belief_.q = j.q;
     belief_.q_std = j.std;
     have_prior_ = true;
     return UpdateStatus::kAccepted;
+  }
+
+  // The end effector's PPOE covariance in the estimator's frame (after ForwardKinematics*).
+  Mat6 PriorCovariance() const {
+    if (ref_ == kinematics::kBaseFrame) return data_.Sigma_frame[ee_];
+    Mat6 cov;
+    kinematics::RelativeCovariance(model_, data_, ref_, ee_, &cov);
+    return cov;
+  }
+
+  // Mean pose of a frame in the estimator's frame (the base, or the reference frame).
+  lie::SE3 InRef(FrameId frame) const {
+    if (ref_ == kinematics::kBaseFrame) return data_.T_base_frame[frame];
+    return data_.T_base_frame[ref_].Between(data_.T_base_frame[frame]);
   }
 
   // Pose of a frame in the end-effector frame, from the mean kinematics at the prior's q: the
@@ -125,8 +147,8 @@ class EkfEstimator : public Estimator {
       return UpdateStatus::kRejectedNonFinite;
     }
     if (!cam.intrinsics.InImage(m.uv)) return UpdateStatus::kRejectedOutside;
-    const PixelPointModel model(cam.intrinsics, data_.T_base_frame[cam.frame],
-                                T_ee(m.frame) * m.p_frame, m.uv, m.cov);
+    const PixelPointModel model(cam.intrinsics, InRef(cam.frame), T_ee(m.frame) * m.p_frame, m.uv,
+                                m.cov);
     return Run(model, m.t);
   }
 
@@ -142,7 +164,7 @@ class EkfEstimator : public Estimator {
       if (!cam.intrinsics.InImage(m.uv[k])) return UpdateStatus::kRejectedOutside;
       p_ee[k] = T_ee_frame * m.p_frame[k];
     }
-    const TagCornersModel model(cam.intrinsics, data_.T_base_frame[cam.frame], p_ee, m.uv, m.cov);
+    const TagCornersModel model(cam.intrinsics, InRef(cam.frame), p_ee, m.uv, m.cov);
     return Run(model, m.t);
   }
 
@@ -180,6 +202,7 @@ class EkfEstimator : public Estimator {
   const kinematics::PpoeModel& model_;
   kinematics::PpoeData data_;
   FrameId ee_;
+  FrameId ref_;
   std::vector<CameraSetup> cameras_;
   PriorKind kind_;
   std::string name_;

@@ -166,6 +166,45 @@ void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
   }
 }
 
+void RelativeCovariance(const PpoeModel& model, const PpoeData& data, FrameId ref, FrameId frame,
+                        Mat6* Sigma_ref_frame) {
+  const int n = model.num_frames();
+  if (ref < 0 || ref >= n || frame < 0 || frame >= n) {
+    throw InputError("RelativeCovariance: frame id " +
+                     std::to_string(ref < 0 || ref >= n ? ref : frame) +
+                     " does not exist in PPOE model '" + model.name() + "'");
+  }
+  if (static_cast<int>(data.T_base_frame.size()) != n) {
+    throw InputError("RelativeCovariance: data was built for another model than '" + model.name() +
+                     "'");
+  }
+  // Lowest common ancestor: parents have smaller ids (frames are added below existing ones),
+  // so step the larger id up until both meet.
+  FrameId a = ref;
+  FrameId b = frame;
+  while (a != b) {
+    if (a > b) {
+      a = model.frame(a).parent;
+    } else {
+      b = model.frame(b).parent;
+    }
+  }
+  const FrameId lca = a;
+  Mat6& out = *Sigma_ref_frame;
+  out.setZero();
+  const SE3& T_base_frame = data.T_base_frame[frame];
+  Mat6 contribution;
+  for (FrameId start : {frame, ref}) {
+    for (FrameId k = start; k != lca; k = model.frame(k).parent) {
+      const PpoeFrame& f = model.frame(k);
+      if (!f.has_source) continue;
+      const SE3 T_base_kp = data.T_base_frame[f.parent] * f.T_parent_ip;
+      lie::TransportCovariance(T_base_kp.Between(T_base_frame), f.source_cov, &contribution);
+      out += contribution;
+    }
+  }
+}
+
 void ComputeFrameJacobian(const PpoeModel& model, const PpoeData& data, FrameId frame,
                           Eigen::Ref<Matrix6Xd> J_frame_q) {
   if (frame < 0 || frame >= model.num_frames()) {

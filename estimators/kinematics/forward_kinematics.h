@@ -29,6 +29,19 @@ void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
                                      const Eigen::Ref<const Eigen::VectorXd>& q,
                                      lie::CompoundOrder order);
 
+// Covariance of the relative pose T_ref_frame = T_base_ref^-1 T_base_frame in its local tangent
+// space, to 2nd order (eq. 18): the sum over every source k on the path from the two frames'
+// lowest common ancestor down to either frame of Ad_{T_kp_frame^-1} Sigma_k Ad^T, with
+// T_kp_frame = T_base_kp^-1 T_base_frame (a source on `ref`'s branch enters with a minus sign,
+// which the covariance does not see). Sources on the common trunk move both frames alike and
+// cancel exactly. This is the prior of an estimate made in a sensor's frame, e.g. the end
+// effector seen from a camera on another branch (PPOE paper eq. 25: X is the end effector in
+// the camera frame). With ref = kBaseFrame it equals ForwardKinematicsWithCovariance's kSecond
+// Sigma_frame. Reads the mean poses in `data` (call ForwardKinematics* with the same q first);
+// does not allocate. Throws InputError for a frame id the model lacks.
+void RelativeCovariance(const PpoeModel& model, const PpoeData& data, FrameId ref, FrameId frame,
+                        Mat6* Sigma_ref_frame);
+
 // J_frame_q (6 x nq): T_base_frame(q + dq) = T_base_frame(q) * Exp(J_frame_q dq) to first
 // order (right/local tangent, xi = [rho; theta]). Column k is Ad_{T_frame_j} zeta_j for the
 // frame j moved by q[k] if j is `frame` or one of its ancestors, else zero. Reads the mean poses

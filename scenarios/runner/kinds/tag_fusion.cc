@@ -3,10 +3,10 @@
 // every estimator fuses the tag corners with the encoder readings of its declared model. The
 // end-effector estimates are scored against MuJoCo's true pose: lateral error (across the
 // end-effector axis, the paper's metric), position, rotation and NEES.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <algorithm>
 #include <map>
 #include <random>
 
@@ -35,8 +35,9 @@ class TagFusionKind : public ScenarioKind {
     const ConfigNode model = root.Child("model");
     model_path_ = model.ResolvePath(model.AsString());
     const ConfigNode declared = root.Child("declared");
-    declared_ = declared.IsMap() ? sim::ParseDeclaredModel(declared)
-                                 : sim::LoadDeclaredModel(declared.ResolvePath(declared.AsString()));
+    declared_ = declared.IsMap()
+                    ? sim::ParseDeclaredModel(declared)
+                    : sim::LoadDeclaredModel(declared.ResolvePath(declared.AsString()));
     if (declared.IsMap()) declared_.model_path = model_path_;
     effects_ = sim::ParseEffects(root.Child("effects"));
     camera_ = root.GetString("camera");
@@ -86,6 +87,18 @@ class TagFusionKind : public ScenarioKind {
       aim_at_ = aim->GetString("at");
     }
     save_frames_ = root.GetBool("save_frames", true);
+    // The paper's Table I for the chart: {estimator: [mean_cm, std_cm]}.
+    if (root.Has("paper_lateral_cm")) {
+      const ConfigNode paper = root.Child("paper_lateral_cm");
+      for (const std::string& name : paper.Keys()) {
+        const ConfigNode v = paper.Child(name);
+        const std::vector<double> ms = v.AsDoubleList();
+        if (ms.size() != 2 || !(ms[0] >= 0.0) || !(ms[1] >= 0.0)) {
+          v.Fail("expected [mean_cm, std_cm], both >= 0");
+        }
+        paper_lateral_cm_.emplace_back(name, ms);
+      }
+    }
     estimators_ = ParseEstimators(root.Child("estimators"));
 
     // Everything that can be wrong is checked now, before any output exists.
@@ -119,6 +132,12 @@ class TagFusionKind : public ScenarioKind {
     setup_.end_effector = chain_->end_effector;
     setup_.cameras.push_back(
         {sim::CameraIntrinsics(sim_->model(), camera_id_), chain_->ObservedFrame(camera_)});
+    // estimate_in: an observed frame (e.g. the camera, as in the paper's eq. 25) in which every
+    // estimator works and is scored; by default the declared base.
+    if (root.Has("estimate_in")) {
+      estimate_in_ = root.GetString("estimate_in");
+      setup_.reference_frame = chain_->ObservedFrame(estimate_in_);
+    }
     for (const EstimatorSpec& spec : estimators_) {
       estimators::EstimatorSetup s = setup_;
       s.params = spec.params;
@@ -185,15 +204,18 @@ class TagFusionKind : public ScenarioKind {
       configs_without_tags += measurements.empty();
 
       // The truth in the declared model's base frame.
-      const lie::SE3 T_w_base =
-          chain_->base_body == 0
-              ? lie::SE3()
-              : ToSE3(sim_->BodyPose(sim::ObjectName(sim_->model(), mjOBJ_BODY, chain_->base_body)));
-      const lie::SE3 T_base_ee = T_w_base.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
+      const lie::SE3 T_w_base = chain_->base_body == 0
+                                    ? lie::SE3()
+                                    : ToSE3(sim_->BodyPose(sim::ObjectName(
+                                          sim_->model(), mjOBJ_BODY, chain_->base_body)));
+      // Estimates made in a reference frame are scored against the truth seen from that
+      // frame's true pose (a sagging camera mount moves the frame, not the truth).
+      const lie::SE3 T_w_ref = estimate_in_.empty() ? T_w_base : ToSE3(sim_->Pose(estimate_in_));
+      const lie::SE3 T_base_ee = T_w_ref.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
       const Eigen::Isometry3d T_cam_w = sim_->Pose(camera_).inverse();
       const auto to_cam = [&](const lie::SE3& T_base_x) {
         Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-        const lie::SE3 T_w_x = T_w_base * T_base_x;
+        const lie::SE3 T_w_x = T_w_ref * T_base_x;
         T.linear() = T_w_x.rotation();
         T.translation() = T_w_x.translation();
         return Eigen::Isometry3d(T_cam_w * T);
@@ -203,8 +225,8 @@ class TagFusionKind : public ScenarioKind {
       render::DrawText(&overlay, "truth: axes   estimates: + and 95% ellipse", {8, 18},
                        render::kWhite);
       for (const render::TagDetection& d : det.detections) {
-        render::DrawPolyline(&overlay, {d.corners.begin(), d.corners.end()}, true,
-                             render::kYellow, 1);
+        render::DrawPolyline(&overlay, {d.corners.begin(), d.corners.end()}, true, render::kYellow,
+                             1);
       }
       for (size_t e = 0; e < instances_.size(); ++e) {
         estimators::Estimator& est = *instances_[e];
@@ -248,6 +270,7 @@ class TagFusionKind : public ScenarioKind {
     }
     Json& metrics = (*ctx.summary)["metrics"];
     metrics["configurations"] = static_cast<int>(configurations_.size());
+    metrics["estimated_in"] = estimate_in_.empty() ? "base" : estimate_in_;
     if (random_count_ > 0) metrics["configuration_attempts"] = attempts_;
     metrics["tags_detected_total"] = total_tags;
     metrics["configurations_without_tags"] = configs_without_tags;
@@ -256,10 +279,12 @@ class TagFusionKind : public ScenarioKind {
       stats[e].WriteMetrics(&em);
       Json& counts = (*ctx.summary)["estimators"][estimators_[e].name]["updates"];
       for (const auto& [status, n] : status_counts[e]) counts[status] = n;
+      counts["covariance_repairs"] = instances_[e]->covariance_repairs();
     }
-    // Table I as a chart: mean lateral error with its standard deviation per estimator.
+    // Table I as a chart: one bar per estimator (mean lateral error, +- std), and the paper's
+    // value beside it when the scenario gives it.
     {
-      render::Figure fig(700, 480);
+      render::Figure fig(760, 480);
       render::Axes& ax = fig.axes();
       ax.title = "Lateral end-effector error (mean +- std), " +
                  std::to_string(configurations_.size()) + " configurations";
@@ -271,23 +296,37 @@ class TagFusionKind : public ScenarioKind {
         return names;
       }() + ")";
       ax.y_label = "lateral error [cm]";
-      ax.x_min = -0.5;
-      ax.x_max = estimators_.size() - 0.5;
+      ax.x_min = -0.6;
+      ax.x_max = estimators_.size() - 0.4;
       ax.y_min = 0.0;
       ax.legend_position = render::LegendPosition::kTopRight;
       double top = 0.0;
+      const bool with_paper = !paper_lateral_cm_.empty();
+      bool paper_labelled = false;
       for (size_t e = 0; e < estimators_.size(); ++e) {
         const Json& em = (*ctx.summary)["estimators"][estimators_[e].name]["metrics"];
         if (!em.contains("lateral_err_mean_m")) continue;
-        render::Series& sr = ax.AddScatter(estimators_[e].name, {static_cast<double>(e)},
-                                           {100.0 * em["lateral_err_mean_m"].get<double>()});
-        sr.y_err = {100.0 * em["lateral_err_std_m"].get<double>()};
-        sr.marker = render::Marker::kSquare;
-        sr.marker_size = 7;
-        top = std::max(top, 100.0 * (em["lateral_err_mean_m"].get<double>() +
-                                     em["lateral_err_std_m"].get<double>()));
+        const double mean = 100.0 * em["lateral_err_mean_m"].get<double>();
+        const double sd = 100.0 * em["lateral_err_std_m"].get<double>();
+        render::Series& bar =
+            ax.AddBars(estimators_[e].name + " (simulated)", {e - (with_paper ? 0.17 : 0.0)},
+                       {mean}, with_paper ? 0.3 : 0.5);
+        bar.y_err = {sd};
+        bar.color = render::PaletteColor(static_cast<int>(e));
+        top = std::max(top, mean + sd);
+        for (const auto& [name, ms] : paper_lateral_cm_) {
+          if (name != estimators_[e].name) continue;
+          render::Series& p =
+              ax.AddScatter(paper_labelled ? "" : "paper, Table I", {e + 0.17}, {ms[0]});
+          paper_labelled = true;
+          p.y_err = {ms[1]};
+          p.marker = render::Marker::kDiamond;
+          p.marker_size = 6;
+          p.color = render::Rgb{60, 60, 60};
+          top = std::max(top, ms[0] + ms[1]);
+        }
       }
-      ax.y_max = 1.35 * top;  // room for the legend above the highest bar
+      ax.y_max = 1.45 * top;  // room for the legend above the highest bar
       fig.SavePng((ctx.out->FramesDir() / "lateral_error.png").string());
     }
     // The paper's exp. II finding is that PPOE and naive end up alike: |ppoe - naive|.
@@ -341,11 +380,10 @@ class TagFusionKind : public ScenarioKind {
     std::mt19937_64 rng(ctx.seed * 7919ULL + 17);
     while (static_cast<int>(configurations_.size()) < random_count_) {
       if (attempts_ >= max_attempts_) {
-        throw InputError("random_configurations: only " +
-                         std::to_string(configurations_.size()) + " of " +
-                         std::to_string(random_count_) + " configurations show " +
-                         std::to_string(min_tags_) + " tag(s) after " +
-                         std::to_string(attempts_) + " attempts; widen ranges_deg");
+        throw InputError("random_configurations: only " + std::to_string(configurations_.size()) +
+                         " of " + std::to_string(random_count_) + " configurations show " +
+                         std::to_string(min_tags_) + " tag(s) after " + std::to_string(attempts_) +
+                         " attempts; widen ranges_deg");
       }
       ++attempts_;
       std::vector<std::pair<std::string, double>> cfg;
@@ -367,12 +405,14 @@ class TagFusionKind : public ScenarioKind {
   sim::DeclaredModel declared_;
   sim::EffectList effects_;
   std::string camera_;
+  std::string estimate_in_;  // "" = the declared base
   double pixel_std_ = 0.5;
   render::RenderMode mode_ = render::RenderMode::kFast;
   render::DetectorSettings detector_;
   std::vector<std::pair<std::string, double>> fixed_;
   std::vector<std::vector<std::pair<std::string, double>>> configurations_;
   bool save_frames_ = true;
+  std::vector<std::pair<std::string, std::vector<double>>> paper_lateral_cm_;
   bool use_corners_ = false;
   int random_count_ = 0;
   int min_tags_ = 1;

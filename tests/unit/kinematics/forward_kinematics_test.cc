@@ -8,6 +8,8 @@
 #include <unsupported/Eigen/MatrixFunctions>
 #include <vector>
 
+#include "estimators/error.h"
+#include "estimators/kinematics/chain_sampler.h"
 #include "estimators/lie/sampling.h"
 #include "tests/unit/kinematics/ppoe_test_models.h"
 #include "tests/unit/lie/lie_test_util.h"
@@ -392,6 +394,112 @@ TEST(FrameJacobian, ColumnsOfOtherBranchesAreZero) {
   EXPECT_FALSE(J.col(0).isZero(0.0));
   ComputeFrameJacobian(model, data, kBaseFrame, J);
   EXPECT_TRUE(J.isZero(0.0));
+}
+
+}  // namespace
+}  // namespace flexbench::kinematics
+
+namespace flexbench::kinematics {
+namespace {
+
+// A torso with a source, and two arms with sources on it: the "camera" tip of one and the
+// "hand" tip of the other, as the mast camera and the arm of a rover share its body.
+PpoeModel TwoArmTree(double trunk_rot_sd, double branch_trans_sd, double branch_rot_sd) {
+  std::mt19937_64 r(21);
+  PpoeModel m("two_arm_tree");
+  FrameId torso =
+      m.AddLink(kBaseFrame, "torso", lie::RandomSE3(r, 0.3), Joint::Revolute(Vec3::UnitZ()),
+                testing::RandomSource(r, 0.002, trunk_rot_sd));
+  for (const char* side : {"camera", "hand"}) {
+    FrameId p = torso;
+    for (int i = 0; i < 3; ++i) {
+      p = m.AddLink(p, std::string(side) + std::to_string(i), lie::RandomSE3(r, 0.3),
+                    Joint::Revolute(testing::UniformVec3(r)),
+                    testing::RandomSource(r, branch_trans_sd, branch_rot_sd));
+    }
+    m.AddFrame(p, std::string(side) + "_tip", SE3::Translation(Vec3(0.1, 0, 0)));
+  }
+  return m;
+}
+
+TEST(RelativeCovariance, FromTheBaseItIsTheSecondOrderCovariance) {
+  std::mt19937_64 rng(5);
+  for (int trial = 0; trial < 5; ++trial) {
+    testing::RandomChainOptions o;
+    o.dof = 7;
+    o.trans_sd = 0.005;
+    o.rot_sd = 0.05;
+    const PpoeModel model = testing::RandomChain(rng, o);
+    PpoeData data(model);
+    ForwardKinematicsWithCovariance(model, data, testing::RandomQ(rng, model),
+                                    CompoundOrder::kSecond);
+    for (FrameId f = 0; f < model.num_frames(); ++f) {
+      Mat6 rel;
+      RelativeCovariance(model, data, kBaseFrame, f, &rel);
+      const double scale = std::max(1e-300, data.Sigma_frame[f].cwiseAbs().maxCoeff());
+      EXPECT_LT((rel - data.Sigma_frame[f]).cwiseAbs().maxCoeff(), 1e-12 * scale) << "frame " << f;
+    }
+  }
+}
+
+TEST(RelativeCovariance, TrunkSourcesCancelExactly) {
+  const PpoeModel model = TwoArmTree(0.05, 0.0, 0.0);  // only the torso is uncertain
+  PpoeData data(model);
+  std::mt19937_64 rng(6);
+  const Eigen::VectorXd q = testing::RandomQ(rng, model);
+  ForwardKinematicsWithCovariance(model, data, q, CompoundOrder::kSecond);
+  const FrameId cam = model.FindFrame("camera_tip");
+  const FrameId hand = model.FindFrame("hand_tip");
+  ASSERT_GT(data.Sigma_frame[hand].norm(), 1e-4);  // uncertain in the base frame...
+  Mat6 rel;
+  RelativeCovariance(model, data, cam, hand, &rel);
+  EXPECT_EQ(rel, Mat6::Zero());  // ...but not seen from the camera
+  // The sampled chain agrees: every draw of the torso leaves T_cam_hand where it was.
+  ChainSampler sampler(model);
+  std::vector<SE3> poses(model.num_frames());
+  const SE3 nominal = data.T_base_frame[cam].Between(data.T_base_frame[hand]);
+  for (int i = 0; i < 100; ++i) {
+    sampler.Sample(q, rng, &poses);
+    EXPECT_LT(nominal.Between(poses[cam].Between(poses[hand])).Log().norm(), 1e-12);
+  }
+}
+
+// Both branches uncertain: the relative covariance against the sampled chain, for small
+// sources (where 2nd order is exact up to sampling error) in both directions of the pair.
+TEST(RelativeCovariance, MatchesMonteCarloAcrossTwoBranches) {
+  const PpoeModel model = TwoArmTree(0.05, 0.002, 0.5 * kDeg);
+  PpoeData data(model);
+  std::mt19937_64 rng(7);
+  const Eigen::VectorXd q = testing::RandomQ(rng, model);
+  ForwardKinematicsWithCovariance(model, data, q, CompoundOrder::kSecond);
+  const FrameId cam = model.FindFrame("camera_tip");
+  const FrameId hand = model.FindFrame("hand_tip");
+  ChainSampler sampler(model);
+  std::vector<SE3> poses(model.num_frames());
+  for (const auto& [a, b] : {std::pair{cam, hand}, std::pair{hand, cam}}) {
+    Mat6 rel;
+    RelativeCovariance(model, data, a, b, &rel);
+    const SE3 nominal = data.T_base_frame[a].Between(data.T_base_frame[b]);
+    Mat6 mc = Mat6::Zero();
+    // 36 normalised entries with sampling sd ~sqrt(1.5/n) each: ~0.015 expected at this n.
+    const int n = 160000;
+    for (int i = 0; i < n; ++i) {
+      sampler.Sample(q, rng, &poses);
+      const Vec6 xi = nominal.Between(poses[a].Between(poses[b])).Log();
+      mc += xi * xi.transpose() / n;
+    }
+    EXPECT_LT(NormalizedError(rel, mc), 0.03) << "ref " << a << ", frame " << b;
+    // The trunk's large source is gone: far smaller than the frame's own covariance.
+    EXPECT_LT(rel.trace(), 0.2 * data.Sigma_frame[b].trace());
+  }
+}
+
+TEST(RelativeCovariance, UnknownFrameIsAClearError) {
+  const PpoeModel model = TwoArmTree(0.05, 0.002, 0.01);
+  PpoeData data(model);
+  Mat6 rel;
+  EXPECT_THROW(RelativeCovariance(model, data, 0, model.num_frames(), &rel), InputError);
+  EXPECT_THROW(RelativeCovariance(model, data, -1, 1, &rel), InputError);
 }
 
 }  // namespace

@@ -1,10 +1,11 @@
 // render/plot: deterministic bytes, ticks, what gets drawn where.
+#include "render/plot.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <limits>
 
-#include "render/plot.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::render {
@@ -62,6 +63,35 @@ TEST(Plot, DrawsSeriesInTheirColours) {
   // White background in the corners.
   EXPECT_EQ(img.data[0], 255);
   EXPECT_EQ(img.data[img.data.size() - 1], 255);
+}
+
+// Bars start at 0: their filled areas are in proportion to their heights, and a bar drawn
+// from 0 to a negative value is not lost.
+TEST(Plot, BarAreasFollowTheirHeights) {
+  Figure fig(500, 400);
+  Axes& a = fig.axes();
+  a.y_min = -2.0;
+  a.y_max = 4.0;
+  a.AddBars("one", {0.0}, {1.0});
+  a.AddBars("three", {1.0}, {3.0}).y_err = {0.5};
+  a.AddBars("minus", {2.0}, {-1.5});
+  a.legend = false;
+  const Image img = fig.Render();
+  const auto tinted = [&](Rgb c) {
+    const auto t = [](int v) { return static_cast<int>(std::lround(v + 0.6 * (255 - v))); };
+    int n = 0;
+    for (size_t i = 0; i + 2 < img.data.size(); i += 3) {
+      n += std::abs(img.data[i] - t(c.r)) <= 1 && std::abs(img.data[i + 1] - t(c.g)) <= 1 &&
+           std::abs(img.data[i + 2] - t(c.b)) <= 1;
+    }
+    return n;
+  };
+  const int one = tinted(PaletteColor(0));
+  const int three = tinted(PaletteColor(1));
+  const int minus = tinted(PaletteColor(2));
+  ASSERT_GT(one, 100);
+  EXPECT_NEAR(static_cast<double>(three) / one, 3.0, 0.3);
+  EXPECT_NEAR(static_cast<double>(minus) / one, 1.5, 0.2);
 }
 
 TEST(Plot, NonFinitePointsAreSkipped) {
