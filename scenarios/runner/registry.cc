@@ -23,6 +23,8 @@ const std::vector<KindEntry>& ScenarioKinds() {
       {"jsk_imu_yaw_drift", "PF paper sec. IV-E: drifting IMU yaw, unimodal vs axis-symmetric Bingham", MakeJskImuYawDriftKind},
       {"jsk_direct_fusion", "PF paper sec. IV-D: direct IMU fusion ('xyz', 'yxz') vs the filter", MakeJskDirectFusionKind},
       {"jsk_particle_sweep", "PF paper sec. V-A: number of particles and kappa_v sweep", MakeJskParticleSweepKind},
+      {"closed_loop", "measured data -> residual -> undeclared effects found, fitted, validated",
+       MakeClosedLoopKind},
   };
   return kinds;
 }

@@ -18,5 +18,6 @@ std::unique_ptr<ScenarioKind> MakeJskFlexibleArmKind();
 std::unique_ptr<ScenarioKind> MakeJskImuYawDriftKind();
 std::unique_ptr<ScenarioKind> MakeJskDirectFusionKind();
 std::unique_ptr<ScenarioKind> MakeJskParticleSweepKind();
+std::unique_ptr<ScenarioKind> MakeClosedLoopKind();
 
 }  // namespace flexbench::scenarios

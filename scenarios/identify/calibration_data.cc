@@ -1,0 +1,174 @@
+#include "scenarios/identify/calibration_data.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "estimators/error.h"
+
+namespace flexbench::identify {
+namespace {
+
+std::string Trim(const std::string& s) {
+  const size_t a = s.find_first_not_of(" \t\r");
+  if (a == std::string::npos) return "";
+  const size_t b = s.find_last_not_of(" \t\r");
+  return s.substr(a, b - a + 1);
+}
+
+std::vector<std::string> SplitCsv(const std::string& line) {
+  std::vector<std::string> out;
+  std::stringstream ss(line);
+  std::string cell;
+  while (std::getline(ss, cell, ',')) out.push_back(Trim(cell));
+  if (!line.empty() && line.back() == ',') out.push_back("");
+  return out;
+}
+
+double ParseNumber(const std::string& cell, const std::string& where, const std::string& col) {
+  if (cell.empty()) throw InputError(where + ": column '" + col + "' is empty");
+  errno = 0;
+  char* end = nullptr;
+  const double v = std::strtod(cell.c_str(), &end);
+  if (end == cell.c_str() || *end != '\0' || errno == ERANGE) {
+    throw InputError(where + ": column '" + col + "': '" + cell + "' is not a number");
+  }
+  if (!std::isfinite(v)) throw InputError(where + ": column '" + col + "' is " + cell);
+  return v;
+}
+
+}  // namespace
+
+int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
+  for (size_t i = 0; i < labels->size(); ++i) {
+    if ((*labels)[i] == label) return static_cast<int>(i);
+  }
+  labels->push_back(label);
+  return static_cast<int>(labels->size()) - 1;
+}
+
+void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
+                        DataSet* data) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot open");
+  std::string line;
+  int line_no = 0;
+  std::vector<std::string> header;
+  while (std::getline(in, line)) {
+    ++line_no;
+    const std::string t = Trim(line);
+    if (t.empty() || t[0] == '#') continue;
+    header = SplitCsv(t);
+    break;
+  }
+  if (header.empty()) throw InputError(path + ": no header row");
+  std::vector<int> joint_col(joints.size(), -1);
+  int group_col = -1, set_col = -1, xyz_col[3] = {-1, -1, -1};
+  for (size_t c = 0; c < header.size(); ++c) {
+    const std::string& h = header[c];
+    const std::string where = path + ":" + std::to_string(line_no);
+    bool known = false;
+    for (size_t j = 0; j < joints.size(); ++j) {
+      if (joints[j] == h) {
+        if (joint_col[j] >= 0) throw InputError(where + ": joint column '" + h + "' twice");
+        joint_col[j] = static_cast<int>(c);
+        known = true;
+      }
+    }
+    if (h == "group") group_col = static_cast<int>(c), known = true;
+    if (h == "set") set_col = static_cast<int>(c), known = true;
+    if (h == "x") xyz_col[0] = static_cast<int>(c), known = true;
+    if (h == "y") xyz_col[1] = static_cast<int>(c), known = true;
+    if (h == "z") xyz_col[2] = static_cast<int>(c), known = true;
+    if (!known) {
+      throw InputError(where + ": column '" + h +
+                       "' is neither an actuated joint of the declared model nor one of group, "
+                       "set, x, y, z");
+    }
+  }
+  for (size_t j = 0; j < joints.size(); ++j) {
+    if (joint_col[j] < 0) {
+      throw InputError(path + ":" + std::to_string(line_no) + ": no column for joint '" +
+                       joints[j] + "'");
+    }
+  }
+  const bool has_xyz = xyz_col[0] >= 0 && xyz_col[1] >= 0 && xyz_col[2] >= 0;
+  if ((xyz_col[0] >= 0 || xyz_col[1] >= 0 || xyz_col[2] >= 0) && !has_xyz) {
+    throw InputError(path + ":" + std::to_string(line_no) + ": x, y and z go together");
+  }
+  if (has_xyz == (group_col >= 0)) {
+    throw InputError(path + ":" + std::to_string(line_no) +
+                     ": need either a 'group' column or 'x','y','z' columns (not both)");
+  }
+  int rows = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    const std::string t = Trim(line);
+    if (t.empty() || t[0] == '#') continue;
+    const std::string where = path + ":" + std::to_string(line_no);
+    const std::vector<std::string> cells = SplitCsv(t);
+    if (cells.size() != header.size()) {
+      throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
+                       std::to_string(header.size()));
+    }
+    Observation o;
+    o.where = where;
+    o.q.resize(joints.size());
+    for (size_t j = 0; j < joints.size(); ++j) {
+      o.q[j] = ParseNumber(cells[joint_col[j]], where, joints[j]);
+    }
+    if (has_xyz) {
+      const char* names[3] = {"x", "y", "z"};
+      for (int k = 0; k < 3; ++k) o.p_base[k] = ParseNumber(cells[xyz_col[k]], where, names[k]);
+    } else {
+      if (cells[group_col].empty()) throw InputError(where + ": column 'group' is empty");
+      o.group = LabelIndex(&data->groups, cells[group_col]);
+    }
+    o.set = LabelIndex(&data->sets, set_col >= 0 ? cells[set_col] : path);
+    data->rows.push_back(o);
+    ++rows;
+  }
+  if (rows == 0) throw InputError(path + ": no data rows");
+}
+
+void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_joints,
+                        double socket_distance_m, DataSet* data) {
+  const int s = LabelIndex(&data->sets, set);
+  int groups[2];
+  for (int h = 0; h < 2; ++h) {
+    const std::string path = dir + "/hole_" + std::to_string(h) + ".csv";
+    std::ifstream in(path);
+    if (!in) throw InputError(path + ": cannot open");
+    groups[h] = LabelIndex(&data->groups, set + "/hole_" + std::to_string(h));
+    std::string line;
+    int line_no = 0;
+    int rows = 0;
+    while (std::getline(in, line)) {
+      ++line_no;
+      const std::string t = Trim(line);
+      if (t.empty() || t[0] == '#') continue;
+      const std::string where = path + ":" + std::to_string(line_no);
+      const std::vector<std::string> cells = SplitCsv(t);
+      if (static_cast<int>(cells.size()) != num_joints) {
+        throw InputError(where + ": " + std::to_string(cells.size()) + " columns, expected " +
+                         std::to_string(num_joints) + " joint angles");
+      }
+      Observation o;
+      o.where = where;
+      o.q.resize(num_joints);
+      for (int j = 0; j < num_joints; ++j) {
+        o.q[j] = ParseNumber(cells[j], where, "joint " + std::to_string(j + 1));
+      }
+      o.group = groups[h];
+      o.set = s;
+      data->rows.push_back(o);
+      ++rows;
+    }
+    if (rows == 0) throw InputError(path + ": no data rows");
+  }
+  data->distances.push_back({groups[0], groups[1], socket_distance_m});
+}
+
+}  // namespace flexbench::identify

@@ -1,0 +1,35 @@
+// Measured calibration data: a user's own CSV, and the MUKCa Panda recordings.
+//
+// CSV ("bring your own robot and data", README): one header row naming the columns, then one
+// row per configuration; '#' starts a comment line.
+//   - one column per actuated joint of the declared model, named as the joint (rad, or m for
+//     slides); every actuated joint must be present;
+//   - `group`: a label; rows with the same label share one unknown fixed end-effector point
+//     (a ball in a socket), or
+//   - `x`, `y`, `z`: the end-effector point measured in the declared base frame (m);
+//   - optional `set`: a label for the placement or session the row belongs to (errors are
+//     averaged per set, then over sets).
+// Rows must have the header's column count; empty cells, NaN and infinities are errors, as are
+// column names that are neither a joint of the model nor one of the above.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "scenarios/identify/identify.h"
+
+namespace flexbench::identify {
+
+// Appends the file's rows to `data` (groups and sets are matched by label). Throws InputError
+// "<file>:<line>: ..." on malformed input.
+void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
+                        DataSet* data);
+
+// One MUKCa tool placement: `dir`/hole_0.csv and hole_1.csv (7 joint angles per row, no
+// header) become groups "<set>/hole_0" and "<set>/hole_1", 0.050 m apart.
+void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_joints,
+                        double socket_distance_m, DataSet* data);
+
+// Index of `label` in `labels`, appended when new.
+int LabelIndex(std::vector<std::string>* labels, const std::string& label);
+
+}  // namespace flexbench::identify

@@ -1,0 +1,375 @@
+#include "scenarios/identify/effect_model.h"
+
+#include <cmath>
+#include <memory>
+
+#include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/lie/so3.h"
+
+namespace flexbench::identify {
+namespace {
+
+// "joint/j2" -> "j2".
+std::string Untyped(const std::string& name) {
+  const size_t slash = name.find('/');
+  return slash == std::string::npos ? name : name.substr(slash + 1);
+}
+
+int BodyOfFrame(const mjModel* m, const std::string& typed) {
+  const size_t slash = typed.find('/');
+  if (slash == std::string::npos) return -1;
+  const std::string type = typed.substr(0, slash);
+  const std::string name = typed.substr(slash + 1);
+  if (type == "joint") {
+    const int j = mj_name2id(m, mjOBJ_JOINT, name.c_str());
+    return j < 0 ? -1 : m->jnt_bodyid[j];
+  }
+  if (type == "body") return mj_name2id(m, mjOBJ_BODY, name.c_str());
+  if (type == "site") {
+    const int s = mj_name2id(m, mjOBJ_SITE, name.c_str());
+    return s < 0 ? -1 : m->site_bodyid[s];
+  }
+  if (type == "geom") {
+    const int g = mj_name2id(m, mjOBJ_GEOM, name.c_str());
+    return g < 0 ? -1 : m->geom_bodyid[g];
+  }
+  if (type == "camera") {
+    const int c = mj_name2id(m, mjOBJ_CAMERA, name.c_str());
+    return c < 0 ? -1 : m->cam_bodyid[c];
+  }
+  return -1;
+}
+
+struct DataDeleter {
+  void operator()(mjData* d) const { mj_deleteData(d); }
+};
+
+}  // namespace
+
+const char* ToString(EffectType type) {
+  switch (type) {
+    case EffectType::kJointOffset:
+      return "joint_offset";
+    case EffectType::kJointCompliance:
+      return "joint_compliance";
+    case EffectType::kBacklash:
+      return "backlash";
+    case EffectType::kLinkLength:
+      return "link_length";
+    case EffectType::kLinkOffset:
+      return "link_offset";
+    case EffectType::kAxisTilt:
+      return "joint_axis_tilt";
+    case EffectType::kLinkBending:
+      return "link_bending";
+    case EffectType::kBaseCompliance:
+      return "base_compliance";
+    case EffectType::kThermalExpansion:
+      return "thermal_expansion";
+    case EffectType::kPayload:
+      return "payload";
+  }
+  return "?";
+}
+
+EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame)
+    : chain_(&chain), point_frame_(point_frame), m_(m) {
+  const kinematics::PpoeModel& model = chain.model;
+  const int n = model.num_frames();
+  if (point_frame < 0 || point_frame >= n) {
+    throw InputError("identify: point frame " + std::to_string(point_frame) + " not in '" +
+                     model.name() + "'");
+  }
+  on_path_.assign(n, 0);
+  for (FrameId f = point_frame; f >= 0; f = model.frame(f).parent) {
+    on_path_[f] = 1;
+    if (f == kinematics::kBaseFrame) break;
+  }
+  frame_body_.assign(n, -1);
+  for (FrameId f = 1; f < n; ++f) frame_body_[f] = BodyOfFrame(m, model.frame(f).name);
+  // The first joint on the way to the point.
+  FrameId first_joint = -1;
+  for (FrameId f = 1; f < n; ++f) {
+    if (on_path_[f] && model.frame(f).q_index >= 0) {
+      first_joint = f;
+      break;
+    }
+  }
+  // The arm's mount, where a compliant base tilts: the first frame with a declared source ahead
+  // of the first joint (the declared model says the base is uncertain there), else the first
+  // joint's anchor (frame axes before the joint turns).
+  mount_ = first_joint > 0 ? first_joint : kinematics::kBaseFrame;
+  for (FrameId f = 1; f < first_joint; ++f) {
+    if (on_path_[f] && model.frame(f).has_source) {
+      mount_ = f;
+      break;
+    }
+  }
+  // Below 10 g the model carries no real masses (e.g. a URDF without inertials, where MuJoCo
+  // keeps a minimal mass): loads are then zero and the load-driven effects unidentifiable.
+  has_masses_ = first_joint > 0 && frame_body_[first_joint] >= 0 &&
+                m->body_subtreemass[frame_body_[first_joint]] > 0.01;
+  tilt_a_.assign(n, Vec3::Zero());
+  tilt_b_.assign(n, Vec3::Zero());
+  for (FrameId f = 1; f < n; ++f) {
+    const kinematics::PpoeFrame& fr = model.frame(f);
+    if (fr.q_index < 0) continue;
+    const Vec3 w = fr.joint.axis.normalized();
+    const Vec3 any = std::abs(w.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+    tilt_a_[f] = (any - any.dot(w) * w).normalized();
+    tilt_b_[f] = w.cross(tilt_a_[f]);
+  }
+
+  const auto add = [&](EffectType t, const std::string& loc, int q, FrameId f, int np, double step,
+                       const char* unit) {
+    Candidate c;
+    c.type = t;
+    c.location = loc;
+    c.q_index = q;
+    c.frame = f;
+    c.num_params = np;
+    c.step = step;
+    c.unit = unit;
+    candidates_.push_back(c);
+  };
+  for (int k = 0; k < model.nq(); ++k) {
+    const FrameId f = model.joint_frame(k);
+    if (!on_path_[f]) continue;
+    const std::string& name = chain.q_joints[k];
+    add(EffectType::kJointOffset, name, k, f, 1, 1e-6,
+        model.frame(f).joint.type == kinematics::JointType::kPrismatic ? "m" : "rad");
+    add(EffectType::kAxisTilt, name, k, f, 1, 1e-6, "rad");
+    add(EffectType::kAxisTilt, name, k, f, 1, 1e-6, "rad");
+    candidates_.back().axis = 1;
+    add(EffectType::kLinkOffset, name, k, f, 3, 1e-6, "m");
+    if (model.frame(f).joint.type != kinematics::JointType::kRevolute) continue;
+    add(EffectType::kJointCompliance, name, k, f, 1, 1e-7, "rad/Nm");
+    add(EffectType::kBacklash, name, k, f, 1, 1e-6, "rad");
+  }
+  for (FrameId f = 1; f < n; ++f) {
+    if (!on_path_[f] || model.frame(f).T_parent_ip.translation().norm() < 0.01) continue;
+    const std::string name = Untyped(model.frame(f).name);
+    add(EffectType::kLinkLength, name, -1, f, 1, 1e-6, "m");
+  }
+  // Links between consecutive joints (passive frames in between belong to the link).
+  prev_joint_.assign(n, -1);
+  {
+    kinematics::PpoeData pd(model);
+    kinematics::ForwardKinematics(model, pd, Eigen::VectorXd::Zero(model.nq()));
+    for (FrameId f = 1; f < n; ++f) {
+      if (!on_path_[f] || model.frame(f).q_index < 0) continue;
+      FrameId p = model.frame(f).parent;
+      while (p > 0 && model.frame(p).q_index < 0) p = model.frame(p).parent;
+      if (p <= 0) continue;
+      const lie::SE3 T_pre = pd.T_base_frame[model.frame(f).parent] * model.frame(f).T_parent_ip;
+      const Vec3 link_p = pd.T_base_frame[p].rotation().transpose() *
+                          (T_pre.translation() - pd.T_base_frame[p].translation());
+      if (link_p.norm() < 0.05) continue;
+      prev_joint_[f] = p;
+      link_dir_.resize(n, Vec3::Zero());
+      link_dir_[f] = link_p.normalized();
+      add(EffectType::kLinkBending, chain.q_joints[model.frame(f).q_index], -1, f, 1, 1e-7,
+          "rad/Nm");
+    }
+  }
+  // The tool: where the measured point sits on the last link (a probe, a ball, a fingertip).
+  add(EffectType::kLinkOffset, Untyped(model.frame(point_frame).name), -1, point_frame, 3, 1e-6,
+      "m");
+  if (mount_ != kinematics::kBaseFrame) {
+    add(EffectType::kBaseCompliance, Untyped(model.frame(mount_).name), -1, mount_, 2, 1e-7,
+        "rad/Nm");
+  }
+  add(EffectType::kThermalExpansion, "all", -1, -1, 1, 1e-6, "-");
+  add(EffectType::kPayload, Untyped(model.frame(point_frame).name), -1, point_frame, 4, 1e-3,
+      "kg, kg m");
+}
+
+int EffectModel::FindCandidate(const std::string& name) const {
+  for (size_t i = 0; i < candidates_.size(); ++i) {
+    if (candidates_[i].Name() == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const {
+  const kinematics::PpoeModel& model = chain_->model;
+  const int n = model.num_frames();
+  ConfigLoads L;
+  L.tau = Eigen::VectorXd::Zero(model.nq());
+  L.tau_unit = Eigen::VectorXd::Zero(model.nq());
+  L.M_mid.assign(n, Vec3::Zero());
+  L.M_mid_unit.assign(n, Vec3::Zero());
+  L.axis_base = Eigen::Matrix3Xd::Zero(3, model.nq());
+  L.R_mid_T.assign(n, Mat3::Identity());
+  if (!has_masses_) return L;
+  kinematics::PpoeData pd(model);
+  kinematics::ForwardKinematics(model, pd, q);
+  std::unique_ptr<mjData, DataDeleter> d(mj_makeData(m_));
+  chain_->WriteQpos(q, d->qpos);
+  mj_kinematics(m_, d.get());
+  mj_comPos(m_, d.get());
+  const int base = chain_->base_body;
+  Mat3 R_w_base;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) R_w_base(r, c) = d->xmat[9 * base + 3 * r + c];
+  }
+  const Vec3 p_w_base(d->xpos[3 * base], d->xpos[3 * base + 1], d->xpos[3 * base + 2]);
+  const Vec3 g_base =
+      R_w_base.transpose() * Vec3(m_->opt.gravity[0], m_->opt.gravity[1], m_->opt.gravity[2]);
+  const Vec3 p_ee = pd.T_base_frame[point_frame_].translation();
+  // Moment about `a` (base coordinates) of the weight of body b's subtree, and of 1 kg at p_ee.
+  const auto moment = [&](int b, const Vec3& a) {
+    const Vec3 c = R_w_base.transpose() * (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1],
+                                                d->subtree_com[3 * b + 2]) -
+                                           p_w_base);
+    return Vec3((c - a).cross(m_->body_subtreemass[b] * g_base));
+  };
+  const auto unit_moment = [&](const Vec3& a) { return Vec3((p_ee - a).cross(g_base)); };
+  for (int k = 0; k < model.nq(); ++k) {
+    const FrameId f = model.joint_frame(k);
+    if (!on_path_[f] || frame_body_[f] < 0) continue;
+    const kinematics::PpoeFrame& fr = model.frame(f);
+    const lie::SE3& T = pd.T_base_frame[f];
+    const Vec3 axis = T.rotation() * fr.joint.axis;
+    const Vec3 a = T * fr.joint.point;
+    // The torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest).
+    L.tau[k] = -axis.dot(moment(frame_body_[f], a));
+    L.axis_base.col(k) = axis;
+    L.tau_unit[k] = -axis.dot(unit_moment(a));
+  }
+  for (FrameId f = 1; f < n; ++f) {
+    const FrameId p = prev_joint_[f];
+    if (p < 0 || frame_body_[p] < 0) continue;
+    const kinematics::PpoeFrame& fr = model.frame(f);
+    const lie::SE3 T_pre = pd.T_base_frame[fr.parent] * fr.T_parent_ip;
+    const lie::SE3& Tp = pd.T_base_frame[p];
+    const Vec3 mid = 0.5 * (Tp.translation() + T_pre.translation());
+    // The whole link's subtree about its middle (the near half's own weight barely counts).
+    L.M_mid[f] = Tp.rotation().transpose() * moment(frame_body_[p], mid);
+    L.M_mid_unit[f] = Tp.rotation().transpose() * unit_moment(mid);
+    L.R_mid_T[f] = Tp.rotation().transpose();
+  }
+  if (mount_ != kinematics::kBaseFrame && frame_body_[mount_] >= 0) {
+    const kinematics::PpoeFrame& fr = model.frame(mount_);
+    const lie::SE3 T_pre = pd.T_base_frame[fr.parent] * fr.T_parent_ip;
+    L.M_mount = T_pre.rotation().transpose() * moment(frame_body_[mount_], T_pre.translation());
+    L.M_mount_unit = T_pre.rotation().transpose() * unit_moment(T_pre.translation());
+    L.R_mount_T = T_pre.rotation().transpose();
+  }
+  // (R_ee s) x g = -[g]x R_ee s.
+  L.M_first = -lie::Skew(g_base) * pd.T_base_frame[point_frame_].rotation();
+  return L;
+}
+
+EffectModel::Workspace EffectModel::MakeWorkspace() const {
+  const kinematics::PpoeModel& model = chain_->model;
+  Workspace ws;
+  ws.dq = Eigen::VectorXd::Zero(model.nq());
+  ws.dlen.assign(model.num_frames(), 0.0);
+  ws.bend.assign(model.num_frames(), Vec3::Zero());
+  ws.offset.assign(model.num_frames(), Vec3::Zero());
+  ws.tilt.assign(model.num_frames(), Vec3::Zero());
+  ws.T.assign(model.num_frames(), lie::SE3());
+  return ws;
+}
+
+Vec3 EffectModel::Predict(const Eigen::VectorXd& q, const ConfigLoads& L,
+                          const std::vector<int>& active, const double* theta,
+                          Workspace& ws) const {
+  const kinematics::PpoeModel& model = chain_->model;
+  const int n = model.num_frames();
+  double payload = 0.0;
+  Vec3 couple = Vec3::Zero();  // base axes
+  {
+    const double* t = theta;
+    for (int i : active) {
+      if (candidates_[i].type == EffectType::kPayload) {
+        payload = t[0];
+        couple = L.M_first * Vec3(t[1], t[2], t[3]);
+      }
+      t += candidates_[i].num_params;
+    }
+  }
+  ws.dq.setZero();
+  std::fill(ws.dlen.begin(), ws.dlen.end(), 0.0);
+  std::fill(ws.bend.begin(), ws.bend.end(), Vec3::Zero());
+  std::fill(ws.offset.begin(), ws.offset.end(), Vec3::Zero());
+  std::fill(ws.tilt.begin(), ws.tilt.end(), Vec3::Zero());
+  double scale = 0.0;
+  Vec3 mount_rot = Vec3::Zero();
+  const double* t = theta;
+  for (int i : active) {
+    const Candidate& c = candidates_[i];
+    switch (c.type) {
+      case EffectType::kJointOffset:
+        ws.dq[c.q_index] += t[0];
+        break;
+      case EffectType::kJointCompliance:
+        ws.dq[c.q_index] += t[0] * (L.tau[c.q_index] + payload * L.tau_unit[c.q_index] -
+                                    L.axis_base.col(c.q_index).dot(couple));
+        break;
+      case EffectType::kBacklash: {
+        const double tau = L.tau[c.q_index] + payload * L.tau_unit[c.q_index] -
+                           L.axis_base.col(c.q_index).dot(couple);
+        // Below a millinewton-metre the load picks no flank.
+        ws.dq[c.q_index] += t[0] * (tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0);
+        break;
+      }
+      case EffectType::kLinkLength:
+        ws.dlen[c.frame] += t[0];
+        break;
+      case EffectType::kLinkOffset:
+        ws.offset[c.frame] += Vec3(t[0], t[1], t[2]);
+        break;
+      case EffectType::kAxisTilt:
+        ws.tilt[c.frame] += t[0] * (c.axis ? tilt_b_[c.frame] : tilt_a_[c.frame]);
+        break;
+      case EffectType::kLinkBending: {
+        const Vec3& dir = link_dir_[c.frame];
+        const Vec3 M =
+            L.M_mid[c.frame] + payload * L.M_mid_unit[c.frame] + L.R_mid_T[c.frame] * couple;
+        ws.bend[c.frame] += t[0] * (M - M.dot(dir) * dir);
+        break;
+      }
+      case EffectType::kBaseCompliance: {
+        const Vec3 M = L.M_mount + payload * L.M_mount_unit + L.R_mount_T * couple;
+        mount_rot.x() += t[0] * M.x();
+        mount_rot.y() += t[1] * M.y();
+        break;
+      }
+      case EffectType::kThermalExpansion:
+        scale += t[0];
+        break;
+      case EffectType::kPayload:
+        break;
+    }
+    t += c.num_params;
+  }
+  ws.T[0] = lie::SE3();
+  for (FrameId f = 1; f < n; ++f) {
+    if (!on_path_[f]) continue;
+    const kinematics::PpoeFrame& fr = model.frame(f);
+    const Vec3& t0 = fr.T_parent_ip.translation();
+    Vec3 tr = t0 * (1.0 + scale);
+    if (ws.dlen[f] != 0.0) tr += ws.dlen[f] * t0.normalized();
+    tr += ws.offset[f];
+    lie::SE3 T_parent_f(fr.T_parent_ip.rotation(), tr);
+    ws.T[f] = ws.T[fr.parent] * T_parent_f;
+    if (!ws.bend[f].isZero()) {
+      // The link turns about its middle: an Euler-Bernoulli beam under an end moment.
+      const FrameId p = prev_joint_[f];
+      const Mat3 Rb = lie::SO3Exp(ws.T[p].rotation() * ws.bend[f]);
+      const Vec3 mid = 0.5 * (ws.T[p].translation() + ws.T[f].translation());
+      ws.T[f] = lie::SE3(Rb, mid - Rb * mid) * ws.T[f];
+    }
+    if (f == mount_ && !mount_rot.isZero()) {
+      ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(mount_rot), Vec3::Zero());
+    }
+    if (!ws.tilt[f].isZero()) ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(ws.tilt[f]), Vec3::Zero());
+    if (fr.q_index >= 0) ws.T[f] = ws.T[f] * fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]);
+  }
+  return ws.T[point_frame_].translation();
+}
+
+}  // namespace flexbench::identify

@@ -1,0 +1,132 @@
+// Candidate effects a declared model may lack, each with a physical location and a parametric
+// form, and the kinematics of the declared chain augmented by any subset of them.
+//
+// The declared chain is the nominal PPOE chain (PPOE paper, eq. 16-17, all sources at their
+// mean). An effect perturbs it at its location:
+//   joint_offset@J        q_J += a                                  a [rad]
+//   joint_compliance@J    q_J += c * tau_J(q)                       c [rad/(N m)] (gear elasticity)
+//   backlash@J            q_J += b * sign(tau_J(q))                 b [rad] (half the play)
+//   link_length@F         t_F += l * t_F / |t_F|                    l [m]
+//   link_offset@F         t_F += d (3-D, parent coordinates)        d [m] (machining, assembly)
+//   joint_axis_tilt_a@J   rotation about a, the first of J's frame axes not along J's axis
+//   joint_axis_tilt_b@J   rotation about b = w x a; both before the joint moves [rad] (bearing
+//                         misalignment; two candidates, since data often sees only one)
+//   link_bending@J        the link from the previous joint to J turns by c * M_perp(q) about
+//                         its middle (Euler-Bernoulli beam under an end moment: the tip
+//                         turns like a hinge at mid-length)              c [rad/(N m)]
+//   base_compliance@J1    rotation (c_x M_x, c_y M_y) about the first joint's anchor (the plate
+//                         under the arm tilts), frame axes before the joint turns  c [rad/(N m)]
+//   thermal_expansion@all every link translation scaled by (1 + e)  e [-] (alpha * delta T)
+//   payload@ee            a mass m [kg] with its centre at offset c from the end effector (its
+//                         frame); parameters (m, m c) [kg, kg m] keep the loads linear in them
+// tau_J is the gravity torque the joint carries (MuJoCo masses, nominal configuration), M the
+// moment of the weight beyond a point, in the local frame. Loads are computed once per
+// configuration; a model without masses gives zero loads, and the load-driven candidates are
+// then unidentifiable (reported, never fitted).
+#pragma once
+#include <mujoco/mujoco.h>
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "estimators/kinematics/ppoe_data.h"
+#include "estimators/kinematics/ppoe_model.h"
+#include "sim/declared_chain.h"
+
+namespace flexbench::identify {
+
+using kinematics::FrameId;
+
+enum class EffectType {
+  kJointOffset,
+  kJointCompliance,
+  kBacklash,
+  kLinkLength,
+  kLinkOffset,
+  kAxisTilt,
+  kLinkBending,
+  kBaseCompliance,
+  kThermalExpansion,
+  kPayload,
+};
+
+const char* ToString(EffectType type);
+
+struct Candidate {
+  EffectType type = EffectType::kJointOffset;
+  std::string location;  // joint, frame or "all" / "ee"
+  int q_index = -1;      // joint effects
+  FrameId frame = -1;    // frame effects
+  int num_params = 1;
+  double step = 1e-6;  // finite-difference step of each parameter
+  std::string unit;
+  int axis = 0;  // joint_axis_tilt: 0 = a, 1 = b
+  std::string Name() const {
+    return std::string(ToString(type)) +
+           (type == EffectType::kAxisTilt ? (axis ? "_b" : "_a") : "") + "@" + location;
+  }
+};
+
+// Gravity loads of one configuration (nominal model), in the frames the effects act in.
+struct ConfigLoads {
+  Eigen::VectorXd tau;          // per PPOE joint variable, N m
+  std::vector<Vec3> M_mid;      // per joint frame: moment at its link's middle, start joint axes
+  Vec3 M_mount = Vec3::Zero();  // about the first joint's anchor, its pre-motion axes
+  // The same quantities for 1 kg at the end effector (payload sensitivity).
+  Eigen::VectorXd tau_unit;
+  std::vector<Vec3> M_mid_unit;
+  Vec3 M_mount_unit = Vec3::Zero();
+  // Moment (base axes) per unit first moment m c of the payload about the end effector (ee
+  // axes): the same at every point, as a couple. With the axes to carry it into each load.
+  Mat3 M_first = Mat3::Zero();
+  Eigen::Matrix3Xd axis_base;  // joint axes, base coordinates
+  std::vector<Mat3> R_mid_T;   // base -> start-joint axes, per link
+  Mat3 R_mount_T = Mat3::Identity();
+};
+
+// The augmented kinematics. Constant after construction; Predict needs a Workspace.
+class EffectModel {
+ public:
+  // `point_frame`: the chain frame whose origin is predicted (the end effector).
+  EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame);
+
+  const kinematics::PpoeModel& chain() const { return chain_->model; }
+  const std::vector<Candidate>& candidates() const { return candidates_; }
+  int FindCandidate(const std::string& name) const;  // -1 when absent
+  FrameId mount() const { return mount_; }
+  bool has_masses() const { return has_masses_; }
+
+  ConfigLoads Loads(const Eigen::VectorXd& q) const;
+
+  struct Workspace {
+    Eigen::VectorXd dq;
+    std::vector<double> dlen;
+    std::vector<Vec3> bend;
+    std::vector<Vec3> offset;
+    std::vector<Vec3> tilt;
+    std::vector<lie::SE3> T;
+  };
+  Workspace MakeWorkspace() const;
+
+  // Position of the point frame in the base frame, with effects `active` (indices into
+  // candidates()) at parameters `theta` (concatenated in that order).
+  Vec3 Predict(const Eigen::VectorXd& q, const ConfigLoads& loads, const std::vector<int>& active,
+               const double* theta, Workspace& ws) const;
+
+ private:
+  const sim::DeclaredChain* chain_;
+  FrameId point_frame_;
+  FrameId mount_ = 0;
+  bool has_masses_ = false;
+  std::vector<Candidate> candidates_;
+  std::vector<char> on_path_;          // frames between the base and the point frame
+  std::vector<Vec3> tilt_a_, tilt_b_;  // per joint frame: unit normals of its axis
+  std::vector<FrameId> prev_joint_;    // per joint frame: the joint at its link's start, or -1
+  std::vector<Vec3> link_dir_;         // that link's direction in the start joint's frame
+  // MuJoCo bodies behind each chain frame (-1: none) for loads.
+  std::vector<int> frame_body_;
+  const mjModel* m_;
+};
+
+}  // namespace flexbench::identify

@@ -1,0 +1,570 @@
+// closed_loop: from measured data to the effect the declared model lacks (issue 8).
+// Residual of the declared model on a calibration set -> stepwise selection of candidate
+// effects (scenarios/identify) -> fitted, augmented declared model -> error before and after on
+// the calibration and on a separate validation set, NEES before and after, PNGs.
+//
+// Data sources (keys `calibration` and `validation`):
+//   mukca: {dir: <recordings of one robot>, placements: [front, ...], socket_distance_m: 0.05}
+//   csv: <file> (+ distances: [[group_a, group_b, metres], ...]); format in calibration_data.h
+//   simulate: {placements: N, configurations_per_socket: n, seed: k}
+//     the truth (`truth.effects`, the sim effect list) puts the end effector into sockets
+//     `truth.socket_distance_m` apart at random placements; rows are its encoder readings.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <set>
+#include <sstream>
+
+#include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/stats/chi_square.h"
+#include "render/plot.h"
+#include "scenarios/identify/calibration_data.h"
+#include "scenarios/identify/identify.h"
+#include "scenarios/runner/kinds/kinds.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "sim/effects/effect.h"
+#include "sim/mujoco_model.h"
+#include "sim/simulation.h"
+
+namespace flexbench::scenarios {
+namespace {
+
+namespace fs = std::filesystem;
+using identify::DataSet;
+
+constexpr double kDeg = M_PI / 180.0;
+
+struct Source {
+  enum class Type { kMukca, kCsv, kSimulate } type = Type::kCsv;
+  std::string path;
+  std::vector<std::string> placements;
+  double socket_distance_m = 0.05;
+  std::vector<std::tuple<std::string, std::string, double>> distances;
+  int sim_placements = 3;
+  int per_socket = 20;
+  int seed = 0;
+  std::string where;
+};
+
+Source ParseSource(const ConfigNode& n) {
+  Source s;
+  s.where = n.Where();
+  if (const auto m = n.Optional("mukca")) {
+    s.type = Source::Type::kMukca;
+    s.path = m->ResolvePath(m->GetString("dir"));
+    for (const ConfigNode& p : m->Child("placements").Items()) s.placements.push_back(p.AsString());
+    s.socket_distance_m = m->GetDouble("socket_distance_m", 0.05);
+  } else if (const auto c = n.Optional("csv")) {
+    s.type = Source::Type::kCsv;
+    s.path = c->ResolvePath(c->AsString());
+    if (const auto d = n.Optional("distances")) {
+      for (const ConfigNode& e : d->Items()) {
+        const std::vector<ConfigNode> it = e.Items();
+        if (it.size() != 3) e.Fail("expected [group_a, group_b, metres]");
+        s.distances.emplace_back(it[0].AsString(), it[1].AsString(), it[2].AsDouble());
+      }
+    }
+  } else if (const auto sim = n.Optional("simulate")) {
+    s.type = Source::Type::kSimulate;
+    s.sim_placements = sim->GetInt("placements", 3);
+    s.per_socket = sim->GetInt("configurations_per_socket", 20);
+    s.seed = sim->GetInt("seed", 0);
+    if (s.sim_placements < 1 || s.per_socket < 2) sim->Fail("need placements >= 1 and >= 2 rows");
+  } else {
+    n.Fail("expected one of mukca, csv, simulate");
+  }
+  return s;
+}
+
+std::string Num(double v) {
+  char b[64];
+  std::snprintf(b, sizeof(b), "%.6g", v);
+  return b;
+}
+
+struct Stats {
+  double mean = 0, std = 0, max = 0;
+};
+Stats Summarise(const std::vector<double>& e) {
+  Stats s;
+  if (e.empty()) return s;
+  for (double v : e) s.mean += v, s.max = std::max(s.max, v);
+  s.mean /= e.size();
+  for (double v : e) s.std += (v - s.mean) * (v - s.mean);
+  s.std = std::sqrt(s.std / e.size());
+  return s;
+}
+
+class ClosedLoopKind : public ScenarioKind {
+ public:
+  void Configure(const ConfigNode& root) override {
+    const ConfigNode model = root.Child("model");
+    model_path_ = model.ResolvePath(model.AsString());
+    const ConfigNode declared = root.Child("declared");
+    declared_ = declared.IsMap()
+                    ? sim::ParseDeclaredModel(declared)
+                    : sim::LoadDeclaredModel(declared.ResolvePath(declared.AsString()));
+    if (declared.IsMap()) declared_.model_path = model_path_;
+    if (const auto c = root.Optional("candidates")) {
+      for (const ConfigNode& n : c->Items()) candidate_specs_.push_back({n.AsString(), n.Where()});
+    }
+    opt_.point_std_m = root.GetDouble("point_std_m", opt_.point_std_m);
+    opt_.distance_std_m = root.GetDouble("distance_std_m", opt_.distance_std_m);
+    opt_.bic_threshold = root.GetDouble("bic_threshold", opt_.bic_threshold);
+    opt_.max_effects = root.GetInt("max_effects", opt_.max_effects);
+    calibration_ = ParseSource(root.Child("calibration"));
+    validation_ = ParseSource(root.Child("validation"));
+    if (const auto t = root.Optional("truth")) {
+      effects_ = sim::ParseEffects(t->Child("effects"));
+      for (const ConfigNode& n : t->Child("expected").Items()) truth_names_.push_back(n.AsString());
+      socket_distance_m_ = t->GetDouble("socket_distance_m", 0.05);
+      encoder_noise_rad_ = t->GetDouble("encoder_noise_deg", 0.0) * kDeg;
+      const auto ws = t->Child("workspace");
+      ws_center_ = Vec3::Map(ws.Child("center").AsDoubleList().data());
+      ws_half_ = Vec3::Map(ws.Child("half_extent").AsDoubleList().data());
+      has_truth_ = true;
+    }
+    if ((calibration_.type == Source::Type::kSimulate ||
+         validation_.type == Source::Type::kSimulate) &&
+        !has_truth_) {
+      root.Fail("simulated data needs a 'truth' block (effects, expected, workspace)");
+    }
+    for (const Source* s : {&calibration_, &validation_}) {
+      if (s->type == Source::Type::kMukca && !fs::exists(s->path)) {
+        throw InputError(s->where + ": MUKCa recordings not found at " + s->path +
+                         " (read from ../shared/data/mukca; see its SOURCE.md)");
+      }
+    }
+    // Model, chain and candidates now: bad names fail before any work.
+    mj_ = sim::LoadModel(declared_.model_path);
+    chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(mj_.get(), declared_));
+    em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector);
+    if (candidate_specs_.empty()) {
+      for (size_t i = 0; i < em_->candidates().size(); ++i) candidates_.push_back(i);
+    }
+    for (const auto& [spec, where] : candidate_specs_) {
+      bool any = false;
+      for (size_t i = 0; i < em_->candidates().size(); ++i) {
+        const identify::Candidate& c = em_->candidates()[i];
+        if (c.Name() == spec || identify::ToString(c.type) == spec) {
+          if (std::find(candidates_.begin(), candidates_.end(), static_cast<int>(i)) ==
+              candidates_.end()) {
+            candidates_.push_back(static_cast<int>(i));
+          }
+          any = true;
+        }
+      }
+      if (!any) throw InputError(where + ": no candidate effect '" + spec + "' on this chain");
+    }
+    if (has_truth_) {
+      sim_ = sim::Simulation::Load(model_path_, effects_);
+    }
+  }
+
+  void Run(RunContext& ctx) override {
+    DataSet cal = Load(calibration_, ctx, "calibration");
+    DataSet val = Load(validation_, ctx, "validation");
+    const std::vector<identify::ConfigLoads> cal_loads = identify::ComputeLoads(*em_, cal);
+    const std::vector<identify::ConfigLoads> val_loads = identify::ComputeLoads(*em_, val);
+    ctx.log("identify: " + std::to_string(cal.rows.size()) + " calibration rows, " +
+            std::to_string(candidates_.size()) + " candidate effects");
+    const identify::IdentifyResult res =
+        identify::Identify(*em_, cal, cal_loads, candidates_, opt_);
+    for (const std::string& s : res.steps) ctx.log("  " + s);
+
+    const auto errors = [&](const DataSet& d, const std::vector<identify::ConfigLoads>& L,
+                            bool after) {
+      const auto p = identify::PredictAll(*em_, d, L, after ? res.after.active : std::vector<int>{},
+                                          after ? res.after.theta : Eigen::VectorXd());
+      return std::make_pair(identify::RowErrors(d, p), p);
+    };
+    const auto [cal_before, cal_p0] = errors(cal, cal_loads, false);
+    const auto [cal_after, cal_p1] = errors(cal, cal_loads, true);
+    const auto [val_before, val_p0] = errors(val, val_loads, false);
+    const auto [val_after, val_p1] = errors(val, val_loads, true);
+
+    Json& m = (*ctx.summary)["metrics"];
+    std::vector<std::string> found;
+    for (const auto& e : res.effects) found.push_back(e.name);
+    if (has_truth_) {
+      m["truth_effects"] = truth_names_;
+      std::set<std::string> a(found.begin(), found.end()),
+          b(truth_names_.begin(), truth_names_.end());
+      m["effect_found_correct"] = a == b;
+    }
+    m["effects_found"] = found;
+    m["val_err_before_m"] = identify::ConsistencyError(val, val_before);
+    m["val_err_after_m"] = identify::ConsistencyError(val, val_after);
+    m["cal_err_before_m"] = identify::ConsistencyError(cal, cal_before);
+    m["cal_err_after_m"] = identify::ConsistencyError(cal, cal_after);
+    for (const auto& [name, e] :
+         {std::pair{"cal_before", &cal_before}, std::pair{"cal_after", &cal_after},
+          std::pair{"val_before", &val_before}, std::pair{"val_after", &val_after}}) {
+      const Stats s = Summarise(*e);
+      m[std::string(name) + "_row_err_mean_m"] = s.mean;
+      m[std::string(name) + "_row_err_std_m"] = s.std;
+      m[std::string(name) + "_row_err_max_m"] = s.max;
+    }
+    m["calibration_rows"] = cal.rows.size();
+    m["validation_rows"] = val.rows.size();
+    m["condition_number"] = res.condition_number;
+    // The fitted distance of each constrained group pair (a check on the scale: the
+    // consistency metric alone would reward shrinking the robot).
+    std::vector<double> fitted_distances;
+    for (const identify::GroupDistance& gd : cal.distances) {
+      fitted_distances.push_back(
+          (res.after.group_points[gd.a] - res.after.group_points[gd.b]).norm());
+    }
+    m["cal_group_distances_fitted_m"] = fitted_distances;
+    m["unidentifiable"] = res.unidentifiable;
+    m["indistinguishable"] = res.indistinguishable;
+
+    // NEES of the declared PPOE covariance (plus the point noise) before and after; the
+    // augmented model's sources are scaled to what the remaining residual supports.
+    const double nees_before = MeanNees(val, val_p0);
+    const double nees_after = MeanNees(val, val_p1);
+    const stats::ChiSquareBounds nb =
+        stats::MeanChiSquareBounds(3.0, static_cast<int>(val.rows.size()));
+    m["nees_before"] = nees_before;
+    m["nees_after"] = nees_after;
+    m["nees_bound_low"] = nb.lower;
+    m["nees_bound_high"] = nb.upper;
+    const double cal_nees_after = MeanNees(cal, cal_p1);
+    source_scale_ = std::isfinite(cal_nees_after) ? std::min(1.0, cal_nees_after / 3.0) : 1.0;
+    m["source_covariance_scale"] = source_scale_;
+
+    Json& id = (*ctx.summary)["identification"];
+    id["selection_rule"] = "forward stepwise, BIC = N ln(RSS/N) + k ln N, add while dBIC < -" +
+                           Num(opt_.bic_threshold);
+    id["steps"] = res.steps;
+    Json effects = Json::array();
+    for (const auto& e : res.effects) {
+      const identify::Candidate& c = em_->candidates()[e.candidate];
+      effects.push_back({{"effect", e.name},
+                         {"value", e.value},
+                         {"std", e.std},
+                         {"unit", c.unit},
+                         {"share", e.share}});
+    }
+    id["effects"] = effects;
+    Json corr = Json::array();
+    for (int i = 0; i < res.theta_corr.rows(); ++i) {
+      std::vector<double> row(res.theta_corr.cols());
+      for (int j = 0; j < res.theta_corr.cols(); ++j) row[j] = res.theta_corr(i, j);
+      corr.push_back(row);
+    }
+    id["correlation"] = corr;
+    id["rss_before"] = res.before.rss;
+    id["rss_after"] = res.after.rss;
+
+    WriteAugmented(ctx, res);
+    WriteResiduals(ctx, cal, cal_before, cal_after, cal_loads, cal_p0, "calibration");
+    WriteResiduals(ctx, val, val_before, val_after, val_loads, val_p0, "validation");
+    Plot(ctx, res, val, val_before, val_after, val_loads);
+  }
+
+ private:
+  DataSet Load(const Source& s, RunContext& ctx, const std::string& what) {
+    DataSet d;
+    switch (s.type) {
+      case Source::Type::kMukca:
+        for (const std::string& p : s.placements) {
+          identify::ReadMukcaPlacement(s.path + "/" + p, p, chain_->model.nq(), s.socket_distance_m,
+                                       &d);
+        }
+        break;
+      case Source::Type::kCsv: {
+        identify::ReadCalibrationCsv(s.path, chain_->q_joints, &d);
+        for (const auto& [a, b, dist] : s.distances) {
+          const auto ia = std::find(d.groups.begin(), d.groups.end(), a);
+          const auto ib = std::find(d.groups.begin(), d.groups.end(), b);
+          if (ia == d.groups.end() || ib == d.groups.end()) {
+            throw InputError(s.where + ": distance between unknown groups '" + a + "', '" + b +
+                             "'");
+          }
+          d.distances.push_back({static_cast<int>(ia - d.groups.begin()),
+                                 static_cast<int>(ib - d.groups.begin()), dist});
+        }
+        break;
+      }
+      case Source::Type::kSimulate:
+        Simulate(s, ctx, what, &d);
+        break;
+    }
+    if (d.rows.empty()) throw InputError(s.where + ": no " + what + " rows");
+    return d;
+  }
+
+  // The truth guides its end effector into two sockets per placement, from random starting
+  // configurations (a user hand-guiding the ball); the encoders are read there.
+  void Simulate(const Source& s, RunContext& ctx, const std::string& what, DataSet* d) {
+    std::mt19937_64 rng(ctx.seed * 1000003ULL + static_cast<std::uint64_t>(s.seed));
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const kinematics::PpoeModel& model = chain_->model;
+    const int nq = model.nq();
+    const sim::FrameRef ee = sim_->Frame(declared_.end_effector);
+    std::vector<int> act_index(nq);
+    for (int k = 0; k < nq; ++k) {
+      const auto& names = sim_->actuated_joints();
+      const auto it = std::find(names.begin(), names.end(), chain_->q_joints[k]);
+      if (it == names.end()) throw InputError(chain_->q_joints[k] + " is not actuated in truth");
+      act_index[k] = static_cast<int>(it - names.begin());
+    }
+    Eigen::VectorXd cmd = Eigen::VectorXd::Zero(sim_->num_actuated());
+    kinematics::PpoeData pd(model);
+    const auto true_point = [&](const Eigen::VectorXd& q) {
+      for (int k = 0; k < nq; ++k) cmd[act_index[k]] = q[k];
+      sim_->SetCommand(cmd);
+      sim_->Settle();
+      return Vec3(sim_->Pose(ee).translation());
+    };
+    std::normal_distribution<double> noise(0.0, 1.0);
+    int failed = 0;
+    for (int p = 0; p < s.sim_placements; ++p) {
+      const std::string set = what + "_" + std::to_string(p);
+      const int si = identify::LabelIndex(&d->sets, set);
+      Vec3 c0;
+      for (int k = 0; k < 3; ++k) c0[k] = ws_center_[k] + ws_half_[k] * u(rng);
+      const double yaw = M_PI * u(rng);
+      const Vec3 dir(std::cos(yaw), std::sin(yaw), 0.0);
+      int g[2];
+      for (int h = 0; h < 2; ++h) {
+        g[h] = identify::LabelIndex(&d->groups, set + "/socket_" + std::to_string(h));
+        const Vec3 target = c0 + (h - 0.5) * socket_distance_m_ * dir;
+        for (int r = 0; r < s.per_socket; ++r) {
+          Eigen::VectorXd q(nq);
+          bool ok = false;
+          for (int attempt = 0; attempt < 5 && !ok; ++attempt) {
+            for (int k = 0; k < nq; ++k) q[k] = 1.2 * u(rng) + ref_q_(k);
+            // Newton on the truth with the declared position Jacobian (close enough to
+            // converge), damped; the null space keeps the random start's posture.
+            for (int it = 0; it < 40; ++it) {
+              const Vec3 err = target - true_point(q);
+              if (err.norm() < 1e-7) {
+                ok = true;
+                break;
+              }
+              kinematics::ForwardKinematics(model, pd, q);
+              Eigen::Matrix<double, 6, Eigen::Dynamic> J(6, nq);
+              kinematics::ComputeFrameJacobian(model, pd, chain_->end_effector, J);
+              const Eigen::Matrix<double, 3, Eigen::Dynamic> Jp =
+                  pd.T_base_frame[chain_->end_effector].rotation() * J.topRows<3>();
+              const Eigen::MatrixXd JJt = Jp * Jp.transpose() + 1e-6 * Eigen::Matrix3d::Identity();
+              Eigen::VectorXd dq = Jp.transpose() * JJt.ldlt().solve(err);
+              const double n = dq.norm();
+              if (n > 0.3) dq *= 0.3 / n;
+              q += dq;
+            }
+            if (ok && !InLimits(q)) ok = false;
+          }
+          if (!ok) {
+            ++failed;
+            continue;
+          }
+          identify::Observation o;
+          o.q.resize(nq);
+          for (int k = 0; k < nq; ++k) {
+            const int jid = mj_name2id(sim_->model(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
+            o.q[k] = sim_->MotorPosition(jid) + sim_->EncoderOffset(jid) +
+                     encoder_noise_rad_ * noise(rng);
+          }
+          o.group = g[h];
+          o.set = si;
+          o.where = set + "/socket_" + std::to_string(h) + "/" + std::to_string(r);
+          d->rows.push_back(o);
+        }
+      }
+      d->distances.push_back({g[0], g[1], socket_distance_m_});
+    }
+    if (failed > 0) {
+      ctx.log(what + ": " + std::to_string(failed) +
+              " configurations skipped (the truth could not reach the socket within joint "
+              "limits)");
+    }
+    (*ctx.summary)["metrics"][what + "_skipped_configurations"] = failed;
+  }
+
+  double ref_q_(int k) const {
+    const int j = mj_name2id(mj_.get(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
+    if (mj_->jnt_limited[j]) return 0.5 * (mj_->jnt_range[2 * j] + mj_->jnt_range[2 * j + 1]);
+    return 0.0;
+  }
+
+  bool InLimits(const Eigen::VectorXd& q) const {
+    for (int k = 0; k < q.size(); ++k) {
+      const int j = mj_name2id(mj_.get(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
+      if (mj_->jnt_limited[j] &&
+          (q[k] < mj_->jnt_range[2 * j] || q[k] > mj_->jnt_range[2 * j + 1])) {
+        return false;
+      }
+    }
+    return true;
+  }
+
+  // Mean NEES of the rows' point errors under the declared PPOE position covariance plus the
+  // point noise, each row against its group's mean (or its measured point).
+  double MeanNees(const DataSet& d, const std::vector<Vec3>& p) const {
+    const std::vector<double> unused;
+    const int G = static_cast<int>(d.groups.size());
+    std::vector<Vec3> mean(G, Vec3::Zero());
+    std::vector<int> count(G, 0);
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      if (d.rows[r].group < 0) continue;
+      mean[d.rows[r].group] += p[r];
+      ++count[d.rows[r].group];
+    }
+    for (int g = 0; g < G; ++g) {
+      if (count[g]) mean[g] /= count[g];
+    }
+    kinematics::PpoeData pd(chain_->model);
+    double sum = 0.0;
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      kinematics::ForwardKinematicsWithCovariance(chain_->model, pd, d.rows[r].q,
+                                                  lie::CompoundOrder::kSecond);
+      const Mat3 R = pd.T_base_frame[chain_->end_effector].rotation();
+      const Mat3 S =
+          R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() * R.transpose() +
+          opt_.point_std_m * opt_.point_std_m * Mat3::Identity();
+      const Vec3 e = p[r] - (d.rows[r].group >= 0 ? mean[d.rows[r].group] : d.rows[r].p_base);
+      sum += e.dot(S.ldlt().solve(e));
+    }
+    return sum / std::max<size_t>(1, d.rows.size());
+  }
+
+  void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
+    std::ostringstream y;
+    y << "# Declared model augmented by flexbench closed_loop: the identified effects with their\n"
+         "# fitted parameters, and the PPOE sources scaled by "
+      << Num(source_scale_)
+      << " (what the\n# remaining calibration residual supports: mean NEES -> 3).\n";
+    y << "model: " << declared_.model_path << "\n";
+    y << "base: " << declared_.base << "\n";
+    y << "actuated_joints: [";
+    for (size_t i = 0; i < declared_.actuated_joints.size(); ++i) {
+      y << (i ? ", " : "") << declared_.actuated_joints[i];
+    }
+    y << "]\nend_effector: " << declared_.end_effector << "\n";
+    if (!declared_.observed_frames.empty()) {
+      y << "observed_frames: [";
+      for (size_t i = 0; i < declared_.observed_frames.size(); ++i) {
+        y << (i ? ", " : "") << declared_.observed_frames[i];
+      }
+      y << "]\n";
+    }
+    if (!declared_.sources.empty()) {
+      y << "sources:\n";
+      for (const sim::DeclaredSource& s : declared_.sources) {
+        y << "  - at: " << s.at << "\n";
+        if (s.about_axis_rad > 0) {
+          y << "    about_axis_deg: " << Num(std::sqrt(source_scale_) * s.about_axis_rad / kDeg)
+            << "\n";
+        }
+        if (!s.cov.isZero()) {
+          y << "    covariance: [";
+          for (int i = 0; i < 36; ++i) y << (i ? ", " : "") << Num(source_scale_ * s.cov(i));
+          y << "]\n";
+        }
+      }
+    }
+    y << "identified_effects:\n";
+    for (const auto& e : res.effects) {
+      y << "  - effect: " << e.name << "\n    value: [";
+      for (size_t k = 0; k < e.value.size(); ++k) y << (k ? ", " : "") << Num(e.value[k]);
+      y << "]\n    std: [";
+      for (size_t k = 0; k < e.std.size(); ++k) y << (k ? ", " : "") << Num(e.std[k]);
+      y << "]\n    unit: " << em_->candidates()[e.candidate].unit << "\n";
+    }
+    WriteFileAtomic(ctx.out->File("declared_augmented.yaml"), y.str());
+  }
+
+  void WriteResiduals(RunContext& ctx, const DataSet& d, const std::vector<double>& before,
+                      const std::vector<double>& after,
+                      const std::vector<identify::ConfigLoads>& loads, const std::vector<Vec3>& p,
+                      const std::string& name) const {
+    std::ostringstream c;
+    c << "row,set,group,where,err_before_m,err_after_m,reach_m,max_abs_tau_Nm,x_m,y_m,z_m\n";
+    kinematics::PpoeData pd(chain_->model);
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      kinematics::ForwardKinematics(chain_->model, pd, d.rows[r].q);
+      const double reach = pd.T_base_frame[chain_->end_effector].translation().norm();
+      c << r << "," << d.sets[d.rows[r].set] << ","
+        << (d.rows[r].group >= 0 ? d.groups[d.rows[r].group] : "") << "," << d.rows[r].where << ","
+        << Num(before[r]) << "," << Num(after[r]) << "," << Num(reach) << ","
+        << Num(loads[r].tau.size() ? loads[r].tau.cwiseAbs().maxCoeff() : 0.0) << ","
+        << Num(p[r].x()) << "," << Num(p[r].y()) << "," << Num(p[r].z()) << "\n";
+    }
+    WriteFileAtomic(ctx.out->File(name + "_residuals.csv"), c.str());
+  }
+
+  // Residual before and after against the quantity that exposed the first chosen effect.
+  void Plot(RunContext& ctx, const identify::IdentifyResult& res, const DataSet& d,
+            const std::vector<double>& before, const std::vector<double>& after,
+            const std::vector<identify::ConfigLoads>& loads) const {
+    std::string xl = "row";
+    std::vector<double> x(d.rows.size());
+    for (size_t r = 0; r < x.size(); ++r) x[r] = r;
+    if (!res.effects.empty()) {
+      const identify::Candidate& c = em_->candidates()[res.effects[0].candidate];
+      if (c.q_index >= 0 && (c.type == identify::EffectType::kJointCompliance ||
+                             c.type == identify::EffectType::kBacklash)) {
+        xl = "gravity torque at " + c.location + " [N m]";
+        for (size_t r = 0; r < x.size(); ++r) x[r] = loads[r].tau[c.q_index];
+      } else if (c.q_index >= 0) {
+        xl = c.location + " [deg]";
+        for (size_t r = 0; r < x.size(); ++r) x[r] = d.rows[r].q[c.q_index] / kDeg;
+      } else if (c.type == identify::EffectType::kBaseCompliance) {
+        xl = "moment at the mount, |M_xy| [N m]";
+        for (size_t r = 0; r < x.size(); ++r) x[r] = loads[r].M_mount.head<2>().norm();
+      } else {
+        xl = "reach [m]";
+        kinematics::PpoeData pd(chain_->model);
+        for (size_t r = 0; r < x.size(); ++r) {
+          kinematics::ForwardKinematics(chain_->model, pd, d.rows[r].q);
+          x[r] = pd.T_base_frame[chain_->end_effector].translation().norm();
+        }
+      }
+    }
+    std::vector<double> b_mm(before.size()), a_mm(after.size());
+    for (size_t r = 0; r < before.size(); ++r) b_mm[r] = 1e3 * before[r], a_mm[r] = 1e3 * after[r];
+    render::Figure fig(900, 560);
+    fig.title = "Validation residual before and after identification";
+    render::Axes& ax = fig.axes();
+    ax.x_label = xl;
+    ax.y_label = "distance from the socket's mean [mm]";
+    ax.AddScatter("declared model", x, b_mm).marker = render::Marker::kCircle;
+    ax.AddScatter("with identified effects", x, a_mm).marker = render::Marker::kSquare;
+    ax.legend_position = render::LegendPosition::kTopRight;
+    ax.y_min = 0.0;
+    fig.SavePng(ctx.out->File("residual_before_after.png").string());
+  }
+
+  std::string model_path_;
+  sim::DeclaredModel declared_;
+  std::vector<std::pair<std::string, std::string>> candidate_specs_;
+  std::vector<int> candidates_;
+  identify::IdentifyOptions opt_;
+  Source calibration_, validation_;
+  sim::EffectList effects_;
+  std::vector<std::string> truth_names_;
+  bool has_truth_ = false;
+  double socket_distance_m_ = 0.05;
+  double encoder_noise_rad_ = 0.0;
+  Vec3 ws_center_ = Vec3::Zero();
+  Vec3 ws_half_ = Vec3::Zero();
+  sim::MjModelPtr mj_;
+  std::unique_ptr<sim::DeclaredChain> chain_;
+  std::unique_ptr<identify::EffectModel> em_;
+  std::unique_ptr<sim::Simulation> sim_;
+  double source_scale_ = 1.0;
+};
+
+}  // namespace
+
+std::unique_ptr<ScenarioKind> MakeClosedLoopKind() { return std::make_unique<ClosedLoopKind>(); }
+
+}  // namespace flexbench::scenarios

@@ -1,0 +1,329 @@
+// Closing the loop (issue 8): the augmented kinematics against MuJoCo, identification of known
+// effects from synthetic data, unidentifiable and indistinguishable candidates, bad CSV input,
+// and the MUKCa real-data scenario (skipped when ../shared/data/mukca is absent).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <random>
+
+#include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
+#include "scenarios/identify/calibration_data.h"
+#include "scenarios/identify/identify.h"
+#include "scenarios/runner/runner.h"
+#include "sim/declared_chain.h"
+#include "sim/mujoco_model.h"
+#include "sim/simulation.h"
+#include "tests/common/test_util.h"
+
+namespace flexbench::identify {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr char kArm3[] = R"(
+<mujoco model="arm3">
+  <compiler angle="radian" autolimits="true"/>
+  <worldbody>
+    <body name="base" pos="0 0 0.1">
+      <joint name="j1" axis="0 0 1"/>
+      <geom type="cylinder" size="0.05 0.05" mass="2"/>
+      <body name="upper" pos="0 0 0.1">
+        <joint name="j2" axis="0 1 0"/>
+        <geom type="capsule" fromto="0 0 0 0.4 0 0" size="0.03" mass="3"/>
+        <body name="fore" pos="0.4 0 0">
+          <joint name="j3" axis="0 1 0"/>
+          <geom type="capsule" fromto="0 0 0 0.35 0 0" size="0.025" mass="2"/>
+          <site name="ee" pos="0.35 0 0.02"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>)";
+
+// j2 and j3 turn about one axis line: their offsets cannot be told apart by any data.
+constexpr char kTwinJoints[] = R"(
+<mujoco model="twin">
+  <compiler angle="radian" autolimits="true"/>
+  <worldbody>
+    <body name="base" pos="0 0 0.1">
+      <joint name="j1" axis="0 0 1"/>
+      <geom type="cylinder" size="0.05 0.05" mass="2"/>
+      <body name="upper" pos="0 0 0.1">
+        <joint name="j2" axis="0 1 0"/>
+        <geom type="sphere" size="0.03" mass="1"/>
+        <body name="fore" pos="0 0 0">
+          <joint name="j3" axis="0 1 0"/>
+          <geom type="capsule" fromto="0 0 0 0.6 0 0" size="0.025" mass="2"/>
+          <site name="ee" pos="0.6 0 0.02"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>)";
+
+struct Fixture {
+  sim::MjModelPtr m;
+  sim::DeclaredChain chain;
+  std::unique_ptr<EffectModel> em;
+};
+
+Fixture Make(const char* xml, const std::vector<std::string>& joints) {
+  Fixture f;
+  f.m = sim::LoadModelFromString(xml, "inline.xml");
+  sim::DeclaredModel d;
+  d.file = "inline.declared";
+  d.actuated_joints = joints;
+  d.end_effector = "ee";
+  f.chain = sim::BuildDeclaredChain(f.m.get(), d);
+  f.em = std::make_unique<EffectModel>(f.m.get(), f.chain, f.chain.end_effector);
+  return f;
+}
+
+int Candidate(const EffectModel& em, const std::string& name) {
+  const int c = em.FindCandidate(name);
+  EXPECT_GE(c, 0) << name;
+  return c;
+}
+
+// Measured points of the truth (the model with `active` at `theta`) plus Gaussian noise.
+DataSet PointData(const EffectModel& em, const std::vector<int>& active,
+                  const Eigen::VectorXd& theta, int rows, double noise, std::mt19937_64& rng) {
+  DataSet d;
+  d.sets = {"s"};
+  std::uniform_real_distribution<double> u(-1.5, 1.5);
+  std::normal_distribution<double> n(0.0, noise);
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  for (int r = 0; r < rows; ++r) {
+    Observation o;
+    o.q = Eigen::VectorXd(em.chain().nq());
+    for (int k = 0; k < o.q.size(); ++k) o.q[k] = u(rng);
+    const ConfigLoads L = em.Loads(o.q);
+    o.p_base = em.Predict(o.q, L, active, theta.data(), ws) + Vec3(n(rng), n(rng), n(rng));
+    d.rows.push_back(o);
+  }
+  return d;
+}
+
+std::vector<int> AllCandidates(const EffectModel& em, const std::string& type = "") {
+  std::vector<int> c;
+  for (size_t i = 0; i < em.candidates().size(); ++i) {
+    if (type.empty() || type == ToString(em.candidates()[i].type)) c.push_back(i);
+  }
+  return c;
+}
+
+TEST(EffectModel, WithoutEffectsItIsMujocosKinematics) {
+  auto sim = sim::Simulation::Load(testing::SourceDir() + "/models/rover_arm.xml");
+  sim::DeclaredModel d =
+      sim::LoadDeclaredModel(testing::SourceDir() + "/models/rover_arm.declared.yaml");
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(sim->nominal_model(), d);
+  const EffectModel em(sim->nominal_model(), chain, chain.end_effector);
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const int j3 = Candidate(em, "joint_offset@j3");
+  for (int trial = 0; trial < 10; ++trial) {
+    Eigen::VectorXd cmd = Eigen::VectorXd::Zero(sim->num_actuated());
+    for (int k = 0; k < cmd.size(); ++k) cmd[k] = u(rng);
+    Eigen::VectorXd q(chain.model.nq());
+    for (int k = 0; k < q.size(); ++k) {
+      const auto& names = sim->actuated_joints();
+      q[k] = cmd[std::find(names.begin(), names.end(), chain.q_joints[k]) - names.begin()];
+    }
+    const ConfigLoads L = em.Loads(q);
+    const Vec3 p = em.Predict(q, L, {}, nullptr, ws);
+    EXPECT_LT((p - sim->NominalPose("ee", cmd).translation()).norm(), 1e-9);
+    // A joint offset is the joint turned further: MuJoCo at q + a.
+    const double a = 0.02;
+    Eigen::VectorXd cmd_a = cmd;
+    const auto& names = sim->actuated_joints();
+    cmd_a[std::find(names.begin(), names.end(), "j3") - names.begin()] += a;
+    const Vec3 pa = em.Predict(q, L, {j3}, &a, ws);
+    EXPECT_LT((pa - sim->NominalPose("ee", cmd_a).translation()).norm(), 1e-9);
+    // Loads: the gravity torque each joint holds is MuJoCo's qfrc_bias at rest.
+    const Eigen::VectorXd g = sim->GravityTorque(cmd);
+    // The arm's joints (the mast is not on the way to the end effector and carries no load here).
+    for (int k = 0; k < 6; ++k) {
+      ASSERT_EQ(chain.q_joints[k], "j" + std::to_string(k + 1));
+      const double tau_mj =
+          g[std::find(names.begin(), names.end(), chain.q_joints[k]) - names.begin()];
+      EXPECT_NEAR(L.tau[k], tau_mj, 1e-9 * (1.0 + std::abs(tau_mj))) << chain.q_joints[k];
+    }
+  }
+}
+
+TEST(Identify, FindsAnOffsetAndAGearComplianceFromPoints) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  const std::vector<int> truth = {Candidate(*f.em, "joint_offset@j2"),
+                                  Candidate(*f.em, "joint_compliance@j3")};
+  Eigen::VectorXd theta(2);
+  theta << 0.01, 2e-3;
+  std::mt19937_64 rng(11);
+  const DataSet d = PointData(*f.em, truth, theta, 80, 1e-4, rng);
+  const auto loads = ComputeLoads(*f.em, d);
+  const IdentifyResult r = Identify(*f.em, d, loads, AllCandidates(*f.em), IdentifyOptions{});
+  std::vector<std::string> found;
+  for (const auto& e : r.effects) found.push_back(e.name);
+  std::sort(found.begin(), found.end());
+  EXPECT_EQ(found, (std::vector<std::string>{"joint_compliance@j3", "joint_offset@j2"}));
+  for (const auto& e : r.effects) {
+    const double want = e.name == "joint_offset@j2" ? theta[0] : theta[1];
+    EXPECT_NEAR(e.value[0], want, 4.0 * e.std[0]) << e.name;
+    EXPECT_LT(e.std[0], 0.05 * std::abs(want)) << e.name;
+  }
+  // The fit leaves the noise: RSS of whitened residuals ~ its degrees of freedom.
+  EXPECT_LT(r.after.rss, 1.5 * r.after.num_residuals);
+  EXPECT_GT(r.before.rss, 100.0 * r.after.rss);
+}
+
+// Rows of `group` socket points reached by the truth from several starting postures.
+DataSet SocketData(const EffectModel& em, const std::vector<int>& active,
+                   const Eigen::VectorXd& theta, int sockets, std::mt19937_64& rng) {
+  DataSet d;
+  d.sets = {"s"};
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  const int nq = em.chain().nq();
+  for (int s = 0; s < sockets; ++s) {
+    const Vec3 target(0.45 + 0.1 * u(rng), 0.3 * u(rng), 0.25 + 0.1 * u(rng));
+    const int g = LabelIndex(&d.groups, "socket" + std::to_string(s));
+    for (int start = 0; start < 4; ++start) {
+      // Both elbows, facing the socket and reaching over the top: all postures of a 3-DoF arm.
+      Eigen::VectorXd q(nq);
+      q[0] = std::atan2(target.y(), target.x()) + (start / 2 ? M_PI : 0.0) + 0.1 * u(rng);
+      q[1] = (start / 2 ? 1.0 : -1.0) * (-0.5 + 0.1 * u(rng));
+      q[2] = (start % 2 ? 1.0 : -1.0) * (1.2 + 0.1 * u(rng));
+      for (int it = 0; it < 60; ++it) {
+        const Vec3 p = em.Predict(q, em.Loads(q), active, theta.data(), ws);
+        if ((target - p).norm() < 1e-12) break;
+        Eigen::Matrix3Xd J(3, nq);
+        for (int k = 0; k < nq; ++k) {
+          Eigen::VectorXd qk = q;
+          qk[k] += 1e-7;
+          J.col(k) = (em.Predict(qk, em.Loads(qk), active, theta.data(), ws) - p) / 1e-7;
+        }
+        q += J.transpose() * (J * J.transpose() + 1e-9 * Mat3::Identity()).ldlt().solve(target - p);
+      }
+      Observation o;
+      o.q = q + 1e-5 * Eigen::VectorXd::NullaryExpr(nq, [&] { return noise(rng); });  // encoders
+      o.group = g;
+      d.rows.push_back(o);
+    }
+  }
+  return d;
+}
+
+TEST(Identify, AnOffsetTheSocketsAbsorbIsUnidentifiableAndNeverFitted) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  const std::vector<int> truth = {Candidate(*f.em, "joint_offset@j2")};
+  const Eigen::VectorXd theta = Eigen::VectorXd::Constant(1, 0.02);
+  std::mt19937_64 rng(12);
+  const DataSet d = SocketData(*f.em, truth, theta, 8, rng);
+  const auto loads = ComputeLoads(*f.em, d);
+  const IdentifyResult r =
+      Identify(*f.em, d, loads, AllCandidates(*f.em, "joint_offset"), IdentifyOptions{});
+  std::string log;
+  for (const auto& s : r.steps) log += s + "\n";
+  ASSERT_EQ(r.effects.size(), 1u) << log;
+  EXPECT_EQ(r.effects[0].name, "joint_offset@j2");
+  EXPECT_NEAR(r.effects[0].value[0], 0.02, 4.0 * r.effects[0].std[0]);
+  // Turning the base about the vertical moves every socket alike: the free socket points absorb it.
+  EXPECT_NE(std::find(r.unidentifiable.begin(), r.unidentifiable.end(), "joint_offset@j1"),
+            r.unidentifiable.end());
+}
+
+TEST(Identify, TwoCandidatesTheDataCannotTellApartAreBothNamedNeverOne) {
+  const Fixture f = Make(kTwinJoints, {"j1", "j2", "j3"});
+  const std::vector<int> truth = {Candidate(*f.em, "joint_offset@j3")};
+  const Eigen::VectorXd theta = Eigen::VectorXd::Constant(1, 0.01);
+  std::mt19937_64 rng(13);
+  const DataSet d = PointData(*f.em, truth, theta, 40, 1e-4, rng);
+  const auto loads = ComputeLoads(*f.em, d);
+  const IdentifyResult r =
+      Identify(*f.em, d, loads, AllCandidates(*f.em, "joint_offset"), IdentifyOptions{});
+  // The correction is kept (the data supports it) but no single joint is named as its cause.
+  ASSERT_EQ(r.effects.size(), 1u);
+  const std::string& name = r.effects[0].name;
+  EXPECT_NE(name.find("joint_offset@j2"), std::string::npos) << name;
+  EXPECT_NE(name.find("joint_offset@j3"), std::string::npos) << name;
+  EXPECT_NE(name.find(" | "), std::string::npos) << name;
+  EXPECT_NEAR(r.effects[0].value[0], 0.01, 4.0 * r.effects[0].std[0]);
+  ASSERT_EQ(r.indistinguishable.size(), 1u);
+  std::vector<std::string> names = r.indistinguishable[0];
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"joint_offset@j2", "joint_offset@j3"}));
+}
+
+class CalibrationCsv : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("flexbench_csv_" + std::to_string(::getpid()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Write(const std::string& text) {
+    const fs::path p = dir_ / "data.csv";
+    testing::WriteFile(p, text);
+    return p.string();
+  }
+  std::string Error(const std::string& text) {
+    DataSet d;
+    try {
+      ReadCalibrationCsv(Write(text), {"j1", "j2"}, &d);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "";
+  }
+  fs::path dir_;
+};
+
+TEST_F(CalibrationCsv, ReadsGroupsSetsAndPoints) {
+  DataSet d;
+  ReadCalibrationCsv(Write("# socket data\nj2,j1,group,set\n0.1,0.2,a,p1\n0.3,0.4,b,p1\n"
+                           "0.5,0.6,a,p2\n"),
+                     {"j1", "j2"}, &d);
+  ASSERT_EQ(d.rows.size(), 3u);
+  EXPECT_EQ(d.rows[0].q, (Eigen::VectorXd(2) << 0.2, 0.1).finished());
+  EXPECT_EQ(d.groups, (std::vector<std::string>{"a", "b"}));
+  EXPECT_EQ(d.sets, (std::vector<std::string>{"p1", "p2"}));
+  EXPECT_EQ(d.rows[2].group, 0);
+  DataSet p;
+  ReadCalibrationCsv(Write("j1,j2,x,y,z\n0,0,1,2,3\n"), {"j1", "j2"}, &p);
+  EXPECT_EQ(p.rows[0].p_base, Vec3(1, 2, 3));
+  EXPECT_EQ(p.rows[0].group, -1);
+}
+
+TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
+  EXPECT_NE(Error("j1,j2,group\n0,0,a\n0,0\n").find("data.csv:3: 2 columns, the header has 3"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,j2,group\n0,nan,a\n").find("data.csv:2: column 'j2' is nan"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,j2,j9,group\n0,0,0,a\n").find("data.csv:1: column 'j9' is neither"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,group\n0,a\n").find("no column for joint 'j2'"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,x,y\n0,0,1,2\n").find("x, y and z go together"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,group\n0,abc,a\n").find("'abc' is not a number"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,group\n").find("no data rows"), std::string::npos);
+}
+
+TEST(ClosedLoopMukca, RealPandaDataMeetsItsGates) {
+  const fs::path data = fs::path(testing::SourceDir()) / "../shared/data/mukca/data/panda_6";
+  if (!fs::exists(data)) {
+    GTEST_SKIP() << "MUKCa recordings not found at " << data.string()
+                 << " (read from ../shared at run time, never copied)";
+  }
+  scenarios::RunOptions o;
+  o.scenario_path = testing::SourceDir() + "/scenarios/closed_loop_mukca_panda.yaml";
+  o.out_dir =
+      (fs::temp_directory_path() / ("flexbench_mukca_" + std::to_string(::getpid()))).string();
+  o.check_gates = true;
+  EXPECT_EQ(scenarios::RunScenario(o), scenarios::kExitOk);
+  fs::remove_all(o.out_dir);
+}
+
+}  // namespace
+}  // namespace flexbench::identify
