@@ -1,6 +1,5 @@
 // flexbench: run scenarios that score pose estimators of flexible arms against MuJoCo's truth.
 #include <CLI/CLI.hpp>
-
 #include <filesystem>
 #include <iostream>
 
@@ -30,6 +29,20 @@ int main(int argc, char** argv) {
       "inspect", "print a model's joints, sensors, cameras, tags and effects as JSON");
   inspect_cmd->add_option("model", inspect_path, "MJCF model or declared-model YAML")->required();
 
+  // identify: the closed_loop kind on a user's own model, declared model and CSV files.
+  std::string id_model, id_declared, id_cal, id_val, id_out;
+  std::vector<std::string> id_candidates;
+  double id_point_std = 1e-4;
+  CLI::App* identify_cmd = app.add_subcommand(
+      "identify", "find the effects a declared model lacks from measured data (closed_loop)");
+  identify_cmd->add_option("--model", id_model, "MJCF or URDF of the robot")->required();
+  identify_cmd->add_option("--declared", id_declared, "declared-model YAML")->required();
+  identify_cmd->add_option("--calibration", id_cal, "calibration CSV (README format)")->required();
+  identify_cmd->add_option("--validation", id_val, "validation CSV (README format)")->required();
+  identify_cmd->add_option("--candidates", id_candidates,
+                           "effect types or type@location to test (default: all)");
+  identify_cmd->add_option("--point-std", id_point_std, "point noise [m] (default 1e-4)");
+  identify_cmd->add_option("--out", id_out, "output folder (default: out/identify)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -39,6 +52,11 @@ int main(int argc, char** argv) {
   if (*seed_opt) run.seed = seed;
   if (*run_cmd) return flexbench::scenarios::RunScenario(run);
   if (*inspect_cmd) return flexbench::scenarios::InspectCommand(inspect_path);
+  if (*identify_cmd) {
+    return flexbench::scenarios::IdentifyCommand(id_model, id_declared, id_cal, id_val,
+                                                 id_candidates, id_point_std,
+                                                 id_out.empty() ? "out/identify" : id_out);
+  }
   if (*list_cmd) {
     if (!std::filesystem::is_directory(list_dir) &&
         std::filesystem::is_directory(std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios")) {

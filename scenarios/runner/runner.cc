@@ -5,13 +5,15 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
+#include <sstream>
 
 #include "estimators/error.h"
-#include "sim/config.h"
 #include "scenarios/runner/gates.h"
 #include "scenarios/runner/output.h"
 #include "scenarios/runner/scenario_kind.h"
+#include "sim/config.h"
 
 namespace fs = std::filesystem;
 
@@ -48,7 +50,8 @@ int RunScenario(const RunOptions& options) {
     kind->Configure(root);
     root.CheckNoUnknownKeys();
 
-    const fs::path out_dir = options.out_dir.empty() ? fs::path("out") / name : fs::path(options.out_dir);
+    const fs::path out_dir =
+        options.out_dir.empty() ? fs::path("out") / name : fs::path(options.out_dir);
     OutputDir out(out_dir);
 
     Json summary;
@@ -130,6 +133,67 @@ int ListScenarios(const std::string& scenarios_dir) {
                 description.c_str());
   }
   return kExitOk;
+}
+
+}  // namespace flexbench::scenarios
+
+namespace flexbench::scenarios {
+namespace {
+
+std::string Quoted(const std::string& s) {
+  std::string q = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') q += '\\';
+    q += c;
+  }
+  return q + "\"";
+}
+
+}  // namespace
+
+int IdentifyCommand(const std::string& model, const std::string& declared,
+                    const std::string& calibration_csv, const std::string& validation_csv,
+                    const std::vector<std::string>& candidates, double point_std_m,
+                    const std::string& out_dir) {
+  namespace fs = std::filesystem;
+  for (const auto& [what, path] :
+       {std::pair{"--model", model}, std::pair{"--declared", declared},
+        std::pair{"--calibration", calibration_csv}, std::pair{"--validation", validation_csv}}) {
+    if (!fs::exists(path)) {
+      std::cerr << "flexbench: error: " << what << " " << path << ": not found\n";
+      return kExitBadInput;
+    }
+  }
+  // The command line becomes a closed_loop scenario file (absolute paths), run as any other.
+  std::ostringstream y;
+  y << "scenario: identify\nkind: closed_loop\nseed: 0\n"
+    << "model: " << Quoted(fs::absolute(model).string()) << "\n"
+    << "declared: " << Quoted(fs::absolute(declared).string()) << "\n"
+    << "calibration: {csv: " << Quoted(fs::absolute(calibration_csv).string()) << "}\n"
+    << "validation: {csv: " << Quoted(fs::absolute(validation_csv).string()) << "}\n"
+    << "point_std_m: " << point_std_m << "\n";
+  if (!candidates.empty()) {
+    y << "candidates: [";
+    for (size_t i = 0; i < candidates.size(); ++i) y << (i ? ", " : "") << Quoted(candidates[i]);
+    y << "]\n";
+  }
+  const fs::path file =
+      fs::temp_directory_path() / ("flexbench_identify_" + std::to_string(::getpid()) + ".yaml");
+  {
+    std::ofstream out(file);
+    out << y.str();
+    if (!out) {
+      std::cerr << "flexbench: error: cannot write " << file.string() << "\n";
+      return kExitInternal;
+    }
+  }
+  RunOptions o;
+  o.scenario_path = file.string();
+  o.out_dir = out_dir;
+  const int code = RunScenario(o);
+  std::error_code ec;
+  fs::remove(file, ec);
+  return code;
 }
 
 }  // namespace flexbench::scenarios

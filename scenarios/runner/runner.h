@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace flexbench::scenarios {
 
@@ -22,6 +23,13 @@ struct RunOptions {
 
 // Runs one scenario; prints one line on stderr for bad input. Returns an exit code.
 int RunScenario(const RunOptions& options);
+
+// `flexbench identify`: a closed_loop run on a user's files (paths as given on the command
+// line). Returns an exit code.
+int IdentifyCommand(const std::string& model, const std::string& declared,
+                    const std::string& calibration_csv, const std::string& validation_csv,
+                    const std::vector<std::string>& candidates, double point_std_m,
+                    const std::string& out_dir);
 
 // Prints the scenario kinds and the scenario files found under `scenarios_dir`.
 int ListScenarios(const std::string& scenarios_dir);

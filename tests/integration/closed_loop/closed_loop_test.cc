@@ -310,6 +310,49 @@ TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
   EXPECT_NE(Error("j1,j2,group\n").find("no data rows"), std::string::npos);
 }
 
+// "Bring your own robot and data": a model file, a declared model and two CSVs through the CLI.
+TEST(IdentifyCommand, FindsTheEffectInAUsersCsvAndRejectsABadRow) {
+  const fs::path dir = fs::temp_directory_path() / ("flexbench_byo_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  testing::WriteFile(dir / "arm3.xml", kArm3);
+  testing::WriteFile(dir / "arm3.declared.yaml",
+                     "model: arm3.xml\nactuated_joints: [j1, j2, j3]\nend_effector: ee\n"
+                     "sources:\n  - {at: j2, about_axis_deg: 0.5}\n");
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  const std::vector<int> truth = {Candidate(*f.em, "joint_offset@j2")};
+  const Eigen::VectorXd theta = Eigen::VectorXd::Constant(1, -0.01);
+  std::mt19937_64 rng(21);
+  for (const char* name : {"cal.csv", "val.csv"}) {
+    const DataSet d = PointData(*f.em, truth, theta, 40, 1e-4, rng);
+    std::string csv = "j1,j2,j3,x,y,z\n";
+    char row[256];
+    for (const Observation& o : d.rows) {
+      std::snprintf(row, sizeof(row), "%.12g,%.12g,%.12g,%.12g,%.12g,%.12g\n", o.q[0], o.q[1],
+                    o.q[2], o.p_base.x(), o.p_base.y(), o.p_base.z());
+      csv += row;
+    }
+    testing::WriteFile(dir / name, csv);
+  }
+  const std::string cmd = testing::BinDir() + "/flexbench identify --model " +
+                          (dir / "arm3.xml").string() + " --declared " +
+                          (dir / "arm3.declared.yaml").string() + " --validation " +
+                          (dir / "val.csv").string() + " --out " + (dir / "out").string();
+  const testing::CommandResult ok =
+      testing::RunCommand(cmd + " --calibration " + (dir / "cal.csv").string());
+  ASSERT_EQ(ok.exit_code, 0) << ok.err;
+  const std::string summary = testing::ReadFile(dir / "out" / "summary.json");
+  EXPECT_NE(summary.find("\"effects_found\": [\n      \"joint_offset@j2\"\n    ]"),
+            std::string::npos)
+      << summary.substr(0, 2000);
+  EXPECT_TRUE(fs::exists(dir / "out" / "declared_augmented.yaml"));
+  testing::WriteFile(dir / "bad.csv", "j1,j2,j3,x,y,z\n0,0,0,1,1,1\n0,nan,0,1,1,1\n");
+  const testing::CommandResult bad =
+      testing::RunCommand(cmd + " --calibration " + (dir / "bad.csv").string());
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("bad.csv:3: column 'j2' is nan"), std::string::npos) << bad.err;
+  fs::remove_all(dir);
+}
+
 TEST(ClosedLoopMukca, RealPandaDataMeetsItsGates) {
   const fs::path data = fs::path(testing::SourceDir()) / "../shared/data/mukca/data/panda_6";
   if (!fs::exists(data)) {

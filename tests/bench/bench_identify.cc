@@ -1,0 +1,90 @@
+// Speed of identification (issue 8): 200 configurations of rover_arm with measured end-effector
+// points, 20 candidate effects, two of them in the data (a gear compliance at j2, an encoder
+// offset at j3). BM_Identify runs the whole selection (loads, stepwise BIC, swaps, equivalents,
+// covariance, shares). Target: at most 10 s. BM_Predict is one augmented forward kinematics.
+// Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true; quote medians.
+#include <benchmark/benchmark.h>
+
+#include <random>
+
+#include "scenarios/identify/identify.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "sim/mujoco_model.h"
+
+namespace flexbench::identify {
+namespace {
+
+struct Setup {
+  sim::MjModelPtr m;
+  sim::DeclaredChain chain;
+  std::unique_ptr<EffectModel> em;
+  DataSet data;
+  std::vector<int> candidates;
+};
+
+Setup& Rover() {
+  static Setup s = [] {
+    Setup s;
+    const std::string dir = std::string(FLEXBENCH_SOURCE_DIR) + "/models/";
+    s.m = sim::LoadModel(dir + "rover_arm.xml");
+    const sim::DeclaredModel d = sim::LoadDeclaredModel(dir + "rover_arm.declared.yaml");
+    s.chain = sim::BuildDeclaredChain(s.m.get(), d);
+    s.em = std::make_unique<EffectModel>(s.m.get(), s.chain, s.chain.end_effector);
+    const std::vector<int> truth = {s.em->FindCandidate("joint_compliance@j2"),
+                                    s.em->FindCandidate("joint_offset@j3")};
+    const double theta[2] = {1.2e-3, 0.005};
+    std::mt19937_64 rng(1);
+    std::uniform_real_distribution<double> u(-1.2, 1.2);
+    std::normal_distribution<double> n(0.0, 1e-4);
+    EffectModel::Workspace ws = s.em->MakeWorkspace();
+    s.data.sets = {"bench"};
+    for (int r = 0; r < 200; ++r) {
+      Observation o;
+      o.q = Eigen::VectorXd(s.chain.model.nq());
+      for (int k = 0; k < o.q.size(); ++k) o.q[k] = u(rng);
+      o.p_base =
+          s.em->Predict(o.q, s.em->Loads(o.q), truth, theta, ws) + Vec3(n(rng), n(rng), n(rng));
+      s.data.rows.push_back(o);
+    }
+    for (size_t i = 0; i < s.em->candidates().size() && s.candidates.size() < 20; ++i) {
+      s.candidates.push_back(static_cast<int>(i));
+    }
+    return s;
+  }();
+  return s;
+}
+
+void BM_Identify(benchmark::State& state) {
+  Setup& s = Rover();
+  size_t found = 0;
+  for (auto _ : state) {
+    const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
+    const IdentifyResult r = Identify(*s.em, s.data, loads, s.candidates, IdentifyOptions{});
+    found = r.effects.size();
+    benchmark::DoNotOptimize(found);
+  }
+  state.counters["configurations"] = s.data.rows.size();
+  state.counters["candidates"] = s.candidates.size();
+  state.counters["effects_found"] = found;
+}
+BENCHMARK(BM_Identify)->Unit(benchmark::kMillisecond)->Iterations(1);
+
+void BM_Predict(benchmark::State& state) {
+  Setup& s = Rover();
+  const std::vector<int> active = {s.em->FindCandidate("joint_compliance@j2"),
+                                   s.em->FindCandidate("link_bending@j3"),
+                                   s.em->FindCandidate("base_compliance@base_plate")};
+  const double theta[4] = {1e-3, 1e-4, 1e-4, 1e-4};
+  const ConfigLoads loads = s.em->Loads(s.data.rows[0].q);
+  EffectModel::Workspace ws = s.em->MakeWorkspace();
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(s.em->Predict(s.data.rows[0].q, loads, active, theta, ws));
+  }
+}
+BENCHMARK(BM_Predict);
+
+}  // namespace
+}  // namespace flexbench::identify
+
+BENCHMARK_MAIN();
