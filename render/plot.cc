@@ -8,6 +8,8 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "estimators/error.h"
+
 namespace flexbench::render {
 namespace {
 
@@ -414,6 +416,97 @@ std::vector<double> NiceTicks(double lo, double hi, int target) {
   const long k1 = static_cast<long>(std::floor(hi / step + 1e-9));
   for (long k = k0; k <= k1; ++k) ticks.push_back(k * step);
   return ticks;
+}
+
+}  // namespace flexbench::render
+
+namespace flexbench::render {
+namespace {
+
+cv::Scalar Viridis(double t) {
+  static const double k[5][3] = {
+      {68, 1, 84}, {59, 82, 139}, {33, 145, 140}, {94, 201, 98}, {253, 231, 37}};
+  t = std::clamp(t, 0.0, 1.0) * 4.0;
+  const int i = std::min(3, static_cast<int>(t));
+  const double f = t - i;
+  return cv::Scalar(k[i][0] + f * (k[i + 1][0] - k[i][0]), k[i][1] + f * (k[i + 1][1] - k[i][1]),
+                    k[i][2] + f * (k[i + 1][2] - k[i][2]));
+}
+
+void DrawHeatmap(cv::Mat& img, const Heatmap& h, const cv::Rect& cell) {
+  const int rows = static_cast<int>(h.row_labels.size());
+  const int cols = static_cast<int>(h.col_labels.size());
+  if (static_cast<int>(h.value.size()) != rows) throw InputError("heat map: value rows");
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  const auto scaled = [&](double v) { return h.log_scale ? std::log10(v) : v; };
+  for (const auto& r : h.value) {
+    if (static_cast<int>(r.size()) != cols) throw InputError("heat map: value columns");
+    for (double v : r) {
+      if (!std::isfinite(v) || (h.log_scale && v <= 0)) continue;
+      lo = std::min(lo, scaled(v));
+      hi = std::max(hi, scaled(v));
+    }
+  }
+  if (!(hi > lo)) hi = lo + 1.0;
+  int label_w = 0;
+  for (const auto& l : h.row_labels) label_w = std::max(label_w, TextSize(l, kTickFont).width);
+  const int left = cell.x + label_w + 14;
+  const int top = cell.y + 40;
+  const int right = cell.x + cell.width - 10;
+  const int bottom = cell.y + cell.height - 76;
+  const int cw = (right - left) / std::max(1, cols);
+  const int ch = (bottom - top) / std::max(1, rows);
+  const cv::Size ts = TextSize(h.title, kTitleFont);
+  PutText(img, h.title, {cell.x + (cell.width - ts.width) / 2, cell.y + 24}, kTitleFont);
+  for (int r = 0; r < rows; ++r) {
+    const cv::Size s = TextSize(h.row_labels[r], kTickFont);
+    PutText(img, h.row_labels[r], {left - s.width - 8, top + r * ch + ch / 2 + s.height / 2},
+            kTickFont);
+    for (int c = 0; c < cols; ++c) {
+      const double v = h.value[r][c];
+      const bool ok = std::isfinite(v) && !(h.log_scale && v <= 0);
+      const double t = ok ? (scaled(v) - lo) / (hi - lo) : 0.0;
+      const cv::Rect box(left + c * cw, top + r * ch, cw, ch);
+      cv::rectangle(img, box, ok ? Viridis(t) : cv::Scalar(200, 200, 200), cv::FILLED);
+      cv::rectangle(img, box, kWhite, 1);
+      if (!h.marked.empty() && h.marked[r][c]) {
+        cv::rectangle(img, cv::Rect(box.x + 2, box.y + 2, box.width - 4, box.height - 4),
+                      cv::Scalar(220, 30, 30), 3);
+      }
+      if (!h.text.empty() && !h.text[r][c].empty()) {
+        const cv::Size s = TextSize(h.text[r][c], kTickFont);
+        PutText(img, h.text[r][c], {box.x + (cw - s.width) / 2, box.y + (ch + s.height) / 2},
+                kTickFont, ok && t < 0.6 ? kWhite : kBlack);
+      }
+    }
+  }
+  // Labels wider than their column are staggered over two lines.
+  bool stagger = false;
+  for (const auto& l : h.col_labels) stagger |= TextSize(l, kTickFont).width > cw - 6;
+  for (int c = 0; c < cols; ++c) {
+    const cv::Size s = TextSize(h.col_labels[c], kTickFont);
+    PutText(img, h.col_labels[c],
+            {left + c * cw + (cw - s.width) / 2, bottom + 20 + (stagger && c % 2 ? 16 : 0)},
+            kTickFont);
+  }
+  if (!h.note.empty()) PutText(img, h.note, {left, bottom + 58}, kTickFont);
+}
+
+}  // namespace
+
+void SaveHeatmapsPng(const std::vector<Heatmap>& panels, int width_px, int height_px,
+                     const std::string& path) {
+  cv::Mat img(height_px, width_px, CV_8UC3, kWhite);
+  const int w = width_px / std::max<int>(1, panels.size());
+  for (size_t i = 0; i < panels.size(); ++i) {
+    DrawHeatmap(img, panels[i], cv::Rect(static_cast<int>(i) * w, 0, w, height_px));
+  }
+  Image out;
+  out.width = width_px;
+  out.height = height_px;
+  out.channels = 3;
+  out.data.assign(img.data, img.data + static_cast<size_t>(width_px) * height_px * 3);
+  WritePng(out, path);
 }
 
 }  // namespace flexbench::render

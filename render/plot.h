@@ -101,6 +101,24 @@ class Figure {
   std::vector<Axes> axes_;
 };
 
+// A table of coloured cells (a heat map): colour from each value on a log or linear scale
+// (viridis), a text per cell, and a thick red outline on marked cells.
+struct Heatmap {
+  std::string title;
+  std::vector<std::string> row_labels;
+  std::vector<std::string> col_labels;
+  std::vector<std::vector<double>> value;      // rows x cols; non-finite: grey
+  std::vector<std::vector<std::string>> text;  // optional, rows x cols
+  std::vector<std::vector<char>> marked;       // optional, rows x cols
+  bool log_scale = true;
+  std::string note;  // one line under the table
+};
+
+// Heat maps side by side in one PNG of width x height pixels. Throws InputError naming the
+// path when it cannot be written, or when a panel's tables do not match its labels.
+void SaveHeatmapsPng(const std::vector<Heatmap>& panels, int width_px, int height_px,
+                     const std::string& path);
+
 // "Nice" tick values covering [lo, hi] (steps of 1, 2 or 5 times a power of ten), about
 // `target` of them.
 std::vector<double> NiceTicks(double lo, double hi, int target = 6);

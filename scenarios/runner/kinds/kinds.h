@@ -19,5 +19,6 @@ std::unique_ptr<ScenarioKind> MakeJskImuYawDriftKind();
 std::unique_ptr<ScenarioKind> MakeJskDirectFusionKind();
 std::unique_ptr<ScenarioKind> MakeJskParticleSweepKind();
 std::unique_ptr<ScenarioKind> MakeClosedLoopKind();
+std::unique_ptr<ScenarioKind> MakeMismatchMatrixKind();
 
 }  // namespace flexbench::scenarios

@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <limits>
 
+#include "estimators/error.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::render {
@@ -111,6 +113,29 @@ TEST(Plot, NiceTicks) {
   expect_ticks(NiceTicks(0.0, 1.0, 5), {0.0, 0.2, 0.4, 0.6, 0.8, 1.0});
   expect_ticks(NiceTicks(-3.2, 7.9, 6), {-2.0, 0.0, 2.0, 4.0, 6.0});
   expect_ticks(NiceTicks(0.013, 0.0191, 4), {0.014, 0.016, 0.018});
+}
+
+TEST(Plot, HeatmapsAreDeterministicAndCheckTheirShape) {
+  Heatmap h;
+  h.title = "error";
+  h.row_labels = {"a", "b"};
+  h.col_labels = {"none", "effect"};
+  h.value = {{1.0, 10.0}, {1.0, std::numeric_limits<double>::quiet_NaN()}};
+  h.text = {{"1", "10"}, {"1", "nan"}};
+  h.marked = {{0, 1}, {0, 0}};
+  const auto dir = std::filesystem::temp_directory_path();
+  const std::string p1 = (dir / "flexbench_heat_1.png").string();
+  const std::string p2 = (dir / "flexbench_heat_2.png").string();
+  SaveHeatmapsPng({h, h}, 600, 260, p1);
+  SaveHeatmapsPng({h, h}, 600, 260, p2);
+  const std::string a = testing::ReadFile(p1);
+  EXPECT_GT(a.size(), 1000u);
+  EXPECT_EQ(a, testing::ReadFile(p2));
+  std::filesystem::remove(p2);
+  h.value[1].pop_back();  // a row shorter than the column labels
+  EXPECT_THROW(SaveHeatmapsPng({h}, 600, 260, p2), InputError);
+  EXPECT_FALSE(std::filesystem::exists(p2));
+  std::filesystem::remove(p1);
 }
 
 }  // namespace
