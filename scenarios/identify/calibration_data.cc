@@ -1,5 +1,6 @@
 #include "scenarios/identify/calibration_data.h"
 
+#include <Eigen/Geometry>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -65,7 +66,8 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   }
   if (header.empty()) throw InputError(path + ": no header row");
   std::vector<int> joint_col(joints.size(), -1);
-  int group_col = -1, set_col = -1, xyz_col[3] = {-1, -1, -1};
+  int group_col = -1, set_col = -1, xyz_col[3] = {-1, -1, -1}, quat_col[4] = {-1, -1, -1, -1},
+      uv_col[2] = {-1, -1};
   for (size_t c = 0; c < header.size(); ++c) {
     const std::string& h = header[c];
     const std::string where = path + ":" + std::to_string(line_no);
@@ -82,10 +84,16 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     if (h == "x") xyz_col[0] = static_cast<int>(c), known = true;
     if (h == "y") xyz_col[1] = static_cast<int>(c), known = true;
     if (h == "z") xyz_col[2] = static_cast<int>(c), known = true;
+    const char* quat[4] = {"qw", "qx", "qy", "qz"};
+    for (int k = 0; k < 4; ++k) {
+      if (h == quat[k]) quat_col[k] = static_cast<int>(c), known = true;
+    }
+    if (h == "u") uv_col[0] = static_cast<int>(c), known = true;
+    if (h == "v") uv_col[1] = static_cast<int>(c), known = true;
     if (!known) {
       throw InputError(where + ": column '" + h +
                        "' is neither an actuated joint of the declared model nor one of group, "
-                       "set, x, y, z");
+                       "set, x, y, z, qw, qx, qy, qz, u, v");
     }
   }
   for (size_t j = 0; j < joints.size(); ++j) {
@@ -98,9 +106,21 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   if ((xyz_col[0] >= 0 || xyz_col[1] >= 0 || xyz_col[2] >= 0) && !has_xyz) {
     throw InputError(path + ":" + std::to_string(line_no) + ": x, y and z go together");
   }
-  if (has_xyz == (group_col >= 0)) {
-    throw InputError(path + ":" + std::to_string(line_no) +
-                     ": need either a 'group' column or 'x','y','z' columns (not both)");
+  const std::string hdr = path + ":" + std::to_string(line_no);
+  const int num_quat =
+      (quat_col[0] >= 0) + (quat_col[1] >= 0) + (quat_col[2] >= 0) + (quat_col[3] >= 0);
+  if (num_quat != 0 && (num_quat != 4 || !has_xyz)) {
+    throw InputError(hdr + ": a pose needs x, y, z and all of qw, qx, qy, qz");
+  }
+  const bool has_uv = uv_col[0] >= 0 && uv_col[1] >= 0;
+  if ((uv_col[0] >= 0) != (uv_col[1] >= 0)) throw InputError(hdr + ": u and v go together");
+  if (has_xyz + (group_col >= 0) + has_uv != 1) {
+    throw InputError(hdr +
+                     ": need exactly one of a 'group' column, 'x','y','z' columns or "
+                     "'u','v' columns");
+  }
+  if (has_uv && !data->camera.present) {
+    throw InputError(hdr + ": pixel columns need a camera (the scenario's 'camera' key)");
   }
   int rows = 0;
   while (std::getline(in, line)) {
@@ -120,10 +140,27 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       o.q[j] = ParseNumber(cells[joint_col[j]], where, joints[j]);
     }
     if (has_xyz) {
+      o.type = ObservationType::kPoint;
       const char* names[3] = {"x", "y", "z"};
       for (int k = 0; k < 3; ++k) o.p_base[k] = ParseNumber(cells[xyz_col[k]], where, names[k]);
+      if (num_quat == 4) {
+        o.type = ObservationType::kPose;
+        const Eigen::Quaterniond qt(ParseNumber(cells[quat_col[0]], where, "qw"),
+                                    ParseNumber(cells[quat_col[1]], where, "qx"),
+                                    ParseNumber(cells[quat_col[2]], where, "qy"),
+                                    ParseNumber(cells[quat_col[3]], where, "qz"));
+        if (std::abs(qt.norm() - 1.0) > 1e-3) {
+          throw InputError(where + ": quaternion (qw, qx, qy, qz) is not of unit length");
+        }
+        o.R_base = qt.normalized().toRotationMatrix();
+      }
+    } else if (has_uv) {
+      o.type = ObservationType::kPixel;
+      o.uv = Eigen::Vector2d(ParseNumber(cells[uv_col[0]], where, "u"),
+                             ParseNumber(cells[uv_col[1]], where, "v"));
     } else {
       if (cells[group_col].empty()) throw InputError(where + ": column 'group' is empty");
+      o.type = ObservationType::kGroup;
       o.group = LabelIndex(&data->groups, cells[group_col]);
     }
     o.set = LabelIndex(&data->sets, set_col >= 0 ? cells[set_col] : path);
@@ -161,6 +198,7 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
       for (int j = 0; j < num_joints; ++j) {
         o.q[j] = ParseNumber(cells[j], where, "joint " + std::to_string(j + 1));
       }
+      o.type = ObservationType::kGroup;
       o.group = groups[h];
       o.set = s;
       data->rows.push_back(o);

@@ -6,7 +6,10 @@
 //     slides); every actuated joint must be present;
 //   - `group`: a label; rows with the same label share one unknown fixed end-effector point
 //     (a ball in a socket), or
-//   - `x`, `y`, `z`: the end-effector point measured in the declared base frame (m);
+//   - `x`, `y`, `z`: the end-effector point measured in the declared base frame (m), with
+//     optionally `qw`, `qx`, `qy`, `qz`: its frame's measured orientation (a full pose), or
+//   - `u`, `v`: the end-effector point seen in pixels by the data set's camera (set
+//     DataSet::camera first; the scenario's `camera` key);
 //   - optional `set`: a label for the placement or session the row belongs to (errors are
 //     averaged per set, then over sets).
 // Rows must have the header's column count; empty cells, NaN and infinities are errors, as are
@@ -19,7 +22,8 @@
 
 namespace flexbench::identify {
 
-// Appends the file's rows to `data` (groups and sets are matched by label). Throws InputError
+// Appends the file's rows to `data` (groups and sets are matched by label; pixel rows need
+// data->camera). Throws InputError
 // "<file>:<line>: ..." on malformed input.
 void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
                         DataSet* data);

@@ -69,11 +69,14 @@ const char* ToString(EffectType type) {
       return "thermal_expansion";
     case EffectType::kPayload:
       return "payload";
+    case EffectType::kCameraOffset:
+      return "camera_offset";
   }
   return "?";
 }
 
-EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame)
+EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame,
+                         const std::string& camera)
     : chain_(&chain), point_frame_(point_frame), m_(m) {
   const kinematics::PpoeModel& model = chain.model;
   const int n = model.num_frames();
@@ -181,6 +184,7 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
         "rad/Nm");
   }
   add(EffectType::kThermalExpansion, "all", -1, -1, 1, 1e-6, "-");
+  if (!camera.empty()) add(EffectType::kCameraOffset, camera, -1, -1, 6, 1e-6, "m, rad");
   add(EffectType::kPayload, Untyped(model.frame(point_frame).name), -1, point_frame, 4, 1e-3,
       "kg, kg m");
 }
@@ -274,9 +278,9 @@ EffectModel::Workspace EffectModel::MakeWorkspace() const {
   return ws;
 }
 
-Vec3 EffectModel::Predict(const Eigen::VectorXd& q, const ConfigLoads& L,
-                          const std::vector<int>& active, const double* theta,
-                          Workspace& ws) const {
+lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L,
+                                  const std::vector<int>& active, const double* theta,
+                                  Workspace& ws) const {
   const kinematics::PpoeModel& model = chain_->model;
   const int n = model.num_frames();
   double payload = 0.0;
@@ -342,6 +346,7 @@ Vec3 EffectModel::Predict(const Eigen::VectorXd& q, const ConfigLoads& L,
         scale += t[0];
         break;
       case EffectType::kPayload:
+      case EffectType::kCameraOffset:  // acts on the camera, not on the chain
         break;
     }
     t += c.num_params;
@@ -369,7 +374,7 @@ Vec3 EffectModel::Predict(const Eigen::VectorXd& q, const ConfigLoads& L,
     if (!ws.tilt[f].isZero()) ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(ws.tilt[f]), Vec3::Zero());
     if (fr.q_index >= 0) ws.T[f] = ws.T[f] * fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]);
   }
-  return ws.T[point_frame_].translation();
+  return ws.T[point_frame_];
 }
 
 }  // namespace flexbench::identify

@@ -19,6 +19,8 @@
 //   thermal_expansion@all every link translation scaled by (1 + e)  e [-] (alpha * delta T)
 //   payload@ee            a mass m [kg] with its centre at offset c from the end effector (its
 //                         frame); parameters (m, m c) [kg, kg m] keep the loads linear in them
+//   camera_offset@C       the camera's pose T_base_cam Exp(xi), xi = [rho; theta] [m, rad]
+//                         (extrinsic calibration error; only with pixel observations)
 // tau_J is the gravity torque the joint carries (MuJoCo masses, nominal configuration), M the
 // moment of the weight beyond a point, in the local frame. Loads are computed once per
 // configuration; a model without masses gives zero loads, and the load-driven candidates are
@@ -49,6 +51,7 @@ enum class EffectType {
   kBaseCompliance,
   kThermalExpansion,
   kPayload,
+  kCameraOffset,
 };
 
 const char* ToString(EffectType type);
@@ -88,8 +91,10 @@ struct ConfigLoads {
 // The augmented kinematics. Constant after construction; Predict needs a Workspace.
 class EffectModel {
  public:
-  // `point_frame`: the chain frame whose origin is predicted (the end effector).
-  EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame);
+  // `point_frame`: the chain frame whose origin is predicted (the end effector). `camera`: the
+  // name of a camera that observes it in pixels ("" for none), for the camera_offset candidate.
+  EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame,
+              const std::string& camera = "");
 
   const kinematics::PpoeModel& chain() const { return chain_->model; }
   const std::vector<Candidate>& candidates() const { return candidates_; }
@@ -112,7 +117,12 @@ class EffectModel {
   // Position of the point frame in the base frame, with effects `active` (indices into
   // candidates()) at parameters `theta` (concatenated in that order).
   Vec3 Predict(const Eigen::VectorXd& q, const ConfigLoads& loads, const std::vector<int>& active,
-               const double* theta, Workspace& ws) const;
+               const double* theta, Workspace& ws) const {
+    return PredictPose(q, loads, active, theta, ws).translation();
+  }
+  // The point frame's pose (its orientation for pose observations).
+  lie::SE3 PredictPose(const Eigen::VectorXd& q, const ConfigLoads& loads,
+                       const std::vector<int>& active, const double* theta, Workspace& ws) const;
 
  private:
   const sim::DeclaredChain* chain_;

@@ -9,6 +9,7 @@
 #include <map>
 
 #include "estimators/error.h"
+#include "estimators/lie/so3.h"
 
 namespace flexbench::identify {
 namespace {
@@ -19,67 +20,137 @@ int NumTheta(const EffectModel& em, const std::vector<int>& active) {
   return n;
 }
 
-// Whitened residuals of the full parameter vector x = [theta; group points].
-struct Problem {
+int RowDim(const Observation& o) {
+  switch (o.type) {
+    case ObservationType::kPose:
+      return 6;
+    case ObservationType::kPixel:
+      return 2;
+    default:
+      return 3;
+  }
+}
+
+// The camera with the active camera_offset (if any) applied.
+lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vector<int>& active,
+                    const double* theta) {
+  lie::SE3 T = data.camera.T_base_cam;
+  for (int i : active) {
+    const Candidate& c = em.candidates()[i];
+    if (c.type == EffectType::kCameraOffset) {
+      Vec6 xi;
+      for (int k = 0; k < 6; ++k) xi[k] = theta[k];
+      T = T * lie::SE3::Exp(xi);
+    }
+    theta += c.num_params;
+  }
+  return T;
+}
+
+// Pixel of a base-frame point; far off when behind the camera, so a fit never goes there.
+Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& p_base) {
+  const Vec3 p = T_base_cam.rotation().transpose() * (p_base - T_base_cam.translation());
+  const double z = std::max(p.z(), 1e-6);
+  return Eigen::Vector2d(cam.fx * p.x() / z + cam.cx, cam.fy * p.y() / z + cam.cy);
+}
+
+// Whitened residuals of the full parameter vector x = [theta; group points]. Rows contribute 3
+// (point, group), 6 (pose: position, then rotation) or 2 (pixel) entries, then one per distance.
+class Problem {
+ public:
+  Problem(const EffectModel& em_, const DataSet& data_, const std::vector<ConfigLoads>& loads_,
+          const std::vector<int>& active_, const IdentifyOptions& opt_, int num_theta_)
+      : em(em_), data(data_), loads(loads_), active(active_), opt(opt_), num_theta(num_theta_) {
+    offset_.reserve(data.rows.size());
+    int o = 0;
+    for (const Observation& r : data.rows) {
+      offset_.push_back(o);
+      o += RowDim(r);
+    }
+    rows_dim_ = o;
+  }
+
   const EffectModel& em;
   const DataSet& data;
   const std::vector<ConfigLoads>& loads;
   const std::vector<int>& active;
   const IdentifyOptions& opt;
   int num_theta;
-  int num_params() const { return num_theta + 3 * static_cast<int>(data.groups.size()); }
-  int num_residuals() const {
-    return 3 * static_cast<int>(data.rows.size()) + static_cast<int>(data.distances.size());
-  }
 
-  void Points(const Eigen::VectorXd& x, std::vector<Vec3>* p) const {
+  int num_params() const { return num_theta + 3 * static_cast<int>(data.groups.size()); }
+  int num_residuals() const { return rows_dim_ + static_cast<int>(data.distances.size()); }
+
+  void Poses(const Eigen::VectorXd& x, std::vector<lie::SE3>* T) const {
     EffectModel::Workspace ws = em.MakeWorkspace();
-    p->resize(data.rows.size());
+    T->resize(data.rows.size());
     for (size_t r = 0; r < data.rows.size(); ++r) {
-      (*p)[r] = em.Predict(data.rows[r].q, loads[r], active, x.data(), ws);
+      (*T)[r] = em.PredictPose(data.rows[r].q, loads[r], active, x.data(), ws);
     }
   }
 
   Vec3 GroupPoint(const Eigen::VectorXd& x, int g) const { return x.segment<3>(num_theta + 3 * g); }
 
-  Eigen::VectorXd Residuals(const Eigen::VectorXd& x, const std::vector<Vec3>& p) const {
+  Eigen::VectorXd Residuals(const Eigen::VectorXd& x, const std::vector<lie::SE3>& T) const {
     Eigen::VectorXd r(num_residuals());
+    const lie::SE3 T_base_cam =
+        data.camera.present ? CameraPose(em, data, active, x.data()) : lie::SE3();
     for (size_t i = 0; i < data.rows.size(); ++i) {
       const Observation& o = data.rows[i];
-      const Vec3 target = o.group >= 0 ? GroupPoint(x, o.group) : o.p_base;
-      r.segment<3>(3 * i) = (p[i] - target) / opt.point_std_m;
+      const int k = offset_[i];
+      const Vec3 p = T[i].translation();
+      switch (o.type) {
+        case ObservationType::kGroup:
+          r.segment<3>(k) = (p - GroupPoint(x, o.group)) / opt.point_std_m;
+          break;
+        case ObservationType::kPoint:
+          r.segment<3>(k) = (p - o.p_base) / opt.point_std_m;
+          break;
+        case ObservationType::kPose:
+          r.segment<3>(k) = (p - o.p_base) / opt.point_std_m;
+          r.segment<3>(k + 3) =
+              lie::SO3Log(o.R_base.transpose() * T[i].rotation()) / opt.rotation_std_rad;
+          break;
+        case ObservationType::kPixel:
+          r.segment<2>(k) = (Project(data.camera, T_base_cam, p) - o.uv) / opt.pixel_std_px;
+          break;
+      }
     }
     for (size_t k = 0; k < data.distances.size(); ++k) {
       const GroupDistance& d = data.distances[k];
-      r[3 * data.rows.size() + k] =
+      r[rows_dim_ + k] =
           ((GroupPoint(x, d.a) - GroupPoint(x, d.b)).norm() - d.distance_m) / opt.distance_std_m;
     }
     return r;
+  }
+
+  // Central differences of the row residuals in theta (columns `first` .. `first + count`).
+  void ThetaColumns(const Eigen::VectorXd& x, int first, int count, double step,
+                    Eigen::Ref<Eigen::MatrixXd> out) const {
+    std::vector<lie::SE3> Tp, Tm;
+    for (int k = 0; k < count; ++k) {
+      Eigen::VectorXd xp = x, xm = x;
+      xp[first + k] += step;
+      xm[first + k] -= step;
+      Poses(xp, &Tp);
+      Poses(xm, &Tm);
+      out.col(k) = (Residuals(xp, Tp) - Residuals(xm, Tm)) / (2.0 * step);
+    }
   }
 
   // Central differences for theta, exact columns for the group points.
   Eigen::MatrixXd Jacobian(const Eigen::VectorXd& x) const {
     const int nr = num_residuals();
     Eigen::MatrixXd J = Eigen::MatrixXd::Zero(nr, num_params());
-    std::vector<Vec3> pp, pm;
     int col = 0;
     for (int i : active) {
       const Candidate& c = em.candidates()[i];
-      for (int k = 0; k < c.num_params; ++k, ++col) {
-        Eigen::VectorXd xp = x, xm = x;
-        xp[col] += c.step;
-        xm[col] -= c.step;
-        Points(xp, &pp);
-        Points(xm, &pm);
-        for (size_t r = 0; r < data.rows.size(); ++r) {
-          J.block<3, 1>(3 * r, col) = (pp[r] - pm[r]) / (2.0 * c.step * opt.point_std_m);
-        }
-      }
+      ThetaColumns(x, col, c.num_params, c.step, J.middleCols(col, c.num_params));
+      col += c.num_params;
     }
     for (size_t r = 0; r < data.rows.size(); ++r) {
       const int g = data.rows[r].group;
-      if (g >= 0) {
-        J.block<3, 3>(3 * r, num_theta + 3 * g) = -Mat3::Identity() / opt.point_std_m;
+      if (data.rows[r].type == ObservationType::kGroup) {
+        J.block<3, 3>(offset_[r], num_theta + 3 * g) = -Mat3::Identity() / opt.point_std_m;
       }
     }
     for (size_t k = 0; k < data.distances.size(); ++k) {
@@ -88,12 +159,16 @@ struct Problem {
       const double len = diff.norm();
       if (len < 1e-12) continue;
       const Eigen::RowVector3d u = diff.transpose() / (len * opt.distance_std_m);
-      const int row = 3 * static_cast<int>(data.rows.size()) + static_cast<int>(k);
+      const int row = rows_dim_ + static_cast<int>(k);
       J.block<1, 3>(row, num_theta + 3 * d.a) += u;
       J.block<1, 3>(row, num_theta + 3 * d.b) -= u;
     }
     return J;
   }
+
+ private:
+  std::vector<int> offset_;
+  int rows_dim_ = 0;
 };
 
 std::string Num(double v) {
@@ -119,7 +194,7 @@ Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data,
   x.head(nt) = fit.theta;
   for (size_t g = 0; g < fit.group_points.size(); ++g)
     x.segment<3>(nt + 3 * g) = fit.group_points[g];
-  const Problem pr{em, data, loads, fit.active, opt, nt};
+  const Problem pr(em, data, loads, fit.active, opt, nt);
   return pr.Jacobian(x);
 }
 
@@ -137,18 +212,14 @@ Eigen::MatrixXd ProjectedColumns(const EffectModel& em, const DataSet& data,
   const int np = cand.num_params;
   Eigen::VectorXd theta = Eigen::VectorXd::Zero(nt_old + np);
   theta.head(nt_old) = fit.theta;
-  Eigen::MatrixXd Jc = Eigen::MatrixXd::Zero(J_fit.rows(), np);
-  EffectModel::Workspace ws = em.MakeWorkspace();
-  for (int k = 0; k < np; ++k) {
-    Eigen::VectorXd tp = theta, tm = theta;
-    tp[nt_old + k] += cand.step;
-    tm[nt_old + k] -= cand.step;
-    for (size_t r = 0; r < data.rows.size(); ++r) {
-      const Vec3 a = em.Predict(data.rows[r].q, loads[r], act, tp.data(), ws);
-      const Vec3 b = em.Predict(data.rows[r].q, loads[r], act, tm.data(), ws);
-      Jc.block<3, 1>(3 * r, k) = (a - b) / (2.0 * cand.step * opt.point_std_m);
-    }
+  Eigen::VectorXd x(nt_old + np + 3 * static_cast<int>(data.groups.size()));
+  x.head(nt_old + np) = theta;
+  for (size_t g = 0; g < fit.group_points.size(); ++g) {
+    x.segment<3>(nt_old + np + 3 * g) = fit.group_points[g];
   }
+  const Problem pr(em, data, loads, act, opt, nt_old + np);
+  Eigen::MatrixXd Jc = Eigen::MatrixXd::Zero(J_fit.rows(), np);
+  pr.ThetaColumns(x, nt_old, np, cand.step, Jc);
   Eigen::MatrixXd R = Jc;
   if (J_fit.cols() > 0) R = Jc - J_fit * qr.solve(Jc);
   double rel = std::numeric_limits<double>::infinity();
@@ -184,21 +255,21 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
                const std::vector<int>& active, const Eigen::VectorXd& init,
                const IdentifyOptions& opt) {
   const int nt = NumTheta(em, active);
-  const Problem pr{em, data, loads, active, opt, nt};
+  const Problem pr(em, data, loads, active, opt, nt);
   const int G = static_cast<int>(data.groups.size());
   Eigen::VectorXd x = Eigen::VectorXd::Zero(pr.num_params());
   x.head(std::min<int>(nt, static_cast<int>(init.size()))) =
       init.head(std::min<int>(nt, static_cast<int>(init.size())));
-  std::vector<Vec3> p;
-  pr.Points(x, &p);
+  std::vector<lie::SE3> p;
+  pr.Poses(x, &p);
   {
     // Group points start at their rows' mean.
     std::vector<Vec3> sum(G, Vec3::Zero());
     std::vector<int> count(G, 0);
     for (size_t r = 0; r < data.rows.size(); ++r) {
       const int g = data.rows[r].group;
-      if (g < 0) continue;
-      sum[g] += p[r];
+      if (data.rows[r].type != ObservationType::kGroup) continue;
+      sum[g] += p[r].translation();
       ++count[g];
     }
     for (int g = 0; g < G; ++g) {
@@ -222,8 +293,8 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
         continue;
       }
       const Eigen::VectorXd xn = x + dx;
-      std::vector<Vec3> pn;
-      pr.Points(xn, &pn);
+      std::vector<lie::SE3> pn;
+      pr.Poses(xn, &pn);
       const Eigen::VectorXd rn = pr.Residuals(xn, pn);
       const double rss_n = rn.squaredNorm();
       if (std::isfinite(rss_n) && rss_n < rss) {
@@ -465,7 +536,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
     for (size_t g = 0; g < cur.group_points.size(); ++g) {
       x.segment<3>(nt + 3 * g) = cur.group_points[g];
     }
-    const Problem pr{em, data, loads, cur.active, opt, nt};
+    const Problem pr(em, data, loads, cur.active, opt, nt);
     const Eigen::MatrixXd J = pr.Jacobian(x);
     const int dof = std::max(1, pr.num_residuals() - pr.num_params());
     const double s2 = cur.rss / dof;
@@ -515,15 +586,31 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   return res;
 }
 
-std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& points) {
+std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet& data,
+                                           const std::vector<ConfigLoads>& loads,
+                                           const std::vector<int>& active,
+                                           const Eigen::VectorXd& theta) {
+  std::vector<Eigen::Vector2d> uv(data.rows.size(), Eigen::Vector2d::Zero());
+  if (!data.camera.present) return uv;
+  const lie::SE3 T_base_cam = CameraPose(em, data, active, theta.data());
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    if (data.rows[r].type != ObservationType::kPixel) continue;
+    uv[r] = Project(data.camera, T_base_cam,
+                    em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws));
+  }
+  return uv;
+}
+
+std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& points,
+                              const std::vector<Eigen::Vector2d>& pixels) {
   const int G = static_cast<int>(data.groups.size());
   std::vector<Vec3> mean(G, Vec3::Zero());
   std::vector<int> count(G, 0);
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    const int g = data.rows[r].group;
-    if (g < 0) continue;
-    mean[g] += points[r];
-    ++count[g];
+    if (data.rows[r].type != ObservationType::kGroup) continue;
+    mean[data.rows[r].group] += points[r];
+    ++count[data.rows[r].group];
   }
   for (int g = 0; g < G; ++g) {
     if (count[g] > 0) mean[g] /= count[g];
@@ -531,7 +618,17 @@ std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& poin
   std::vector<double> e(data.rows.size());
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Observation& o = data.rows[r];
-    e[r] = (points[r] - (o.group >= 0 ? mean[o.group] : o.p_base)).norm();
+    switch (o.type) {
+      case ObservationType::kGroup:
+        e[r] = (points[r] - mean[o.group]).norm();
+        break;
+      case ObservationType::kPixel:
+        e[r] = pixels.empty() ? std::nan("") : (pixels[r] - o.uv).norm();
+        break;
+      default:
+        e[r] = (points[r] - o.p_base).norm();
+        break;
+    }
   }
   return e;
 }
@@ -541,6 +638,7 @@ double ConsistencyError(const DataSet& data, const std::vector<double>& row_erro
   std::vector<double> sum(S, 0.0);
   std::vector<int> count(S, 0);
   for (size_t r = 0; r < data.rows.size(); ++r) {
+    if (data.rows[r].type == ObservationType::kPixel) continue;
     sum[data.rows[r].set] += row_errors[r];
     ++count[data.rows[r].set];
   }
@@ -552,6 +650,17 @@ double ConsistencyError(const DataSet& data, const std::vector<double>& row_erro
     ++used;
   }
   return used > 0 ? total / used : 0.0;
+}
+
+double PixelError(const DataSet& data, const std::vector<double>& row_errors) {
+  double sum = 0.0;
+  int n = 0;
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    if (data.rows[r].type != ObservationType::kPixel) continue;
+    sum += row_errors[r];
+    ++n;
+  }
+  return n > 0 ? sum / n : 0.0;
 }
 
 }  // namespace flexbench::identify

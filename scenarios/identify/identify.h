@@ -21,14 +21,20 @@
 #include <string>
 #include <vector>
 
+#include "estimators/lie/se3.h"
 #include "scenarios/identify/effect_model.h"
 
 namespace flexbench::identify {
 
+enum class ObservationType { kPoint, kGroup, kPose, kPixel };
+
 struct Observation {
   Eigen::VectorXd q;  // declared joint order
-  int group = -1;     // index into DataSet::groups, or -1 for a measured point
-  Vec3 p_base = Vec3::Zero();
+  ObservationType type = ObservationType::kPoint;
+  int group = -1;                                // kGroup: index into DataSet::groups
+  Vec3 p_base = Vec3::Zero();                    // kPoint, kPose: measured point, base frame
+  Mat3 R_base = Mat3::Identity();                // kPose: measured orientation of the point frame
+  Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // kPixel: the point seen by DataSet::camera
   int set = 0;        // index into DataSet::sets (a placement, a session)
   std::string where;  // "<file>:<line>" for messages
 };
@@ -39,16 +45,27 @@ struct GroupDistance {
   double distance_m = 0.0;
 };
 
+// A fixed pinhole camera observing the end-effector point (pixel rows).
+struct CameraModel {
+  bool present = false;
+  std::string name = "camera";
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  lie::SE3 T_base_cam;  // optical frame: x right, y down, z forward
+};
+
 struct DataSet {
   std::vector<Observation> rows;
+  CameraModel camera;
   std::vector<std::string> groups;
   std::vector<GroupDistance> distances;
   std::vector<std::string> sets;
 };
 
 struct IdentifyOptions {
-  double point_std_m = 1e-4;     // noise of a measured or grouped point
-  double distance_std_m = 1e-4;  // of a known group distance
+  double point_std_m = 1e-4;       // noise of a measured or grouped point
+  double distance_std_m = 1e-4;    // of a known group distance
+  double rotation_std_rad = 1e-3;  // of a measured orientation (pose rows)
+  double pixel_std_px = 0.5;       // of a pixel (pixel rows)
   double bic_threshold = 10.0;
   double ambiguity_bic = 2.0;
   double ambiguity_cos = 0.999;
@@ -104,12 +121,23 @@ std::vector<Vec3> PredictAll(const EffectModel& em, const DataSet& data,
                              const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
                              const Eigen::VectorXd& theta);
 
-// Error of each row in metres: distance to its measured point, or to its group's mean
-// (re-estimated from the rows themselves, as the MUKCa authors score consistency).
-std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& points);
+// Per-row predicted pixel of pixel rows (zero for other rows), with an active camera_offset.
+std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet& data,
+                                           const std::vector<ConfigLoads>& loads,
+                                           const std::vector<int>& active,
+                                           const Eigen::VectorXd& theta);
 
-// The MUKCa authors' metric: per set, the count-weighted mean over its groups of the mean row
-// error; then the mean over sets.
+// Error of each row in its own unit: metres to its measured point (point and pose rows, the
+// position part) or to its group's mean (re-estimated from the rows themselves, as the MUKCa
+// authors score consistency); pixels for pixel rows (`pixels` from PredictPixels).
+std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& points,
+                              const std::vector<Eigen::Vector2d>& pixels = {});
+
+// The MUKCa authors' metric over the rows in metres: per set, the count-weighted mean over its
+// groups of the mean row error; then the mean over sets. 0 when there are no such rows.
 double ConsistencyError(const DataSet& data, const std::vector<double>& row_errors);
+
+// Mean error of the pixel rows (px); 0 when there are none.
+double PixelError(const DataSet& data, const std::vector<double>& row_errors);
 
 }  // namespace flexbench::identify

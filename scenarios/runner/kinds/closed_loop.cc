@@ -115,8 +115,25 @@ class ClosedLoopKind : public ScenarioKind {
     }
     opt_.point_std_m = root.GetDouble("point_std_m", opt_.point_std_m);
     opt_.distance_std_m = root.GetDouble("distance_std_m", opt_.distance_std_m);
+    opt_.rotation_std_rad = root.GetDouble("rotation_std_rad", opt_.rotation_std_rad);
+    opt_.pixel_std_px = root.GetDouble("pixel_std_px", opt_.pixel_std_px);
     opt_.bic_threshold = root.GetDouble("bic_threshold", opt_.bic_threshold);
     opt_.max_effects = root.GetInt("max_effects", opt_.max_effects);
+    if (const auto c = root.Optional("camera")) {
+      // A fixed camera seeing the end-effector point (pixel rows in CSV data).
+      camera_.present = true;
+      camera_.name = c->GetString("name", "camera");
+      camera_.fx = c->GetDouble("fx");
+      camera_.fy = c->GetDouble("fy");
+      camera_.cx = c->GetDouble("cx");
+      camera_.cy = c->GetDouble("cy");
+      const ConfigNode t = c->Child("T_base_cam");
+      const std::vector<double> v = t.AsDoubleList();
+      if (v.size() != 7) t.Fail("expected [x, y, z, qw, qx, qy, qz]");
+      const Eigen::Quaterniond qt(v[3], v[4], v[5], v[6]);
+      if (std::abs(qt.norm() - 1.0) > 1e-6) t.Fail("quaternion is not of unit length");
+      camera_.T_base_cam = lie::SE3(qt.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
+    }
     calibration_ = ParseSource(root.Child("calibration"));
     validation_ = ParseSource(root.Child("validation"));
     if (const auto t = root.Optional("truth")) {
@@ -143,7 +160,8 @@ class ClosedLoopKind : public ScenarioKind {
     // Model, chain and candidates now: bad names fail before any work.
     mj_ = sim::LoadModel(declared_.model_path);
     chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(mj_.get(), declared_));
-    em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector);
+    em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
+                                                  camera_.present ? camera_.name : "");
     if (candidate_specs_.empty()) {
       for (size_t i = 0; i < em_->candidates().size(); ++i) candidates_.push_back(i);
     }
@@ -179,9 +197,11 @@ class ClosedLoopKind : public ScenarioKind {
 
     const auto errors = [&](const DataSet& d, const std::vector<identify::ConfigLoads>& L,
                             bool after) {
-      const auto p = identify::PredictAll(*em_, d, L, after ? res.after.active : std::vector<int>{},
-                                          after ? res.after.theta : Eigen::VectorXd());
-      return std::make_pair(identify::RowErrors(d, p), p);
+      const std::vector<int> act = after ? res.after.active : std::vector<int>{};
+      const Eigen::VectorXd th = after ? res.after.theta : Eigen::VectorXd();
+      const auto p = identify::PredictAll(*em_, d, L, act, th);
+      const auto pix = identify::PredictPixels(*em_, d, L, act, th);
+      return std::make_pair(identify::RowErrors(d, p, pix), p);
     };
     const auto [cal_before, cal_p0] = errors(cal, cal_loads, false);
     const auto [cal_after, cal_p1] = errors(cal, cal_loads, true);
@@ -198,6 +218,12 @@ class ClosedLoopKind : public ScenarioKind {
       m["effect_found_correct"] = a == b;
     }
     m["effects_found"] = found;
+    if (camera_.present) {
+      m["val_err_before_px"] = identify::PixelError(val, val_before);
+      m["val_err_after_px"] = identify::PixelError(val, val_after);
+      m["cal_err_before_px"] = identify::PixelError(cal, cal_before);
+      m["cal_err_after_px"] = identify::PixelError(cal, cal_after);
+    }
     m["val_err_before_m"] = identify::ConsistencyError(val, val_before);
     m["val_err_after_m"] = identify::ConsistencyError(val, val_after);
     m["cal_err_before_m"] = identify::ConsistencyError(cal, cal_before);
@@ -271,6 +297,7 @@ class ClosedLoopKind : public ScenarioKind {
  private:
   DataSet Load(const Source& s, RunContext& ctx, const std::string& what) {
     DataSet d;
+    d.camera = camera_;
     switch (s.type) {
       case Source::Type::kMukca:
         for (const std::string& p : s.placements) {
@@ -373,6 +400,7 @@ class ClosedLoopKind : public ScenarioKind {
             o.q[k] = sim_->MotorPosition(jid) + sim_->EncoderOffset(jid) +
                      encoder_noise_rad_ * noise(rng);
           }
+          o.type = identify::ObservationType::kGroup;
           o.group = g[h];
           o.set = si;
           o.where = set + "/socket_" + std::to_string(h) + "/" + std::to_string(r);
@@ -414,7 +442,7 @@ class ClosedLoopKind : public ScenarioKind {
     std::vector<Vec3> mean(G, Vec3::Zero());
     std::vector<int> count(G, 0);
     for (size_t r = 0; r < d.rows.size(); ++r) {
-      if (d.rows[r].group < 0) continue;
+      if (d.rows[r].type != identify::ObservationType::kGroup) continue;
       mean[d.rows[r].group] += p[r];
       ++count[d.rows[r].group];
     }
@@ -423,17 +451,22 @@ class ClosedLoopKind : public ScenarioKind {
     }
     kinematics::PpoeData pd(chain_->model);
     double sum = 0.0;
+    size_t n = 0;
     for (size_t r = 0; r < d.rows.size(); ++r) {
+      if (d.rows[r].type == identify::ObservationType::kPixel) continue;  // metres only
+      ++n;
       kinematics::ForwardKinematicsWithCovariance(chain_->model, pd, d.rows[r].q,
                                                   lie::CompoundOrder::kSecond);
       const Mat3 R = pd.T_base_frame[chain_->end_effector].rotation();
       const Mat3 S =
           R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() * R.transpose() +
           opt_.point_std_m * opt_.point_std_m * Mat3::Identity();
-      const Vec3 e = p[r] - (d.rows[r].group >= 0 ? mean[d.rows[r].group] : d.rows[r].p_base);
+      const Vec3 e =
+          p[r] - (d.rows[r].type == identify::ObservationType::kGroup ? mean[d.rows[r].group]
+                                                                      : d.rows[r].p_base);
       sum += e.dot(S.ldlt().solve(e));
     }
-    return sum / std::max<size_t>(1, d.rows.size());
+    return n > 0 ? sum / n : std::nan("");
   }
 
   void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
@@ -493,10 +526,10 @@ class ClosedLoopKind : public ScenarioKind {
       kinematics::ForwardKinematics(chain_->model, pd, d.rows[r].q);
       const double reach = pd.T_base_frame[chain_->end_effector].translation().norm();
       c << r << "," << d.sets[d.rows[r].set] << ","
-        << (d.rows[r].group >= 0 ? d.groups[d.rows[r].group] : "") << "," << d.rows[r].where << ","
-        << Num(before[r]) << "," << Num(after[r]) << "," << Num(reach) << ","
-        << Num(loads[r].tau.size() ? loads[r].tau.cwiseAbs().maxCoeff() : 0.0) << ","
-        << Num(p[r].x()) << "," << Num(p[r].y()) << "," << Num(p[r].z()) << "\n";
+        << (d.rows[r].type == identify::ObservationType::kGroup ? d.groups[d.rows[r].group] : "")
+        << "," << d.rows[r].where << "," << Num(before[r]) << "," << Num(after[r]) << ","
+        << Num(reach) << "," << Num(loads[r].tau.size() ? loads[r].tau.cwiseAbs().maxCoeff() : 0.0)
+        << "," << Num(p[r].x()) << "," << Num(p[r].y()) << "," << Num(p[r].z()) << "\n";
     }
     WriteFileAtomic(ctx.out->File(name + "_residuals.csv"), c.str());
   }
@@ -509,14 +542,29 @@ class ClosedLoopKind : public ScenarioKind {
     std::vector<double> x(d.rows.size());
     for (size_t r = 0; r < x.size(); ++r) x[r] = r;
     if (!res.effects.empty()) {
-      const identify::Candidate& c = em_->candidates()[res.effects[0].candidate];
+      size_t main = 0;
+      for (size_t e = 1; e < res.effects.size(); ++e) {
+        if (res.effects[e].share > res.effects[main].share) main = e;
+      }
+      const identify::Candidate& c = em_->candidates()[res.effects[main].candidate];
+      // Geometry at a fixed frame (a tool offset) shows against the nearest joint above it.
+      int q_index = c.q_index;
+      for (kinematics::FrameId f = c.frame; q_index < 0 && f > 0;
+           f = chain_->model.frame(f).parent) {
+        if (c.type == identify::EffectType::kLinkOffset ||
+            c.type == identify::EffectType::kLinkLength) {
+          q_index = chain_->model.frame(f).q_index;
+        } else {
+          break;
+        }
+      }
       if (c.q_index >= 0 && (c.type == identify::EffectType::kJointCompliance ||
                              c.type == identify::EffectType::kBacklash)) {
         xl = "gravity torque at " + c.location + " [N m]";
         for (size_t r = 0; r < x.size(); ++r) x[r] = loads[r].tau[c.q_index];
-      } else if (c.q_index >= 0) {
-        xl = c.location + " [deg]";
-        for (size_t r = 0; r < x.size(); ++r) x[r] = d.rows[r].q[c.q_index] / kDeg;
+      } else if (q_index >= 0) {
+        xl = chain_->q_joints[q_index] + " [deg] (main effect: " + res.effects[main].name + ")";
+        for (size_t r = 0; r < x.size(); ++r) x[r] = d.rows[r].q[q_index] / kDeg;
       } else if (c.type == identify::EffectType::kBaseCompliance) {
         xl = "moment at the mount, |M_xy| [N m]";
         for (size_t r = 0; r < x.size(); ++r) x[r] = loads[r].M_mount.head<2>().norm();
@@ -548,6 +596,7 @@ class ClosedLoopKind : public ScenarioKind {
   std::vector<std::pair<std::string, std::string>> candidate_specs_;
   std::vector<int> candidates_;
   identify::IdentifyOptions opt_;
+  identify::CameraModel camera_;
   Source calibration_, validation_;
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;

@@ -9,6 +9,7 @@
 
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/lie/so3.h"
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/identify.h"
 #include "scenarios/runner/runner.h"
@@ -209,6 +210,7 @@ DataSet SocketData(const EffectModel& em, const std::vector<int>& active,
       }
       Observation o;
       o.q = q + 1e-5 * Eigen::VectorXd::NullaryExpr(nq, [&] { return noise(rng); });  // encoders
+      o.type = ObservationType::kGroup;
       o.group = g;
       d.rows.push_back(o);
     }
@@ -257,6 +259,95 @@ TEST(Identify, TwoCandidatesTheDataCannotTellApartAreBothNamedNeverOne) {
   EXPECT_EQ(names, (std::vector<std::string>{"joint_offset@j2", "joint_offset@j3"}));
 }
 
+// Full poses (a tracker with orientation) and pixels of a fixed, slightly miscalibrated camera.
+TEST(Identify, PosesAndPixelsWithACameraOffset) {
+  sim::MjModelPtr m = sim::LoadModelFromString(kArm3, "inline.xml");
+  sim::DeclaredModel dm;
+  dm.file = "inline.declared";
+  dm.actuated_joints = {"j1", "j2", "j3"};
+  dm.end_effector = "ee";
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), dm);
+  const EffectModel em(m.get(), chain, chain.end_effector, "cam");
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<double> u(-1.2, 1.2);
+  std::normal_distribution<double> n(0.0, 1.0);
+  EffectModel::Workspace ws = em.MakeWorkspace();
+
+  // Poses: an axis tilt only the orientation reveals well, at 1 mm / 1 mrad.
+  {
+    const std::vector<int> truth = {Candidate(em, "joint_axis_tilt_a@j3")};
+    const double theta = 0.01;
+    DataSet d;
+    d.sets = {"s"};
+    for (int r = 0; r < 40; ++r) {
+      Observation o;
+      o.type = ObservationType::kPose;
+      o.q = Eigen::Vector3d(u(rng), u(rng), u(rng));
+      const lie::SE3 T = em.PredictPose(o.q, em.Loads(o.q), truth, &theta, ws);
+      o.p_base = T.translation() + 1e-3 * Vec3(n(rng), n(rng), n(rng));
+      o.R_base = T.rotation() * lie::SO3Exp(1e-3 * Vec3(n(rng), n(rng), n(rng)));
+      d.rows.push_back(o);
+    }
+    IdentifyOptions opt;
+    opt.point_std_m = 1e-3;
+    opt.rotation_std_rad = 1e-3;
+    const auto loads = ComputeLoads(em, d);
+    const IdentifyResult r = Identify(em, d, loads, AllCandidates(em, "joint_axis_tilt"), opt);
+    ASSERT_EQ(r.effects.size(), 1u);
+    EXPECT_EQ(r.effects[0].name, "joint_axis_tilt_a@j3");
+    EXPECT_NEAR(r.effects[0].value[0], theta, 4.0 * r.effects[0].std[0]);
+  }
+
+  // Pixels: the camera is 1.5 m in front of the arm, looking back at it.
+  {
+    DataSet d;
+    d.sets = {"s"};
+    d.camera.present = true;
+    d.camera.name = "cam";
+    d.camera.fx = d.camera.fy = 600.0;
+    d.camera.cx = 320.0;
+    d.camera.cy = 240.0;
+    Mat3 R;
+    R.col(0) = Vec3(0, 1, 0);   // x right
+    R.col(1) = Vec3(0, 0, -1);  // y down
+    R.col(2) = Vec3(-1, 0, 0);  // z forward, towards the arm
+    d.camera.T_base_cam = lie::SE3(R, Vec3(1.5, 0.0, 0.3));
+    const std::vector<int> truth = {Candidate(em, "camera_offset@cam"),
+                                    Candidate(em, "joint_offset@j2")};
+    Eigen::VectorXd theta(7);
+    theta << 0.01, -0.008, 0.012, 0.006, -0.008, 0.004, 0.02;
+    const lie::SE3 T_true_cam = d.camera.T_base_cam * lie::SE3::Exp(theta.head<6>());
+    for (int r = 0; r < 80; ++r) {
+      Observation o;
+      o.type = ObservationType::kPixel;
+      o.q = Eigen::Vector3d(u(rng), u(rng), u(rng));
+      const Vec3 p = em.Predict(o.q, em.Loads(o.q), truth, theta.data(), ws);
+      const Vec3 pc = T_true_cam.rotation().transpose() * (p - T_true_cam.translation());
+      o.uv = Eigen::Vector2d(600.0 * pc.x() / pc.z() + 320.0, 600.0 * pc.y() / pc.z() + 240.0) +
+             0.3 * Eigen::Vector2d(n(rng), n(rng));
+      d.rows.push_back(o);
+    }
+    IdentifyOptions opt;
+    opt.pixel_std_px = 0.3;
+    const auto loads = ComputeLoads(em, d);
+    std::vector<int> cands = AllCandidates(em, "joint_offset");
+    cands.push_back(Candidate(em, "camera_offset@cam"));
+    const IdentifyResult r = Identify(em, d, loads, cands, opt);
+    std::vector<std::string> found;
+    for (const auto& e : r.effects) found.push_back(e.name);
+    std::sort(found.begin(), found.end());
+    std::string log;
+    for (const auto& s : r.steps) log += s + "\n";
+    EXPECT_EQ(found, (std::vector<std::string>{"camera_offset@cam", "joint_offset@j2"})) << log;
+    const auto before = RowErrors(d, PredictAll(em, d, loads, {}, Eigen::VectorXd()),
+                                  PredictPixels(em, d, loads, {}, Eigen::VectorXd()));
+    const auto after = RowErrors(d, PredictAll(em, d, loads, r.after.active, r.after.theta),
+                                 PredictPixels(em, d, loads, r.after.active, r.after.theta));
+    EXPECT_GT(PixelError(d, before), 10.0);
+    EXPECT_LT(PixelError(d, after), 0.6);
+  }
+}
+
 class CalibrationCsv : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -294,7 +385,11 @@ TEST_F(CalibrationCsv, ReadsGroupsSetsAndPoints) {
   DataSet p;
   ReadCalibrationCsv(Write("j1,j2,x,y,z\n0,0,1,2,3\n"), {"j1", "j2"}, &p);
   EXPECT_EQ(p.rows[0].p_base, Vec3(1, 2, 3));
-  EXPECT_EQ(p.rows[0].group, -1);
+  EXPECT_EQ(p.rows[0].type, ObservationType::kPoint);
+  DataSet q;
+  ReadCalibrationCsv(Write("j1,j2,x,y,z,qw,qx,qy,qz\n0,0,1,2,3,0,0,0,1\n"), {"j1", "j2"}, &q);
+  EXPECT_EQ(q.rows[0].type, ObservationType::kPose);
+  EXPECT_TRUE(q.rows[0].R_base.isApprox(Eigen::Vector3d(-1, -1, 1).asDiagonal().toDenseMatrix()));
 }
 
 TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
@@ -308,6 +403,10 @@ TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
   EXPECT_NE(Error("j1,j2,x,y\n0,0,1,2\n").find("x, y and z go together"), std::string::npos);
   EXPECT_NE(Error("j1,j2,group\n0,abc,a\n").find("'abc' is not a number"), std::string::npos);
   EXPECT_NE(Error("j1,j2,group\n").find("no data rows"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,x,y,z,qw,qx\n0,0,1,1,1,1,0\n").find("a pose needs"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,x,y,z,qw,qx,qy,qz\n0,0,1,1,1,2,0,0,0\n").find("not of unit length"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,j2,u,v\n0,0,1,1\n").find("need a camera"), std::string::npos);
 }
 
 // "Bring your own robot and data": a model file, a declared model and two CSVs through the CLI.
