@@ -1,6 +1,7 @@
 #include "scenarios/identify/calibration_data.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -66,6 +67,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   }
   if (header.empty()) throw InputError(path + ": no header row");
   std::vector<int> joint_col(joints.size(), -1);
+  std::vector<int> motion_col(joints.size(), -1);
   int group_col = -1, set_col = -1, xyz_col[3] = {-1, -1, -1}, quat_col[4] = {-1, -1, -1, -1},
       uv_col[2] = {-1, -1};
   for (size_t c = 0; c < header.size(); ++c) {
@@ -89,11 +91,17 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       if (h == quat[k]) quat_col[k] = static_cast<int>(c), known = true;
     }
     if (h == "u") uv_col[0] = static_cast<int>(c), known = true;
+    if (h.rfind("motion_", 0) == 0) {
+      for (size_t j = 0; j < joints.size(); ++j) {
+        if (joints[j] == h.substr(7)) motion_col[j] = static_cast<int>(c), known = true;
+      }
+      if (!known) throw InputError(where + ": column '" + h + "' names no actuated joint");
+    }
     if (h == "v") uv_col[1] = static_cast<int>(c), known = true;
     if (!known) {
       throw InputError(where + ": column '" + h +
                        "' is neither an actuated joint of the declared model nor one of group, "
-                       "set, x, y, z, qw, qx, qy, qz, u, v");
+                       "set, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
     }
   }
   for (size_t j = 0; j < joints.size(); ++j) {
@@ -138,6 +146,17 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     o.q.resize(joints.size());
     for (size_t j = 0; j < joints.size(); ++j) {
       o.q[j] = ParseNumber(cells[joint_col[j]], where, joints[j]);
+    }
+    if (std::any_of(motion_col.begin(), motion_col.end(), [](int c) { return c >= 0; })) {
+      o.motion_sign = Eigen::VectorXd::Zero(joints.size());
+      for (size_t j = 0; j < joints.size(); ++j) {
+        if (motion_col[j] < 0) continue;
+        const double v = ParseNumber(cells[motion_col[j]], where, "motion_" + joints[j]);
+        if (v != -1.0 && v != 0.0 && v != 1.0) {
+          throw InputError(where + ": column 'motion_" + joints[j] + "' must be -1, 0 or 1");
+        }
+        o.motion_sign[j] = v;
+      }
     }
     if (has_xyz) {
       o.type = ObservationType::kPoint;

@@ -10,6 +10,8 @@
 //     optionally `qw`, `qx`, `qy`, `qz`: its frame's measured orientation (a full pose), or
 //   - `u`, `v`: the end-effector point seen in pixels by the data set's camera (set
 //     DataSet::camera first; the scenario's `camera` key);
+//   - optional `motion_<joint>`: -1, 0 or +1, the direction the joint last moved in before the
+//     reading (which flank of a backlash it rests on; 0 unknown);
 //   - optional `set`: a label for the placement or session the row belongs to (errors are
 //     averaged per set, then over sets).
 // Rows must have the header's column count; empty cells, NaN and infinities are errors, as are

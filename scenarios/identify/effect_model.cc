@@ -316,8 +316,11 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
       case EffectType::kBacklash: {
         const double tau = L.tau[c.q_index] + payload * L.tau_unit[c.q_index] -
                            L.axis_base.col(c.q_index).dot(couple);
-        // Below a millinewton-metre the load picks no flank.
-        ws.dq[c.q_index] += t[0] * (tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0);
+        // The flank: the last motion's direction where the data records it, else the one the
+        // gravity load presses on (below a millinewton-metre it picks none).
+        const double motion = L.motion_sign.size() ? L.motion_sign[c.q_index] : 0.0;
+        const double flank = motion != 0.0 ? motion : tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0;
+        ws.dq[c.q_index] += t[0] * flank;
         break;
       }
       case EffectType::kLinkLength:

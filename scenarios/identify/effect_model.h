@@ -5,7 +5,8 @@
 // mean). An effect perturbs it at its location:
 //   joint_offset@J        q_J += a                                  a [rad]
 //   joint_compliance@J    q_J += c * tau_J(q)                       c [rad/(N m)] (gear elasticity)
-//   backlash@J            q_J += b * sign(tau_J(q))                 b [rad] (half the play)
+//   backlash@J            q_J += b * s, s the sign of the joint's last motion where the data
+//                         records it (CSV `motion_J`), else sign(tau_J(q))  b [rad] (half the play)
 //   link_length@F         t_F += l * t_F / |t_F|                    l [m]
 //   link_offset@F         t_F += d (3-D, parent coordinates)        d [m] (machining, assembly)
 //   joint_axis_tilt_a@J   rotation about a, the first of J's frame axes not along J's axis
@@ -86,6 +87,8 @@ struct ConfigLoads {
   Eigen::Matrix3Xd axis_base;  // joint axes, base coordinates
   std::vector<Mat3> R_mid_T;   // base -> start-joint axes, per link
   Mat3 R_mount_T = Mat3::Identity();
+  // Per joint: the sign of its last motion (+1, -1; 0 unknown), from the data.
+  Eigen::VectorXd motion_sign;
 };
 
 // The augmented kinematics. Constant after construction; Predict needs a Workspace.

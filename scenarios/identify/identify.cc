@@ -236,7 +236,10 @@ Eigen::MatrixXd ProjectedColumns(const EffectModel& em, const DataSet& data,
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data) {
   std::vector<ConfigLoads> loads;
   loads.reserve(data.rows.size());
-  for (const Observation& o : data.rows) loads.push_back(em.Loads(o.q));
+  for (const Observation& o : data.rows) {
+    loads.push_back(em.Loads(o.q));
+    loads.back().motion_sign = o.motion_sign;
+  }
   return loads;
 }
 

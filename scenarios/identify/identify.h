@@ -35,8 +35,9 @@ struct Observation {
   Vec3 p_base = Vec3::Zero();                    // kPoint, kPose: measured point, base frame
   Mat3 R_base = Mat3::Identity();                // kPose: measured orientation of the point frame
   Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // kPixel: the point seen by DataSet::camera
-  int set = 0;        // index into DataSet::sets (a placement, a session)
-  std::string where;  // "<file>:<line>" for messages
+  Eigen::VectorXd motion_sign;  // optional, per joint: +1/-1 last motion direction, 0 unknown
+  int set = 0;                  // index into DataSet::sets (a placement, a session)
+  std::string where;            // "<file>:<line>" for messages
 };
 
 struct GroupDistance {

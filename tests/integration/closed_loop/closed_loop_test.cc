@@ -179,6 +179,41 @@ TEST(Identify, FindsAnOffsetAndAGearComplianceFromPoints) {
   EXPECT_GT(r.before.rss, 100.0 * r.after.rss);
 }
 
+// Backlash with the direction of the last motion recorded per row: the flank follows the motion,
+// not the load (here random), and identification uses it.
+TEST(Identify, BacklashFollowsTheRecordedMotion) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  const std::vector<int> truth = {Candidate(*f.em, "backlash@j3")};
+  const double half_play = 0.004;
+  std::mt19937_64 rng(41);
+  std::uniform_real_distribution<double> u(-1.5, 1.5);
+  std::normal_distribution<double> n(0.0, 1e-4);
+  DataSet d;
+  d.sets = {"s"};
+  EffectModel::Workspace ws = f.em->MakeWorkspace();
+  for (int r = 0; r < 60; ++r) {
+    Observation o;
+    o.q = Eigen::Vector3d(u(rng), u(rng), u(rng));
+    o.motion_sign = Eigen::Vector3d(0, 0, u(rng) > 0 ? 1 : -1);
+    ConfigLoads L = f.em->Loads(o.q);
+    L.motion_sign = o.motion_sign;
+    o.p_base = f.em->Predict(o.q, L, truth, &half_play, ws) + Vec3(n(rng), n(rng), n(rng));
+    d.rows.push_back(o);
+  }
+  const auto loads = ComputeLoads(*f.em, d);
+  const IdentifyResult r = Identify(*f.em, d, loads, AllCandidates(*f.em), IdentifyOptions{});
+  ASSERT_EQ(r.effects.size(), 1u);
+  EXPECT_EQ(r.effects[0].name, "backlash@j3");
+  EXPECT_NEAR(r.effects[0].value[0], half_play, 4.0 * r.effects[0].std[0]);
+  // Without the recorded motion the load picks the flank, and the data no longer fits.
+  DataSet blind = d;
+  for (Observation& o : blind.rows) o.motion_sign.resize(0);
+  const auto blind_loads = ComputeLoads(*f.em, blind);
+  const Fit fit =
+      FitEffects(*f.em, blind, blind_loads, truth, Eigen::VectorXd(), IdentifyOptions{});
+  EXPECT_GT(fit.rss, 10.0 * r.after.rss);
+}
+
 // Rows of `group` socket points reached by the truth from several starting postures.
 DataSet SocketData(const EffectModel& em, const std::vector<int>& active,
                    const Eigen::VectorXd& theta, int sockets, std::mt19937_64& rng) {
@@ -407,6 +442,10 @@ TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
   EXPECT_NE(Error("j1,j2,x,y,z,qw,qx,qy,qz\n0,0,1,1,1,2,0,0,0\n").find("not of unit length"),
             std::string::npos);
   EXPECT_NE(Error("j1,j2,u,v\n0,0,1,1\n").find("need a camera"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,motion_j2,group\n0,0,2,a\n").find("must be -1, 0 or 1"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,j2,motion_j7,group\n0,0,1,a\n").find("names no actuated joint"),
+            std::string::npos);
 }
 
 // "Bring your own robot and data": a model file, a declared model and two CSVs through the CLI.
