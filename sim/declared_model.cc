@@ -69,6 +69,21 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
       d.sources.push_back(src);
     }
   }
+  if (const auto fx = node.Optional("identified_effects")) {
+    for (const ConfigNode& e : fx->Items()) {
+      IdentifiedEffect ie;
+      ie.where = e.Where();
+      ie.effect = e.GetString("effect");
+      ie.value = e.Child("value").AsDoubleList();
+      if (const auto sd = e.Optional("std")) ie.std = sd->AsDoubleList();
+      ie.unit = e.GetString("unit", "");
+      if (ie.value.empty()) e.Child("value").Fail("needs at least one number");
+      if (!ie.std.empty() && ie.std.size() != ie.value.size()) {
+        e.Child("std").Fail("needs as many numbers as 'value'");
+      }
+      d.identified_effects.push_back(ie);
+    }
+  }
   return d;
 }
 

@@ -11,6 +11,11 @@
 //       std_trans_m: [0, 0, 0]      # translation std
 //       about_axis_deg: 0.5         # rotation std about the joint's own axis (joints only)
 //       covariance: [36 numbers]    # or a full 6x6, [rho; theta] order, SI units
+//   identified_effects:             # written by closed_loop / `flexbench identify`
+//     - {effect: joint_offset@j3, value: [-0.0052], std: [1e-5], unit: rad}
+//
+// Identified effects are carried for the record and for the next identification; the PPOE
+// chain (BuildDeclaredChain) does not apply them yet.
 //
 // Passive joints that are not actuated are held at their reference angle (qpos0): the declared
 // model does not know they move. A source at such a joint is how the model admits it.
@@ -25,11 +30,19 @@
 namespace flexbench::sim {
 
 struct DeclaredSource {
-  std::string at;       // joint or body name
+  std::string at;  // joint or body name
   Mat6 cov = Mat6::Zero();
   // Rotation std about the joint axis, applied once the axis is known (about_axis_deg).
   double about_axis_rad = 0.0;
-  std::string where;    // "<file>:<line>" for messages
+  std::string where;  // "<file>:<line>" for messages
+};
+
+struct IdentifiedEffect {
+  std::string effect;  // type@location (scenarios/identify/effect_model.h)
+  std::vector<double> value;
+  std::vector<double> std;
+  std::string unit;
+  std::string where;
 };
 
 struct DeclaredModel {
@@ -40,6 +53,7 @@ struct DeclaredModel {
   std::string end_effector;
   std::vector<std::string> observed_frames;
   std::vector<DeclaredSource> sources;
+  std::vector<IdentifiedEffect> identified_effects;
 };
 
 // Reads and checks the format (not the names: see BuildDeclaredChain). Throws InputError

@@ -24,6 +24,7 @@
 #include "render/plot.h"
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/identify.h"
+#include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -103,13 +104,7 @@ Stats Summarise(const std::vector<double>& e) {
 class ClosedLoopKind : public ScenarioKind {
  public:
   void Configure(const ConfigNode& root) override {
-    const ConfigNode model = root.Child("model");
-    model_path_ = model.ResolvePath(model.AsString());
-    const ConfigNode declared = root.Child("declared");
-    declared_ = declared.IsMap()
-                    ? sim::ParseDeclaredModel(declared)
-                    : sim::LoadDeclaredModel(declared.ResolvePath(declared.AsString()));
-    if (declared.IsMap()) declared_.model_path = model_path_;
+    declared_ = ReadModelAndDeclared(root, &model_path_);
     if (const auto c = root.Optional("candidates")) {
       for (const ConfigNode& n : c->Items()) candidate_specs_.push_back({n.AsString(), n.Where()});
     }

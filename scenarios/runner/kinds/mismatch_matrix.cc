@@ -14,6 +14,7 @@
 #include "estimators/stats/chi_square.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -37,13 +38,7 @@ std::string Fmt(const char* f, double v) {
 class MismatchMatrixKind : public ScenarioKind {
  public:
   void Configure(const ConfigNode& root) override {
-    const ConfigNode model = root.Child("model");
-    model_path_ = model.ResolvePath(model.AsString());
-    const ConfigNode declared = root.Child("declared");
-    declared_ = declared.IsMap()
-                    ? sim::ParseDeclaredModel(declared)
-                    : sim::LoadDeclaredModel(declared.ResolvePath(declared.AsString()));
-    if (declared.IsMap()) declared_.model_path = model_path_;
+    declared_ = ReadModelAndDeclared(root, &model_path_);
     const ConfigNode effects = root.Child("effects");
     for (const std::string& name : effects.Keys()) {
       columns_.push_back(name);

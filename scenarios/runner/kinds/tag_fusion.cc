@@ -17,6 +17,7 @@
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -32,13 +33,7 @@ lie::SE3 ToSE3(const Eigen::Isometry3d& T) { return lie::SE3(T.linear(), T.trans
 class TagFusionKind : public ScenarioKind {
  public:
   void Configure(const ConfigNode& root) override {
-    const ConfigNode model = root.Child("model");
-    model_path_ = model.ResolvePath(model.AsString());
-    const ConfigNode declared = root.Child("declared");
-    declared_ = declared.IsMap()
-                    ? sim::ParseDeclaredModel(declared)
-                    : sim::LoadDeclaredModel(declared.ResolvePath(declared.AsString()));
-    if (declared.IsMap()) declared_.model_path = model_path_;
+    declared_ = ReadModelAndDeclared(root, &model_path_);
     effects_ = sim::ParseEffects(root.Child("effects"));
     camera_ = root.GetString("camera");
     pixel_std_ = root.GetDouble("pixel_noise_std_px", 0.5);

@@ -482,7 +482,15 @@ TEST(IdentifyCommand, FindsTheEffectInAUsersCsvAndRejectsABadRow) {
   EXPECT_NE(summary.find("\"effects_found\": [\n      \"joint_offset@j2\"\n    ]"),
             std::string::npos)
       << summary.substr(0, 2000);
-  EXPECT_TRUE(fs::exists(dir / "out" / "declared_augmented.yaml"));
+  // The augmented declared model is a declared model again, with the effect and its value.
+  const sim::DeclaredModel aug =
+      sim::LoadDeclaredModel((dir / "out" / "declared_augmented.yaml").string());
+  ASSERT_EQ(aug.identified_effects.size(), 1u);
+  EXPECT_EQ(aug.identified_effects[0].effect, "joint_offset@j2");
+  EXPECT_NEAR(aug.identified_effects[0].value[0], -0.01, 4.0 * aug.identified_effects[0].std[0]);
+  EXPECT_EQ(aug.actuated_joints, (std::vector<std::string>{"j1", "j2", "j3"}));
+  ASSERT_EQ(aug.sources.size(), 1u);
+  EXPECT_LT(aug.sources[0].about_axis_rad, 0.5 * M_PI / 180.0);  // reduced to what remains
   testing::WriteFile(dir / "bad.csv", "j1,j2,j3,x,y,z\n0,0,0,1,1,1\n0,nan,0,1,1,1\n");
   const testing::CommandResult bad =
       testing::RunCommand(cmd + " --calibration " + (dir / "bad.csv").string());
