@@ -362,7 +362,7 @@ class ClosedLoopKind : public ScenarioKind {
           Eigen::VectorXd q(nq);
           bool ok = false;
           for (int attempt = 0; attempt < 5 && !ok; ++attempt) {
-            for (int k = 0; k < nq; ++k) q[k] = 1.2 * u(rng) + ref_q_(k);
+            for (int k = 0; k < nq; ++k) q[k] = 1.2 * u(rng) + MidRange(k);
             // Newton on the truth with the declared position Jacobian (close enough to
             // converge), damped; the null space keeps the random start's posture.
             for (int it = 0; it < 40; ++it) {
@@ -412,7 +412,8 @@ class ClosedLoopKind : public ScenarioKind {
     (*ctx.summary)["metrics"][what + "_skipped_configurations"] = failed;
   }
 
-  double ref_q_(int k) const {
+  // Middle of joint k's range (0 when unlimited): where random starting postures centre.
+  double MidRange(int k) const {
     const int j = mj_name2id(mj_.get(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
     if (mj_->jnt_limited[j]) return 0.5 * (mj_->jnt_range[2 * j] + mj_->jnt_range[2 * j + 1]);
     return 0.0;
@@ -432,7 +433,6 @@ class ClosedLoopKind : public ScenarioKind {
   // Mean NEES of the rows' point errors under the declared PPOE position covariance plus the
   // point noise, each row against its group's mean (or its measured point).
   double MeanNees(const DataSet& d, const std::vector<Vec3>& p) const {
-    const std::vector<double> unused;
     const int G = static_cast<int>(d.groups.size());
     std::vector<Vec3> mean(G, Vec3::Zero());
     std::vector<int> count(G, 0);
