@@ -73,10 +73,12 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   for (size_t c = 0; c < header.size(); ++c) {
     const std::string& h = header[c];
     const std::string where = path + ":" + std::to_string(line_no);
+    for (size_t k = 0; k < c; ++k) {
+      if (header[k] == h) throw InputError(where + ": column '" + h + "' twice");
+    }
     bool known = false;
     for (size_t j = 0; j < joints.size(); ++j) {
       if (joints[j] == h) {
-        if (joint_col[j] >= 0) throw InputError(where + ": joint column '" + h + "' twice");
         joint_col[j] = static_cast<int>(c);
         known = true;
       }
@@ -182,6 +184,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       o.type = ObservationType::kGroup;
       o.group = LabelIndex(&data->groups, cells[group_col]);
     }
+    if (set_col >= 0 && cells[set_col].empty()) throw InputError(where + ": column 'set' is empty");
     o.set = LabelIndex(&data->sets, set_col >= 0 ? cells[set_col] : path);
     data->rows.push_back(o);
     ++rows;

@@ -176,9 +176,11 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
           "rad/Nm");
     }
   }
-  // The tool: where the measured point sits on the last link (a probe, a ball, a fingertip).
-  add(EffectType::kLinkOffset, Untyped(model.frame(point_frame).name), -1, point_frame, 3, 1e-6,
-      "m");
+  // The tool: where the measured point sits on the last link (a probe, a ball, a fingertip),
+  // unless the point frame is a joint frame, which has its link_offset already.
+  if (model.frame(point_frame).q_index < 0)
+    add(EffectType::kLinkOffset, Untyped(model.frame(point_frame).name), -1, point_frame, 3, 1e-6,
+        "m");
   if (mount_ != kinematics::kBaseFrame) {
     add(EffectType::kBaseCompliance, Untyped(model.frame(mount_).name), -1, mount_, 2, 1e-7,
         "rad/Nm");

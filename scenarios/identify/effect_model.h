@@ -22,6 +22,10 @@
 //                         frame); parameters (m, m c) [kg, kg m] keep the loads linear in them
 //   camera_offset@C       the camera's pose T_base_cam Exp(xi), xi = [rho; theta] [m, rad]
 //                         (extrinsic calibration error; only with pixel observations)
+// Signs: tau_J is the torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest),
+// so a gear spring of stiffness k fits as c = -1/k and a play resting on the loaded flank as
+// b = -play/2; moments M are those of the weight itself, so plates and links that sag fit with
+// c > 0. The fit leaves every sign free.
 // tau_J is the gravity torque the joint carries (MuJoCo masses, nominal configuration), M the
 // moment of the weight beyond a point, in the local frame. Loads are computed once per
 // configuration; a model without masses gives zero loads, and the load-driven candidates are

@@ -181,6 +181,23 @@ double Bic(double rss, int n, int k) {
   return n * std::log(std::max(rss, 1e-300) / n) + k * std::log(static_cast<double>(n));
 }
 
+// How well the candidate with fewer parameters lies in the span of the other's (projected)
+// sensitivities: the smallest, over its columns, of |projection| / |column|. 1: every direction
+// of one is a direction of the other, so the data cannot tell them apart.
+double SameSpan(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+  const Eigen::MatrixXd& small = a.cols() <= b.cols() ? a : b;
+  const Eigen::MatrixXd& big = a.cols() <= b.cols() ? b : a;
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(big);
+  double worst = 1.0;
+  for (int i = 0; i < small.cols(); ++i) {
+    const double n = small.col(i).norm();
+    if (!(n > 0)) return 0.0;
+    const Eigen::VectorXd proj = big * qr.solve(small.col(i));
+    worst = std::min(worst, proj.norm() / n);
+  }
+  return worst;
+}
+
 // Refit of `cur` with its e-th effect removed (the others start from their values).
 Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const Fit& cur, size_t e, const IdentifyOptions& opt);
@@ -333,6 +350,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   std::vector<int> pool = candidates;
   char line[512];
   std::map<int, std::string> alias;  // a kept correction of indistinguishable candidates
+  std::map<int, std::vector<int>> twins_of;
   int rounds = 0;
   while (static_cast<int>(cur.active.size()) < opt.max_effects && !pool.empty() &&
          rounds++ < 3 * opt.max_effects) {
@@ -371,16 +389,9 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
     std::vector<int> twins;
     for (size_t k = 1; k < trials.size(); ++k) {
       if (trials[k].fit.bic - trials[0].fit.bic >= opt.ambiguity_bic) break;
-      const Eigen::MatrixXd& a = trials[0].proj;
-      const Eigen::MatrixXd& b = trials[k].proj;
-      double cos = 0.0;
-      for (int i = 0; i < a.cols(); ++i) {
-        for (int j = 0; j < b.cols(); ++j) {
-          const double den = a.col(i).norm() * b.col(j).norm();
-          if (den > 0) cos = std::max(cos, std::abs(a.col(i).dot(b.col(j))) / den);
-        }
+      if (SameSpan(trials[0].proj, trials[k].proj) > opt.ambiguity_cos) {
+        twins.push_back(trials[k].c);
       }
-      if (cos > opt.ambiguity_cos) twins.push_back(trials[k].c);
     }
     const double dbic = trials[0].fit.bic - cur.bic;
     if (dbic > -opt.bic_threshold) {
@@ -399,6 +410,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
       std::string joined;
       for (const auto& n : names) joined += (joined.empty() ? "" : " | ") + n;
       alias[trials[0].c] = joined;
+      twins_of[trials[0].c] = twins;
       std::snprintf(line, sizeof(line),
                     "indistinguishable (|cos| > %.3g, BIC within %.0f), kept as one correction "
                     "without a cause: %s: BIC %.1f -> %.1f",
@@ -428,11 +440,16 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
         Fit w = FitWithout(em, data, loads, cur, e, opt);
         if (w.bic < best_bic) best_bic = w.bic, best_without = w, worst = e;
       }
-      if (best_bic - cur.bic >= opt.bic_threshold) break;
+      if (!std::isfinite(best_bic) || best_bic - cur.bic >= opt.bic_threshold) break;
       std::snprintf(line, sizeof(line), "drop %s: BIC %.1f -> %.1f without it",
                     em.candidates()[cur.active[worst]].Name().c_str(), cur.bic, best_bic);
       res.steps.push_back(line);
-      pool.push_back(cur.active[worst]);
+      const int dropped = cur.active[worst];
+      pool.push_back(dropped);
+      // Its indistinguishable twins were set aside with it; they return with it.
+      for (int t : twins_of[dropped]) pool.push_back(t);
+      twins_of.erase(dropped);
+      alias.erase(dropped);
       cur = best_without;
     }
   }

@@ -12,8 +12,9 @@
 // accepting the candidate with the lowest BIC while it lowers BIC by more than 10 ("very
 // strong" evidence on Kass & Raftery's scale). A candidate whose sensitivity lies (to 1e-3) in
 // the span of the ones already chosen and the group points is unidentifiable and never fitted.
-// When the best candidate and another one differ by less than 2 in BIC and their sensitivities
-// (with the chosen ones projected out) are parallel (|cos| > 0.999), the data cannot tell them
+// When the best candidate and another one differ by less than 2 in BIC and the sensitivities
+// (with the chosen ones projected out) of the one with fewer parameters lie in the span of the
+// other's (to a cosine of 0.999, every direction), the data cannot tell them
 // apart: they are reported by name, and the correction is kept as one effect named by all of
 // them ("a | b"), so no single cause is claimed.
 #pragma once

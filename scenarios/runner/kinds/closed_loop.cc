@@ -112,6 +112,10 @@ class ClosedLoopKind : public ScenarioKind {
     opt_.distance_std_m = root.GetDouble("distance_std_m", opt_.distance_std_m);
     opt_.rotation_std_rad = root.GetDouble("rotation_std_rad", opt_.rotation_std_rad);
     opt_.pixel_std_px = root.GetDouble("pixel_std_px", opt_.pixel_std_px);
+    for (const char* key :
+         {"point_std_m", "distance_std_m", "rotation_std_rad", "pixel_std_px", "bic_threshold"}) {
+      if (root.Has(key) && !(root.GetDouble(key) > 0.0)) root.Child(key).Fail("must be > 0");
+    }
     opt_.bic_threshold = root.GetDouble("bic_threshold", opt_.bic_threshold);
     opt_.max_effects = root.GetInt("max_effects", opt_.max_effects);
     if (const auto c = root.Optional("camera")) {
@@ -137,8 +141,12 @@ class ClosedLoopKind : public ScenarioKind {
       socket_distance_m_ = t->GetDouble("socket_distance_m", 0.05);
       encoder_noise_rad_ = t->GetDouble("encoder_noise_deg", 0.0) * kDeg;
       const auto ws = t->Child("workspace");
-      ws_center_ = Vec3::Map(ws.Child("center").AsDoubleList().data());
-      ws_half_ = Vec3::Map(ws.Child("half_extent").AsDoubleList().data());
+      for (const auto& [key, out] :
+           {std::pair{"center", &ws_center_}, std::pair{"half_extent", &ws_half_}}) {
+        const std::vector<double> v = ws.Child(key).AsDoubleList();
+        if (v.size() != 3) ws.Child(key).Fail("expected [x, y, z] in metres");
+        *out = Vec3(v[0], v[1], v[2]);
+      }
       has_truth_ = true;
     }
     if ((calibration_.type == Source::Type::kSimulate ||
@@ -226,10 +234,23 @@ class ClosedLoopKind : public ScenarioKind {
     for (const auto& [name, e] :
          {std::pair{"cal_before", &cal_before}, std::pair{"cal_after", &cal_after},
           std::pair{"val_before", &val_before}, std::pair{"val_after", &val_after}}) {
-      const Stats s = Summarise(*e);
-      m[std::string(name) + "_row_err_mean_m"] = s.mean;
-      m[std::string(name) + "_row_err_std_m"] = s.std;
-      m[std::string(name) + "_row_err_max_m"] = s.max;
+      const DataSet& d = std::string(name).rfind("cal", 0) == 0 ? cal : val;
+      std::vector<double> metres, pixels;
+      for (size_t r = 0; r < d.rows.size(); ++r) {
+        (d.rows[r].type == identify::ObservationType::kPixel ? pixels : metres).push_back((*e)[r]);
+      }
+      if (!metres.empty()) {
+        const Stats s = Summarise(metres);
+        m[std::string(name) + "_row_err_mean_m"] = s.mean;
+        m[std::string(name) + "_row_err_std_m"] = s.std;
+        m[std::string(name) + "_row_err_max_m"] = s.max;
+      }
+      if (!pixels.empty()) {
+        const Stats s = Summarise(pixels);
+        m[std::string(name) + "_row_err_mean_px"] = s.mean;
+        m[std::string(name) + "_row_err_std_px"] = s.std;
+        m[std::string(name) + "_row_err_max_px"] = s.max;
+      }
     }
     m["calibration_rows"] = cal.rows.size();
     m["validation_rows"] = val.rows.size();
@@ -354,9 +375,8 @@ class ClosedLoopKind : public ScenarioKind {
       for (int k = 0; k < 3; ++k) c0[k] = ws_center_[k] + ws_half_[k] * u(rng);
       const double yaw = M_PI * u(rng);
       const Vec3 dir(std::cos(yaw), std::sin(yaw), 0.0);
-      int g[2];
+      int g[2] = {-1, -1};  // a socket becomes a group with its first reached configuration
       for (int h = 0; h < 2; ++h) {
-        g[h] = identify::LabelIndex(&d->groups, set + "/socket_" + std::to_string(h));
         const Vec3 target = c0 + (h - 0.5) * socket_distance_m_ * dir;
         for (int r = 0; r < s.per_socket; ++r) {
           Eigen::VectorXd q(nq);
@@ -396,13 +416,19 @@ class ClosedLoopKind : public ScenarioKind {
                      encoder_noise_rad_ * noise(rng);
           }
           o.type = identify::ObservationType::kGroup;
+          if (g[h] < 0) {
+            g[h] = identify::LabelIndex(&d->groups, set + "/socket_" + std::to_string(h));
+          }
           o.group = g[h];
           o.set = si;
           o.where = set + "/socket_" + std::to_string(h) + "/" + std::to_string(r);
           d->rows.push_back(o);
         }
       }
-      d->distances.push_back({g[0], g[1], socket_distance_m_});
+      // A socket no configuration reached is no group, and has no distance.
+      if (g[0] >= 0 && g[1] >= 0) {
+        d->distances.push_back({g[0], g[1], socket_distance_m_});
+      }
     }
     if (failed > 0) {
       ctx.log(what + ": " + std::to_string(failed) +

@@ -442,6 +442,8 @@ TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
   EXPECT_NE(Error("j1,j2,x,y,z,qw,qx,qy,qz\n0,0,1,1,1,2,0,0,0\n").find("not of unit length"),
             std::string::npos);
   EXPECT_NE(Error("j1,j2,u,v\n0,0,1,1\n").find("need a camera"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,x,y,z,x\n0,0,1,1,1,1\n").find("column 'x' twice"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,group,set\n0,0,a,\n").find("column 'set' is empty"), std::string::npos);
   EXPECT_NE(Error("j1,j2,motion_j2,group\n0,0,2,a\n").find("must be -1, 0 or 1"),
             std::string::npos);
   EXPECT_NE(Error("j1,j2,motion_j7,group\n0,0,1,a\n").find("names no actuated joint"),
