@@ -41,6 +41,32 @@ double ParseNumber(const std::string& cell, const std::string& where, const std:
   return v;
 }
 
+// The data lines of a CSV file: blank lines and '#' comments skipped, cells trimmed.
+class CsvLines {
+ public:
+  explicit CsvLines(const std::string& path) : in_(path), path_(path) {
+    if (!in_) throw InputError(path + ": cannot open");
+  }
+  bool Next(std::vector<std::string>* cells) {
+    std::string line;
+    while (std::getline(in_, line)) {
+      ++line_no_;
+      const std::string t = Trim(line);
+      if (t.empty() || t[0] == '#') continue;
+      *cells = SplitCsv(t);
+      return true;
+    }
+    return false;
+  }
+  // "<file>:<line>" of the last line returned.
+  std::string Where() const { return path_ + ":" + std::to_string(line_no_); }
+
+ private:
+  std::ifstream in_;
+  std::string path_;
+  int line_no_ = 0;
+};
+
 }  // namespace
 
 int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
@@ -53,28 +79,18 @@ int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
 
 void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
                         DataSet* data) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": cannot open");
-  std::string line;
-  int line_no = 0;
+  CsvLines csv(path);
   std::vector<std::string> header;
-  while (std::getline(in, line)) {
-    ++line_no;
-    const std::string t = Trim(line);
-    if (t.empty() || t[0] == '#') continue;
-    header = SplitCsv(t);
-    break;
-  }
-  if (header.empty()) throw InputError(path + ": no header row");
+  if (!csv.Next(&header)) throw InputError(path + ": no header row");
+  const std::string hdr = csv.Where();
   std::vector<int> joint_col(joints.size(), -1);
   std::vector<int> motion_col(joints.size(), -1);
   int group_col = -1, set_col = -1, xyz_col[3] = {-1, -1, -1}, quat_col[4] = {-1, -1, -1, -1},
       uv_col[2] = {-1, -1};
   for (size_t c = 0; c < header.size(); ++c) {
     const std::string& h = header[c];
-    const std::string where = path + ":" + std::to_string(line_no);
     for (size_t k = 0; k < c; ++k) {
-      if (header[k] == h) throw InputError(where + ": column '" + h + "' twice");
+      if (header[k] == h) throw InputError(hdr + ": column '" + h + "' twice");
     }
     bool known = false;
     for (size_t j = 0; j < joints.size(); ++j) {
@@ -97,26 +113,24 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       for (size_t j = 0; j < joints.size(); ++j) {
         if (joints[j] == h.substr(7)) motion_col[j] = static_cast<int>(c), known = true;
       }
-      if (!known) throw InputError(where + ": column '" + h + "' names no actuated joint");
+      if (!known) throw InputError(hdr + ": column '" + h + "' names no actuated joint");
     }
     if (h == "v") uv_col[1] = static_cast<int>(c), known = true;
     if (!known) {
-      throw InputError(where + ": column '" + h +
+      throw InputError(hdr + ": column '" + h +
                        "' is neither an actuated joint of the declared model nor one of group, "
                        "set, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
     }
   }
   for (size_t j = 0; j < joints.size(); ++j) {
     if (joint_col[j] < 0) {
-      throw InputError(path + ":" + std::to_string(line_no) + ": no column for joint '" +
-                       joints[j] + "'");
+      throw InputError(hdr + ": no column for joint '" + joints[j] + "'");
     }
   }
   const bool has_xyz = xyz_col[0] >= 0 && xyz_col[1] >= 0 && xyz_col[2] >= 0;
   if ((xyz_col[0] >= 0 || xyz_col[1] >= 0 || xyz_col[2] >= 0) && !has_xyz) {
-    throw InputError(path + ":" + std::to_string(line_no) + ": x, y and z go together");
+    throw InputError(hdr + ": x, y and z go together");
   }
-  const std::string hdr = path + ":" + std::to_string(line_no);
   const int num_quat =
       (quat_col[0] >= 0) + (quat_col[1] >= 0) + (quat_col[2] >= 0) + (quat_col[3] >= 0);
   if (num_quat != 0 && (num_quat != 4 || !has_xyz)) {
@@ -133,12 +147,9 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     throw InputError(hdr + ": pixel columns need a camera (the scenario's 'camera' key)");
   }
   int rows = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    const std::string t = Trim(line);
-    if (t.empty() || t[0] == '#') continue;
-    const std::string where = path + ":" + std::to_string(line_no);
-    const std::vector<std::string> cells = SplitCsv(t);
+  std::vector<std::string> cells;
+  while (csv.Next(&cells)) {
+    const std::string where = csv.Where();
     if (cells.size() != header.size()) {
       throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
                        std::to_string(header.size()));
@@ -198,18 +209,12 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
   int groups[2];
   for (int h = 0; h < 2; ++h) {
     const std::string path = dir + "/hole_" + std::to_string(h) + ".csv";
-    std::ifstream in(path);
-    if (!in) throw InputError(path + ": cannot open");
+    CsvLines csv(path);
     groups[h] = LabelIndex(&data->groups, set + "/hole_" + std::to_string(h));
-    std::string line;
-    int line_no = 0;
     int rows = 0;
-    while (std::getline(in, line)) {
-      ++line_no;
-      const std::string t = Trim(line);
-      if (t.empty() || t[0] == '#') continue;
-      const std::string where = path + ":" + std::to_string(line_no);
-      const std::vector<std::string> cells = SplitCsv(t);
+    std::vector<std::string> cells;
+    while (csv.Next(&cells)) {
+      const std::string where = csv.Where();
       if (static_cast<int>(cells.size()) != num_joints) {
         throw InputError(where + ": " + std::to_string(cells.size()) + " columns, expected " +
                          std::to_string(num_joints) + " joint angles");

@@ -41,10 +41,6 @@ int BodyOfFrame(const mjModel* m, const std::string& typed) {
   return -1;
 }
 
-struct DataDeleter {
-  void operator()(mjData* d) const { mj_deleteData(d); }
-};
-
 }  // namespace
 
 const char* ToString(EffectType type) {
@@ -211,10 +207,12 @@ ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const {
   if (!has_masses_) return L;
   kinematics::PpoeData pd(model);
   kinematics::ForwardKinematics(model, pd, q);
-  std::unique_ptr<mjData, DataDeleter> d(mj_makeData(m_));
+  if (!d_) d_ = sim::MakeData(m_);
+  mjData* d = d_.get();
+  mju_copy(d->qpos, m_->qpos0, m_->nq);
   chain_->WriteQpos(q, d->qpos);
-  mj_kinematics(m_, d.get());
-  mj_comPos(m_, d.get());
+  mj_kinematics(m_, d);
+  mj_comPos(m_, d);
   const int base = chain_->base_body;
   Mat3 R_w_base;
   for (int r = 0; r < 3; ++r) {

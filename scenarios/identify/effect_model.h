@@ -40,6 +40,7 @@
 #include "estimators/kinematics/ppoe_data.h"
 #include "estimators/kinematics/ppoe_model.h"
 #include "sim/declared_chain.h"
+#include "sim/mujoco_model.h"
 
 namespace flexbench::identify {
 
@@ -144,6 +145,7 @@ class EffectModel {
   // MuJoCo bodies behind each chain frame (-1: none) for loads.
   std::vector<int> frame_body_;
   const mjModel* m_;
+  mutable sim::MjDataPtr d_;  // scratch for Loads (not thread-safe, like the rest of a model)
 };
 
 }  // namespace flexbench::identify

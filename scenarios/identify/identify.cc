@@ -284,17 +284,10 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
   pr.Poses(x, &p);
   {
     // Group points start at their rows' mean.
-    std::vector<Vec3> sum(G, Vec3::Zero());
-    std::vector<int> count(G, 0);
-    for (size_t r = 0; r < data.rows.size(); ++r) {
-      const int g = data.rows[r].group;
-      if (data.rows[r].type != ObservationType::kGroup) continue;
-      sum[g] += p[r].translation();
-      ++count[g];
-    }
-    for (int g = 0; g < G; ++g) {
-      if (count[g] > 0) x.segment<3>(nt + 3 * g) = sum[g] / count[g];
-    }
+    std::vector<Vec3> points(p.size());
+    for (size_t r = 0; r < p.size(); ++r) points[r] = p[r].translation();
+    const std::vector<Vec3> mean = GroupMeans(data, points);
+    for (int g = 0; g < G; ++g) x.segment<3>(nt + 3 * g) = mean[g];
   }
   Eigen::VectorXd r = pr.Residuals(x, p);
   double rss = r.squaredNorm();
@@ -622,8 +615,7 @@ std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet&
   return uv;
 }
 
-std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& points,
-                              const std::vector<Eigen::Vector2d>& pixels) {
+std::vector<Vec3> GroupMeans(const DataSet& data, const std::vector<Vec3>& points) {
   const int G = static_cast<int>(data.groups.size());
   std::vector<Vec3> mean(G, Vec3::Zero());
   std::vector<int> count(G, 0);
@@ -635,6 +627,12 @@ std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& poin
   for (int g = 0; g < G; ++g) {
     if (count[g] > 0) mean[g] /= count[g];
   }
+  return mean;
+}
+
+std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& points,
+                              const std::vector<Eigen::Vector2d>& pixels) {
+  const std::vector<Vec3> mean = GroupMeans(data, points);
   std::vector<double> e(data.rows.size());
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Observation& o = data.rows[r];

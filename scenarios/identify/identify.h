@@ -129,6 +129,9 @@ std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet&
                                            const std::vector<int>& active,
                                            const Eigen::VectorXd& theta);
 
+// Mean point of each group's rows (zero for a group without rows).
+std::vector<Vec3> GroupMeans(const DataSet& data, const std::vector<Vec3>& points);
+
 // Error of each row in its own unit: metres to its measured point (point and pose rows, the
 // position part) or to its group's mean (re-estimated from the rows themselves, as the MUKCa
 // authors score consistency); pixels for pixel rows (`pixels` from PredictPixels).

@@ -459,17 +459,7 @@ class ClosedLoopKind : public ScenarioKind {
   // Mean NEES of the rows' point errors under the declared PPOE position covariance plus the
   // point noise, each row against its group's mean (or its measured point).
   double MeanNees(const DataSet& d, const std::vector<Vec3>& p) const {
-    const int G = static_cast<int>(d.groups.size());
-    std::vector<Vec3> mean(G, Vec3::Zero());
-    std::vector<int> count(G, 0);
-    for (size_t r = 0; r < d.rows.size(); ++r) {
-      if (d.rows[r].type != identify::ObservationType::kGroup) continue;
-      mean[d.rows[r].group] += p[r];
-      ++count[d.rows[r].group];
-    }
-    for (int g = 0; g < G; ++g) {
-      if (count[g]) mean[g] /= count[g];
-    }
+    const std::vector<Vec3> mean = identify::GroupMeans(d, p);
     kinematics::PpoeData pd(chain_->model);
     double sum = 0.0;
     size_t n = 0;

@@ -14,14 +14,13 @@
 #include "render/plot.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/sim_readings.h"
+#include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/simulation.h"
 
 namespace flexbench::scenarios {
 namespace {
-
-lie::SE3 ToSE3(const Eigen::Isometry3d& T) { return lie::SE3(T.linear(), T.translation()); }
 
 class ContactFusionKind : public ScenarioKind {
  public:

@@ -15,6 +15,7 @@
 #include "render/plot.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/model_config.h"
+#include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -26,8 +27,6 @@ namespace flexbench::scenarios {
 namespace {
 
 constexpr double kDeg = M_PI / 180.0;
-
-lie::SE3 ToSE3(const Eigen::Isometry3d& T) { return lie::SE3(T.linear(), T.translation()); }
 
 std::string Fmt(const char* f, double v) {
   char b[64];

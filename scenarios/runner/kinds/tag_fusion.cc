@@ -20,6 +20,7 @@
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/sim_readings.h"
+#include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/declared_chain.h"
@@ -27,8 +28,6 @@
 
 namespace flexbench::scenarios {
 namespace {
-
-lie::SE3 ToSE3(const Eigen::Isometry3d& T) { return lie::SE3(T.linear(), T.translation()); }
 
 class TagFusionKind : public ScenarioKind {
  public:
