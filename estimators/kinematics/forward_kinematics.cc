@@ -4,6 +4,8 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/lie/sincos.h"
+#include "estimators/target_clones.h"
 
 namespace flexbench::kinematics {
 namespace {
@@ -47,8 +49,8 @@ double JointValue(const PpoeFrame& f, const Eigen::Ref<const Eigen::VectorXd>& q
 }
 
 // The two coefficients of PpoeFrame's precomputed form: (sin q, 1 - cos q) for a revolute joint,
-// from one sincos of q/2 (GCC fuses the pair; 1 - cos q = 2 sin^2(q/2) keeps full precision for
-// small q), (q, 0) for a prismatic joint, (0, 0) for a fixed frame.
+// from one inline sincos of q/2 (1 - cos q = 2 sin^2(q/2) keeps full precision for small q), (q, 0)
+// for a prismatic joint, (0, 0) for a fixed frame.
 struct JointTrig {
   double a = 0.0;
   double b = 0.0;
@@ -57,8 +59,8 @@ struct JointTrig {
 JointTrig ComputeTrig(const PpoeFrame& f, double q) {
   JointTrig t;
   if (f.joint.type == JointType::kRevolute) {
-    const double sh = std::sin(0.5 * q);
-    const double ch = std::cos(0.5 * q);
+    double sh, ch;
+    lie::SinCos(0.5 * q, &sh, &ch);
     t.a = 2.0 * sh * ch;
     t.b = 2.0 * sh * sh;
   } else if (f.joint.type == JointType::kPrismatic) {
@@ -111,9 +113,11 @@ void ForwardKinematics(const PpoeModel& model, PpoeData& data,
   }
 }
 
-void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
-                                     const Eigen::Ref<const Eigen::VectorXd>& q,
-                                     lie::CompoundOrder order) {
+// The transports inline into it (vector-extension code), so the AVX2 clone runs them 4-wide:
+// 7-DoF with 2nd-order covariance 356 ns instead of ~550 ns on this machine.
+FLEXBENCH_TARGET_CLONES void ForwardKinematicsWithCovariance(
+    const PpoeModel& model, PpoeData& data, const Eigen::Ref<const Eigen::VectorXd>& q,
+    lie::CompoundOrder order) {
   CheckInputs(model, data, q, "ForwardKinematicsWithCovariance");
   if (order != lie::CompoundOrder::kSecond && order != lie::CompoundOrder::kFourth) {
     throw InputError("ForwardKinematicsWithCovariance: order must be kSecond or kFourth, got " +

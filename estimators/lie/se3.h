@@ -11,6 +11,8 @@
 // - An SE3 T_a_b is the pose of frame b in frame a; it maps points p_b to p_a = T_a_b * p_b.
 #pragma once
 
+#include <cstring>
+
 #include "estimators/conventions.h"
 #include "estimators/lie/so3.h"
 
@@ -140,36 +142,111 @@ inline Mat6 TransformCovariance(const SE3& X, const Mat6& Sigma) {
 
 namespace internal {
 
-// [[R^T, 0], [0, R^T]] [[I, -[t]x], [0, I]] Sigma (...)^T for Sigma = [[A, B], [B^T, C]]: the
-// congruence by Ad_{(R, t)^-1}, sheared in the input frame and then rotated, so neither R^T t
-// nor a copy of R^T is needed. Same ~200 multiplications as CongruenceAdjoint. Forced inline:
-// in the FK loop this lets the compiler overlap it with the mean-pose products (~10%).
-EIGEN_ALWAYS_INLINE void TransportBlocks(const Mat3& R, const Vec3& t, const Mat3& A, const Mat3& B,
-                                         const Mat3& C, Mat6* out) {
-  const Vec3 s = -t;
-  // Shear: D = B + [s]x C, TL = A + [s]x B^T - D [s]x (see CongruenceAdjoint).
-  Mat3 D, G;
-  D.row(0) = B.row(0) + s[1] * C.row(2) - s[2] * C.row(1);
-  D.row(1) = B.row(1) + s[2] * C.row(0) - s[0] * C.row(2);
-  D.row(2) = B.row(2) + s[0] * C.row(1) - s[1] * C.row(0);
-  for (int j = 0; j < 3; ++j) G.col(j) = s.cross(Vec3(B.row(j).transpose()));
-  for (int i = 0; i < 3; ++i) G.row(i) += s.cross(Vec3(D.row(i).transpose())).transpose();
-  G += A;
-  // Rotate: R^T M R per block, upper triangles only for the symmetric ones.
-  Mat3 RtG, RtD, RtC, D_out;
-  RtG.noalias() = R.transpose() * G;
-  RtD.noalias() = R.transpose() * D;
-  RtC.noalias() = R.transpose() * C;
-  D_out.noalias() = RtD * R;
-  Mat6& o = *out;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = i; j < 3; ++j) {
-      o(i, j) = o(j, i) = RtG.row(i).dot(R.col(j));
-      o(3 + i, 3 + j) = o(3 + j, 3 + i) = RtC.row(i).dot(R.col(j));
-    }
+// Four doubles in one GCC vector; a 3x3 block is three such columns with lane 3 unused. Plain
+// vector-extension arithmetic is lane-wise IEEE, so a 4-wide (AVX2) and a 2x2-wide (SSE2) build
+// of the same source give the same bits (-ffp-contract=off keeps multiplies and adds apart).
+typedef double V4 __attribute__((vector_size(32)));
+typedef long long V4i __attribute__((vector_size(32)));
+
+// The helpers below return 32-byte vectors; they are always inlined, so no call passes one
+// (hence -Wno-psabi in CMakeLists.txt).
+
+EIGEN_ALWAYS_INLINE V4 LoadV4(const double* p) {
+  V4 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+EIGEN_ALWAYS_INLINE void StoreV4(double* p, V4 v) { std::memcpy(p, &v, sizeof v); }
+EIGEN_ALWAYS_INLINE V4 SplatV4(double x) { return V4{x, x, x, x}; }
+// s x v in lanes 0..2 (the s vectors are zero in lane 3).
+EIGEN_ALWAYS_INLINE V4 CrossV4(V4 s_yzx, V4 s_zxy, V4 v) {
+  return s_yzx * __builtin_shuffle(v, V4i{2, 0, 1, 3}) -
+         s_zxy * __builtin_shuffle(v, V4i{1, 2, 0, 3});
+}
+// R^T M R for a 3x3 M given by columns, R column-major in memory, Rt0..2 the rows of R.
+EIGEN_ALWAYS_INLINE void RotateBlockV4(const double* R, V4 Rt0, V4 Rt1, V4 Rt2, const V4* M,
+                                       V4* out) {
+  V4 P[3];
+  for (int j = 0; j < 3; ++j) {
+    P[j] = M[0] * SplatV4(R[3 * j]) + M[1] * SplatV4(R[3 * j + 1]) + M[2] * SplatV4(R[3 * j + 2]);
   }
-  o.topRightCorner<3, 3>() = D_out;
-  o.bottomLeftCorner<3, 3>() = D_out.transpose();
+  for (int j = 0; j < 3; ++j) {
+    out[j] = Rt0 * SplatV4(P[j][0]) + Rt1 * SplatV4(P[j][1]) + Rt2 * SplatV4(P[j][2]);
+  }
+}
+
+// [[R^T, 0], [0, R^T]] [[I, -[t]x], [0, I]] (Sigma1 + Sigma2) (...)^T, Sigma2 optional, both
+// symmetric with Sigma = [[A, B], [B^T, C]]: the congruence by Ad_{(R, t)^-1}, sheared in the
+// input frame and then rotated, so neither R^T t nor a copy of R^T is needed. ~200
+// multiplications instead of ~430 for two dense 6x6 products, done on 3-column blocks in 4-wide
+// vectors; B^T is read from the lower-left block (hence "symmetric"). The output is exactly
+// symmetric (the upper triangles are mirrored). `out` may alias either input: all of it is read
+// before anything is written. Forced inline so that the kinematics' clones (x86-64-v3 and
+// baseline) each get their own vector width.
+EIGEN_ALWAYS_INLINE void TransportBlocks(const Mat3& R_in, const Vec3& t, const Mat6& Sigma1,
+                                         const Mat6* Sigma2, Mat6* out) {
+  const double* S1 = Sigma1.data();
+  // Columns of A, B, B^T, C (C's last column is read one row early and shifted, so no load
+  // runs past the end of the matrix).
+  V4 A[3], B[3], Bt[3], C[3];
+  for (int j = 0; j < 3; ++j) {
+    A[j] = LoadV4(S1 + 6 * j);
+    B[j] = LoadV4(S1 + 6 * (3 + j));
+    Bt[j] = LoadV4(S1 + 6 * j + 3);
+  }
+  C[0] = LoadV4(S1 + 21);
+  C[1] = LoadV4(S1 + 27);
+  C[2] = __builtin_shuffle(LoadV4(S1 + 32), V4i{1, 2, 3, 0});
+  if (Sigma2 != nullptr) {
+    const double* S2 = Sigma2->data();
+    for (int j = 0; j < 3; ++j) {
+      A[j] += LoadV4(S2 + 6 * j);
+      B[j] += LoadV4(S2 + 6 * (3 + j));
+      Bt[j] += LoadV4(S2 + 6 * j + 3);
+    }
+    C[0] += LoadV4(S2 + 21);
+    C[1] += LoadV4(S2 + 27);
+    C[2] += __builtin_shuffle(LoadV4(S2 + 32), V4i{1, 2, 3, 0});
+  }
+  const double* R = R_in.data();
+  const V4 Rt0{R[0], R[3], R[6], 0.0};
+  const V4 Rt1{R[1], R[4], R[7], 0.0};
+  const V4 Rt2{R[2], R[5], R[8], 0.0};
+  // Shear with s = -t: D = B + [s]x C, G = A + [s]x B^T - D [s]x.
+  const double s0 = -t[0], s1 = -t[1], s2 = -t[2];
+  const V4 s_yzx{s1, s2, s0, 0.0};
+  const V4 s_zxy{s2, s0, s1, 0.0};
+  V4 D[3], G[3];
+  for (int j = 0; j < 3; ++j) D[j] = B[j] + CrossV4(s_yzx, s_zxy, C[j]);
+  G[0] = A[0] + CrossV4(s_yzx, s_zxy, Bt[0]) - (D[1] * SplatV4(s2) - D[2] * SplatV4(s1));
+  G[1] = A[1] + CrossV4(s_yzx, s_zxy, Bt[1]) - (D[2] * SplatV4(s0) - D[0] * SplatV4(s2));
+  G[2] = A[2] + CrossV4(s_yzx, s_zxy, Bt[2]) - (D[0] * SplatV4(s1) - D[1] * SplatV4(s0));
+  V4 TL[3], TR[3], BR[3];
+  RotateBlockV4(R, Rt0, Rt1, Rt2, G, TL);
+  RotateBlockV4(R, Rt0, Rt1, Rt2, D, TR);
+  RotateBlockV4(R, Rt0, Rt1, Rt2, C, BR);
+  // Write column by column; each 4-lane store spills one double into the next rows, which a
+  // later store overwrites.
+  double* o = out->data();
+  for (int j = 0; j < 3; ++j) {
+    StoreV4(o + 6 * j, TL[j]);
+    o[6 * j + 3] = TR[0][j];
+    o[6 * j + 4] = TR[1][j];
+    o[6 * j + 5] = TR[2][j];
+  }
+  StoreV4(o + 18, TR[0]);
+  StoreV4(o + 21, BR[0]);
+  StoreV4(o + 24, TR[1]);
+  StoreV4(o + 27, BR[1]);
+  StoreV4(o + 30, TR[2]);
+  StoreV4(o + 32, __builtin_shuffle(BR[2], TR[2], V4i{6, 0, 1, 2}));
+  // Mirror the upper triangles of the two symmetric blocks.
+  o[1] = o[6];
+  o[2] = o[12];
+  o[8] = o[13];
+  o[22] = o[27];
+  o[23] = o[33];
+  o[29] = o[34];
 }
 
 }  // namespace internal
@@ -177,9 +254,8 @@ EIGEN_ALWAYS_INLINE void TransportBlocks(const Mat3& R, const Vec3& t, const Mat
 // Sigma -> Ad_{X^-1} Sigma Ad_{X^-1}^T: moves a local covariance at Y to the local tangent space
 // at Y * X, exactly (Y Exp(xi) X = Y X Exp(Ad_{X^-1} xi)); the transport step of eqs. 15, 18.
 // Sigma must be symmetric; `out` may alias it.
-inline void TransportCovariance(const SE3& X, const Mat6& Sigma, Mat6* out) {
-  internal::TransportBlocks(X.rotation(), X.translation(), Sigma.topLeftCorner<3, 3>(),
-                            Sigma.topRightCorner<3, 3>(), Sigma.bottomRightCorner<3, 3>(), out);
+EIGEN_ALWAYS_INLINE void TransportCovariance(const SE3& X, const Mat6& Sigma, Mat6* out) {
+  internal::TransportBlocks(X.rotation(), X.translation(), Sigma, nullptr, out);
 }
 inline Mat6 TransportCovariance(const SE3& X, const Mat6& Sigma) {
   Mat6 out;
@@ -188,12 +264,9 @@ inline Mat6 TransportCovariance(const SE3& X, const Mat6& Sigma) {
 }
 
 // Ad_{X^-1} (Sigma1 + Sigma2) Ad_{X^-1}^T without forming the sum; the hot step of eq. 18.
-inline void TransportCovarianceSum(const SE3& X, const Mat6& Sigma1, const Mat6& Sigma2,
-                                   Mat6* out) {
-  internal::TransportBlocks(
-      X.rotation(), X.translation(), Sigma1.topLeftCorner<3, 3>() + Sigma2.topLeftCorner<3, 3>(),
-      Sigma1.topRightCorner<3, 3>() + Sigma2.topRightCorner<3, 3>(),
-      Sigma1.bottomRightCorner<3, 3>() + Sigma2.bottomRightCorner<3, 3>(), out);
+EIGEN_ALWAYS_INLINE void TransportCovarianceSum(const SE3& X, const Mat6& Sigma1,
+                                                const Mat6& Sigma2, Mat6* out) {
+  internal::TransportBlocks(X.rotation(), X.translation(), Sigma1, &Sigma2, out);
 }
 
 }  // namespace flexbench::lie

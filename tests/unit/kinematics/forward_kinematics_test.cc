@@ -187,6 +187,38 @@ TEST(ForwardKinematicsCovariance, SecondOrderIsTheSumOfAdjointMappedSources) {
   }
 }
 
+TEST(ForwardKinematicsCovariance, SameBitsAsTheBaselineRecursion) {
+  // ForwardKinematicsWithCovariance runs as an AVX2 clone where the CPU has it
+  // (estimators/target_clones.h); this file is compiled for the baseline only. Redo eq. 18's
+  // recursion here with the same inline transports: every bit must agree, or "same seed, same
+  // bytes" would depend on the machine.
+  std::mt19937_64 rng(21);
+  testing::RandomChainOptions o;
+  o.dof = 12;
+  o.trans_sd = 0.01;
+  o.rot_sd = 0.05;
+  o.mixed_joints = true;
+  o.fixed_base_source = true;
+  o.grasp = true;
+  const PpoeModel model = testing::RandomChain(rng, o);
+  PpoeData data(model);
+  for (int trial = 0; trial < 5; ++trial) {
+    const Eigen::VectorXd q = testing::RandomQ(rng, model);
+    ForwardKinematicsWithCovariance(model, data, q, CompoundOrder::kSecond);
+    std::vector<Mat6> Sigma(model.num_frames(), Mat6::Zero());
+    for (FrameId i = 1; i < model.num_frames(); ++i) {
+      const PpoeFrame& f = model.frame(i);
+      const SE3& T_parent_i = data.T_parent_frame[i];
+      if (f.has_source) {
+        lie::TransportCovarianceSum(T_parent_i, Sigma[f.parent], f.source_cov_parent, &Sigma[i]);
+      } else {
+        lie::TransportCovariance(T_parent_i, Sigma[f.parent], &Sigma[i]);
+      }
+      EXPECT_TRUE(data.Sigma_frame[i] == Sigma[i]) << model.frame(i).name << " trial " << trial;
+    }
+  }
+}
+
 TEST(ForwardKinematicsCovariance, SingleSourceIsExactAtBothOrders) {
   // Only the first joint is uncertain (paper Fig. 3a): every frame's covariance is the exactly
   // transported source, so both orders agree with each other and with Monte Carlo.

@@ -282,6 +282,12 @@ TEST_P(SE3AtPose, CongruenceIsSymmetricAndMayAlias) {
   EXPECT_LT((sum - sum_expected).cwiseAbs().maxCoeff(),
             1e-12 * (1.0 + sum_expected.cwiseAbs().maxCoeff()));
   EXPECT_TRUE(sum.isApprox(sum.transpose(), 0.0));
+  // In place on either input (everything is read before the first store).
+  Mat6 in1 = Sigma, in2 = Sigma2;
+  TransportCovarianceSum(X(), in1, Sigma2, &in1);
+  TransportCovarianceSum(X(), Sigma, in2, &in2);
+  EXPECT_TRUE(in1 == sum);
+  EXPECT_TRUE(in2 == sum);
 }
 
 INSTANTIATE_TEST_SUITE_P(Poses, SE3AtPose, ::testing::ValuesIn(testing::StandardPoseCases()),

@@ -1,0 +1,16 @@
+// FLEXBENCH_TARGET_CLONES marks a hot function to be compiled twice on x86-64 with GCC, for
+// x86-64-v3 (AVX2, FMA) and for the baseline; glibc's ifunc picks one when the program loads.
+// Loops and GCC vector-extension code inside (and everything inlined into it) then run 4-wide
+// where the CPU allows, the binary still runs on any x86-64, and struct layouts (Eigen's
+// alignment) stay those of the baseline build because only function bodies differ. Results are
+// bit-identical between the two: the build pins -ffp-contract=off (no fused multiply-adds) and
+// GCC does not reorder floating-point arithmetic without -ffast-math. Sanitizer builds, other
+// compilers and -DFLEXBENCH_NO_TARGET_CLONES get the baseline only.
+#pragma once
+
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && \
+    !defined(__SANITIZE_ADDRESS__) && !defined(FLEXBENCH_NO_TARGET_CLONES)
+#define FLEXBENCH_TARGET_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define FLEXBENCH_TARGET_CLONES
+#endif
