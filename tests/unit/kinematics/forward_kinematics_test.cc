@@ -93,13 +93,7 @@ void Record(const std::string& key, double value) {
 
 TEST(ForwardKinematics, MeanMatchesProductOf4x4Matrices) {
   std::mt19937_64 rng(1);
-  testing::RandomChainOptions o;
-  o.dof = 7;
-  o.trans_sd = 0.01;
-  o.rot_sd = 0.05;
-  o.mixed_joints = true;
-  o.fixed_base_source = true;
-  o.grasp = true;
+  const testing::RandomChainOptions o = testing::EveryFeature(7, 0.01, 0.05);
   const PpoeModel model = testing::RandomChain(rng, o);
   PpoeData data(model);
   for (int trial = 0; trial < 20; ++trial) {
@@ -162,12 +156,7 @@ TEST(ForwardKinematicsCovariance, SecondOrderIsTheSumOfAdjointMappedSources) {
   // eq. 18 unrolled: Sigma_frame = sum over upstream sources s of
   // Ad_{T_frame^-1 T_{s,p}} Sigma_s Ad^T, with T_{s,p} the source's mean frame.
   std::mt19937_64 rng(2);
-  testing::RandomChainOptions o;
-  o.trans_sd = 0.01;
-  o.rot_sd = 0.05;
-  o.mixed_joints = true;
-  o.fixed_base_source = true;
-  o.grasp = true;
+  const testing::RandomChainOptions o = testing::EveryFeature(7, 0.01, 0.05);
   const PpoeModel model = testing::RandomChain(rng, o);
   PpoeData data(model);
   const Eigen::VectorXd q = testing::RandomQ(rng, model);
@@ -193,13 +182,7 @@ TEST(ForwardKinematicsCovariance, SameBitsAsTheBaselineRecursion) {
   // recursion here with the same inline transports: every bit must agree, or "same seed, same
   // bytes" would depend on the machine.
   std::mt19937_64 rng(21);
-  testing::RandomChainOptions o;
-  o.dof = 12;
-  o.trans_sd = 0.01;
-  o.rot_sd = 0.05;
-  o.mixed_joints = true;
-  o.fixed_base_source = true;
-  o.grasp = true;
+  const testing::RandomChainOptions o = testing::EveryFeature(12, 0.01, 0.05);
   const PpoeModel model = testing::RandomChain(rng, o);
   PpoeData data(model);
   for (int trial = 0; trial < 5; ++trial) {
@@ -277,12 +260,7 @@ TEST(ForwardKinematicsCovariance, SevenDofChainSmallPerturbationsAllFrames) {
   // 1 mm / 0.5 deg sources, a passive base compliance and an uncertain grasp: both orders match
   // Monte Carlo at every frame within sampling error.
   std::mt19937_64 rng(5);
-  testing::RandomChainOptions o;
-  o.trans_sd = 1e-3;
-  o.rot_sd = 0.5 * kDeg;
-  o.mixed_joints = true;
-  o.fixed_base_source = true;
-  o.grasp = true;
+  const testing::RandomChainOptions o = testing::EveryFeature(7, 1e-3, 0.5 * kDeg);
   const PpoeModel model = testing::RandomChain(rng, o);
   const Eigen::VectorXd q = testing::RandomQ(rng, model);
   PpoeData d2(model), d4(model);

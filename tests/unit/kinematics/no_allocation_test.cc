@@ -69,13 +69,7 @@ TEST(NoAllocation, CounterSeesAllocations) {
 
 TEST(NoAllocation, ForwardKinematicsCallsDoNotAllocate) {
   std::mt19937_64 rng(1);
-  testing::RandomChainOptions o;
-  o.dof = 27;
-  o.trans_sd = 0.01;
-  o.rot_sd = 0.05;
-  o.mixed_joints = true;
-  o.fixed_base_source = true;
-  o.grasp = true;
+  const testing::RandomChainOptions o = testing::EveryFeature(27, 0.01, 0.05);
   const PpoeModel model = testing::RandomChain(rng, o);
   PpoeData data(model);
   const Eigen::VectorXd q = testing::RandomQ(rng, model);

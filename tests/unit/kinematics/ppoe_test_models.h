@@ -69,6 +69,18 @@ struct RandomChainOptions {
   bool tag = true;                 // a rigid "tag" frame on link N-2
 };
 
+// Every structural feature on: mixed joint types, a base compliance, an uncertain grasp.
+inline RandomChainOptions EveryFeature(int dof, double trans_sd, double rot_sd) {
+  RandomChainOptions o;
+  o.dof = dof;
+  o.trans_sd = trans_sd;
+  o.rot_sd = rot_sd;
+  o.mixed_joints = true;
+  o.fixed_base_source = true;
+  o.grasp = true;
+  return o;
+}
+
 // A serial chain with random geometry (links ~0.3 m) and a 6-DoF source at every joint. Frames:
 // "base_plate" (if requested), "link1".."linkN", "ee", "tag" (a rigid frame on link N-2, if
 // requested), "grasp" (if requested).
