@@ -111,6 +111,25 @@ void Report(const EffectModel& em, const DataSet& data, const std::vector<Config
       res->theta_corr(i, j) = sd[i] * sd[j] > 0 ? res->theta_cov(i, j) / (sd[i] * sd[j]) : 0.0;
     }
   }
+  {
+    // Each effect's correction with the group points projected out.
+    Fit groups_only = cur;
+    groups_only.active.clear();
+    groups_only.basis.clear();
+    groups_only.theta.resize(0);
+    const Projector proj(FitJacobian(em, data, loads, groups_only, opt));
+    Eigen::VectorXd sum = Eigen::VectorXd::Zero(J.rows());
+    double parts = 0.0;
+    for (size_t e = 0, a = 0; e < cur.active.size(); ++e) {
+      const int m = static_cast<int>(cur.basis[e].cols());
+      const Eigen::VectorXd d =
+          proj.Apply(J.middleCols(a, m) * StateOf(pr, cur).segment(a, m));
+      sum += d;
+      parts += d.squaredNorm();
+      a += m;
+    }
+    res->overlap = parts > 0 ? sum.squaredNorm() / parts : 1.0;
+  }
   std::vector<double> gain;
   double total = 0.0;
   int off = 0;
@@ -160,6 +179,37 @@ Fit FollowFinding(const SelectionContext& ctx, const std::vector<int>& candidate
   return SelectEffects(ctx, cur, pool, true, cv);
 }
 
+// For each chosen effect, the best selection without it (cross-validation only).
+void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candidates,
+                      IdentifyResult* res) {
+  if (!ctx.opt.cross_validation) return;
+  std::vector<int> pool = Pool(ctx.em, candidates, false, false);
+  for (const std::string& u : res->unlocked) pool.push_back(ctx.em.FindCandidate(u));
+  for (int banned : res->after.active) {
+    if (ctx.em.candidates()[banned].generic_geometry) continue;
+    std::vector<int> rest;
+    for (int c : pool) {
+      if (c != banned) rest.push_back(c);
+    }
+    std::vector<std::string> quiet;
+    const SelectionContext alt_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, ctx.opt, &quiet};
+    double cv = res->cv_before;
+    const Fit alt = SelectEffects(alt_ctx, res->before, rest, true, &cv);
+    Alternative a;
+    a.banned = ctx.em.candidates()[banned].Name();
+    a.cv = cv;
+    for (int c : alt.active) a.effects.push_back(ctx.em.candidates()[c].Name());
+    std::string names;
+    for (const auto& n : a.effects) names += (names.empty() ? "" : " + ") + n;
+    const bool close = !alt.active.empty() && cv < (1.0 + ctx.opt.ambiguity_cv) * res->cv_after;
+    if (close) res->attribution_unique = false;
+    res->steps.push_back(Fmt("without %s: %s reach held-out %.4g (chosen %.4g)%s",
+                             a.banned.c_str(), names.empty() ? "nothing" : names.c_str(), cv,
+                             res->cv_after, close ? ": as good, the cause is not singled out" : ""));
+    res->alternatives.push_back(std::move(a));
+  }
+}
+
 }  // namespace
 
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data) {
@@ -199,6 +249,19 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
                          "determine its own sockets, let alone an effect",
                          res.before.num_residuals, res.before.num_params));
   }
+  {
+    // A group of one row fixes its own point and nothing else: refused, not silently used.
+    std::vector<int> count(data.groups.size(), 0);
+    for (const Observation& o : data.rows) {
+      if (o.type == ObservationType::kGroup) ++count[o.group];
+    }
+    for (size_t g = 0; g < count.size(); ++g) {
+      if (count[g] == 1) {
+        throw InputError("identify: group '" + data.groups[g] +
+                         "' has one row; a group (socket) needs two or more");
+      }
+    }
+  }
   const Folds folds = MakeFolds(data);
   res.folds_by = opt.cross_validation ? folds.by : "";
   res.num_folds = opt.cross_validation ? static_cast<int>(folds.test_rows.size()) : 0;
@@ -227,6 +290,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
     res.steps.push_back(std::string("diagnostics after: ") + res.finding.message +
                         (res.finding.significant ? " (significant)" : ""));
   }
+  FindAlternatives(ctx, candidates, &res);
   FindEquivalents(em, data, loads, cur, candidates, opt, &res);
   for (const EquivalenceSet& s : res.equivalence) {
     if (s.members.size() > 1) {
@@ -314,7 +378,8 @@ std::string Verdict(const IdentifyResult& res, double val_before, double val_aft
   if (!(val_after < 0.99 * val_before)) return "unexplained";
   const Fit& a = res.after;
   const bool left = a.rss > 2.0 * std::max(1, a.num_residuals - a.num_params);
-  return res.finding.significant || left ? "partly_explained" : "explained";
+  if (res.finding.significant || left) return "partly_explained";
+  return res.attribution_unique ? "explained" : "ambiguous";
 }
 
 std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet& data,

@@ -70,6 +70,8 @@ struct IdentifyOptions {
   int cv_trials = 3;             // best-BIC candidates cross-validated per round
   double outlier_iqr = 3.0;      // rows beyond Q3 + k IQR of the declared model's errors; 0: off
   double diagnostic_p = 1e-6;    // significance of a residual finding
+  double ambiguity_cv = 0.25;    // an alternative within this share of the held-out error is
+                                 // as good an explanation
   double singular_tol = 1e-10;   // smallest / largest eigenvalue of the normalised information
   double point_std_m = 1e-4;       // noise of a measured or grouped point
   double distance_std_m = 1e-4;    // of a known group distance
@@ -118,6 +120,14 @@ struct EquivalenceSet {
   double correction_rms = 0.0;           // whitened RMS of the correction it makes
 };
 
+// The best model selection finds when one chosen effect is banned: if it reaches about the same
+// held-out error, the data does not single out that effect as the cause.
+struct Alternative {
+  std::string banned;
+  std::vector<std::string> effects;
+  double cv = 0.0;  // its held-out error (mean squared whitened residual)
+};
+
 // Structure left in the residual (diagnostics.h).
 struct ResidualFinding {
   bool significant = false;
@@ -148,6 +158,11 @@ struct IdentifyResult {
   std::string folds_by;               // cross-validation folds: "set", "group", "row", ""
   int num_folds = 0;
   double cv_before = 0.0, cv_after = 0.0;  // held-out mean squared whitened residual
+  std::vector<Alternative> alternatives;   // one per chosen effect (cross-validation only)
+  bool attribution_unique = true;          // no alternative comes within ambiguity_cv
+  // |sum of the effects' corrections|^2 / sum of their |correction|^2 (group points projected
+  // out): about 1 for independent causes, well below 1 when effects cancel each other.
+  double overlap = 1.0;
   bool near_singular = false;              // information matrix near singular
   std::string undetermined;                // the combination it does not determine
   Eigen::MatrixXd theta_cov;
@@ -170,7 +185,11 @@ DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop);
 //                       while structure (or the error) remains: the model lacks something the
 //                       candidate library cannot represent;
 //   "partly_explained"  the validation error drops, but significant structure remains;
-//   "explained"         the validation error drops and no significant structure remains.
+//   "ambiguous"         the validation error drops and nothing is left, but with one of the
+//                       chosen effects banned, other effects do about as well on held-out data:
+//                       the correction holds, its cause is not singled out;
+//   "explained"         the validation error drops, no significant structure remains, and no
+//                       alternative explains the held-out data as well.
 std::string Verdict(const IdentifyResult& result, double val_before, double val_after);
 
 // Precomputed per-row loads for a data set.

@@ -23,6 +23,7 @@
 #include "estimators/stats/chi_square.h"
 #include "render/plot.h"
 #include "scenarios/identify/calibration_data.h"
+#include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/identify.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -287,6 +288,8 @@ class ClosedLoopKind : public ScenarioKind {
                                  m["val_err_after_m"].get<double>());
     m["verdict"] = verdict_;
     m["near_singular"] = res.near_singular;
+    m["effect_overlap"] = res.overlap;
+    m["attribution_unique"] = res.attribution_unique;
     m["cv_err_before"] = res.cv_before;
     m["cv_err_after"] = res.cv_after;
     m["residual_finding"] = FindingJson(res.finding);
@@ -307,7 +310,8 @@ class ClosedLoopKind : public ScenarioKind {
     m["nees_bound_high"] = nb.upper;
     source_scale_ = SourceScale(val, val_p1);
     m["source_covariance_scale"] = source_scale_;
-    m["nees_after_scaled"] = MeanNees(val, val_p1, source_scale_);
+    nees_scaled_ = MeanNees(val, val_p1, source_scale_);
+    m["nees_after_scaled"] = nees_scaled_;
 
     Json& id = (*ctx.summary)["identification"];
     id["selection_rule"] = "forward stepwise, BIC = N ln(RSS/N) + k ln N, add while dBIC < -" +
@@ -337,9 +341,14 @@ class ClosedLoopKind : public ScenarioKind {
     id["undetermined"] = res.undetermined;
     id["first_finding"] = FindingJson(res.first_finding);
     id["unlocked"] = res.unlocked;
+    Json alts = Json::array();
+    for (const identify::Alternative& a : res.alternatives) {
+      alts.push_back({{"banned", a.banned}, {"effects", a.effects}, {"cv_err", a.cv}});
+    }
+    id["alternatives"] = alts;
 
     // A model that does not lower the validation error is no fix: it is not shipped.
-    if (verdict_ == "explained" || verdict_ == "partly_explained") {
+    if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
       WriteAugmented(ctx, res);
     } else {
       ctx.log("declared_augmented.yaml not written: the identified model does not explain the "
@@ -376,9 +385,24 @@ class ClosedLoopKind : public ScenarioKind {
         }
         break;
       }
-      case Source::Type::kSimulate:
+      case Source::Type::kSimulate: {
         Simulate(s, ctx, what, &d);
+        // A socket reached once fixes only its own point: left out, and counted.
+        std::vector<int> count(d.groups.size(), 0), keep;
+        for (const auto& o : d.rows) ++count[o.group];
+        for (size_t r = 0; r < d.rows.size(); ++r) {
+          if (count[d.rows[r].group] >= 2) keep.push_back(static_cast<int>(r));
+        }
+        if (keep.size() < d.rows.size()) {
+          ctx.log(what + ": " + std::to_string(d.rows.size() - keep.size()) +
+                  " row(s) of sockets reached only once left out");
+          (*ctx.summary)["metrics"][what + "_skipped_configurations"] =
+              (*ctx.summary)["metrics"][what + "_skipped_configurations"].get<int>() +
+              static_cast<int>(d.rows.size() - keep.size());
+          d = identify::Subset(d, keep);
+        }
         break;
+      }
     }
     if (d.rows.empty()) throw InputError(s.where + ": no " + what + " rows");
     return d;
@@ -643,8 +667,12 @@ class ClosedLoopKind : public ScenarioKind {
     y << "# Declared model augmented by flexbench closed_loop: the identified effects with their\n"
          "# fitted parameters, and the PPOE sources scaled by "
       << Num(source_scale_)
-      << " (what the\n# remaining validation residual supports: mean NEES -> 3). Verdict: "
-      << verdict_ << ".\n";
+      << " (what the\n# remaining validation residual supports; mean NEES there "
+      << Num(nees_scaled_) << ", 3 is consistent). Verdict: " << verdict_
+      << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the data "
+                                    "about as well, so no cause is singled out)"
+                                  : "")
+      << ".\n";
     // Relative to the result folder, so the file loads from where it is written.
     y << "model: "
       << fs::absolute(declared_.model_path)
@@ -787,6 +815,7 @@ class ClosedLoopKind : public ScenarioKind {
   std::unique_ptr<sim::Simulation> sim_;
   double source_scale_ = 1.0;
   std::string verdict_;
+  double nees_scaled_ = 0.0;
 };
 
 }  // namespace
