@@ -105,6 +105,9 @@ double CrossValidate(const EffectModel& em, const DataSet& data,
   double ss = 0.0;
   int entries = 0;
   std::vector<char> in_test(data.rows.size());
+  // Each fold starts from the full-data fit, a few steps from its own optimum.
+  IdentifyOptions fold_opt = opt;
+  fold_opt.max_iterations = std::min(opt.max_iterations, 8);
   for (const std::vector<int>& test : folds.test_rows) {
     std::fill(in_test.begin(), in_test.end(), 0);
     for (int r : test) in_test[r] = 1;
@@ -116,7 +119,7 @@ double CrossValidate(const EffectModel& em, const DataSet& data,
     const std::vector<ConfigLoads> tr_loads = SubsetLoads(loads, train);
     Eigen::VectorXd theta = fit.theta;
     if (!fit.active.empty()) {
-      theta = FitEffects(em, tr, tr_loads, fit.active, fit.basis, fit.theta, opt).theta;
+      theta = FitEffects(em, tr, tr_loads, fit.active, fit.basis, fit.theta, fold_opt).theta;
     }
     int n = 0;
     ss += HeldOutSquares(em, Subset(data, test), SubsetLoads(loads, test), fit.active, theta, opt,

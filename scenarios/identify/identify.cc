@@ -194,7 +194,8 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
     std::vector<std::string> quiet;
     const SelectionContext alt_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, ctx.opt, &quiet};
     double cv = res->cv_before;
-    const Fit alt = SelectEffects(alt_ctx, res->before, rest, true, &cv);
+    // No swap step: an alternative needs to be found, not polished.
+    const Fit alt = SelectEffects(alt_ctx, res->before, rest, true, &cv, false);
     Alternative a;
     a.banned = ctx.em.candidates()[banned].Name();
     a.cv = cv;

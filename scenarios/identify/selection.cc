@@ -173,7 +173,7 @@ double CvError(const SelectionContext& ctx, const Fit& fit) {
 }
 
 Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
-                  bool backward, double* cv) {
+                  bool backward, double* cv, bool swap) {
   Fit cur = start;
   for (int round = 0; static_cast<int>(cur.active.size()) < ctx.opt.max_effects &&
                       round < 3 * ctx.opt.max_effects;
@@ -197,7 +197,7 @@ Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vect
     *cv = cv_best;
     if (backward) cur = BackwardStep(ctx, std::move(cur), cv);
   }
-  if (backward) cur = SwapStep(ctx, std::move(cur), pool, cv);
+  if (backward && swap) cur = SwapStep(ctx, std::move(cur), pool, cv);
   return cur;
 }
 

@@ -35,9 +35,10 @@ std::vector<std::string> BoundViolations(const EffectModel& em, const Fit& fit);
 // Held-out error of `fit` (NaN when cross-validation is off).
 double CvError(const SelectionContext& ctx, const Fit& fit);
 
-// Selection from `start` over `pool`. `backward`: earlier effects may leave again. `*cv` holds
-// the current model's held-out error on entry and on return.
+// Selection from `start` over `pool`. `backward`: earlier effects may leave again, and the
+// swap step runs at the end when `swap`. `*cv` holds the current model's held-out error on
+// entry and on return.
 Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
-                  bool backward, double* cv);
+                  bool backward, double* cv, bool swap = true);
 
 }  // namespace flexbench::identify
