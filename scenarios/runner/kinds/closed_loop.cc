@@ -635,7 +635,10 @@ class ClosedLoopKind : public ScenarioKind {
       cz.push_back(y * zs);
     }
     render::Figure fig(900, 560);
-    fig.title = "Residual structure: " + f.message + (f.significant ? "" : " (not significant)");
+    char title[160];
+    std::snprintf(title, sizeof(title), "Residual left: %s in %s, p = %.2g%s", f.kind.c_str(),
+                  f.variable.c_str(), f.p_value, f.significant ? "" : " (not significant)");
+    fig.title = title;
     render::Axes& ax = fig.axes();
     ax.x_label = angle ? f.variable + " [deg]"
                  : f.kind == "load" ? "gravity torque at " + f.variable + " [N m]"

@@ -340,6 +340,7 @@ TEST(Identify, AnEffectOutsideTheLibraryIsReportedNotMisnamed) {
       Identify(*f.em, cal, cal_loads, WithoutNeedsEvidence(*f.em), IdentifyOptions{});
   std::string log;
   for (const auto& s : r.steps) log += s + "\n";
+  std::printf("%s\n", r.finding.message.c_str());
   // The structure is found where it lives: j3, 2 cycles per revolution, about its size.
   EXPECT_TRUE(r.finding.significant) << log;
   EXPECT_EQ(r.finding.kind, "periodic") << log;
