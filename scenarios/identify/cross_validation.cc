@@ -6,7 +6,7 @@
 
 namespace flexbench::identify {
 
-Folds MakeFolds(const DataSet& data) {
+Folds MakeFolds(const DataSet& data, const std::string& by) {
   Folds f;
   const auto by_label = [&](const char* by, int n, auto label_of) {
     f.by = by;
@@ -19,12 +19,15 @@ Folds MakeFolds(const DataSet& data) {
                                      [](const std::vector<int>& v) { return v.empty(); }),
                       f.test_rows.end());
   };
-  by_label("set", static_cast<int>(data.sets.size()), [](const Observation& o) { return o.set; });
-  if (f.test_rows.size() >= 2) return f;
-  by_label("group", static_cast<int>(data.groups.size()), [](const Observation& o) {
+  if (by == "auto" || by == "set") {
+    by_label("set", static_cast<int>(data.sets.size()),
+             [](const Observation& o) { return o.set; });
+    if (f.test_rows.size() >= 2 || by == "set") return f;
+  }
+  if (by == "auto" || by == "group") by_label("group", static_cast<int>(data.groups.size()), [](const Observation& o) {
     return o.type == ObservationType::kGroup ? o.group : -1;
   });
-  if (f.test_rows.size() >= 4) {
+  if (f.test_rows.size() >= 4 || by == "group") {
     // Rows without a group (points) join the folds in round robin.
     int k = 0;
     for (size_t r = 0; r < data.rows.size(); ++r) {

@@ -18,7 +18,8 @@ struct Folds {
   std::vector<std::vector<int>> test_rows;  // per fold, row indices into the data set
 };
 
-Folds MakeFolds(const DataSet& data);
+// `by`: "auto" (as above) or "set", "group", "row" (fewer than two folds then: none).
+Folds MakeFolds(const DataSet& data, const std::string& by = "auto");
 
 // The rows `rows` of `data` as a data set of their own (groups, sets and distances renumbered,
 // distances only between groups that keep rows). `loads` likewise, when given.

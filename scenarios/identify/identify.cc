@@ -263,12 +263,14 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
       }
     }
   }
-  const Folds folds = MakeFolds(data);
+  const Folds folds = MakeFolds(data, opt.folds_by);
   res.folds_by = opt.cross_validation ? folds.by : "";
   res.num_folds = opt.cross_validation ? static_cast<int>(folds.test_rows.size()) : 0;
   if (opt.cross_validation && folds.test_rows.size() < 2) {
-    throw InputError("identify: cross-validation needs at least two sets, four groups or two "
-                     "rows; the data has " + std::to_string(data.rows.size()) + " rows");
+    throw InputError("identify: cross-validation by " + folds.by + " needs at least two " +
+                     folds.by + "s with rows; the data has " +
+                     std::to_string(folds.test_rows.size()) +
+                     " (set cross_validation: false, or another folds_by)");
   }
   const SelectionContext ctx{em, data, loads, folds, opt, &res.steps};
   double cv = CvError(ctx, res.before);

@@ -66,6 +66,7 @@ struct DataSet {
 
 struct IdentifyOptions {
   bool cross_validation = true;  // selection checked on held-out folds (cross_validation.h)
+  std::string folds_by = "auto";  // "auto", or insist on "set", "group" or "row" folds
   double cv_min_gain = 0.02;     // share the held-out error must drop by to keep an effect
   int cv_trials = 3;             // best-BIC candidates cross-validated per round
   double outlier_iqr = 3.0;      // rows beyond Q3 + k IQR of the declared model's errors; 0: off

@@ -121,6 +121,11 @@ class ClosedLoopKind : public ScenarioKind {
     opt_.max_effects = root.GetInt("max_effects", opt_.max_effects);
     if (opt_.max_effects < 0) root.Child("max_effects").Fail("must be >= 0");
     opt_.cross_validation = root.GetBool("cross_validation", opt_.cross_validation);
+    opt_.folds_by = root.GetString("folds_by", opt_.folds_by);
+    if (opt_.folds_by != "auto" && opt_.folds_by != "set" && opt_.folds_by != "group" &&
+        opt_.folds_by != "row") {
+      root.Child("folds_by").Fail("expected auto, set, group or row");
+    }
     opt_.cv_min_gain = root.GetDouble("cv_min_gain", opt_.cv_min_gain);
     if (!(opt_.cv_min_gain >= 0.0 && opt_.cv_min_gain < 1.0)) {
       root.Child("cv_min_gain").Fail("must be in [0, 1)");

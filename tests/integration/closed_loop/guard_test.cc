@@ -97,3 +97,50 @@ INSTANTIATE_TEST_SUITE_P(Planted, ClosedLoopGuard,
 
 }  // namespace
 }  // namespace flexbench::identify
+
+namespace flexbench::identify {
+namespace {
+
+// Bad selection input: exit 2 with one line naming the file, and nothing written.
+TEST(ClosedLoopBadInput, FoldsThatCannotExistAndUnknownFamilies) {
+  const fs::path src = fs::path(testing::SourceDir()) / "scenarios" / "closed_loop_backlash.yaml";
+  const YAML::Node root = YAML::LoadFile(src.string());
+  const fs::path dir = fs::temp_directory_path() / ("flexbench_badsel_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const auto run = [&](const YAML::Node& n) {
+    {
+      std::ofstream out(dir / "bad.yaml");
+      out << n;
+    }
+    const std::string cmd = testing::BinDir() + "/flexbench run " + (dir / "bad.yaml").string() +
+                            " --out " + (dir / "out").string();
+    return testing::RunCommand(cmd);
+  };
+  YAML::Node base = YAML::Clone(root);
+  for (const char* key : {"model", "declared"}) {
+    base[key] = (src.parent_path() / root[key].as<std::string>()).lexically_normal().string();
+  }
+  {
+    YAML::Node n = YAML::Clone(base);
+    n["calibration"]["simulate"]["placements"] = 1;
+    n["folds_by"] = "set";
+    const testing::CommandResult r = run(n);
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("cross-validation by set needs at least two sets"), std::string::npos)
+        << r.err;
+    EXPECT_FALSE(fs::exists(dir / "out"));
+  }
+  {
+    YAML::Node n = YAML::Clone(base);
+    n["candidates"].push_back("joint_offsett");
+    const testing::CommandResult r = run(n);
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("bad.yaml"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("joint_offsett"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(dir / "out"));
+  }
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace flexbench::identify
