@@ -28,6 +28,19 @@ Renderer::Renderer(const mjModel* m, RenderMode mode)
       model_(m),
       width_(m->vis.global.offwidth),
       height_(m->vis.global.offheight) {
+  // MuJoCo's offscreen buffer: a size OSMesa cannot allocate ends in mju_error, a negative one
+  // in an OSMesa failure; both are the model's (bad input), said before any GL call.
+  constexpr int kMaxOffscreen = 8192;
+  if (width_ < 1 || height_ < 1 || width_ > kMaxOffscreen || height_ > kMaxOffscreen) {
+    throw InputError("model's <visual><global offwidth=\"" + std::to_string(width_) +
+                     "\" offheight=\"" + std::to_string(height_) +
+                     "\">: the offscreen buffer must be 1.." + std::to_string(kMaxOffscreen) +
+                     " pixels each way");
+  }
+  if (m->vis.quality.offsamples < 0 || m->vis.quality.offsamples > 16) {
+    throw InputError("model's <visual><quality offsamples=\"" +
+                     std::to_string(m->vis.quality.offsamples) + "\">: must be 0..16");
+  }
   gl_renderer_ = EnsureGlContext();
   mjv_defaultScene(&impl_->scene);
   mjv_defaultCamera(&impl_->camera);

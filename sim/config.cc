@@ -1,6 +1,7 @@
 #include "sim/config.h"
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -16,29 +17,157 @@ std::string LineOf(const YAML::Mark& mark) {
   return mark.line >= 0 ? std::to_string(mark.line + 1) : std::string("?");
 }
 
+// Length of the valid UTF-8 sequence at s[i], 0 when it is not one (overlongs, surrogates and
+// code points above U+10FFFF are invalid).
+size_t Utf8SequenceLength(const std::string& s, size_t i) {
+  const auto b = [&](size_t k) { return static_cast<unsigned char>(s[k]); };
+  const unsigned char c = b(i);
+  if (c < 0x80) return 1;
+  size_t n = 0;
+  unsigned lo = 0x80, hi = 0xBF;
+  if (c >= 0xC2 && c <= 0xDF) {
+    n = 2;
+  } else if (c >= 0xE0 && c <= 0xEF) {
+    n = 3;
+    if (c == 0xE0) lo = 0xA0;
+    if (c == 0xED) hi = 0x9F;
+  } else if (c >= 0xF0 && c <= 0xF4) {
+    n = 4;
+    if (c == 0xF0) lo = 0x90;
+    if (c == 0xF4) hi = 0x8F;
+  } else {
+    return 0;
+  }
+  if (i + n > s.size()) return 0;
+  if (b(i + 1) < lo || b(i + 1) > hi) return 0;
+  for (size_t k = 2; k < n; ++k) {
+    if (b(i + k) < 0x80 || b(i + k) > 0xBF) return 0;
+  }
+  return n;
+}
+
+// Text must be UTF-8 (JSON output, messages): the first bad byte is named with its line and,
+// when the line starts with a plain key, that key.
+void CheckUtf8(const std::string& text, const std::string& name) {
+  size_t line = 1, line_start = 0;
+  for (size_t i = 0; i < text.size();) {
+    if (text[i] == '\n') {
+      ++line;
+      line_start = i + 1;
+      ++i;
+      continue;
+    }
+    const size_t n = Utf8SequenceLength(text, i);
+    if (n > 0) {
+      i += n;
+      continue;
+    }
+    char hex[8];
+    std::snprintf(hex, sizeof(hex), "0x%02X", static_cast<unsigned char>(text[i]));
+    std::string key;
+    const std::string head = text.substr(line_start, i - line_start);
+    const size_t colon = head.find(':');
+    if (colon != std::string::npos) {
+      const size_t a = head.find_first_not_of(" -\t");
+      if (a != std::string::npos && a < colon) key = head.substr(a, colon - a);
+    }
+    throw InputError(name + ":" + std::to_string(line) + ":" +
+                     (key.empty() ? "" : " key '" + CapForMessage(key, 60) + "':") +
+                     " not valid UTF-8 (byte " + hex + "); save the file as UTF-8");
+  }
+}
+
+// Structural checks yaml-cpp does not make: every key a scalar, no key twice in one mapping.
+// Counts visited nodes: aliases can make a small file a huge tree.
+void CheckStructure(const YAML::Node& node, const std::string& name, const std::string& path,
+                    size_t* visited) {
+  if (++*visited > 1000000) {
+    throw InputError(name + ": more than 1,000,000 YAML nodes (aliases expanding?)");
+  }
+  if (node.IsMap()) {
+    std::set<std::string> seen;
+    for (const auto& kv : node) {
+      if (!kv.first.IsScalar()) {
+        throw InputError(name + ":" + LineOf(kv.first.Mark()) + ": a key under '" +
+                         (path.empty() ? std::string("(top level)") : CapForMessage(path)) +
+                         "' is a list or a mapping; keys are plain names");
+      }
+      const std::string key = kv.first.Scalar();
+      const std::string child = JoinPath(path, key);
+      if (!seen.insert(key).second) {
+        throw InputError(name + ":" + LineOf(kv.first.Mark()) + ": key '" + CapForMessage(child) +
+                         "' given twice");
+      }
+      CheckStructure(kv.second, name, child, visited);
+    }
+  } else if (node.IsSequence()) {
+    for (size_t i = 0; i < node.size(); ++i) {
+      CheckStructure(node[i], name, path + "[" + std::to_string(i) + "]", visited);
+    }
+  }
+}
+
 }  // namespace
 
+std::string CapForMessage(const std::string& value, size_t max_chars) {
+  if (value.size() <= max_chars) return value;
+  size_t cut = max_chars;
+  while (cut > 0 && (static_cast<unsigned char>(value[cut]) & 0xC0) == 0x80) --cut;
+  return value.substr(0, cut) + "...";
+}
+
+void CheckInputFile(const std::string& path, std::uintmax_t max_bytes) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) {
+    throw InputError(CapForMessage(path) + ": file not found or not readable" +
+                     (ec && ec != std::errc::no_such_file_or_directory ? " (" + ec.message() + ")"
+                                                                       : ""));
+  }
+  if (fs::is_directory(st)) throw InputError(CapForMessage(path) + ": is a folder, not a file");
+  if (!fs::is_regular_file(st)) {
+    throw InputError(CapForMessage(path) + ": not a regular file (a device, pipe or socket)");
+  }
+  const std::uintmax_t size = fs::file_size(path, ec);
+  if (ec) throw InputError(CapForMessage(path) + ": cannot read: " + ec.message());
+  if (size > max_bytes) {
+    throw InputError(CapForMessage(path) + ": " + std::to_string(size) +
+                     " bytes, more than the " + std::to_string(max_bytes) + " allowed");
+  }
+}
+
 ConfigNode ConfigNode::LoadFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": file not found or not readable");
+  CheckInputFile(path, kMaxConfigFileBytes);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(CapForMessage(path) + ": file not found or not readable");
   std::stringstream buffer;
   buffer << in.rdbuf();
+  if (!in.good() && !in.eof()) throw InputError(CapForMessage(path) + ": read error");
   return LoadString(buffer.str(), path);
 }
 
-ConfigNode ConfigNode::LoadString(const std::string& text, const std::string& name) {
+ConfigNode ConfigNode::LoadString(const std::string& text, const std::string& name_in) {
+  const std::string name = CapForMessage(name_in);
   auto state = std::make_shared<State>();
   state->file = name;
-  YAML::Node root;
+  CheckUtf8(text, name);
+  std::vector<YAML::Node> docs;
   try {
-    root = YAML::Load(text);
+    docs = YAML::LoadAll(text);
   } catch (const YAML::Exception& e) {
-    throw InputError(name + ":" + LineOf(e.mark) + ": YAML syntax error: " + e.msg);
+    throw InputError(name + ":" + LineOf(e.mark) + ": YAML syntax error: " + CapForMessage(e.msg));
   }
-  if (!root.IsMap()) {
+  if (docs.size() > 1) {
+    throw InputError(name + ":" + LineOf(docs[1].Mark()) +
+                     ": a second YAML document ('---'); a file holds one");
+  }
+  if (docs.empty() || !docs[0].IsMap()) {
     throw InputError(name + ": expected a YAML mapping at the top level");
   }
-  return ConfigNode(state, root, "");
+  size_t visited = 0;
+  CheckStructure(docs[0], name, "", &visited);
+  return ConfigNode(state, docs[0], "");
 }
 
 ConfigNode ConfigNode::MakeChild(const YAML::Node& node, const std::string& child_path) const {
@@ -54,7 +183,7 @@ ConfigNode ConfigNode::Child(const std::string& key) const {
   if (!node_.IsMap()) Fail("expected a mapping with key '" + JoinPath(path_, key) + "'");
   const YAML::Node child = node_[key];
   if (!child.IsDefined() || child.IsNull()) {
-    throw InputError(Where() + ": missing key '" + JoinPath(path_, key) + "'");
+    throw InputError(Where() + ": missing key '" + CapForMessage(JoinPath(path_, key)) + "'");
   }
   return MakeChild(child, JoinPath(path_, key));
 }
@@ -73,9 +202,9 @@ double ConfigNode::AsDouble() const {
   try {
     v = node_.as<double>();
   } catch (const YAML::Exception&) {
-    Fail("expected a number, got '" + node_.Scalar() + "'");
+    Fail("expected a number, got '" + CapForMessage(node_.Scalar()) + "'");
   }
-  if (!std::isfinite(v)) Fail("expected a finite number, got '" + node_.Scalar() + "'");
+  if (!std::isfinite(v)) Fail("expected a finite number, got '" + CapForMessage(node_.Scalar()) + "'");
   return v;
 }
 
@@ -84,7 +213,7 @@ int ConfigNode::AsInt() const {
   try {
     return node_.as<int>();
   } catch (const YAML::Exception&) {
-    Fail("expected an integer, got '" + node_.Scalar() + "'");
+    Fail("expected an integer, got '" + CapForMessage(node_.Scalar()) + "'");
   }
 }
 
@@ -93,7 +222,7 @@ bool ConfigNode::AsBool() const {
   try {
     return node_.as<bool>();
   } catch (const YAML::Exception&) {
-    Fail("expected true or false, got '" + node_.Scalar() + "'");
+    Fail("expected true or false, got '" + CapForMessage(node_.Scalar()) + "'");
   }
 }
 
@@ -151,7 +280,7 @@ void ConfigNode::CheckUnknown(const YAML::Node& node, const std::string& path) c
       const std::string child = JoinPath(path, key);
       if (!state_->consumed.count(child)) {
         throw InputError(state_->file + ":" + LineOf(kv.first.Mark()) + ": unknown key '" +
-                         child + "'");
+                         CapForMessage(child) + "'");
       }
       CheckUnknown(kv.second, child);
     }
@@ -166,7 +295,7 @@ void ConfigNode::CheckUnknown(const YAML::Node& node, const std::string& path) c
 std::string ConfigNode::Where() const { return state_->file + ":" + LineOf(node_.Mark()); }
 
 std::string ConfigNode::WhereKey() const {
-  return path_.empty() ? Where() : Where() + ": key '" + path_ + "'";
+  return path_.empty() ? Where() : Where() + ": key '" + CapForMessage(path_) + "'";
 }
 
 void ConfigNode::Fail(const std::string& message) const {

@@ -4,6 +4,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <set>
@@ -14,10 +15,24 @@
 
 namespace flexbench {
 
+// `value` cut to at most `max_chars` bytes (never inside a UTF-8 sequence) with "..." appended
+// when cut: user values echoed in messages stay short.
+std::string CapForMessage(const std::string& value, size_t max_chars = 200);
+
+// Largest scenario or declared-model file read (bytes); a bigger one is refused as bad input.
+inline constexpr std::uintmax_t kMaxConfigFileBytes = 16u << 20;
+
+// Checks that `path` names a regular file of at most `max_bytes`; throws InputError
+// "<path>: ..." (the path capped) when it does not exist, is a folder, a device or a pipe, or
+// is too big.
+void CheckInputFile(const std::string& path, std::uintmax_t max_bytes);
+
 class ConfigNode {
  public:
   // Parses a YAML file. Throws InputError "<file>: not found" or "<file>:<line>: YAML syntax
-  // error: ...".
+  // error: ...". Also input errors: a file that is not a regular file or is bigger than
+  // kMaxConfigFileBytes, text that is not UTF-8, a key that is a list or a map, a key given
+  // twice in one mapping, more than one YAML document.
   static ConfigNode LoadFile(const std::string& path);
   // Parses YAML text; `name` stands for the file in messages.
   static ConfigNode LoadString(const std::string& text, const std::string& name);

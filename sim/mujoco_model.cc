@@ -1,6 +1,8 @@
 #include "sim/mujoco_model.h"
 
 #include <cctype>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -8,6 +10,7 @@
 #include <mutex>
 
 #include "estimators/error.h"
+#include "sim/config.h"
 
 namespace flexbench::sim {
 namespace {
@@ -16,6 +19,26 @@ namespace {
 // and guarded by a mutex, so the global hook is safe to swap.
 std::mutex g_load_mutex;
 std::vector<std::string>* g_warnings = nullptr;
+
+void PrintWarning(const char* msg) {
+  std::string m = msg ? msg : "";
+  while (!m.empty() && (m.back() == '\n' || m.back() == ' ')) m.pop_back();
+  for (char& c : m) {
+    if (c == '\n') c = ' ';
+  }
+  std::fprintf(stderr, "[flexbench] MuJoCo warning: %s\n", CapForMessage(m, 400).c_str());
+}
+
+[[noreturn]] void FatalError(const char* msg) {
+  std::string m = msg ? msg : "";
+  while (!m.empty() && (m.back() == '\n' || m.back() == ' ')) m.pop_back();
+  for (char& c : m) {
+    if (c == '\n') c = ' ';
+  }
+  std::fprintf(stderr, "flexbench: error: MuJoCo: %s\n", CapForMessage(m, 400).c_str());
+  std::fflush(stderr);
+  std::_Exit(2);
+}
 
 void CollectWarning(const char* msg) {
   if (g_warnings) g_warnings->emplace_back(msg);
@@ -55,6 +78,11 @@ bool EndsWith(const std::string& s, const std::string& suffix) {
 }
 
 }  // namespace
+
+void InstallMujocoHandlers() {
+  if (mju_user_error != FatalError) mju_user_error = FatalError;
+  if (mju_user_warning == nullptr) mju_user_warning = PrintWarning;
+}
 
 std::string PrepareUrdf(const std::string& urdf, const std::string& path,
                         std::vector<std::string>* warnings) {
@@ -122,9 +150,12 @@ std::string PrepareUrdf(const std::string& urdf, const std::string& path,
 }
 
 MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings) {
-  if (!std::filesystem::is_regular_file(path)) {
-    throw InputError(path + ": model file not found");
+  InstallMujocoHandlers();
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) {
+    throw InputError(CapForMessage(path) + ": model file not found");
   }
+  CheckInputFile(path, kMaxModelFileBytes);
   const std::string ext = std::filesystem::path(path).extension().string();
   if (ext == ".urdf" || ext == ".URDF") {
     std::ifstream in(path);
@@ -141,13 +172,15 @@ MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings
   char error[1024] = "";
   mjModel* m = mj_loadXML(path.c_str(), nullptr, error, sizeof(error));
   if (!m) {
-    throw InputError(path + ": MuJoCo rejected the model: " + Trim(error));
+    throw InputError(CapForMessage(path) + ": MuJoCo rejected the model: " +
+                     CapForMessage(Trim(error), 400));
   }
   return MjModelPtr(m);
 }
 
 MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name,
                                std::vector<std::string>* warnings) {
+  InstallMujocoHandlers();
   std::lock_guard<std::mutex> lock(g_load_mutex);
   std::vector<std::string> local;
   WarningScope scope(warnings ? warnings : &local);
@@ -163,7 +196,8 @@ MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name,
   mjModel* m = mj_loadXML(name.c_str(), vfs.get(), error, sizeof(error));
   mj_deleteVFS(vfs.get());
   if (!m) {
-    throw InputError(name + ": MuJoCo rejected the model: " + Trim(error));
+    throw InputError(CapForMessage(name) + ": MuJoCo rejected the model: " +
+                     CapForMessage(Trim(error), 400));
   }
   return MjModelPtr(m);
 }

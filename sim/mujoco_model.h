@@ -4,6 +4,7 @@
 
 #include <mujoco/mujoco.h>
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -18,6 +19,18 @@ struct MjDataDeleter {
 };
 using MjModelPtr = std::unique_ptr<mjModel, MjModelDeleter>;
 using MjDataPtr = std::unique_ptr<mjData, MjDataDeleter>;
+
+// Installs MuJoCo's process-wide error and warning handlers (idempotent; LoadModel calls it):
+// a warning goes to stderr as one line "[flexbench] MuJoCo warning: ..." (never to
+// MUJOCO_LOG.TXT); a fatal MuJoCo error (MuJoCo's default would print "Press Enter to exit",
+// wait on stdin and write MUJOCO_LOG.TXT) prints one line "flexbench: error: MuJoCo: ..." and
+// ends the process with exit code 2 (bad input: in practice a model MuJoCo cannot serve, e.g.
+// an offscreen buffer too big). A fatal error cannot be thrown as a C++ exception through
+// MuJoCo's C frames, and the handler must not return.
+void InstallMujocoHandlers();
+
+// Largest model file read (bytes).
+inline constexpr std::uintmax_t kMaxModelFileBytes = 64u << 20;
 
 // Loads an MJCF or URDF file. URDF goes through MuJoCo's own importer after PrepareUrdf. Throws InputError("<path>: <MuJoCo's message>") when the file is
 // missing or MuJoCo rejects it. Warnings MuJoCo emits while compiling are appended to

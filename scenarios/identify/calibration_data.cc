@@ -5,10 +5,16 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <cstdio>
 #include <fstream>
+#include <iostream>
+#include <limits>
+#include <map>
+#include <set>
 #include <sstream>
 
 #include "estimators/error.h"
+#include "sim/config.h"
 
 namespace flexbench::identify {
 namespace {
@@ -29,28 +35,48 @@ std::vector<std::string> SplitCsv(const std::string& line) {
   return out;
 }
 
-double ParseNumber(const std::string& cell, const std::string& where, const std::string& col) {
-  if (cell.empty()) throw InputError(where + ": column '" + col + "' is empty");
+// Largest magnitudes accepted: far beyond any arm (joint readings in rad or m, points in m,
+// pixels), small enough that squares and sums of them stay finite.
+constexpr double kMaxJoint = 1e3;
+constexpr double kMaxCoordinate = 1e3;
+constexpr double kMaxPixel = 1e6;
+
+double ParseNumber(const std::string& cell, const std::string& where, const std::string& col,
+                   double max_abs = std::numeric_limits<double>::infinity()) {
+  if (cell.empty()) throw InputError(where + ": column '" + CapForMessage(col) + "' is empty");
   errno = 0;
   char* end = nullptr;
   const double v = std::strtod(cell.c_str(), &end);
   if (end == cell.c_str() || *end != '\0' || errno == ERANGE) {
-    throw InputError(where + ": column '" + col + "': '" + cell + "' is not a number");
+    throw InputError(where + ": column '" + CapForMessage(col) + "': '" + CapForMessage(cell) +
+                     "' is not a number");
   }
-  if (!std::isfinite(v)) throw InputError(where + ": column '" + col + "' is " + cell);
+  if (!std::isfinite(v)) {
+    throw InputError(where + ": column '" + CapForMessage(col) + "' is " + CapForMessage(cell));
+  }
+  if (std::abs(v) > max_abs) {
+    char lim[32];
+    std::snprintf(lim, sizeof(lim), "%g", max_abs);
+    throw InputError(where + ": column '" + CapForMessage(col) + "': " + CapForMessage(cell) +
+                     " is out of range (|value| <= " + lim + ")");
+  }
   return v;
 }
 
 // The data lines of a CSV file: blank lines and '#' comments skipped, cells trimmed.
 class CsvLines {
  public:
-  explicit CsvLines(const std::string& path) : in_(path), path_(path) {
-    if (!in_) throw InputError(path + ": cannot open");
+  explicit CsvLines(const std::string& path) : path_(CapForMessage(path)) {
+    CheckInputFile(path, kMaxCsvBytes);
+    in_.open(path, std::ios::binary);
+    if (!in_) throw InputError(path_ + ": cannot open");
   }
   bool Next(std::vector<std::string>* cells) {
     std::string line;
     while (std::getline(in_, line)) {
       ++line_no_;
+      // Excel's "CSV UTF-8" starts with a byte-order mark: not part of the first column's name.
+      if (line_no_ == 1 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
       const std::string t = Trim(line);
       if (t.empty() || t[0] == '#') continue;
       *cells = SplitCsv(t);
@@ -65,7 +91,40 @@ class CsvLines {
   std::ifstream in_;
   std::string path_;
   int line_no_ = 0;
+  static constexpr std::uintmax_t kMaxCsvBytes = 512u << 20;
 };
+
+// Group labels are global: rows with one label share one fixed point whatever their set. A
+// label used in several sets (e.g. "hole_0" for every placement) is almost always meant per
+// set; it is named on stderr with the fix.
+void WarnGroupsSpanningSets(const DataSet& data, size_t first_row) {
+  std::map<int, std::pair<int, size_t>> first;  // group -> (set, row)
+  int warned = 0;
+  std::set<int> done;
+  for (size_t r = first_row; r < data.rows.size(); ++r) {
+    const Observation& o = data.rows[r];
+    if (o.type != ObservationType::kGroup) continue;
+    const auto it = first.find(o.group);
+    if (it == first.end()) {
+      first[o.group] = {o.set, r};
+      continue;
+    }
+    if (it->second.first == o.set || done.count(o.group)) continue;
+    done.insert(o.group);
+    if (++warned > 3) continue;
+    const std::string g = CapForMessage(data.groups[o.group], 60);
+    std::cerr << "[flexbench] warning: " << o.where << ": group '" << g << "' spans sets '"
+              << CapForMessage(data.sets[it->second.first], 60) << "' and '"
+              << CapForMessage(data.sets[o.set], 60) << "' (first at "
+              << data.rows[it->second.second].where
+              << "); group labels are global (one fixed point for all its rows): if each set is "
+                 "a placement, label the groups per set, e.g. '"
+              << CapForMessage(data.sets[o.set], 60) << "/" << g << "'\n";
+  }
+  if (warned > 3) {
+    std::cerr << "[flexbench] warning: " << warned - 3 << " more groups span several sets\n";
+  }
+}
 
 }  // namespace
 
@@ -80,6 +139,7 @@ int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
 void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
                         DataSet* data) {
   CsvLines csv(path);
+  const size_t first_row = data->rows.size();
   std::vector<std::string> header;
   if (!csv.Next(&header)) throw InputError(path + ": no header row");
   const std::string hdr = csv.Where();
@@ -90,7 +150,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   for (size_t c = 0; c < header.size(); ++c) {
     const std::string& h = header[c];
     for (size_t k = 0; k < c; ++k) {
-      if (header[k] == h) throw InputError(hdr + ": column '" + h + "' twice");
+      if (header[k] == h) throw InputError(hdr + ": column '" + CapForMessage(h) + "' twice");
     }
     bool known = false;
     for (size_t j = 0; j < joints.size(); ++j) {
@@ -113,11 +173,11 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       for (size_t j = 0; j < joints.size(); ++j) {
         if (joints[j] == h.substr(7)) motion_col[j] = static_cast<int>(c), known = true;
       }
-      if (!known) throw InputError(hdr + ": column '" + h + "' names no actuated joint");
+      if (!known) throw InputError(hdr + ": column '" + CapForMessage(h) + "' names no actuated joint");
     }
     if (h == "v") uv_col[1] = static_cast<int>(c), known = true;
     if (!known) {
-      throw InputError(hdr + ": column '" + h +
+      throw InputError(hdr + ": column '" + CapForMessage(h) +
                        "' is neither an actuated joint of the declared model nor one of group, "
                        "set, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
     }
@@ -158,7 +218,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     o.where = where;
     o.q.resize(joints.size());
     for (size_t j = 0; j < joints.size(); ++j) {
-      o.q[j] = ParseNumber(cells[joint_col[j]], where, joints[j]);
+      o.q[j] = ParseNumber(cells[joint_col[j]], where, joints[j], kMaxJoint);
     }
     if (std::any_of(motion_col.begin(), motion_col.end(), [](int c) { return c >= 0; })) {
       o.motion_sign = Eigen::VectorXd::Zero(joints.size());
@@ -174,7 +234,9 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     if (has_xyz) {
       o.type = ObservationType::kPoint;
       const char* names[3] = {"x", "y", "z"};
-      for (int k = 0; k < 3; ++k) o.p_base[k] = ParseNumber(cells[xyz_col[k]], where, names[k]);
+      for (int k = 0; k < 3; ++k) {
+        o.p_base[k] = ParseNumber(cells[xyz_col[k]], where, names[k], kMaxCoordinate);
+      }
       if (num_quat == 4) {
         o.type = ObservationType::kPose;
         const Eigen::Quaterniond qt(ParseNumber(cells[quat_col[0]], where, "qw"),
@@ -188,8 +250,8 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       }
     } else if (has_uv) {
       o.type = ObservationType::kPixel;
-      o.uv = Eigen::Vector2d(ParseNumber(cells[uv_col[0]], where, "u"),
-                             ParseNumber(cells[uv_col[1]], where, "v"));
+      o.uv = Eigen::Vector2d(ParseNumber(cells[uv_col[0]], where, "u", kMaxPixel),
+                             ParseNumber(cells[uv_col[1]], where, "v", kMaxPixel));
     } else {
       if (cells[group_col].empty()) throw InputError(where + ": column 'group' is empty");
       o.type = ObservationType::kGroup;
@@ -200,11 +262,19 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     data->rows.push_back(o);
     ++rows;
   }
-  if (rows == 0) throw InputError(path + ": no data rows");
+  if (rows == 0) throw InputError(CapForMessage(path) + ": no data rows");
+  WarnGroupsSpanningSets(*data, first_row);
 }
 
 void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_joints,
                         double socket_distance_m, DataSet* data) {
+  if (!(std::isfinite(socket_distance_m) && socket_distance_m > 0.0 &&
+        socket_distance_m <= 10.0)) {
+    char v[32];
+    std::snprintf(v, sizeof(v), "%g", socket_distance_m);
+    throw InputError(CapForMessage(dir) + ": socket_distance_m " + v +
+                     " must be > 0 and at most 10 (metres)");
+  }
   const int s = LabelIndex(&data->sets, set);
   int groups[2];
   for (int h = 0; h < 2; ++h) {
@@ -223,7 +293,7 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
       o.where = where;
       o.q.resize(num_joints);
       for (int j = 0; j < num_joints; ++j) {
-        o.q[j] = ParseNumber(cells[j], where, "joint " + std::to_string(j + 1));
+        o.q[j] = ParseNumber(cells[j], where, "joint " + std::to_string(j + 1), kMaxJoint);
       }
       o.type = ObservationType::kGroup;
       o.group = groups[h];
@@ -231,7 +301,7 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
       data->rows.push_back(o);
       ++rows;
     }
-    if (rows == 0) throw InputError(path + ": no data rows");
+    if (rows == 0) throw InputError(CapForMessage(path) + ": no data rows");
   }
   data->distances.push_back({groups[0], groups[1], socket_distance_m});
 }

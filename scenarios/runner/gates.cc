@@ -36,6 +36,7 @@ std::vector<GateSpec> ParseGates(const ConfigNode& root) {
   if (!node) return gates;
   for (const ConfigNode& g : node->Items()) {
     GateSpec s;
+    s.where = g.Where();
     s.name = g.GetString("name");
     s.metric = g.GetString("metric");
     const ConfigNode op = g.Child("op");
@@ -64,6 +65,17 @@ const Json* FindMetric(const Json& summary, const std::string& path) {
     if (const Json* m = Walk(summary["metrics"], path)) return m;
   }
   return Walk(summary, path);
+}
+
+void CheckGateMetricsExist(const std::vector<GateSpec>& gates, const Json& summary) {
+  for (const GateSpec& g : gates) {
+    for (const std::string* path : {&g.metric, &g.threshold_metric}) {
+      if (path->empty() || FindMetric(summary, *path)) continue;
+      throw InputError(g.where + ": gate '" + CapForMessage(g.name) + "': metric '" +
+                       CapForMessage(*path) +
+                       "' is not in this scenario's results (a typo? see summary.json)");
+    }
+  }
 }
 
 Json EvaluateGates(const std::vector<GateSpec>& gates, const Json& summary, bool* all_passed) {

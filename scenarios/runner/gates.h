@@ -27,12 +27,18 @@ struct GateSpec {
   double scale = 1.0;
   bool threshold_is_bool = false;
   bool threshold_bool = false;
+  std::string where;  // "<file>:<line>" of the gate, for messages
 };
 
 std::vector<GateSpec> ParseGates(const ConfigNode& root);
 
+// Throws InputError "<file>:<line>: gate '<name>': metric '<path>' is not in this scenario's
+// results" for a gate whose metric (or threshold metric) path names nothing in `summary`: a
+// typo, not a failed gate.
+void CheckGateMetricsExist(const std::vector<GateSpec>& gates, const Json& summary);
+
 // Evaluates every gate against `summary`, returns the `gates` array. A missing or non-numeric
-// metric fails its gate (value null).
+// (or non-finite) metric fails its gate (value null).
 Json EvaluateGates(const std::vector<GateSpec>& gates, const Json& summary, bool* all_passed);
 
 // Looks up a dotted metric path ("a.b.c") under summary.metrics, then from the root.

@@ -198,14 +198,10 @@ int InspectCommand(const std::string& path) {
     } else {
       out = InspectModel(path);
     }
-    std::cout << out.dump(2) << "\n";
+    std::cout << out.dump(2, ' ', false, Json::error_handler_t::replace) << "\n";
     return kExitOk;
-  } catch (const InputError& e) {
-    std::cerr << "flexbench: error: " << e.what() << "\n";
-    return kExitBadInput;
   } catch (const std::exception& e) {
-    std::cerr << "flexbench: internal error: " << e.what() << "\n";
-    return kExitInternal;
+    return ReportError(e);
   }
 }
 

@@ -5,9 +5,15 @@
 
 #include "scenarios/runner/inspect.h"
 #include "scenarios/runner/runner.h"
+#include "sim/mujoco_model.h"
 
-int main(int argc, char** argv) {
+namespace {
+
+int Main(int argc, char** argv) {
   using flexbench::scenarios::RunOptions;
+  // MuJoCo's fatal errors and warnings: one line on stderr, never a prompt on stdin or a log
+  // file in the working folder.
+  flexbench::sim::InstallMujocoHandlers();
   CLI::App app{"flexbench: pose estimation of flexible robot arms, scored against MuJoCo"};
   app.set_version_flag("--version", std::string("flexbench ") + FLEXBENCH_VERSION);
   app.require_subcommand(1);
@@ -19,10 +25,12 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--out", run.out_dir, "output folder (default: out/<scenario>)");
   CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "override the scenario's seed");
   run_cmd->add_flag("--check-gates", run.check_gates, "exit 3 when a gate fails");
+  run_cmd->add_flag("--force", run.force,
+                    "let --out replace an existing folder that is not a flexbench result");
 
-  std::string list_dir = "scenarios";
+  std::string list_dir;
   CLI::App* list_cmd = app.add_subcommand("list", "list scenario kinds and scenario files");
-  list_cmd->add_option("--dir", list_dir, "folder with scenario files");
+  list_cmd->add_option("--dir", list_dir, "folder with scenario files (default: scenarios)");
 
   std::string inspect_path;
   CLI::App* inspect_cmd = app.add_subcommand(
@@ -30,19 +38,23 @@ int main(int argc, char** argv) {
   inspect_cmd->add_option("model", inspect_path, "MJCF model or declared-model YAML")->required();
 
   // identify: the closed_loop kind on a user's own model, declared model and CSV files.
-  std::string id_model, id_declared, id_cal, id_val, id_out;
-  std::vector<std::string> id_candidates;
-  double id_point_std = 1e-4;
+  flexbench::scenarios::IdentifyCliOptions id;
   CLI::App* identify_cmd = app.add_subcommand(
       "identify", "find the effects a declared model lacks from measured data (closed_loop)");
-  identify_cmd->add_option("--model", id_model, "MJCF or URDF of the robot")->required();
-  identify_cmd->add_option("--declared", id_declared, "declared-model YAML")->required();
-  identify_cmd->add_option("--calibration", id_cal, "calibration CSV (README format)")->required();
-  identify_cmd->add_option("--validation", id_val, "validation CSV (README format)")->required();
-  identify_cmd->add_option("--candidates", id_candidates,
+  identify_cmd->add_option("--model", id.model,
+                           "MJCF or URDF of the robot (optional; must be the model the "
+                           "declared file names)");
+  identify_cmd->add_option("--declared", id.declared, "declared-model YAML")->required();
+  identify_cmd->add_option("--calibration", id.calibration_csv, "calibration CSV (README format)")
+      ->required();
+  identify_cmd->add_option("--validation", id.validation_csv, "validation CSV (README format)")
+      ->required();
+  identify_cmd->add_option("--candidates", id.candidates,
                            "effect types or type@location to test (default: all)");
-  identify_cmd->add_option("--point-std", id_point_std, "point noise [m] (default 1e-4)");
-  identify_cmd->add_option("--out", id_out, "output folder (default: out/identify)");
+  identify_cmd->add_option("--point-std", id.point_std_m, "point noise [m] (default 1e-4)");
+  identify_cmd->add_option("--out", id.out_dir, "output folder (default: out/identify)");
+  identify_cmd->add_flag("--force", id.force,
+                         "let --out replace an existing folder that is not a flexbench result");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -53,16 +65,34 @@ int main(int argc, char** argv) {
   if (*run_cmd) return flexbench::scenarios::RunScenario(run);
   if (*inspect_cmd) return flexbench::scenarios::InspectCommand(inspect_path);
   if (*identify_cmd) {
-    return flexbench::scenarios::IdentifyCommand(id_model, id_declared, id_cal, id_val,
-                                                 id_candidates, id_point_std,
-                                                 id_out.empty() ? "out/identify" : id_out);
+    if (id.out_dir.empty()) id.out_dir = "out/identify";
+    return flexbench::scenarios::IdentifyCommand(id);
   }
   if (*list_cmd) {
-    if (!std::filesystem::is_directory(list_dir) &&
-        std::filesystem::is_directory(std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios")) {
-      list_dir = std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios";
+    if (list_dir.empty()) {
+      // Default: ./scenarios, else the source tree's.
+      std::error_code ec;
+      list_dir = "scenarios";
+      if (!std::filesystem::is_directory(list_dir, ec) &&
+          std::filesystem::is_directory(std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios", ec)) {
+        list_dir = std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios";
+      }
     }
     return flexbench::scenarios::ListScenarios(list_dir);
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // Nothing escapes as an abort: every error is one line and an exit code of the contract.
+  try {
+    return Main(argc, argv);
+  } catch (const std::exception& e) {
+    return flexbench::scenarios::ReportError(e);
+  } catch (...) {
+    std::cerr << "flexbench: internal error: unknown exception\n";
+    return flexbench::scenarios::kExitInternal;
+  }
 }

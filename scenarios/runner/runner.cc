@@ -2,7 +2,11 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +18,7 @@
 #include "scenarios/runner/output.h"
 #include "scenarios/runner/scenario_kind.h"
 #include "sim/config.h"
+#include "sim/declared_model.h"
 
 namespace fs = std::filesystem;
 
@@ -32,90 +37,139 @@ std::unique_ptr<ScenarioKind> MakeKind(const ConfigNode& kind_node) {
 
 void Log(const std::string& line) { std::cerr << "[flexbench] " << line << "\n"; }
 
+// A scenario name becomes the default output folder out/<name>: one plain path element.
+void CheckScenarioName(const ConfigNode& node, const std::string& name) {
+  if (name.empty() || name == "." || name == ".." || name.size() > 200 ||
+      name.find_first_of("/\\") != std::string::npos ||
+      std::any_of(name.begin(), name.end(),
+                  [](char c) { return static_cast<unsigned char>(c) < 0x20; })) {
+    node.Fail("must be a plain name (no '/', not '.' or '..', at most 200 characters)");
+  }
+}
+
+// Runs a loaded scenario. `inputs` are files the run reads (never replaced by --out).
+int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
+              const std::vector<fs::path>& inputs) {
+  const auto t_start = std::chrono::steady_clock::now();
+  // Everything that can be wrong with the input is checked before any work is done.
+  const ConfigNode name_node = root.Child("scenario");
+  const std::string name = name_node.AsString();
+  CheckScenarioName(name_node, name);
+  const std::string description = root.GetString("description", "");
+  const ConfigNode seed_node = root.Child("seed");
+  if (seed_node.AsInt() < 0) seed_node.Fail("seed must be >= 0");
+  const std::uint64_t seed =
+      options.seed ? *options.seed : static_cast<std::uint64_t>(seed_node.AsInt());
+  std::unique_ptr<ScenarioKind> kind = MakeKind(root.Child("kind"));
+  const std::vector<GateSpec> gates = ParseGates(root);
+  if (options.check_gates && gates.empty()) {
+    throw InputError(root.file() + ": --check-gates, but the scenario has no gates");
+  }
+  kind->Configure(root);
+  root.CheckNoUnknownKeys();
+
+  const fs::path out_dir =
+      options.out_dir.empty() ? fs::path("out") / name : fs::path(options.out_dir);
+  OutputDir out(out_dir, options.force, inputs);
+
+  Json summary;
+  summary["scenario"] = name;
+  summary["kind"] = root.GetString("kind");
+  if (!description.empty()) summary["description"] = description;
+  summary["seed"] = seed;
+  summary["metrics"] = Json::object();
+  summary["estimators"] = Json::object();
+  Json timing = Json::object();
+
+  const bool tty = isatty(fileno(stderr));
+  RunContext ctx;
+  ctx.seed = seed;
+  ctx.out = &out;
+  ctx.summary = &summary;
+  ctx.timing = &timing;
+  ctx.log = Log;
+  ctx.progress = [tty](const std::string& stage, int done, int total) {
+    if (!tty) return;
+    std::fprintf(stderr, "\r[flexbench] %s %d/%d%s", stage.c_str(), done, total,
+                 done == total ? "\n" : "");
+    std::fflush(stderr);
+  };
+  Log("scenario " + name + " (" + shown_path + "), seed " + std::to_string(seed));
+  kind->Run(ctx);
+
+  CheckGateMetricsExist(gates, summary);
+  bool all_passed = true;
+  summary["gates"] = EvaluateGates(gates, summary, &all_passed);
+  timing["total_s"] =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  summary["timing"] = timing;
+  // Strings from data files (labels, paths) that are not UTF-8 are replaced, never fatal.
+  WriteFileAtomic(out.File("summary.json"),
+                  summary.dump(2, ' ', false, Json::error_handler_t::replace) + "\n");
+  out.Commit();
+
+  for (const Json& g : summary["gates"]) {
+    Log(std::string(g["passed"].get<bool>() ? "PASS" : "FAIL") + " gate " +
+        g["name"].get<std::string>() + ": " + g["metric"].get<std::string>() + " = " +
+        g["value"].dump() + " " + g["op"].get<std::string>() + " " + g["threshold"].dump());
+  }
+  Log("results in " + out.final_dir().string());
+  if (options.check_gates && !all_passed) return kExitGateFailed;
+  return kExitOk;
+}
+
+std::string OneLine(std::string m) {
+  while (!m.empty() && (m.back() == '\n' || m.back() == ' ')) m.pop_back();
+  for (char& c : m) {
+    if (c == '\n' || c == '\r') c = ' ';
+  }
+  return CapForMessage(m, 1000);
+}
+
 }  // namespace
 
+int ReportError(const std::exception& e) {
+  if (dynamic_cast<const InputError*>(&e)) {
+    std::cerr << "flexbench: error: " << OneLine(e.what()) << "\n";
+    return kExitBadInput;
+  }
+  if (dynamic_cast<const SimulationError*>(&e)) {
+    std::cerr << "flexbench: simulation error: " << OneLine(e.what()) << "\n";
+    return kExitBadInput;
+  }
+  if (const auto* f = dynamic_cast<const fs::filesystem_error*>(&e)) {
+    std::string paths;
+    if (!f->path1().empty()) paths += CapForMessage(f->path1().string()) + ": ";
+    std::cerr << "flexbench: error: " << paths << OneLine(f->code().message()) << "\n";
+    return kExitBadInput;
+  }
+  std::cerr << "flexbench: internal error: " << OneLine(e.what()) << "\n";
+  return kExitInternal;
+}
+
 int RunScenario(const RunOptions& options) {
-  const auto t_start = std::chrono::steady_clock::now();
   try {
-    // Everything that can be wrong with the input is checked before any work is done.
     const ConfigNode root = ConfigNode::LoadFile(options.scenario_path);
-    const std::string name = root.GetString("scenario");
-    const std::string description = root.GetString("description", "");
-    const ConfigNode seed_node = root.Child("seed");
-    if (seed_node.AsInt() < 0) seed_node.Fail("seed must be >= 0");
-    const std::uint64_t seed =
-        options.seed ? *options.seed : static_cast<std::uint64_t>(seed_node.AsInt());
-    std::unique_ptr<ScenarioKind> kind = MakeKind(root.Child("kind"));
-    const std::vector<GateSpec> gates = ParseGates(root);
-    kind->Configure(root);
-    root.CheckNoUnknownKeys();
-
-    const fs::path out_dir =
-        options.out_dir.empty() ? fs::path("out") / name : fs::path(options.out_dir);
-    OutputDir out(out_dir);
-
-    Json summary;
-    summary["scenario"] = name;
-    summary["kind"] = root.GetString("kind");
-    if (!description.empty()) summary["description"] = description;
-    summary["seed"] = seed;
-    summary["metrics"] = Json::object();
-    summary["estimators"] = Json::object();
-    Json timing = Json::object();
-
-    const bool tty = isatty(fileno(stderr));
-    RunContext ctx;
-    ctx.seed = seed;
-    ctx.out = &out;
-    ctx.summary = &summary;
-    ctx.timing = &timing;
-    ctx.log = Log;
-    ctx.progress = [tty](const std::string& stage, int done, int total) {
-      if (!tty) return;
-      std::fprintf(stderr, "\r[flexbench] %s %d/%d%s", stage.c_str(), done, total,
-                   done == total ? "\n" : "");
-      std::fflush(stderr);
-    };
-    Log("scenario " + name + " (" + options.scenario_path + "), seed " + std::to_string(seed));
-    kind->Run(ctx);
-
-    bool all_passed = true;
-    summary["gates"] = EvaluateGates(gates, summary, &all_passed);
-    timing["total_s"] =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-    summary["timing"] = timing;
-    WriteFileAtomic(out.File("summary.json"), summary.dump(2) + "\n");
-    out.Commit();
-
-    for (const Json& g : summary["gates"]) {
-      Log(std::string(g["passed"].get<bool>() ? "PASS" : "FAIL") + " gate " +
-          g["name"].get<std::string>() + ": " + g["metric"].get<std::string>() + " = " +
-          g["value"].dump() + " " + g["op"].get<std::string>() + " " + g["threshold"].dump());
-    }
-    Log("results in " + out.final_dir().string());
-    if (options.check_gates && !all_passed) return kExitGateFailed;
-    return kExitOk;
-  } catch (const InputError& e) {
-    std::cerr << "flexbench: error: " << e.what() << "\n";
-    return kExitBadInput;
-  } catch (const SimulationError& e) {
-    std::cerr << "flexbench: simulation error: " << e.what() << "\n";
-    return kExitBadInput;
+    return RunLoaded(root, options, options.scenario_path, {fs::path(options.scenario_path)});
   } catch (const std::exception& e) {
-    std::cerr << "flexbench: internal error: " << e.what() << "\n";
-    return kExitInternal;
+    return ReportError(e);
   }
 }
 
 int ListScenarios(const std::string& scenarios_dir) {
+  std::error_code ec;
+  if (!fs::is_directory(scenarios_dir, ec)) {
+    std::cerr << "flexbench: error: --dir " << CapForMessage(scenarios_dir)
+              << ": not a folder" << (ec ? " (" + ec.message() + ")" : std::string()) << "\n";
+    return kExitBadInput;
+  }
   std::cout << "scenario kinds:\n";
   for (const KindEntry& e : ScenarioKinds()) {
     std::printf("  %-24s %s\n", e.name, e.description);
   }
-  std::error_code ec;
   std::vector<fs::path> files;
-  for (const auto& entry : fs::directory_iterator(scenarios_dir, ec)) {
-    if (entry.path().extension() == ".yaml") files.push_back(entry.path());
+  for (fs::directory_iterator it(scenarios_dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->path().extension() == ".yaml") files.push_back(it->path());
   }
   std::sort(files.begin(), files.end());
   std::cout << "scenarios in " << scenarios_dir << ":\n";
@@ -149,51 +203,121 @@ std::string Quoted(const std::string& s) {
   return q + "\"";
 }
 
+// Bad input about a command-line option: "--<option> <value>: <what>".
+[[noreturn]] void OptionError(const std::string& option, const std::string& value,
+                              const std::string& what) {
+  throw InputError(option + " " + CapForMessage(value) + ": " + what);
+}
+
+std::string ReadWhole(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// The in-memory scenario's name in messages; "<name>:<line>" is replaced by the option that
+// line came from.
+constexpr const char* kIdentifyName = "flexbench identify";
+
 }  // namespace
 
-int IdentifyCommand(const std::string& model, const std::string& declared,
-                    const std::string& calibration_csv, const std::string& validation_csv,
-                    const std::vector<std::string>& candidates, double point_std_m,
-                    const std::string& out_dir) {
-  namespace fs = std::filesystem;
-  for (const auto& [what, path] :
-       {std::pair{"--model", model}, std::pair{"--declared", declared},
-        std::pair{"--calibration", calibration_csv}, std::pair{"--validation", validation_csv}}) {
-    if (!fs::exists(path)) {
-      std::cerr << "flexbench: error: " << what << " " << path << ": not found\n";
-      return kExitBadInput;
+int IdentifyCommand(const IdentifyCliOptions& o) {
+  try {
+    for (const auto& [option, path] :
+         {std::pair{"--declared", o.declared}, std::pair{"--calibration", o.calibration_csv},
+          std::pair{"--validation", o.validation_csv}}) {
+      std::error_code ec;
+      const fs::file_status st = fs::status(path, ec);
+      if (ec || !fs::exists(st)) {
+        OptionError(option, path,
+                    "not found" + (ec && ec != std::errc::no_such_file_or_directory
+                                       ? " (" + ec.message() + ")"
+                                       : std::string()));
+      }
+      if (!fs::is_regular_file(st)) OptionError(option, path, "not a regular file");
     }
-  }
-  // The command line becomes a closed_loop scenario file (absolute paths), run as any other.
-  std::ostringstream y;
-  y << "scenario: identify\nkind: closed_loop\nseed: 0\n"
-    << "model: " << Quoted(fs::absolute(model).string()) << "\n"
-    << "declared: " << Quoted(fs::absolute(declared).string()) << "\n"
-    << "calibration: {csv: " << Quoted(fs::absolute(calibration_csv).string()) << "}\n"
-    << "validation: {csv: " << Quoted(fs::absolute(validation_csv).string()) << "}\n"
-    << "point_std_m: " << point_std_m << "\n";
-  if (!candidates.empty()) {
-    y << "candidates: [";
-    for (size_t i = 0; i < candidates.size(); ++i) y << (i ? ", " : "") << Quoted(candidates[i]);
-    y << "]\n";
-  }
-  const fs::path file =
-      fs::temp_directory_path() / ("flexbench_identify_" + std::to_string(::getpid()) + ".yaml");
-  {
-    std::ofstream out(file);
-    out << y.str();
-    if (!out) {
-      std::cerr << "flexbench: error: cannot write " << file.string() << "\n";
-      return kExitInternal;
+    if (!(std::isfinite(o.point_std_m) && o.point_std_m >= 1e-7 && o.point_std_m <= 1.0)) {
+      OptionError("--point-std", std::to_string(o.point_std_m),
+                  "must be between 1e-7 and 1 (metres)");
     }
+    // The model is the declared file's; --model, when given, must be that file.
+    const std::string declared_abs = fs::absolute(o.declared).lexically_normal().string();
+    sim::DeclaredModel declared;
+    try {
+      declared = sim::LoadDeclaredModel(declared_abs);
+    } catch (const InputError& e) {
+      throw InputError(std::string("--declared: ") + e.what());
+    }
+    if (!o.model.empty()) {
+      std::error_code ec;
+      if (!fs::exists(o.model, ec)) OptionError("--model", o.model, "not found");
+      if (!fs::equivalent(o.model, declared.model_path, ec)) {
+        OptionError("--model", o.model,
+                    "is not the model the declared file names (" +
+                        CapForMessage(declared.model_path) +
+                        "); omit --model or name the same file");
+      }
+    }
+    {
+      std::error_code ec;
+      if (fs::equivalent(o.calibration_csv, o.validation_csv, ec) ||
+          ReadWhole(o.calibration_csv) == ReadWhole(o.validation_csv)) {
+        OptionError("--validation", o.validation_csv,
+                    "holds the same rows as --calibration; validate on other data");
+      }
+    }
+    // The command line as a closed_loop scenario, configured in memory; one option a line.
+    std::vector<std::string> option_of_line{""};  // 1-based lines
+    std::ostringstream y;
+    const auto line = [&](const std::string& option, const std::string& text) {
+      y << text << "\n";
+      option_of_line.push_back(option);
+    };
+    line("", "scenario: identify");
+    line("", "kind: closed_loop");
+    line("", "seed: 0");
+    line("--declared", "model: " + Quoted(declared.model_path));
+    line("--declared", "declared: " + Quoted(declared_abs));
+    line("--calibration",
+         "calibration: {csv: " + Quoted(fs::absolute(o.calibration_csv).string()) + "}");
+    line("--validation",
+         "validation: {csv: " + Quoted(fs::absolute(o.validation_csv).string()) + "}");
+    char num[64];
+    std::snprintf(num, sizeof(num), "%.17g", o.point_std_m);
+    line("--point-std", std::string("point_std_m: ") + num);
+    if (!o.candidates.empty()) {
+      std::string c = "candidates: [";
+      for (size_t i = 0; i < o.candidates.size(); ++i) {
+        c += (i ? ", " : "") + Quoted(o.candidates[i]);
+      }
+      line("--candidates", c + "]");
+    }
+    const ConfigNode root = ConfigNode::LoadString(y.str(), kIdentifyName);
+    RunOptions run;
+    run.out_dir = o.out_dir;
+    run.force = o.force;
+    try {
+      return RunLoaded(root, run, "identify command line",
+                       {fs::path(o.declared), fs::path(declared.model_path),
+                        fs::path(o.calibration_csv), fs::path(o.validation_csv)});
+    } catch (const InputError& e) {
+      // "flexbench identify:<line>: ..." names the option instead.
+      std::string m = e.what();
+      const std::string prefix = std::string(kIdentifyName) + ":";
+      if (m.compare(0, prefix.size(), prefix) == 0) {
+        size_t end = prefix.size();
+        while (end < m.size() && std::isdigit(static_cast<unsigned char>(m[end]))) ++end;
+        const int ln = std::atoi(m.substr(prefix.size(), end - prefix.size()).c_str());
+        const std::string option =
+            ln > 0 && ln < static_cast<int>(option_of_line.size()) ? option_of_line[ln] : "";
+        m = (option.empty() ? std::string("identify") : option) + m.substr(end);
+      }
+      throw InputError(m);
+    }
+  } catch (const std::exception& e) {
+    return ReportError(e);
   }
-  RunOptions o;
-  o.scenario_path = file.string();
-  o.out_dir = out_dir;
-  const int code = RunScenario(o);
-  std::error_code ec;
-  fs::remove(file, ec);
-  return code;
 }
 
 }  // namespace flexbench::scenarios

@@ -19,19 +19,34 @@ struct RunOptions {
   std::string out_dir;                 // default: out/<scenario name>
   std::optional<std::uint64_t> seed;   // overrides the file's seed
   bool check_gates = false;
+  bool force = false;  // --out may replace a folder that is not a previous result
 };
 
 // Runs one scenario; prints one line on stderr for bad input. Returns an exit code.
 int RunScenario(const RunOptions& options);
 
+struct IdentifyCliOptions {
+  std::string model;  // optional: must be the model the declared file names
+  std::string declared;
+  std::string calibration_csv;
+  std::string validation_csv;
+  std::vector<std::string> candidates;
+  double point_std_m = 1e-4;
+  std::string out_dir = "out/identify";
+  bool force = false;
+};
+
 // `flexbench identify`: a closed_loop run on a user's files (paths as given on the command
-// line). Returns an exit code.
-int IdentifyCommand(const std::string& model, const std::string& declared,
-                    const std::string& calibration_csv, const std::string& validation_csv,
-                    const std::vector<std::string>& candidates, double point_std_m,
-                    const std::string& out_dir);
+// line), configured in memory (no scenario file is written); errors name the option.
+// Returns an exit code.
+int IdentifyCommand(const IdentifyCliOptions& options);
 
 // Prints the scenario kinds and the scenario files found under `scenarios_dir`.
 int ListScenarios(const std::string& scenarios_dir);
+
+// Prints `e` as one line on stderr ("flexbench: error: ..." for bad input, "flexbench:
+// internal error: ..." otherwise; newlines folded, capped) and returns its exit code: 2 for
+// InputError, SimulationError and filesystem errors (a path the system refused), 1 otherwise.
+int ReportError(const std::exception& e);
 
 }  // namespace flexbench::scenarios

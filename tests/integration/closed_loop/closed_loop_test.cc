@@ -591,6 +591,65 @@ TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
             std::string::npos);
 }
 
+// Issue 21: Excel's byte-order mark, absurd values, groups that span sets, socket distances.
+TEST_F(CalibrationCsv, ByteOrderMarkIsNotPartOfTheFirstColumn) {
+  DataSet d;
+  ReadCalibrationCsv(Write("\xEF\xBB\xBFj1,j2,x,y,z\n0.1,0.2,1,2,3\n"), {"j1", "j2"}, &d);
+  ASSERT_EQ(d.rows.size(), 1u);
+  EXPECT_EQ(d.rows[0].q[0], 0.1);
+}
+
+TEST_F(CalibrationCsv, FiniteAbsurdValuesAreOutOfRange) {
+  EXPECT_NE(Error("j1,j2,x,y,z\n1e200,0,1,2,3\n").find("data.csv:2: column 'j1': 1e200 is out "
+                                                       "of range"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,j2,x,y,z\n0,0,1e308,2,3\n").find("column 'x': 1e308 is out of range"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,j2,group\n0,1e5,a\n").find("out of range"), std::string::npos);
+  EXPECT_EQ(Error("j1,j2,x,y,z\n-3.1,6.2,-2.5,0.5,1e2\n"), "");
+}
+
+TEST_F(CalibrationCsv, EchoedCellsAreCapped) {
+  const std::string e = Error("j1,j2,group\n0," + std::string(10000, 'z') + ",a\n");
+  EXPECT_NE(e.find("is not a number"), std::string::npos) << e.substr(0, 300);
+  EXPECT_LT(e.size(), 400u);
+}
+
+TEST_F(CalibrationCsv, AGroupSpanningSetsIsWarnedAbout) {
+  DataSet d;
+  ::testing::internal::CaptureStderr();
+  ReadCalibrationCsv(Write("j1,j2,group,set\n0,0,hole_0,front\n0,1,hole_0,left\n"),
+                     {"j1", "j2"}, &d);
+  std::string err = ::testing::internal::GetCapturedStderr();
+  EXPECT_NE(err.find("data.csv:3: group 'hole_0' spans sets 'front' and 'left'"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find("'left/hole_0'"), std::string::npos) << err;
+  DataSet ok;
+  ::testing::internal::CaptureStderr();
+  ReadCalibrationCsv(Write("j1,j2,group,set\n0,0,front/hole_0,front\n0,1,left/hole_0,left\n"),
+                     {"j1", "j2"}, &ok);
+  err = ::testing::internal::GetCapturedStderr();
+  EXPECT_EQ(err, "");
+}
+
+TEST_F(CalibrationCsv, DevicesAreRefused) {
+  DataSet d;
+  EXPECT_THROW(ReadCalibrationCsv("/dev/zero", {"j1", "j2"}, &d), InputError);
+}
+
+TEST(MukcaPlacement, SocketDistanceMustBePositive) {
+  DataSet d;
+  for (double bad : {-0.05, 0.0, 1e300}) {
+    try {
+      ReadMukcaPlacement("/nonexistent", "front", 7, bad, &d);
+      ADD_FAILURE() << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("socket_distance_m"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // "Bring your own robot and data": a model file, a declared model and two CSVs through the CLI.
 TEST(IdentifyCommand, FindsTheEffectInAUsersCsvAndRejectsABadRow) {
   const fs::path dir = fs::temp_directory_path() / ("flexbench_byo_" + std::to_string(::getpid()));

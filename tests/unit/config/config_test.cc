@@ -103,5 +103,59 @@ TEST(Gates, EvaluatesNumbersBooleansAndRelativeThresholds) {
   EXPECT_FALSE(EvaluateGates(gates, summary, &all)[1]["passed"].get<bool>());
 }
 
+// Issue 21: inputs that yaml-cpp accepts silently or turns into internal errors.
+TEST(ConfigNode, NonUtf8TextIsBadInputNamingLineAndKey) {
+  const std::string e = ErrorOf(
+      [] { ConfigNode::LoadString("scenario: x\ndescription: caf\xe9 au lait\n", "f.yaml"); });
+  EXPECT_NE(e.find("f.yaml:2: key 'description': not valid UTF-8 (byte 0xE9)"),
+            std::string::npos)
+      << e;
+  EXPECT_NO_THROW(ConfigNode::LoadString("description: caf\xc3\xa9\n", "f.yaml"));
+}
+
+TEST(ConfigNode, KeyThatIsAListOrMapIsBadInput) {
+  std::string e = ErrorOf([] { ConfigNode::LoadString("a: 1\n? [a, b]\n: 1\n", "f.yaml"); });
+  EXPECT_NE(e.find("f.yaml:2: a key under '(top level)' is a list or a mapping"),
+            std::string::npos)
+      << e;
+  e = ErrorOf([] { ConfigNode::LoadString("outer:\n  ? {x: 1}\n  : 2\n", "f.yaml"); });
+  EXPECT_NE(e.find("f.yaml:2: a key under 'outer'"), std::string::npos) << e;
+}
+
+TEST(ConfigNode, DuplicateKeyIsBadInput) {
+  std::string e = ErrorOf([] { ConfigNode::LoadString("seed: 1\nseed: 2\n", "f.yaml"); });
+  EXPECT_NE(e.find("f.yaml:2: key 'seed' given twice"), std::string::npos) << e;
+  e = ErrorOf([] { ConfigNode::LoadString("o:\n  - {a: 1, a: 2}\n", "f.yaml"); });
+  EXPECT_NE(e.find("key 'o[0].a' given twice"), std::string::npos) << e;
+}
+
+TEST(ConfigNode, SecondDocumentIsBadInput) {
+  const std::string e =
+      ErrorOf([] { ConfigNode::LoadString("a: 1\n---\nb: 2\n", "f.yaml"); });
+  EXPECT_NE(e.find("f.yaml:3: a second YAML document"), std::string::npos) << e;
+  EXPECT_NO_THROW(ConfigNode::LoadString("---\na: 1\n", "f.yaml"));
+}
+
+TEST(ConfigNode, NonRegularAndHugeFilesAreRefused) {
+  std::string e = ErrorOf([] { ConfigNode::LoadFile("/dev/zero"); });
+  EXPECT_NE(e.find("/dev/zero: not a regular file"), std::string::npos) << e;
+  e = ErrorOf([] { ConfigNode::LoadFile("/tmp"); });
+  EXPECT_NE(e.find("/tmp: is a folder"), std::string::npos) << e;
+  const std::string long_name = "/tmp/" + std::string(300, 'a');
+  e = ErrorOf([&] { ConfigNode::LoadFile(long_name); });
+  EXPECT_NE(e.find("not found"), std::string::npos) << e;
+  EXPECT_LT(e.size(), 300u) << e;
+}
+
+TEST(ConfigNode, EchoedValuesAreCapped) {
+  const ConfigNode root =
+      ConfigNode::LoadString("a: " + std::string(5000, 'x') + "\n", "f.yaml");
+  const std::string e = ErrorOf([&] { root.GetDouble("a"); });
+  EXPECT_NE(e.find("expected a number"), std::string::npos) << e;
+  EXPECT_LT(e.size(), 300u);
+  EXPECT_EQ(CapForMessage("abc", 2), "ab...");
+  EXPECT_EQ(CapForMessage("\xc3\xa9\xc3\xa9", 3), "\xc3\xa9...");  // never inside a character
+}
+
 }  // namespace
 }  // namespace flexbench::scenarios

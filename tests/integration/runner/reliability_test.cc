@@ -1,0 +1,261 @@
+// Issue 21, "nothing lost, nothing hangs": the README's Reliability promises through the CLI.
+// Exit codes (0 ok, 2 bad input, 3 gate failed, 1 internal), one line on stderr for an error,
+// echoed values capped, results moved into place whole, nothing removed that is not a result.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+#include "sim/mujoco_model.h"
+#include "tests/common/test_util.h"
+
+namespace flexbench::testing {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string Flexbench() { return BinDir() + "/flexbench"; }
+
+std::string SmokeYaml(const std::string& extra = "", const std::string& model = "") {
+  const std::string model_path = model.empty() ? SourceDir() + "/models/planar3.xml" : model;
+  return "scenario: smoke_copy\nkind: smoke\nseed: 3\nmodel: " + model_path +
+         "\ncamera: overview\nconfiguration: {joint1: 0.35, joint2: -0.6, joint3: 0.5}\n" +
+         extra;
+}
+
+std::string RunCmd(const fs::path& scenario, const fs::path& out, const std::string& extra = "") {
+  return Flexbench() + " run " + scenario.string() + " --out " + out.string() + " " + extra +
+         " </dev/null";
+}
+
+// The last stderr line is the error line.
+std::string LastLine(const std::string& err) {
+  std::string e = err;
+  while (!e.empty() && e.back() == '\n') e.pop_back();
+  const size_t nl = e.rfind('\n');
+  return nl == std::string::npos ? e : e.substr(nl + 1);
+}
+
+TEST(Reliability, OutThatHoldsUserFilesIsRefusedAndKept) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "s.yaml";
+  WriteFile(s, SmokeYaml());
+  const fs::path out = tmp.path() / "mine";
+  WriteFile(out / "thesis.tex", "years of work");
+  CommandResult r = RunCommand(RunCmd(s, out));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("not a flexbench result"), std::string::npos) << r.err;
+  EXPECT_EQ(ReadFile(out / "thesis.tex"), "years of work");
+  // --force is the user's say-so.
+  r = RunCommand(RunCmd(s, out, "--force"));
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(out / "summary.json"));
+  // A previous result is replaced without --force.
+  r = RunCommand(RunCmd(s, out));
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
+TEST(Reliability, OutThatHoldsTheScenarioIsRefusedEvenWithForce) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "here" / "s.yaml";
+  WriteFile(s, SmokeYaml());
+  for (const char* extra : {"", "--force"}) {
+    const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "here", extra));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(CountLines(r.err), 1) << r.err;
+    EXPECT_TRUE(fs::exists(s)) << "the scenario file was deleted";
+  }
+}
+
+TEST(Reliability, OutThatIsARegularFileIsRefusedAndKept) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "s.yaml";
+  WriteFile(s, SmokeYaml());
+  const fs::path out = tmp.path() / "notes.txt";
+  WriteFile(out, "keep me");
+  for (const char* extra : {"", "--force"}) {
+    const CommandResult r = RunCommand(RunCmd(s, out, extra));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("is not a folder"), std::string::npos) << r.err;
+    EXPECT_EQ(ReadFile(out), "keep me");
+  }
+}
+
+TEST(Reliability, TemporariesOfKilledRunsAreRemovedByTheNextRun) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "s.yaml";
+  WriteFile(s, SmokeYaml());
+  // pid_max is at most 2^22: these processes cannot exist.
+  WriteFile(tmp.path() / "out.tmp-99999999" / "summary.json", "{}");
+  WriteFile(tmp.path() / "out.old-99999998" / "x.csv", "1");
+  // A live run's temporary (this test's own pid) and unrelated names are kept.
+  const std::string live = "out.tmp-" + std::to_string(::getpid());
+  WriteFile(tmp.path() / live / "a", "");
+  WriteFile(tmp.path() / "out.tmp-notapid" / "a", "");
+  const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(tmp.path() / "out.tmp-99999999"));
+  EXPECT_FALSE(fs::exists(tmp.path() / "out.old-99999998"));
+  EXPECT_TRUE(fs::exists(tmp.path() / live));
+  EXPECT_TRUE(fs::exists(tmp.path() / "out.tmp-notapid"));
+}
+
+TEST(Reliability, NonUtf8ScenarioIsBadInputBeforeAnyWork) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "s.yaml";
+  WriteFile(s, SmokeYaml("description: caf\xe9\n"));
+  const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("key 'description': not valid UTF-8"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+}
+
+TEST(Reliability, DevicesFoldersAndLongNamesAreBadInput) {
+  TempDir tmp;
+  const std::string long_name = std::string(300, 'a');
+  for (const std::string& cmd :
+       {Flexbench() + " run /dev/zero", Flexbench() + " run " + tmp.path().string(),
+        Flexbench() + " run " + long_name, Flexbench() + " list --dir " + long_name,
+        Flexbench() + " inspect " + long_name, Flexbench() + " inspect " + long_name + ".yaml",
+        Flexbench() + " identify --model " + long_name + " --declared " + SourceDir() +
+            "/models/planar3.declared.yaml --calibration " + long_name + " --validation c",
+        Flexbench() + " run " + SourceDir() + "/scenarios/smoke.yaml --out " + long_name}) {
+    const CommandResult r = RunCommand("cd " + tmp.path().string() + " && " + cmd + " </dev/null");
+    EXPECT_EQ(r.exit_code, 2) << cmd << "\n" << r.err;
+    EXPECT_EQ(CountLines(r.err), CountLines(r.err) > 1 ? 2 : 1) << r.err;  // a log line at most
+    EXPECT_LT(LastLine(r.err).size(), 400u) << r.err;
+  }
+}
+
+TEST(Reliability, MujocoFatalErrorsAndBadOffscreenSizesAreBadInputWithoutAPrompt) {
+  TempDir tmp;
+  std::string xml = ReadFile(SourceDir() + "/models/planar3.xml");
+  const std::string from = "offwidth=\"640\" offheight=\"480\"";
+  ASSERT_NE(xml.find(from), std::string::npos);
+  for (const char* size : {"offwidth=\"60000\" offheight=\"60000\"",
+                           "offwidth=\"640\" offheight=\"-5\""}) {
+    std::string m = xml;
+    m.replace(m.find(from), from.size(), size);
+    WriteFile(tmp.path() / "m.xml", m);
+    WriteFile(tmp.path() / "s.yaml", SmokeYaml("", (tmp.path() / "m.xml").string()));
+    const CommandResult r = RunCommand("cd " + tmp.path().string() + " && timeout 120 " +
+                                       RunCmd(tmp.path() / "s.yaml", tmp.path() / "out"));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(LastLine(r.err).find("offwidth"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("Press Enter"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(tmp.path() / "MUJOCO_LOG.TXT"));
+    EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+  }
+}
+
+TEST(ReliabilityDeathTest, MujocoErrorHandlerPrintsOneLineAndExitsTwo) {
+  sim::InstallMujocoHandlers();
+  EXPECT_EXIT(mju_error("boom\nsecond line"), ::testing::ExitedWithCode(2),
+              "flexbench: error: MuJoCo: boom second line");
+  ::testing::internal::CaptureStderr();
+  mju_warning("careful");
+  const std::string err = ::testing::internal::GetCapturedStderr();
+  EXPECT_EQ(err, "[flexbench] MuJoCo warning: careful\n");
+}
+
+TEST(Reliability, CheckGatesWithoutGatesAndGateTyposAreBadInput) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "s.yaml";
+  WriteFile(s, SmokeYaml());
+  CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out", "--check-gates"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("no gates"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+  WriteFile(s, SmokeYaml("gates:\n  - {name: typo, metric: corner_rmse_pix, op: '<', "
+                         "threshold: 1.0}\n"));
+  r = RunCommand(RunCmd(s, tmp.path() / "out", "--check-gates"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find(s.string() + ":8: gate 'typo': metric 'corner_rmse_pix' is "
+                                               "not in this scenario's results"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+}
+
+TEST(Reliability, ScenarioNameCannotLeaveTheOutputFolder) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "s.yaml";
+  std::string y = SmokeYaml();
+  y.replace(y.find("smoke_copy"), 10, "../../escape");
+  WriteFile(s, y);
+  const CommandResult r = RunCommand("cd " + tmp.path().string() + " && " + Flexbench() +
+                                     " run " + s.string());
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("key 'scenario': must be a plain name"), std::string::npos) << r.err;
+}
+
+// identify: configured in memory, errors name the option, --model used or rejected.
+class IdentifyCli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::string csv = "joint1,joint2,joint3,x,y,z\n";
+    for (int i = 0; i < 30; ++i) {
+      char row[200];
+      std::snprintf(row, sizeof(row), "%.3f,%.3f,%.3f,%.3f,%.3f,0.1\n", 0.05 * i, -0.03 * i,
+                    0.02 * i, 0.3 - 0.01 * i, 0.01 * i);
+      csv += row;
+    }
+    WriteFile(tmp_.path() / "cal.csv", csv);
+    csv += "0.5,0.5,0.5,0.2,0.2,0.1\n";
+    WriteFile(tmp_.path() / "val.csv", csv);
+  }
+  CommandResult Identify(const std::string& extra) {
+    return RunCommand(Flexbench() + " identify --declared " + SourceDir() +
+                      "/models/planar3.declared.yaml --calibration " +
+                      (tmp_.path() / "cal.csv").string() + " --validation " +
+                      (tmp_.path() / "val.csv").string() + " --out " +
+                      (tmp_.path() / "out").string() + " " + extra + " </dev/null");
+  }
+  TempDir tmp_;
+};
+
+TEST_F(IdentifyCli, ModelIsTheDeclaredFilesOrRejected) {
+  CommandResult r = Identify("--model /tmp");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("--model /tmp: is not the model the declared file names"),
+            std::string::npos)
+      << r.err;
+  r = Identify("--model " + SourceDir() + "/models/rover_arm.xml");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  r = Identify("--model " + SourceDir() + "/models/../models/planar3.xml --candidates "
+               "joint_offset");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  r = Identify("--candidates joint_offset");  // --model is optional
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
+TEST_F(IdentifyCli, OptionErrorsNameTheOptionNotATemporaryFile) {
+  CommandResult r = Identify("--candidates bogus_effect");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("error: --candidates: no candidate effect 'bogus_effect'"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(r.err.find("/tmp/flexbench_identify"), std::string::npos) << r.err;
+  r = Identify("--point-std 1e-300");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("--point-std"), std::string::npos) << r.err;
+  r = Identify("--point-std -1");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+}
+
+TEST_F(IdentifyCli, SameRowsForCalibrationAndValidationAreRefused) {
+  const CommandResult r =
+      RunCommand(Flexbench() + " identify --declared " + SourceDir() +
+                 "/models/planar3.declared.yaml --calibration " +
+                 (tmp_.path() / "cal.csv").string() + " --validation " +
+                 (tmp_.path() / "cal.csv").string() + " --out " +
+                 (tmp_.path() / "out").string() + " </dev/null");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("same rows as --calibration"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace flexbench::testing
