@@ -693,6 +693,18 @@ TEST(IdentifyCommand, FindsTheEffectInAUsersCsvAndRejectsABadRow) {
   EXPECT_EQ(aug.actuated_joints, (std::vector<std::string>{"j1", "j2", "j3"}));
   ASSERT_EQ(aug.sources.size(), 1u);
   EXPECT_LT(aug.sources[0].about_axis_rad, 0.5 * M_PI / 180.0);  // reduced to what remains
+  // Selection options on the command line: with no effect allowed, nothing is shipped.
+  const testing::CommandResult none = testing::RunCommand(
+      cmd + "0 --max-effects 0 --calibration " + (dir / "cal.csv").string());
+  ASSERT_EQ(none.exit_code, 0) << none.err;
+  EXPECT_NE(testing::ReadFile(dir / "out0" / "summary.json").find("\"verdict\": \"unexplained\""),
+            std::string::npos);
+  EXPECT_FALSE(fs::exists(dir / "out0" / "declared_augmented.yaml"));
+  const testing::CommandResult sets = testing::RunCommand(
+      cmd + "1 --folds-by set --calibration " + (dir / "cal.csv").string());
+  EXPECT_EQ(sets.exit_code, 2) << sets.err;
+  EXPECT_NE(sets.err.find("cross-validation by set needs at least two sets"), std::string::npos)
+      << sets.err;
   testing::WriteFile(dir / "bad.csv", "j1,j2,j3,x,y,z\n0,0,0,1,1,1\n0,nan,0,1,1,1\n");
   const testing::CommandResult bad =
       testing::RunCommand(cmd + " --calibration " + (dir / "bad.csv").string());
