@@ -41,6 +41,54 @@ int BodyOfFrame(const mjModel* m, const std::string& typed) {
   return -1;
 }
 
+constexpr double kDeg = M_PI / 180.0;
+
+// Physical bounds per family (effect_model.h says why).
+void SetBounds(Candidate* c, bool prismatic) {
+  const auto all = [&](double lo, double hi) {
+    c->lower.assign(c->num_params, lo);
+    c->upper.assign(c->num_params, hi);
+  };
+  switch (c->type) {
+    case EffectType::kJointOffset:
+      prismatic ? all(-0.1, 0.1) : all(-10 * kDeg, 10 * kDeg);
+      break;
+    case EffectType::kAxisTilt:
+      all(-10 * kDeg, 10 * kDeg);
+      break;
+    case EffectType::kBacklash:
+      all(-5 * kDeg, 5 * kDeg);
+      break;
+    case EffectType::kLinkLength:
+    case EffectType::kLinkOffset:
+      all(-0.1, 0.1);
+      break;
+    case EffectType::kJointCompliance:
+      all(-1.0, 0.0);
+      break;
+    case EffectType::kLinkBending:
+    case EffectType::kBaseCompliance:
+      all(0.0, 1.0);
+      break;
+    case EffectType::kThermalExpansion:
+      all(-1e-3, 1e-3);
+      break;
+    case EffectType::kPayload:
+      all(-50.0, 50.0);
+      c->lower[0] = -1e-3;
+      c->upper[0] = 100.0;
+      break;
+    case EffectType::kCameraOffset:
+    case EffectType::kJointOrigin: {
+      const double lin = c->type == EffectType::kCameraOffset ? 0.5 : 0.1;
+      const double ang = c->type == EffectType::kCameraOffset ? 0.5 : 10 * kDeg;
+      c->lower = {-lin, -lin, -lin, -ang, -ang, -ang};
+      c->upper = {lin, lin, lin, ang, ang, ang};
+      break;
+    }
+  }
+}
+
 }  // namespace
 
 const char* ToString(EffectType type) {
@@ -67,6 +115,8 @@ const char* ToString(EffectType type) {
       return "payload";
     case EffectType::kCameraOffset:
       return "camera_offset";
+    case EffectType::kJointOrigin:
+      return "joint_origin";
   }
   return "?";
 }
@@ -130,6 +180,7 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
     c.num_params = np;
     c.step = step;
     c.unit = unit;
+    SetBounds(&c, model.frame(f > 0 ? f : 0).joint.type == kinematics::JointType::kPrismatic);
     candidates_.push_back(c);
   };
   for (int k = 0; k < model.nq(); ++k) {
@@ -185,6 +236,13 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
   if (!camera.empty()) add(EffectType::kCameraOffset, camera, -1, -1, 6, 1e-6, "m, rad");
   add(EffectType::kPayload, Untyped(model.frame(point_frame).name), -1, point_frame, 4, 1e-3,
       "kg, kg m");
+  // Complete geometry last, so the named candidates keep their indices.
+  for (int k = 0; k < model.nq(); ++k) {
+    const FrameId f = model.joint_frame(k);
+    if (!on_path_[f]) continue;
+    add(EffectType::kJointOrigin, chain.q_joints[k], k, f, 6, 1e-6, "m, rad");
+    candidates_.back().generic_geometry = true;
+  }
 }
 
 int EffectModel::FindCandidate(const std::string& name) const {
@@ -274,6 +332,7 @@ EffectModel::Workspace EffectModel::MakeWorkspace() const {
   ws.bend.assign(model.num_frames(), Vec3::Zero());
   ws.offset.assign(model.num_frames(), Vec3::Zero());
   ws.tilt.assign(model.num_frames(), Vec3::Zero());
+  ws.origin.assign(model.num_frames(), Vec6::Zero());
   ws.T.assign(model.num_frames(), lie::SE3());
   return ws;
 }
@@ -300,6 +359,7 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
   std::fill(ws.bend.begin(), ws.bend.end(), Vec3::Zero());
   std::fill(ws.offset.begin(), ws.offset.end(), Vec3::Zero());
   std::fill(ws.tilt.begin(), ws.tilt.end(), Vec3::Zero());
+  std::fill(ws.origin.begin(), ws.origin.end(), Vec6::Zero());
   double scale = 0.0;
   Vec3 mount_rot = Vec3::Zero();
   const double* t = theta;
@@ -348,6 +408,9 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
       case EffectType::kThermalExpansion:
         scale += t[0];
         break;
+      case EffectType::kJointOrigin:
+        for (int k = 0; k < 6; ++k) ws.origin[c.frame][k] += t[k];
+        break;
       case EffectType::kPayload:
       case EffectType::kCameraOffset:  // acts on the camera, not on the chain
         break;
@@ -363,6 +426,7 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
     if (ws.dlen[f] != 0.0) tr += ws.dlen[f] * t0.normalized();
     tr += ws.offset[f];
     lie::SE3 T_parent_f(fr.T_parent_ip.rotation(), tr);
+    if (!ws.origin[f].isZero()) T_parent_f = T_parent_f * lie::SE3::Exp(ws.origin[f]);
     ws.T[f] = ws.T[fr.parent] * T_parent_f;
     if (!ws.bend[f].isZero()) {
       // The link turns about its middle: an Euler-Bernoulli beam under an end moment.

@@ -22,6 +22,17 @@
 //                         frame); parameters (m, m c) [kg, kg m] keep the loads linear in them
 //   camera_offset@C       the camera's pose T_base_cam Exp(xi), xi = [rho; theta] [m, rad]
 //                         (extrinsic calibration error; only with pixel observations)
+//   joint_origin@J        J's fixed transform T_parent_ip becomes T_parent_ip Exp(xi), xi =
+//                         [rho; theta] [m, rad], before the joint moves: any geometric error of
+//                         the joint's placement (complete geometry, as the MUKCa authors
+//                         calibrate; generic_geometry: chosen after the named effects)
+// Physical bounds (Candidate::lower/upper; a fit outside them is not accepted): angles within
+// 10 deg (offsets, tilts, joint origins) and 5 deg (backlash half play, either sign: the flank
+// convention decides it), lengths within 0.1 m, a gear compliance c <= 0 (stiffness k = -1/c
+// > 0), plate and link compliances c >= 0 (they sag under their weight), |thermal strain| <=
+// 1e-3 (about 80 K of steel), a payload mass in [-1 g, 100 kg] (a gram below zero is zero
+// within the fit's precision; the MUKCa-like data cannot separate it), its first moment within
+// 50 kg m, a camera within 0.5 m and 0.5 rad of its stated pose.
 // Signs: tau_J is the torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest),
 // so a gear spring of stiffness k fits as c = -1/k and a play resting on the loaded flank as
 // b = -play/2; moments M are those of the weight itself, so plates and links that sag fit with
@@ -58,6 +69,7 @@ enum class EffectType {
   kThermalExpansion,
   kPayload,
   kCameraOffset,
+  kJointOrigin,
 };
 
 const char* ToString(EffectType type);
@@ -124,6 +136,7 @@ class EffectModel {
     std::vector<Vec3> bend;
     std::vector<Vec3> offset;
     std::vector<Vec3> tilt;
+    std::vector<Vec6> origin;
     std::vector<lie::SE3> T;
   };
   Workspace MakeWorkspace() const;

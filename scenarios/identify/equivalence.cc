@@ -159,6 +159,64 @@ void FindEquivalents(const EffectModel& em, const DataSet& data,
   }
 }
 
+void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
+                            const std::vector<ConfigLoads>& loads, const Fit& fit,
+                            const std::vector<int>& candidates, const IdentifyOptions& opt,
+                            IdentifyResult* result) {
+  const int k = static_cast<int>(fit.active.size());
+  if (k < 2 || k > 10) return;
+  Fit groups_only = fit;
+  groups_only.active.clear();
+  groups_only.basis.clear();
+  groups_only.theta.resize(0);
+  const Projector proj(FitJacobian(em, data, loads, groups_only, opt));
+  // Each chosen effect's correction (group points projected out).
+  std::vector<Eigen::VectorXd> d(k);
+  std::vector<int> np(k);
+  for (int e = 0, off = 0; e < k; ++e) {
+    const int c = fit.active[e];
+    np[e] = em.candidates()[c].num_params;
+    d[e] = proj.Apply(CandidateJacobian(em, data, loads, groups_only, c, opt)) *
+           fit.theta.segment(off, np[e]);
+    off += np[e];
+  }
+  for (size_t c = 0; c < em.candidates().size(); ++c) {
+    const Candidate& cand = em.candidates()[c];
+    if (cand.generic_geometry || cand.type == EffectType::kCameraOffset) continue;
+    if (std::find(fit.active.begin(), fit.active.end(), static_cast<int>(c)) != fit.active.end()) {
+      continue;
+    }
+    const Eigen::MatrixXd Rc =
+        proj.Apply(CandidateJacobian(em, data, loads, groups_only, static_cast<int>(c), opt));
+    if (!(Rc.norm() > 0)) continue;
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Rc);
+    for (int mask = 1; mask < (1 << k); ++mask) {
+      if (__builtin_popcount(mask) < 2) continue;
+      Eigen::VectorXd sum = Eigen::VectorXd::Zero(d[0].size());
+      int params = 0;
+      std::string names;
+      for (int e = 0; e < k; ++e) {
+        if (!(mask & (1 << e))) continue;
+        sum += d[e];
+        params += np[e];
+        names += (names.empty() ? "" : " + ") + em.candidates()[fit.active[e]].Name();
+      }
+      if (cand.num_params >= params || !(sum.norm() > 0)) continue;
+      const Eigen::VectorXd pd = Rc * qr.solve(sum);
+      if (pd.norm() / sum.norm() <= opt.ambiguity_cos) continue;
+      const bool listed =
+          std::find(candidates.begin(), candidates.end(), static_cast<int>(c)) != candidates.end();
+      const std::string line = names + " together make the same correction as " + cand.Name() +
+                               " (" + std::to_string(cand.num_params) + " parameter(s) instead of " +
+                               std::to_string(params) + (listed ? "" : "; not among the candidates") +
+                               "): the cause is not singled out";
+      result->simpler.push_back(line);
+      result->steps.push_back(line);
+      result->attribution_unique = false;
+    }
+  }
+}
+
 void FindUnidentifiable(const EffectModel& em, const DataSet& data,
                         const std::vector<ConfigLoads>& loads, const Fit& fit,
                         const std::vector<int>& candidates, const IdentifyOptions& opt,

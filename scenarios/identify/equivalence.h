@@ -58,4 +58,14 @@ void FindUnidentifiable(const EffectModel& em, const DataSet& data,
                         const std::vector<int>& candidates, const IdentifyOptions& opt,
                         IdentifyResult* result);
 
+// Several chosen effects that together make the correction of one simpler candidate of the
+// whole library (fewer parameters; in the candidate list or not): e.g. a translation plus a
+// tilt of one joint's frame that is exactly a rotation about the previous joint's axis. The
+// data cannot tell them apart, so the cause is not singled out: result->attribution_unique is
+// cleared and the finding logged (result->simpler).
+void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
+                            const std::vector<ConfigLoads>& loads, const Fit& fit,
+                            const std::vector<int>& candidates, const IdentifyOptions& opt,
+                            IdentifyResult* result);
+
 }  // namespace flexbench::identify

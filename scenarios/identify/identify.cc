@@ -285,6 +285,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   if (!generic.empty() && static_cast<int>(cur.active.size()) < opt.max_effects) {
     res.steps.push_back("complete geometry: joint origins beyond the named effects");
     cur = SelectEffects(ctx, cur, generic, false, &cv);
+    cur = AddGeometryBlock(ctx, cur, generic, &cv);
   }
   res.after = cur;
   res.cv_after = cv;
@@ -295,6 +296,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   }
   FindAlternatives(ctx, candidates, &res);
   FindEquivalents(em, data, loads, cur, candidates, opt, &res);
+  FindSimplerEquivalents(em, data, loads, cur, candidates, opt, &res);
   for (const EquivalenceSet& s : res.equivalence) {
     if (s.members.size() > 1) {
       res.steps.push_back("equivalent on this data (named by all): " + s.name);

@@ -161,6 +161,7 @@ struct IdentifyResult {
   double cv_before = 0.0, cv_after = 0.0;  // held-out mean squared whitened residual
   std::vector<Alternative> alternatives;   // one per chosen effect (cross-validation only)
   bool attribution_unique = true;          // no alternative comes within ambiguity_cv
+  std::vector<std::string> simpler;        // chosen effects that together equal a simpler one
   // |sum of the effects' corrections|^2 / sum of their |correction|^2 (group points projected
   // out): about 1 for independent causes, well below 1 when effects cancel each other.
   double overlap = 1.0;

@@ -76,6 +76,23 @@ int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
     t.fit = FitEffects(ctx.em, ctx.data, ctx.loads, t.fit.active, t.fit.basis, t.fit.theta,
                        ctx.opt);
     const std::string name = ctx.em.candidates()[t.c].Name();
+    // An earlier effect pushed past its bound by the new one is made redundant by it: it
+    // leaves (the backward step's job, done here so the bound never sees it).
+    for (size_t e = 0; e + 1 < t.fit.active.size();) {
+      Fit one = t.fit;
+      one.active = {t.fit.active[e]};
+      int off = 0;
+      for (size_t k = 0; k < e; ++k) off += ctx.em.candidates()[t.fit.active[k]].num_params;
+      one.theta = t.fit.theta.segment(off, ctx.em.candidates()[t.fit.active[e]].num_params);
+      if (BoundViolations(ctx.em, one).empty()) {
+        ++e;
+        continue;
+      }
+      ctx.log->push_back("with " + name + ", " + ctx.em.candidates()[t.fit.active[e]].Name() +
+                         " leaves (pushed outside its physical bounds)");
+      t.fit = FitWithout(ctx.em, ctx.data, ctx.loads, t.fit, e, ctx.opt);
+      e = 0;
+    }
     const std::vector<std::string> out = BoundViolations(ctx.em, t.fit);
     if (!out.empty()) {
       ctx.log->push_back("reject " + name + ": outside its physical bounds (" + out[0] + ")");
@@ -170,6 +187,46 @@ std::vector<std::string> BoundViolations(const EffectModel& em, const Fit& fit) 
 double CvError(const SelectionContext& ctx, const Fit& fit) {
   if (!ctx.opt.cross_validation) return std::nan("");
   return CrossValidate(ctx.em, ctx.data, ctx.loads, ctx.folds, fit, ctx.opt);
+}
+
+Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
+                     double* cv) {
+  if (!ctx.opt.cross_validation) return start;
+  Fit block = start;
+  int added = 0;
+  for (int c : pool) {
+    if (Contains(block.active, c)) continue;
+    const Projector proj(FitJacobian(ctx.em, ctx.data, ctx.loads, block, ctx.opt));
+    double rel = 0.0;
+    const Eigen::MatrixXd B = ObservableBasis(
+        CandidateJacobian(ctx.em, ctx.data, ctx.loads, block, c, ctx.opt), proj,
+        ctx.opt.rank_tol, &rel);
+    if (B.cols() == 0 || block.num_params + B.cols() >= block.num_residuals) continue;
+    block.active.push_back(c);
+    block.basis.push_back(B);
+    block.theta.conservativeResize(block.theta.size() + ctx.em.candidates()[c].num_params);
+    block.theta.tail(ctx.em.candidates()[c].num_params).setZero();
+    block.num_params += static_cast<int>(B.cols());
+    ++added;
+  }
+  if (added == 0) return start;
+  Fit fit = FitEffects(ctx.em, ctx.data, ctx.loads, block.active, block.basis, block.theta,
+                       ctx.opt);
+  const std::vector<std::string> out = BoundViolations(ctx.em, fit);
+  const double cv_block = CvError(ctx, fit);
+  if (!out.empty() || !CvLower(ctx.opt, cv_block, *cv)) {
+    ctx.log->push_back(Fmt("geometry block of %d joint origins (%d directions) not kept: "
+                           "held-out %.4g -> %.4g%s",
+                           added, fit.num_params - start.num_params, *cv, cv_block,
+                           out.empty() ? "" : ", outside bounds"));
+    return start;
+  }
+  ctx.log->push_back(Fmt("add geometry block of %d joint origins (%d directions): BIC %.1f -> "
+                         "%.1f, held-out %.4g -> %.4g",
+                         added, fit.num_params - start.num_params, start.bic, fit.bic, *cv,
+                         cv_block));
+  *cv = cv_block;
+  return fit;
 }
 
 Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,

@@ -41,4 +41,12 @@ double CvError(const SelectionContext& ctx, const Fit& fit);
 Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
                   bool backward, double* cv, bool swap = true);
 
+// Complete geometry in one block: every candidate of `pool` (joint origins) at once, each in
+// the directions still observable beside the chosen effects and the block so far, kept only
+// when the whole block lowers the held-out error by cv_min_gain and stays inside its bounds.
+// Small corrections spread over many joints (what a full recalibration fits) never pass
+// forward selection one at a time; as a block they may.
+Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
+                     double* cv);
+
 }  // namespace flexbench::identify

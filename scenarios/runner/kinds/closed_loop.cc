@@ -351,6 +351,7 @@ class ClosedLoopKind : public ScenarioKind {
       alts.push_back({{"banned", a.banned}, {"effects", a.effects}, {"cv_err", a.cv}});
     }
     id["alternatives"] = alts;
+    id["simpler_equivalents"] = res.simpler;
 
     // A model that does not lower the validation error is no fix: it is not shipped.
     if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {

@@ -161,7 +161,7 @@ TEST(Identify, FindsAnOffsetAndAGearComplianceFromPoints) {
   const std::vector<int> truth = {Candidate(*f.em, "joint_offset@j2"),
                                   Candidate(*f.em, "joint_compliance@j3")};
   Eigen::VectorXd theta(2);
-  theta << 0.01, 2e-3;
+  theta << 0.01, -2e-3;  // a gear of stiffness 500 N m/rad (c = -1/k)
   std::mt19937_64 rng(11);
   const DataSet d = PointData(*f.em, truth, theta, 80, 1e-4, rng);
   const auto loads = ComputeLoads(*f.em, d);
