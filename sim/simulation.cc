@@ -183,7 +183,8 @@ void Simulation::SetHeldPositions(const std::vector<int>& backlash_sign) const {
     const int j = catalog_.actuated[i];
     const GearSpec& g = setup_.gear[j];
     // Rigid: held there. Elastic: the spring's unloaded position, the Newton start.
-    d->qpos[m->jnt_qposadr[j]] = command_[i] - backlash_sign[j] * 0.5 * g.backlash;
+    d->qpos[m->jnt_qposadr[j]] =
+        command_[i] + g.TransmissionError(command_[i]) - backlash_sign[j] * 0.5 * g.backlash;
   }
   for (int j : locked_joints_) d->qpos[m->jnt_qposadr[j]] = m->qpos0[m->jnt_qposadr[j]];
 }
@@ -224,7 +225,7 @@ void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const 
                                      catalog_.actuated.begin());
       // The gear spring around the flank the load presses on (set by the backlash pass through
       // the unloaded position stored in qpos0 of the pass, see Settle).
-      r -= setup_.gear[j].stiffness * (gear_reference_[i] - x[k]);
+      r -= setup_.gear[j].SpringTorque(gear_reference_[i] - x[k]);
     }
     (*residual)[static_cast<int>(k)] = r;
   }
@@ -254,7 +255,8 @@ SettleReport Simulation::Settle(const SettleOptions& options) {
     SetHeldPositions(sign);
     for (int i = 0; i < num_actuated(); ++i) {
       const int j = catalog_.actuated[i];
-      gear_reference_[i] = command_[i] - sign[j] * 0.5 * setup_.gear[j].backlash;
+      const GearSpec& g = setup_.gear[j];
+      gear_reference_[i] = command_[i] + g.TransmissionError(command_[i]) - sign[j] * 0.5 * g.backlash;
     }
     // Start from the nominal state: the result does not depend on the previous configuration.
     for (int k = 0; k < n; ++k) {
@@ -348,12 +350,13 @@ void Simulation::ApplyServo() const {
     const double q = d->qpos[m->jnt_qposadr[j]];
     const double kp = m->actuator_gainprm[a * mjNGAIN];
     const GearSpec& g = setup_.gear[j];
+    const double link_command = command_[i] + g.TransmissionError(command_[i]);
     if (g.stiffness <= 0 && g.backlash <= 0) {
-      d->ctrl[a] = command_[i];
+      d->ctrl[a] = link_command;
       d->qfrc_applied[dof] = d->qfrc_bias[dof];
     } else {
-      const double k = g.stiffness > 0 ? g.stiffness : kp;
-      const double tau = k * DeadZone(command_[i] - q, 0.5 * g.backlash);
+      const double dz = DeadZone(link_command - q, 0.5 * g.backlash);
+      const double tau = g.stiffness > 0 ? g.SpringTorque(dz) : kp * dz;
       d->ctrl[a] = q + tau / kp;
       d->qfrc_applied[dof] = 0.0;
     }
@@ -507,7 +510,9 @@ double Simulation::MotorPosition(int joint_id) const {
   const JointEntry& j = catalog_.Joint(joint_id);
   if (j.role != JointRole::kActuated) return JointPosition(joint_id);
   const GearSpec& g = setup_.gear[joint_id];
-  if (g.stiffness <= 0 && g.backlash <= 0) return JointPosition(joint_id);
+  if (g.stiffness <= 0 && g.backlash <= 0 && !g.has_transmission_error()) {
+    return JointPosition(joint_id);
+  }
   const auto it = std::find(catalog_.actuated.begin(), catalog_.actuated.end(), joint_id);
   return command_[static_cast<int>(it - catalog_.actuated.begin())];
 }

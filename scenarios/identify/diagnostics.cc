@@ -159,6 +159,7 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
     if (slash != std::string::npos) best.variable = best.variable.substr(slash + 1);
   }
   best.significant = best.p_value < opt.diagnostic_p;
+  best.notable = best.p_value < opt.explained_p;
   char line[256];
   if (best.kind == "periodic") {
     std::snprintf(line, sizeof(line), "residual periodic in %s, %d cycles/rev, %.3g deg, p %s %.2g",

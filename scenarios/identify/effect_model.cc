@@ -78,6 +78,14 @@ void SetBounds(Candidate* c, bool prismatic) {
       c->lower[0] = -1e-3;
       c->upper[0] = 100.0;
       break;
+    case EffectType::kTransmissionError:
+    case EffectType::kJointErrorCurve:
+      all(-1 * kDeg, 1 * kDeg);
+      break;
+    case EffectType::kStiffeningSpring:
+      c->lower = {-1.0, 0.0};
+      c->upper = {0.0, 1.0};
+      break;
     case EffectType::kCameraOffset:
     case EffectType::kJointOrigin: {
       const double lin = c->type == EffectType::kCameraOffset ? 0.5 : 0.1;
@@ -117,6 +125,12 @@ const char* ToString(EffectType type) {
       return "camera_offset";
     case EffectType::kJointOrigin:
       return "joint_origin";
+    case EffectType::kTransmissionError:
+      return "transmission_error";
+    case EffectType::kJointErrorCurve:
+      return "joint_error_curve";
+    case EffectType::kStiffeningSpring:
+      return "stiffening_spring";
   }
   return "?";
 }
@@ -236,6 +250,18 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
   if (!camera.empty()) add(EffectType::kCameraOffset, camera, -1, -1, 6, 1e-6, "m, rad");
   add(EffectType::kPayload, Untyped(model.frame(point_frame).name), -1, point_frame, 4, 1e-3,
       "kg, kg m");
+  // Families that enter only when the residual diagnostics point at their joint; after the
+  // others, so those keep their indices.
+  for (int k = 0; k < model.nq(); ++k) {
+    const FrameId f = model.joint_frame(k);
+    if (!on_path_[f] || model.frame(f).joint.type != kinematics::JointType::kRevolute) continue;
+    add(EffectType::kTransmissionError, chain.q_joints[k], k, f, 4, 1e-6, "rad");
+    candidates_.back().needs_evidence = true;
+    add(EffectType::kJointErrorCurve, chain.q_joints[k], k, f, 6, 1e-6, "rad");
+    candidates_.back().needs_evidence = true;
+    add(EffectType::kStiffeningSpring, chain.q_joints[k], k, f, 2, 1e-7, "rad/Nm");
+    candidates_.back().needs_evidence = true;
+  }
   // Complete geometry last, so the named candidates keep their indices.
   for (int k = 0; k < model.nq(); ++k) {
     const FrameId f = model.joint_frame(k);
@@ -411,6 +437,21 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
       case EffectType::kJointOrigin:
         for (int k = 0; k < 6; ++k) ws.origin[c.frame][k] += t[k];
         break;
+      case EffectType::kTransmissionError:
+      case EffectType::kJointErrorCurve: {
+        const double qj = q[c.q_index];
+        for (int h = 1; 2 * h <= c.num_params; ++h) {
+          ws.dq[c.q_index] += t[2 * h - 2] * std::cos(h * qj) + t[2 * h - 1] * std::sin(h * qj);
+        }
+        break;
+      }
+      case EffectType::kStiffeningSpring: {
+        constexpr double kTau0 = 10.0;
+        const double tau = L.tau[c.q_index] + payload * L.tau_unit[c.q_index] -
+                           L.axis_base.col(c.q_index).dot(couple);
+        ws.dq[c.q_index] += t[0] * tau + t[1] * tau * tau * tau / (kTau0 * kTau0);
+        break;
+      }
       case EffectType::kPayload:
       case EffectType::kCameraOffset:  // acts on the camera, not on the chain
         break;

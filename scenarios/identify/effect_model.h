@@ -22,6 +22,15 @@
 //                         frame); parameters (m, m c) [kg, kg m] keep the loads linear in them
 //   camera_offset@C       the camera's pose T_base_cam Exp(xi), xi = [rho; theta] [m, rad]
 //                         (extrinsic calibration error; only with pixel observations)
+//   transmission_error@J  q_J += a1 cos q + b1 sin q + a2 cos 2q + b2 sin 2q   [rad] (strain-wave
+//                         gearing: 1 and 2 cycles per revolution; amplitude and phase as
+//                         cos/sin coefficients, so the fit is linear in them; needs_evidence)
+//   joint_error_curve@J   q_J += sum_{h=1..3} a_h cos hq + b_h sin hq   [rad] (the generic
+//                         fallback for an angle-dependent error; needs_evidence; never named as
+//                         the equivalent of a narrower family)
+//   stiffening_spring@J   q_J += c1 tau + c3 tau^3 / tau0^2, tau0 = 10 N m  [rad/(N m)] (a gear
+//                         spring whose stiffness grows with deflection: c1 = -1/k1 <= 0 and the
+//                         cubic term takes some deflection back, c3 >= 0; needs_evidence)
 //   joint_origin@J        J's fixed transform T_parent_ip becomes T_parent_ip Exp(xi), xi =
 //                         [rho; theta] [m, rad], before the joint moves: any geometric error of
 //                         the joint's placement (complete geometry, as the MUKCa authors
@@ -70,6 +79,9 @@ enum class EffectType {
   kPayload,
   kCameraOffset,
   kJointOrigin,
+  kTransmissionError,
+  kJointErrorCurve,
+  kStiffeningSpring,
 };
 
 const char* ToString(EffectType type);

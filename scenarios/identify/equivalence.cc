@@ -141,6 +141,13 @@ void FindEquivalents(const EffectModel& em, const DataSet& data,
         // A full joint-origin recalibration can make any geometric correction at its joint;
         // naming it beside every geometric finding says nothing.
         if (em.candidates()[c].generic_geometry && !generic) continue;
+        // Likewise the wider families that need evidence (a stiffening spring contains the
+        // linear one, the error curve the transmission error) beside a narrower chosen one.
+        if (em.candidates()[c].needs_evidence &&
+            (!em.candidates()[ce].needs_evidence ||
+             em.candidates()[c].type == EffectType::kJointErrorCurve)) {
+          continue;
+        }
         const Eigen::MatrixXd Rc = proj.Apply(CandidateJacobian(em, data, loads, rest, c, opt));
         if (!(Rc.norm() > 0)) continue;
         const Eigen::VectorXd pd = Rc * Rc.colPivHouseholderQr().solve(d);
@@ -159,12 +166,12 @@ void FindEquivalents(const EffectModel& em, const DataSet& data,
   }
 }
 
-void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
-                            const std::vector<ConfigLoads>& loads, const Fit& fit,
-                            const std::vector<int>& candidates, const IdentifyOptions& opt,
-                            IdentifyResult* result) {
+std::vector<SimplerEquivalent> SimplerEquivalents(const EffectModel& em, const DataSet& data,
+                                                  const std::vector<ConfigLoads>& loads,
+                                                  const Fit& fit, const IdentifyOptions& opt) {
+  std::vector<SimplerEquivalent> out;
   const int k = static_cast<int>(fit.active.size());
-  if (k < 2 || k > 10) return;
+  if (k < 2 || k > 10) return out;
   Fit groups_only = fit;
   groups_only.active.clear();
   groups_only.basis.clear();
@@ -194,26 +201,43 @@ void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
       if (__builtin_popcount(mask) < 2) continue;
       Eigen::VectorXd sum = Eigen::VectorXd::Zero(d[0].size());
       int params = 0;
-      std::string names;
+      SimplerEquivalent se;
+      se.candidate = static_cast<int>(c);
       for (int e = 0; e < k; ++e) {
         if (!(mask & (1 << e))) continue;
         sum += d[e];
         params += np[e];
-        names += (names.empty() ? "" : " + ") + em.candidates()[fit.active[e]].Name();
+        se.effects.push_back(e);
       }
       if (cand.num_params >= params || !(sum.norm() > 0)) continue;
       const Eigen::VectorXd pd = Rc * qr.solve(sum);
-      if (pd.norm() / sum.norm() <= opt.ambiguity_cos) continue;
-      const bool listed =
-          std::find(candidates.begin(), candidates.end(), static_cast<int>(c)) != candidates.end();
-      const std::string line = names + " together make the same correction as " + cand.Name() +
-                               " (" + std::to_string(cand.num_params) + " parameter(s) instead of " +
-                               std::to_string(params) + (listed ? "" : "; not among the candidates") +
-                               "): the cause is not singled out";
-      result->simpler.push_back(line);
-      result->steps.push_back(line);
-      result->attribution_unique = false;
+      if (pd.norm() / sum.norm() > opt.ambiguity_cos) out.push_back(se);
     }
+  }
+  return out;
+}
+
+void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
+                            const std::vector<ConfigLoads>& loads, const Fit& fit,
+                            const std::vector<int>& candidates, const IdentifyOptions& opt,
+                            IdentifyResult* result) {
+  for (const SimplerEquivalent& se : SimplerEquivalents(em, data, loads, fit, opt)) {
+    const Candidate& cand = em.candidates()[se.candidate];
+    std::string names;
+    int params = 0;
+    for (int e : se.effects) {
+      names += (names.empty() ? "" : " + ") + em.candidates()[fit.active[e]].Name();
+      params += em.candidates()[fit.active[e]].num_params;
+    }
+    const bool listed = std::find(candidates.begin(), candidates.end(), se.candidate) !=
+                        candidates.end();
+    const std::string line = names + " together make the same correction as " + cand.Name() +
+                             " (" + std::to_string(cand.num_params) + " parameter(s) instead of " +
+                             std::to_string(params) + (listed ? "" : "; not among the candidates") +
+                             "): the cause is not singled out";
+    result->simpler.push_back(line);
+    result->steps.push_back(line);
+    result->attribution_unique = false;
   }
 }
 

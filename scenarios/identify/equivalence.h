@@ -63,6 +63,13 @@ void FindUnidentifiable(const EffectModel& em, const DataSet& data,
 // tilt of one joint's frame that is exactly a rotation about the previous joint's axis. The
 // data cannot tell them apart, so the cause is not singled out: result->attribution_unique is
 // cleared and the finding logged (result->simpler).
+struct SimplerEquivalent {
+  std::vector<int> effects;  // indices into fit.active
+  int candidate = -1;        // the simpler candidate making the same correction
+};
+std::vector<SimplerEquivalent> SimplerEquivalents(const EffectModel& em, const DataSet& data,
+                                                  const std::vector<ConfigLoads>& loads,
+                                                  const Fit& fit, const IdentifyOptions& opt);
 void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
                             const std::vector<ConfigLoads>& loads, const Fit& fit,
                             const std::vector<int>& candidates, const IdentifyOptions& opt,

@@ -187,9 +187,17 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
   for (const std::string& u : res->unlocked) pool.push_back(ctx.em.FindCandidate(u));
   for (int banned : res->after.active) {
     if (ctx.em.candidates()[banned].generic_geometry) continue;
+    // A wider family of the same kind (the generic error curve beside a transmission error)
+    // reproduces it by construction: no competing cause.
+    const bool angle_family = ctx.em.candidates()[banned].type == EffectType::kTransmissionError;
     std::vector<int> rest;
     for (int c : pool) {
-      if (c != banned) rest.push_back(c);
+      if (c == banned) continue;
+      if (angle_family && ctx.em.candidates()[c].type == EffectType::kJointErrorCurve &&
+          ctx.em.candidates()[c].q_index == ctx.em.candidates()[banned].q_index) {
+        continue;
+      }
+      rest.push_back(c);
     }
     std::vector<std::string> quiet;
     const SelectionContext alt_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, ctx.opt, &quiet};
@@ -209,6 +217,45 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
                              res->cv_after, close ? ": as good, the cause is not singled out" : ""));
     res->alternatives.push_back(std::move(a));
   }
+}
+
+// Chosen effects that together equal one simpler listed candidate are replaced by it when the
+// data agrees (BIC lower, held-out error not higher, inside its bounds): Occam's razor on the
+// model, e.g. a linear gear compliance plus a payload that only mimic a stiffening spring.
+Fit PreferSimpler(const SelectionContext& ctx, const std::vector<int>& candidates, Fit cur,
+                  double* cv) {
+  for (int round = 0; round < 4; ++round) {
+    bool replaced = false;
+    for (const SimplerEquivalent& se :
+         SimplerEquivalents(ctx.em, ctx.data, ctx.loads, cur, ctx.opt)) {
+      if (std::find(candidates.begin(), candidates.end(), se.candidate) == candidates.end()) {
+        continue;
+      }
+      Fit rest = cur;
+      for (auto it = se.effects.rbegin(); it != se.effects.rend(); ++it) {
+        rest = FitWithout(ctx.em, ctx.data, ctx.loads, rest, *it, ctx.opt);
+      }
+      const int np = ctx.em.candidates()[se.candidate].num_params;
+      const Fit trial = FitWith(ctx.em, ctx.data, ctx.loads, rest, se.candidate,
+                                Eigen::MatrixXd::Identity(np, np), ctx.opt);
+      if (!(trial.bic < cur.bic) || !BoundViolations(ctx.em, trial).empty()) continue;
+      const double cv_trial = CvError(ctx, trial);
+      if (ctx.opt.cross_validation && cv_trial > *cv * (1.0 + ctx.opt.cv_min_gain)) continue;
+      std::string names;
+      for (int e : se.effects) {
+        names += (names.empty() ? "" : " + ") + ctx.em.candidates()[cur.active[e]].Name();
+      }
+      ctx.log->push_back(Fmt("replace %s by the simpler %s (same correction): BIC %.1f -> %.1f",
+                             names.c_str(), ctx.em.candidates()[se.candidate].Name().c_str(),
+                             cur.bic, trial.bic));
+      cur = trial;
+      *cv = cv_trial;
+      replaced = true;
+      break;
+    }
+    if (!replaced) break;
+  }
+  return cur;
 }
 
 }  // namespace
@@ -287,6 +334,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
     cur = SelectEffects(ctx, cur, generic, false, &cv);
     cur = AddGeometryBlock(ctx, cur, generic, &cv);
   }
+  cur = PreferSimpler(ctx, candidates, std::move(cur), &cv);
   res.after = cur;
   res.cv_after = cv;
   res.finding = FindResidualStructure(em, data, loads, cur, opt);
@@ -383,7 +431,7 @@ std::string Verdict(const IdentifyResult& res, double val_before, double val_aft
   if (!(val_after < 0.99 * val_before)) return "unexplained";
   const Fit& a = res.after;
   const bool left = a.rss > 2.0 * std::max(1, a.num_residuals - a.num_params);
-  if (res.finding.significant || left) return "partly_explained";
+  if (res.finding.notable || left) return "partly_explained";
   return res.attribution_unique ? "explained" : "ambiguous";
 }
 

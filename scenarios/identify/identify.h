@@ -70,7 +70,8 @@ struct IdentifyOptions {
   double cv_min_gain = 0.02;     // share the held-out error must drop by to keep an effect
   int cv_trials = 3;             // best-BIC candidates cross-validated per round
   double outlier_iqr = 3.0;      // rows beyond Q3 + k IQR of the declared model's errors; 0: off
-  double diagnostic_p = 1e-6;    // significance of a residual finding
+  double diagnostic_p = 1e-6;    // significance of a residual finding (lets families in)
+  double explained_p = 1e-3;     // a finding this strong still forbids "explained"
   double ambiguity_cv = 0.25;    // an alternative within this share of the held-out error is
                                  // as good an explanation
   double singular_tol = 1e-10;   // smallest / largest eigenvalue of the normalised information
@@ -131,7 +132,8 @@ struct Alternative {
 
 // Structure left in the residual (diagnostics.h).
 struct ResidualFinding {
-  bool significant = false;
+  bool significant = false;  // p < diagnostic_p
+  bool notable = false;      // p < explained_p: too much left to call the data explained
   std::string kind;      // "periodic", "load", "drift" ("" none tested)
   std::string variable;  // joint name, or "row order, x"
   int q_index = -1;
@@ -186,7 +188,8 @@ DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop);
 //   "unexplained"       nothing chosen, or the chosen effects do not lower the validation error,
 //                       while structure (or the error) remains: the model lacks something the
 //                       candidate library cannot represent;
-//   "partly_explained"  the validation error drops, but significant structure remains;
+//   "partly_explained"  the validation error drops, but structure remains (a finding with
+//                       p < explained_p, or more than twice the stated noise);
 //   "ambiguous"         the validation error drops and nothing is left, but with one of the
 //                       chosen effects banned, other effects do about as well on held-out data:
 //                       the correction holds, its cause is not singled out;

@@ -290,6 +290,100 @@ class EncoderOffsetEffect : public Effect {
   std::map<std::string, double> per_joint_;
 };
 
+// ---- Transmission error of strain-wave gears: the link runs ahead of or behind the motor by a
+// periodic function of the motor angle (the flexspline's elliptic deformation: mostly 2 cycles
+// per revolution, plus 1 from eccentricity). The encoder reads the motor.
+//   transmission_error: {harmonics_deg: {j3: [A1, phase1, A2, phase2]}}   (degrees)
+class TransmissionErrorEffect : public Effect {
+ public:
+  void Configure(const Params& p) override {
+    const ConfigNode c = p.Require("harmonics_deg");
+    if (!c.IsMap()) c.Fail("expected {joint: [A1, phase1, A2, phase2]} in degrees");
+    for (const std::string& j : c.Keys()) {
+      const ConfigNode v = c.Child(j);
+      const std::vector<double> h = v.AsDoubleList();
+      if (h.size() != 4) v.Fail("expected [A1, phase1, A2, phase2] in degrees");
+      if (std::abs(h[0]) > 5 || std::abs(h[2]) > 5) v.Fail("amplitudes above 5 deg");
+      per_joint_[j] = h;
+    }
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (!c.actuated.empty()) return true;
+    *why = "no actuated joints";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    for (const auto& [joint, h] : per_joint_) {
+      const int j = ActuatedJointOrFail(s, *this, joint);
+      if (s.catalog->Joint(j).type != mjJNT_HINGE) {
+        throw InputError(where() + ": a transmission error needs a hinge joint; '" + joint +
+                         "' is a slide");
+      }
+      GearSpec& g = s.gear[j];
+      g.tx_amplitude[0] = h[0] * kDeg;
+      g.tx_phase[0] = h[1] * kDeg;
+      g.tx_amplitude[1] = h[2] * kDeg;
+      g.tx_phase[1] = h[3] * kDeg;
+    }
+  }
+  std::string Describe() const override {
+    std::string d;
+    for (const auto& [j, h] : per_joint_) {
+      d += (d.empty() ? "" : " ") + j + "=[" + Num(h[0]) + "," + Num(h[1]) + "," + Num(h[2]) +
+           "," + Num(h[3]) + "]";
+    }
+    return d;
+  }
+
+ private:
+  std::map<std::string, std::vector<double>> per_joint_;
+};
+
+// ---- A gear spring that stiffens with deflection: torque = k d + k3 d^3.
+//   stiffening_joint: {stiffness_Nm_per_rad: {j2: 800}, cubic_Nm_per_rad3: {j2: 4e7}}
+class StiffeningJointEffect : public Effect {
+ public:
+  void Configure(const Params& p) override {
+    for (const auto& [key, out] : {std::pair{"stiffness_Nm_per_rad", &k1_},
+                                   std::pair{"cubic_Nm_per_rad3", &k3_}}) {
+      const ConfigNode c = p.Require(key);
+      if (!c.IsMap()) c.Fail("expected {joint: value}");
+      for (const std::string& j : c.Keys()) {
+        const ConfigNode v = c.Child(j);
+        if (!(v.AsDouble() > 0)) v.Fail("must be > 0");
+        (*out)[j] = v.AsDouble();
+      }
+    }
+    for (const auto& [j, v] : k3_) {
+      if (!k1_.count(j)) p.Require("stiffness_Nm_per_rad").Fail("no linear stiffness for " + j);
+    }
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (!c.actuated.empty()) return true;
+    *why = "no actuated joints";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    for (const auto& [joint, k] : k1_) {
+      const int j = ActuatedJointOrFail(s, *this, joint);
+      s.gear[j].stiffness = k;
+      const auto it = k3_.find(joint);
+      s.gear[j].stiffness_cubic = it == k3_.end() ? 0.0 : it->second;
+    }
+  }
+  std::string Describe() const override {
+    std::string d;
+    for (const auto& [j, v] : k1_) {
+      d += (d.empty() ? "" : " ") + j + "=" + Num(v) + "+" +
+           Num(k3_.count(j) ? k3_.at(j) : 0.0) + "d^3";
+    }
+    return d;
+  }
+
+ private:
+  std::map<std::string, double> k1_, k3_;
+};
+
 // ---- Thermal expansion: the listed link bodies grow by alpha * delta_T along every offset.
 class ThermalExpansionEffect : public Effect {
  public:
@@ -429,6 +523,10 @@ const std::vector<EffectEntry>& EffectRegistry() {
        Make<EncoderOffsetEffect>},
       {"thermal_expansion", "links grow by alpha * delta_T (delta_T_K, alpha_per_K, bodies)",
        Make<ThermalExpansionEffect>},
+      {"transmission_error", "strain-wave gear: link ahead of the motor by a periodic error "
+       "(harmonics_deg: {joint: [A1, phase1, A2, phase2]})", Make<TransmissionErrorEffect>},
+      {"stiffening_joint", "gear spring stiffening with deflection, k d + k3 d^3 "
+       "(stiffness_Nm_per_rad, cubic_Nm_per_rad3)", Make<StiffeningJointEffect>},
       {"imu_bias", "IMU constant bias and bias random walk, hence yaw drift (gyro_bias_rad_s, ...)",
        Make<ImuBiasEffect>},
   };
