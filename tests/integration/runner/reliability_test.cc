@@ -246,6 +246,16 @@ TEST_F(IdentifyCli, OptionErrorsNameTheOptionNotATemporaryFile) {
   EXPECT_EQ(r.exit_code, 2) << r.err;
 }
 
+TEST_F(IdentifyCli, RowsAreNamedByThePathAsGiven) {
+  const CommandResult r = RunCommand(
+      "cd " + tmp_.path().string() + " && " + Flexbench() + " identify --declared " +
+      SourceDir() + "/models/planar3.declared.yaml --calibration cal.csv --validation ./val.csv "
+      "--candidates joint_offset --out out </dev/null");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string res = ReadFile(tmp_.path() / "out" / "calibration_residuals.csv");
+  EXPECT_NE(res.find(",cal.csv:2,"), std::string::npos) << res.substr(0, 400);
+}
+
 TEST_F(IdentifyCli, SameRowsForCalibrationAndValidationAreRefused) {
   const CommandResult r =
       RunCommand(Flexbench() + " identify --declared " + SourceDir() +
