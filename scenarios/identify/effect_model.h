@@ -71,6 +71,12 @@ struct Candidate {
   double step = 1e-6;  // finite-difference step of each parameter
   std::string unit;
   int axis = 0;  // joint_axis_tilt: 0 = a, 1 = b
+  // Enters selection only when the residual diagnostics point at its joint.
+  bool needs_evidence = false;
+  // Can represent any geometric error at its location; chosen after the named effects.
+  bool generic_geometry = false;
+  // Physical bounds per parameter (empty: none); a fit outside them is not accepted.
+  std::vector<double> lower, upper;
   std::string Name() const {
     return std::string(ToString(type)) +
            (type == EffectType::kAxisTilt ? (axis ? "_b" : "_a") : "") + "@" + location;

@@ -1,251 +1,214 @@
 #include "scenarios/identify/identify.h"
 
-#include <Eigen/Cholesky>
-#include <Eigen/QR>
-#include <Eigen/SVD>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <cstdarg>
+#include <cstdio>
 #include <limits>
-#include <map>
 
 #include "estimators/error.h"
-#include "estimators/lie/so3.h"
+#include "scenarios/identify/cross_validation.h"
+#include "scenarios/identify/diagnostics.h"
+#include "scenarios/identify/equivalence.h"
+#include "scenarios/identify/problem.h"
+#include "scenarios/identify/selection.h"
 
 namespace flexbench::identify {
 namespace {
 
-int NumTheta(const EffectModel& em, const std::vector<int>& active) {
-  int n = 0;
-  for (int i : active) n += em.candidates()[i].num_params;
-  return n;
+std::string Fmt(const char* format, ...) __attribute__((format(printf, 1, 2)));
+std::string Fmt(const char* format, ...) {
+  char line[512];
+  va_list args;
+  va_start(args, format);
+  std::vsnprintf(line, sizeof(line), format, args);
+  va_end(args);
+  return line;
 }
 
-int RowDim(const Observation& o) {
-  switch (o.type) {
-    case ObservationType::kPose:
-      return 6;
-    case ObservationType::kPixel:
-      return 2;
-    default:
-      return 3;
+// Candidates by stage: physically named ones first, those that need evidence, complete geometry.
+std::vector<int> Pool(const EffectModel& em, const std::vector<int>& candidates, bool evidence,
+                      bool generic) {
+  std::vector<int> out;
+  for (int c : candidates) {
+    const Candidate& cand = em.candidates()[c];
+    if (cand.needs_evidence == evidence && cand.generic_geometry == generic) out.push_back(c);
+  }
+  return out;
+}
+
+// The parameter of x's k-th alpha entry, named for messages.
+std::string AlphaName(const EffectModel& em, const Fit& fit, int k) {
+  for (size_t e = 0; e < fit.active.size(); ++e) {
+    const int m = fit.basis[e].cols();
+    if (k < m) {
+      return em.candidates()[fit.active[e]].Name() +
+             (fit.basis[e].cols() > 1 || fit.basis[e].rows() > 1 ? "[" + std::to_string(k) + "]"
+                                                                 : "");
+    }
+    k -= m;
+  }
+  return "group point " + std::to_string(k / 3);
+}
+
+// Covariance of the fitted parameters (pseudo-inverse of the normalised information; a near
+// singular direction is reported, never hidden behind a clamped variance), correlations,
+// condition number and each effect's share of the removed sum of squares.
+void Report(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+            const IdentifyOptions& opt, IdentifyResult* res) {
+  const Fit& cur = res->after;
+  const int nt = static_cast<int>(cur.theta.size());
+  if (nt == 0) return;
+  const Problem pr(em, data, loads, cur.active, cur.basis, opt);
+  const Eigen::MatrixXd J = pr.Jacobian(StateOf(pr, cur));
+  const Eigen::MatrixXd info = J.transpose() * J;
+  Eigen::VectorXd d = info.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+  const Eigen::MatrixXd In = d.asDiagonal() * info * d.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(In);
+  const Eigen::VectorXd& lam = eig.eigenvalues();
+  const double lmax = lam.maxCoeff();
+  res->condition_number = lam[0] > 0 ? std::sqrt(lmax / lam[0]) : HUGE_VAL;
+  Eigen::MatrixXd pinv = Eigen::MatrixXd::Zero(In.rows(), In.cols());
+  for (int i = 0; i < lam.size(); ++i) {
+    if (lam[i] > opt.singular_tol * lmax) {
+      pinv += eig.eigenvectors().col(i) * eig.eigenvectors().col(i).transpose() / lam[i];
+    }
+  }
+  if (!(lam[0] > opt.singular_tol * lmax)) {
+    res->near_singular = true;
+    const Eigen::VectorXd v = eig.eigenvectors().col(0);
+    std::vector<int> idx(v.size());
+    for (int i = 0; i < v.size(); ++i) idx[i] = i;
+    std::sort(idx.begin(), idx.end(),
+              [&](int a, int b) { return std::abs(v[a]) > std::abs(v[b]); });
+    std::string combo;
+    for (int i = 0; i < std::min<int>(3, v.size()); ++i) {
+      if (std::abs(v[idx[i]]) < 0.1) break;
+      combo += Fmt("%s%+.2f %s", combo.empty() ? "" : " ", v[idx[i]],
+                   AlphaName(em, cur, idx[i]).c_str());
+    }
+    res->undetermined = combo;
+    res->steps.push_back(Fmt("near singular: the data does not determine %s (eigenvalue ratio "
+                             "%.2g); its standard deviations cover only the determined part",
+                             combo.c_str(), lam[0] / lmax));
+  }
+  const int dof = std::max(1, pr.num_residuals() - pr.num_params());
+  const Eigen::MatrixXd cov_x = (cur.rss / dof) * d.asDiagonal() * pinv * d.asDiagonal();
+  // Alpha -> theta through the bases.
+  Eigen::MatrixXd B = Eigen::MatrixXd::Zero(nt, pr.num_alpha());
+  for (size_t e = 0, r = 0, c = 0; e < cur.active.size(); ++e) {
+    B.block(r, c, cur.basis[e].rows(), cur.basis[e].cols()) = cur.basis[e];
+    r += cur.basis[e].rows();
+    c += cur.basis[e].cols();
+  }
+  const int na = pr.num_alpha();
+  res->theta_cov = B * cov_x.topLeftCorner(na, na) * B.transpose();
+  const Eigen::VectorXd sd = res->theta_cov.diagonal().cwiseMax(0).cwiseSqrt();
+  res->theta_corr = res->theta_cov;
+  for (int i = 0; i < nt; ++i) {
+    for (int j = 0; j < nt; ++j) {
+      res->theta_corr(i, j) = sd[i] * sd[j] > 0 ? res->theta_cov(i, j) / (sd[i] * sd[j]) : 0.0;
+    }
+  }
+  {
+    // Each effect's correction with the group points projected out.
+    Fit groups_only = cur;
+    groups_only.active.clear();
+    groups_only.basis.clear();
+    groups_only.theta.resize(0);
+    const Projector proj(FitJacobian(em, data, loads, groups_only, opt));
+    Eigen::VectorXd sum = Eigen::VectorXd::Zero(J.rows());
+    double parts = 0.0;
+    for (size_t e = 0, a = 0; e < cur.active.size(); ++e) {
+      const int m = static_cast<int>(cur.basis[e].cols());
+      const Eigen::VectorXd d =
+          proj.Apply(J.middleCols(a, m) * StateOf(pr, cur).segment(a, m));
+      sum += d;
+      parts += d.squaredNorm();
+      a += m;
+    }
+    res->overlap = parts > 0 ? sum.squaredNorm() / parts : 1.0;
+  }
+  std::vector<double> gain;
+  double total = 0.0;
+  int off = 0;
+  for (size_t e = 0; e < cur.active.size(); ++e) {
+    const int c = cur.active[e];
+    const int np = em.candidates()[c].num_params;
+    gain.push_back(std::max(0.0, FitWithout(em, data, loads, cur, e, opt).rss - cur.rss));
+    total += gain.back();
+    FittedEffect fe;
+    fe.candidate = c;
+    fe.name = em.candidates()[c].Name();
+    for (int k = 0; k < np; ++k) {
+      fe.value.push_back(cur.theta[off + k]);
+      fe.std.push_back(sd[off + k]);
+    }
+    for (const EquivalenceSet& s : res->equivalence) {
+      if (s.effect != static_cast<int>(e)) continue;
+      fe.name = s.name;
+      fe.value = s.members[0].value;
+      fe.unobservable = s.members[0].unobservable;
+    }
+    off += np;
+    res->effects.push_back(fe);
+  }
+  for (size_t e = 0; e < res->effects.size(); ++e) {
+    res->effects[e].share = total > 0 ? gain[e] / total : 0.0;
   }
 }
 
-// The camera with the active camera_offset (if any) applied.
-lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vector<int>& active,
-                    const double* theta) {
-  lie::SE3 T = data.camera.T_base_cam;
-  for (int i : active) {
-    const Candidate& c = em.candidates()[i];
-    if (c.type == EffectType::kCameraOffset) {
-      Vec6 xi;
-      for (int k = 0; k < 6; ++k) xi[k] = theta[k];
-      T = T * lie::SE3::Exp(xi);
-    }
-    theta += c.num_params;
+// Diagnostics of `cur`'s residual; when they point at candidates that need evidence, those join
+// the selection.
+Fit FollowFinding(const SelectionContext& ctx, const std::vector<int>& candidates, Fit cur,
+                  double* cv, IdentifyResult* res) {
+  res->first_finding = FindResidualStructure(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+  res->steps.push_back(std::string("diagnostics: ") + res->first_finding.message +
+                       (res->first_finding.significant ? " (significant)" : ""));
+  const std::vector<int> unlocked = CandidatesFor(ctx.em, res->first_finding, candidates);
+  if (unlocked.empty()) return cur;
+  std::string names;
+  for (int c : unlocked) {
+    res->unlocked.push_back(ctx.em.candidates()[c].Name());
+    names += (names.empty() ? "" : ", ") + res->unlocked.back();
   }
-  return T;
+  res->steps.push_back("diagnostics let in: " + names);
+  std::vector<int> pool = Pool(ctx.em, candidates, false, false);
+  pool.insert(pool.end(), unlocked.begin(), unlocked.end());
+  return SelectEffects(ctx, cur, pool, true, cv);
 }
 
-// Pixel of a base-frame point; far off when behind the camera, so a fit never goes there.
-Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& p_base) {
-  const Vec3 p = T_base_cam.rotation().transpose() * (p_base - T_base_cam.translation());
-  const double z = std::max(p.z(), 1e-6);
-  return Eigen::Vector2d(cam.fx * p.x() / z + cam.cx, cam.fy * p.y() / z + cam.cy);
-}
-
-// Whitened residuals of the full parameter vector x = [theta; group points]. Rows contribute 3
-// (point, group), 6 (pose: position, then rotation) or 2 (pixel) entries, then one per distance.
-class Problem {
- public:
-  Problem(const EffectModel& em_, const DataSet& data_, const std::vector<ConfigLoads>& loads_,
-          const std::vector<int>& active_, const IdentifyOptions& opt_, int num_theta_)
-      : em(em_), data(data_), loads(loads_), active(active_), opt(opt_), num_theta(num_theta_) {
-    offset_.reserve(data.rows.size());
-    int o = 0;
-    for (const Observation& r : data.rows) {
-      offset_.push_back(o);
-      o += RowDim(r);
+// For each chosen effect, the best selection without it (cross-validation only).
+void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candidates,
+                      IdentifyResult* res) {
+  if (!ctx.opt.cross_validation) return;
+  std::vector<int> pool = Pool(ctx.em, candidates, false, false);
+  for (const std::string& u : res->unlocked) pool.push_back(ctx.em.FindCandidate(u));
+  for (int banned : res->after.active) {
+    if (ctx.em.candidates()[banned].generic_geometry) continue;
+    std::vector<int> rest;
+    for (int c : pool) {
+      if (c != banned) rest.push_back(c);
     }
-    rows_dim_ = o;
+    std::vector<std::string> quiet;
+    const SelectionContext alt_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, ctx.opt, &quiet};
+    double cv = res->cv_before;
+    // No swap step: an alternative needs to be found, not polished.
+    const Fit alt = SelectEffects(alt_ctx, res->before, rest, true, &cv, false);
+    Alternative a;
+    a.banned = ctx.em.candidates()[banned].Name();
+    a.cv = cv;
+    for (int c : alt.active) a.effects.push_back(ctx.em.candidates()[c].Name());
+    std::string names;
+    for (const auto& n : a.effects) names += (names.empty() ? "" : " + ") + n;
+    const bool close = !alt.active.empty() && cv < (1.0 + ctx.opt.ambiguity_cv) * res->cv_after;
+    if (close) res->attribution_unique = false;
+    res->steps.push_back(Fmt("without %s: %s reach held-out %.4g (chosen %.4g)%s",
+                             a.banned.c_str(), names.empty() ? "nothing" : names.c_str(), cv,
+                             res->cv_after, close ? ": as good, the cause is not singled out" : ""));
+    res->alternatives.push_back(std::move(a));
   }
-
-  const EffectModel& em;
-  const DataSet& data;
-  const std::vector<ConfigLoads>& loads;
-  const std::vector<int>& active;
-  const IdentifyOptions& opt;
-  int num_theta;
-
-  int num_params() const { return num_theta + 3 * static_cast<int>(data.groups.size()); }
-  int num_residuals() const { return rows_dim_ + static_cast<int>(data.distances.size()); }
-
-  void Poses(const Eigen::VectorXd& x, std::vector<lie::SE3>* T) const {
-    EffectModel::Workspace ws = em.MakeWorkspace();
-    T->resize(data.rows.size());
-    for (size_t r = 0; r < data.rows.size(); ++r) {
-      (*T)[r] = em.PredictPose(data.rows[r].q, loads[r], active, x.data(), ws);
-    }
-  }
-
-  Vec3 GroupPoint(const Eigen::VectorXd& x, int g) const { return x.segment<3>(num_theta + 3 * g); }
-
-  Eigen::VectorXd Residuals(const Eigen::VectorXd& x, const std::vector<lie::SE3>& T) const {
-    Eigen::VectorXd r(num_residuals());
-    const lie::SE3 T_base_cam =
-        data.camera.present ? CameraPose(em, data, active, x.data()) : lie::SE3();
-    for (size_t i = 0; i < data.rows.size(); ++i) {
-      const Observation& o = data.rows[i];
-      const int k = offset_[i];
-      const Vec3 p = T[i].translation();
-      switch (o.type) {
-        case ObservationType::kGroup:
-          r.segment<3>(k) = (p - GroupPoint(x, o.group)) / opt.point_std_m;
-          break;
-        case ObservationType::kPoint:
-          r.segment<3>(k) = (p - o.p_base) / opt.point_std_m;
-          break;
-        case ObservationType::kPose:
-          r.segment<3>(k) = (p - o.p_base) / opt.point_std_m;
-          r.segment<3>(k + 3) =
-              lie::SO3Log(o.R_base.transpose() * T[i].rotation()) / opt.rotation_std_rad;
-          break;
-        case ObservationType::kPixel:
-          r.segment<2>(k) = (Project(data.camera, T_base_cam, p) - o.uv) / opt.pixel_std_px;
-          break;
-      }
-    }
-    for (size_t k = 0; k < data.distances.size(); ++k) {
-      const GroupDistance& d = data.distances[k];
-      r[rows_dim_ + k] =
-          ((GroupPoint(x, d.a) - GroupPoint(x, d.b)).norm() - d.distance_m) / opt.distance_std_m;
-    }
-    return r;
-  }
-
-  // Central differences of the row residuals in theta (columns `first` .. `first + count`).
-  void ThetaColumns(const Eigen::VectorXd& x, int first, int count, double step,
-                    Eigen::Ref<Eigen::MatrixXd> out) const {
-    std::vector<lie::SE3> Tp, Tm;
-    for (int k = 0; k < count; ++k) {
-      Eigen::VectorXd xp = x, xm = x;
-      xp[first + k] += step;
-      xm[first + k] -= step;
-      Poses(xp, &Tp);
-      Poses(xm, &Tm);
-      out.col(k) = (Residuals(xp, Tp) - Residuals(xm, Tm)) / (2.0 * step);
-    }
-  }
-
-  // Central differences for theta, exact columns for the group points.
-  Eigen::MatrixXd Jacobian(const Eigen::VectorXd& x) const {
-    const int nr = num_residuals();
-    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(nr, num_params());
-    int col = 0;
-    for (int i : active) {
-      const Candidate& c = em.candidates()[i];
-      ThetaColumns(x, col, c.num_params, c.step, J.middleCols(col, c.num_params));
-      col += c.num_params;
-    }
-    for (size_t r = 0; r < data.rows.size(); ++r) {
-      const int g = data.rows[r].group;
-      if (data.rows[r].type == ObservationType::kGroup) {
-        J.block<3, 3>(offset_[r], num_theta + 3 * g) = -Mat3::Identity() / opt.point_std_m;
-      }
-    }
-    for (size_t k = 0; k < data.distances.size(); ++k) {
-      const GroupDistance& d = data.distances[k];
-      const Vec3 diff = GroupPoint(x, d.a) - GroupPoint(x, d.b);
-      const double len = diff.norm();
-      if (len < 1e-12) continue;
-      const Eigen::RowVector3d u = diff.transpose() / (len * opt.distance_std_m);
-      const int row = rows_dim_ + static_cast<int>(k);
-      J.block<1, 3>(row, num_theta + 3 * d.a) += u;
-      J.block<1, 3>(row, num_theta + 3 * d.b) -= u;
-    }
-    return J;
-  }
-
- private:
-  std::vector<int> offset_;
-  int rows_dim_ = 0;
-};
-
-std::string Num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof(b), "%.4g", v);
-  return b;
-}
-
-double Bic(double rss, int n, int k) {
-  return n * std::log(std::max(rss, 1e-300) / n) + k * std::log(static_cast<double>(n));
-}
-
-// How well the candidate with fewer parameters lies in the span of the other's (projected)
-// sensitivities: the smallest, over its columns, of |projection| / |column|. 1: every direction
-// of one is a direction of the other, so the data cannot tell them apart.
-double SameSpan(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
-  const Eigen::MatrixXd& small = a.cols() <= b.cols() ? a : b;
-  const Eigen::MatrixXd& big = a.cols() <= b.cols() ? b : a;
-  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(big);
-  double worst = 1.0;
-  for (int i = 0; i < small.cols(); ++i) {
-    const double n = small.col(i).norm();
-    if (!(n > 0)) return 0.0;
-    const Eigen::VectorXd proj = big * qr.solve(small.col(i));
-    worst = std::min(worst, proj.norm() / n);
-  }
-  return worst;
-}
-
-// Refit of `cur` with its e-th effect removed (the others start from their values).
-Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-               const Fit& cur, size_t e, const IdentifyOptions& opt);
-
-// Whitened Jacobian of the fit's own parameters (theta and group points) at its state.
-Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data,
-                            const std::vector<ConfigLoads>& loads, const Fit& fit,
-                            const IdentifyOptions& opt) {
-  const int nt = static_cast<int>(fit.theta.size());
-  Eigen::VectorXd x(nt + 3 * static_cast<int>(data.groups.size()));
-  x.head(nt) = fit.theta;
-  for (size_t g = 0; g < fit.group_points.size(); ++g)
-    x.segment<3>(nt + 3 * g) = fit.group_points[g];
-  const Problem pr(em, data, loads, fit.active, opt, nt);
-  return pr.Jacobian(x);
-}
-
-// Sensitivity of candidate c's parameters at the fit's state (central differences, whitened),
-// with the columns of the fit itself (`qr` of its Jacobian) projected out.
-Eigen::MatrixXd ProjectedColumns(const EffectModel& em, const DataSet& data,
-                                 const std::vector<ConfigLoads>& loads, const Fit& fit, int c,
-                                 const Eigen::MatrixXd& J_fit,
-                                 const Eigen::ColPivHouseholderQR<Eigen::MatrixXd>& qr,
-                                 const IdentifyOptions& opt, double* relative_norm) {
-  std::vector<int> act = fit.active;
-  act.push_back(c);
-  const int nt_old = static_cast<int>(fit.theta.size());
-  const Candidate& cand = em.candidates()[c];
-  const int np = cand.num_params;
-  Eigen::VectorXd theta = Eigen::VectorXd::Zero(nt_old + np);
-  theta.head(nt_old) = fit.theta;
-  Eigen::VectorXd x(nt_old + np + 3 * static_cast<int>(data.groups.size()));
-  x.head(nt_old + np) = theta;
-  for (size_t g = 0; g < fit.group_points.size(); ++g) {
-    x.segment<3>(nt_old + np + 3 * g) = fit.group_points[g];
-  }
-  const Problem pr(em, data, loads, act, opt, nt_old + np);
-  Eigen::MatrixXd Jc = Eigen::MatrixXd::Zero(J_fit.rows(), np);
-  pr.ThetaColumns(x, nt_old, np, cand.step, Jc);
-  Eigen::MatrixXd R = Jc;
-  if (J_fit.cols() > 0) R = Jc - J_fit * qr.solve(Jc);
-  double rel = std::numeric_limits<double>::infinity();
-  for (int k = 0; k < np; ++k) {
-    const double n0 = Jc.col(k).norm();
-    rel = std::min(rel, n0 > 0 ? R.col(k).norm() / n0 : 0.0);
-  }
-  *relative_norm = rel;
-  return R;
 }
 
 }  // namespace
@@ -274,64 +237,7 @@ std::vector<Vec3> PredictAll(const EffectModel& em, const DataSet& data,
 Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const std::vector<int>& active, const Eigen::VectorXd& init,
                const IdentifyOptions& opt) {
-  const int nt = NumTheta(em, active);
-  const Problem pr(em, data, loads, active, opt, nt);
-  const int G = static_cast<int>(data.groups.size());
-  Eigen::VectorXd x = Eigen::VectorXd::Zero(pr.num_params());
-  x.head(std::min<int>(nt, static_cast<int>(init.size()))) =
-      init.head(std::min<int>(nt, static_cast<int>(init.size())));
-  std::vector<lie::SE3> p;
-  pr.Poses(x, &p);
-  {
-    // Group points start at their rows' mean.
-    std::vector<Vec3> points(p.size());
-    for (size_t r = 0; r < p.size(); ++r) points[r] = p[r].translation();
-    const std::vector<Vec3> mean = GroupMeans(data, points);
-    for (int g = 0; g < G; ++g) x.segment<3>(nt + 3 * g) = mean[g];
-  }
-  Eigen::VectorXd r = pr.Residuals(x, p);
-  double rss = r.squaredNorm();
-  double lambda = 1e-3;
-  for (int it = 0; it < opt.max_iterations; ++it) {
-    const Eigen::MatrixXd J = pr.Jacobian(x);
-    const Eigen::MatrixXd A = J.transpose() * J;
-    const Eigen::VectorXd g = J.transpose() * r;
-    bool improved = false;
-    for (int tries = 0; tries < 12; ++tries) {
-      Eigen::MatrixXd Ad = A;
-      for (int k = 0; k < A.rows(); ++k) Ad(k, k) += lambda * std::max(A(k, k), 1e-12);
-      const Eigen::VectorXd dx = -Ad.ldlt().solve(g);
-      if (!dx.allFinite()) {
-        lambda *= 10;
-        continue;
-      }
-      const Eigen::VectorXd xn = x + dx;
-      std::vector<lie::SE3> pn;
-      pr.Poses(xn, &pn);
-      const Eigen::VectorXd rn = pr.Residuals(xn, pn);
-      const double rss_n = rn.squaredNorm();
-      if (std::isfinite(rss_n) && rss_n < rss) {
-        const double gain = rss - rss_n;
-        x = xn;
-        r = rn;
-        rss = rss_n;
-        lambda = std::max(lambda / 3.0, 1e-12);
-        improved = gain > 1e-12 * rss;
-        break;
-      }
-      lambda *= 4.0;
-    }
-    if (!improved) break;
-  }
-  Fit f;
-  f.active = active;
-  f.theta = x.head(nt);
-  f.group_points.resize(G);
-  for (int g = 0; g < G; ++g) f.group_points[g] = x.segment<3>(nt + 3 * g);
-  f.rss = rss;
-  f.num_residuals = pr.num_residuals();
-  f.bic = Bic(rss, f.num_residuals, pr.num_params());
-  return f;
+  return FitEffects(em, data, loads, active, {}, init, opt);
 }
 
 IdentifyResult Identify(const EffectModel& em, const DataSet& data,
@@ -339,264 +245,144 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
                         const IdentifyOptions& opt) {
   IdentifyResult res;
   res.before = FitEffects(em, data, loads, {}, Eigen::VectorXd(), opt);
-  Fit cur = res.before;
-  std::vector<int> pool = candidates;
-  char line[512];
-  std::map<int, std::string> alias;  // a kept correction of indistinguishable candidates
-  std::map<int, std::vector<int>> twins_of;
-  int rounds = 0;
-  while (static_cast<int>(cur.active.size()) < opt.max_effects && !pool.empty() &&
-         rounds++ < 3 * opt.max_effects) {
-    struct Trial {
-      int c;
-      Fit fit;
-      Eigen::MatrixXd proj;
-    };
-    std::vector<Trial> trials;
-    std::vector<int> keep;
-    const Eigen::MatrixXd J_cur = FitJacobian(em, data, loads, cur, opt);
-    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr_cur;
-    if (J_cur.cols() > 0) qr_cur.compute(J_cur);  // no effect and no group point yet: nothing
-    // Trials are screened with a few iterations; the winner is refit to convergence.
-    IdentifyOptions screen = opt;
-    screen.max_iterations = 4;
-    for (int c : pool) {
-      double rel = 0.0;
-      Eigen::MatrixXd proj = ProjectedColumns(em, data, loads, cur, c, J_cur, qr_cur, opt, &rel);
-      keep.push_back(c);
-      // Not fitted while its sensitivity lies in the span of the chosen effects and the group
-      // points; it stays in the pool (a payload becomes visible once a compliance is chosen).
-      if (!(rel > opt.rank_tol)) continue;
-      std::vector<int> act = cur.active;
-      act.push_back(c);
-      Eigen::VectorXd init = Eigen::VectorXd::Zero(NumTheta(em, act));
-      init.head(cur.theta.size()) = cur.theta;
-      trials.push_back({c, FitEffects(em, data, loads, act, init, screen), proj});
+  if (res.before.num_residuals <= res.before.num_params) {
+    throw InputError(Fmt("identify: %d residuals for %d unknowns (group points): the data cannot "
+                         "determine its own sockets, let alone an effect",
+                         res.before.num_residuals, res.before.num_params));
+  }
+  {
+    // A group of one row fixes its own point and nothing else: refused, not silently used.
+    std::vector<int> count(data.groups.size(), 0);
+    for (const Observation& o : data.rows) {
+      if (o.type == ObservationType::kGroup) ++count[o.group];
     }
-    pool = keep;
-    if (trials.empty()) break;
-    std::sort(trials.begin(), trials.end(),
-              [](const Trial& a, const Trial& b) { return a.fit.bic < b.fit.bic; });
-    trials[0].fit = FitEffects(em, data, loads, trials[0].fit.active, trials[0].fit.theta, opt);
-    // Candidates the data cannot tell apart from the best one.
-    std::vector<int> twins;
-    for (size_t k = 1; k < trials.size(); ++k) {
-      if (trials[k].fit.bic - trials[0].fit.bic >= opt.ambiguity_bic) break;
-      if (SameSpan(trials[0].proj, trials[k].proj) > opt.ambiguity_cos) {
-        twins.push_back(trials[k].c);
+    for (size_t g = 0; g < count.size(); ++g) {
+      if (count[g] == 1) {
+        throw InputError("identify: group '" + data.groups[g] +
+                         "' has one row; a group (socket) needs two or more");
       }
-    }
-    const double dbic = trials[0].fit.bic - cur.bic;
-    if (dbic > -opt.bic_threshold) {
-      std::snprintf(line, sizeof(line), "stop: best next %s changes BIC by %.1f (> -%.0f)",
-                    em.candidates()[trials[0].c].Name().c_str(), dbic, opt.bic_threshold);
-      res.steps.push_back(line);
-      break;
-    }
-    if (!twins.empty()) {
-      // The data cannot say which of these it is; their corrections are the same. The
-      // correction is kept (it is what the data supports) under all their names, and none of
-      // them is named as the cause.
-      std::vector<std::string> names{em.candidates()[trials[0].c].Name()};
-      for (int t : twins) names.push_back(em.candidates()[t].Name());
-      res.indistinguishable.push_back(names);
-      std::string joined;
-      for (const auto& n : names) joined += (joined.empty() ? "" : " | ") + n;
-      alias[trials[0].c] = joined;
-      twins_of[trials[0].c] = twins;
-      std::snprintf(line, sizeof(line),
-                    "indistinguishable (|cos| > %.3g, BIC within %.0f), kept as one correction "
-                    "without a cause: %s: BIC %.1f -> %.1f",
-                    opt.ambiguity_cos, opt.ambiguity_bic, joined.c_str(), cur.bic,
-                    trials[0].fit.bic);
-      res.steps.push_back(line);
-      pool.erase(std::remove_if(pool.begin(), pool.end(),
-                                [&](int c) {
-                                  return std::find(twins.begin(), twins.end(), c) != twins.end();
-                                }),
-                 pool.end());
-    } else {
-      std::snprintf(line, sizeof(line), "add %s: BIC %.1f -> %.1f, RSS %.4g -> %.4g",
-                    em.candidates()[trials[0].c].Name().c_str(), cur.bic, trials[0].fit.bic,
-                    cur.rss, trials[0].fit.rss);
-      res.steps.push_back(line);
-    }
-    cur = trials[0].fit;
-    pool.erase(std::find(pool.begin(), pool.end(), trials[0].c));
-    // Backward step: an earlier effect that the new one made redundant (no longer lowering BIC
-    // by the threshold) goes back to the pool.
-    while (cur.active.size() > 1) {
-      size_t worst = 0;
-      Fit best_without;
-      double best_bic = std::numeric_limits<double>::infinity();
-      for (size_t e = 0; e + 1 < cur.active.size(); ++e) {
-        Fit w = FitWithout(em, data, loads, cur, e, opt);
-        if (w.bic < best_bic) best_bic = w.bic, best_without = w, worst = e;
-      }
-      if (!std::isfinite(best_bic) || best_bic - cur.bic >= opt.bic_threshold) break;
-      std::snprintf(line, sizeof(line), "drop %s: BIC %.1f -> %.1f without it",
-                    em.candidates()[cur.active[worst]].Name().c_str(), cur.bic, best_bic);
-      res.steps.push_back(line);
-      const int dropped = cur.active[worst];
-      pool.push_back(dropped);
-      // Its indistinguishable twins were set aside with it; they return with it.
-      for (int t : twins_of[dropped]) pool.push_back(t);
-      twins_of.erase(dropped);
-      alias.erase(dropped);
-      cur = best_without;
     }
   }
-  // Swap step: a chosen effect with several parameters that a simpler candidate replaces at a
-  // lower BIC is swapped (e.g. an offset of the wrist's link that is really one joint offset).
-  for (bool swapped = true; swapped;) {
-    swapped = false;
-    for (size_t e = 0; e < cur.active.size() && !swapped; ++e) {
-      const int np = em.candidates()[cur.active[e]].num_params;
-      if (np < 2) continue;
-      const Fit without = FitWithout(em, data, loads, cur, e, opt);
-      Fit best = cur;
-      int best_c = -1;
-      for (int c : pool) {
-        if (em.candidates()[c].num_params >= np) continue;
-        std::vector<int> act = without.active;
-        act.push_back(c);
-        Eigen::VectorXd init = Eigen::VectorXd::Zero(NumTheta(em, act));
-        init.head(without.theta.size()) = without.theta;
-        IdentifyOptions screen = opt;
-        screen.max_iterations = 4;
-        Fit f = FitEffects(em, data, loads, act, init, screen);
-        if (f.bic < best.bic) best = f, best_c = c;
-      }
-      if (best_c < 0) continue;
-      best = FitEffects(em, data, loads, best.active, best.theta, opt);
-      if (best.bic >= cur.bic) continue;
-      std::snprintf(line, sizeof(line), "swap %s for %s: BIC %.1f -> %.1f",
-                    em.candidates()[cur.active[e]].Name().c_str(),
-                    em.candidates()[best_c].Name().c_str(), cur.bic, best.bic);
-      res.steps.push_back(line);
-      pool.erase(std::find(pool.begin(), pool.end(), best_c));
-      pool.push_back(cur.active[e]);
-      cur = best;
-      swapped = true;
-    }
+  const Folds folds = MakeFolds(data, opt.folds_by);
+  res.folds_by = opt.cross_validation ? folds.by : "";
+  res.num_folds = opt.cross_validation ? static_cast<int>(folds.test_rows.size()) : 0;
+  if (opt.cross_validation && folds.test_rows.size() < 2) {
+    throw InputError("identify: cross-validation by " + folds.by + " needs at least two " +
+                     folds.by + "s with rows; the data has " +
+                     std::to_string(folds.test_rows.size()) +
+                     " (set cross_validation: false, or another folds_by)");
   }
-  // Equivalents: a candidate left in the pool whose sensitivity, with the rest of the chosen
-  // set projected out, is parallel to a chosen effect's explains the data as well; the data
-  // cannot tell them apart, so the chosen correction is named by both.
-  for (size_t e = 0; e < cur.active.size(); ++e) {
-    const int ce = cur.active[e];
-    if (em.candidates()[ce].num_params != 1) continue;
-    Fit rest = cur;
-    rest.active.clear();
-    std::vector<double> th;
-    int off = 0;
-    for (size_t k = 0; k < cur.active.size(); ++k) {
-      const int np = em.candidates()[cur.active[k]].num_params;
-      if (k != e) {
-        rest.active.push_back(cur.active[k]);
-        for (int i = 0; i < np; ++i) th.push_back(cur.theta[off + i]);
-      }
-      off += np;
-    }
-    rest.theta = Eigen::Map<const Eigen::VectorXd>(th.data(), th.size());
-    const Eigen::MatrixXd J_rest = FitJacobian(em, data, loads, rest, opt);
-    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr_rest;
-    if (J_rest.cols() > 0) qr_rest.compute(J_rest);
-    double rel = 0.0;
-    const Eigen::MatrixXd a =
-        ProjectedColumns(em, data, loads, rest, ce, J_rest, qr_rest, opt, &rel);
-    std::vector<std::string> names;
-    for (int c : pool) {
-      if (em.candidates()[c].num_params != 1) continue;
-      const Eigen::MatrixXd b =
-          ProjectedColumns(em, data, loads, rest, c, J_rest, qr_rest, opt, &rel);
-      const double den = a.col(0).norm() * b.col(0).norm();
-      if (den > 0 && std::abs(a.col(0).dot(b.col(0))) / den > opt.ambiguity_cos) {
-        names.push_back(em.candidates()[c].Name());
-      }
-    }
-    if (names.empty()) continue;
-    std::string joined = alias.count(ce) ? alias.at(ce) : em.candidates()[ce].Name();
-    std::vector<std::string> group{joined};
-    for (const auto& n : names) joined += " | " + n, group.push_back(n);
-    alias[ce] = joined;
-    res.indistinguishable.push_back(group);
-    res.steps.push_back("indistinguishable from a chosen effect (|cos| > " +
-                        Num(opt.ambiguity_cos) + "), named by all: " + joined);
+  const SelectionContext ctx{em, data, loads, folds, opt, &res.steps};
+  double cv = CvError(ctx, res.before);
+  res.cv_before = cv;
+  if (opt.cross_validation) {
+    res.steps.push_back(Fmt("cross-validation over %d folds by %s; declared model's held-out "
+                            "error %.4g", res.num_folds, folds.by.c_str(), cv));
+  }
+  Fit cur = SelectEffects(ctx, res.before, Pool(em, candidates, false, false), true, &cv);
+  cur = FollowFinding(ctx, candidates, std::move(cur), &cv, &res);
+  const std::vector<int> generic = Pool(em, candidates, false, true);
+  if (!generic.empty() && static_cast<int>(cur.active.size()) < opt.max_effects) {
+    res.steps.push_back("complete geometry: joint origins beyond the named effects");
+    cur = SelectEffects(ctx, cur, generic, false, &cv);
   }
   res.after = cur;
-  // Whatever is still in the pool and has no sensitivity of its own at the end is reported.
-  const Eigen::MatrixXd J_end = FitJacobian(em, data, loads, cur, opt);
-  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr_end;
-  if (J_end.cols() > 0) qr_end.compute(J_end);
-  for (int c : pool) {
-    double rel = 0.0;
-    ProjectedColumns(em, data, loads, cur, c, J_end, qr_end, opt, &rel);
-    if (rel > opt.rank_tol) continue;
-    res.unidentifiable.push_back(em.candidates()[c].Name());
-    std::snprintf(line, sizeof(line),
-                  "%s: unidentifiable (%.2g of its sensitivity lies outside the chosen effects "
-                  "and group points)",
-                  em.candidates()[c].Name().c_str(), rel);
-    res.steps.push_back(line);
+  res.cv_after = cv;
+  res.finding = FindResidualStructure(em, data, loads, cur, opt);
+  if (!cur.active.empty() || !res.unlocked.empty()) {
+    res.steps.push_back(std::string("diagnostics after: ") + res.finding.message +
+                        (res.finding.significant ? " (significant)" : ""));
   }
-
-  // Identifiability of the final fit: covariance, correlations, condition number.
-  const int nt = static_cast<int>(cur.theta.size());
-  if (nt > 0) {
-    Eigen::VectorXd x(nt + 3 * static_cast<int>(data.groups.size()));
-    x.head(nt) = cur.theta;
-    for (size_t g = 0; g < cur.group_points.size(); ++g) {
-      x.segment<3>(nt + 3 * g) = cur.group_points[g];
-    }
-    const Problem pr(em, data, loads, cur.active, opt, nt);
-    const Eigen::MatrixXd J = pr.Jacobian(x);
-    const int dof = std::max(1, pr.num_residuals() - pr.num_params());
-    const double s2 = cur.rss / dof;
-    const Eigen::MatrixXd cov =
-        s2 * (J.transpose() * J).ldlt().solve(Eigen::MatrixXd::Identity(J.cols(), J.cols()));
-    res.theta_cov = cov.topLeftCorner(nt, nt);
-    const Eigen::VectorXd sd = res.theta_cov.diagonal().cwiseMax(0).cwiseSqrt();
-    res.theta_corr = res.theta_cov;
-    for (int i = 0; i < nt; ++i) {
-      for (int j = 0; j < nt; ++j) {
-        res.theta_corr(i, j) = sd[i] * sd[j] > 0 ? res.theta_cov(i, j) / (sd[i] * sd[j]) : 0.0;
-      }
-    }
-    Eigen::MatrixXd Jn = J;
-    for (int k = 0; k < Jn.cols(); ++k) {
-      const double n = Jn.col(k).norm();
-      if (n > 0) Jn.col(k) /= n;
-    }
-    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Jn);
-    const Eigen::VectorXd s = svd.singularValues();
-    res.condition_number =
-        s[s.size() - 1] > 0 ? s[0] / s[s.size() - 1] : std::numeric_limits<double>::infinity();
-    // Shares: the sum of squares each effect removes when it alone is dropped and the rest refit.
-    std::vector<double> gain;
-    double total = 0.0;
-    int off = 0;
-    for (size_t e = 0; e < cur.active.size(); ++e) {
-      const int c = cur.active[e];
-      const int np = em.candidates()[c].num_params;
-      const Fit without = FitWithout(em, data, loads, cur, e, opt);
-      gain.push_back(std::max(0.0, without.rss - cur.rss));
-      total += gain.back();
-      FittedEffect fe;
-      fe.candidate = c;
-      fe.name = alias.count(c) ? alias.at(c) : em.candidates()[c].Name();
-      for (int k = 0; k < np; ++k) {
-        fe.value.push_back(cur.theta[off + k]);
-        fe.std.push_back(sd[off + k]);
-      }
-      off += np;
-      res.effects.push_back(fe);
-    }
-    for (size_t e = 0; e < res.effects.size(); ++e) {
-      res.effects[e].share = total > 0 ? gain[e] / total : 0.0;
+  FindAlternatives(ctx, candidates, &res);
+  FindEquivalents(em, data, loads, cur, candidates, opt, &res);
+  for (const EquivalenceSet& s : res.equivalence) {
+    if (s.members.size() > 1) {
+      res.steps.push_back("equivalent on this data (named by all): " + s.name);
     }
   }
+  FindUnidentifiable(em, data, loads, cur, candidates, opt, &res);
+  Report(em, data, loads, opt, &res);
   return res;
+}
+
+std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data,
+                              const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt) {
+  std::vector<int> out;
+  if (!(opt.outlier_iqr > 0) || data.rows.empty()) return out;
+  const std::vector<Vec3> p = PredictAll(em, data, loads, {}, Eigen::VectorXd());
+  const std::vector<Eigen::Vector2d> uv = PredictPixels(em, data, loads, {}, Eigen::VectorXd());
+  // Coordinate-wise median of each group: a far-off row cannot drag it.
+  std::vector<Vec3> median(data.groups.size(), Vec3::Zero());
+  for (size_t g = 0; g < data.groups.size(); ++g) {
+    for (int a = 0; a < 3; ++a) {
+      std::vector<double> v;
+      for (size_t r = 0; r < data.rows.size(); ++r) {
+        if (data.rows[r].type == ObservationType::kGroup && data.rows[r].group == (int)g) {
+          v.push_back(p[r][a]);
+        }
+      }
+      if (v.empty()) continue;
+      std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+      median[g][a] = v[v.size() / 2];
+    }
+  }
+  std::vector<double> err(data.rows.size());
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const Observation& o = data.rows[r];
+    err[r] = o.type == ObservationType::kGroup   ? (p[r] - median[o.group]).norm()
+             : o.type == ObservationType::kPixel ? (uv[r] - o.uv).norm()
+                                                 : (p[r] - o.p_base).norm();
+  }
+  for (const bool pixels : {false, true}) {
+    std::vector<double> v;
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      if ((data.rows[r].type == ObservationType::kPixel) == pixels) v.push_back(err[r]);
+    }
+    if (v.size() < 4) continue;
+    std::sort(v.begin(), v.end());
+    const auto quantile = [&](double f) {
+      const double i = f * (v.size() - 1);
+      const size_t lo = static_cast<size_t>(i);
+      return lo + 1 < v.size() ? v[lo] + (i - lo) * (v[lo + 1] - v[lo]) : v[lo];
+    };
+    const double q1 = quantile(0.25), q3 = quantile(0.75);
+    const double floor = 10.0 * (pixels ? opt.pixel_std_px : opt.point_std_m);
+    const double limit = std::max(q3 + opt.outlier_iqr * (q3 - q1), floor);
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      if ((data.rows[r].type == ObservationType::kPixel) == pixels && !(err[r] <= limit)) {
+        out.push_back(static_cast<int>(r));
+      }
+    }
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop) {
+  DataSet d = data;
+  d.rows.clear();
+  size_t k = 0;
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    if (k < drop.size() && drop[k] == static_cast<int>(r)) {
+      ++k;
+      continue;
+    }
+    d.rows.push_back(data.rows[r]);
+  }
+  return d;
+}
+
+std::string Verdict(const IdentifyResult& res, double val_before, double val_after) {
+  const Fit& b = res.before;
+  const bool noisy = b.rss > 2.0 * std::max(1, b.num_residuals - b.num_params);
+  if (res.effects.empty()) {
+    return res.finding.significant || noisy ? "unexplained" : "no_effect";
+  }
+  if (!(val_after < 0.99 * val_before)) return "unexplained";
+  const Fit& a = res.after;
+  const bool left = a.rss > 2.0 * std::max(1, a.num_residuals - a.num_params);
+  if (res.finding.significant || left) return "partly_explained";
+  return res.attribution_unique ? "explained" : "ambiguous";
 }
 
 std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet& data,
@@ -681,27 +467,4 @@ double PixelError(const DataSet& data, const std::vector<double>& row_errors) {
   return n > 0 ? sum / n : 0.0;
 }
 
-}  // namespace flexbench::identify
-
-namespace flexbench::identify {
-namespace {
-
-Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-               const Fit& cur, size_t e, const IdentifyOptions& opt) {
-  std::vector<int> rest;
-  std::vector<double> init;
-  int off = 0;
-  for (size_t k = 0; k < cur.active.size(); ++k) {
-    const int np = em.candidates()[cur.active[k]].num_params;
-    if (k != e) {
-      rest.push_back(cur.active[k]);
-      for (int i = 0; i < np; ++i) init.push_back(cur.theta[off + i]);
-    }
-    off += np;
-  }
-  return FitEffects(em, data, loads, rest,
-                    Eigen::Map<const Eigen::VectorXd>(init.data(), init.size()), opt);
-}
-
-}  // namespace
 }  // namespace flexbench::identify

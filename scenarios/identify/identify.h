@@ -1,5 +1,6 @@
 // Closing the loop on measured data: the residual of a declared model, the effects that explain
-// it, their fitted parameters, and the error before and after.
+// it, their fitted parameters, what the data cannot tell apart, what is left, and the error
+// before and after.
 //
 // Observations are rows of joint angles with one of
 //   - a measured point position in the base frame (a tracker, a probe), or
@@ -7,16 +8,16 @@
 //     socket, a fingertip on a mark); pairs of groups may have a known distance.
 // The unknown group points are nuisance parameters fitted with the effects.
 //
-// Selection is forward stepwise with the Bayesian information criterion,
-//   BIC = N ln(RSS / N) + k ln N   (N residuals, k fitted parameters incl. group points),
-// accepting the candidate with the lowest BIC while it lowers BIC by more than 10 ("very
-// strong" evidence on Kass & Raftery's scale). A candidate whose sensitivity lies (to 1e-3) in
-// the span of the ones already chosen and the group points is unidentifiable and never fitted.
-// When the best candidate and another one differ by less than 2 in BIC and the sensitivities
-// (with the chosen ones projected out) of the one with fewer parameters lie in the span of the
-// other's (to a cosine of 0.999, every direction), the data cannot tell them
-// apart: they are reported by name, and the correction is kept as one effect named by all of
-// them ("a | b"), so no single cause is claimed.
+// Identify runs in stages, each in its own file:
+//   outliers (FindOutliers, below)  rows far from the rest under the declared model
+//   problem.h                       residuals and the Levenberg-Marquardt fit
+//   selection.h                     forward selection screened by BIC, checked by
+//                                   cross-validation (cross_validation.h), physical bounds
+//   diagnostics.h                   structure left in the residual; candidates that need
+//                                   evidence (periodic, stiffening) enter only when it points
+//                                   at them; then complete geometry (joint_origin) last
+//   equivalence.h                   equivalence sets, observable parts, unidentifiable
+//   report (here)                   covariance, near-singular directions, shares, verdict
 #pragma once
 #include <Eigen/Core>
 #include <string>
@@ -64,6 +65,15 @@ struct DataSet {
 };
 
 struct IdentifyOptions {
+  bool cross_validation = true;  // selection checked on held-out folds (cross_validation.h)
+  std::string folds_by = "auto";  // "auto", or insist on "set", "group" or "row" folds
+  double cv_min_gain = 0.02;     // share the held-out error must drop by to keep an effect
+  int cv_trials = 3;             // best-BIC candidates cross-validated per round
+  double outlier_iqr = 3.0;      // rows beyond Q3 + k IQR of the declared model's errors; 0: off
+  double diagnostic_p = 1e-6;    // significance of a residual finding
+  double ambiguity_cv = 0.25;    // an alternative within this share of the held-out error is
+                                 // as good an explanation
+  double singular_tol = 1e-10;   // smallest / largest eigenvalue of the normalised information
   double point_std_m = 1e-4;       // noise of a measured or grouped point
   double distance_std_m = 1e-4;    // of a known group distance
   double rotation_std_rad = 1e-3;  // of a measured orientation (pose rows)
@@ -78,42 +88,123 @@ struct IdentifyOptions {
 
 struct FittedEffect {
   int candidate = -1;
-  std::string name;
-  std::vector<double> value;
-  std::vector<double> std;
+  std::string name;            // all members of its equivalence set, "a | b"
+  std::vector<double> value;   // the observable part (minimum norm over unseen directions)
+  std::vector<double> std;     // of the observable part; 0 along unseen directions
+  std::vector<std::vector<double>> unobservable;  // parameter directions the data does not see
   double share = 0.0;  // fraction of the removed sum of squares it accounts for
 };
 
 struct Fit {
   std::vector<int> active;
-  Eigen::VectorXd theta;
+  std::vector<Eigen::MatrixXd> basis;  // per active effect: fitted directions (empty: all)
+  Eigen::VectorXd theta;               // full parameters of the active candidates
   std::vector<Vec3> group_points;
   double rss = 0.0;  // whitened
   int num_residuals = 0;
+  int num_params = 0;  // fitted unknowns (effect directions + group points)
   double bic = 0.0;
+};
+
+// A candidate that makes the same correction as a chosen effect on this data.
+struct EquivalentMember {
+  int candidate = -1;
+  std::string name;
+  std::vector<double> value;                      // minimum-norm parameters of the correction
+  std::vector<std::vector<double>> unobservable;  // its parameter directions the data cannot see
+};
+
+struct EquivalenceSet {
+  int effect = -1;                       // index into IdentifyResult::effects
+  std::string name;                      // members joined by " | ", the chosen one first
+  std::vector<EquivalentMember> members;
+  double correction_rms = 0.0;           // whitened RMS of the correction it makes
+};
+
+// The best model selection finds when one chosen effect is banned: if it reaches about the same
+// held-out error, the data does not single out that effect as the cause.
+struct Alternative {
+  std::string banned;
+  std::vector<std::string> effects;
+  double cv = 0.0;  // its held-out error (mean squared whitened residual)
+};
+
+// Structure left in the residual (diagnostics.h).
+struct ResidualFinding {
+  bool significant = false;
+  std::string kind;      // "periodic", "load", "drift" ("" none tested)
+  std::string variable;  // joint name, or "row order, x"
+  int q_index = -1;
+  int cycles = 0;  // periodic: cycles per revolution of the strongest harmonic
+  double size = 0.0;
+  std::string unit;
+  double p_value = 1.0;
+  double statistic = 0.0;
+  std::string message;
+  std::vector<double> coefficients;  // regression [const, ...] for the plot
+  std::vector<double> x, z;          // per row: the variable and the projected residual (rad/m)
 };
 
 struct IdentifyResult {
   Fit before;  // no effect: group points only
   Fit after;
   std::vector<FittedEffect> effects;
+  std::vector<EquivalenceSet> equivalence;                  // one per chosen effect
   std::vector<std::string> unidentifiable;                  // candidate names
-  std::vector<std::vector<std::string>> indistinguishable;  // groups of names
+  std::vector<std::vector<std::string>> indistinguishable;  // equivalence sets of 2 or more
   std::vector<std::string> steps;                           // selection log lines
+  std::vector<std::string> unlocked;  // needs-evidence candidates a finding let in
+  ResidualFinding first_finding;      // in the residual of the named effects, before unlocking
+  ResidualFinding finding;            // in the final residual
+  std::string folds_by;               // cross-validation folds: "set", "group", "row", ""
+  int num_folds = 0;
+  double cv_before = 0.0, cv_after = 0.0;  // held-out mean squared whitened residual
+  std::vector<Alternative> alternatives;   // one per chosen effect (cross-validation only)
+  bool attribution_unique = true;          // no alternative comes within ambiguity_cv
+  // |sum of the effects' corrections|^2 / sum of their |correction|^2 (group points projected
+  // out): about 1 for independent causes, well below 1 when effects cancel each other.
+  double overlap = 1.0;
+  bool near_singular = false;              // information matrix near singular
+  std::string undetermined;                // the combination it does not determine
   Eigen::MatrixXd theta_cov;
   Eigen::MatrixXd theta_corr;
   double condition_number = 0.0;
 };
 
+// Rows whose declared-model error lies beyond Q3 + opt.outlier_iqr IQR of all rows' (and above
+// ten times the stated noise): errors to the coordinate-wise median of their group, to their
+// measured point, or in pixels, each kind on its own. Sorted row indices; none when k = 0.
+std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data,
+                              const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt);
+
+// `data` without the rows `drop` (sorted), groups and sets kept as they are.
+DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop);
+
+// What identification concludes, from the validation error before and after and the findings:
+//   "no_effect"         nothing chosen and no structure left in the residual;
+//   "unexplained"       nothing chosen, or the chosen effects do not lower the validation error,
+//                       while structure (or the error) remains: the model lacks something the
+//                       candidate library cannot represent;
+//   "partly_explained"  the validation error drops, but significant structure remains;
+//   "ambiguous"         the validation error drops and nothing is left, but with one of the
+//                       chosen effects banned, other effects do about as well on held-out data:
+//                       the correction holds, its cause is not singled out;
+//   "explained"         the validation error drops, no significant structure remains, and no
+//                       alternative explains the held-out data as well.
+std::string Verdict(const IdentifyResult& result, double val_before, double val_after);
+
 // Precomputed per-row loads for a data set.
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data);
 
-// Fits `active` (plus group points) by Levenberg-Marquardt from `init` (theta; may be empty).
+// Fits `active` (all directions, plus group points) by Levenberg-Marquardt from `init` (theta;
+// may be empty). problem.h has the form with fitted directions.
 Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const std::vector<int>& active, const Eigen::VectorXd& init,
                const IdentifyOptions& options);
 
-// Stepwise selection over `candidates` (indices into em.candidates()).
+// The staged identification over `candidates` (indices into em.candidates()). Throws
+// InputError when the data has fewer residuals than unknowns, or cross-validation is asked for
+// and the data has fewer than two folds.
 IdentifyResult Identify(const EffectModel& em, const DataSet& data,
                         const std::vector<ConfigLoads>& loads, const std::vector<int>& candidates,
                         const IdentifyOptions& options);

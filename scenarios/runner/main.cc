@@ -52,6 +52,15 @@ int Main(int argc, char** argv) {
   identify_cmd->add_option("--candidates", id.candidates,
                            "effect types or type@location to test (default: all)");
   identify_cmd->add_option("--point-std", id.point_std_m, "point noise [m] (default 1e-4)");
+  identify_cmd->add_option("--max-effects", id.max_effects, "most effects to choose (default 8)");
+  identify_cmd->add_option("--bic-threshold", id.bic_threshold,
+                           "BIC drop a candidate must bring to be tried (default 10)");
+  identify_cmd->add_option("--folds-by", id.folds_by,
+                           "cross-validation folds: auto, set, group or row (default auto)");
+  identify_cmd->add_option("--outlier-iqr", id.outlier_iqr,
+                           "reject rows beyond Q3 + k IQR (default 3; 0: off)");
+  identify_cmd->add_flag("--no-cross-validation", id.no_cross_validation,
+                         "select by BIC alone (the issue-8 rule)");
   identify_cmd->add_option("--out", id.out_dir, "output folder (default: out/identify)");
   identify_cmd->add_flag("--force", id.force,
                          "let --out replace an existing folder that is not a flexbench result");

@@ -295,6 +295,17 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
     char num[64];
     std::snprintf(num, sizeof(num), "%.17g", o.point_std_m);
     line("--point-std", std::string("point_std_m: ") + num);
+    if (o.max_effects) line("--max-effects", "max_effects: " + std::to_string(*o.max_effects));
+    if (o.bic_threshold) {
+      std::snprintf(num, sizeof(num), "%.17g", *o.bic_threshold);
+      line("--bic-threshold", std::string("bic_threshold: ") + num);
+    }
+    if (o.folds_by) line("--folds-by", "folds_by: " + Quoted(*o.folds_by));
+    if (o.outlier_iqr) {
+      std::snprintf(num, sizeof(num), "%.17g", *o.outlier_iqr);
+      line("--outlier-iqr", std::string("outlier_iqr: ") + num);
+    }
+    if (o.no_cross_validation) line("--no-cross-validation", "cross_validation: false");
     if (!o.candidates.empty()) {
       std::string c = "candidates: [";
       for (size_t i = 0; i < o.candidates.size(); ++i) {

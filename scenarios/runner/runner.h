@@ -32,6 +32,12 @@ struct IdentifyCliOptions {
   std::string validation_csv;
   std::vector<std::string> candidates;
   double point_std_m = 1e-4;
+  // Selection options (closed_loop keys of the same names); unset: the kind's defaults.
+  std::optional<int> max_effects;
+  std::optional<double> bic_threshold;
+  std::optional<std::string> folds_by;
+  std::optional<double> outlier_iqr;
+  bool no_cross_validation = false;
   std::string out_dir = "out/identify";
   bool force = false;
 };

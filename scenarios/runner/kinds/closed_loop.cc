@@ -23,6 +23,7 @@
 #include "estimators/stats/chi_square.h"
 #include "render/plot.h"
 #include "scenarios/identify/calibration_data.h"
+#include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/identify.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -118,6 +119,23 @@ class ClosedLoopKind : public ScenarioKind {
     }
     opt_.bic_threshold = root.GetDouble("bic_threshold", opt_.bic_threshold);
     opt_.max_effects = root.GetInt("max_effects", opt_.max_effects);
+    if (opt_.max_effects < 0) root.Child("max_effects").Fail("must be >= 0");
+    opt_.cross_validation = root.GetBool("cross_validation", opt_.cross_validation);
+    opt_.folds_by = root.GetString("folds_by", opt_.folds_by);
+    if (opt_.folds_by != "auto" && opt_.folds_by != "set" && opt_.folds_by != "group" &&
+        opt_.folds_by != "row") {
+      root.Child("folds_by").Fail("expected auto, set, group or row");
+    }
+    opt_.cv_min_gain = root.GetDouble("cv_min_gain", opt_.cv_min_gain);
+    if (!(opt_.cv_min_gain >= 0.0 && opt_.cv_min_gain < 1.0)) {
+      root.Child("cv_min_gain").Fail("must be in [0, 1)");
+    }
+    opt_.outlier_iqr = root.GetDouble("outlier_iqr", opt_.outlier_iqr);
+    if (!(opt_.outlier_iqr >= 0.0)) root.Child("outlier_iqr").Fail("must be >= 0 (0: off)");
+    opt_.diagnostic_p = root.GetDouble("diagnostic_p", opt_.diagnostic_p);
+    if (!(opt_.diagnostic_p > 0.0 && opt_.diagnostic_p < 1.0)) {
+      root.Child("diagnostic_p").Fail("must be in (0, 1)");
+    }
     if (const auto c = root.Optional("camera")) {
       // A fixed camera seeing the end-effector point (pixel rows in CSV data).
       camera_.present = true;
@@ -190,8 +208,14 @@ class ClosedLoopKind : public ScenarioKind {
   void Run(RunContext& ctx) override {
     DataSet cal = Load(calibration_, ctx, "calibration");
     DataSet val = Load(validation_, ctx, "validation");
-    const std::vector<identify::ConfigLoads> cal_loads = identify::ComputeLoads(*em_, cal);
-    const std::vector<identify::ConfigLoads> val_loads = identify::ComputeLoads(*em_, val);
+    std::vector<identify::ConfigLoads> cal_loads = identify::ComputeLoads(*em_, cal);
+    std::vector<identify::ConfigLoads> val_loads = identify::ComputeLoads(*em_, val);
+    Json rejected = Json::array();
+    RejectOutliers(ctx, calibration_, "calibration", &cal, &cal_loads, &rejected);
+    RejectOutliers(ctx, validation_, "validation", &val, &val_loads, &rejected);
+    (*ctx.summary)["metrics"]["rejected_rows"] = rejected.size();
+    (*ctx.summary)["identification"]["rejected_rows"] = rejected;
+    CheckSets(cal, calibration_);
     ctx.log("identify: " + std::to_string(cal.rows.size()) + " calibration rows, " +
             std::to_string(candidates_.size()) + " candidate effects");
     const identify::IdentifyResult res =
@@ -265,6 +289,19 @@ class ClosedLoopKind : public ScenarioKind {
     m["cal_group_distances_fitted_m"] = fitted_distances;
     m["unidentifiable"] = res.unidentifiable;
     m["indistinguishable"] = res.indistinguishable;
+    verdict_ = identify::Verdict(res, m["val_err_before_m"].get<double>(),
+                                 m["val_err_after_m"].get<double>());
+    m["verdict"] = verdict_;
+    m["near_singular"] = res.near_singular;
+    m["effect_overlap"] = res.overlap;
+    m["attribution_unique"] = res.attribution_unique;
+    m["cv_err_before"] = res.cv_before;
+    m["cv_err_after"] = res.cv_after;
+    m["residual_finding"] = FindingJson(res.finding);
+    ctx.log("verdict: " + verdict_ + "; " + res.finding.message +
+            (res.finding.significant
+                 ? (res.unlocked.empty() ? " - not in the candidate library" : " - left over")
+                 : " (not significant)"));
 
     // NEES of the declared PPOE covariance (plus the point noise) before and after; the
     // augmented model's sources are scaled to what the remaining residual supports.
@@ -276,9 +313,10 @@ class ClosedLoopKind : public ScenarioKind {
     m["nees_after"] = nees_after;
     m["nees_bound_low"] = nb.lower;
     m["nees_bound_high"] = nb.upper;
-    const double cal_nees_after = MeanNees(cal, cal_p1);
-    source_scale_ = std::isfinite(cal_nees_after) ? std::min(1.0, cal_nees_after / 3.0) : 1.0;
+    source_scale_ = SourceScale(val, val_p1);
     m["source_covariance_scale"] = source_scale_;
+    nees_scaled_ = MeanNees(val, val_p1, source_scale_);
+    m["nees_after_scaled"] = nees_scaled_;
 
     Json& id = (*ctx.summary)["identification"];
     id["selection_rule"] = "forward stepwise, BIC = N ln(RSS/N) + k ln N, add while dBIC < -" +
@@ -303,8 +341,25 @@ class ClosedLoopKind : public ScenarioKind {
     id["correlation"] = corr;
     id["rss_before"] = res.before.rss;
     id["rss_after"] = res.after.rss;
+    id["cross_validation"] = {{"folds_by", res.folds_by}, {"folds", res.num_folds}};
+    id["equivalence_sets"] = EquivalenceJson(res);
+    id["undetermined"] = res.undetermined;
+    id["first_finding"] = FindingJson(res.first_finding);
+    id["unlocked"] = res.unlocked;
+    Json alts = Json::array();
+    for (const identify::Alternative& a : res.alternatives) {
+      alts.push_back({{"banned", a.banned}, {"effects", a.effects}, {"cv_err", a.cv}});
+    }
+    id["alternatives"] = alts;
 
-    WriteAugmented(ctx, res);
+    // A model that does not lower the validation error is no fix: it is not shipped.
+    if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
+      WriteAugmented(ctx, res);
+    } else {
+      ctx.log("declared_augmented.yaml not written: the identified model does not explain the "
+              "validation data (verdict " + verdict_ + ")");
+    }
+    PlotFinding(ctx, res.finding.significant ? res.finding : res.first_finding);
     WriteResiduals(ctx, cal, cal_before, cal_after, cal_loads, cal_p0, "calibration");
     WriteResiduals(ctx, val, val_before, val_after, val_loads, val_p0, "validation");
     Plot(ctx, res, val, val_before, val_after, val_loads);
@@ -335,9 +390,24 @@ class ClosedLoopKind : public ScenarioKind {
         }
         break;
       }
-      case Source::Type::kSimulate:
+      case Source::Type::kSimulate: {
         Simulate(s, ctx, what, &d);
+        // A socket reached once fixes only its own point: left out, and counted.
+        std::vector<int> count(d.groups.size(), 0), keep;
+        for (const auto& o : d.rows) ++count[o.group];
+        for (size_t r = 0; r < d.rows.size(); ++r) {
+          if (count[d.rows[r].group] >= 2) keep.push_back(static_cast<int>(r));
+        }
+        if (keep.size() < d.rows.size()) {
+          ctx.log(what + ": " + std::to_string(d.rows.size() - keep.size()) +
+                  " row(s) of sockets reached only once left out");
+          (*ctx.summary)["metrics"][what + "_skipped_configurations"] =
+              (*ctx.summary)["metrics"][what + "_skipped_configurations"].get<int>() +
+              static_cast<int>(d.rows.size() - keep.size());
+          d = identify::Subset(d, keep);
+        }
         break;
+      }
     }
     if (d.rows.empty()) throw InputError(s.where + ": no " + what + " rows");
     return d;
@@ -458,7 +528,7 @@ class ClosedLoopKind : public ScenarioKind {
 
   // Mean NEES of the rows' point errors under the declared PPOE position covariance plus the
   // point noise, each row against its group's mean (or its measured point).
-  double MeanNees(const DataSet& d, const std::vector<Vec3>& p) const {
+  double MeanNees(const DataSet& d, const std::vector<Vec3>& p, double source_scale = 1.0) const {
     const std::vector<Vec3> mean = identify::GroupMeans(d, p);
     kinematics::PpoeData pd(chain_->model);
     double sum = 0.0;
@@ -470,7 +540,8 @@ class ClosedLoopKind : public ScenarioKind {
                                                   lie::CompoundOrder::kSecond);
       const Mat3 R = pd.T_base_frame[chain_->end_effector].rotation();
       const Mat3 S =
-          R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() * R.transpose() +
+          source_scale * R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() *
+              R.transpose() +
           opt_.point_std_m * opt_.point_std_m * Mat3::Identity();
       const Vec3 e =
           p[r] - (d.rows[r].type == identify::ObservationType::kGroup ? mean[d.rows[r].group]
@@ -480,13 +551,143 @@ class ClosedLoopKind : public ScenarioKind {
     return n > 0 ? sum / n : std::nan("");
   }
 
+  // Rows far off under the declared model are listed and left out (identify.h FindOutliers).
+  void RejectOutliers(RunContext& ctx, const Source& src, const std::string& what, DataSet* d,
+                      std::vector<identify::ConfigLoads>* loads, Json* rejected) const {
+    const std::vector<int> out = identify::FindOutliers(*em_, *d, *loads, opt_);
+    if (out.empty()) return;
+    if (out.size() >= d->rows.size()) {
+      throw InputError(src.where + ": every " + what + " row was rejected as an outlier");
+    }
+    for (int r : out) {
+      rejected->push_back(d->rows[r].where.empty() ? what + " row " + std::to_string(r)
+                                                   : d->rows[r].where);
+    }
+    ctx.log(what + ": " + std::to_string(out.size()) + " row(s) rejected as outliers, first " +
+            rejected->back().get<std::string>());
+    *d = identify::WithoutRows(*d, out);
+    std::vector<identify::ConfigLoads> kept;
+    size_t k = 0;
+    for (size_t r = 0; r < loads->size(); ++r) {
+      if (k < out.size() && out[k] == static_cast<int>(r)) {
+        ++k;
+        continue;
+      }
+      kept.push_back((*loads)[r]);
+    }
+    *loads = std::move(kept);
+  }
+
+  // Cross-validation by set needs every set to hold more than one row.
+  void CheckSets(const DataSet& d, const Source& src) const {
+    if (!opt_.cross_validation || d.sets.size() < 2) return;
+    std::vector<int> count(d.sets.size(), 0);
+    for (const auto& r : d.rows) ++count[r.set];
+    for (size_t s = 0; s < count.size(); ++s) {
+      if (count[s] == 1) {
+        throw InputError(src.where + ": set '" + d.sets[s] +
+                         "' has one row; cross-validation by set needs two or more (or "
+                         "cross_validation: false)");
+      }
+    }
+  }
+
+  static Json FindingJson(const identify::ResidualFinding& f) {
+    return {{"significant", f.significant}, {"kind", f.kind},   {"variable", f.variable},
+            {"cycles", f.cycles},           {"size", f.size},   {"unit", f.unit},
+            {"p_value", f.p_value},         {"message", f.message}};
+  }
+
+  Json EquivalenceJson(const identify::IdentifyResult& res) const {
+    Json sets = Json::array();
+    for (const identify::EquivalenceSet& s : res.equivalence) {
+      Json members = Json::array();
+      for (const identify::EquivalentMember& mb : s.members) {
+        members.push_back({{"effect", mb.name},
+                           {"observable_value", mb.value},
+                           {"unit", em_->candidates()[mb.candidate].unit},
+                           {"unobservable_directions", mb.unobservable}});
+      }
+      sets.push_back({{"name", s.name}, {"members", members}});
+    }
+    return sets;
+  }
+
+  // The projected residual of the finding's joint against its variable, with the fitted curve.
+  void PlotFinding(RunContext& ctx, const identify::ResidualFinding& f) const {
+    if (f.x.empty()) return;
+    const bool angle = f.kind == "periodic";
+    const double xs = angle ? 1.0 / kDeg : 1.0;
+    const double zs = f.kind == "drift" ? 1e3 : 1.0 / kDeg;
+    std::vector<double> x(f.x.size()), z(f.z.size());
+    for (size_t i = 0; i < x.size(); ++i) x[i] = f.x[i] * xs, z[i] = f.z[i] * zs;
+    std::vector<double> cx, cz;
+    const auto [lo, hi] = std::minmax_element(f.x.begin(), f.x.end());
+    for (int i = 0; i <= 200; ++i) {
+      const double v = *lo + (*hi - *lo) * i / 200.0;
+      double y = f.coefficients.empty() ? 0.0 : f.coefficients[0];
+      if (angle) {
+        for (int c = 1; c <= 3 && 2 * c < static_cast<int>(f.coefficients.size()); ++c) {
+          y += f.coefficients[2 * c - 1] * std::cos(c * v) + f.coefficients[2 * c] * std::sin(c * v);
+        }
+      } else if (f.kind == "load" && f.coefficients.size() == 3) {
+        const double scale = std::max(std::abs(*lo), std::abs(*hi));
+        y += f.coefficients[1] * v + f.coefficients[2] * std::pow(v / scale, 3) * scale;
+      } else if (f.coefficients.size() == 2) {
+        y += f.coefficients[1] * v;
+      }
+      cx.push_back(v * xs);
+      cz.push_back(y * zs);
+    }
+    render::Figure fig(900, 560);
+    char title[160];
+    std::snprintf(title, sizeof(title), "Residual left: %s in %s, p = %.2g%s", f.kind.c_str(),
+                  f.variable.c_str(), f.p_value, f.significant ? "" : " (not significant)");
+    fig.title = title;
+    render::Axes& ax = fig.axes();
+    ax.x_label = angle ? f.variable + " [deg]"
+                 : f.kind == "load" ? "gravity torque at " + f.variable + " [N m]"
+                                    : "row order (0 first, 1 last)";
+    ax.y_label = f.kind == "drift" ? "residual [mm]" : "residual as an angle error of " +
+                                                           f.variable + " [deg]";
+    ax.AddScatter("rows", x, z).marker = render::Marker::kCircle;
+    ax.AddLine("fitted", cx, cz);
+    ax.legend_position = render::LegendPosition::kTopRight;
+    fig.SavePng(ctx.out->File("residual_structure.png").string());
+  }
+
+  // The factor on the declared PPOE sources that makes the validation mean NEES 3 (it may grow
+  // as well as shrink), found by bisection on a log scale.
+  double SourceScale(const DataSet& d, const std::vector<Vec3>& p) const {
+    double lo = 1e-6, hi = 1e6;
+    if (!std::isfinite(MeanNees(d, p, 1.0))) return 1.0;
+    if (MeanNees(d, p, hi) > 3.0) return hi;
+    if (MeanNees(d, p, lo) < 3.0) return lo;
+    for (int it = 0; it < 60; ++it) {
+      const double mid = std::sqrt(lo * hi);
+      (MeanNees(d, p, mid) > 3.0 ? lo : hi) = mid;
+    }
+    return std::sqrt(lo * hi);
+  }
+
   void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
     std::ostringstream y;
     y << "# Declared model augmented by flexbench closed_loop: the identified effects with their\n"
          "# fitted parameters, and the PPOE sources scaled by "
       << Num(source_scale_)
-      << " (what the\n# remaining calibration residual supports: mean NEES -> 3).\n";
-    y << "model: " << declared_.model_path << "\n";
+      << " (what the\n# remaining validation residual supports; mean NEES there "
+      << Num(nees_scaled_) << ", 3 is consistent). Verdict: " << verdict_
+      << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the data "
+                                    "about as well, so no cause is singled out)"
+                                  : "")
+      << ".\n";
+    // Relative to the result folder, so the file loads from where it is written.
+    y << "model: "
+      << fs::absolute(declared_.model_path)
+             .lexically_normal()
+             .lexically_relative(fs::absolute(ctx.out->final_dir()).lexically_normal())
+             .generic_string()
+      << "\n";
     y << "base: " << declared_.base << "\n";
     y << "actuated_joints: [";
     for (size_t i = 0; i < declared_.actuated_joints.size(); ++i) {
@@ -621,6 +822,8 @@ class ClosedLoopKind : public ScenarioKind {
   std::unique_ptr<identify::EffectModel> em_;
   std::unique_ptr<sim::Simulation> sim_;
   double source_scale_ = 1.0;
+  std::string verdict_;
+  double nees_scaled_ = 0.0;
 };
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/lie/so3.h"
 #include "scenarios/identify/calibration_data.h"
+#include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/identify.h"
 #include "scenarios/runner/runner.h"
 #include "sim/declared_chain.h"
@@ -294,6 +295,146 @@ TEST(Identify, TwoCandidatesTheDataCannotTellApartAreBothNamedNeverOne) {
   EXPECT_EQ(names, (std::vector<std::string>{"joint_offset@j2", "joint_offset@j3"}));
 }
 
+// Points of kArm3 whose j3 turns by an error periodic in its own angle, 2 cycles per revolution
+// (a strain-wave transmission error): written with the declared chain's plain forward kinematics,
+// not with the effect model under test. Two sets, so cross-validation leaves one out.
+DataSet PeriodicErrorData(const EffectModel& em, double amplitude, int rows,
+                          std::mt19937_64& rng) {
+  DataSet d;
+  d.sets = {"a", "b"};
+  std::uniform_real_distribution<double> u(-M_PI, M_PI);
+  std::normal_distribution<double> n(0.0, 1e-4);
+  kinematics::PpoeData pd(em.chain());
+  const kinematics::FrameId ee = em.chain().num_frames() - 1;
+  for (int r = 0; r < rows; ++r) {
+    Observation o;
+    o.q = Eigen::Vector3d(u(rng), 0.6 * u(rng), 0.6 * u(rng));
+    Eigen::VectorXd q_link = o.q;
+    q_link[2] += amplitude * std::sin(2.0 * o.q[2] + 0.7);
+    kinematics::ForwardKinematics(em.chain(), pd, q_link);
+    o.p_base = pd.T_base_frame[ee].translation() + Vec3(n(rng), n(rng), n(rng));
+    o.set = r % 2;
+    d.rows.push_back(o);
+  }
+  return d;
+}
+
+std::vector<int> WithoutNeedsEvidence(const EffectModel& em) {
+  std::vector<int> c;
+  for (size_t i = 0; i < em.candidates().size(); ++i) {
+    if (!em.candidates()[i].needs_evidence) c.push_back(i);
+  }
+  return c;
+}
+
+TEST(Identify, AnEffectOutsideTheLibraryIsReportedNotMisnamed) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  ASSERT_EQ(f.em->chain().frame(f.em->chain().num_frames() - 1).name, "site/ee");
+  std::mt19937_64 rng(31);
+  const double amplitude = 0.08 * M_PI / 180.0;
+  const DataSet cal = PeriodicErrorData(*f.em, amplitude, 120, rng);
+  const DataSet val = PeriodicErrorData(*f.em, amplitude, 80, rng);
+  const auto cal_loads = ComputeLoads(*f.em, cal);
+  const auto val_loads = ComputeLoads(*f.em, val);
+  const IdentifyResult r =
+      Identify(*f.em, cal, cal_loads, WithoutNeedsEvidence(*f.em), IdentifyOptions{});
+  std::string log;
+  for (const auto& s : r.steps) log += s + "\n";
+  std::printf("%s\n", r.finding.message.c_str());
+  // The structure is found where it lives: j3, 2 cycles per revolution, about its size.
+  EXPECT_TRUE(r.finding.significant) << log;
+  EXPECT_EQ(r.finding.kind, "periodic") << log;
+  EXPECT_EQ(r.finding.variable, "j3") << log;
+  EXPECT_EQ(r.finding.cycles, 2) << log;
+  EXPECT_NEAR(r.finding.size, 0.08, 0.03) << log;
+  const auto error = [&](const DataSet& d, const std::vector<ConfigLoads>& L, const Fit& fit) {
+    return ConsistencyError(d, RowErrors(d, PredictAll(*f.em, d, L, fit.active, fit.theta)));
+  };
+  const double before = error(val, val_loads, r.before);
+  const double after = error(val, val_loads, r.after);
+  EXPECT_LE(after, before) << log;
+  EXPECT_NE(Verdict(r, before, after), "explained") << log;
+  EXPECT_NE(Verdict(r, before, after), "no_effect") << log;
+}
+
+TEST(Identify, OnlyTheObservablePartOfAnOffsetIsReported) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  const std::vector<int> truth = {Candidate(*f.em, "link_offset@j2")};
+  const Eigen::Vector3d offset(0.002, 0.0, 0.003);  // z: along j1's axis, a pure translation
+  std::mt19937_64 rng(14);
+  const DataSet d = SocketData(*f.em, truth, offset, 8, rng);
+  const auto loads = ComputeLoads(*f.em, d);
+  const IdentifyResult r =
+      Identify(*f.em, d, loads, AllCandidates(*f.em, "link_offset"), IdentifyOptions{});
+  std::string log;
+  for (const auto& s : r.steps) log += s + "\n";
+  ASSERT_EQ(r.effects.size(), 1u) << log;
+  EXPECT_EQ(r.effects[0].name.rfind("link_offset@j2", 0), 0u) << r.effects[0].name;
+  EXPECT_NEAR(r.effects[0].value[0], 0.002, 2e-4) << log;
+  EXPECT_NEAR(r.effects[0].value[1], 0.0, 2e-4) << log;
+  EXPECT_NEAR(r.effects[0].value[2], 0.0, 1e-9) << "the unseen z part is not reported";
+  ASSERT_EQ(r.effects[0].unobservable.size(), 1u) << log;
+  EXPECT_GT(std::abs(r.effects[0].unobservable[0][2]), 0.99);
+  EXPECT_EQ(std::find(r.unidentifiable.begin(), r.unidentifiable.end(), "link_offset@j2"),
+            r.unidentifiable.end());
+}
+
+TEST(Identify, RefusesAGroupOfOneRowAndTooFewResiduals) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  std::mt19937_64 rng(15);
+  DataSet d = SocketData(*f.em, {}, Eigen::VectorXd(), 4, rng);
+  d.rows.erase(d.rows.begin() + 1, d.rows.begin() + 4);  // socket0 keeps one row
+  const auto loads = ComputeLoads(*f.em, d);
+  try {
+    Identify(*f.em, d, loads, AllCandidates(*f.em), IdentifyOptions{});
+    FAIL() << "accepted a group of one row";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("group 'socket0' has one row"), std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(Identify, AFarOffRowIsRejectedAndTheEffectStillFound) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  const std::vector<int> truth = {Candidate(*f.em, "joint_offset@j2")};
+  const Eigen::VectorXd theta = Eigen::VectorXd::Constant(1, 0.01);
+  std::mt19937_64 rng(16);
+  DataSet d = PointData(*f.em, truth, theta, 60, 1e-4, rng);
+  for (size_t r = 0; r < d.rows.size(); ++r) d.rows[r].set = r % 2;
+  d.sets = {"a", "b"};
+  d.rows[17].p_base.x() = 1e6;
+  const auto loads = ComputeLoads(*f.em, d);
+  const std::vector<int> out = FindOutliers(*f.em, d, loads, IdentifyOptions{});
+  ASSERT_EQ(out, std::vector<int>{17});
+  const DataSet clean = WithoutRows(d, out);
+  const IdentifyResult r =
+      Identify(*f.em, clean, ComputeLoads(*f.em, clean), AllCandidates(*f.em), IdentifyOptions{});
+  ASSERT_EQ(r.effects.size(), 1u);
+  // (Every row holds j2 on the same flank here, so a backlash there is the same correction.)
+  EXPECT_EQ(r.effects[0].name.rfind("joint_offset@j2", 0), 0u) << r.effects[0].name;
+  EXPECT_NEAR(r.effects[0].value[0], 0.01, 4.0 * r.effects[0].std[0]);
+}
+
+TEST(Identify, FoldsAreSetsThenGroupsThenRows) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  std::mt19937_64 rng(17);
+  DataSet sockets = SocketData(*f.em, {}, Eigen::VectorXd(), 5, rng);
+  EXPECT_EQ(MakeFolds(sockets).by, "group");
+  EXPECT_EQ(MakeFolds(sockets).test_rows.size(), 5u);
+  sockets.sets = {"a", "b"};
+  for (size_t r = 0; r < sockets.rows.size(); ++r) sockets.rows[r].set = r < 8 ? 0 : 1;
+  EXPECT_EQ(MakeFolds(sockets).by, "set");
+  const DataSet points = PointData(*f.em, {}, Eigen::VectorXd(), 12, 1e-4, rng);
+  const Folds rows = MakeFolds(points);
+  EXPECT_EQ(rows.by, "row");
+  ASSERT_EQ(rows.test_rows.size(), 5u);
+  EXPECT_EQ(rows.test_rows[2], (std::vector<int>{2, 7}));
+  // A held-out fold keeps its groups and sets, renumbered.
+  const DataSet sub = Subset(sockets, {8, 9, 12});
+  EXPECT_EQ(sub.groups.size(), 2u);
+  EXPECT_EQ(sub.sets, std::vector<std::string>{"b"});
+}
+
 // Full poses (a tracker with orientation) and pixels of a fixed, slightly miscalibrated camera.
 TEST(Identify, PosesAndPixelsWithACameraOffset) {
   sim::MjModelPtr m = sim::LoadModelFromString(kArm3, "inline.xml");
@@ -552,6 +693,18 @@ TEST(IdentifyCommand, FindsTheEffectInAUsersCsvAndRejectsABadRow) {
   EXPECT_EQ(aug.actuated_joints, (std::vector<std::string>{"j1", "j2", "j3"}));
   ASSERT_EQ(aug.sources.size(), 1u);
   EXPECT_LT(aug.sources[0].about_axis_rad, 0.5 * M_PI / 180.0);  // reduced to what remains
+  // Selection options on the command line: with no effect allowed, nothing is shipped.
+  const testing::CommandResult none = testing::RunCommand(
+      cmd + "0 --max-effects 0 --calibration " + (dir / "cal.csv").string());
+  ASSERT_EQ(none.exit_code, 0) << none.err;
+  EXPECT_NE(testing::ReadFile(dir / "out0" / "summary.json").find("\"verdict\": \"unexplained\""),
+            std::string::npos);
+  EXPECT_FALSE(fs::exists(dir / "out0" / "declared_augmented.yaml"));
+  const testing::CommandResult sets = testing::RunCommand(
+      cmd + "1 --folds-by set --calibration " + (dir / "cal.csv").string());
+  EXPECT_EQ(sets.exit_code, 2) << sets.err;
+  EXPECT_NE(sets.err.find("cross-validation by set needs at least two sets"), std::string::npos)
+      << sets.err;
   testing::WriteFile(dir / "bad.csv", "j1,j2,j3,x,y,z\n0,0,0,1,1,1\n0,nan,0,1,1,1\n");
   const testing::CommandResult bad =
       testing::RunCommand(cmd + " --calibration " + (dir / "bad.csv").string());

@@ -1,0 +1,135 @@
+#include "scenarios/identify/cross_validation.h"
+
+#include <algorithm>
+
+#include "scenarios/identify/problem.h"
+
+namespace flexbench::identify {
+
+Folds MakeFolds(const DataSet& data, const std::string& by) {
+  Folds f;
+  const auto by_label = [&](const char* by, int n, auto label_of) {
+    f.by = by;
+    f.test_rows.assign(n, {});
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      const int l = label_of(data.rows[r]);
+      if (l >= 0) f.test_rows[l].push_back(static_cast<int>(r));
+    }
+    f.test_rows.erase(std::remove_if(f.test_rows.begin(), f.test_rows.end(),
+                                     [](const std::vector<int>& v) { return v.empty(); }),
+                      f.test_rows.end());
+  };
+  if (by == "auto" || by == "set") {
+    by_label("set", static_cast<int>(data.sets.size()),
+             [](const Observation& o) { return o.set; });
+    if (f.test_rows.size() >= 2 || by == "set") return f;
+  }
+  if (by == "auto" || by == "group") by_label("group", static_cast<int>(data.groups.size()), [](const Observation& o) {
+    return o.type == ObservationType::kGroup ? o.group : -1;
+  });
+  if (f.test_rows.size() >= 4 || by == "group") {
+    // Rows without a group (points) join the folds in round robin.
+    int k = 0;
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      if (data.rows[r].type != ObservationType::kGroup) {
+        f.test_rows[k++ % f.test_rows.size()].push_back(static_cast<int>(r));
+      }
+    }
+    for (auto& t : f.test_rows) std::sort(t.begin(), t.end());
+    return f;
+  }
+  f.by = "row";
+  const int k = static_cast<int>(std::min<size_t>(5, data.rows.size()));
+  f.test_rows.assign(k, {});
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    f.test_rows[r % k].push_back(static_cast<int>(r));
+  }
+  return f;
+}
+
+DataSet Subset(const DataSet& data, const std::vector<int>& rows) {
+  DataSet s;
+  s.camera = data.camera;
+  std::vector<int> group_map(data.groups.size(), -1), set_map(data.sets.size(), -1);
+  for (int r : rows) {
+    Observation o = data.rows[r];
+    if (o.type == ObservationType::kGroup) {
+      if (group_map[o.group] < 0) {
+        group_map[o.group] = static_cast<int>(s.groups.size());
+        s.groups.push_back(data.groups[o.group]);
+      }
+      o.group = group_map[o.group];
+    }
+    if (o.set >= 0 && o.set < static_cast<int>(set_map.size())) {
+      if (set_map[o.set] < 0) {
+        set_map[o.set] = static_cast<int>(s.sets.size());
+        s.sets.push_back(data.sets[o.set]);
+      }
+      o.set = set_map[o.set];
+    }
+    s.rows.push_back(std::move(o));
+  }
+  for (const GroupDistance& d : data.distances) {
+    if (group_map[d.a] >= 0 && group_map[d.b] >= 0) {
+      s.distances.push_back({group_map[d.a], group_map[d.b], d.distance_m});
+    }
+  }
+  return s;
+}
+
+std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
+                                     const std::vector<int>& rows) {
+  std::vector<ConfigLoads> s;
+  s.reserve(rows.size());
+  for (int r : rows) s.push_back(loads[r]);
+  return s;
+}
+
+double HeldOutSquares(const EffectModel& em, const DataSet& data,
+                      const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
+                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries) {
+  const Problem pr(em, data, loads, active, {}, opt);
+  std::vector<lie::SE3> T;
+  pr.Poses(theta, &T);
+  std::vector<Vec3> points(T.size());
+  for (size_t r = 0; r < T.size(); ++r) points[r] = T[r].translation();
+  const std::vector<Vec3> mean = GroupMeans(data, points);
+  Eigen::VectorXd x(pr.num_params());
+  x.head(pr.num_alpha()) = theta;
+  for (size_t g = 0; g < mean.size(); ++g) x.segment<3>(pr.num_alpha() + 3 * g) = mean[g];
+  const Eigen::VectorXd r = pr.Residuals(x);
+  *entries = static_cast<int>(r.size());
+  return r.squaredNorm();
+}
+
+double CrossValidate(const EffectModel& em, const DataSet& data,
+                     const std::vector<ConfigLoads>& loads, const Folds& folds, const Fit& fit,
+                     const IdentifyOptions& opt) {
+  double ss = 0.0;
+  int entries = 0;
+  std::vector<char> in_test(data.rows.size());
+  // Each fold starts from the full-data fit, a few steps from its own optimum.
+  IdentifyOptions fold_opt = opt;
+  fold_opt.max_iterations = std::min(opt.max_iterations, 8);
+  for (const std::vector<int>& test : folds.test_rows) {
+    std::fill(in_test.begin(), in_test.end(), 0);
+    for (int r : test) in_test[r] = 1;
+    std::vector<int> train;
+    for (size_t r = 0; r < data.rows.size(); ++r) {
+      if (!in_test[r]) train.push_back(static_cast<int>(r));
+    }
+    const DataSet tr = Subset(data, train);
+    const std::vector<ConfigLoads> tr_loads = SubsetLoads(loads, train);
+    Eigen::VectorXd theta = fit.theta;
+    if (!fit.active.empty()) {
+      theta = FitEffects(em, tr, tr_loads, fit.active, fit.basis, fit.theta, fold_opt).theta;
+    }
+    int n = 0;
+    ss += HeldOutSquares(em, Subset(data, test), SubsetLoads(loads, test), fit.active, theta, opt,
+                         &n);
+    entries += n;
+  }
+  return entries > 0 ? ss / entries : 0.0;
+}
+
+}  // namespace flexbench::identify

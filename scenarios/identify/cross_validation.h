@@ -1,0 +1,42 @@
+// Cross-validation of a model's effects: fit on all data but one fold, score the fold.
+//
+// Folds are the data's sets (placements, sessions) when it has two or more; with one set, the
+// groups (sockets) when there are at least four; otherwise rows in round robin (k = 5). A
+// held-out fold is scored with its own nuisance parameters re-estimated from the prediction
+// (each group's point is the mean of its rows), so the score sees only what the effects
+// predict: the mean squared whitened residual per residual entry, distances included.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "scenarios/identify/identify.h"
+
+namespace flexbench::identify {
+
+struct Folds {
+  std::string by;                          // "set", "group", "row"
+  std::vector<std::vector<int>> test_rows;  // per fold, row indices into the data set
+};
+
+// `by`: "auto" (as above) or "set", "group", "row" (fewer than two folds then: none).
+Folds MakeFolds(const DataSet& data, const std::string& by = "auto");
+
+// The rows `rows` of `data` as a data set of their own (groups, sets and distances renumbered,
+// distances only between groups that keep rows). `loads` likewise, when given.
+DataSet Subset(const DataSet& data, const std::vector<int>& rows);
+std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
+                                     const std::vector<int>& rows);
+
+// Sum of squared whitened residuals of `data` under (active, theta), group points at the mean
+// of their rows' predictions; `*entries` the number of residual entries.
+double HeldOutSquares(const EffectModel& em, const DataSet& data,
+                      const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
+                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries);
+
+// Mean squared whitened residual over the held-out folds of `fit`'s model, each fold's
+// parameters fitted on the other folds (starting from `fit`'s values, its bases kept).
+double CrossValidate(const EffectModel& em, const DataSet& data,
+                     const std::vector<ConfigLoads>& loads, const Folds& folds, const Fit& fit,
+                     const IdentifyOptions& opt);
+
+}  // namespace flexbench::identify

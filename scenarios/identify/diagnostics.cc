@@ -1,0 +1,199 @@
+#include "scenarios/identify/diagnostics.h"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "estimators/stats/chi_square.h"
+#include "scenarios/identify/problem.h"
+
+namespace flexbench::identify {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+struct Regression {
+  Eigen::VectorXd beta;
+  double stat = 0.0;
+  double p_value = 1.0;
+};
+
+// Weighted least squares of z on [1, X] against [1] alone; the test of the X columns.
+Regression Regress(const Eigen::MatrixXd& X, const Eigen::VectorXd& z, const Eigen::VectorXd& w) {
+  Regression out;
+  const int n = static_cast<int>(z.size());
+  const int p = static_cast<int>(X.cols());
+  if (n < p + 3) return out;
+  Eigen::MatrixXd A(n, p + 1);
+  A.col(0).setOnes();
+  A.rightCols(p) = X;
+  const Eigen::VectorXd sw = w.cwiseSqrt();
+  const Eigen::MatrixXd Aw = sw.asDiagonal() * A;
+  const Eigen::VectorXd zw = sw.cwiseProduct(z);
+  out.beta = Aw.colPivHouseholderQr().solve(zw);
+  const double ss1 = (zw - Aw * out.beta).squaredNorm();
+  const double mean = w.sum() > 0 ? w.dot(z) / w.sum() : 0.0;
+  const double ss0 = (zw - sw * mean).squaredNorm();
+  if (!(ss1 > 0)) return out;
+  out.stat = (ss0 - ss1) / (ss1 / (n - p - 1));
+  out.p_value = std::max(1e-16, 1.0 - stats::ChiSquareCdf(std::max(0.0, out.stat), p));
+  return out;
+}
+
+void Keep(ResidualFinding candidate, ResidualFinding* best) {
+  if (candidate.p_value < best->p_value ||
+      (candidate.p_value == best->p_value && candidate.statistic > best->statistic)) {
+    *best = std::move(candidate);
+  }
+}
+
+}  // namespace
+
+ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data,
+                                      const std::vector<ConfigLoads>& loads, const Fit& fit,
+                                      const IdentifyOptions& opt) {
+  ResidualFinding best;
+  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
+  const Eigen::VectorXd res = pr.Residuals(StateOf(pr, fit));
+  std::vector<int> rows;  // rows with a position residual
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    if (data.rows[r].type != ObservationType::kPixel) rows.push_back(static_cast<int>(r));
+  }
+  const int n = static_cast<int>(rows.size());
+  if (n < 10) return best;
+  const int nq = em.chain().nq();
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  const double h = 1e-6;
+  for (int k = 0; k < nq; ++k) {
+    Eigen::VectorXd z(n), w(n), q(n), tau(n);
+    for (int i = 0; i < n; ++i) {
+      const int r = rows[i];
+      Eigen::VectorXd qp = data.rows[r].q, qm = qp;
+      qp[k] += h;
+      qm[k] -= h;
+      const Vec3 s = (em.Predict(qp, loads[r], fit.active, fit.theta.data(), ws) -
+                      em.Predict(qm, loads[r], fit.active, fit.theta.data(), ws)) /
+                     (2 * h * opt.point_std_m);
+      const Vec3 e = res.segment<3>(pr.row_offset(r));
+      const double s2 = s.squaredNorm();
+      z[i] = s2 > 1e-12 ? s.dot(e) / s2 : 0.0;
+      w[i] = s2 > 1e-12 ? s2 : 0.0;
+      q[i] = data.rows[r].q[k];
+      tau[i] = loads[r].tau.size() > k ? loads[r].tau[k] : 0.0;
+    }
+    if (!(w.maxCoeff() > 0)) continue;
+    const std::string joint = em.chain().frame(em.chain().joint_frame(k)).name;
+    {
+      Eigen::MatrixXd X(n, 6);
+      for (int c = 1; c <= 3; ++c) {
+        X.col(2 * c - 2) = (c * q.array()).cos();
+        X.col(2 * c - 1) = (c * q.array()).sin();
+      }
+      const Regression g = Regress(X, z, w);
+      if (g.beta.size() > 0) {
+        ResidualFinding f;
+        f.kind = "periodic";
+        f.q_index = k;
+        double amp = 0.0;
+        for (int c = 1; c <= 3; ++c) {
+          const double a = std::hypot(g.beta[2 * c - 1], g.beta[2 * c]);
+          if (a > amp) amp = a, f.cycles = c;
+        }
+        f.size = amp / kDeg;
+        f.unit = "deg";
+        f.p_value = g.p_value;
+        f.statistic = g.stat;
+        f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
+        f.x.assign(q.data(), q.data() + n);
+        f.z.assign(z.data(), z.data() + n);
+        Keep(std::move(f), &best);
+      }
+    }
+    if (em.has_masses() && tau.cwiseAbs().maxCoeff() > 1e-6) {
+      const double scale = tau.cwiseAbs().maxCoeff();
+      Eigen::MatrixXd X(n, 2);
+      X.col(0) = tau;
+      X.col(1) = (tau / scale).array().cube() * scale;
+      const Regression g = Regress(X, z, w);
+      if (g.beta.size() > 0) {
+        ResidualFinding f;
+        f.kind = "load";
+        f.q_index = k;
+        // The angle error at the largest load the data holds.
+        f.size = std::abs(g.beta[1] * scale + g.beta[2] * scale) / kDeg;
+        f.unit = "deg at the largest gravity torque";
+        f.p_value = g.p_value;
+        f.statistic = g.stat;
+        f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
+        f.x.assign(tau.data(), tau.data() + n);
+        f.z.assign(z.data(), z.data() + n);
+        Keep(std::move(f), &best);
+      }
+    }
+  }
+  // Drift: each coordinate of the residual against the row order.
+  for (int axis = 0; axis < 3; ++axis) {
+    Eigen::VectorXd z(n), t(n);
+    for (int i = 0; i < n; ++i) {
+      z[i] = res[pr.row_offset(rows[i]) + axis] * opt.point_std_m;
+      t[i] = static_cast<double>(i) / std::max(1, n - 1);
+    }
+    const Regression g = Regress(t, z, Eigen::VectorXd::Ones(n));
+    if (g.beta.size() == 0) continue;
+    ResidualFinding f;
+    f.kind = "drift";
+    f.variable = std::string("row order, ") + "xyz"[axis];
+    f.size = std::abs(g.beta[1]) * 1e3;
+    f.unit = "mm over the data";
+    f.p_value = g.p_value;
+    f.statistic = g.stat;
+    f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
+    f.x.assign(t.data(), t.data() + n);
+    f.z.assign(z.data(), z.data() + n);
+    Keep(std::move(f), &best);
+  }
+  if (best.q_index >= 0) {
+    best.variable = em.chain().frame(em.chain().joint_frame(best.q_index)).name;
+    const size_t slash = best.variable.find('/');
+    if (slash != std::string::npos) best.variable = best.variable.substr(slash + 1);
+  }
+  best.significant = best.p_value < opt.diagnostic_p;
+  char line[256];
+  if (best.kind == "periodic") {
+    std::snprintf(line, sizeof(line), "residual periodic in %s, %d cycles/rev, %.3g deg, p %s %.2g",
+                  best.variable.c_str(), best.cycles, best.size,
+                  best.p_value <= 1e-16 ? "<" : "=", best.p_value);
+  } else if (best.kind == "load") {
+    std::snprintf(line, sizeof(line),
+                  "residual follows the gravity torque of %s, %.3g %s, p %s %.2g",
+                  best.variable.c_str(), best.size, best.unit.c_str(),
+                  best.p_value <= 1e-16 ? "<" : "=", best.p_value);
+  } else if (best.kind == "drift") {
+    std::snprintf(line, sizeof(line), "residual drifts with the %s, %.3g %s, p %s %.2g",
+                  best.variable.c_str(), best.size, best.unit.c_str(),
+                  best.p_value <= 1e-16 ? "<" : "=", best.p_value);
+  } else {
+    std::snprintf(line, sizeof(line), "no residual structure tested");
+  }
+  best.message = line;
+  return best;
+}
+
+std::vector<int> CandidatesFor(const EffectModel& em, const ResidualFinding& finding,
+                               const std::vector<int>& candidates) {
+  std::vector<int> out;
+  if (!finding.significant || finding.q_index < 0) return out;
+  for (int c : candidates) {
+    const Candidate& cand = em.candidates()[c];
+    if (!cand.needs_evidence || cand.q_index != finding.q_index) continue;
+    const std::string type = ToString(cand.type);
+    const bool match = finding.kind == "periodic"
+                           ? (type == "transmission_error" || type == "joint_error_curve")
+                           : finding.kind == "load" && type == "stiffening_spring";
+    if (match) out.push_back(c);
+  }
+  return out;
+}
+
+}  // namespace flexbench::identify

@@ -1,0 +1,188 @@
+#include "scenarios/identify/equivalence.h"
+
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+
+#include "scenarios/identify/problem.h"
+
+namespace flexbench::identify {
+
+Projector::Projector(const Eigen::MatrixXd& J_fit) {
+  if (J_fit.cols() == 0) return;
+  // An orthonormal basis of the columns' span; columns of (numerically) no rank add nothing.
+  Eigen::MatrixXd Jn = J_fit;
+  for (int k = 0; k < Jn.cols(); ++k) {
+    const double n = Jn.col(k).norm();
+    if (n > 0) Jn.col(k) /= n;
+  }
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Jn);
+  qr.setThreshold(1e-10);
+  const int rank = static_cast<int>(qr.rank());
+  Q_ = qr.householderQ() * Eigen::MatrixXd::Identity(Jn.rows(), rank);
+}
+
+Eigen::MatrixXd Projector::Apply(const Eigen::MatrixXd& M) const {
+  if (Q_.cols() == 0) return M;
+  return M - Q_ * (Q_.transpose() * M);
+}
+
+Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj, double tol,
+                                double* rel) {
+  const int np = static_cast<int>(Jc.cols());
+  // Scale each parameter to unit sensitivity, so directions compare by their effect.
+  Eigen::VectorXd scale(np);
+  for (int k = 0; k < np; ++k) {
+    const double n = Jc.col(k).norm();
+    scale[k] = n > 0 ? 1.0 / n : 0.0;
+  }
+  const Eigen::MatrixXd Js = Jc * scale.asDiagonal();
+  const Eigen::MatrixXd Rs = proj.Apply(Js);
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Rs, Eigen::ComputeThinV);
+  std::vector<Eigen::VectorXd> keep;
+  double best = 0.0;
+  for (int i = 0; i < svd.singularValues().size(); ++i) {
+    const Eigen::VectorXd v = svd.matrixV().col(i);
+    const double full = (Js * v).norm();
+    const double r = full > 0 ? svd.singularValues()[i] / full : 0.0;
+    best = std::max(best, r);
+    if (r > tol) keep.push_back((scale.asDiagonal() * v).normalized());
+  }
+  *rel = best;
+  Eigen::MatrixXd B(np, keep.size());
+  for (size_t i = 0; i < keep.size(); ++i) B.col(i) = keep[i];
+  return B;
+}
+
+Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data,
+                            const std::vector<ConfigLoads>& loads, const Fit& fit,
+                            const IdentifyOptions& opt) {
+  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
+  return pr.Jacobian(StateOf(pr, fit));
+}
+
+Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data,
+                                  const std::vector<ConfigLoads>& loads, const Fit& fit, int c,
+                                  const IdentifyOptions& opt) {
+  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
+  return pr.CandidateColumns(StateOf(pr, fit), c);
+}
+
+namespace {
+
+// `fit` without its e-th effect, the others at their values (no refit).
+Fit Remove(const EffectModel& em, const Fit& fit, size_t e, Eigen::VectorXd* theta_e) {
+  Fit rest = fit;
+  rest.active.clear();
+  rest.basis.clear();
+  std::vector<double> th;
+  int off = 0;
+  for (size_t k = 0; k < fit.active.size(); ++k) {
+    const int np = em.candidates()[fit.active[k]].num_params;
+    if (k != e) {
+      rest.active.push_back(fit.active[k]);
+      rest.basis.push_back(k < fit.basis.size() ? fit.basis[k] : Eigen::MatrixXd());
+      for (int i = 0; i < np; ++i) th.push_back(fit.theta[off + i]);
+    } else {
+      *theta_e = fit.theta.segment(off, np);
+    }
+    off += np;
+  }
+  rest.theta = Eigen::Map<const Eigen::VectorXd>(th.data(), th.size());
+  return rest;
+}
+
+// Minimum-norm parameters of R reproducing d, and the parameter directions R does not see.
+EquivalentMember Member(const EffectModel& em, int c, const Eigen::MatrixXd& R,
+                        const Eigen::VectorXd& d) {
+  EquivalentMember m;
+  m.candidate = c;
+  m.name = em.candidates()[c].Name();
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(R, Eigen::ComputeThinU | Eigen::ComputeFullV);
+  const Eigen::VectorXd& s = svd.singularValues();
+  const double cut = s.size() ? 1e-3 * s[0] : 0.0;
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(R.cols());
+  for (int i = 0; i < s.size(); ++i) {
+    if (s[i] > cut) x += svd.matrixV().col(i) * (svd.matrixU().col(i).dot(d) / s[i]);
+  }
+  m.value.assign(x.data(), x.data() + x.size());
+  for (int i = 0; i < R.cols(); ++i) {
+    if (i >= s.size() || s[i] <= cut) {
+      const Eigen::VectorXd v = svd.matrixV().col(i);
+      m.unobservable.emplace_back(v.data(), v.data() + v.size());
+    }
+  }
+  return m;
+}
+
+}  // namespace
+
+void FindEquivalents(const EffectModel& em, const DataSet& data,
+                     const std::vector<ConfigLoads>& loads, const Fit& fit,
+                     const std::vector<int>& candidates, const IdentifyOptions& opt,
+                     IdentifyResult* result) {
+  for (size_t e = 0; e < fit.active.size(); ++e) {
+    const int ce = fit.active[e];
+    Eigen::VectorXd theta_e;
+    const Fit rest = Remove(em, fit, e, &theta_e);
+    const Projector proj(FitJacobian(em, data, loads, rest, opt));
+    const Eigen::MatrixXd Re = proj.Apply(CandidateJacobian(em, data, loads, rest, ce, opt));
+    const Eigen::VectorXd d = Re * theta_e;
+    EquivalenceSet set;
+    set.effect = static_cast<int>(e);
+    set.correction_rms = std::sqrt(d.squaredNorm() / std::max<Eigen::Index>(1, d.size()));
+    set.members.push_back(Member(em, ce, Re, d));
+    const bool generic = em.candidates()[ce].generic_geometry;
+    if (d.norm() > 0) {
+      for (int c : candidates) {
+        if (c == ce || std::find(fit.active.begin(), fit.active.end(), c) != fit.active.end()) {
+          continue;
+        }
+        // A full joint-origin recalibration can make any geometric correction at its joint;
+        // naming it beside every geometric finding says nothing.
+        if (em.candidates()[c].generic_geometry && !generic) continue;
+        const Eigen::MatrixXd Rc = proj.Apply(CandidateJacobian(em, data, loads, rest, c, opt));
+        if (!(Rc.norm() > 0)) continue;
+        const Eigen::VectorXd pd = Rc * Rc.colPivHouseholderQr().solve(d);
+        if (pd.norm() / d.norm() > opt.ambiguity_cos) set.members.push_back(Member(em, c, Rc, d));
+      }
+    }
+    std::string name;
+    std::vector<std::string> names;
+    for (const EquivalentMember& m : set.members) {
+      name += (name.empty() ? "" : " | ") + m.name;
+      names.push_back(m.name);
+    }
+    set.name = name;
+    if (names.size() > 1) result->indistinguishable.push_back(names);
+    result->equivalence.push_back(set);
+  }
+}
+
+void FindUnidentifiable(const EffectModel& em, const DataSet& data,
+                        const std::vector<ConfigLoads>& loads, const Fit& fit,
+                        const std::vector<int>& candidates, const IdentifyOptions& opt,
+                        IdentifyResult* result) {
+  const Projector proj(FitJacobian(em, data, loads, fit, opt));
+  for (int c : candidates) {
+    if (std::find(fit.active.begin(), fit.active.end(), c) != fit.active.end()) continue;
+    bool member = false;
+    for (const EquivalenceSet& s : result->equivalence) {
+      for (const EquivalentMember& m : s.members) member = member || m.candidate == c;
+    }
+    if (member) continue;
+    double rel = 0.0;
+    const Eigen::MatrixXd B =
+        ObservableBasis(CandidateJacobian(em, data, loads, fit, c, opt), proj, opt.rank_tol, &rel);
+    if (B.cols() > 0) continue;
+    result->unidentifiable.push_back(em.candidates()[c].Name());
+    char line[256];
+    std::snprintf(line, sizeof(line),
+                  "%s: unidentifiable (%.2g of its sensitivity lies outside the chosen effects "
+                  "and group points)",
+                  em.candidates()[c].Name().c_str(), rel);
+    result->steps.push_back(line);
+  }
+}
+
+}  // namespace flexbench::identify

@@ -1,0 +1,305 @@
+#include "scenarios/identify/problem.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/QR>
+#include <algorithm>
+#include <cmath>
+
+#include "estimators/lie/so3.h"
+
+namespace flexbench::identify {
+
+int NumTheta(const EffectModel& em, const std::vector<int>& active) {
+  int n = 0;
+  for (int i : active) n += em.candidates()[i].num_params;
+  return n;
+}
+
+double Bic(double rss, int n, int k) {
+  return n * std::log(std::max(rss, 1e-300) / n) + k * std::log(static_cast<double>(n));
+}
+
+int RowDim(const Observation& o) {
+  switch (o.type) {
+    case ObservationType::kPose:
+      return 6;
+    case ObservationType::kPixel:
+      return 2;
+    default:
+      return 3;
+  }
+}
+
+lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vector<int>& active,
+                    const double* theta) {
+  lie::SE3 T = data.camera.T_base_cam;
+  for (int i : active) {
+    const Candidate& c = em.candidates()[i];
+    if (c.type == EffectType::kCameraOffset) {
+      Vec6 xi;
+      for (int k = 0; k < 6; ++k) xi[k] = theta[k];
+      T = T * lie::SE3::Exp(xi);
+    }
+    theta += c.num_params;
+  }
+  return T;
+}
+
+Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& p_base) {
+  const Vec3 p = T_base_cam.rotation().transpose() * (p_base - T_base_cam.translation());
+  const double z = std::max(p.z(), 1e-6);
+  return Eigen::Vector2d(cam.fx * p.x() / z + cam.cx, cam.fy * p.y() / z + cam.cy);
+}
+
+Problem::Problem(const EffectModel& em, const DataSet& data,
+                 const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
+                 const std::vector<Eigen::MatrixXd>& basis, const IdentifyOptions& opt)
+    : em_(em), data_(data), loads_(loads), active_(active), opt_(opt) {
+  basis_.resize(active.size());
+  for (size_t e = 0; e < active.size(); ++e) {
+    const int np = em.candidates()[active[e]].num_params;
+    basis_[e] = e < basis.size() && basis[e].size() > 0 ? basis[e]
+                                                         : Eigen::MatrixXd::Identity(np, np);
+    num_alpha_ += static_cast<int>(basis_[e].cols());
+    num_theta_ += np;
+  }
+  offset_.reserve(data.rows.size());
+  int o = 0;
+  for (const Observation& r : data.rows) {
+    offset_.push_back(o);
+    o += RowDim(r);
+  }
+  rows_dim_ = o;
+}
+
+Eigen::VectorXd Problem::Theta(const Eigen::VectorXd& x) const {
+  Eigen::VectorXd theta(num_theta_);
+  int a = 0, t = 0;
+  for (const Eigen::MatrixXd& B : basis_) {
+    theta.segment(t, B.rows()) = B * x.segment(a, B.cols());
+    a += static_cast<int>(B.cols());
+    t += static_cast<int>(B.rows());
+  }
+  return theta;
+}
+
+Eigen::VectorXd Problem::Alpha(const Eigen::VectorXd& theta) const {
+  Eigen::VectorXd alpha = Eigen::VectorXd::Zero(num_alpha_);
+  int a = 0, t = 0;
+  for (const Eigen::MatrixXd& B : basis_) {
+    if (t + B.rows() <= theta.size() && B.cols() > 0) {
+      alpha.segment(a, B.cols()) =
+          B.colPivHouseholderQr().solve(theta.segment(t, B.rows()));
+    }
+    a += static_cast<int>(B.cols());
+    t += static_cast<int>(B.rows());
+  }
+  return alpha;
+}
+
+void Problem::Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) const {
+  EffectModel::Workspace ws = em_.MakeWorkspace();
+  T->resize(data_.rows.size());
+  for (size_t r = 0; r < data_.rows.size(); ++r) {
+    (*T)[r] = em_.PredictPose(data_.rows[r].q, loads_[r], active_, theta.data(), ws);
+  }
+}
+
+Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                                     const std::vector<int>& active) const {
+  EffectModel::Workspace ws = em_.MakeWorkspace();
+  Eigen::VectorXd r(num_residuals());
+  const lie::SE3 T_base_cam =
+      data_.camera.present ? CameraPose(em_, data_, active, theta.data()) : lie::SE3();
+  const auto group_point = [&](int g) -> Vec3 { return x.segment<3>(num_alpha_ + 3 * g); };
+  for (size_t i = 0; i < data_.rows.size(); ++i) {
+    const Observation& o = data_.rows[i];
+    const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws);
+    const int k = offset_[i];
+    const Vec3 p = T.translation();
+    switch (o.type) {
+      case ObservationType::kGroup:
+        r.segment<3>(k) = (p - group_point(o.group)) / opt_.point_std_m;
+        break;
+      case ObservationType::kPoint:
+        r.segment<3>(k) = (p - o.p_base) / opt_.point_std_m;
+        break;
+      case ObservationType::kPose:
+        r.segment<3>(k) = (p - o.p_base) / opt_.point_std_m;
+        r.segment<3>(k + 3) =
+            lie::SO3Log(o.R_base.transpose() * T.rotation()) / opt_.rotation_std_rad;
+        break;
+      case ObservationType::kPixel:
+        r.segment<2>(k) = (Project(data_.camera, T_base_cam, p) - o.uv) / opt_.pixel_std_px;
+        break;
+    }
+  }
+  for (size_t k = 0; k < data_.distances.size(); ++k) {
+    const GroupDistance& d = data_.distances[k];
+    r[rows_dim_ + k] =
+        ((group_point(d.a) - group_point(d.b)).norm() - d.distance_m) / opt_.distance_std_m;
+  }
+  return r;
+}
+
+Eigen::VectorXd Problem::Residuals(const Eigen::VectorXd& x) const {
+  return ResidualsAt(x, Theta(x), active_);
+}
+
+Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(num_residuals(), num_params());
+  int col = 0, t = 0;
+  const Eigen::VectorXd theta = Theta(x);
+  for (size_t e = 0; e < active_.size(); ++e) {
+    const Eigen::MatrixXd& B = basis_[e];
+    const double step = em_.candidates()[active_[e]].step;
+    for (int k = 0; k < B.cols(); ++k) {
+      Eigen::VectorXd tp = theta, tm = theta;
+      tp.segment(t, B.rows()) += step * B.col(k);
+      tm.segment(t, B.rows()) -= step * B.col(k);
+      J.col(col + k) = (ResidualsAt(x, tp, active_) - ResidualsAt(x, tm, active_)) / (2 * step);
+    }
+    col += static_cast<int>(B.cols());
+    t += static_cast<int>(B.rows());
+  }
+  for (size_t r = 0; r < data_.rows.size(); ++r) {
+    if (data_.rows[r].type == ObservationType::kGroup) {
+      J.block<3, 3>(offset_[r], num_alpha_ + 3 * data_.rows[r].group) =
+          -Mat3::Identity() / opt_.point_std_m;
+    }
+  }
+  for (size_t k = 0; k < data_.distances.size(); ++k) {
+    const GroupDistance& d = data_.distances[k];
+    const Vec3 diff = x.segment<3>(num_alpha_ + 3 * d.a) - x.segment<3>(num_alpha_ + 3 * d.b);
+    const double len = diff.norm();
+    if (len < 1e-12) continue;
+    const Eigen::RowVector3d u = diff.transpose() / (len * opt_.distance_std_m);
+    const int row = rows_dim_ + static_cast<int>(k);
+    J.block<1, 3>(row, num_alpha_ + 3 * d.a) += u;
+    J.block<1, 3>(row, num_alpha_ + 3 * d.b) -= u;
+  }
+  return J;
+}
+
+Eigen::MatrixXd Problem::CandidateColumns(const Eigen::VectorXd& x, int c) const {
+  const Candidate& cand = em_.candidates()[c];
+  std::vector<int> act = active_;
+  act.push_back(c);
+  Eigen::VectorXd theta(num_theta_ + cand.num_params);
+  theta << Theta(x), Eigen::VectorXd::Zero(cand.num_params);
+  Eigen::MatrixXd out(num_residuals(), cand.num_params);
+  for (int k = 0; k < cand.num_params; ++k) {
+    Eigen::VectorXd tp = theta, tm = theta;
+    tp[num_theta_ + k] += cand.step;
+    tm[num_theta_ + k] -= cand.step;
+    out.col(k) = (ResidualsAt(x, tp, act) - ResidualsAt(x, tm, act)) / (2 * cand.step);
+  }
+  return out;
+}
+
+Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
+  Eigen::VectorXd x(pr.num_params());
+  x.head(pr.num_alpha()) = pr.Alpha(fit.theta);
+  for (size_t g = 0; g < fit.group_points.size(); ++g) {
+    x.segment<3>(pr.num_alpha() + 3 * g) = fit.group_points[g];
+  }
+  return x;
+}
+
+Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+               const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
+               const Eigen::VectorXd& init, const IdentifyOptions& opt) {
+  const Problem pr(em, data, loads, active, basis, opt);
+  const int G = static_cast<int>(data.groups.size());
+  const int nt = pr.num_theta();
+  Eigen::VectorXd theta0 = Eigen::VectorXd::Zero(nt);
+  const int n_init = std::min<int>(nt, static_cast<int>(init.size()));
+  theta0.head(n_init) = init.head(n_init);
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(pr.num_params());
+  x.head(pr.num_alpha()) = pr.Alpha(theta0);
+  {
+    // Group points start at their rows' mean.
+    std::vector<lie::SE3> T;
+    pr.Poses(pr.Theta(x), &T);
+    std::vector<Vec3> points(T.size());
+    for (size_t r = 0; r < T.size(); ++r) points[r] = T[r].translation();
+    const std::vector<Vec3> mean = GroupMeans(data, points);
+    for (int g = 0; g < G; ++g) x.segment<3>(pr.num_alpha() + 3 * g) = mean[g];
+  }
+  Eigen::VectorXd r = pr.Residuals(x);
+  double rss = r.squaredNorm();
+  double lambda = 1e-3;
+  for (int it = 0; it < opt.max_iterations; ++it) {
+    const Eigen::MatrixXd J = pr.Jacobian(x);
+    const Eigen::MatrixXd A = J.transpose() * J;
+    const Eigen::VectorXd g = J.transpose() * r;
+    bool improved = false;
+    for (int tries = 0; tries < 12; ++tries) {
+      Eigen::MatrixXd Ad = A;
+      for (int k = 0; k < A.rows(); ++k) Ad(k, k) += lambda * std::max(A(k, k), 1e-12);
+      const Eigen::VectorXd dx = -Ad.ldlt().solve(g);
+      if (!dx.allFinite()) {
+        lambda *= 10;
+        continue;
+      }
+      const Eigen::VectorXd xn = x + dx;
+      const Eigen::VectorXd rn = pr.Residuals(xn);
+      const double rss_n = rn.squaredNorm();
+      if (std::isfinite(rss_n) && rss_n < rss) {
+        const double gain = rss - rss_n;
+        x = xn;
+        r = rn;
+        rss = rss_n;
+        lambda = std::max(lambda / 3.0, 1e-12);
+        improved = gain > 1e-12 * rss;
+        break;
+      }
+      lambda *= 4.0;
+    }
+    if (!improved) break;
+  }
+  Fit f;
+  f.active = active;
+  for (size_t e = 0; e < active.size(); ++e) f.basis.push_back(pr.basis(e));
+  f.theta = pr.Theta(x);
+  f.group_points.resize(G);
+  for (int g = 0; g < G; ++g) f.group_points[g] = x.segment<3>(pr.num_alpha() + 3 * g);
+  f.rss = rss;
+  f.num_residuals = pr.num_residuals();
+  f.num_params = pr.num_params();
+  f.bic = Bic(rss, f.num_residuals, pr.num_params());
+  return f;
+}
+
+Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+               const Fit& fit, size_t e, const IdentifyOptions& opt) {
+  std::vector<int> rest;
+  std::vector<Eigen::MatrixXd> basis;
+  std::vector<double> init;
+  int off = 0;
+  for (size_t k = 0; k < fit.active.size(); ++k) {
+    const int np = em.candidates()[fit.active[k]].num_params;
+    if (k != e) {
+      rest.push_back(fit.active[k]);
+      basis.push_back(k < fit.basis.size() ? fit.basis[k] : Eigen::MatrixXd());
+      for (int i = 0; i < np; ++i) init.push_back(fit.theta[off + i]);
+    }
+    off += np;
+  }
+  return FitEffects(em, data, loads, rest, basis,
+                    Eigen::Map<const Eigen::VectorXd>(init.data(), init.size()), opt);
+}
+
+Fit FitWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+            const Fit& fit, int c, const Eigen::MatrixXd& basis_c, const IdentifyOptions& opt) {
+  std::vector<int> act = fit.active;
+  act.push_back(c);
+  std::vector<Eigen::MatrixXd> basis = fit.basis;
+  basis.resize(fit.active.size());
+  basis.push_back(basis_c);
+  Eigen::VectorXd init = Eigen::VectorXd::Zero(NumTheta(em, act));
+  init.head(fit.theta.size()) = fit.theta;
+  return FitEffects(em, data, loads, act, basis, init, opt);
+}
+
+}  // namespace flexbench::identify

@@ -1,0 +1,92 @@
+// The least-squares problem behind identification: whitened residuals of a data set under a
+// declared chain augmented by a set of candidate effects, and its Levenberg-Marquardt fit.
+//
+// Unknowns x = [alpha; group points]. Each active effect e moves its candidate's parameters only
+// along the columns of a basis B_e (theta_e = B_e alpha_e): the identity when every direction of
+// the candidate is observable, fewer columns when some direction lies in the span of the other
+// unknowns (selection keeps only the observable directions instead of dropping the candidate).
+#pragma once
+#include <Eigen/Core>
+#include <vector>
+
+#include "scenarios/identify/identify.h"
+
+namespace flexbench::identify {
+
+// Number of parameters of the candidates `active` (sum of their num_params).
+int NumTheta(const EffectModel& em, const std::vector<int>& active);
+
+// BIC = N ln(RSS / N) + k ln N.
+double Bic(double rss, int n, int k);
+
+// Residual entries of one row: 3 (point, group), 6 (pose), 2 (pixel).
+int RowDim(const Observation& o);
+
+// Pixel of a base-frame point; far off when behind the camera, so a fit never goes there.
+Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& p_base);
+
+// The camera with the active camera_offset (if any) applied.
+lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vector<int>& active,
+                    const double* theta);
+
+class Problem {
+ public:
+  // `basis`: per active effect its B_e (num_params x m_e); empty: identity for all.
+  Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+          const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
+          const IdentifyOptions& opt);
+
+  int num_alpha() const { return num_alpha_; }
+  int num_theta() const { return num_theta_; }
+  int num_params() const { return num_alpha_ + 3 * static_cast<int>(data_.groups.size()); }
+  int num_residuals() const { return rows_dim_ + static_cast<int>(data_.distances.size()); }
+  int row_offset(size_t r) const { return offset_[r]; }
+  const Eigen::MatrixXd& basis(size_t e) const { return basis_[e]; }
+
+  // theta (full candidate parameters) of x.
+  Eigen::VectorXd Theta(const Eigen::VectorXd& x) const;
+  // alpha that reproduces theta best (least squares in each basis).
+  Eigen::VectorXd Alpha(const Eigen::VectorXd& theta) const;
+
+  void Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) const;
+  Eigen::VectorXd Residuals(const Eigen::VectorXd& x) const;
+  // Central differences for alpha, exact columns for the group points and distances.
+  Eigen::MatrixXd Jacobian(const Eigen::VectorXd& x) const;
+  // Sensitivity (central differences, whitened) of the row residuals to the full parameters of
+  // candidate `c` added to the model at zero, at state x.
+  Eigen::MatrixXd CandidateColumns(const Eigen::VectorXd& x, int c) const;
+
+ private:
+  Eigen::VectorXd ResidualsAt(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                              const std::vector<int>& active) const;
+
+  const EffectModel& em_;
+  const DataSet& data_;
+  const std::vector<ConfigLoads>& loads_;
+  std::vector<int> active_;
+  std::vector<Eigen::MatrixXd> basis_;
+  const IdentifyOptions& opt_;
+  int num_alpha_ = 0;
+  int num_theta_ = 0;
+  std::vector<int> offset_;
+  int rows_dim_ = 0;
+};
+
+// The state vector x of a fit (alpha, then group points).
+Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit);
+
+// Fits `active` (in the directions of `basis`, empty = all) plus the group points by
+// Levenberg-Marquardt from `init` (theta; may be empty or shorter).
+Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+               const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
+               const Eigen::VectorXd& init, const IdentifyOptions& options);
+
+// The same fit with `fit`'s e-th effect removed (the others start from their values).
+Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+               const Fit& fit, size_t e, const IdentifyOptions& opt);
+
+// The same fit with candidate c added in the directions `basis_c` (from zero).
+Fit FitWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+            const Fit& fit, int c, const Eigen::MatrixXd& basis_c, const IdentifyOptions& opt);
+
+}  // namespace flexbench::identify

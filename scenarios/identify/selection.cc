@@ -1,0 +1,204 @@
+#include "scenarios/identify/selection.h"
+
+#include <algorithm>
+#include <cstdarg>
+#include <cstdio>
+#include <cmath>
+#include <limits>
+
+#include "scenarios/identify/equivalence.h"
+#include "scenarios/identify/problem.h"
+
+namespace flexbench::identify {
+namespace {
+
+std::string Fmt(const char* format, ...) __attribute__((format(printf, 1, 2)));
+std::string Fmt(const char* format, ...) {
+  char line[512];
+  va_list args;
+  va_start(args, format);
+  std::vsnprintf(line, sizeof(line), format, args);
+  va_end(args);
+  return line;
+}
+
+bool Contains(const std::vector<int>& v, int x) {
+  return std::find(v.begin(), v.end(), x) != v.end();
+}
+
+// Whether `cv` improves on `cv_cur` by the required share (always, without cross-validation).
+bool CvLower(const IdentifyOptions& opt, double cv, double cv_cur) {
+  if (!opt.cross_validation) return true;
+  return cv < cv_cur * (1.0 - opt.cv_min_gain);
+}
+
+struct Trial {
+  int c;
+  Fit fit;
+};
+
+// Screened fits of every pool candidate beside `cur`, best BIC first.
+std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
+                                    const std::vector<int>& pool) {
+  const Projector proj(FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt));
+  IdentifyOptions screen = ctx.opt;
+  screen.max_iterations = 4;
+  std::vector<Trial> trials;
+  for (int c : pool) {
+    if (Contains(cur.active, c)) continue;
+    double rel = 0.0;
+    const Eigen::MatrixXd B = ObservableBasis(
+        CandidateJacobian(ctx.em, ctx.data, ctx.loads, cur, c, ctx.opt), proj, ctx.opt.rank_tol,
+        &rel);
+    if (B.cols() == 0) continue;
+    // Never more unknowns than residuals.
+    if (cur.num_params + B.cols() >= cur.num_residuals) continue;
+    Fit f = FitWith(ctx.em, ctx.data, ctx.loads, cur, c, B, screen);
+    if (std::isfinite(f.bic)) trials.push_back({c, std::move(f)});
+  }
+  std::stable_sort(trials.begin(), trials.end(), [](const Trial& a, const Trial& b) {
+    if (a.fit.bic != b.fit.bic) return a.fit.bic < b.fit.bic;
+    return a.fit.num_params < b.fit.num_params;
+  });
+  return trials;
+}
+
+// The best of the screened trials that passes BIC, bounds and held-out error; -1 when none.
+int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
+              std::vector<Trial>* trials, double* cv_best) {
+  int best = -1;
+  *cv_best = std::numeric_limits<double>::infinity();
+  int tried = 0;
+  for (size_t k = 0; k < trials->size() && tried < ctx.opt.cv_trials; ++k) {
+    Trial& t = (*trials)[k];
+    if (t.fit.bic - cur.bic > -ctx.opt.bic_threshold) break;
+    ++tried;
+    t.fit = FitEffects(ctx.em, ctx.data, ctx.loads, t.fit.active, t.fit.basis, t.fit.theta,
+                       ctx.opt);
+    const std::string name = ctx.em.candidates()[t.c].Name();
+    const std::vector<std::string> out = BoundViolations(ctx.em, t.fit);
+    if (!out.empty()) {
+      ctx.log->push_back("reject " + name + ": outside its physical bounds (" + out[0] + ")");
+      continue;
+    }
+    const double cv = CvError(ctx, t.fit);
+    if (!CvLower(ctx.opt, cv, cv_cur)) {
+      ctx.log->push_back(Fmt("not kept %s: BIC %.1f -> %.1f but held-out error %.4g -> %.4g",
+                             name.c_str(), cur.bic, t.fit.bic, cv_cur, cv));
+      continue;
+    }
+    if (best < 0 || (ctx.opt.cross_validation && cv < *cv_best)) {
+      best = static_cast<int>(k);
+      *cv_best = cv;
+    }
+  }
+  return best;
+}
+
+// Drops earlier effects (all but the last) that neither BIC nor the held-out error needs.
+Fit BackwardStep(const SelectionContext& ctx, Fit cur, double* cv_cur) {
+  while (cur.active.size() > 1) {
+    size_t worst = 0;
+    Fit best_without;
+    double best_bic = std::numeric_limits<double>::infinity();
+    for (size_t e = 0; e + 1 < cur.active.size(); ++e) {
+      Fit w = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, ctx.opt);
+      if (w.bic < best_bic) best_bic = w.bic, best_without = std::move(w), worst = e;
+    }
+    if (!std::isfinite(best_bic) || best_bic - cur.bic >= ctx.opt.bic_threshold) break;
+    const double cv = CvError(ctx, best_without);
+    if (ctx.opt.cross_validation && cv > *cv_cur * (1.0 + ctx.opt.cv_min_gain)) break;
+    ctx.log->push_back(Fmt("drop %s: BIC %.1f -> %.1f without it",
+                           ctx.em.candidates()[cur.active[worst]].Name().c_str(), cur.bic,
+                           best_bic));
+    cur = std::move(best_without);
+    *cv_cur = cv;
+  }
+  return cur;
+}
+
+// Swaps a chosen effect for a pool candidate that the data clearly prefers.
+Fit SwapStep(const SelectionContext& ctx, Fit cur, const std::vector<int>& pool, double* cv_cur) {
+  for (bool swapped = true; swapped;) {
+    swapped = false;
+    for (size_t e = 0; e < cur.active.size() && !swapped; ++e) {
+      const Fit without = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, ctx.opt);
+      std::vector<int> others;
+      for (int c : pool) {
+        if (c != cur.active[e]) others.push_back(c);
+      }
+      std::vector<Trial> trials = ScreenCandidates(ctx, without, others);
+      if (trials.empty() || trials[0].fit.bic >= cur.bic - ctx.opt.ambiguity_bic) continue;
+      Fit best = FitEffects(ctx.em, ctx.data, ctx.loads, trials[0].fit.active,
+                            trials[0].fit.basis, trials[0].fit.theta, ctx.opt);
+      if (best.bic >= cur.bic - ctx.opt.ambiguity_bic) continue;
+      if (!BoundViolations(ctx.em, best).empty()) continue;
+      const double cv = CvError(ctx, best);
+      if (ctx.opt.cross_validation && cv > *cv_cur) continue;
+      ctx.log->push_back(Fmt("swap %s for %s: BIC %.1f -> %.1f",
+                             ctx.em.candidates()[cur.active[e]].Name().c_str(),
+                             ctx.em.candidates()[trials[0].c].Name().c_str(), cur.bic, best.bic));
+      cur = std::move(best);
+      *cv_cur = cv;
+      swapped = true;
+    }
+  }
+  return cur;
+}
+
+}  // namespace
+
+std::vector<std::string> BoundViolations(const EffectModel& em, const Fit& fit) {
+  std::vector<std::string> out;
+  int off = 0;
+  for (int c : fit.active) {
+    const Candidate& cand = em.candidates()[c];
+    for (int k = 0; k < cand.num_params; ++k) {
+      const double v = fit.theta[off + k];
+      const double lo = k < static_cast<int>(cand.lower.size()) ? cand.lower[k] : -HUGE_VAL;
+      const double hi = k < static_cast<int>(cand.upper.size()) ? cand.upper[k] : HUGE_VAL;
+      if (!(v >= lo && v <= hi)) {
+        out.push_back(Fmt("%s[%d] = %.4g outside [%.4g, %.4g] %s", cand.Name().c_str(), k, v, lo,
+                          hi, cand.unit.c_str()));
+      }
+    }
+    off += cand.num_params;
+  }
+  return out;
+}
+
+double CvError(const SelectionContext& ctx, const Fit& fit) {
+  if (!ctx.opt.cross_validation) return std::nan("");
+  return CrossValidate(ctx.em, ctx.data, ctx.loads, ctx.folds, fit, ctx.opt);
+}
+
+Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
+                  bool backward, double* cv, bool swap) {
+  Fit cur = start;
+  for (int round = 0; static_cast<int>(cur.active.size()) < ctx.opt.max_effects &&
+                      round < 3 * ctx.opt.max_effects;
+       ++round) {
+    std::vector<Trial> trials = ScreenCandidates(ctx, cur, pool);
+    if (trials.empty()) break;
+    double cv_best = 0.0;
+    const int k = PickTrial(ctx, cur, *cv, &trials, &cv_best);
+    if (k < 0) {
+      ctx.log->push_back(Fmt("stop: best next %s changes BIC by %.1f%s",
+                             ctx.em.candidates()[trials[0].c].Name().c_str(),
+                             trials[0].fit.bic - cur.bic,
+                             ctx.opt.cross_validation ? "; none lowers the held-out error" : ""));
+      break;
+    }
+    const Trial& t = trials[k];
+    ctx.log->push_back(Fmt("add %s: BIC %.1f -> %.1f, RSS %.4g -> %.4g, held-out %.4g -> %.4g",
+                           ctx.em.candidates()[t.c].Name().c_str(), cur.bic, t.fit.bic, cur.rss,
+                           t.fit.rss, *cv, cv_best));
+    cur = t.fit;
+    *cv = cv_best;
+    if (backward) cur = BackwardStep(ctx, std::move(cur), cv);
+  }
+  if (backward && swap) cur = SwapStep(ctx, std::move(cur), pool, cv);
+  return cur;
+}
+
+}  // namespace flexbench::identify

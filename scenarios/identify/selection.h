@@ -1,0 +1,44 @@
+// Choosing the effects: forward selection screened by BIC and checked on held-out data.
+//
+// Each round fits every eligible candidate (its observable directions only) beside the chosen
+// ones, ranks them by BIC = N ln(RSS/N) + k ln N, and takes the best few that lower BIC by more
+// than the threshold to cross-validation (cross_validation.h): the candidate kept is the one
+// with the lowest held-out error, and only if that error drops by more than `cv_min_gain`
+// relative to the current model's; a fit outside a candidate's physical bounds is rejected and
+// logged. After each addition, an earlier effect that neither BIC nor the held-out error still
+// needs goes back to the pool. Nothing is ever set aside for good: a candidate whose
+// sensitivity a chosen effect covers is simply unobservable while that effect stays, and comes
+// back when it leaves. At the end, a chosen effect is swapped for another candidate when the
+// swap lowers BIC by more than `ambiguity_bic` without raising the held-out error.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "scenarios/identify/cross_validation.h"
+#include "scenarios/identify/identify.h"
+
+namespace flexbench::identify {
+
+struct SelectionContext {
+  const EffectModel& em;
+  const DataSet& data;
+  const std::vector<ConfigLoads>& loads;
+  const Folds& folds;
+  const IdentifyOptions& opt;
+  std::vector<std::string>* log;
+};
+
+// Parameters of `fit` outside their candidates' bounds, as "name[k] = v outside [lo, hi]";
+// empty when all are inside.
+std::vector<std::string> BoundViolations(const EffectModel& em, const Fit& fit);
+
+// Held-out error of `fit` (NaN when cross-validation is off).
+double CvError(const SelectionContext& ctx, const Fit& fit);
+
+// Selection from `start` over `pool`. `backward`: earlier effects may leave again, and the
+// swap step runs at the end when `swap`. `*cv` holds the current model's held-out error on
+// entry and on return.
+Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
+                  bool backward, double* cv, bool swap = true);
+
+}  // namespace flexbench::identify
