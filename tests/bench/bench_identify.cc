@@ -100,25 +100,29 @@ BENCHMARK(BM_Predict);
 
 // Issue 21 ("point-format CSVs scale badly"): reading a point-format CSV of N rows (the file
 // is written once, outside the timing). Linear: about 1 us a row.
-void BM_ReadPointCsv(benchmark::State& state) {
+// Arg 1: a `set` label of its own on every row (labels are looked up once a row).
+void ReadPointCsv(benchmark::State& state, bool set_per_row) {
   Setup& s = Rover();
   const int rows = static_cast<int>(state.range(0));
   const std::string path = (std::filesystem::temp_directory_path() /
-                            ("flexbench_bench_points_" + std::to_string(rows) + ".csv"))
+                            ("flexbench_bench_points_" + std::to_string(rows) +
+                             (set_per_row ? "_sets" : "") + ".csv"))
                                .string();
   {
     std::ofstream out(path);
     for (const std::string& j : s.chain.q_joints) out << j << ",";
-    out << "x,y,z\n";
+    out << "x,y,z" << (set_per_row ? ",set" : "") << "\n";
     std::mt19937_64 rng(2);
     std::uniform_real_distribution<double> u(-1.2, 1.2);
     char buf[64];
     for (int r = 0; r < rows; ++r) {
       for (size_t k = 0; k < s.chain.q_joints.size() + 3; ++k) {
         std::snprintf(buf, sizeof(buf), "%.12g%s", u(rng),
-                      k + 1 < s.chain.q_joints.size() + 3 ? "," : "\n");
+                      k + 1 < s.chain.q_joints.size() + 3 ? "," : "");
         out << buf;
       }
+      if (set_per_row) out << ",session_" << r;
+      out << "\n";
     }
   }
   for (auto _ : state) {
@@ -129,7 +133,14 @@ void BM_ReadPointCsv(benchmark::State& state) {
   std::filesystem::remove(path);
   state.SetComplexityN(rows);
 }
+void BM_ReadPointCsv(benchmark::State& state) { ReadPointCsv(state, false); }
+void BM_ReadPointCsvSetPerRow(benchmark::State& state) { ReadPointCsv(state, true); }
 BENCHMARK(BM_ReadPointCsv)
+    ->RangeMultiplier(10)
+    ->Range(100, 10000)
+    ->Unit(benchmark::kMillisecond)
+    ->Complexity();
+BENCHMARK(BM_ReadPointCsvSetPerRow)
     ->RangeMultiplier(10)
     ->Range(100, 10000)
     ->Unit(benchmark::kMillisecond)
