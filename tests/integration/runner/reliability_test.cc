@@ -180,6 +180,20 @@ TEST(Reliability, CheckGatesWithoutGatesAndGateTyposAreBadInput) {
   EXPECT_FALSE(fs::exists(tmp.path() / "out"));
 }
 
+// Found by mutation testing: a huge detector setting crashed the AprilTag library (rc 139).
+TEST(Reliability, AbsurdDetectorSettingsAreBadInput) {
+  TempDir tmp;
+  for (const char* setting : {"decimate: 1.1e300", "decimate: 500", "sigma: 1e300",
+                              "threads: 100000"}) {
+    const fs::path s = tmp.path() / "s.yaml";
+    WriteFile(s, SmokeYaml(std::string("detector:\n  family: tag36h11\n  ") + setting + "\n"));
+    const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+    EXPECT_EQ(r.exit_code, 2) << setting << "\n" << r.err;
+    EXPECT_NE(LastLine(r.err).find("detector."), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+  }
+}
+
 TEST(Reliability, ScenarioNameCannotLeaveTheOutputFolder) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
