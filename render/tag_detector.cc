@@ -19,18 +19,28 @@ struct TagDetector::Impl {
 
 TagDetector::TagDetector(const DetectorSettings& settings)
     : impl_(std::make_unique<Impl>()), settings_(settings) {
-  if (!(settings.decimate >= 1.0)) throw InputError("detector.decimate: must be >= 1");
-  if (!(settings.sigma >= 0.0)) throw InputError("detector.sigma: must be >= 0");
-  if (settings.threads < 1) throw InputError("detector.threads: must be >= 1");
-  if (!(settings.min_edge_px >= 0.0)) throw InputError("detector.min_edge_px: must be >= 0");
+  // Upper bounds too: the AprilTag library crashes on a decimation that leaves no image or a
+  // blur kernel sized from a huge sigma.
+  if (!(settings.decimate >= 1.0 && settings.decimate <= 8.0)) {
+    throw InputError("detector.decimate: must be in [1, 8]");
+  }
+  if (!(settings.sigma >= 0.0 && settings.sigma <= 10.0)) {
+    throw InputError("detector.sigma: must be in [0, 10]");
+  }
+  if (settings.threads < 1 || settings.threads > 64) {
+    throw InputError("detector.threads: must be in [1, 64]");
+  }
+  if (!(settings.min_edge_px >= 0.0 && settings.min_edge_px <= 1e4)) {
+    throw InputError("detector.min_edge_px: must be in [0, 10000]");
+  }
   if (!(settings.max_view_angle_deg > 0.0 && settings.max_view_angle_deg <= 90.0)) {
     throw InputError("detector.max_view_angle_deg: must be in (0, 90]");
   }
-  if (!(settings.border_margin_px >= 0.0)) {
-    throw InputError("detector.border_margin_px: must be >= 0");
+  if (!(settings.border_margin_px >= 0.0 && settings.border_margin_px <= 1e4)) {
+    throw InputError("detector.border_margin_px: must be in [0, 10000]");
   }
-  if (!(settings.pixel_noise_std >= 0.0)) {
-    throw InputError("detector.pixel_noise_std: must be >= 0");
+  if (!(settings.pixel_noise_std >= 0.0 && settings.pixel_noise_std <= 1e3)) {
+    throw InputError("detector.pixel_noise_std: must be in [0, 1000]");
   }
   impl_->family = MakeFamily(settings.family, "detector.family");
   impl_->detector = apriltag_detector_create();

@@ -1,15 +1,27 @@
 #include "sim/declared_model.h"
 
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 
 namespace flexbench::sim {
 namespace {
 
-Vec3 ReadVec3(const ConfigNode& node) {
+// Standard deviations of a perturbation source are small: beyond these the PPOE linearisation
+// means nothing and covariance compounding overflows (NaN metrics).
+constexpr double kMaxStdDeg = 90.0;
+constexpr double kMaxStdM = 10.0;
+
+Vec3 ReadVec3(const ConfigNode& node, double max) {
   const std::vector<double> v = node.AsDoubleList();
   if (v.size() != 3) node.Fail("expected 3 numbers [x, y, z]");
   for (double x : v) {
     if (x < 0.0) node.Fail("a standard deviation must be >= 0");
+    if (x > max) {
+      char b[32];
+      std::snprintf(b, sizeof(b), "%g", max);
+      node.Fail(std::string("a standard deviation must be at most ") + b);
+    }
   }
   return Vec3(v[0], v[1], v[2]);
 }
@@ -43,6 +55,17 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
         for (int r = 0; r < 6; ++r) {
           for (int c = 0; c < 6; ++c) src.cov(r, c) = v[6 * r + c];
         }
+        const double max_rot = std::pow(kMaxStdDeg * M_PI / 180.0, 2);
+        for (int k = 0; k < 6; ++k) {
+          const double max = k < 3 ? kMaxStdM * kMaxStdM : max_rot;  // [rho; theta]
+          if (!(src.cov(k, k) >= 0.0) || src.cov(k, k) > max) {
+            cov->Fail("diagonal entry " + std::to_string(k) +
+                      " must be >= 0 and at most (10 m)^2 (translation) or (90 deg)^2 (rotation)");
+          }
+        }
+        if (!src.cov.isApprox(src.cov.transpose(), 1e-9) && !src.cov.isZero()) {
+          cov->Fail("covariance must be symmetric");
+        }
       }
       const auto rot = s.Optional("std_rot_deg");
       const auto trans = s.Optional("std_trans_m");
@@ -54,16 +77,17 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
         s.Fail("a source needs std_rot_deg, std_trans_m, about_axis_deg or covariance");
       }
       if (trans) {
-        const Vec3 sd = ReadVec3(*trans);
+        const Vec3 sd = ReadVec3(*trans, kMaxStdM);
         src.cov.block<3, 3>(kTransIdx, kTransIdx) = sd.cwiseAbs2().asDiagonal();
       }
       if (rot) {
-        const Vec3 sd = ReadVec3(*rot) * (M_PI / 180.0);
+        const Vec3 sd = ReadVec3(*rot, kMaxStdDeg) * (M_PI / 180.0);
         src.cov.block<3, 3>(kRotIdx, kRotIdx) = sd.cwiseAbs2().asDiagonal();
       }
       if (axis) {
         const double deg = axis->AsDouble();
         if (deg < 0.0) axis->Fail("a standard deviation must be >= 0");
+        if (deg > kMaxStdDeg) axis->Fail("a standard deviation must be at most 90 deg");
         src.about_axis_rad = deg * M_PI / 180.0;
       }
       d.sources.push_back(src);
@@ -83,6 +107,12 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
       }
       d.identified_effects.push_back(ie);
     }
+  }
+  // Checked last, so format errors come first. (In a scenario's inline `declared:` block the
+  // scenario's own `model` is what is loaded; a path here that names nothing is still an error.)
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(d.model_path, ec)) {
+    model.Fail("model file " + CapForMessage(d.model_path) + " not found");
   }
   return d;
 }

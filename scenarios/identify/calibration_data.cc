@@ -11,6 +11,7 @@
 #include <limits>
 #include <map>
 #include <set>
+#include <unordered_map>
 #include <sstream>
 
 #include "estimators/error.h"
@@ -126,6 +127,24 @@ void WarnGroupsSpanningSets(const DataSet& data, size_t first_row) {
   }
 }
 
+// LabelIndex with a hash index: a linear search per row made reading a file whose rows each
+// carry their own label quadratic in the rows.
+class LabelIndexer {
+ public:
+  explicit LabelIndexer(std::vector<std::string>* labels) : labels_(labels) {
+    for (size_t i = 0; i < labels->size(); ++i) index_.emplace((*labels)[i], static_cast<int>(i));
+  }
+  int operator()(const std::string& label) {
+    const auto [it, added] = index_.emplace(label, static_cast<int>(labels_->size()));
+    if (added) labels_->push_back(label);
+    return it->second;
+  }
+
+ private:
+  std::vector<std::string>* labels_;
+  std::unordered_map<std::string, int> index_;
+};
+
 }  // namespace
 
 int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
@@ -140,6 +159,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
                         DataSet* data) {
   CsvLines csv(path);
   const size_t first_row = data->rows.size();
+  LabelIndexer group_index(&data->groups), set_index(&data->sets);
   std::vector<std::string> header;
   if (!csv.Next(&header)) throw InputError(path + ": no header row");
   const std::string hdr = csv.Where();
@@ -255,10 +275,10 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     } else {
       if (cells[group_col].empty()) throw InputError(where + ": column 'group' is empty");
       o.type = ObservationType::kGroup;
-      o.group = LabelIndex(&data->groups, cells[group_col]);
+      o.group = group_index(cells[group_col]);
     }
     if (set_col >= 0 && cells[set_col].empty()) throw InputError(where + ": column 'set' is empty");
-    o.set = LabelIndex(&data->sets, set_col >= 0 ? cells[set_col] : path);
+    o.set = set_index(set_col >= 0 ? cells[set_col] : path);
     data->rows.push_back(o);
     ++rows;
   }

@@ -194,11 +194,20 @@ int ListScenarios(const std::string& scenarios_dir) {
 namespace flexbench::scenarios {
 namespace {
 
+// A YAML double-quoted scalar holding `s` exactly (control characters escaped).
 std::string Quoted(const std::string& s) {
   std::string q = "\"";
   for (char c : s) {
-    if (c == '"' || c == '\\') q += '\\';
-    q += c;
+    if (c == '"' || c == '\\') {
+      q += '\\';
+      q += c;
+    } else if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
+      char b[8];
+      std::snprintf(b, sizeof(b), "\\x%02x", static_cast<unsigned char>(c));
+      q += b;
+    } else {
+      q += c;
+    }
   }
   return q + "\"";
 }
@@ -279,10 +288,10 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
     line("", "seed: 0");
     line("--declared", "model: " + Quoted(declared.model_path));
     line("--declared", "declared: " + Quoted(declared_abs));
-    line("--calibration",
-         "calibration: {csv: " + Quoted(fs::absolute(o.calibration_csv).string()) + "}");
-    line("--validation",
-         "validation: {csv: " + Quoted(fs::absolute(o.validation_csv).string()) + "}");
+    // CSV paths as given (relative ones resolve against the working folder): rows are named
+    // "<path>:<line>" as the user wrote the path, whatever the working folder's location.
+    line("--calibration", "calibration: {csv: " + Quoted(o.calibration_csv) + "}");
+    line("--validation", "validation: {csv: " + Quoted(o.validation_csv) + "}");
     char num[64];
     std::snprintf(num, sizeof(num), "%.17g", o.point_std_m);
     line("--point-std", std::string("point_std_m: ") + num);

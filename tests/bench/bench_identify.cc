@@ -7,8 +7,12 @@
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true; quote medians.
 #include <benchmark/benchmark.h>
 
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <random>
 
+#include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/identify.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -25,9 +29,9 @@ struct Setup {
   std::vector<int> candidates;
 };
 
-Setup& Rover() {
-  static Setup s = [] {
-    Setup s;
+// Filled in place: the effect model keeps a reference to the chain.
+void FillRover(Setup& s, int rows) {
+  {
     const std::string dir = std::string(FLEXBENCH_SOURCE_DIR) + "/models/";
     s.m = sim::LoadModel(dir + "rover_arm.xml");
     const sim::DeclaredModel d = sim::LoadDeclaredModel(dir + "rover_arm.declared.yaml");
@@ -41,7 +45,7 @@ Setup& Rover() {
     std::normal_distribution<double> n(0.0, 1e-4);
     EffectModel::Workspace ws = s.em->MakeWorkspace();
     s.data.sets = {"s0", "s1", "s2", "s3"};
-    for (int r = 0; r < 200; ++r) {
+    for (int r = 0; r < rows; ++r) {
       Observation o;
       o.q = Eigen::VectorXd(s.chain.model.nq());
       for (int k = 0; k < o.q.size(); ++k) o.q[k] = u(rng);
@@ -53,8 +57,12 @@ Setup& Rover() {
     for (size_t i = 0; i < s.em->candidates().size() && s.candidates.size() < 30; ++i) {
       s.candidates.push_back(static_cast<int>(i));
     }
-    return s;
-  }();
+  }
+}
+
+Setup& Rover() {
+  static Setup s;
+  if (!s.em) FillRover(s, 200);
   return s;
 }
 
@@ -89,6 +97,77 @@ void BM_Predict(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_Predict);
+
+// Issue 21 ("point-format CSVs scale badly"): reading a point-format CSV of N rows (the file
+// is written once, outside the timing). Linear: about 1 us a row.
+// Arg 1: a `set` label of its own on every row (labels are looked up once a row).
+void ReadPointCsv(benchmark::State& state, bool set_per_row) {
+  Setup& s = Rover();
+  const int rows = static_cast<int>(state.range(0));
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("flexbench_bench_points_" + std::to_string(rows) +
+                             (set_per_row ? "_sets" : "") + ".csv"))
+                               .string();
+  {
+    std::ofstream out(path);
+    for (const std::string& j : s.chain.q_joints) out << j << ",";
+    out << "x,y,z" << (set_per_row ? ",set" : "") << "\n";
+    std::mt19937_64 rng(2);
+    std::uniform_real_distribution<double> u(-1.2, 1.2);
+    char buf[64];
+    for (int r = 0; r < rows; ++r) {
+      for (size_t k = 0; k < s.chain.q_joints.size() + 3; ++k) {
+        std::snprintf(buf, sizeof(buf), "%.12g%s", u(rng),
+                      k + 1 < s.chain.q_joints.size() + 3 ? "," : "");
+        out << buf;
+      }
+      if (set_per_row) out << ",session_" << r;
+      out << "\n";
+    }
+  }
+  for (auto _ : state) {
+    DataSet d;
+    ReadCalibrationCsv(path, s.chain.q_joints, &d);
+    benchmark::DoNotOptimize(d.rows.data());
+  }
+  std::filesystem::remove(path);
+  state.SetComplexityN(rows);
+}
+void BM_ReadPointCsv(benchmark::State& state) { ReadPointCsv(state, false); }
+void BM_ReadPointCsvSetPerRow(benchmark::State& state) { ReadPointCsv(state, true); }
+BENCHMARK(BM_ReadPointCsv)
+    ->RangeMultiplier(10)
+    ->Range(100, 10000)
+    ->Unit(benchmark::kMillisecond)
+    ->Complexity();
+BENCHMARK(BM_ReadPointCsvSetPerRow)
+    ->RangeMultiplier(10)
+    ->Range(100, 10000)
+    ->Unit(benchmark::kMillisecond)
+    ->Complexity();
+
+// The whole identification on N point rows (rover_arm, 20 candidates): how it scales.
+void BM_IdentifyRows(benchmark::State& state) {
+  Setup s;
+  FillRover(s, static_cast<int>(state.range(0)));
+  size_t found = 0;
+  for (auto _ : state) {
+    const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
+    const IdentifyResult r = Identify(*s.em, s.data, loads, s.candidates, IdentifyOptions{});
+    found = r.effects.size();
+    benchmark::DoNotOptimize(found);
+  }
+  state.counters["effects_found"] = found;
+  state.SetComplexityN(state.range(0));
+}
+BENCHMARK(BM_IdentifyRows)
+    ->Arg(250)
+    ->Arg(500)
+    ->Arg(1000)
+    ->Arg(2000)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1)
+    ->Complexity();
 
 }  // namespace
 }  // namespace flexbench::identify

@@ -199,8 +199,9 @@ TEST(DeclaredModelFile, FormatErrorsNameFileLineAndKey) {
               std::string::npos)
         << e.what();
   }
-  testing::WriteFile(path, "model: planar3.xml\nactuated_joints: [j1]\nend_effector: ee\n"
-                           "colour: red\n");
+  testing::WriteFile(path, "model: " + testing::SourceDir() +
+                               "/models/planar3.xml\nactuated_joints: [j1]\nend_effector: ee\n"
+                               "colour: red\n");
   try {
     LoadDeclaredModel(path.string());
     FAIL();
@@ -208,6 +209,37 @@ TEST(DeclaredModelFile, FormatErrorsNameFileLineAndKey) {
     EXPECT_NE(std::string(e.what()).find(":4: unknown key 'colour'"), std::string::npos)
         << e.what();
   }
+}
+
+// Issue 21: absurd standard deviations (NaN metrics later) and a model path naming nothing.
+TEST(DeclaredModelFile, RangesAndTheModelPathAreChecked) {
+  testing::TempDir tmp;
+  const auto path = tmp.path() / "x.declared.yaml";
+  const std::string model = "model: " + testing::SourceDir() + "/models/planar3.xml\n";
+  const auto error = [&](const std::string& text) {
+    testing::WriteFile(path, text);
+    try {
+      LoadDeclaredModel(path.string());
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string head = "actuated_joints: [joint1]\nend_effector: ee\nsources:\n";
+  EXPECT_NE(error(model + head + "  - {at: joint1, about_axis_deg: 1e6}\n").find("at most 90"),
+            std::string::npos);
+  EXPECT_NE(error(model + head + "  - {at: joint1, std_rot_deg: [1, 1e6, 1]}\n")
+                .find("at most 90"),
+            std::string::npos);
+  EXPECT_NE(error(model + head + "  - {at: joint1, std_trans_m: [0, 0, 1e3]}\n")
+                .find("at most 10"),
+            std::string::npos);
+  EXPECT_EQ(error(model + head + "  - {at: joint1, about_axis_deg: 2}\n"), "");
+  const std::string e = error("model: /nonexistent/robot.xml\n" + head +
+                              "  - {at: joint1, about_axis_deg: 2}\n");
+  EXPECT_NE(e.find(":1: key 'model': model file /nonexistent/robot.xml not found"),
+            std::string::npos)
+      << e;
 }
 
 }  // namespace

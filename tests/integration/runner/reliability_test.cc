@@ -180,6 +180,20 @@ TEST(Reliability, CheckGatesWithoutGatesAndGateTyposAreBadInput) {
   EXPECT_FALSE(fs::exists(tmp.path() / "out"));
 }
 
+// Found by mutation testing: a huge detector setting crashed the AprilTag library (rc 139).
+TEST(Reliability, AbsurdDetectorSettingsAreBadInput) {
+  TempDir tmp;
+  for (const char* setting : {"decimate: 1.1e300", "decimate: 500", "sigma: 1e300",
+                              "threads: 100000"}) {
+    const fs::path s = tmp.path() / "s.yaml";
+    WriteFile(s, SmokeYaml(std::string("detector:\n  family: tag36h11\n  ") + setting + "\n"));
+    const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+    EXPECT_EQ(r.exit_code, 2) << setting << "\n" << r.err;
+    EXPECT_NE(LastLine(r.err).find("detector."), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+  }
+}
+
 TEST(Reliability, ScenarioNameCannotLeaveTheOutputFolder) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
@@ -244,6 +258,16 @@ TEST_F(IdentifyCli, OptionErrorsNameTheOptionNotATemporaryFile) {
   EXPECT_NE(r.err.find("--point-std"), std::string::npos) << r.err;
   r = Identify("--point-std -1");
   EXPECT_EQ(r.exit_code, 2) << r.err;
+}
+
+TEST_F(IdentifyCli, RowsAreNamedByThePathAsGiven) {
+  const CommandResult r = RunCommand(
+      "cd " + tmp_.path().string() + " && " + Flexbench() + " identify --declared " +
+      SourceDir() + "/models/planar3.declared.yaml --calibration cal.csv --validation ./val.csv "
+      "--candidates joint_offset --out out </dev/null");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string res = ReadFile(tmp_.path() / "out" / "calibration_residuals.csv");
+  EXPECT_NE(res.find(",cal.csv:2,"), std::string::npos) << res.substr(0, 400);
 }
 
 TEST_F(IdentifyCli, SameRowsForCalibrationAndValidationAreRefused) {
