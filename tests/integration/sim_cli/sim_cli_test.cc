@@ -65,7 +65,9 @@ TEST(Inspect, RoverModelAsJson) {
   EXPECT_TRUE(supported["link_elasticity"]);
   EXPECT_TRUE(supported["payload"]);
   EXPECT_FALSE(supported["neck_elasticity"]);
-  EXPECT_EQ(supported.size(), 11u);
+  EXPECT_TRUE(supported["transmission_error"]);
+  EXPECT_TRUE(supported["stiffening_joint"]);
+  EXPECT_EQ(supported.size(), 13u);
   EXPECT_EQ(j["sensors"]["encoders"].size(), 8u);
 }
 
