@@ -17,16 +17,6 @@
 namespace flexbench::identify {
 namespace {
 
-std::string Fmt(const char* format, ...) __attribute__((format(printf, 1, 2)));
-std::string Fmt(const char* format, ...) {
-  char line[512];
-  va_list args;
-  va_start(args, format);
-  std::vsnprintf(line, sizeof(line), format, args);
-  va_end(args);
-  return line;
-}
-
 // Candidates by stage: physically named ones first, those that need evidence, complete geometry.
 std::vector<int> Pool(const EffectModel& em, const std::vector<int>& candidates, bool evidence,
                       bool generic) {

@@ -4,10 +4,21 @@
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
+#include <cstdarg>
+#include <cstdio>
 
 #include "estimators/lie/so3.h"
 
 namespace flexbench::identify {
+
+std::string Fmt(const char* format, ...) {
+  char line[512];
+  va_list args;
+  va_start(args, format);
+  std::vsnprintf(line, sizeof(line), format, args);
+  va_end(args);
+  return line;
+}
 
 int NumTheta(const EffectModel& em, const std::vector<int>& active) {
   int n = 0;

@@ -7,6 +7,7 @@
 // unknowns (selection keeps only the observable directions instead of dropping the candidate).
 #pragma once
 #include <Eigen/Core>
+#include <string>
 #include <vector>
 
 #include "scenarios/identify/identify.h"
@@ -15,6 +16,9 @@ namespace flexbench::identify {
 
 // Number of parameters of the candidates `active` (sum of their num_params).
 int NumTheta(const EffectModel& em, const std::vector<int>& active);
+
+// printf into a string, for the selection log.
+std::string Fmt(const char* format, ...) __attribute__((format(printf, 1, 2)));
 
 // BIC = N ln(RSS / N) + k ln N.
 double Bic(double rss, int n, int k);
