@@ -153,6 +153,30 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
     f.z.assign(z.data(), z.data() + n);
     Keep(std::move(f), &best);
   }
+  // Per set: each coordinate of the residual against the set it belongs to (a placement or a
+  // session that errs as a whole; with socket groups the fitted points absorb most of it).
+  if (data.sets.size() >= 2) {
+    const int S = static_cast<int>(data.sets.size());
+    for (int axis = 0; axis < 3; ++axis) {
+      Eigen::VectorXd z(n);
+      Eigen::MatrixXd X = Eigen::MatrixXd::Zero(n, S - 1);
+      for (int i = 0; i < n; ++i) {
+        z[i] = res[pr.row_offset(rows[i]) + axis] * opt.point_std_m;
+        const int set = data.rows[rows[i]].set;
+        if (set > 0) X(i, set - 1) = 1.0;
+      }
+      const Regression g = Regress(X, z, Eigen::VectorXd::Ones(n));
+      if (g.beta.size() == 0) continue;
+      ResidualFinding f;
+      f.kind = "set";
+      f.variable = std::string("set, ") + "xyz"[axis];
+      f.size = g.beta.tail(S - 1).cwiseAbs().maxCoeff() * 1e3;
+      f.unit = "mm between sets";
+      f.p_value = g.p_value;
+      f.statistic = g.stat;
+      Keep(std::move(f), &best);
+    }
+  }
   if (best.q_index >= 0) {
     best.variable = em.chain().frame(em.chain().joint_frame(best.q_index)).name;
     const size_t slash = best.variable.find('/');
@@ -168,6 +192,10 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
   } else if (best.kind == "load") {
     std::snprintf(line, sizeof(line),
                   "residual follows the gravity torque of %s, %.3g %s, p %s %.2g",
+                  best.variable.c_str(), best.size, best.unit.c_str(),
+                  best.p_value <= 1e-16 ? "<" : "=", best.p_value);
+  } else if (best.kind == "set") {
+    std::snprintf(line, sizeof(line), "residual differs between sets (%s), %.3g %s, p %s %.2g",
                   best.variable.c_str(), best.size, best.unit.c_str(),
                   best.p_value <= 1e-16 ? "<" : "=", best.p_value);
   } else if (best.kind == "drift") {

@@ -6,7 +6,8 @@
 //   - harmonics of the joint angle, 1..3 cycles per revolution (a transmission error, an
 //     eccentric bearing, an error curve), and
 //   - the gravity torque the joint holds and its cube (a spring, a stiffening spring);
-// and each residual coordinate on the row order within the data (drift over time). Each test
+// and each residual coordinate on the row order within the data (drift over time) and on the
+// set it belongs to (a placement or session that errs as a whole). Each test
 // compares the reduction of the weighted sum of squares with the remaining variance,
 // stat = (SS0 - SS1) / (SS1 / (n - p - 1)), asymptotically chi-square with p degrees of freedom
 // under pure noise; its p-value is the significance. The strongest finding is the one with the

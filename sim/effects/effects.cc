@@ -293,7 +293,7 @@ class EncoderOffsetEffect : public Effect {
 // ---- Transmission error of strain-wave gears: the link runs ahead of or behind the motor by a
 // periodic function of the motor angle (the flexspline's elliptic deformation: mostly 2 cycles
 // per revolution, plus 1 from eccentricity). The encoder reads the motor.
-//   transmission_error: {harmonics_deg: {j3: [A1, phase1, A2, phase2]}}   (degrees)
+//   transmission_error: {harmonics_deg: {j3: [A1, phase1, A2, phase2(, A3, phase3)]}}  (deg)
 class TransmissionErrorEffect : public Effect {
  public:
   void Configure(const Params& p) override {
@@ -302,8 +302,12 @@ class TransmissionErrorEffect : public Effect {
     for (const std::string& j : c.Keys()) {
       const ConfigNode v = c.Child(j);
       const std::vector<double> h = v.AsDoubleList();
-      if (h.size() != 4) v.Fail("expected [A1, phase1, A2, phase2] in degrees");
-      if (std::abs(h[0]) > 5 || std::abs(h[2]) > 5) v.Fail("amplitudes above 5 deg");
+      if (h.size() != 4 && h.size() != 6) {
+        v.Fail("expected [A1, phase1, A2, phase2] or with A3, phase3, in degrees");
+      }
+      for (size_t k = 0; k < h.size(); k += 2) {
+        if (std::abs(h[k]) > 5) v.Fail("amplitudes above 5 deg");
+      }
       per_joint_[j] = h;
     }
   }
@@ -320,17 +324,18 @@ class TransmissionErrorEffect : public Effect {
                          "' is a slide");
       }
       GearSpec& g = s.gear[j];
-      g.tx_amplitude[0] = h[0] * kDeg;
-      g.tx_phase[0] = h[1] * kDeg;
-      g.tx_amplitude[1] = h[2] * kDeg;
-      g.tx_phase[1] = h[3] * kDeg;
+      for (size_t k = 0; 2 * k < h.size(); ++k) {
+        g.tx_amplitude[k] = h[2 * k] * kDeg;
+        g.tx_phase[k] = h[2 * k + 1] * kDeg;
+      }
     }
   }
   std::string Describe() const override {
     std::string d;
     for (const auto& [j, h] : per_joint_) {
-      d += (d.empty() ? "" : " ") + j + "=[" + Num(h[0]) + "," + Num(h[1]) + "," + Num(h[2]) +
-           "," + Num(h[3]) + "]";
+      std::string list;
+      for (double v : h) list += (list.empty() ? "" : ",") + Num(v);
+      d += (d.empty() ? "" : " ") + j + "=[" + list + "]";
     }
     return d;
   }

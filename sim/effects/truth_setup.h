@@ -22,14 +22,17 @@ struct GearSpec {
   double stiffness_cubic = 0.0;  // Nm/rad^3: torque k d + k3 d^3, a spring that stiffens
   double backlash = 0.0;   // total play, rad (m)
   // Transmission error of a strain-wave gear: the link turns by
-  // sum_h amplitude[h] sin((h + 1) motor + phase[h]) beyond the motor, 1 and 2 cycles per
+  // sum_h amplitude[h] sin((h + 1) motor + phase[h]) beyond the motor, 1 to 3 cycles per
   // revolution (rad).
-  double tx_amplitude[2] = {0.0, 0.0};
-  double tx_phase[2] = {0.0, 0.0};
-  bool has_transmission_error() const { return tx_amplitude[0] != 0 || tx_amplitude[1] != 0; }
+  double tx_amplitude[3] = {0.0, 0.0, 0.0};
+  double tx_phase[3] = {0.0, 0.0, 0.0};
+  bool has_transmission_error() const {
+    return tx_amplitude[0] != 0 || tx_amplitude[1] != 0 || tx_amplitude[2] != 0;
+  }
   double TransmissionError(double motor) const {
-    return tx_amplitude[0] * std::sin(motor + tx_phase[0]) +
-           tx_amplitude[1] * std::sin(2.0 * motor + tx_phase[1]);
+    double e = 0.0;
+    for (int h = 0; h < 3; ++h) e += tx_amplitude[h] * std::sin((h + 1) * motor + tx_phase[h]);
+    return e;
   }
   // Spring torque at deflection d.
   double SpringTorque(double d) const { return stiffness * d + stiffness_cubic * d * d * d; }

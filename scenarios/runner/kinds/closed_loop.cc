@@ -616,7 +616,7 @@ class ClosedLoopKind : public ScenarioKind {
 
   // The projected residual of the finding's joint against its variable, with the fitted curve.
   void PlotFinding(RunContext& ctx, const identify::ResidualFinding& f) const {
-    if (f.x.empty()) return;
+    if (f.x.empty()) return;  // (a per-set finding has no curve to draw)
     const bool angle = f.kind == "periodic";
     const double xs = angle ? 1.0 / kDeg : 1.0;
     const double zs = f.kind == "drift" ? 1e3 : 1.0 / kDeg;

@@ -57,7 +57,10 @@ TEST_P(ClosedLoopGuard, WithoutThePlantedFamilyItDoesNotClaimAnExplanation) {
     for (const std::string& f : AllFamilies(guarded["declared"].as<std::string>())) {
       // Without angle-dependent errors at all: the generic error curve goes with the
       // transmission error it contains.
-      if (f == family || (family == "transmission_error" && f == "joint_error_curve")) continue;
+      const bool angle = family == "transmission_error" || family == "joint_error_curve";
+      if (f == family || (angle && (f == "transmission_error" || f == "joint_error_curve"))) {
+        continue;
+      }
       cands.push_back(f);
     }
     guarded["candidates"] = cands;
@@ -98,7 +101,8 @@ INSTANTIATE_TEST_SUITE_P(Planted, ClosedLoopGuard,
                                            "closed_loop_payload_and_plate",
                                            "closed_loop_offset_and_gear",
                                            "closed_loop_transmission_error",
-                                           "closed_loop_stiffening_spring"));
+                                           "closed_loop_stiffening_spring",
+                                           "closed_loop_error_curve"));
 
 }  // namespace
 }  // namespace flexbench::identify
