@@ -39,7 +39,7 @@ void FillRover(Setup& s, int rows) {
     s.em = std::make_unique<EffectModel>(s.m.get(), s.chain, s.chain.end_effector);
     const std::vector<int> truth = {s.em->FindCandidate("joint_compliance@j2"),
                                     s.em->FindCandidate("joint_offset@j3")};
-    const double theta[2] = {1.2e-3, 0.005};
+    const double theta[2] = {-1.2e-3, 0.005};  // a gear of 830 N m/rad (c = -1/k), 0.29 deg
     std::mt19937_64 rng(1);
     std::uniform_real_distribution<double> u(-1.2, 1.2);
     std::normal_distribution<double> n(0.0, 1e-4);
