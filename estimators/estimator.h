@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "estimators/camera/pinhole.h"
+#include "estimators/kinematics/model_effects.h"
 #include "estimators/kinematics/ppoe_model.h"
 #include "estimators/measurement.h"
 
@@ -53,6 +54,10 @@ struct ImuSetup {
 
 struct EstimatorSetup {
   const kinematics::PpoeModel* model = nullptr;
+  // Effects identified from data for this model (an augmented declared file), or nullptr: every
+  // estimator then predicts with the corrected model at each joint reading
+  // (kinematics::EffectiveChain). Owned by the caller, like `model`.
+  const kinematics::ModelEffects* effects = nullptr;
   FrameId end_effector = -1;
   std::vector<CameraSetup> cameras;
   std::vector<ImuSetup> imus;

@@ -4,6 +4,7 @@
 #include <set>
 
 #include "estimators/error.h"
+#include "sim/declared_effects.h"
 #include "sim/mujoco_model.h"
 
 namespace flexbench::sim {
@@ -180,8 +181,9 @@ std::string TypedFrameName(const mjModel* m, const std::string& name) {
 }
 
 DeclaredChain BuildDeclaredChain(const mjModel* m, const DeclaredModel& declared) {
-  DeclaredChain chain{kinematics::PpoeModel(declared.file), {}, {}, {}, 0, -1, {}};
+  DeclaredChain chain{kinematics::PpoeModel(declared.file), {}, {}, {}, 0, -1, {}, {}};
   ChainBuilder(m, declared, &chain).Build();
+  ApplyIdentifiedEffects(m, declared, &chain);
   return chain;
 }
 

@@ -16,6 +16,7 @@
 #include <utility>
 #include <vector>
 
+#include "estimators/kinematics/model_effects.h"
 #include "estimators/kinematics/ppoe_model.h"
 #include "sim/declared_model.h"
 
@@ -33,6 +34,13 @@ struct DeclaredChain {
   kinematics::FrameId end_effector = -1;
   // Observed frames by their declared name.
   std::vector<std::pair<std::string, kinematics::FrameId>> observed;
+  // The declared file's identified effects (none when it has none), with the chain's masses and
+  // gravity for the load-driven ones: estimators predict with them (EstimatorSetup::effects).
+  kinematics::ModelEffects effects;
+  // nullptr when there is nothing to apply.
+  const kinematics::ModelEffects* effects_or_null() const {
+    return effects.empty() ? nullptr : &effects;
+  }
 
   // PPOE joint vector from a MuJoCo qpos.
   Eigen::VectorXd QFromQpos(const double* qpos) const;
@@ -44,8 +52,9 @@ struct DeclaredChain {
   kinematics::FrameId ObservedFrame(const std::string& name) const;
 };
 
-// Builds the chain. Throws InputError naming the declared file (and line) for a joint, body,
-// site or frame the model lacks, a source off the chain, or an unsupported joint type.
+// Builds the chain and applies the declared file's identified effects (sim/declared_effects.h).
+// Throws InputError naming the declared file (and line) for a joint, body, site or frame the
+// model lacks, a source off the chain, an unsupported joint type, or a bad identified effect.
 DeclaredChain BuildDeclaredChain(const mjModel* m, const DeclaredModel& declared);
 
 // Resolves a frame name of the model the way declared files do: a site, then a geom, a camera,

@@ -102,6 +102,12 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
       if (const auto sd = e.Optional("std")) ie.std = sd->AsDoubleList();
       ie.unit = e.GetString("unit", "");
       if (ie.value.empty()) e.Child("value").Fail("needs at least one number");
+      for (const char* key : {"value", "std"}) {
+        const std::vector<double>& v = key[0] == 'v' ? ie.value : ie.std;
+        for (double x : v) {
+          if (!std::isfinite(x)) e.Child(key).Fail("must hold finite numbers (no NaN or inf)");
+        }
+      }
       if (!ie.std.empty() && ie.std.size() != ie.value.size()) {
         e.Child("std").Fail("needs as many numbers as 'value'");
       }

@@ -14,8 +14,8 @@
 //   identified_effects:             # written by closed_loop / `flexbench identify`
 //     - {effect: joint_offset@j3, value: [-0.0052], std: [1e-5], unit: rad}
 //
-// Identified effects are carried for the record and for the next identification; the PPOE
-// chain (BuildDeclaredChain) does not apply them yet.
+// Identified effects are applied by BuildDeclaredChain (sim/declared_effects.h): every estimator
+// given the chain's effects predicts with the corrected model.
 //
 // Passive joints that are not actuated are held at their reference angle (qpos0): the declared
 // model does not know they move. A source at such a joint is how the model admits it.

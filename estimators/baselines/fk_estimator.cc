@@ -9,7 +9,7 @@ namespace {
 class FkEstimator : public Estimator {
  public:
   explicit FkEstimator(const EstimatorSetup& setup)
-      : model_(*setup.model),
+      : kin_(*setup.model, setup.effects),
         data_(*setup.model),
         ee_(setup.end_effector),
         ref_(setup.reference_frame) {
@@ -18,7 +18,7 @@ class FkEstimator : public Estimator {
       throw InputError("fk: covariance_order must be 2 or 4");
     }
     order_ = order == 4.0 ? lie::CompoundOrder::kFourth : lie::CompoundOrder::kSecond;
-    if (ref_ < 0 || ref_ >= model_.num_frames()) {
+    if (ref_ < 0 || ref_ >= setup.model->num_frames()) {
       throw InputError("fk: reference frame " + std::to_string(ref_) + " not in the model");
     }
     if (ref_ != kinematics::kBaseFrame && order_ == lie::CompoundOrder::kFourth) {
@@ -35,22 +35,25 @@ class FkEstimator : public Estimator {
   UpdateStatus Update(const Measurement& z) override {
     const auto* joints = std::get_if<JointReading>(&z);
     if (!joints) return UpdateStatus::kIgnored;
-    if (joints->q.size() != model_.nq()) {
+    const kinematics::PpoeModel& declared = kin_.declared();
+    if (joints->q.size() != declared.nq()) {
       throw InputError("fk: joint reading has " + std::to_string(joints->q.size()) +
-                       " angles, the declared model " + std::to_string(model_.nq()));
+                       " angles, the declared model " + std::to_string(declared.nq()));
     }
     if (!joints->q.allFinite()) return UpdateStatus::kRejectedNonFinite;
-    kinematics::ForwardKinematicsWithCovariance(model_, data_, joints->q, order_);
+    kin_.Update(joints->q);
+    const kinematics::PpoeModel& model = kin_.model();
+    kinematics::ForwardKinematicsWithCovariance(model, data_, kin_.q(), order_);
     belief_.t = joints->t;
     if (ref_ == kinematics::kBaseFrame) {
       belief_.T_base_ee = data_.T_base_frame[ee_];
       belief_.cov = data_.Sigma_frame[ee_];
     } else {  // the end effector seen from the reference frame
       belief_.T_base_ee = data_.T_base_frame[ref_].Between(data_.T_base_frame[ee_]);
-      kinematics::RelativeCovariance(model_, data_, ref_, ee_, &belief_.cov);
+      kinematics::RelativeCovariance(model, data_, ref_, ee_, &belief_.cov);
     }
     belief_.has_joints = true;
-    belief_.q = joints->q;
+    belief_.q = kin_.q();
     belief_.q_std = joints->std;
     return UpdateStatus::kAccepted;
   }
@@ -58,7 +61,7 @@ class FkEstimator : public Estimator {
   Belief Estimate() const override { return belief_; }
 
  private:
-  const kinematics::PpoeModel& model_;
+  kinematics::EffectiveChain kin_;
   kinematics::PpoeData data_;
   FrameId ee_;
   FrameId ref_;

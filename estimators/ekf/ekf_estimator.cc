@@ -14,7 +14,7 @@ enum class PriorKind { kPpoe, kNaive };
 class EkfEstimator : public Estimator {
  public:
   EkfEstimator(const EstimatorSetup& setup, PriorKind kind, const char* name)
-      : model_(*setup.model),
+      : kin_(*setup.model, setup.effects),
         data_(*setup.model),
         ee_(setup.end_effector),
         ref_(setup.reference_frame),
@@ -42,7 +42,7 @@ class EkfEstimator : public Estimator {
         naive_cov_(3 + i, 3 + i) = std::pow(r[i] * M_PI / 180.0, 2);
       }
     }
-    if (ref_ < 0 || ref_ >= model_.num_frames()) {
+    if (ref_ < 0 || ref_ >= setup.model->num_frames()) {
       throw InputError(name_ + ": reference frame " + std::to_string(ref_) + " not in the model");
     }
     if (ref_ != kinematics::kBaseFrame && order_ == lie::CompoundOrder::kFourth) {
@@ -75,13 +75,15 @@ class EkfEstimator : public Estimator {
 
  private:
   UpdateStatus SetPrior(const JointReading& j) {
-    if (j.q.size() != model_.nq()) {
+    if (j.q.size() != kin_.declared().nq()) {
       throw InputError(name_ + ": joint reading has " + std::to_string(j.q.size()) +
-                       " angles, the declared model " + std::to_string(model_.nq()));
+                       " angles, the declared model " + std::to_string(kin_.declared().nq()));
     }
     if (!j.q.allFinite()) return UpdateStatus::kRejectedNonFinite;
+    kin_.Update(j.q);
+    const kinematics::PpoeModel& model = kin_.model();
     if (kind_ == PriorKind::kPpoe) {
-      kinematics::ForwardKinematicsWithCovariance(model_, data_, j.q, order_);
+      kinematics::ForwardKinematicsWithCovariance(model, data_, kin_.q(), order_);
       belief_.cov = PriorCovariance();
       // PPOE covariances are PSD by construction (often singular: rotational sources only);
       // a negative eigenvalue beyond rounding would mean a broken model: repair and count.
@@ -92,16 +94,16 @@ class EkfEstimator : public Estimator {
         belief_.cov = repaired;
       }
     } else if (ppoe_diagonal_) {
-      kinematics::ForwardKinematicsWithCovariance(model_, data_, j.q, order_);
+      kinematics::ForwardKinematicsWithCovariance(model, data_, kin_.q(), order_);
       belief_.cov = PriorCovariance().diagonal().asDiagonal();
     } else {
-      kinematics::ForwardKinematics(model_, data_, j.q);
+      kinematics::ForwardKinematics(model, data_, kin_.q());
       belief_.cov = naive_cov_;
     }
     belief_.t = j.t;
     belief_.T_base_ee = InRef(ee_);
     belief_.has_joints = true;
-    belief_.q = j.q;
+    belief_.q = kin_.q();
     belief_.q_std = j.std;
     have_prior_ = true;
     return UpdateStatus::kAccepted;
@@ -111,7 +113,7 @@ class EkfEstimator : public Estimator {
   Mat6 PriorCovariance() const {
     if (ref_ == kinematics::kBaseFrame) return data_.Sigma_frame[ee_];
     Mat6 cov;
-    kinematics::RelativeCovariance(model_, data_, ref_, ee_, &cov);
+    kinematics::RelativeCovariance(kin_.model(), data_, ref_, ee_, &cov);
     return cov;
   }
 
@@ -199,7 +201,7 @@ class EkfEstimator : public Estimator {
   UpdateStatus Correct(const ImuReading&) { return UpdateStatus::kIgnored; }
   UpdateStatus Correct(const OrientationReading&) { return UpdateStatus::kIgnored; }
 
-  const kinematics::PpoeModel& model_;
+  kinematics::EffectiveChain kin_;
   kinematics::PpoeData data_;
   FrameId ee_;
   FrameId ref_;

@@ -32,6 +32,7 @@ class DirectFusion : public Estimator {
       : name_(name),
         order_(order),
         model_(*setup.model),
+        kin_(*setup.model, setup.effects),
         data_(*setup.model),
         ee_(setup.end_effector) {
     setup.params.CheckAllUsed(name_);
@@ -94,7 +95,8 @@ class DirectFusion : public Estimator {
                          " angles, the declared model " + std::to_string(model_.nq()));
       }
       if (!j->q.allFinite()) return UpdateStatus::kRejectedNonFinite;
-      q_enc_ = j->q;
+      kin_.Update(j->q);
+      q_enc_ = kin_.q();
       has_enc_ = true;
       belief_.t = j->t;
       Recompute();
@@ -144,7 +146,7 @@ class DirectFusion : public Estimator {
   void Recompute() {
     if (!has_enc_) return;
     q_ = q_enc_;
-    kinematics::ForwardKinematics(model_, data_, q_enc_);
+    kinematics::ForwardKinematics(kin_.model(), data_, q_enc_);
     for (const Link& l : links_) {
       if (!l.has_reading) continue;
       const Mat3 Rc = MeasuredLink(l);
@@ -161,7 +163,8 @@ class DirectFusion : public Estimator {
       const double angle = 2.0 * std::atan2(v.norm(), w);
       q_[l.q_index] = v.dot(l.axis) < 0.0 ? -angle : angle;
     }
-    kinematics::ForwardKinematicsWithCovariance(model_, data_, q_, lie::CompoundOrder::kSecond);
+    kinematics::ForwardKinematicsWithCovariance(kin_.model(), data_, q_,
+                                                lie::CompoundOrder::kSecond);
     belief_.T_base_ee = data_.T_base_frame[ee_];
     belief_.cov = data_.Sigma_frame[ee_];
     belief_.has_joints = true;
@@ -171,7 +174,10 @@ class DirectFusion : public Estimator {
 
   std::string name_;
   imu::EulerOrder order_;
+  // The IMU links' geometry is the declared one; the encoders' joint map and the chain's
+  // identified effects (kin_) apply to the encoder-driven joints and the end-effector pose.
   const PpoeModel& model_;
+  kinematics::EffectiveChain kin_;
   kinematics::PpoeData data_;
   FrameId ee_;
   std::vector<Link> links_;

@@ -106,8 +106,6 @@ FrameId PpoeModel::AddLink(FrameId parent, const std::string& name, const lie::S
   f.has_source = !f.source_cov.isZero(0.0);
   f.joint = joint;
 
-  const Mat3& R_p = T_parent_ip.rotation();
-  f.u0 = T_parent_ip.translation();
   if (joint.type != JointType::kFixed) {
     const double norm = joint.axis.norm();
     if (!std::isfinite(norm) || !AllFinite(joint.point) || norm < kMinAxisNorm) {
@@ -116,29 +114,45 @@ FrameId PpoeModel::AddLink(FrameId parent, const std::string& name, const lie::S
           << "], point [" << joint.point.transpose() << "])";
       throw InputError(msg.str());
     }
-    const Vec3 w = joint.axis / norm;
-    f.joint.axis = w;
-    if (joint.type == JointType::kRevolute) {
-      const Vec3& r = joint.point;
-      f.zeta.segment<3>(kTransIdx) = r.cross(w);
-      f.zeta.segment<3>(kRotIdx) = w;
-      const Mat3 W = lie::Skew(w);
-      f.K1 = R_p * W;
-      f.K2 = f.K1 * W;
-      f.W2 = W * W;
-      f.u1 = -(f.K1 * r);
-      f.u2 = -(f.K2 * r);
-    } else {
-      f.joint.point.setZero();
-      f.zeta.segment<3>(kTransIdx) = w;
-      f.u1 = R_p * w;
-    }
+    f.joint.axis = joint.axis / norm;
+    if (joint.type == JointType::kPrismatic) f.joint.point.setZero();
     f.q_index = nq();
   }
-  f.source_cov_parent = lie::TransformCovariance(T_parent_ip, f.source_cov);
+  Precompute(&f);
   if (f.q_index >= 0) q_frames_.push_back(num_frames());
   frames_.push_back(f);
   return num_frames() - 1;
+}
+
+void PpoeModel::Precompute(PpoeFrame* f) {
+  const lie::SE3& T_parent_ip = f->T_parent_ip;
+  const Mat3& R_p = T_parent_ip.rotation();
+  f->u0 = T_parent_ip.translation();
+  const Vec3& w = f->joint.axis;
+  if (f->joint.type == JointType::kRevolute) {
+    const Vec3& r = f->joint.point;
+    f->zeta.segment<3>(kTransIdx) = r.cross(w);
+    f->zeta.segment<3>(kRotIdx) = w;
+    const Mat3 W = lie::Skew(w);
+    f->K1 = R_p * W;
+    f->K2 = f->K1 * W;
+    f->W2 = W * W;
+    f->u1 = -(f->K1 * r);
+    f->u2 = -(f->K2 * r);
+  } else if (f->joint.type == JointType::kPrismatic) {
+    f->zeta.segment<3>(kTransIdx) = w;
+    f->u1 = R_p * w;
+  }
+  f->source_cov_parent = lie::TransformCovariance(T_parent_ip, f->source_cov);
+}
+
+void PpoeModel::SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip) {
+  if (id <= kBaseFrame || id >= num_frames()) {
+    throw InputError("PPOE model '" + name_ + "': SetFixedTransform of frame id " +
+                     std::to_string(id) + ", which does not exist");
+  }
+  frames_[id].T_parent_ip = T_parent_ip;
+  Precompute(&frames_[id]);
 }
 
 FrameId PpoeModel::AddFrame(FrameId parent, const std::string& name, const lie::SE3& T_parent_fp,

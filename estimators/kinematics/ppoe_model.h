@@ -110,6 +110,11 @@ class PpoeModel {
   FrameId AddFrame(FrameId parent, const std::string& name, const lie::SE3& T_parent_fp,
                    const Mat6& source_cov = Mat6::Zero());
 
+  // Replaces frame `id`'s fixed transform T_parent_ip (its joint and source stay) and updates the
+  // precomputed terms; does not allocate. For a model corrected at run time (model_effects.h);
+  // the caller keeps T_parent_ip a rigid transform. Throws InputError for an unknown frame.
+  void SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip);
+
   const std::string& name() const { return name_; }
   int num_frames() const { return static_cast<int>(frames_.size()); }
   // Number of joint variables (size of q).
@@ -125,6 +130,8 @@ class PpoeModel {
   bool HasFrame(const std::string& name) const;
 
  private:
+  static void Precompute(PpoeFrame* f);
+
   std::string name_;
   std::vector<PpoeFrame> frames_;
   std::vector<FrameId> q_frames_;

@@ -117,17 +117,10 @@ BatchKinematics::BatchKinematics(const PpoeModel& model, const std::vector<Frame
                        "' has a prismatic joint; the particle filter's state is joint angles on "
                        "a torus and needs revolute joints");
     }
-    const auto [parent_joint, T_pj_parent] = NearestJointFrame(model, f.parent);
     Node n;
-    n.parent = node_for(parent_joint);
-    const lie::SE3 T_pj_ip = T_pj_parent * f.T_parent_ip;
-    const Mat3 W = lie::Skew(f.joint.axis);
-    n.q_index = f.q_index;
-    n.K0 = T_pj_ip.rotation();
-    n.K1 = n.K0 * W;
-    n.K2 = n.K1 * W;
-    n.r = f.joint.point;
-    n.u0 = T_pj_ip.translation() + n.K0 * n.r;
+    n.frame = joint_frame;
+    n.parent = node_for(NearestJointFrame(model, f.parent).first);
+    Fold(model, &n);
     nodes_.push_back(n);
     node_of_frame[joint_frame] = static_cast<int>(nodes_.size()) - 1;
     return static_cast<int>(nodes_.size()) - 1;
@@ -152,6 +145,32 @@ BatchKinematics::BatchKinematics(const PpoeModel& model, const std::vector<Frame
   // would evict each other from the same L1 sets when N is a power of two).
   ld_ = (static_cast<std::size_t>(capacity_) + 7) / 8 * 8 + 8;
   out_.assign(outputs_.size() * 12 * ld_, 0.0);
+}
+
+void BatchKinematics::Fold(const PpoeModel& model, Node* n) {
+  const PpoeFrame& f = model.frame(n->frame);
+  const lie::SE3 T_pj_ip = NearestJointFrame(model, f.parent).second * f.T_parent_ip;
+  const Mat3 W = lie::Skew(f.joint.axis);
+  n->q_index = f.q_index;
+  n->K0 = T_pj_ip.rotation();
+  n->K1 = n->K0 * W;
+  n->K2 = n->K1 * W;
+  n->r = f.joint.point;
+  n->u0 = T_pj_ip.translation() + n->K0 * n->r;
+}
+
+void BatchKinematics::Refold(const PpoeModel& model) {
+  for (Node& n : nodes_) {
+    if (n.frame >= model.num_frames() || model.frame(n.frame).q_index != n.q_index) {
+      throw InputError("BatchKinematics: Refold with PPOE model '" + model.name() +
+                       "', which has other joints than the model it was built for");
+    }
+    Fold(model, &n);
+  }
+  for (Output& o : outputs_) {
+    o.T_node_frame = NearestJointFrame(model, o.frame).second;
+    o.rotation_identity = o.T_node_frame.rotation() == Mat3::Identity();
+  }
 }
 
 int BatchKinematics::OutputIndex(FrameId frame) const {

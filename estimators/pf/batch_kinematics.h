@@ -35,6 +35,11 @@ class BatchKinematics {
   BatchKinematics(const kinematics::PpoeModel& model, const std::vector<FrameId>& outputs,
                   int capacity, const std::vector<bool>& translation_needed = {});
 
+  // Takes the fixed parts of `model` (the model this was built for, with other T_parent_ip: a
+  // corrected model, kinematics::EffectiveChain); the outputs keep their last values until the
+  // next Compute. Does not allocate. Throws InputError for a model of another shape.
+  void Refold(const kinematics::PpoeModel& model);
+
   int num_outputs() const { return static_cast<int>(outputs_.size()); }
   int capacity() const { return capacity_; }
   FrameId output_frame(int k) const { return outputs_[k].frame; }
@@ -54,7 +59,8 @@ class BatchKinematics {
 
  private:
   struct Node {
-    int parent = -1;  // node index, -1: the base
+    FrameId frame = -1;  // its joint frame in the model
+    int parent = -1;     // node index, -1: the base
     int q_index = -1;
     Mat3 K0, K1, K2;
     Vec3 u0, r;
@@ -66,6 +72,9 @@ class BatchKinematics {
     bool rotation_identity = false;  // R_node_frame = I exactly
     bool translation = true;         // compute the translation
   };
+
+  // The constants of a node from its joint frame in `model`.
+  static void Fold(const kinematics::PpoeModel& model, Node* node);
 
   int capacity_;
   std::size_t ld_ = 0;  // distance between two output arrays (padded capacity)

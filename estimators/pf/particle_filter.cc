@@ -113,7 +113,7 @@ const ParticleFilterConfig& Validated(const ParticleFilterConfig& c,
 
 ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
                                const ParticleFilterConfig& config, std::uint64_t seed)
-    : model_(model),
+    : model_(&model),
       config_(Validated(config, model)),
       seed_(seed),
       n_(config.num_particles),
@@ -179,6 +179,17 @@ void ParticleFilter::Reset() {
 void ParticleFilter::ComputeKinematics() {
   if (fk_.num_outputs() > 0) fk_.Compute(cos_.data(), sin_.data(), static_cast<int>(stride_), n_);
   summary_valid_ = false;
+}
+
+void ParticleFilter::SetModel(const kinematics::PpoeModel& model) {
+  if (model.num_frames() != model_->num_frames() || model.nq() != nq_) {
+    throw InputError("particle filter: SetModel with PPOE model '" + model.name() +
+                     "', which has other frames than '" + model_->name() + "'");
+  }
+  model_ = &model;
+  fk_.Refold(model);
+  // A pending move recomputes the kinematics after it; otherwise the particles stay put.
+  if (!pending_move_) ComputeKinematics();
 }
 
 FLEXBENCH_PARTICLE_LOOP void ParticleFilter::ResampleIfNeeded() {
@@ -288,7 +299,7 @@ FLEXBENCH_PARTICLE_LOOP bool ParticleFilter::ApplyLogLikelihood(double constant)
 FLEXBENCH_PARTICLE_LOOP PfStatus ParticleFilter::UpdateReference(const double* u, int n) {
   if (n != nq_) {
     throw InputError("particle filter: joint reading has " + std::to_string(n) +
-                     " angles, PPOE model '" + model_.name() + "' has " + std::to_string(nq_));
+                     " angles, PPOE model '" + model_->name() + "' has " + std::to_string(nq_));
   }
   for (int j = 0; j < n; ++j) {
     if (!std::isfinite(u[j])) return PfStatus::kRejectedNonFinite;
@@ -497,7 +508,7 @@ const ParticleSummary& ParticleFilter::Summary() const {
     // which a broad angular posterior pulls towards the base.
     const int k = ee_output_;
     for (int j = 0; j < nq_; ++j) q_mean_[j] = out.mean[j];
-    kinematics::ForwardKinematics(model_, fk_data_, q_mean_);
+    kinematics::ForwardKinematics(*model_, fk_data_, q_mean_);
     const lie::SE3 mean = fk_data_.T_base_frame[config_.end_effector];
     const lie::SE3 mean_inv = mean.Inverse();
     // The particles' spread about it, in its local tangent space.

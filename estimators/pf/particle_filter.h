@@ -113,6 +113,11 @@ class ParticleFilter {
   // JointReading.
   void Predict();
 
+  // Replaces the kinematic model by `model` (the same frames and joints, other fixed parts: the
+  // declared model corrected at this reading, kinematics::EffectiveChain). Kept by reference;
+  // does not allocate.
+  void SetModel(const kinematics::PpoeModel& model);
+
   // Reference angles u (nq values; eq. 28). Non-finite values are rejected.
   PfStatus UpdateReference(const double* u, int n);
   // Position p_base of the point p_frame on frame (eq. 26). Ignored for frames not in F_P.
@@ -148,7 +153,7 @@ class ParticleFilter {
   bool ApplyLogLikelihood(double constant);
   double LogSumExpWeights() const;
 
-  const kinematics::PpoeModel& model_;
+  const kinematics::PpoeModel* model_;
   ParticleFilterConfig config_;
   std::uint64_t seed_;
   int n_;

@@ -113,7 +113,8 @@ PfEstimator::PfEstimator(const EstimatorSetup& setup, const Variant& variant)
     : name_(variant.name) {
   const pf::ParticleFilterConfig config = MakePfConfig(setup, variant);
   setup.params.CheckAllUsed(name_);
-  filter_ = std::make_unique<pf::ParticleFilter>(*setup.model, config, setup.seed);
+  kin_ = std::make_unique<kinematics::EffectiveChain>(*setup.model, setup.effects);
+  filter_ = std::make_unique<pf::ParticleFilter>(kin_->model(), config, setup.seed);
 }
 
 void PfEstimator::Reset() {
@@ -131,7 +132,13 @@ void PfEstimator::Predict(double t) {
 
 UpdateStatus PfEstimator::Update(const Measurement& z) {
   if (const auto* j = std::get_if<JointReading>(&z)) {
-    return ToUpdateStatus(filter_->UpdateReference(j->q.data(), static_cast<int>(j->q.size())));
+    const int n = static_cast<int>(j->q.size());
+    if (!kin_->active() || n != kin_->declared().nq() || !j->q.allFinite()) {
+      return ToUpdateStatus(filter_->UpdateReference(j->q.data(), n));  // it checks them
+    }
+    kin_->Update(j->q);
+    if (kin_->varies()) filter_->SetModel(kin_->model());
+    return ToUpdateStatus(filter_->UpdateReference(kin_->q().data(), n));
   }
   if (const auto* o = std::get_if<OrientationReading>(&z)) {
     return ToUpdateStatus(filter_->UpdateOrientation(o->frame, o->q_base_frame));

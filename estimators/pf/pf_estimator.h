@@ -59,6 +59,9 @@ class PfEstimator : public Estimator {
 
  private:
   std::string name_;
+  // The declared model with its identified effects at the last joint reading; the particles
+  // live in its joint angles (the readings are mapped before they weigh them).
+  std::unique_ptr<kinematics::EffectiveChain> kin_;
   std::unique_ptr<pf::ParticleFilter> filter_;
   bool has_t_ = false;
   double t_ = 0.0;

@@ -1,0 +1,207 @@
+#include "estimators/kinematics/model_effects.h"
+
+#include <cmath>
+
+#include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/lie/so3.h"
+
+namespace flexbench::kinematics {
+
+ModelEffects ModelEffects::None(const PpoeModel& model) {
+  ModelEffects e;
+  e.joints.assign(model.nq(), JointTerms{});
+  e.frames.assign(model.num_frames(), FrameTerms{});
+  e.on_path.assign(model.num_frames(), 0);
+  e.masses.assign(model.num_frames(), FrameMass{});
+  return e;
+}
+
+bool ModelEffects::NeedsLoads() const {
+  for (const JointTerms& j : joints) {
+    if (j.backlash != 0.0 || j.compliance != 0.0 || j.cubic != 0.0) return true;
+  }
+  for (const FrameTerms& f : frames) {
+    if (f.bend != 0.0) return true;
+  }
+  return !mount_compliance.isZero(0.0);
+}
+
+bool ModelEffects::FrameVaries(FrameId f) const {
+  return frames[f].bend != 0.0 || (f == mount && !mount_compliance.isZero(0.0));
+}
+
+bool ModelEffects::empty() const {
+  if (NeedsLoads() || thermal != 0.0) return false;
+  for (const JointTerms& j : joints) {
+    if (j.offset != 0.0) return false;
+    for (double h : j.harmonic) {
+      if (h != 0.0) return false;
+    }
+  }
+  for (const FrameTerms& f : frames) {
+    if (f.dlen != 0.0 || !f.offset.isZero(0.0) || !f.origin.isZero(0.0) || !f.tilt.isZero(0.0))
+      return false;
+  }
+  return true;
+}
+
+void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffects& effects,
+                   std::vector<double>* subtree_mass, std::vector<Vec3>* subtree_first) {
+  std::vector<double>& m = *subtree_mass;
+  std::vector<Vec3>& s = *subtree_first;
+  const int n = model.num_frames();
+  for (FrameId f = 0; f < n; ++f) {
+    FrameMass fm = effects.masses[f];
+    if (f == effects.payload_frame) {
+      fm.mass += effects.payload.mass;
+      fm.first_moment += effects.payload.first_moment;
+    }
+    const lie::SE3& T = data.T_base_frame[f];
+    m[f] = fm.mass;
+    s[f] = fm.mass * T.translation() + T.rotation() * fm.first_moment;
+  }
+  // Children have larger ids than their parents.
+  for (FrameId f = n - 1; f > 0; --f) {
+    const FrameId p = model.frame(f).parent;
+    m[p] += m[f];
+    s[p] += s[f];
+  }
+}
+
+EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* effects)
+    : declared_(&declared),
+      effects_(effects && !effects->empty() ? effects : nullptr),
+      effective_(declared),
+      nominal_(declared) {
+  const int n = declared.num_frames();
+  q_ = Eigen::VectorXd::Zero(declared.nq());
+  tau_ = Eigen::VectorXd::Zero(declared.nq());
+  if (!effects_) return;
+  const ModelEffects& e = *effects_;
+  if (static_cast<int>(e.frames.size()) != n || static_cast<int>(e.joints.size()) != declared.nq() ||
+      static_cast<int>(e.masses.size()) != n || static_cast<int>(e.on_path.size()) != n) {
+    throw InputError("EffectiveChain: the effects were made for another model than '" +
+                     declared.name() + "'");
+  }
+  subtree_mass_.assign(n, 0.0);
+  subtree_first_.assign(n, Vec3::Zero());
+  static_.assign(n, lie::SE3());
+  T_.assign(n, lie::SE3());
+  bend_.assign(n, Vec3::Zero());
+  for (FrameId f = 1; f < n; ++f) {
+    const ModelEffects::FrameTerms& t = e.frames[f];
+    const lie::SE3& T_ip = declared.frame(f).T_parent_ip;
+    const Vec3& t0 = T_ip.translation();
+    Vec3 tr = e.on_path[f] ? Vec3(t0 * (1.0 + e.thermal)) : t0;
+    if (t.dlen != 0.0) tr += t.dlen * t0.normalized();
+    tr += t.offset;
+    lie::SE3 S(T_ip.rotation(), tr);
+    if (!t.origin.isZero(0.0)) S = S * lie::SE3::Exp(t.origin);
+    static_[f] = S;
+    if (e.FrameVaries(f)) {
+      last_varying_ = f;
+      has_bends_ = has_bends_ || t.bend != 0.0;
+      continue;
+    }
+    if (!t.tilt.isZero(0.0)) S = S * lie::SE3(lie::SO3Exp(t.tilt), Vec3::Zero());
+    effective_.SetFixedTransform(f, S);
+  }
+}
+
+void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
+  const ModelEffects& e = *effects_;
+  const PpoeModel& model = *declared_;
+  ForwardKinematics(model, nominal_, q_read);
+  SubtreeMasses(model, nominal_, e, &subtree_mass_, &subtree_first_);
+  const std::vector<lie::SE3>& T = nominal_.T_base_frame;
+  // Moment about a (base coordinates) of the weight of frame f's subtree.
+  const auto moment = [&](FrameId f, const Vec3& a) {
+    return Vec3((subtree_first_[f] - subtree_mass_[f] * a).cross(e.g_base));
+  };
+  for (int k = 0; k < model.nq(); ++k) {
+    const FrameId f = model.joint_frame(k);
+    const PpoeFrame& fr = model.frame(f);
+    if (fr.joint.type != JointType::kRevolute) continue;
+    tau_[k] = -(T[f].rotation() * fr.joint.axis).dot(moment(f, T[f] * fr.joint.point));
+  }
+  for (FrameId f = 1; f <= last_varying_; ++f) {
+    const ModelEffects::FrameTerms& t = e.frames[f];
+    const PpoeFrame& fr = model.frame(f);
+    if (t.bend != 0.0) {
+      const FrameId p = t.bend_start;
+      const Vec3 end = T[fr.parent] * fr.T_parent_ip.translation();
+      const Vec3 mid = 0.5 * (T[p].translation() + end);
+      const Vec3 M = T[p].rotation().transpose() * moment(p, mid);
+      bend_[f] = t.bend * (M - M.dot(t.bend_dir) * t.bend_dir);
+    }
+    if (f == e.mount && !e.mount_compliance.isZero(0.0)) {
+      const lie::SE3 T_pre = T[fr.parent] * fr.T_parent_ip;
+      const Vec3 M = T_pre.rotation().transpose() * moment(f, T_pre.translation());
+      mount_rot_ = Vec3(e.mount_compliance.x() * M.x(), e.mount_compliance.y() * M.y(), 0.0);
+    }
+  }
+}
+
+// The fixed parts that change with the configuration: a bent link turns about its middle by the
+// rotation its start joint's frame carries (at the corrected poses upstream), the mount tilts.
+void EffectiveChain::CorrectFrames() {
+  const ModelEffects& e = *effects_;
+  T_[kBaseFrame] = lie::SE3();
+  for (FrameId f = 1; f <= last_varying_; ++f) {
+    const PpoeFrame& fr = effective_.frame(f);
+    if (e.FrameVaries(f)) {
+      lie::SE3 local = static_[f];
+      if (e.frames[f].bend != 0.0) {
+        const FrameId p = e.frames[f].bend_start;
+        const lie::SE3 T_pre = T_[fr.parent] * static_[f];
+        const Mat3 Rb = lie::SO3Exp(T_[p].rotation() * bend_[f]);
+        const Vec3 mid = 0.5 * (T_[p].translation() + T_pre.translation());
+        local = T_[fr.parent].Inverse() * lie::SE3(Rb, mid - Rb * mid) * T_pre;
+      }
+      if (f == e.mount) local = local * lie::SE3(lie::SO3Exp(mount_rot_), Vec3::Zero());
+      const Vec3& tilt = e.frames[f].tilt;
+      if (!tilt.isZero(0.0)) local = local * lie::SE3(lie::SO3Exp(tilt), Vec3::Zero());
+      effective_.SetFixedTransform(f, local);
+    }
+    if (!has_bends_) continue;  // no later frame needs the poses
+    T_[f] = T_[fr.parent] * fr.T_parent_ip;
+    if (fr.q_index >= 0) T_[f] = T_[f] * fr.JointMotion(q_[fr.q_index]);
+  }
+}
+
+void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
+  if (q_read.size() != declared_->nq()) {
+    throw InputError("EffectiveChain: reading has " + std::to_string(q_read.size()) +
+                     " joints, PPOE model '" + declared_->name() + "' has " +
+                     std::to_string(declared_->nq()));
+  }
+  q_ = q_read;
+  if (!effects_) return;
+  if (!q_read.allFinite()) {
+    throw InputError("EffectiveChain: a joint reading of '" + declared_->name() + "' is not finite");
+  }
+  const ModelEffects& e = *effects_;
+  const bool loads = e.NeedsLoads();
+  if (loads) ComputeLoads(q_read);
+  for (int k = 0; k < declared_->nq(); ++k) {
+    const ModelEffects::JointTerms& j = e.joints[k];
+    const double qk = q_read[k];
+    double dq = j.offset;
+    for (int h = 1; h <= 3; ++h) {
+      if (j.harmonic[2 * h - 2] != 0.0 || j.harmonic[2 * h - 1] != 0.0) {
+        dq += j.harmonic[2 * h - 2] * std::cos(h * qk) + j.harmonic[2 * h - 1] * std::sin(h * qk);
+      }
+    }
+    if (loads) {
+      const double tau = tau_[k];
+      // The identification's flank: the side the gravity load presses (none below 1 mN m).
+      const double flank = tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0;
+      dq += j.backlash * flank + j.compliance * tau + j.cubic * tau * tau * tau;
+    }
+    q_[k] = qk + dq;
+  }
+  if (last_varying_ > 0) CorrectFrames();
+}
+
+}  // namespace flexbench::kinematics

@@ -1,0 +1,131 @@
+// Effects identified from measured data, applied to the declared PPOE chain so that every
+// estimator predicts with the corrected model (the closed loop's last step).
+//
+// The effects are those of scenarios/identify/effect_model.h, in the form the kinematics needs
+// them, indexed by the declared model's frames and joint variables (names are resolved when a
+// declared file is read: sim/declared_chain.cc). At a joint reading q_read they act as
+//
+//   joint angle   q = q_read + offset + sum_h (a_h cos h q_read + b_h sin h q_read)
+//                     + backlash * flank + compliance * tau + cubic * tau^3
+//   fixed part    T_parent_ip' = B * (R_ip, t_ip (1 + thermal) + dlen t_ip/|t_ip| + offset)
+//                 Exp(origin) * Exp(mount) * Exp(tilt)
+//
+// where tau is the gravity torque the joint holds, B turns a bent link about its middle by
+// c * (the moment of the weight beyond it, across the link), and Exp(mount) tilts the arm's
+// mount by (c_x M_x, c_y M_y). The loads come from the declared masses at the nominal chain's
+// configuration q_read (as the identification computes them), with the payload as a mass on its
+// frame. A backlash rests on the flank its gravity torque presses (the identification's rule
+// for data without recorded motion; a flank that follows the motion is not tracked at run time).
+//
+// Model/Data split: ModelEffects is constant; EffectiveChain is the per-estimator workspace that
+// holds the corrected model at the last reading. Neither allocates after construction.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <string>
+#include <vector>
+
+#include "estimators/conventions.h"
+#include "estimators/kinematics/ppoe_data.h"
+#include "estimators/kinematics/ppoe_model.h"
+
+namespace flexbench::kinematics {
+
+// Mass riding rigidly on a frame: its total and its first moment m c (c, the centre of mass, in
+// the frame's coordinates).
+struct FrameMass {
+  double mass = 0.0;
+  Vec3 first_moment = Vec3::Zero();
+};
+
+struct ModelEffects {
+  // The reading -> joint-angle map and the gear's load-driven deflection of one joint variable.
+  struct JointTerms {
+    double offset = 0.0;                // rad (m for a prismatic joint)
+    std::array<double, 6> harmonic{};   // a1 b1 a2 b2 a3 b3 [rad]
+    double backlash = 0.0;              // rad, times the flank (+1 / -1)
+    double compliance = 0.0;            // rad / (N m), times tau
+    double cubic = 0.0;                 // rad / (N m)^3, times tau^3
+  };
+  // Geometry of one frame's fixed part, and the compliance of the link that ends at it.
+  struct FrameTerms {
+    double dlen = 0.0;              // m, along t_ip
+    Vec3 offset = Vec3::Zero();     // m, parent coordinates
+    Vec6 origin = Vec6::Zero();     // [rho; theta], after the translation
+    Vec3 tilt = Vec3::Zero();       // rotation vector, last before the joint
+    double bend = 0.0;              // rad / (N m) of the link from bend_start to this frame
+    FrameId bend_start = -1;        // the joint frame where that link starts
+    Vec3 bend_dir = Vec3::Zero();   // its direction in bend_start's coordinates (unit)
+  };
+
+  std::vector<JointTerms> joints;  // per joint variable
+  std::vector<FrameTerms> frames;  // per frame
+  // Frames from the base to the end effector: thermal expansion scales their translations.
+  std::vector<char> on_path;
+  double thermal = 0.0;
+  FrameId mount = -1;                      // where a compliant base tilts
+  Eigen::Vector2d mount_compliance = Eigen::Vector2d::Zero();  // rad / (N m) about x, y
+  FrameId payload_frame = -1;
+  FrameMass payload;
+  // The declared masses (per frame) and gravity in the base frame, for the loads.
+  std::vector<FrameMass> masses;
+  Vec3 g_base = Vec3(0.0, 0.0, -9.81);
+
+  // Sized for `model`, no effect.
+  static ModelEffects None(const PpoeModel& model);
+  bool empty() const;
+  // Whether any term depends on the loads (then `masses` must carry the arm's weight).
+  bool NeedsLoads() const;
+  // Whether a frame's fixed part changes with the configuration (bending, the mount's tilt).
+  bool FrameVaries(FrameId f) const;
+};
+
+// Gravity torque each joint variable holds, tau (the torque its actuator must apply: MuJoCo's
+// qfrc_bias at rest), from the masses of the frames below it at the poses in `data` (a mean
+// forward kinematics of `model`). `subtree_mass` / `subtree_first` are scratch of num_frames
+// entries: each frame's subtree mass and first moment in base coordinates.
+void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffects& effects,
+                   std::vector<double>* subtree_mass, std::vector<Vec3>* subtree_first);
+
+// The declared model at one joint reading with the effects applied: model() and q() are what an
+// estimator's kinematics use instead of the declared model and the reading. Without effects
+// (nullptr or empty) they are the declared model and the reading themselves.
+class EffectiveChain {
+ public:
+  EffectiveChain(const PpoeModel& declared, const ModelEffects* effects);
+
+  // Applies the effects at reading q_read. Does not allocate. Throws InputError on a reading of
+  // the wrong size or with a NaN.
+  void Update(const Eigen::Ref<const Eigen::VectorXd>& q_read);
+
+  bool active() const { return effects_ != nullptr; }
+  // Whether model()'s fixed parts change from one reading to the next (load-driven bending or
+  // mount tilt); otherwise they were set once, at construction.
+  bool varies() const { return last_varying_ > 0; }
+  const PpoeModel& model() const { return effects_ ? effective_ : *declared_; }
+  const PpoeModel& declared() const { return *declared_; }
+  const Eigen::VectorXd& q() const { return q_; }
+  // The gravity torque of each joint at the last reading (zero without load-driven effects).
+  const Eigen::VectorXd& tau() const { return tau_; }
+
+ private:
+  void ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read);
+  void CorrectFrames();
+
+  const PpoeModel* declared_;
+  const ModelEffects* effects_;
+  PpoeModel effective_;
+  PpoeData nominal_;          // the declared chain at the reading, for the loads
+  std::vector<double> subtree_mass_;
+  std::vector<Vec3> subtree_first_;
+  std::vector<lie::SE3> static_;    // per frame: the fixed part without load-driven terms
+  std::vector<lie::SE3> T_;         // per frame: corrected mean poses (bending pass)
+  std::vector<Vec3> bend_;          // per frame: the link's bend (rotation vector, base axes)
+  Vec3 mount_rot_ = Vec3::Zero();
+  Eigen::VectorXd q_, tau_;
+  FrameId last_varying_ = 0;  // frames past it keep their fixed part
+  bool has_bends_ = false;
+};
+
+}  // namespace flexbench::kinematics
