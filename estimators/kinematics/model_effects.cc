@@ -4,6 +4,7 @@
 
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/lie/sincos.h"
 #include "estimators/lie/so3.h"
 
 namespace flexbench::kinematics {
@@ -57,8 +58,12 @@ void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffe
       fm.mass += effects.payload.mass;
       fm.first_moment += effects.payload.first_moment;
     }
-    const lie::SE3& T = data.T_base_frame[f];
     m[f] = fm.mass;
+    if (fm.mass == 0.0 && fm.first_moment.isZero(0.0)) {
+      s[f].setZero();
+      continue;
+    }
+    const lie::SE3& T = data.T_base_frame[f];
     s[f] = fm.mass * T.translation() + T.rotation() * fm.first_moment;
   }
   // Children have larger ids than their parents.
@@ -84,6 +89,15 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
     throw InputError("EffectiveChain: the effects were made for another model than '" +
                      declared.name() + "'");
   }
+  needs_loads_ = e.NeedsLoads();
+  torque_needed_.assign(declared.nq(), 0);
+  for (int k = 0; k < declared.nq(); ++k) {
+    const ModelEffects::JointTerms& j = e.joints[k];
+    torque_needed_[k] = declared.frame(declared.joint_frame(k)).joint.type == JointType::kRevolute &&
+                        (j.backlash != 0.0 || j.compliance != 0.0 || j.cubic != 0.0);
+  }
+  varies_.assign(n, 0);
+  for (FrameId f = 1; f < n; ++f) varies_[f] = e.FrameVaries(f);
   subtree_mass_.assign(n, 0.0);
   subtree_first_.assign(n, Vec3::Zero());
   static_.assign(n, lie::SE3());
@@ -101,7 +115,7 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
     static_[f] = S;
     if (e.FrameVaries(f)) {
       last_varying_ = f;
-      has_bends_ = has_bends_ || t.bend != 0.0;
+      if (t.bend != 0.0) last_pose_needed_ = f;  // poses of the frames above it are needed
       continue;
     }
     if (!t.tilt.isZero(0.0)) S = S * lie::SE3(lie::SO3Exp(t.tilt), Vec3::Zero());
@@ -120,9 +134,9 @@ void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_rea
     return Vec3((subtree_first_[f] - subtree_mass_[f] * a).cross(e.g_base));
   };
   for (int k = 0; k < model.nq(); ++k) {
+    if (!torque_needed_[k]) continue;
     const FrameId f = model.joint_frame(k);
     const PpoeFrame& fr = model.frame(f);
-    if (fr.joint.type != JointType::kRevolute) continue;
     tau_[k] = -(T[f].rotation() * fr.joint.axis).dot(moment(f, T[f] * fr.joint.point));
   }
   for (FrameId f = 1; f <= last_varying_; ++f) {
@@ -150,7 +164,7 @@ void EffectiveChain::CorrectFrames() {
   T_[kBaseFrame] = lie::SE3();
   for (FrameId f = 1; f <= last_varying_; ++f) {
     const PpoeFrame& fr = effective_.frame(f);
-    if (e.FrameVaries(f)) {
+    if (varies_[f]) {
       lie::SE3 local = static_[f];
       if (e.frames[f].bend != 0.0) {
         const FrameId p = e.frames[f].bend_start;
@@ -162,11 +176,21 @@ void EffectiveChain::CorrectFrames() {
       if (f == e.mount) local = local * lie::SE3(lie::SO3Exp(mount_rot_), Vec3::Zero());
       const Vec3& tilt = e.frames[f].tilt;
       if (!tilt.isZero(0.0)) local = local * lie::SE3(lie::SO3Exp(tilt), Vec3::Zero());
-      effective_.SetFixedTransform(f, local);
+      // The source stays where the static geometry put it: the load turns it by milliradians.
+      effective_.SetFixedTransform(f, local, /*move_source=*/false);
     }
-    if (!has_bends_) continue;  // no later frame needs the poses
-    T_[f] = T_[fr.parent] * fr.T_parent_ip;
-    if (fr.q_index >= 0) T_[f] = T_[f] * fr.JointMotion(q_[fr.q_index]);
+    if (f >= last_pose_needed_) continue;  // no later frame needs the poses
+    // T_parent_ip Exp(zeta q) from the precomputed Rodrigues terms (as ForwardKinematics).
+    const double qf = fr.q_index >= 0 ? q_[fr.q_index] : 0.0;
+    if (fr.joint.type == JointType::kRevolute) {
+      double sh, ch;
+      lie::SinCos(0.5 * qf, &sh, &ch);
+      const double a = 2.0 * sh * ch, b = 2.0 * sh * sh;
+      T_[f] = T_[fr.parent] * lie::SE3(fr.T_parent_ip.rotation() + a * fr.K1 + b * fr.K2,
+                                       fr.u0 + a * fr.u1 + b * fr.u2);
+    } else {
+      T_[f] = T_[fr.parent] * lie::SE3(fr.T_parent_ip.rotation(), fr.u0 + qf * fr.u1);
+    }
   }
 }
 
@@ -182,7 +206,7 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
     throw InputError("EffectiveChain: a joint reading of '" + declared_->name() + "' is not finite");
   }
   const ModelEffects& e = *effects_;
-  const bool loads = e.NeedsLoads();
+  const bool loads = needs_loads_;
   if (loads) ComputeLoads(q_read);
   for (int k = 0; k < declared_->nq(); ++k) {
     const ModelEffects::JointTerms& j = e.joints[k];
@@ -193,7 +217,7 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
         dq += j.harmonic[2 * h - 2] * std::cos(h * qk) + j.harmonic[2 * h - 1] * std::sin(h * qk);
       }
     }
-    if (loads) {
+    if (loads && torque_needed_[k]) {
       const double tau = tau_[k];
       // The identification's flank: the side the gravity load presses (none below 1 mN m).
       const double flank = tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0;

@@ -106,7 +106,7 @@ class EffectiveChain {
   const PpoeModel& model() const { return effects_ ? effective_ : *declared_; }
   const PpoeModel& declared() const { return *declared_; }
   const Eigen::VectorXd& q() const { return q_; }
-  // The gravity torque of each joint at the last reading (zero without load-driven effects).
+  // The gravity torque at the last reading of each joint with a torque-driven term (else 0).
   const Eigen::VectorXd& tau() const { return tau_; }
 
  private:
@@ -124,8 +124,11 @@ class EffectiveChain {
   std::vector<Vec3> bend_;          // per frame: the link's bend (rotation vector, base axes)
   Vec3 mount_rot_ = Vec3::Zero();
   Eigen::VectorXd q_, tau_;
-  FrameId last_varying_ = 0;  // frames past it keep their fixed part
-  bool has_bends_ = false;
+  bool needs_loads_ = false;
+  std::vector<char> torque_needed_;  // per joint: a term acts through its torque
+  std::vector<char> varies_;      // per frame: ModelEffects::FrameVaries
+  FrameId last_varying_ = 0;      // frames past it keep their fixed part
+  FrameId last_pose_needed_ = 0;  // the corrected poses of frames before it are needed (bends)
 };
 
 }  // namespace flexbench::kinematics

@@ -124,7 +124,7 @@ FrameId PpoeModel::AddLink(FrameId parent, const std::string& name, const lie::S
   return num_frames() - 1;
 }
 
-void PpoeModel::Precompute(PpoeFrame* f) {
+void PpoeModel::Precompute(PpoeFrame* f, bool move_source) {
   const lie::SE3& T_parent_ip = f->T_parent_ip;
   const Mat3& R_p = T_parent_ip.rotation();
   f->u0 = T_parent_ip.translation();
@@ -133,26 +133,41 @@ void PpoeModel::Precompute(PpoeFrame* f) {
     const Vec3& r = f->joint.point;
     f->zeta.segment<3>(kTransIdx) = r.cross(w);
     f->zeta.segment<3>(kRotIdx) = w;
-    const Mat3 W = lie::Skew(w);
-    f->K1 = R_p * W;
-    f->K2 = f->K1 * W;
-    f->W2 = W * W;
+    f->W2 = lie::Skew(w) * lie::Skew(w);
+    // R_p [w]x and R_p [w]x^2 column by column: [w]x e_k = w x e_k.
+    f->K1 = R_p * lie::Skew(w);
+    f->K2 = R_p * f->W2;
     f->u1 = -(f->K1 * r);
     f->u2 = -(f->K2 * r);
   } else if (f->joint.type == JointType::kPrismatic) {
     f->zeta.segment<3>(kTransIdx) = w;
     f->u1 = R_p * w;
   }
-  f->source_cov_parent = lie::TransformCovariance(T_parent_ip, f->source_cov);
+  if (move_source) f->source_cov_parent = lie::TransformCovariance(T_parent_ip, f->source_cov);
 }
 
-void PpoeModel::SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip) {
+void PpoeModel::SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip, bool move_source) {
   if (id <= kBaseFrame || id >= num_frames()) {
     throw InputError("PPOE model '" + name_ + "': SetFixedTransform of frame id " +
                      std::to_string(id) + ", which does not exist");
   }
-  frames_[id].T_parent_ip = T_parent_ip;
-  Precompute(&frames_[id]);
+  PpoeFrame& f = frames_[id];
+  f.T_parent_ip = T_parent_ip;
+  if (move_source) {
+    Precompute(&f, true);
+    return;
+  }
+  // Only the terms that depend on T_parent_ip (the joint's own stay).
+  const Mat3& R_p = T_parent_ip.rotation();
+  f.u0 = T_parent_ip.translation();
+  if (f.joint.type == JointType::kRevolute) {
+    f.K1.noalias() = R_p * lie::Skew(f.joint.axis);
+    f.K2.noalias() = R_p * f.W2;
+    f.u1.noalias() = -(f.K1 * f.joint.point);
+    f.u2.noalias() = -(f.K2 * f.joint.point);
+  } else if (f.joint.type == JointType::kPrismatic) {
+    f.u1.noalias() = R_p * f.joint.axis;
+  }
 }
 
 FrameId PpoeModel::AddFrame(FrameId parent, const std::string& name, const lie::SE3& T_parent_fp,
