@@ -25,6 +25,9 @@ const std::vector<KindEntry>& ScenarioKinds() {
       {"jsk_particle_sweep", "PF paper sec. V-A: number of particles and kappa_v sweep", MakeJskParticleSweepKind},
       {"closed_loop", "measured data -> residual -> undeclared effects found, fitted, validated",
        MakeClosedLoopKind},
+      {"closed_loop_estimators",
+       "estimate -> identify -> estimate with the augmented model, before/after per estimator",
+       MakeClosedLoopEstimatorsKind},
       {"mismatch_matrix", "every estimator against every undeclared effect: error and NEES",
        MakeMismatchMatrixKind},
   };

@@ -19,6 +19,7 @@ std::unique_ptr<ScenarioKind> MakeJskImuYawDriftKind();
 std::unique_ptr<ScenarioKind> MakeJskDirectFusionKind();
 std::unique_ptr<ScenarioKind> MakeJskParticleSweepKind();
 std::unique_ptr<ScenarioKind> MakeClosedLoopKind();
+std::unique_ptr<ScenarioKind> MakeClosedLoopEstimatorsKind();
 std::unique_ptr<ScenarioKind> MakeMismatchMatrixKind();
 
 }  // namespace flexbench::scenarios

@@ -20,6 +20,7 @@
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/sim_readings.h"
+#include "scenarios/runner/common/tag_tracking.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
@@ -151,7 +152,6 @@ class TagFusionKind : public ScenarioKind {
     csv << "config,estimator,tags_used,pos_err_m,lateral_err_m,rot_err_deg,nees\n";
     int total_tags = 0;
     int configs_without_tags = 0;
-    const double sigma2 = pixel_std_ * pixel_std_;
     for (size_t c = 0; c < configurations_.size(); ++c) {
       Command(configurations_[c]);
       const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
@@ -160,40 +160,8 @@ class TagFusionKind : public ScenarioKind {
 
       const estimators::JointReading joints =
           EncoderReading(*sim_, *chain_, static_cast<double>(c));
-      std::vector<estimators::Measurement> measurements;
-      for (const render::TagDetection& d : det.detections) {
-        const auto frame_it = tag_frames_.find(d.id);
-        if (frame_it == tag_frames_.end()) continue;
-        const render::TagInModel* tag = nullptr;
-        for (const auto& t : tags_) {
-          if (t.id == d.id) tag = &t;
-        }
-        if (use_corners_) {
-          estimators::TagCorners m;
-          m.t = joints.t;
-          m.camera = 0;
-          m.tag_id = d.id;
-          m.frame = frame_it->second;
-          for (int k = 0; k < 4; ++k) {
-            m.p_frame[k] = tag->corners_geom[k];
-            m.uv[k] = d.corners[k];
-          }
-          m.cov = Eigen::Matrix<double, 8, 8>::Identity() * sigma2;
-          measurements.push_back(m);
-        } else {
-          // libapriltag's centre is the homography image of the tag centre, i.e. the
-          // projection of the 3-D centre (incidence is preserved by projection).
-          estimators::PixelPoint m;
-          m.t = joints.t;
-          m.camera = 0;
-          m.frame = frame_it->second;
-          m.p_frame = 0.25 * (tag->corners_geom[0] + tag->corners_geom[1] + tag->corners_geom[2] +
-                              tag->corners_geom[3]);
-          m.uv = d.center;
-          m.cov = Eigen::Matrix2d::Identity() * sigma2;
-          measurements.push_back(m);
-        }
-      }
+      const std::vector<estimators::Measurement> measurements =
+          TagMeasurements(det, tags_, tag_frames_, use_corners_, pixel_std_, joints.t);
       total_tags += static_cast<int>(measurements.size());
       configs_without_tags += measurements.empty();
 
@@ -342,32 +310,8 @@ class TagFusionKind : public ScenarioKind {
   void Command(const std::vector<std::pair<std::string, double>>& cfg) {
     for (const auto& [j, deg] : fixed_) sim_->SetCommand(j, deg * M_PI / 180.0);
     for (const auto& [j, deg] : cfg) sim_->SetCommand(j, deg * M_PI / 180.0);
-    if (!aim_pan_.empty()) Aim();
+    if (!aim_pan_.empty()) AimCamera(sim_.get(), aim_pan_, aim_tilt_, aim_at_, camera_);
     sim_->Settle();
-  }
-
-  // Pan and tilt so the camera's optical axis passes through the nominal target (two fixed-
-  // point passes: the camera sits off the pan and tilt axes).
-  void Aim() {
-    // Start from the centred head so the result depends on the arm's command only.
-    sim_->SetCommand(aim_pan_, 0.0);
-    sim_->SetCommand(aim_tilt_, 0.0);
-    for (int pass = 0; pass < 3; ++pass) {
-      const Eigen::VectorXd q = sim_->command();
-      const Vec3 target = sim_->NominalPose(aim_at_, q).translation();
-      const Eigen::Isometry3d T_w_cam = sim_->NominalPose(camera_, q);
-      const Vec3 d_cam = T_w_cam.inverse() * target;  // optical frame: x right, y down, z fwd
-      const double pan = std::atan2(-d_cam.x(), d_cam.z());
-      const double tilt = std::atan2(d_cam.y(), d_cam.z());
-      const int k_pan = Index(aim_pan_), k_tilt = Index(aim_tilt_);
-      sim_->SetCommand(aim_pan_, q[k_pan] + pan);
-      sim_->SetCommand(aim_tilt_, q[k_tilt] + tilt);
-    }
-  }
-
-  int Index(const std::string& joint) const {
-    const auto& names = sim_->actuated_joints();
-    return static_cast<int>(std::find(names.begin(), names.end(), joint) - names.begin());
   }
 
   void SampleConfigurations(render::Renderer& renderer, RunContext& ctx) {
