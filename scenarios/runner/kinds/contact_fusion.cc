@@ -50,6 +50,7 @@ class ContactFusionKind : public ScenarioKind {
     chain_ = std::make_unique<sim::DeclaredChain>(
         sim::BuildDeclaredChain(sim_->nominal_model(), declared_));
     setup_.model = &chain_->model;
+    setup_.effects = chain_->effects_or_null();
     setup_.end_effector = chain_->end_effector;
     // estimate_in: an observed frame, e.g. the head camera whose depth image shows the table
     // (the paper's set-up): the table's pose is known in that frame, the chain from it to the

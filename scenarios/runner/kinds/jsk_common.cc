@@ -113,6 +113,7 @@ Rig LoadRig(const ConfigNode& root, bool with_effects) {
     rig.imu_frames.push_back(rig.chain->ObservedFrame(site));
   }
   rig.setup.model = &rig.chain->model;
+  rig.setup.effects = rig.chain->effects_or_null();
   rig.setup.end_effector = rig.chain->end_effector;
   for (kinematics::FrameId f : rig.imu_frames) rig.setup.imus.push_back(estimators::ImuSetup{f});
   const std::vector<std::string>& act = rig.sim->actuated_joints();

@@ -63,6 +63,7 @@ class MismatchMatrixKind : public ScenarioKind {
     chain_ = std::make_unique<sim::DeclaredChain>(
         sim::BuildDeclaredChain(s0.nominal_model(), declared_));
     setup_.model = &chain_->model;
+    setup_.effects = chain_->effects_or_null();
     setup_.end_effector = chain_->end_effector;
     for (const auto& [j, r] : ranges_) chain_->QIndex(j);  // names checked now
     for (const EstimatorSpec& spec : specs_) {

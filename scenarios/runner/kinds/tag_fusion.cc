@@ -124,6 +124,7 @@ class TagFusionKind : public ScenarioKind {
                        " is among the observed frames");
     }
     setup_.model = &chain_->model;
+    setup_.effects = chain_->effects_or_null();
     setup_.end_effector = chain_->end_effector;
     setup_.cameras.push_back(
         {sim::CameraIntrinsics(sim_->model(), camera_id_), chain_->ObservedFrame(camera_)});
