@@ -60,4 +60,13 @@ std::unique_ptr<Estimator> MakeEstimator(const std::string& name, const Estimato
   throw InputError("unknown estimator '" + name + "' (known: " + known + ")");
 }
 
+bool ReadingNoiseFlag(const Params& params, const std::string& estimator, FrameId reference) {
+  const double v = params.Scalar("reading_noise", 0.0);
+  if (v != 0.0 && v != 1.0) throw InputError(estimator + ": reading_noise must be 0 or 1");
+  if (v == 1.0 && reference != kinematics::kBaseFrame) {
+    throw InputError(estimator + ": reading_noise is only available in the base frame");
+  }
+  return v == 1.0;
+}
+
 }  // namespace flexbench::estimators

@@ -112,6 +112,11 @@ struct EstimatorEntry {
   std::unique_ptr<Estimator> (*make)(const EstimatorSetup& setup);
 };
 
+// The `reading_noise` parameter (0 or 1, default 0) of the estimators with a kinematic prior:
+// 1 adds the joint readings' noise (JointReading::std) to it, to first order. Only in the base
+// frame. Throws InputError naming the estimator.
+bool ReadingNoiseFlag(const Params& params, const std::string& estimator, FrameId reference);
+
 // The explicit list of estimators (registry.cc), one line each.
 const std::vector<EstimatorEntry>& EstimatorRegistry();
 

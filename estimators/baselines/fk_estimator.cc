@@ -2,6 +2,7 @@
 
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/estimator.h"
 
 namespace flexbench::estimators {
 namespace {
@@ -18,6 +19,7 @@ class FkEstimator : public Estimator {
       throw InputError("fk: covariance_order must be 2 or 4");
     }
     order_ = order == 4.0 ? lie::CompoundOrder::kFourth : lie::CompoundOrder::kSecond;
+    reading_noise_ = ReadingNoiseFlag(setup.params, "fk", ref_);
     if (ref_ < 0 || ref_ >= setup.model->num_frames()) {
       throw InputError("fk: reference frame " + std::to_string(ref_) + " not in the model");
     }
@@ -48,6 +50,9 @@ class FkEstimator : public Estimator {
     if (ref_ == kinematics::kBaseFrame) {
       belief_.T_base_ee = data_.T_base_frame[ee_];
       belief_.cov = data_.Sigma_frame[ee_];
+      if (reading_noise_ && joints->std.size() == model.nq() && joints->std.allFinite()) {
+        kinematics::AddJointNoiseCovariance(model, data_, ee_, joints->std, J_, &belief_.cov);
+      }
     } else {  // the end effector seen from the reference frame
       belief_.T_base_ee = data_.T_base_frame[ref_].Between(data_.T_base_frame[ee_]);
       kinematics::RelativeCovariance(model, data_, ref_, ee_, &belief_.cov);
@@ -63,6 +68,8 @@ class FkEstimator : public Estimator {
  private:
   kinematics::EffectiveChain kin_;
   kinematics::PpoeData data_;
+  bool reading_noise_ = false;
+  kinematics::Matrix6Xd J_{6, kin_.declared().nq()};
   FrameId ee_;
   FrameId ref_;
   lie::CompoundOrder order_ = lie::CompoundOrder::kSecond;

@@ -48,6 +48,7 @@ class EkfEstimator : public Estimator {
     if (ref_ != kinematics::kBaseFrame && order_ == lie::CompoundOrder::kFourth) {
       throw InputError(name_ + ": covariance_order 4 is not available in a reference frame");
     }
+    if (kind == PriorKind::kPpoe) reading_noise_ = ReadingNoiseFlag(p, name_, ref_);
     options_.max_iterations = static_cast<int>(p.Scalar("max_iterations", 10));
     options_.numeric_jacobians = p.Scalar("numeric_jacobians", 0.0) != 0.0;
     options_.gate_nis = p.Scalar("gate_nis", 0.0);
@@ -85,6 +86,9 @@ class EkfEstimator : public Estimator {
     if (kind_ == PriorKind::kPpoe) {
       kinematics::ForwardKinematicsWithCovariance(model, data_, kin_.q(), order_);
       belief_.cov = PriorCovariance();
+      if (reading_noise_ && j.std.size() == model.nq() && j.std.allFinite()) {
+        kinematics::AddJointNoiseCovariance(model, data_, ee_, j.std, J_, &belief_.cov);
+      }
       // PPOE covariances are PSD by construction (often singular: rotational sources only);
       // a negative eigenvalue beyond rounding would mean a broken model: repair and count.
       Mat6 repaired = belief_.cov;
@@ -203,6 +207,8 @@ class EkfEstimator : public Estimator {
 
   kinematics::EffectiveChain kin_;
   kinematics::PpoeData data_;
+  bool reading_noise_ = false;
+  kinematics::Matrix6Xd J_{6, kin_.declared().nq()};
   FrameId ee_;
   FrameId ref_;
   std::vector<CameraSetup> cameras_;

@@ -234,4 +234,19 @@ void ComputeFrameJacobian(const PpoeModel& model, const PpoeData& data, FrameId 
   }
 }
 
+void AddJointNoiseCovariance(const PpoeModel& model, const PpoeData& data, FrameId frame,
+                             const Eigen::Ref<const Eigen::VectorXd>& q_std,
+                             Eigen::Ref<Matrix6Xd> J_frame_q, Mat6* Sigma) {
+  if (q_std.size() != model.nq()) {
+    throw InputError("AddJointNoiseCovariance: " + std::to_string(q_std.size()) +
+                     " joint stds for PPOE model '" + model.name() + "' with " +
+                     std::to_string(model.nq()) + " joints");
+  }
+  ComputeFrameJacobian(model, data, frame, J_frame_q);
+  for (int k = 0; k < model.nq(); ++k) {
+    const double v = q_std[k] * q_std[k];
+    if (v > 0.0) Sigma->noalias() += v * J_frame_q.col(k) * J_frame_q.col(k).transpose();
+  }
+}
+
 }  // namespace flexbench::kinematics

@@ -49,4 +49,11 @@ void RelativeCovariance(const PpoeModel& model, const PpoeData& data, FrameId re
 void ComputeFrameJacobian(const PpoeModel& model, const PpoeData& data, FrameId frame,
                           Eigen::Ref<Matrix6Xd> J_frame_q);
 
+// Adds the joint readings' own noise to a frame's local covariance: Sigma += J diag(std^2) J^T
+// with J = J_frame_q at the mean poses in `data` (first order; the PPOE sources know nothing of
+// the encoders' noise). `J_frame_q` is scratch of 6 x nq. Throws InputError on sizes.
+void AddJointNoiseCovariance(const PpoeModel& model, const PpoeData& data, FrameId frame,
+                             const Eigen::Ref<const Eigen::VectorXd>& q_std,
+                             Eigen::Ref<Matrix6Xd> J_frame_q, Mat6* Sigma);
+
 }  // namespace flexbench::kinematics
