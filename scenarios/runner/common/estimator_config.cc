@@ -64,6 +64,18 @@ double Nees(const Vec6& e, const Mat6& cov, int* dof) {
   return d2;
 }
 
+void MismatchTest::Add(double nees, int dof) {
+  nees_.push_back(nees);
+  dof_.push_back(dof);
+  const int n = static_cast<int>(nees_.size());
+  if (n < window_ || first_ >= 0) return;
+  double mean = 0.0, dof_mean = 0.0;
+  for (int k = n - window_; k < n; ++k) mean += nees_[k], dof_mean += dof_[k];
+  mean /= window_;
+  dof_mean /= window_;
+  if (dof_mean > 0 && mean > stats::MeanChiSquareBounds(dof_mean, window_).upper) first_ = n - 1;
+}
+
 void ErrorStats::Add(const lie::SE3& T_est, const Mat6& cov, const lie::SE3& T_true) {
   const Vec3 d = T_est.translation() - T_true.translation();
   const Vec3 axis = T_true.rotation().col(2);

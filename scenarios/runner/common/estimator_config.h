@@ -43,6 +43,24 @@ class ErrorStats {
   std::vector<int> dof_;
 };
 
+// A running model-mismatch test: the mean NEES over the last `window` estimates above the upper
+// 95% bound of a mean of that many chi-square variables (their dof) flags a mismatch, once;
+// one-sided, since an overconfident estimate is the dangerous one.
+class MismatchTest {
+ public:
+  explicit MismatchTest(int window = 10) : window_(window) {}
+  void Add(double nees, int dof);
+  bool flagged() const { return first_ >= 0; }
+  // Index of the estimate at which it fired (-1: never).
+  int first_step() const { return first_; }
+
+ private:
+  int window_;
+  std::vector<double> nees_;
+  std::vector<int> dof_;
+  int first_ = -1;
+};
+
 // NEES of error e against a possibly singular covariance: Mahalanobis distance on the
 // covariance's range (eigenvalues above 1e-12 of the largest), with that rank as dof.
 double Nees(const Vec6& e, const Mat6& cov, int* dof);

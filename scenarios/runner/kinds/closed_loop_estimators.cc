@@ -41,32 +41,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A running test of the NEES: the mean over the last `window` steps above the upper 95% bound
-// of a mean of that many chi-square variables flags a model mismatch.
-class MismatchTest {
- public:
-  explicit MismatchTest(int window) : window_(window) {}
-  void Add(double nees, int dof) {
-    nees_.push_back(nees);
-    dof_.push_back(dof);
-    const int n = static_cast<int>(nees_.size());
-    if (n < window_ || first_ >= 0) return;
-    double mean = 0.0, dof_mean = 0.0;
-    for (int k = n - window_; k < n; ++k) mean += nees_[k], dof_mean += dof_[k];
-    mean /= window_;
-    dof_mean /= window_;
-    if (dof_mean > 0 && mean > stats::MeanChiSquareBounds(dof_mean, window_).upper) first_ = n - 1;
-  }
-  bool flagged() const { return first_ >= 0; }
-  int first_step() const { return first_; }
-
- private:
-  int window_;
-  std::vector<double> nees_;
-  std::vector<int> dof_;
-  int first_ = -1;
-};
-
 // One estimator's run along one trajectory.
 struct Track {
   ErrorStats stats;

@@ -5,6 +5,8 @@
 // NEES, its chi-square bound, flagged) and matrix.png (heat maps of error and NEES, flagged cells
 // outlined). Metric `unflagged_growth_cells`: cells whose error grew by `growth_factor` over the
 // no-effect column while the mean NEES stayed inside its bound -- the mismatch went unnoticed.
+// Per cell, the running-NEES test (common/estimator_config.h, window 10) over the configurations
+// in order gives the detection delay: the configuration at which it first fires (-1: never).
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -87,6 +89,9 @@ class MismatchMatrixKind : public ScenarioKind {
     }
     const size_t E = instances_.size(), C = columns_.size();
     std::vector<std::vector<ErrorStats>> stats(E, std::vector<ErrorStats>(C));
+    // Detection delay: the running-NEES test over the configurations in their order.
+    std::vector<std::vector<MismatchTest>> detect(
+        E, std::vector<MismatchTest>(C, MismatchTest(std::min(10, count_))));
     const sim::FrameRef ee = sims_[0]->Frame(declared_.end_effector);
     for (size_t col = 0; col < C; ++col) {
       sim::Simulation& sim = *sims_[col];
@@ -139,13 +144,16 @@ class MismatchMatrixKind : public ScenarioKind {
         for (size_t e = 0; e < E; ++e) {
           const estimators::Belief b = instances_[e]->Estimate();
           stats[e][col].Add(b.T_base_ee, b.cov, T_true);
+          int dof = 0;
+          Nees(b.T_base_ee.Between(T_true).Log(), b.cov, &dof);
+          detect[e][col].Add(stats[e][col].last_nees(), dof);
         }
       }
     }
     // Metrics, CSV, heat maps.
     std::ostringstream csv;
     csv << "estimator,effect,pos_err_mean_m,rot_err_mean_deg,nees_mean,nees_dof,nees_bound_high,"
-           "flagged,error_grew\n";
+           "flagged,error_grew,detection_delay_configurations\n";
     int unflagged = 0, grown = 0;
     render::Heatmap err_map, nees_map;
     err_map.title = "end-effector position error [mm]";
@@ -165,6 +173,8 @@ class MismatchMatrixKind : public ScenarioKind {
       for (size_t col = 0; col < C; ++col) {
         Json m;
         stats[e][col].WriteMetrics(&m);
+        m["mismatch_flagged"] = detect[e][col].flagged();
+        m["detection_delay_configurations"] = detect[e][col].first_step();
         (*ctx.summary)["estimators"][specs_[e].name]["metrics"][columns_[col]] = m;
         const double pos = m["pos_err_mean_m"].get<double>();
         const double nees = m["nees_mean"].get<double>();
@@ -177,7 +187,7 @@ class MismatchMatrixKind : public ScenarioKind {
         csv << specs_[e].name << "," << columns_[col] << "," << Fmt("%.6g", pos) << ","
             << Fmt("%.6g", m["rot_err_mean_deg"].get<double>()) << "," << Fmt("%.6g", nees) << ","
             << m.value("nees_dof", 0.0) << "," << Fmt("%.6g", high) << "," << flagged << "," << grew
-            << "\n";
+            << "," << detect[e][col].first_step() << "\n";
         err_map.value.back().push_back(1e3 * pos);
         err_map.text.back().push_back(Fmt("%.2f", 1e3 * pos));
         err_map.marked.back().push_back(grew);

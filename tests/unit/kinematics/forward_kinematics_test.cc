@@ -514,3 +514,48 @@ TEST(RelativeCovariance, UnknownFrameIsAClearError) {
 
 }  // namespace
 }  // namespace flexbench::kinematics
+
+namespace flexbench::kinematics {
+namespace {
+
+// The readings' noise on the end effector (fk/ppoe_ekf `reading_noise`) against Monte Carlo:
+// the sample covariance of Log(T(q)^-1 T(q + dq)), dq ~ N(0, diag(std^2)), no sources.
+TEST(AddJointNoiseCovariance, MatchesMonteCarlo) {
+  std::mt19937_64 rng(11);
+  testing::RandomChainOptions o = testing::EveryFeature(7, 0.0, 0.0);
+  o.fixed_base_source = false;
+  o.grasp = false;
+  const PpoeModel model = testing::RandomChain(rng, o);
+  const FrameId ee = model.FindFrame("ee");
+  const Eigen::VectorXd q = testing::RandomQ(rng, model);
+  Eigen::VectorXd std_q(model.nq());
+  for (int k = 0; k < model.nq(); ++k) std_q[k] = 1e-3 * (1 + k % 3);
+  PpoeData data(model);
+  ForwardKinematics(model, data, q);
+  const lie::SE3 T0 = data.T_base_frame[ee];
+  Matrix6Xd J(6, model.nq());
+  Mat6 Sigma = Mat6::Zero();
+  AddJointNoiseCovariance(model, data, ee, std_q, J, &Sigma);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const int samples = 20000;
+  Mat6 mc = Mat6::Zero();
+  PpoeData d2(model);
+  for (int s = 0; s < samples; ++s) {
+    Eigen::VectorXd qs = q;
+    for (int k = 0; k < model.nq(); ++k) qs[k] += std_q[k] * n(rng);
+    ForwardKinematics(model, d2, qs);
+    const Vec6 xi = T0.Between(d2.T_base_frame[ee]).Log();
+    mc += xi * xi.transpose() / samples;
+  }
+  // Relative to the largest entry: the sampling error of 20000 draws is ~1%.
+  EXPECT_LT((mc - Sigma).cwiseAbs().maxCoeff(), 0.03 * Sigma.cwiseAbs().maxCoeff());
+  // Zero std adds nothing; a wrong size is an input error.
+  Mat6 same = Sigma;
+  AddJointNoiseCovariance(model, data, ee, Eigen::VectorXd::Zero(model.nq()), J, &same);
+  EXPECT_EQ(same, Sigma);
+  EXPECT_THROW(AddJointNoiseCovariance(model, data, ee, Eigen::VectorXd::Zero(2), J, &same),
+               InputError);
+}
+
+}  // namespace
+}  // namespace flexbench::kinematics

@@ -126,6 +126,51 @@ TEST_P(NoAllocationTest, EstimatorInterfaceDoesNotAllocate) {
   EXPECT_TRUE(std::isfinite(sink));
 }
 
+// Identified effects (issue 15) cost no allocation either: the corrected model is updated in
+// place at every joint reading (kinematics::EffectiveChain), the particle filter refolds its
+// batch kinematics, fk and the EKF add the readings' noise to their prior.
+TEST_P(NoAllocationTest, EstimatorsWithIdentifiedEffectsDoNotAllocate) {
+  testing::JskLikeArm arm;
+  kinematics::ModelEffects fx = kinematics::ModelEffects::None(arm.model);
+  for (int k = 0; k < arm.model.nq(); ++k) fx.masses[arm.model.joint_frame(k)] = {1.0, Vec3(0.1, 0, 0)};
+  fx.joints[0].offset = 0.01;
+  fx.joints[1].compliance = -2e-3;
+  fx.joints[1].harmonic[0] = 1e-3;
+  const FrameId j3 = arm.model.joint_frame(2);
+  fx.frames[j3].bend = 1e-3;
+  fx.frames[j3].bend_start = arm.model.joint_frame(1);
+  fx.frames[j3].bend_dir = Vec3::UnitX();
+  fx.mount = arm.model.joint_frame(0);
+  fx.mount_compliance = Eigen::Vector2d(1e-3, 1e-3);
+  Eigen::VectorXd q(4);
+  q << 0.3, 0.6, 0.2, 0.0;
+  estimators::Measurement joints =
+      estimators::JointReading{0.0, q, estimators::JointVector::Constant(4, 1e-3)};
+  for (const char* name : {"pf_encoders", "fk", "ppoe_ekf"}) {
+    estimators::EstimatorSetup setup;
+    setup.model = &arm.model;
+    setup.effects = &fx;
+    setup.end_effector = arm.grasp;
+    if (std::string(name) == "pf_encoders") {
+      setup.params = estimators::Params(
+          {{"conjugate_proposal", {GetParam() == Proposal::kEncoderConjugate ? 1.0 : 0.0}}});
+    } else {
+      setup.params = estimators::Params({{"reading_noise", {1.0}}});
+    }
+    auto est = estimators::MakeEstimator(name, setup);
+    double sink = 0.0;
+    const long n = CountAllocations([&] {
+      for (int step = 1; step <= 5; ++step) {
+        est->Predict(step);
+        est->Update(joints);
+        sink += est->Estimate().T_base_ee.translation().x();
+      }
+    });
+    EXPECT_EQ(n, 0) << name;
+    EXPECT_TRUE(std::isfinite(sink)) << name;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Proposals, NoAllocationTest,
                          ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate));
 
