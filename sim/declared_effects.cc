@@ -50,7 +50,10 @@ class EffectsBuilder {
     for (FrameId f = chain_->end_effector; f > 0; f = model_.frame(f).parent) e.on_path[f] = 1;
     FindMount();
     bool load_driven = false;
-    for (const IdentifiedEffect& ie : d_.identified_effects) load_driven |= Add(ie);
+    for (const IdentifiedEffect& ie : d_.identified_effects) {
+      load_driven |= Add(ie);
+      AddVariance(ie);
+    }
     if (load_driven && !HasMasses()) {
       for (const IdentifiedEffect& ie : d_.identified_effects) {
         const auto it = Types().find(ie.effect.substr(0, ie.effect.find('@')));
@@ -125,6 +128,76 @@ class EffectsBuilder {
     return info->second.load_driven;
   }
 
+  // The effect's parameter stds (if given) as ModelEffects::Uncertainty: variances per term;
+  // the geometric terms as a twist covariance at the frame's source, whose axes are the fixed
+  // part's (a translation d in parent axes is R^T d there). A payload's uncertainty is not
+  // carried (it would act through every load-driven term at once).
+  void AddVariance(const IdentifiedEffect& ie) {
+    if (ie.std.empty()) return;
+    const size_t at = ie.effect.find('@');
+    const std::string type = ie.effect.substr(0, at);
+    const std::string loc = ie.effect.substr(at + 1);
+    std::vector<double> v2(ie.std.size());
+    for (size_t i = 0; i < v2.size(); ++i) v2[i] = ie.std[i] * ie.std[i];
+    ModelEffects::Uncertainty& u = chain_->effects.uncertainty;
+    const auto translation = [&](FrameId f, const Vec3& d_parent, double var) {
+      const Vec3 d = model_.frame(f).T_parent_ip.rotation().transpose() * d_parent;
+      u.frames[f].block<3, 3>(kTransIdx, kTransIdx) += var * d * d.transpose();
+    };
+    if (type == "thermal_expansion") {
+      u.thermal += v2[0];
+    } else if (type == "camera_offset" || type == "joint_origin") {
+      const FrameId f = type == "camera_offset" ? Frame(ie, "camera/" + loc, "camera")
+                                                : model_.joint_frame(JointIndex(ie, loc));
+      for (int k = 0; k < 6; ++k) u.frames[f](k, k) += v2[k];
+    } else if (type == "link_length") {
+      const FrameId f = AnyFrame(ie, loc);
+      translation(f, model_.frame(f).T_parent_ip.translation().normalized(), v2[0]);
+    } else if (type == "link_offset") {
+      const FrameId f = AnyFrame(ie, loc);
+      for (int k = 0; k < 3; ++k) translation(f, Vec3::Unit(k), v2[k]);
+    } else if (type == "base_compliance") {
+      u.mount_compliance += Eigen::Vector2d(v2[0], v2[1]);
+    } else if (type != "payload") {
+      AddJointVariance(ie, type, JointIndex(ie, loc), v2);
+    }
+  }
+
+  void AddJointVariance(const IdentifiedEffect& ie, const std::string& type, int k,
+                        const std::vector<double>& v2) {
+    const FrameId f = model_.joint_frame(k);
+    ModelEffects::Uncertainty& u = chain_->effects.uncertainty;
+    ModelEffects::JointTerms& j = u.joints[k];
+    if (type == "joint_offset") {
+      j.offset += v2[0];
+    } else if (type == "joint_axis_tilt_a" || type == "joint_axis_tilt_b") {
+      const Vec3 a = TiltAxis(model_.frame(f).joint.axis, type == "joint_axis_tilt_a");
+      u.frames[f].block<3, 3>(kRotIdx, kRotIdx) += v2[0] * a * a.transpose();
+    } else if (type == "joint_compliance") {
+      j.compliance += v2[0];
+    } else if (type == "backlash") {
+      j.backlash += v2[0];
+    } else if (type == "stiffening_spring") {
+      j.compliance += v2[0];
+      j.cubic += v2[1] / std::pow(kStiffeningTau0, 4);
+    } else if (type == "transmission_error" || type == "joint_error_curve") {
+      for (size_t i = 0; i < v2.size(); ++i) j.harmonic[i] += v2[i];
+    } else if (type == "link_bending") {
+      u.bend[f] += v2[0];
+    } else {
+      Fail(ie, "has no uncertainty model");  // Types() and this list disagree
+    }
+  }
+
+  // The identification's tilt axes: a, the first of x, y not along the joint axis w, made
+  // normal to w; b = w x a.
+  static Vec3 TiltAxis(const Vec3& axis, bool a_axis) {
+    const Vec3 w = axis.normalized();
+    const Vec3 any = std::abs(w.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+    const Vec3 a = (any - any.dot(w) * w).normalized();
+    return a_axis ? a : Vec3(w.cross(a));
+  }
+
   void AddJointEffect(const IdentifiedEffect& ie, const std::string& type, const std::string& loc) {
     const int k = JointIndex(ie, loc);
     const FrameId f = model_.joint_frame(k);
@@ -142,12 +215,7 @@ class EffectsBuilder {
       return;
     }
     if (type == "joint_axis_tilt_a" || type == "joint_axis_tilt_b") {
-      // The identification's tilt axes: a, the first of x, y not along the joint axis w,
-      // made normal to w; b = w x a.
-      const Vec3 w = fr.joint.axis.normalized();
-      const Vec3 any = std::abs(w.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
-      const Vec3 a = (any - any.dot(w) * w).normalized();
-      e.frames[f].tilt += v[0] * (type == "joint_axis_tilt_a" ? a : Vec3(w.cross(a)));
+      e.frames[f].tilt += v[0] * TiltAxis(fr.joint.axis, type == "joint_axis_tilt_a");
       return;
     }
     if (!revolute) Fail(ie, "needs a revolute joint; '" + loc + "' is not");

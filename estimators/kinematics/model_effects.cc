@@ -15,7 +15,26 @@ ModelEffects ModelEffects::None(const PpoeModel& model) {
   e.frames.assign(model.num_frames(), FrameTerms{});
   e.on_path.assign(model.num_frames(), 0);
   e.masses.assign(model.num_frames(), FrameMass{});
+  e.uncertainty.joints.assign(model.nq(), JointTerms{});
+  e.uncertainty.frames.assign(model.num_frames(), Mat6::Zero());
+  e.uncertainty.bend.assign(model.num_frames(), 0.0);
   return e;
+}
+
+bool ModelEffects::Uncertainty::empty() const {
+  for (const JointTerms& j : joints) {
+    if (j.offset != 0.0 || j.backlash != 0.0 || j.compliance != 0.0 || j.cubic != 0.0) return false;
+    for (double h : j.harmonic) {
+      if (h != 0.0) return false;
+    }
+  }
+  for (const Mat6& c : frames) {
+    if (!c.isZero(0.0)) return false;
+  }
+  for (double b : bend) {
+    if (b != 0.0) return false;
+  }
+  return mount_compliance.isZero(0.0) && thermal == 0.0;
 }
 
 bool ModelEffects::NeedsLoads() const {
@@ -121,6 +140,86 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
     if (!t.tilt.isZero(0.0)) S = S * lie::SE3(lie::SO3Exp(t.tilt), Vec3::Zero());
     effective_.SetFixedTransform(f, S);
   }
+  if (!e.uncertainty.empty()) SetConstantSources();
+}
+
+// The parameters' variances as twists at each frame's source (F_{i,p}): a joint term moves the
+// joint variable (xi = zeta dq: Exp(zeta (q + dq)) = Exp(zeta dq) Exp(zeta q)); the geometric
+// terms come as a twist covariance already; the mount turns about its x and y axes; a bent link
+// turns about its middle; thermal expansion scales every translation on the path at once, which
+// moves the end of the path by dtheta times its position (for joints whose axes pass through
+// their frames' origins: a joint point off the origin is not scaled). Terms that do not change
+// with the reading are set here, once.
+void EffectiveChain::SetConstantSources() {
+  const ModelEffects& e = *effects_;
+  const ModelEffects::Uncertainty& u = e.uncertainty;
+  const int n = declared_->num_frames();
+  source_fixed_.assign(n, Mat6::Zero());
+  source_varies_.assign(n, 0);
+  bend_twist_.assign(n, Vec6::Zero());
+  std::vector<char> changed(n, 0);
+  for (FrameId f = 1; f < n; ++f) {
+    source_fixed_[f] = declared_->frame(f).source_cov + u.frames[f];
+    changed[f] = !u.frames[f].isZero(0.0);
+    source_varies_[f] = (f == e.mount && !u.mount_compliance.isZero(0.0)) ||
+                        (u.bend[f] != 0.0 && e.frames[f].bend != 0.0);
+    if (e.on_path[f]) path_end_ = f;
+  }
+  if (u.thermal != 0.0 && path_end_ > 0) source_varies_[path_end_] = 1;
+  for (int k = 0; k < declared_->nq(); ++k) {
+    const ModelEffects::JointTerms& v = u.joints[k];
+    const FrameId f = declared_->joint_frame(k);
+    const Vec6& zeta = declared_->frame(f).zeta;
+    if (v.offset != 0.0) {
+      source_fixed_[f] += v.offset * zeta * zeta.transpose();
+      changed[f] = 1;
+    }
+    bool varies = v.backlash != 0.0 || v.compliance != 0.0 || v.cubic != 0.0;
+    for (double h : v.harmonic) varies = varies || h != 0.0;
+    if (varies) source_varies_[f] = 1;
+  }
+  for (FrameId f = 1; f < n; ++f) {
+    sources_vary_ = sources_vary_ || source_varies_[f];
+    if (changed[f] && !source_varies_[f]) effective_.SetSourceCovariance(f, source_fixed_[f]);
+  }
+}
+
+void EffectiveChain::UpdateSources(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
+  const ModelEffects& e = *effects_;
+  const ModelEffects::Uncertainty& u = e.uncertainty;
+  for (FrameId f = 1; f < declared_->num_frames(); ++f) {
+    if (!source_varies_[f]) continue;
+    Mat6 c = source_fixed_[f];
+    const PpoeFrame& fr = declared_->frame(f);
+    if (fr.q_index >= 0) {
+      const int k = fr.q_index;
+      const ModelEffects::JointTerms& v = u.joints[k];
+      const double qk = q_read[k];
+      double var = 0.0;
+      for (int h = 1; h <= 3; ++h) {
+        const double ch = std::cos(h * qk), sh = std::sin(h * qk);
+        var += v.harmonic[2 * h - 2] * ch * ch + v.harmonic[2 * h - 1] * sh * sh;
+      }
+      if (torque_needed_[k]) {
+        const double tau = tau_[k], tau3 = tau * tau * tau;
+        var += (std::abs(tau) > 1e-3 ? v.backlash : 0.0) + v.compliance * tau * tau +
+               v.cubic * tau3 * tau3;
+      }
+      c.noalias() += var * fr.zeta * fr.zeta.transpose();
+    }
+    if (f == e.mount) {
+      c(kRotIdx, kRotIdx) += u.mount_compliance.x() * mount_moment_.x() * mount_moment_.x();
+      c(kRotIdx + 1, kRotIdx + 1) += u.mount_compliance.y() * mount_moment_.y() * mount_moment_.y();
+    }
+    if (u.bend[f] != 0.0) c.noalias() += u.bend[f] * bend_twist_[f] * bend_twist_[f].transpose();
+    if (f == path_end_ && u.thermal != 0.0) {
+      // Where the source sits (F_{f,p}), from the declared chain at the reading.
+      const lie::SE3 T = nominal_.T_base_frame[fr.parent] * fr.T_parent_ip;
+      const Vec3 d = T.rotation().transpose() * T.translation();
+      c.block<3, 3>(kTransIdx, kTransIdx).noalias() += u.thermal * d * d.transpose();
+    }
+    effective_.SetSourceCovariance(f, c);
+  }
 }
 
 void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
@@ -151,7 +250,8 @@ void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_rea
     }
     if (f == e.mount && !e.mount_compliance.isZero(0.0)) {
       const lie::SE3 T_pre = T[fr.parent] * fr.T_parent_ip;
-      const Vec3 M = T_pre.rotation().transpose() * moment(f, T_pre.translation());
+      mount_moment_ = T_pre.rotation().transpose() * moment(f, T_pre.translation());
+      const Vec3& M = mount_moment_;
       mount_rot_ = Vec3(e.mount_compliance.x() * M.x(), e.mount_compliance.y() * M.y(), 0.0);
     }
   }
@@ -172,6 +272,16 @@ void EffectiveChain::CorrectFrames() {
         const Mat3 Rb = lie::SO3Exp(T_[p].rotation() * bend_[f]);
         const Vec3 mid = 0.5 * (T_[p].translation() + T_pre.translation());
         local = T_[fr.parent].Inverse() * lie::SE3(Rb, mid - Rb * mid) * T_pre;
+        if (sources_vary_ && e.uncertainty.bend[f] != 0.0) {
+          // A unit of bending compliance turns the frame by dw about `mid` (base axes): the
+          // twist [mid x dw; dw] in base coordinates, taken to the frame's own.
+          const Vec3 dw = T_[p].rotation() * (bend_[f] / e.frames[f].bend);
+          const lie::SE3 T_f = T_[fr.parent] * local;
+          Vec6& xi = bend_twist_[f];
+          xi.segment<3>(kRotIdx).noalias() = T_f.rotation().transpose() * dw;
+          xi.segment<3>(kTransIdx).noalias() =
+              T_f.rotation().transpose() * Vec3(mid.cross(dw) - T_f.translation().cross(dw));
+        }
       }
       if (f == e.mount) local = local * lie::SE3(lie::SO3Exp(mount_rot_), Vec3::Zero());
       const Vec3& tilt = e.frames[f].tilt;
@@ -207,7 +317,11 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
   }
   const ModelEffects& e = *effects_;
   const bool loads = needs_loads_;
-  if (loads) ComputeLoads(q_read);
+  if (loads) {
+    ComputeLoads(q_read);
+  } else if (sources_vary_ && e.uncertainty.thermal != 0.0) {
+    ForwardKinematics(*declared_, nominal_, q_read);
+  }
   for (int k = 0; k < declared_->nq(); ++k) {
     const ModelEffects::JointTerms& j = e.joints[k];
     const double qk = q_read[k];
@@ -226,6 +340,7 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
     q_[k] = qk + dq;
   }
   if (last_varying_ > 0) CorrectFrames();
+  if (sources_vary_) UpdateSources(q_read);
 }
 
 }  // namespace flexbench::kinematics

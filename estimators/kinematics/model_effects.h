@@ -59,6 +59,21 @@ struct ModelEffects {
     Vec3 bend_dir = Vec3::Zero();   // its direction in bend_start's coordinates (unit)
   };
 
+  // The identified parameters' variances (their stds squared; correlations between parameters
+  // are not kept). The augmented model is only as certain as its fit: EffectiveChain adds them
+  // to the PPOE sources where the parameters act, so an estimator's covariance covers what the
+  // identification could not pin down.
+  struct Uncertainty {
+    std::vector<JointTerms> joints;  // per joint variable: each term's variance
+    // Per frame: covariance of the constant geometric terms (length, offset, origin, tilt,
+    // thermal) as a twist at F_{i,p}, the frame's source position.
+    std::vector<Mat6> frames;
+    std::vector<double> bend;  // per frame: variance of the link's bending compliance
+    Eigen::Vector2d mount_compliance = Eigen::Vector2d::Zero();
+    double thermal = 0.0;
+    bool empty() const;
+  };
+
   std::vector<JointTerms> joints;  // per joint variable
   std::vector<FrameTerms> frames;  // per frame
   // Frames from the base to the end effector: thermal expansion scales their translations.
@@ -71,6 +86,7 @@ struct ModelEffects {
   // The declared masses (per frame) and gravity in the base frame, for the loads.
   std::vector<FrameMass> masses;
   Vec3 g_base = Vec3(0.0, 0.0, -9.81);
+  Uncertainty uncertainty;  // sized by None(); empty: the parameters are taken as exact
 
   // Sized for `model`, no effect.
   static ModelEffects None(const PpoeModel& model);
@@ -112,6 +128,8 @@ class EffectiveChain {
  private:
   void ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read);
   void CorrectFrames();
+  void SetConstantSources();
+  void UpdateSources(const Eigen::Ref<const Eigen::VectorXd>& q_read);
 
   const PpoeModel* declared_;
   const ModelEffects* effects_;
@@ -123,6 +141,13 @@ class EffectiveChain {
   std::vector<lie::SE3> T_;         // per frame: corrected mean poses (bending pass)
   std::vector<Vec3> bend_;          // per frame: the link's bend (rotation vector, base axes)
   Vec3 mount_rot_ = Vec3::Zero();
+  Vec3 mount_moment_ = Vec3::Zero();  // the weight's moment at the mount, mount axes
+  // Parameter uncertainty (ModelEffects::Uncertainty) as PPOE sources.
+  std::vector<Mat6> source_fixed_;  // per frame: declared source + the constant terms
+  std::vector<char> source_varies_;  // per frame: a term changes with the reading
+  std::vector<Vec6> bend_twist_;    // per frame: local twist of a unit bending compliance
+  FrameId path_end_ = -1;           // the last frame on the path (carries the thermal term)
+  bool sources_vary_ = false;
   Eigen::VectorXd q_, tau_;
   bool needs_loads_ = false;
   std::vector<char> torque_needed_;  // per joint: a term acts through its torque

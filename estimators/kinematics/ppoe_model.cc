@@ -170,6 +170,17 @@ void PpoeModel::SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip, bool 
   }
 }
 
+void PpoeModel::SetSourceCovariance(FrameId id, const Mat6& source_cov) {
+  if (id <= kBaseFrame || id >= num_frames()) {
+    throw InputError("PPOE model '" + name_ + "': SetSourceCovariance of frame id " +
+                     std::to_string(id) + ", which does not exist");
+  }
+  PpoeFrame& f = frames_[id];
+  f.source_cov = source_cov;
+  f.has_source = !source_cov.isZero(0.0);
+  f.source_cov_parent = lie::TransformCovariance(f.T_parent_ip, source_cov);
+}
+
 FrameId PpoeModel::AddFrame(FrameId parent, const std::string& name, const lie::SE3& T_parent_fp,
                             const Mat6& source_cov) {
   return AddLink(parent, name, T_parent_fp, Joint::Fixed(), source_cov);

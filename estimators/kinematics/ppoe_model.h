@@ -117,6 +117,11 @@ class PpoeModel {
   // a milliradian turn. Throws InputError for an unknown frame.
   void SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip, bool move_source = true);
 
+  // Replaces frame `id`'s source covariance (at F_{i,p}) and its transport to the parent, e.g.
+  // with an identified effect's parameter uncertainty that changes with the load. For hot
+  // loops: no validation beyond the id; the caller keeps `source_cov` symmetric PSD.
+  void SetSourceCovariance(FrameId id, const Mat6& source_cov);
+
   const std::string& name() const { return name_; }
   int num_frames() const { return static_cast<int>(frames_.size()); }
   // Number of joint variables (size of q).

@@ -95,6 +95,26 @@ void BM_AugmentedForwardKinematicsCov2(benchmark::State& state) {
   }
 }
 
+// The same with the fitted parameters' stds carried as sources (ModelEffects::Uncertainty): the
+// compliances' and the plate's sources are re-evaluated at every reading.
+void BM_AugmentedUncertainForwardKinematicsCov2(benchmark::State& state) {
+  Fixture f(static_cast<int>(state.range(0)));
+  ModelEffects effects = ThreeLoadDrivenEffects(f.model);
+  for (int k = 0; k < f.model.nq(); ++k) effects.uncertainty.joints[k].offset = 1e-8;
+  effects.uncertainty.joints[1].compliance = 1e-8;
+  for (FrameId fr = 1; fr < f.model.num_frames(); ++fr) {
+    if (effects.frames[fr].bend != 0.0) effects.uncertainty.bend[fr] = 1e-9;
+  }
+  effects.uncertainty.mount_compliance = Eigen::Vector2d(1e-8, 1e-8);
+  EffectiveChain kin(f.model, &effects);
+  for (auto _ : state) {
+    kin.Update(f.q);
+    ForwardKinematicsWithCovariance(kin.model(), f.data, kin.q(), lie::CompoundOrder::kSecond);
+    benchmark::DoNotOptimize(f.data.Sigma_frame.back());
+    benchmark::ClobberMemory();
+  }
+}
+
 void BM_FrameJacobian(benchmark::State& state) {
   Fixture f(static_cast<int>(state.range(0)));
   ForwardKinematics(f.model, f.data, f.q);
@@ -111,6 +131,7 @@ BENCHMARK(BM_ForwardKinematics)->Arg(7)->Arg(27);
 BENCHMARK(BM_ForwardKinematicsCov2)->Arg(7)->Arg(27);
 BENCHMARK(BM_ForwardKinematicsCov4)->Arg(7)->Arg(27);
 BENCHMARK(BM_AugmentedForwardKinematicsCov2)->Arg(7);
+BENCHMARK(BM_AugmentedUncertainForwardKinematicsCov2)->Arg(7);
 BENCHMARK(BM_FrameJacobian)->Arg(7)->Arg(27);
 
 }  // namespace

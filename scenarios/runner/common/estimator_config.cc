@@ -49,12 +49,15 @@ std::vector<EstimatorSpec> ParseEstimators(const ConfigNode& node) {
   return specs;
 }
 
-double Nees(const Vec6& e, const Mat6& cov, int* dof) {
-  Eigen::SelfAdjointEigenSolver<Mat6> eig(0.5 * (cov + cov.transpose()));
+namespace {
+template <int N>
+double MahalanobisOnRange(const Eigen::Matrix<double, N, 1>& e,
+                          const Eigen::Matrix<double, N, N>& cov, int* dof) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, N, N>> eig(0.5 * (cov + cov.transpose()));
   const double tol = 1e-12 * std::max(eig.eigenvalues().maxCoeff(), 1e-300);
   double d2 = 0.0;
   *dof = 0;
-  for (int i = 0; i < 6; ++i) {
+  for (int i = 0; i < N; ++i) {
     const double l = eig.eigenvalues()[i];
     if (l <= tol) continue;
     const double y = eig.eigenvectors().col(i).dot(e);
@@ -62,6 +65,14 @@ double Nees(const Vec6& e, const Mat6& cov, int* dof) {
     ++*dof;
   }
   return d2;
+}
+}  // namespace
+
+double Nees(const Vec6& e, const Mat6& cov, int* dof) { return MahalanobisOnRange<6>(e, cov, dof); }
+
+double PositionNees(const Vec6& e, const Mat6& cov, int* dof) {
+  return MahalanobisOnRange<3>(Vec3(e.segment<3>(kTransIdx)),
+                               Mat3(cov.block<3, 3>(kTransIdx, kTransIdx)), dof);
 }
 
 void MismatchTest::Add(double nees, int dof) {
@@ -86,6 +97,9 @@ void ErrorStats::Add(const lie::SE3& T_est, const Mat6& cov, const lie::SE3& T_t
   int dof = 0;
   nees_.push_back(Nees(e, cov, &dof));
   dof_.push_back(dof);
+  mismatch_.Add(nees_.back(), dof);
+  pos_nees_.push_back(PositionNees(e, cov, &dof));
+  pos_dof_.push_back(dof);
 }
 
 void ErrorStats::WriteMetrics(Json* metrics) const {
@@ -113,6 +127,21 @@ void ErrorStats::WriteMetrics(Json* metrics) const {
     (*metrics)["nees_bound_low"] = b.lower;
     (*metrics)["nees_bound_high"] = b.upper;
     (*metrics)["nees_consistent"] = mean >= b.lower && mean <= b.upper;
+  }
+  (*metrics)["mismatch_window"] = mismatch_.window();
+  (*metrics)["mismatch_flagged"] = mismatch_.flagged();
+  (*metrics)["mismatch_first_step"] = mismatch_.first_step();
+  // The same for the position alone (the block of the twist covariance that a calibration
+  // with points observes).
+  MeanStdMax(pos_nees_, &mean, &sd, &mx);
+  const double pdof = std::accumulate(pos_dof_.begin(), pos_dof_.end(), 0.0) / pos_dof_.size();
+  if (pdof > 0) {
+    const auto b = stats::MeanChiSquareBounds(pdof, static_cast<int>(pos_nees_.size()), 0.05);
+    (*metrics)["nees_position_mean"] = mean;
+    (*metrics)["nees_position_dof"] = pdof;
+    (*metrics)["nees_position_bound_low"] = b.lower;
+    (*metrics)["nees_position_bound_high"] = b.upper;
+    (*metrics)["nees_position_consistent"] = mean >= b.lower && mean <= b.upper;
   }
 }
 

@@ -88,10 +88,9 @@ class MismatchMatrixKind : public ScenarioKind {
       configs.push_back(q);
     }
     const size_t E = instances_.size(), C = columns_.size();
-    std::vector<std::vector<ErrorStats>> stats(E, std::vector<ErrorStats>(C));
+    std::vector<std::vector<ErrorStats>> stats(E, std::vector<ErrorStats>(C, ErrorStats(std::min(10, count_))));
     // Detection delay: the running-NEES test over the configurations in their order.
-    std::vector<std::vector<MismatchTest>> detect(
-        E, std::vector<MismatchTest>(C, MismatchTest(std::min(10, count_))));
+
     const sim::FrameRef ee = sims_[0]->Frame(declared_.end_effector);
     for (size_t col = 0; col < C; ++col) {
       sim::Simulation& sim = *sims_[col];
@@ -144,9 +143,6 @@ class MismatchMatrixKind : public ScenarioKind {
         for (size_t e = 0; e < E; ++e) {
           const estimators::Belief b = instances_[e]->Estimate();
           stats[e][col].Add(b.T_base_ee, b.cov, T_true);
-          int dof = 0;
-          Nees(b.T_base_ee.Between(T_true).Log(), b.cov, &dof);
-          detect[e][col].Add(stats[e][col].last_nees(), dof);
         }
       }
     }
@@ -173,8 +169,7 @@ class MismatchMatrixKind : public ScenarioKind {
       for (size_t col = 0; col < C; ++col) {
         Json m;
         stats[e][col].WriteMetrics(&m);
-        m["mismatch_flagged"] = detect[e][col].flagged();
-        m["detection_delay_configurations"] = detect[e][col].first_step();
+        m["detection_delay_configurations"] = stats[e][col].mismatch().first_step();
         (*ctx.summary)["estimators"][specs_[e].name]["metrics"][columns_[col]] = m;
         const double pos = m["pos_err_mean_m"].get<double>();
         const double nees = m["nees_mean"].get<double>();
@@ -187,7 +182,7 @@ class MismatchMatrixKind : public ScenarioKind {
         csv << specs_[e].name << "," << columns_[col] << "," << Fmt("%.6g", pos) << ","
             << Fmt("%.6g", m["rot_err_mean_deg"].get<double>()) << "," << Fmt("%.6g", nees) << ","
             << m.value("nees_dof", 0.0) << "," << Fmt("%.6g", high) << "," << flagged << "," << grew
-            << "," << detect[e][col].first_step() << "\n";
+            << "," << stats[e][col].mismatch().first_step() << "\n";
         err_map.value.back().push_back(1e3 * pos);
         err_map.text.back().push_back(Fmt("%.2f", 1e3 * pos));
         err_map.marked.back().push_back(grew);

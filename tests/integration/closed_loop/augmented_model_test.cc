@@ -189,6 +189,59 @@ TEST_P(AugmentedModel, AllEffectsAtOnce) {
   }
 }
 
+// The fitted parameters' stds (identified_effects' `std`) become sources whose covariance at the
+// end effector matches Monte Carlo through the identification's own model: values drawn from
+// N(value, std^2), poses from EffectModel::PredictPose (code other than EffectiveChain's).
+// Declared sources are removed first so that only the parameters' uncertainty is compared.
+TEST_P(AugmentedModel, ParameterStdsMatchMonteCarloThroughTheIdentificationModel) {
+  const auto rig = MakeRig(GetParam());
+  std::mt19937_64 rng(17);
+  std::normal_distribution<double> n(0.0, 1.0);
+  EffectModel::Workspace ws = rig->em->MakeWorkspace();
+  int compared = 0;
+  for (size_t i = 0; i < rig->em->candidates().size(); ++i) {
+    const Candidate& c = rig->em->candidates()[i];
+    if (c.type == EffectType::kPayload) continue;  // its uncertainty is not carried
+    const std::vector<double> v = Values(c, rng);
+    std::vector<double> sd(v.size());
+    for (size_t k = 0; k < v.size(); ++k) sd[k] = 0.2 * std::abs(v[k]);
+    sim::DeclaredModel aug = rig->declared;
+    aug.identified_effects.push_back({c.Name(), v, sd, c.unit, "test:1"});
+    sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
+    for (kinematics::FrameId f = 1; f < chain.model.num_frames(); ++f) {
+      chain.model.SetSourceCovariance(f, Mat6::Zero());
+    }
+    std::uniform_real_distribution<double> u(-1.2, 1.2);
+    for (int t = 0; t < 2; ++t) {
+      Eigen::VectorXd q(chain.model.nq());
+      for (int k = 0; k < q.size(); ++k) q[k] = u(rng);
+      kinematics::EffectiveChain kin(chain.model, chain.effects_or_null());
+      kin.Update(q);
+      kinematics::PpoeData data(chain.model);
+      kinematics::ForwardKinematicsWithCovariance(kin.model(), data, kin.q(),
+                                                  lie::CompoundOrder::kSecond);
+      const Mat6 Sigma = data.Sigma_frame[chain.end_effector];
+      const auto loads = rig->em->Loads(q);
+      const lie::SE3 T0 = rig->em->PredictPose(q, loads, {static_cast<int>(i)}, v.data(), ws);
+      const int samples = 10000;
+      Mat6 mc = Mat6::Zero();
+      std::vector<double> vs(v.size());
+      for (int s = 0; s < samples; ++s) {
+        for (size_t k = 0; k < v.size(); ++k) vs[k] = v[k] + sd[k] * n(rng);
+        const Vec6 xi =
+            T0.Between(rig->em->PredictPose(q, loads, {static_cast<int>(i)}, vs.data(), ws)).Log();
+        mc += xi * xi.transpose() / samples;
+      }
+      const double scale = std::max(mc.cwiseAbs().maxCoeff(), Sigma.cwiseAbs().maxCoeff());
+      if (scale < 1e-18) continue;  // acts off the end effector's path (a camera's offset)
+      EXPECT_LT((mc - Sigma).cwiseAbs().maxCoeff(), 0.06 * scale)
+          << c.Name() << "\nMonte Carlo\n" << mc << "\nsources\n" << Sigma;
+      ++compared;
+    }
+  }
+  EXPECT_GE(compared, 30);
+}
+
 INSTANTIATE_TEST_SUITE_P(Arms, AugmentedModel, ::testing::Values("arm4", "rover_arm"));
 
 // Every registered estimator, given the effects, believes what the same estimator believes

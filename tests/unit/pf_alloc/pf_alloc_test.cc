@@ -142,6 +142,13 @@ TEST_P(NoAllocationTest, EstimatorsWithIdentifiedEffectsDoNotAllocate) {
   fx.frames[j3].bend_dir = Vec3::UnitX();
   fx.mount = arm.model.joint_frame(0);
   fx.mount_compliance = Eigen::Vector2d(1e-3, 1e-3);
+  // The fit's uncertainty, re-evaluated as sources at every reading.
+  fx.uncertainty.joints[0].offset = 1e-8;
+  fx.uncertainty.joints[1].compliance = 1e-9;
+  fx.uncertainty.joints[1].harmonic[0] = 1e-8;
+  fx.uncertainty.bend[j3] = 1e-9;
+  fx.uncertainty.mount_compliance = Eigen::Vector2d(1e-9, 1e-9);
+  fx.uncertainty.thermal = 1e-10;
   Eigen::VectorXd q(4);
   q << 0.3, 0.6, 0.2, 0.0;
   estimators::Measurement joints =
