@@ -95,6 +95,18 @@ void BM_AugmentedForwardKinematicsCov2(benchmark::State& state) {
   }
 }
 
+// The correction alone (loads, joint map, bent and tilted fixed parts), without the FK.
+void BM_EffectiveChainUpdate(benchmark::State& state) {
+  Fixture f(static_cast<int>(state.range(0)));
+  const ModelEffects effects = ThreeLoadDrivenEffects(f.model);
+  EffectiveChain kin(f.model, &effects);
+  for (auto _ : state) {
+    kin.Update(f.q);
+    benchmark::DoNotOptimize(kin.q().data());
+    benchmark::ClobberMemory();
+  }
+}
+
 // The same with the fitted parameters' stds carried as sources (ModelEffects::Uncertainty): the
 // compliances' and the plate's sources are re-evaluated at every reading.
 void BM_AugmentedUncertainForwardKinematicsCov2(benchmark::State& state) {
@@ -132,6 +144,7 @@ BENCHMARK(BM_ForwardKinematicsCov2)->Arg(7)->Arg(27);
 BENCHMARK(BM_ForwardKinematicsCov4)->Arg(7)->Arg(27);
 BENCHMARK(BM_AugmentedForwardKinematicsCov2)->Arg(7);
 BENCHMARK(BM_AugmentedUncertainForwardKinematicsCov2)->Arg(7);
+BENCHMARK(BM_EffectiveChainUpdate)->Arg(7);
 BENCHMARK(BM_FrameJacobian)->Arg(7)->Arg(27);
 
 }  // namespace
