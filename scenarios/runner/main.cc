@@ -52,6 +52,9 @@ int Main(int argc, char** argv) {
   identify_cmd->add_option("--candidates", id.candidates,
                            "effect types or type@location to test (default: all)");
   identify_cmd->add_option("--point-std", id.point_std_m, "point noise [m] (default 1e-4)");
+  identify_cmd->add_option("--reading-std-deg", id.reading_std_deg,
+                           "the joint readings' noise [deg]: sizes the augmented model's sources "
+                           "on the validation rows with it");
   identify_cmd->add_option("--max-effects", id.max_effects, "most effects to choose (default 8)");
   identify_cmd->add_option("--bic-threshold", id.bic_threshold,
                            "BIC drop a candidate must bring to be tried (default 10)");

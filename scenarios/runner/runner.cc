@@ -295,6 +295,15 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
     char num[64];
     std::snprintf(num, sizeof(num), "%.17g", o.point_std_m);
     line("--point-std", std::string("point_std_m: ") + num);
+    if (o.reading_std_deg) {
+      if (!(std::isfinite(*o.reading_std_deg) && *o.reading_std_deg > 0.0 &&
+            *o.reading_std_deg <= 10.0)) {
+        OptionError("--reading-std-deg", std::to_string(*o.reading_std_deg),
+                    "must be in (0, 10] (degrees)");
+      }
+      std::snprintf(num, sizeof(num), "%.17g", *o.reading_std_deg);
+      line("--reading-std-deg", std::string("reading_std_deg: ") + num);
+    }
     if (o.max_effects) line("--max-effects", "max_effects: " + std::to_string(*o.max_effects));
     if (o.bic_threshold) {
       std::snprintf(num, sizeof(num), "%.17g", *o.bic_threshold);

@@ -32,6 +32,7 @@ struct IdentifyCliOptions {
   std::string validation_csv;
   std::vector<std::string> candidates;
   double point_std_m = 1e-4;
+  std::optional<double> reading_std_deg;  // the joint readings' noise, when stated
   // Selection options (closed_loop keys of the same names); unset: the kind's defaults.
   std::optional<int> max_effects;
   std::optional<double> bic_threshold;

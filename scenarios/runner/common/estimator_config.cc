@@ -84,7 +84,12 @@ void MismatchTest::Add(double nees, int dof) {
   for (int k = n - window_; k < n; ++k) mean += nees_[k], dof_mean += dof_[k];
   mean /= window_;
   dof_mean /= window_;
-  if (dof_mean > 0 && mean > stats::MeanChiSquareBounds(dof_mean, window_).upper) first_ = n - 1;
+  // One-sided at 99.5% per window: the windows of a run overlap and each is a test, so 97.5%
+  // per window raised a false alarm in ~1 of 5 consistent 30-estimate runs; 99.5% keeps it
+  // near 1 in 20 (tests/integration/runner/error_stats_test.cc measures both rates).
+  if (dof_mean > 0 && mean > stats::MeanChiSquareBounds(dof_mean, window_, 0.01).upper) {
+    first_ = n - 1;
+  }
 }
 
 void ErrorStats::Add(const lie::SE3& T_est, const Mat6& cov, const lie::SE3& T_true) {

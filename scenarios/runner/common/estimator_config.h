@@ -23,9 +23,11 @@ struct EstimatorSpec {
 // names against the registry (InputError naming file, line and estimator).
 std::vector<EstimatorSpec> ParseEstimators(const ConfigNode& node);
 
-// A running model-mismatch test: the mean NEES over the last `window` estimates above the upper
-// 95% bound of a mean of that many chi-square variables (their dof) flags a mismatch, once;
-// one-sided, since an overconfident estimate is the dangerous one.
+// A running model-mismatch test: the mean NEES over the last `window` estimates above the
+// one-sided 99.5% bound of a mean of that many chi-square variables (their dof) flags a
+// mismatch, once. One-sided, since an overconfident estimate is the dangerous one; 99.5% per
+// window so that a consistent run of 30 estimates (21 overlapping windows) raises a false alarm
+// about 1 time in 20.
 class MismatchTest {
  public:
   explicit MismatchTest(int window = 10) : window_(window) {}

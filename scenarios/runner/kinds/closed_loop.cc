@@ -117,6 +117,12 @@ class ClosedLoopKind : public ScenarioKind {
          {"point_std_m", "distance_std_m", "rotation_std_rad", "pixel_std_px", "bic_threshold"}) {
       if (root.Has(key) && !(root.GetDouble(key) > 0.0)) root.Child(key).Fail("must be > 0");
     }
+    // The joint readings' noise, when known (an encoder's resolution): the validation NEES that
+    // sizes the augmented model's sources then takes the rows' noise from it (see RowNoise).
+    reading_std_rad_ = root.GetDouble("reading_std_deg", 0.0) * kDeg;
+    if (root.Has("reading_std_deg") && !(reading_std_rad_ > 0.0)) {
+      root.Child("reading_std_deg").Fail("must be > 0");
+    }
     opt_.bic_threshold = root.GetDouble("bic_threshold", opt_.bic_threshold);
     opt_.max_effects = root.GetInt("max_effects", opt_.max_effects);
     if (opt_.max_effects < 0) root.Child("max_effects").Fail("must be >= 0");
@@ -305,17 +311,27 @@ class ClosedLoopKind : public ScenarioKind {
 
     // NEES of the declared PPOE covariance (plus the point noise) before and after; the
     // augmented model's sources are scaled to what the remaining residual supports.
-    const double nees_before = MeanNees(val, val_p0);
-    const double nees_after = MeanNees(val, val_p1);
+    const std::vector<Mat3> noise_before = RowNoise(val, val_loads, nullptr);
+    const std::vector<Mat3> noise_after = RowNoise(val, val_loads, &res);
+    const double nees_before = MeanNees(val, val_p0, noise_before);
+    const double nees_after = MeanNees(val, val_p1, noise_after);
     const stats::ChiSquareBounds nb =
         stats::MeanChiSquareBounds(3.0, static_cast<int>(val.rows.size()));
     m["nees_before"] = nees_before;
     m["nees_after"] = nees_after;
     m["nees_bound_low"] = nb.lower;
     m["nees_bound_high"] = nb.upper;
-    source_scale_ = SourceScale(val, val_p1);
+    source_scale_ = SourceScale(val, val_p1, noise_after);
     m["source_covariance_scale"] = source_scale_;
-    nees_scaled_ = MeanNees(val, val_p1, source_scale_);
+    m["source_scale_from"] = reading_std_rad_ > 0.0 ? "readings' noise and fitted parameters"
+                                                    : "point_std_m (floor 1e-6)";
+    nees_scaled_ = MeanNees(val, val_p1, noise_after, source_scale_);
+    // At the largest scale and still above 3: what is left is not where the sources act.
+    m["sources_cover_residual"] = nees_scaled_ <= 3.0 + 1e-6;
+    if (nees_scaled_ > 3.0 + 1e-6) {
+      ctx.log("the declared sources cannot cover what the effects leave: validation mean NEES " +
+              Num(nees_scaled_) + " at the largest source scale");
+    }
     m["nees_after_scaled"] = nees_scaled_;
 
     Json& id = (*ctx.summary)["identification"];
@@ -529,7 +545,8 @@ class ClosedLoopKind : public ScenarioKind {
 
   // Mean NEES of the rows' point errors under the declared PPOE position covariance plus the
   // point noise, each row against its group's mean (or its measured point).
-  double MeanNees(const DataSet& d, const std::vector<Vec3>& p, double source_scale = 1.0) const {
+  double MeanNees(const DataSet& d, const std::vector<Vec3>& p, const std::vector<Mat3>& noise,
+                  double source_scale = 1.0) const {
     const std::vector<Vec3> mean = identify::GroupMeans(d, p);
     kinematics::PpoeData pd(chain_->model);
     double sum = 0.0;
@@ -543,13 +560,78 @@ class ClosedLoopKind : public ScenarioKind {
       const Mat3 S =
           source_scale * R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() *
               R.transpose() +
-          opt_.point_std_m * opt_.point_std_m * Mat3::Identity();
-      const Vec3 e =
-          p[r] - (d.rows[r].type == identify::ObservationType::kGroup ? mean[d.rows[r].group]
-                                                                      : d.rows[r].p_base);
+          noise[r];
+      const Vec3 e = p[r] - (d.rows[r].type == identify::ObservationType::kGroup
+                                 ? mean[d.rows[r].group]
+                                 : d.rows[r].p_base);
       sum += e.dot(S.ldlt().solve(e));
     }
     return n > 0 ? sum / n : std::nan("");
+  }
+
+  // Per row, the covariance of its residual that is not the PPOE sources'. With reading_std_deg
+  // the readings' noise through the declared kinematics (J diag(std^2) J^T; the points exact, as
+  // a socket's), for a socket row against its group's mean (r - mean: (1 - 2/n) S_r + sum S_k /
+  // n^2); otherwise the stated point noise. With `res` (the augmented model) also the fitted
+  // parameters' covariance through the identification's model, by central differences of the
+  // residuals (so the group mean's share is exact).
+  std::vector<Mat3> RowNoise(const DataSet& d, const std::vector<identify::ConfigLoads>& L,
+                             const identify::IdentifyResult* res) const {
+    const size_t rows = d.rows.size();
+    std::vector<Mat3> out(rows, opt_.point_std_m * opt_.point_std_m * Mat3::Identity());
+    if (reading_std_rad_ > 0.0) ReadingNoise(d, &out);
+    if (res == nullptr || res->after.theta.size() == 0) return out;
+    const Eigen::VectorXd& theta = res->after.theta;
+    const int np = static_cast<int>(theta.size());
+    const auto residuals = [&](const Eigen::VectorXd& th) {
+      std::vector<Vec3> q = identify::PredictAll(*em_, d, L, res->after.active, th);
+      const std::vector<Vec3> mean = identify::GroupMeans(d, q);
+      for (size_t r = 0; r < rows; ++r) {
+        if (d.rows[r].type == identify::ObservationType::kGroup) q[r] -= mean[d.rows[r].group];
+      }
+      return q;
+    };
+    std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> J(rows, Eigen::MatrixXd::Zero(3, np));
+    for (int i = 0; i < np; ++i) {
+      const double h = std::max(std::sqrt(std::max(res->theta_cov(i, i), 0.0)), 1e-12);
+      Eigen::VectorXd up = theta, down = theta;
+      up[i] += h;
+      down[i] -= h;
+      const std::vector<Vec3> a = residuals(up), b = residuals(down);
+      for (size_t r = 0; r < rows; ++r) J[r].col(i) = (a[r] - b[r]) / (2.0 * h);
+    }
+    for (size_t r = 0; r < rows; ++r) out[r] += J[r] * res->theta_cov * J[r].transpose();
+    return out;
+  }
+
+  void ReadingNoise(const DataSet& d, std::vector<Mat3>* out) const {
+    const kinematics::PpoeModel& model = chain_->model;
+    kinematics::PpoeData pd(model);
+    kinematics::Matrix6Xd J(6, model.nq());
+    std::vector<Mat3> S(d.rows.size(), Mat3::Zero());
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      kinematics::ForwardKinematics(model, pd, d.rows[r].q);
+      kinematics::ComputeFrameJacobian(model, pd, chain_->end_effector, J);
+      const Eigen::Matrix<double, 3, Eigen::Dynamic> Jp =
+          pd.T_base_frame[chain_->end_effector].rotation() * J.topRows<3>();
+      S[r] = reading_std_rad_ * reading_std_rad_ * Jp * Jp.transpose();
+    }
+    std::vector<Mat3> group_sum(d.groups.size(), Mat3::Zero());
+    std::vector<int> group_n(d.groups.size(), 0);
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      if (d.rows[r].type != identify::ObservationType::kGroup) continue;
+      group_sum[d.rows[r].group] += S[r];
+      ++group_n[d.rows[r].group];
+    }
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      if (d.rows[r].type != identify::ObservationType::kGroup) {
+        (*out)[r] = S[r];
+        continue;
+      }
+      const int g = d.rows[r].group;
+      const double n = group_n[g];
+      (*out)[r] = (1.0 - 2.0 / n) * S[r] + group_sum[g] / (n * n);
+    }
   }
 
   // Rows far off under the declared model are listed and left out (identify.h FindOutliers).
@@ -659,14 +741,17 @@ class ClosedLoopKind : public ScenarioKind {
 
   // The factor on the declared PPOE sources that makes the validation mean NEES 3 (it may grow
   // as well as shrink), found by bisection on a log scale.
-  double SourceScale(const DataSet& d, const std::vector<Vec3>& p) const {
-    double lo = 1e-6, hi = 1e6;
-    if (!std::isfinite(MeanNees(d, p, 1.0))) return 1.0;
-    if (MeanNees(d, p, hi) > 3.0) return hi;
-    if (MeanNees(d, p, lo) < 3.0) return lo;
+  // With the readings' noise stated the data decide down to nothing (1e-12); with only a point
+  // noise the scale keeps a floor of 1e-6, since that noise usually hides what is left.
+  double SourceScale(const DataSet& d, const std::vector<Vec3>& p,
+                     const std::vector<Mat3>& noise) const {
+    double lo = reading_std_rad_ > 0.0 ? 1e-12 : 1e-6, hi = 1e6;
+    if (!std::isfinite(MeanNees(d, p, noise, 1.0))) return 1.0;
+    if (MeanNees(d, p, noise, hi) > 3.0) return hi;
+    if (MeanNees(d, p, noise, lo) < 3.0) return lo;
     for (int it = 0; it < 60; ++it) {
       const double mid = std::sqrt(lo * hi);
-      (MeanNees(d, p, mid) > 3.0 ? lo : hi) = mid;
+      (MeanNees(d, p, noise, mid) > 3.0 ? lo : hi) = mid;
     }
     return std::sqrt(lo * hi);
   }
@@ -816,6 +901,7 @@ class ClosedLoopKind : public ScenarioKind {
   bool has_truth_ = false;
   double socket_distance_m_ = 0.05;
   double encoder_noise_rad_ = 0.0;
+  double reading_std_rad_ = 0.0;
   Vec3 ws_center_ = Vec3::Zero();
   Vec3 ws_half_ = Vec3::Zero();
   sim::MjModelPtr mj_;

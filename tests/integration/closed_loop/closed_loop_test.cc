@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <random>
 
 #include "estimators/error.h"
@@ -710,6 +711,80 @@ TEST(IdentifyCommand, FindsTheEffectInAUsersCsvAndRejectsABadRow) {
       testing::RunCommand(cmd + " --calibration " + (dir / "bad.csv").string());
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("bad.csv:3: column 'j2' is nan"), std::string::npos) << bad.err;
+  fs::remove_all(dir);
+}
+
+// --reading-std-deg: the validation rows' noise is the readings' noise through the kinematics
+// (the points exact, as a socket's) plus the fitted parameters' covariance, and the declared
+// sources are scaled to what is left. Readings drawn with noise around MuJoCo-made points: when
+// the identified model is complete the sources shrink to (almost) nothing and the validation
+// NEES is inside its bounds without them; an error the candidates cannot explain (only joint
+// offsets allowed) is left to the sources, sized to a mean NEES of 3 where they act, and
+// reported as not covered where they do not.
+TEST(IdentifyCommand, ReadingNoiseSizesTheSourcesOnWhatTheDataLeaves) {
+  const fs::path dir = fs::temp_directory_path() / ("flexbench_rn_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  testing::WriteFile(dir / "arm3.xml", kArm3);
+  testing::WriteFile(dir / "arm3.declared.yaml",
+                     "model: arm3.xml\nactuated_joints: [j1, j2, j3]\nend_effector: ee\n"
+                     "sources:\n  - {at: j2, about_axis_deg: 0.5}\n");
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  const double reading_std = 0.05 * M_PI / 180.0;
+  const auto write = [&](const std::string& tag, const std::vector<int>& truth,
+                         const Eigen::VectorXd& theta) {
+    std::mt19937_64 rng(31);
+    std::normal_distribution<double> n(0.0, reading_std);
+    for (const char* name : {"cal", "val"}) {
+      const DataSet d = PointData(*f.em, truth, theta, 60, 1e-15, rng);
+      std::string csv = "j1,j2,j3,x,y,z\n";
+      char row[256];
+      for (const Observation& o : d.rows) {
+        std::snprintf(row, sizeof(row), "%.12g,%.12g,%.12g,%.12g,%.12g,%.12g\n", o.q[0] + n(rng),
+                      o.q[1] + n(rng), o.q[2] + n(rng), o.p_base.x(), o.p_base.y(), o.p_base.z());
+        csv += row;
+      }
+      testing::WriteFile(dir / (tag + "_" + name + ".csv"), csv);
+    }
+  };
+  const auto identify = [&](const std::string& tag, const std::string& extra,
+                            const std::string& out_tag = "") {
+    const std::string out = (dir / ("out_" + tag + out_tag)).string();
+    const testing::CommandResult r = testing::RunCommand(
+        testing::BinDir() + "/flexbench identify --declared " +
+        (dir / "arm3.declared.yaml").string() + " --calibration " +
+        (dir / (tag + "_cal.csv")).string() + " --validation " +
+        (dir / (tag + "_val.csv")).string() + " --candidates joint_offset --out " + out + extra);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return nlohmann::json::parse(testing::ReadFile(fs::path(out) / "summary.json"))["metrics"];
+  };
+  const std::vector<int> offset = {Candidate(*f.em, "joint_offset@j2")};
+  write("complete", offset, Eigen::VectorXd::Constant(1, -0.01));
+  // Left to the j2 source: a transmission error of j2 (about its axis, where that source acts);
+  // not: j3 4 mm longer (along the arm, where no source acts).
+  const std::vector<int> periodic = {Candidate(*f.em, "joint_offset@j2"),
+                                     Candidate(*f.em, "transmission_error@j2")};
+  write("missing", periodic, (Eigen::VectorXd(5) << -0.01, 0.004, 0.0, 0.0, 0.003).finished());
+  const std::vector<int> longer = {Candidate(*f.em, "joint_offset@j2"),
+                                   Candidate(*f.em, "link_length@j3")};
+  write("uncovered", longer, (Eigen::VectorXd(2) << -0.01, 0.004).finished());
+
+  const auto complete = identify("complete", " --reading-std-deg 0.05");
+  EXPECT_EQ(complete["source_scale_from"], "readings' noise and fitted parameters");
+  EXPECT_LT(complete["source_covariance_scale"].get<double>(), 1e-3);
+  EXPECT_GE(complete["nees_after_scaled"].get<double>(), complete["nees_bound_low"].get<double>());
+  EXPECT_LE(complete["nees_after_scaled"].get<double>(), complete["nees_bound_high"].get<double>());
+
+  const auto missing = identify("missing", " --reading-std-deg 0.05");
+  EXPECT_GT(missing["source_covariance_scale"].get<double>(), 1e-2);
+  EXPECT_NEAR(missing["nees_after_scaled"].get<double>(), 3.0, 1e-6);
+  EXPECT_TRUE(missing["sources_cover_residual"].get<bool>());
+  const auto uncovered = identify("uncovered", " --reading-std-deg 0.05");
+  EXPECT_FALSE(uncovered["sources_cover_residual"].get<bool>());
+  EXPECT_GT(uncovered["nees_after_scaled"].get<double>(), 3.0);
+
+  // Without the readings' noise the stated point noise stands in, with the 1e-6 floor.
+  const auto point = identify("complete", "", "_point");
+  EXPECT_EQ(point["source_scale_from"], "point_std_m (floor 1e-6)");
   fs::remove_all(dir);
 }
 

@@ -59,9 +59,9 @@ TEST(ErrorStats, ConsistentErrorsKeepNeesAtItsDofAndRarelyFlag) {
   // Mean of 12000 chi-square(6) / chi-square(3) draws: within +-2% of the dof (about 6 sigma).
   EXPECT_NEAR(nees, 6.0, 0.12);
   EXPECT_NEAR(pos, 3.0, 0.06);
-  // 21 overlapping windows of 10 per run, each with a 5% one-sided bound: 74 of 400 runs
-  // (0.19) flag at this seed.
-  EXPECT_LT(flagged, 0.3 * runs) << flagged << " of " << runs;
+  // 21 overlapping windows of 10 per run, each a one-sided 99.5% test: the run's false-alarm
+  // rate is near 5%: 16 of 400 (0.04) at this seed; at 97.5% per window it was 74 (0.19).
+  EXPECT_LT(flagged, 0.1 * runs) << flagged << " of " << runs;
 }
 
 TEST(ErrorStats, ErrorsTwiceTheStatedSizeFlagEarly) {
