@@ -103,7 +103,8 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
   tau_ = Eigen::VectorXd::Zero(declared.nq());
   if (!effects_) return;
   const ModelEffects& e = *effects_;
-  if (static_cast<int>(e.frames.size()) != n || static_cast<int>(e.joints.size()) != declared.nq() ||
+  if (static_cast<int>(e.frames.size()) != n ||
+      static_cast<int>(e.joints.size()) != declared.nq() ||
       static_cast<int>(e.masses.size()) != n || static_cast<int>(e.on_path.size()) != n) {
     throw InputError("EffectiveChain: the effects were made for another model than '" +
                      declared.name() + "'");
@@ -112,8 +113,9 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
   torque_needed_.assign(declared.nq(), 0);
   for (int k = 0; k < declared.nq(); ++k) {
     const ModelEffects::JointTerms& j = e.joints[k];
-    torque_needed_[k] = declared.frame(declared.joint_frame(k)).joint.type == JointType::kRevolute &&
-                        (j.backlash != 0.0 || j.compliance != 0.0 || j.cubic != 0.0);
+    torque_needed_[k] =
+        declared.frame(declared.joint_frame(k)).joint.type == JointType::kRevolute &&
+        (j.backlash != 0.0 || j.compliance != 0.0 || j.cubic != 0.0);
   }
   varies_.assign(n, 0);
   for (FrameId f = 1; f < n; ++f) varies_[f] = e.FrameVaries(f);
@@ -267,20 +269,24 @@ void EffectiveChain::CorrectFrames() {
     if (varies_[f]) {
       lie::SE3 local = static_[f];
       if (e.frames[f].bend != 0.0) {
+        // The turn about the link's middle, in the parent's coordinates (conjugated there
+        // rather than applied in base coordinates and undone: one product instead of three).
         const FrameId p = e.frames[f].bend_start;
-        const lie::SE3 T_pre = T_[fr.parent] * static_[f];
-        const Mat3 Rb = lie::SO3Exp(T_[p].rotation() * bend_[f]);
-        const Vec3 mid = 0.5 * (T_[p].translation() + T_pre.translation());
-        local = T_[fr.parent].Inverse() * lie::SE3(Rb, mid - Rb * mid) * T_pre;
+        const Mat3& R_parent = T_[fr.parent].rotation();
+        const Mat3 R_parent_start = R_parent.transpose() * T_[p].rotation();
+        const Vec3 start =
+            R_parent.transpose() * (T_[p].translation() - T_[fr.parent].translation());
+        const Vec3 mid = 0.5 * (start + static_[f].translation());
+        const Mat3 Rb = lie::SO3Exp(R_parent_start * bend_[f]);
+        local = lie::SE3(Rb, mid - Rb * mid) * static_[f];
         if (sources_vary_ && e.uncertainty.bend[f] != 0.0) {
-          // A unit of bending compliance turns the frame by dw about `mid` (base axes): the
-          // twist [mid x dw; dw] in base coordinates, taken to the frame's own.
-          const Vec3 dw = T_[p].rotation() * (bend_[f] / e.frames[f].bend);
-          const lie::SE3 T_f = T_[fr.parent] * local;
+          // A unit of bending compliance turns the frame by dw about `mid` (parent axes): the
+          // twist [mid x dw; dw] there, taken to the frame's own coordinates.
+          const Vec3 dw = R_parent_start * (bend_[f] / e.frames[f].bend);
           Vec6& xi = bend_twist_[f];
-          xi.segment<3>(kRotIdx).noalias() = T_f.rotation().transpose() * dw;
+          xi.segment<3>(kRotIdx).noalias() = local.rotation().transpose() * dw;
           xi.segment<3>(kTransIdx).noalias() =
-              T_f.rotation().transpose() * Vec3(mid.cross(dw) - T_f.translation().cross(dw));
+              local.rotation().transpose() * Vec3(mid.cross(dw) - local.translation().cross(dw));
         }
       }
       if (f == e.mount) local = local * lie::SE3(lie::SO3Exp(mount_rot_), Vec3::Zero());
@@ -313,7 +319,8 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
   q_ = q_read;
   if (!effects_) return;
   if (!q_read.allFinite()) {
-    throw InputError("EffectiveChain: a joint reading of '" + declared_->name() + "' is not finite");
+    throw InputError("EffectiveChain: a joint reading of '" + declared_->name() +
+                     "' is not finite");
   }
   const ModelEffects& e = *effects_;
   const bool loads = needs_loads_;

@@ -42,21 +42,21 @@ struct FrameMass {
 struct ModelEffects {
   // The reading -> joint-angle map and the gear's load-driven deflection of one joint variable.
   struct JointTerms {
-    double offset = 0.0;                // rad (m for a prismatic joint)
-    std::array<double, 6> harmonic{};   // a1 b1 a2 b2 a3 b3 [rad]
-    double backlash = 0.0;              // rad, times the flank (+1 / -1)
-    double compliance = 0.0;            // rad / (N m), times tau
-    double cubic = 0.0;                 // rad / (N m)^3, times tau^3
+    double offset = 0.0;               // rad (m for a prismatic joint)
+    std::array<double, 6> harmonic{};  // a1 b1 a2 b2 a3 b3 [rad]
+    double backlash = 0.0;             // rad, times the flank (+1 / -1)
+    double compliance = 0.0;           // rad / (N m), times tau
+    double cubic = 0.0;                // rad / (N m)^3, times tau^3
   };
   // Geometry of one frame's fixed part, and the compliance of the link that ends at it.
   struct FrameTerms {
-    double dlen = 0.0;              // m, along t_ip
-    Vec3 offset = Vec3::Zero();     // m, parent coordinates
-    Vec6 origin = Vec6::Zero();     // [rho; theta], after the translation
-    Vec3 tilt = Vec3::Zero();       // rotation vector, last before the joint
-    double bend = 0.0;              // rad / (N m) of the link from bend_start to this frame
-    FrameId bend_start = -1;        // the joint frame where that link starts
-    Vec3 bend_dir = Vec3::Zero();   // its direction in bend_start's coordinates (unit)
+    double dlen = 0.0;             // m, along t_ip
+    Vec3 offset = Vec3::Zero();    // m, parent coordinates
+    Vec6 origin = Vec6::Zero();    // [rho; theta], after the translation
+    Vec3 tilt = Vec3::Zero();      // rotation vector, last before the joint
+    double bend = 0.0;             // rad / (N m) of the link from bend_start to this frame
+    FrameId bend_start = -1;       // the joint frame where that link starts
+    Vec3 bend_dir = Vec3::Zero();  // its direction in bend_start's coordinates (unit)
   };
 
   // The identified parameters' variances (their stds squared; correlations between parameters
@@ -79,7 +79,7 @@ struct ModelEffects {
   // Frames from the base to the end effector: thermal expansion scales their translations.
   std::vector<char> on_path;
   double thermal = 0.0;
-  FrameId mount = -1;                      // where a compliant base tilts
+  FrameId mount = -1;                                          // where a compliant base tilts
   Eigen::Vector2d mount_compliance = Eigen::Vector2d::Zero();  // rad / (N m) about x, y
   FrameId payload_frame = -1;
   FrameMass payload;
@@ -134,26 +134,26 @@ class EffectiveChain {
   const PpoeModel* declared_;
   const ModelEffects* effects_;
   PpoeModel effective_;
-  PpoeData nominal_;          // the declared chain at the reading, for the loads
+  PpoeData nominal_;  // the declared chain at the reading, for the loads
   std::vector<double> subtree_mass_;
   std::vector<Vec3> subtree_first_;
-  std::vector<lie::SE3> static_;    // per frame: the fixed part without load-driven terms
-  std::vector<lie::SE3> T_;         // per frame: corrected mean poses (bending pass)
-  std::vector<Vec3> bend_;          // per frame: the link's bend (rotation vector, base axes)
+  std::vector<lie::SE3> static_;  // per frame: the fixed part without load-driven terms
+  std::vector<lie::SE3> T_;       // per frame: corrected mean poses (bending pass)
+  std::vector<Vec3> bend_;        // per frame: the link's bend (rotation vector, start's axes)
   Vec3 mount_rot_ = Vec3::Zero();
   Vec3 mount_moment_ = Vec3::Zero();  // the weight's moment at the mount, mount axes
   // Parameter uncertainty (ModelEffects::Uncertainty) as PPOE sources.
-  std::vector<Mat6> source_fixed_;  // per frame: declared source + the constant terms
+  std::vector<Mat6> source_fixed_;   // per frame: declared source + the constant terms
   std::vector<char> source_varies_;  // per frame: a term changes with the reading
-  std::vector<Vec6> bend_twist_;    // per frame: local twist of a unit bending compliance
-  FrameId path_end_ = -1;           // the last frame on the path (carries the thermal term)
+  std::vector<Vec6> bend_twist_;     // per frame: local twist of a unit bending compliance
+  FrameId path_end_ = -1;            // the last frame on the path (carries the thermal term)
   bool sources_vary_ = false;
   Eigen::VectorXd q_, tau_;
   bool needs_loads_ = false;
   std::vector<char> torque_needed_;  // per joint: a term acts through its torque
-  std::vector<char> varies_;      // per frame: ModelEffects::FrameVaries
-  FrameId last_varying_ = 0;      // frames past it keep their fixed part
-  FrameId last_pose_needed_ = 0;  // the corrected poses of frames before it are needed (bends)
+  std::vector<char> varies_;         // per frame: ModelEffects::FrameVaries
+  FrameId last_varying_ = 0;         // frames past it keep their fixed part
+  FrameId last_pose_needed_ = 0;     // the corrected poses of frames before it are needed (bends)
 };
 
 }  // namespace flexbench::kinematics

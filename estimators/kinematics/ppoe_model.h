@@ -35,6 +35,8 @@
 
 #include "estimators/conventions.h"
 #include "estimators/lie/se3.h"
+#include "estimators/lie/sincos.h"
+#include "estimators/lie/so3.h"
 
 namespace flexbench::kinematics {
 
@@ -88,8 +90,41 @@ struct PpoeFrame {
   // T_parent_i(q): one 6x6 congruence per frame.
   Mat6 source_cov_parent = Mat6::Zero();
 
-  // Exp(zeta q) (the joint motion alone).
-  lie::SE3 JointMotion(double q) const { return lie::SE3::Exp(zeta * q); }
+  // T_parent_ip * Exp(zeta q) from the precomputed Rodrigues terms (the FK kernels' form).
+  lie::SE3 FixedTimesMotion(double q) const {
+    switch (joint.type) {
+      case JointType::kRevolute: {
+        double sh, ch;
+        lie::SinCos(0.5 * q, &sh, &ch);
+        const double a = 2.0 * sh * ch, b = 2.0 * sh * sh;
+        return lie::SE3(T_parent_ip.rotation() + a * K1 + b * K2, u0 + a * u1 + b * u2);
+      }
+      case JointType::kPrismatic:
+        return lie::SE3(T_parent_ip.rotation(), u0 + q * u1);
+      case JointType::kFixed:
+        break;
+    }
+    return T_parent_ip;
+  }
+
+  // Exp(zeta q) (the joint motion alone), by Rodrigues' formula with one inline sincos of q/2
+  // (as the FK kernels; the general SE3::Exp costs ~3x as much).
+  lie::SE3 JointMotion(double q) const {
+    switch (joint.type) {
+      case JointType::kRevolute: {
+        double sh, ch;
+        lie::SinCos(0.5 * q, &sh, &ch);
+        const Mat3 R =
+            Mat3::Identity() + (2.0 * sh * ch) * lie::Skew(joint.axis) + (2.0 * sh * sh) * W2;
+        return lie::SE3(R, joint.point - R * joint.point);
+      }
+      case JointType::kPrismatic:
+        return lie::SE3::Translation(q * joint.axis);
+      case JointType::kFixed:
+        break;
+    }
+    return lie::SE3();
+  }
 };
 
 class PpoeModel {

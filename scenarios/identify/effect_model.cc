@@ -380,12 +380,10 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
       t += candidates_[i].num_params;
     }
   }
+  // The per-frame terms are zero between calls (MakeWorkspace, and the reset below): only the
+  // active effects' frames are touched, so a call costs what its effects cost, not the model's
+  // frame count (the rover's chain has dozens of frames; a fill of all was ~1/3 of a call).
   ws.dq.setZero();
-  std::fill(ws.dlen.begin(), ws.dlen.end(), 0.0);
-  std::fill(ws.bend.begin(), ws.bend.end(), Vec3::Zero());
-  std::fill(ws.offset.begin(), ws.offset.end(), Vec3::Zero());
-  std::fill(ws.tilt.begin(), ws.tilt.end(), Vec3::Zero());
-  std::fill(ws.origin.begin(), ws.origin.end(), Vec6::Zero());
   double scale = 0.0;
   Vec3 mount_rot = Vec3::Zero();
   const double* t = theta;
@@ -459,9 +457,18 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
     t += c.num_params;
   }
   ws.T[0] = lie::SE3();
+  const bool mount_turns = !mount_rot.isZero();
   for (FrameId f = 1; f < n; ++f) {
     if (!on_path_[f]) continue;
     const kinematics::PpoeFrame& fr = model.frame(f);
+    if (scale == 0.0 && ws.dlen[f] == 0.0 && ws.offset[f].isZero(0.0) &&
+        ws.origin[f].isZero(0.0) && ws.bend[f].isZero(0.0) && ws.tilt[f].isZero(0.0) &&
+        !(f == mount_ && mount_turns)) {
+      // Untouched by the active effects (most frames, most calls): the FK kernels' form.
+      const double qf = fr.q_index >= 0 ? q[fr.q_index] + ws.dq[fr.q_index] : 0.0;
+      ws.T[f] = ws.T[fr.parent] * fr.FixedTimesMotion(qf);
+      continue;
+    }
     const Vec3& t0 = fr.T_parent_ip.translation();
     Vec3 tr = t0 * (1.0 + scale);
     if (ws.dlen[f] != 0.0) tr += ws.dlen[f] * t0.normalized();
@@ -476,11 +483,20 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
       const Vec3 mid = 0.5 * (ws.T[p].translation() + ws.T[f].translation());
       ws.T[f] = lie::SE3(Rb, mid - Rb * mid) * ws.T[f];
     }
-    if (f == mount_ && !mount_rot.isZero()) {
+    if (f == mount_ && mount_turns) {
       ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(mount_rot), Vec3::Zero());
     }
     if (!ws.tilt[f].isZero()) ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(ws.tilt[f]), Vec3::Zero());
     if (fr.q_index >= 0) ws.T[f] = ws.T[f] * fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]);
+  }
+  for (int i : active) {
+    const int f = candidates_[i].frame;
+    if (f < 0) continue;
+    ws.dlen[f] = 0.0;
+    ws.bend[f].setZero();
+    ws.offset[f].setZero();
+    ws.tilt[f].setZero();
+    ws.origin[f].setZero();
   }
   return ws.T[point_frame_];
 }

@@ -30,8 +30,7 @@ struct Arm {
     j3 = model.AddLink(j2, "j3", lie::SE3::Translation(Vec3(0.4, 0, 0)),
                        Joint::Revolute(Vec3::UnitY()));
     const Mat3 Rz = Eigen::AngleAxisd(0.5, Vec3::UnitZ()).toRotationMatrix();
-    j4 = model.AddLink(j3, "j4", lie::SE3(Rz, Vec3(0.35, 0.05, 0)),
-                       Joint::Revolute(Vec3::UnitX()));
+    j4 = model.AddLink(j3, "j4", lie::SE3(Rz, Vec3(0.35, 0.05, 0)), Joint::Revolute(Vec3::UnitX()));
     ee = model.AddFrame(j4, "ee", lie::SE3::Translation(Vec3(0.1, 0, 0.02)));
   }
 };
@@ -72,8 +71,9 @@ std::vector<Term> Terms() {
   using N = std::normal_distribution<double>;
   using R = std::mt19937_64;
   std::vector<Term> t;
-  t.push_back({"joint_offset", [](const Arm&, ModelEffects* e) { e->uncertainty.joints[0].offset = 4e-6; },
-               [](const Arm&, N& n, R& r, ModelEffects* e) { e->joints[0].offset += 2e-3 * n(r); }});
+  t.push_back(
+      {"joint_offset", [](const Arm&, ModelEffects* e) { e->uncertainty.joints[0].offset = 4e-6; },
+       [](const Arm&, N& n, R& r, ModelEffects* e) { e->joints[0].offset += 2e-3 * n(r); }});
   t.push_back({"harmonic",
                [](const Arm&, ModelEffects* e) {
                  e->uncertainty.joints[0].harmonic = {1e-6, 4e-6, 0, 0, 2.25e-6, 0};
@@ -83,14 +83,18 @@ std::vector<Term> Terms() {
                  e->joints[0].harmonic[1] += 2e-3 * n(r);
                  e->joints[0].harmonic[4] += 1.5e-3 * n(r);
                }});
-  t.push_back({"joint_compliance", [](const Arm&, ModelEffects* e) { e->uncertainty.joints[1].compliance = 1e-8; },
-               [](const Arm&, N& n, R& r, ModelEffects* e) { e->joints[1].compliance += 1e-4 * n(r); }});
-  t.push_back({"backlash", [](const Arm&, ModelEffects* e) { e->uncertainty.joints[2].backlash = 2.5e-7; },
-               [](const Arm&, N& n, R& r, ModelEffects* e) { e->joints[2].backlash += 5e-4 * n(r); }});
+  t.push_back(
+      {"joint_compliance",
+       [](const Arm&, ModelEffects* e) { e->uncertainty.joints[1].compliance = 1e-8; },
+       [](const Arm&, N& n, R& r, ModelEffects* e) { e->joints[1].compliance += 1e-4 * n(r); }});
+  t.push_back(
+      {"backlash", [](const Arm&, ModelEffects* e) { e->uncertainty.joints[2].backlash = 2.5e-7; },
+       [](const Arm&, N& n, R& r, ModelEffects* e) { e->joints[2].backlash += 5e-4 * n(r); }});
   t.push_back({"cubic", [](const Arm&, ModelEffects* e) { e->uncertainty.joints[2].cubic = 1e-16; },
                [](const Arm&, N& n, R& r, ModelEffects* e) { e->joints[2].cubic += 1e-8 * n(r); }});
-  t.push_back({"link_bending", [](const Arm& a, ModelEffects* e) { e->uncertainty.bend[a.j3] = 2.5e-9; },
-               [](const Arm& a, N& n, R& r, ModelEffects* e) { e->frames[a.j3].bend += 5e-5 * n(r); }});
+  t.push_back(
+      {"link_bending", [](const Arm& a, ModelEffects* e) { e->uncertainty.bend[a.j3] = 2.5e-9; },
+       [](const Arm& a, N& n, R& r, ModelEffects* e) { e->frames[a.j3].bend += 5e-5 * n(r); }});
   t.push_back({"base_compliance",
                [](const Arm&, ModelEffects* e) { e->uncertainty.mount_compliance << 1e-8, 4e-8; },
                [](const Arm&, N& n, R& r, ModelEffects* e) {
@@ -110,19 +114,20 @@ std::vector<Term> Terms() {
                    e->frames[a.j4].offset[k] += Vec3(1e-3, 2e-3, 5e-4)[k] * n(r);
                  }
                }});
-  t.push_back({"link_length",
-               [](const Arm& a, ModelEffects* e) {
-                 const lie::SE3& T = a.model.frame(a.j4).T_parent_ip;
-                 const Vec3 d = T.rotation().transpose() * T.translation().normalized();
-                 e->uncertainty.frames[a.j4].block<3, 3>(kTransIdx, kTransIdx) +=
-                     4e-6 * d * d.transpose();
-               },
-               [](const Arm& a, N& n, R& r, ModelEffects* e) { e->frames[a.j4].dlen += 2e-3 * n(r); }});
-  t.push_back({"axis_tilt",
-               [](const Arm& a, ModelEffects* e) {
-                 e->uncertainty.frames[a.j4](kRotIdx + 1, kRotIdx + 1) += 4e-6;
-               },
-               [](const Arm& a, N& n, R& r, ModelEffects* e) { e->frames[a.j4].tilt.y() += 2e-3 * n(r); }});
+  t.push_back(
+      {"link_length",
+       [](const Arm& a, ModelEffects* e) {
+         const lie::SE3& T = a.model.frame(a.j4).T_parent_ip;
+         const Vec3 d = T.rotation().transpose() * T.translation().normalized();
+         e->uncertainty.frames[a.j4].block<3, 3>(kTransIdx, kTransIdx) += 4e-6 * d * d.transpose();
+       },
+       [](const Arm& a, N& n, R& r, ModelEffects* e) { e->frames[a.j4].dlen += 2e-3 * n(r); }});
+  t.push_back(
+      {"axis_tilt",
+       [](const Arm& a, ModelEffects* e) {
+         e->uncertainty.frames[a.j4](kRotIdx + 1, kRotIdx + 1) += 4e-6;
+       },
+       [](const Arm& a, N& n, R& r, ModelEffects* e) { e->frames[a.j4].tilt.y() += 2e-3 * n(r); }});
   t.push_back({"joint_origin",
                [](const Arm& a, ModelEffects* e) {
                  for (int k = 0; k < 6; ++k) e->uncertainty.frames[a.j2](k, k) += 1e-6;
@@ -130,7 +135,8 @@ std::vector<Term> Terms() {
                [](const Arm& a, N& n, R& r, ModelEffects* e) {
                  for (int k = 0; k < 6; ++k) e->frames[a.j2].origin[k] += 1e-3 * n(r);
                }});
-  t.push_back({"thermal_expansion", [](const Arm&, ModelEffects* e) { e->uncertainty.thermal = 1e-6; },
+  t.push_back({"thermal_expansion",
+               [](const Arm&, ModelEffects* e) { e->uncertainty.thermal = 1e-6; },
                [](const Arm&, N& n, R& r, ModelEffects* e) { e->thermal += 1e-3 * n(r); }});
   return t;
 }
@@ -176,7 +182,9 @@ TEST_P(UncertaintyMonteCarlo, SourcesMatchDrawnParameters) {
   // Relative to the largest entry: 20000 draws leave ~1-2% sampling error; linearisation less.
   EXPECT_GT(Sigma.cwiseAbs().maxCoeff(), 0.0);
   EXPECT_LT((mc - Sigma).cwiseAbs().maxCoeff(), 0.05 * Sigma.cwiseAbs().maxCoeff())
-      << "Monte Carlo\n" << mc << "\nsources\n" << Sigma;
+      << "Monte Carlo\n"
+      << mc << "\nsources\n"
+      << Sigma;
 }
 
 INSTANTIATE_TEST_SUITE_P(EachTermAndAll, UncertaintyMonteCarlo, ::testing::Range(-1, 12));
