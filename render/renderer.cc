@@ -1,6 +1,7 @@
 #include "render/renderer.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <vector>
 
@@ -86,6 +87,21 @@ void Renderer::Draw(mjData* d, int cam_id) {
   mjr_readPixels(impl_->rgb_flipped.data(), nullptr, viewport, &impl_->context);
 }
 
+// A frame of one colour is what the model and the camera make of it (a camera that sees
+// nothing, a model flung out of view by a diverging simulation), so it is the input's fault:
+// one line naming the camera and whether the state is finite. A GL context that draws nothing
+// at all fails at the first frame of every scenario, with its renderer named.
+void Renderer::ThrowConstantFrame(const mjData* d, int cam_id) const {
+  bool finite = true;
+  for (int i = 0; i < 3 * model_->nbody && finite; ++i) finite = std::isfinite(d->xpos[i]);
+  const char* name = mj_id2name(model_, mjOBJ_CAMERA, cam_id);
+  throw InputError(std::string("camera '") + (name ? name : std::to_string(cam_id).c_str()) +
+                   "' sees nothing: its rendered frame is one colour (" +
+                   (finite ? "the camera may point away from the model"
+                           : "the model's body positions are not finite: a diverging simulation") +
+                   "; GL renderer: " + gl_renderer_ + ")");
+}
+
 Image Renderer::RenderRgb(mjData* d, int cam_id) {
   Image image;
   RenderRgbInto(d, cam_id, &image);
@@ -103,10 +119,7 @@ void Renderer::RenderRgbInto(mjData* d, int cam_id, Image* image) {
   for (int r = 0; r < height_; ++r) {
     std::copy_n(impl_->rgb_flipped.data() + (height_ - 1 - r) * row, row, image->Row(r));
   }
-  if (IsConstant(*image)) {
-    throw std::runtime_error("rendered frame is constant: nothing was drawn (GL renderer: " +
-                             gl_renderer_ + ")");
-  }
+  if (IsConstant(*image)) ThrowConstantFrame(d, cam_id);
 }
 
 Image Renderer::RenderGray(mjData* d, int cam_id) {
@@ -130,10 +143,7 @@ void Renderer::RenderGrayInto(mjData* d, int cam_id, Image* gray) {
   for (int r = 0; r < height_; ++r) {
     std::copy_n(g.Row(height_ - 1 - r), width_, gray->Row(r));
   }
-  if (IsConstant(*gray)) {
-    throw std::runtime_error("rendered frame is constant: nothing was drawn (GL renderer: " +
-                             gl_renderer_ + ")");
-  }
+  if (IsConstant(*gray)) ThrowConstantFrame(d, cam_id);
 }
 
 }  // namespace flexbench::render

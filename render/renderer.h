@@ -27,8 +27,8 @@ class Renderer {
   Renderer& operator=(const Renderer&) = delete;
 
   // Renders camera `cam_id` for the state in `d` (positions must be current: mj_forward or
-  // mj_kinematics). Returns RGB, top row first. Throws std::runtime_error when the frame is
-  // constant (nothing was drawn).
+  // mj_kinematics). Returns RGB, top row first. Throws InputError when the frame is constant
+  // (the camera sees nothing, or the model's state is not finite), naming the camera.
   Image RenderRgb(mjData* d, int cam_id);
   // The same into a caller-owned image whose buffer is reused from frame to frame.
   void RenderRgbInto(mjData* d, int cam_id, Image* rgb);
@@ -49,6 +49,7 @@ class Renderer {
 
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  [[noreturn]] void ThrowConstantFrame(const mjData* d, int cam_id) const;
   const mjModel* model_;
   int width_;
   int height_;

@@ -38,7 +38,7 @@ Vec6 SE3::Log(Mat6* J_xi_X) const {
   Vec6 xi;
   const Vec3 theta = SO3Log(R_);
   xi.segment<3>(kRotIdx) = theta;
-  xi.segment<3>(kTransIdx) = SO3LeftJacobianInverse(theta) * t_;
+  xi.segment<3>(kTransIdx) = SO3LeftJacobianInverseTimes(theta, t_);
   if (J_xi_X != nullptr) *J_xi_X = SE3RightJacobianInverse(xi);
   return xi;
 }

@@ -22,8 +22,9 @@ double InverseJacobianCoefficient(double x) {
            x2 * (1.0 / 720.0 + x2 * (1.0 / 30240.0 + x2 * (1.0 / 1209600.0 + x2 / 47900160.0)));
   }
   // cot(x/2) = sin(x) / (1 - cos(x)) written with half angles so that x = pi is exact.
-  const double half = 0.5 * x;
-  return 1.0 / (x * x) - std::cos(half) / (2.0 * x * std::sin(half));
+  double sh, ch;
+  SinCos(0.5 * x, &sh, &ch);
+  return 1.0 / (x * x) - ch / (2.0 * x * sh);
 }
 
 }  // namespace
@@ -109,6 +110,12 @@ Mat3 SO3RightJacobianInverse(const Vec3& theta) {
   const double d = InverseJacobianCoefficient(theta.norm());
   const Mat3 W = Skew(theta);
   return Mat3::Identity() + 0.5 * W + d * W * W;
+}
+
+Vec3 SO3LeftJacobianInverseTimes(const Vec3& theta, const Vec3& v) {
+  const double d = InverseJacobianCoefficient(theta.norm());
+  const Vec3 wv = theta.cross(v);
+  return v - 0.5 * wv + d * theta.cross(wv);
 }
 
 Mat3 SO3LeftJacobianInverse(const Vec3& theta) {

@@ -56,6 +56,8 @@ Mat3 SO3LeftJacobian(const Vec3& theta);
 Mat3 SO3RightJacobianInverse(const Vec3& theta);
 // Jl^-1(theta) = I - 1/2 [theta]x + d [theta]x^2.
 Mat3 SO3LeftJacobianInverse(const Vec3& theta);
+// SO3LeftJacobianInverse(theta) * v without forming the matrix (two cross products).
+Vec3 SO3LeftJacobianInverseTimes(const Vec3& theta, const Vec3& v);
 
 // Projects a nearly orthonormal matrix onto SO(3) (SVD); for data read from files or after long
 // products of rotations.

@@ -147,7 +147,7 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
   for (FrameId f : config_.position_frames) position_outputs_.push_back(fk_.OutputIndex(f));
   for (FrameId f : config_.orientation_frames) orientation_outputs_.push_back(fk_.OutputIndex(f));
   ee_output_ = config_.end_effector >= 0 ? fk_.OutputIndex(config_.end_effector) : -1;
-  scratch_pairs_.reserve(n_);
+  quantiles_ = CircularQuantileScratch(n_);
   scratch_w_.assign(n_, 0.0);
   q_mean_ = Eigen::VectorXd::Zero(nq_);
   Reset();
@@ -470,36 +470,14 @@ const ParticleSummary& ParticleFilter::Summary() const {
     out.mean[j] = mean >= M_PI ? -M_PI : mean;
     out.circular_std[j] =
         r > 0.0 ? std::sqrt(-2.0 * std::log(r)) : std::numeric_limits<double>::infinity();
-    // Weighted 2.5% / 97.5% quantiles of the deviation from the mean.
+    // Weighted 2.5% / 97.5% quantiles of the deviation from the mean (no full sort).
     const double cm = sc / std::max(r, 1e-300), sm = ss / std::max(r, 1e-300);
-    scratch_pairs_.clear();
-    double kept = 0.0;
-    for (int i = 0; i < n_; ++i) {
-      if (w[i] < negligible) continue;
-      const double d = std::atan2(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm);
-      scratch_pairs_.emplace_back(d, w[i]);
-      kept += w[i];
-    }
-    std::sort(scratch_pairs_.begin(), scratch_pairs_.end());
-    // Each sample's mass sits at the middle of its step of the cumulative distribution.
-    const auto quantile = [&](double p) {
-      const double target = p * kept;
-      double cum = 0.0;
-      double prev_mid = -1.0, prev_d = scratch_pairs_.front().first;
-      for (const auto& [d, wi] : scratch_pairs_) {
-        const double mid = cum + 0.5 * wi;
-        if (mid >= target) {
-          if (prev_mid < 0.0) return d;
-          return prev_d + (d - prev_d) * (target - prev_mid) / (mid - prev_mid);
-        }
-        cum += wi;
-        prev_mid = mid;
-        prev_d = d;
-      }
-      return scratch_pairs_.back().first;
-    };
-    out.lower95[j] = out.mean[j] + quantile(0.025);
-    out.upper95[j] = out.mean[j] + quantile(0.975);
+    static constexpr double kProbs[2] = {0.025, 0.975};
+    double dev[2];
+    WeightedCircularQuantiles(c, s, w, n_, cm, sm, negligible, kProbs, 2, dev, &quantiles_,
+                              out.circular_std[j]);
+    out.lower95[j] = out.mean[j] + dev[0];
+    out.upper95[j] = out.mean[j] + dev[1];
   }
   out.has_end_effector = ee_output_ >= 0;
   if (out.has_end_effector) {

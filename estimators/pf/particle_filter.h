@@ -47,6 +47,7 @@
 #include "estimators/lie/se3.h"
 #include "estimators/pf/batch_kinematics.h"
 #include "estimators/pf/bingham.h"
+#include "estimators/pf/circular_quantile.h"
 #include "estimators/pf/resampling.h"
 #include "estimators/pf/von_mises.h"
 
@@ -194,7 +195,7 @@ class ParticleFilter {
 
   mutable bool summary_valid_ = false;
   mutable ParticleSummary summary_;
-  mutable std::vector<std::pair<double, double>> scratch_pairs_;
+  mutable CircularQuantileScratch quantiles_;
   mutable std::vector<double> scratch_w_;
   mutable kinematics::PpoeData fk_data_;  // the end effector at the mean angles
   mutable Eigen::VectorXd q_mean_;

@@ -1,6 +1,8 @@
 // Offscreen rendering and the AprilTag pipeline on inline models.
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "estimators/error.h"
 #include "render/renderer.h"
 #include "render/tag_detector.h"
@@ -77,6 +79,38 @@ INSTANTIATE_TEST_SUITE_P(IdsRotationsModes, FrontalTag,
                                            std::make_tuple(7, 33.0, RenderMode::kQuality),
                                            std::make_tuple(586, -120.0, RenderMode::kFast),
                                            std::make_tuple(101, 180.0, RenderMode::kFast)));
+
+// A camera that sees nothing, and a model whose state is not finite (what a diverging
+// simulation leaves): bad input naming the camera, not an internal error.
+TEST(Render, AFrameOfOneColourIsBadInputNamingTheCamera) {
+  sim::MjModelPtr m = sim::LoadModelFromString(R"(<mujoco>
+  <visual><global offwidth="64" offheight="48"/></visual>
+  <worldbody>
+    <light pos="0 0 2" dir="0 0 -1"/>
+    <body name="box" pos="0 0 -1"><freejoint/><geom type="box" size="0.1 0.1 0.1"/></body>
+    <camera name="up" pos="0 0 0" xyaxes="1 0 0 0 -1 0"/>
+    <camera name="down" pos="0 0 0" xyaxes="1 0 0 0 1 0"/>
+  </worldbody></mujoco>)");
+  sim::MjDataPtr d = sim::MakeData(m.get());
+  mj_forward(m.get(), d.get());
+  Renderer renderer(m.get(), RenderMode::kFast);
+  EXPECT_NO_THROW(renderer.RenderRgb(d.get(), 1));  // looks down at the box
+  for (bool diverged : {false, true}) {
+    if (diverged) {
+      d->qpos[0] = std::nan("");
+      mj_kinematics(m.get(), d.get());
+    }
+    try {
+      renderer.RenderRgb(d.get(), diverged ? 1 : 0);
+      ADD_FAILURE() << "no error, diverged " << diverged;
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(diverged ? "camera 'down'" : "camera 'up'"), std::string::npos) << msg;
+      EXPECT_EQ(msg.find("not finite") != std::string::npos, diverged) << msg;
+      EXPECT_EQ(msg.find('\n'), std::string::npos);
+    }
+  }
+}
 
 TEST(Render, SameStateSameBytes) {
   const Rendered a = RenderTag(3, 10.0, RenderMode::kQuality);

@@ -1,0 +1,42 @@
+// Weighted quantiles of particle angles about their circular mean, for the particle filter's
+// per-joint 95% intervals, without sorting every particle (issue 18).
+#pragma once
+
+#include <array>
+#include <utility>
+#include <vector>
+
+namespace flexbench::pf {
+
+// Preallocated for n particles; reused across joints and steps (nothing allocated per call).
+class CircularQuantileScratch {
+ public:
+  static constexpr int kBins = 512;
+  CircularQuantileScratch() = default;
+  explicit CircularQuantileScratch(int n);
+
+ private:
+  friend void WeightedCircularQuantiles(const double*, const double*, const double*, int, double,
+                                        double, double, const double*, int, double*,
+                                        CircularQuantileScratch*, double);
+  std::vector<int> bin_;  // -1: a negligible particle
+  std::vector<std::pair<double, double>> pairs_;
+  std::array<double, kBins> mass_{};
+};
+
+// The deviations d_i = atan2(s_i cm - c_i sm, c_i cm + s_i sm) of the particles (cos c_i, sin
+// s_i, normalised weight w_i) from the mean direction (cm, sm), over those with w_i >=
+// negligible, and their weighted p-quantiles for p in probs[0..np): each particle's mass sits at
+// the middle of its step of the cumulative distribution, linear in between (below the first
+// middle: the first deviation; above the last: the last). The result equals that definition
+// computed on the sorted deviations up to rounding (tests/unit/pf/circular_quantile_test.cc),
+// but no particle is sorted or put through atan2 except those near each quantile: a histogram
+// of a pseudo-angle (monotone in the angle, no trigonometry) finds the step, and only the
+// particles of its bin and the non-empty bins on either side are converted and sorted. `spread`
+// (e.g. the circular standard deviation, rad) sizes the bins; any value gives the same result,
+// a good one makes it fast.
+void WeightedCircularQuantiles(const double* c, const double* s, const double* w, int n, double cm,
+                               double sm, double negligible, const double* probs, int np,
+                               double* out, CircularQuantileScratch* scratch, double spread = 1.0);
+
+}  // namespace flexbench::pf
