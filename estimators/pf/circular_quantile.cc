@@ -18,35 +18,36 @@ double PseudoAngle(double y, double x) {
 
 }  // namespace
 
-CircularQuantileScratch::CircularQuantileScratch(int n) : bin_(n) { pairs_.reserve(n); }
+CircularQuantileScratch::CircularQuantileScratch(int n) : key_(n), bin_(n) { pairs_.reserve(n); }
 
 void WeightedCircularQuantiles(const double* c, const double* s, const double* w, int n, double cm,
                                double sm, double negligible, const double* probs, int np,
-                               double* out, CircularQuantileScratch* scratch, double spread) {
+                               double* out, CircularQuantileScratch* scratch) {
   constexpr int kBins = CircularQuantileScratch::kBins;
+  std::vector<double>& key = scratch->key_;
   std::vector<int>& bin = scratch->bin_;
   std::array<double, kBins>& mass = scratch->mass_;
-  // Bins over +-8 spreads of the pseudo-angle (about the angle there); particles beyond fall
-  // into the end bins, which only makes those bins larger, never the result different.
-  const double half = std::min(2.0, std::max(8.0 * spread, 1e-9));
-  const double scale = kBins / (2.0 * half);
-  mass.fill(0.0);
-  double kept = 0.0;
+  double kept = 0.0, kmin = HUGE_VAL, kmax = -HUGE_VAL;
   for (int i = 0; i < n; ++i) {
     if (w[i] < negligible) {
       bin[i] = -1;
       continue;
     }
-    const double key = PseudoAngle(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm);
-    const double x = (key + half) * scale;
-    const int b = x <= 0.0 ? 0 : x >= kBins - 1 ? kBins - 1 : static_cast<int>(x);
-    bin[i] = b;
-    mass[b] += w[i];
+    key[i] = PseudoAngle(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm);
+    kmin = std::min(kmin, key[i]);
+    kmax = std::max(kmax, key[i]);
     kept += w[i];
   }
   if (!(kept > 0.0)) {
     for (int k = 0; k < np; ++k) out[k] = 0.0;
     return;
+  }
+  mass.fill(0.0);
+  const double scale = kmax > kmin ? kBins / (kmax - kmin) : 0.0;
+  for (int i = 0; i < n; ++i) {
+    if (bin[i] < 0) continue;
+    bin[i] = std::min(kBins - 1, static_cast<int>((key[i] - kmin) * scale));
+    mass[bin[i]] += w[i];
   }
   int first_bin = 0;
   while (mass[first_bin] == 0.0 && first_bin + 1 < kBins) ++first_bin;
@@ -59,13 +60,16 @@ void WeightedCircularQuantiles(const double* c, const double* s, const double* w
     while (b + 1 < kBins && before + mass[b] < target) before += mass[b++];
     int lo = b, hi = b;
     double start = before;
-    for (int h = b - 1; h >= 0; --h) {
-      if (mass[h] > 0.0) {
-        lo = h;
-        start = before - mass[h];
+    while (lo > 0) {
+      if (mass[lo - 1] > 0.0) {
+        --lo;
+        start -= mass[lo];
         break;
       }
+      --lo;
     }
+    if (mass[lo] == 0.0) lo = b;  // nothing non-empty before b
+    if (lo == b) start = before;
     for (int h = b + 1; h < kBins; ++h) {
       if (mass[h] > 0.0) {
         hi = h;

@@ -18,7 +18,8 @@ class CircularQuantileScratch {
  private:
   friend void WeightedCircularQuantiles(const double*, const double*, const double*, int, double,
                                         double, double, const double*, int, double*,
-                                        CircularQuantileScratch*, double);
+                                        CircularQuantileScratch*);
+  std::vector<double> key_;
   std::vector<int> bin_;  // -1: a negligible particle
   std::vector<std::pair<double, double>> pairs_;
   std::array<double, kBins> mass_{};
@@ -32,11 +33,10 @@ class CircularQuantileScratch {
 // computed on the sorted deviations up to rounding (tests/unit/pf/circular_quantile_test.cc),
 // but no particle is sorted or put through atan2 except those near each quantile: a histogram
 // of a pseudo-angle (monotone in the angle, no trigonometry) finds the step, and only the
-// particles of its bin and the non-empty bins on either side are converted and sorted. `spread`
-// (e.g. the circular standard deviation, rad) sizes the bins; any value gives the same result,
-// a good one makes it fast.
+// particles of its bin and the non-empty bins on either side are converted and sorted (the bins
+// span the kept particles' pseudo-angles: narrower, from the spread, was measured slower).
 void WeightedCircularQuantiles(const double* c, const double* s, const double* w, int n, double cm,
                                double sm, double negligible, const double* probs, int np,
-                               double* out, CircularQuantileScratch* scratch, double spread = 1.0);
+                               double* out, CircularQuantileScratch* scratch);
 
 }  // namespace flexbench::pf

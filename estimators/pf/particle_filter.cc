@@ -474,8 +474,7 @@ const ParticleSummary& ParticleFilter::Summary() const {
     const double cm = sc / std::max(r, 1e-300), sm = ss / std::max(r, 1e-300);
     static constexpr double kProbs[2] = {0.025, 0.975};
     double dev[2];
-    WeightedCircularQuantiles(c, s, w, n_, cm, sm, negligible, kProbs, 2, dev, &quantiles_,
-                              out.circular_std[j]);
+    WeightedCircularQuantiles(c, s, w, n_, cm, sm, negligible, kProbs, 2, dev, &quantiles_);
     out.lower95[j] = out.mean[j] + dev[0];
     out.upper95[j] = out.mean[j] + dev[1];
   }
