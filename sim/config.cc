@@ -137,17 +137,79 @@ void CheckInputFile(const std::string& path, std::uintmax_t max_bytes) {
   }
 }
 
-ConfigNode ConfigNode::LoadFile(const std::string& path) {
+ConfigOverride ParseOverride(const std::string& arg) {
+  const size_t eq = arg.find('=');
+  const std::string shown = "--set '" + CapForMessage(arg) + "'";
+  if (eq == std::string::npos) throw InputError(shown + ": expected KEY=VALUE");
+  ConfigOverride o{arg.substr(0, eq), arg.substr(eq + 1)};
+  if (o.key.empty() || o.key.front() == '.' || o.key.back() == '.' ||
+      o.key.find("..") != std::string::npos ||
+      o.key.find_first_of(" \t[]{}:#") != std::string::npos) {
+    throw InputError(shown + ": KEY must be a dotted path of names (a.b.c)");
+  }
+  return o;
+}
+
+namespace {
+
+std::vector<std::string> SplitKey(const std::string& key) {
+  std::vector<std::string> parts;
+  size_t start = 0;
+  for (size_t dot; (dot = key.find('.', start)) != std::string::npos; start = dot + 1) {
+    parts.push_back(key.substr(start, dot - start));
+  }
+  parts.push_back(key.substr(start));
+  return parts;
+}
+
+// Sets `o` in `root`: the value parsed and checked like file text, the maps on its path created
+// when absent. yaml-cpp's Node::operator= writes through to the node, so the walk rebinds with
+// reset().
+void ApplyOverride(YAML::Node root, const ConfigOverride& o, const std::string& file) {
+  const std::string where = "--set " + CapForMessage(o.key);
+  YAML::Node value;
+  try {
+    value = YAML::Load(o.value);
+  } catch (const YAML::Exception& e) {
+    throw InputError(where + ": YAML syntax error in the value: " + CapForMessage(e.msg));
+  }
+  size_t visited = 0;
+  CheckStructure(value, where, o.key, &visited);
+  const std::vector<std::string> parts = SplitKey(o.key);
+  YAML::Node cur;
+  cur.reset(root);
+  std::string path;
+  for (size_t i = 0; i + 1 < parts.size(); ++i) {
+    path += (i ? "." : "") + parts[i];
+    YAML::Node next = cur[parts[i]];
+    if (!next.IsDefined() || next.IsNull()) {
+      cur[parts[i]] = YAML::Node(YAML::NodeType::Map);
+      next.reset(cur[parts[i]]);
+    } else if (!next.IsMap()) {
+      throw InputError(where + ": '" + CapForMessage(path) + "' in " + file +
+                       " is not a mapping, so it has no key '" + CapForMessage(parts[i + 1]) +
+                       "'");
+    }
+    cur.reset(next);
+  }
+  cur[parts.back()] = value;
+}
+
+}  // namespace
+
+ConfigNode ConfigNode::LoadFile(const std::string& path,
+                                const std::vector<ConfigOverride>& overrides) {
   CheckInputFile(path, kMaxConfigFileBytes);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(CapForMessage(path) + ": file not found or not readable");
   std::stringstream buffer;
   buffer << in.rdbuf();
   if (!in.good() && !in.eof()) throw InputError(CapForMessage(path) + ": read error");
-  return LoadString(buffer.str(), path);
+  return LoadString(buffer.str(), path, overrides);
 }
 
-ConfigNode ConfigNode::LoadString(const std::string& text, const std::string& name_in) {
+ConfigNode ConfigNode::LoadString(const std::string& text, const std::string& name_in,
+                                  const std::vector<ConfigOverride>& overrides) {
   const std::string name = CapForMessage(name_in);
   auto state = std::make_shared<State>();
   state->file = name;
@@ -167,7 +229,21 @@ ConfigNode ConfigNode::LoadString(const std::string& text, const std::string& na
   }
   size_t visited = 0;
   CheckStructure(docs[0], name, "", &visited);
+  for (const ConfigOverride& o : overrides) {
+    ApplyOverride(docs[0], o, name);
+    state->overridden.push_back(o.key);
+  }
   return ConfigNode(state, docs[0], "");
+}
+
+std::string ConfigNode::Location(const YAML::Mark& mark, const std::string& path) const {
+  for (const std::string& key : state_->overridden) {
+    if (path == key || (path.size() > key.size() && path.compare(0, key.size(), key) == 0 &&
+                        (path[key.size()] == '.' || path[key.size()] == '['))) {
+      return "--set " + CapForMessage(key);
+    }
+  }
+  return state_->file + ":" + LineOf(mark);
 }
 
 ConfigNode ConfigNode::MakeChild(const YAML::Node& node, const std::string& child_path) const {
@@ -279,7 +355,7 @@ void ConfigNode::CheckUnknown(const YAML::Node& node, const std::string& path) c
       const std::string key = kv.first.as<std::string>();
       const std::string child = JoinPath(path, key);
       if (!state_->consumed.count(child)) {
-        throw InputError(state_->file + ":" + LineOf(kv.first.Mark()) + ": unknown key '" +
+        throw InputError(Location(kv.first.Mark(), child) + ": unknown key '" +
                          CapForMessage(child) + "'");
       }
       CheckUnknown(kv.second, child);
@@ -292,7 +368,7 @@ void ConfigNode::CheckUnknown(const YAML::Node& node, const std::string& path) c
   }
 }
 
-std::string ConfigNode::Where() const { return state_->file + ":" + LineOf(node_.Mark()); }
+std::string ConfigNode::Where() const { return Location(node_.Mark(), path_); }
 
 std::string ConfigNode::WhereKey() const {
   return path_.empty() ? Where() : Where() + ": key '" + CapForMessage(path_) + "'";

@@ -27,15 +27,30 @@ inline constexpr std::uintmax_t kMaxConfigFileBytes = 16u << 20;
 // is too big.
 void CheckInputFile(const std::string& path, std::uintmax_t max_bytes);
 
+// A command-line override of one scenario key (`--set KEY=VALUE`): `key` a dotted path
+// (estimators.ppoe_ekf.iterations), `value` YAML text (3, [1, 2], {a: 1}, text).
+struct ConfigOverride {
+  std::string key;
+  std::string value;
+};
+// Parses "KEY=VALUE"; throws InputError "--set '<arg>': ..." for a missing '=' or an empty or
+// malformed dotted key.
+ConfigOverride ParseOverride(const std::string& arg);
+
 class ConfigNode {
  public:
   // Parses a YAML file. Throws InputError "<file>: not found" or "<file>:<line>: YAML syntax
   // error: ...". Also input errors: a file that is not a regular file or is bigger than
   // kMaxConfigFileBytes, text that is not UTF-8, a key that is a list or a map, a key given
   // twice in one mapping, more than one YAML document.
-  static ConfigNode LoadFile(const std::string& path);
+  // `overrides` replace (or add) keys after parsing, with the same checks as the file's own
+  // text; errors about an overridden key name "--set <key>" instead of a line. Maps along the
+  // path are created when absent, so a misspelt key is reported as unknown by the reader.
+  static ConfigNode LoadFile(const std::string& path,
+                             const std::vector<ConfigOverride>& overrides = {});
   // Parses YAML text; `name` stands for the file in messages.
-  static ConfigNode LoadString(const std::string& text, const std::string& name);
+  static ConfigNode LoadString(const std::string& text, const std::string& name,
+                               const std::vector<ConfigOverride>& overrides = {});
 
   bool Has(const std::string& key) const;
   // Required child; throws "<file>:<line>: missing key '<path>'".
@@ -84,7 +99,10 @@ class ConfigNode {
   struct State {
     std::string file;
     std::set<std::string> consumed;
+    std::vector<std::string> overridden;  // dotted keys set on the command line
   };
+  // "<file>:<line>" of a node at `path`, or "--set <key>" when the key came from an override.
+  std::string Location(const YAML::Mark& mark, const std::string& path) const;
   ConfigNode(std::shared_ptr<State> state, YAML::Node node, std::string path)
       : state_(std::move(state)), node_(std::move(node)), path_(std::move(path)) {}
   ConfigNode MakeChild(const YAML::Node& node, const std::string& child_path) const;

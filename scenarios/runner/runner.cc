@@ -47,6 +47,12 @@ void CheckScenarioName(const ConfigNode& node, const std::string& name) {
   }
 }
 
+std::vector<ConfigOverride> ParseOverrides(const std::vector<std::string>& args) {
+  std::vector<ConfigOverride> out;
+  for (const std::string& a : args) out.push_back(ParseOverride(a));
+  return out;
+}
+
 // Runs a loaded scenario. `inputs` are files the run reads (never replaced by --out).
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
               const std::vector<fs::path>& inputs) {
@@ -77,6 +83,8 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   summary["kind"] = root.GetString("kind");
   if (!description.empty()) summary["description"] = description;
   summary["seed"] = seed;
+  // What the command line changed, so that a result says how it was made.
+  if (!options.set.empty()) summary["overrides"] = options.set;
   summary["metrics"] = Json::object();
   summary["estimators"] = Json::object();
   Json timing = Json::object();
@@ -149,7 +157,8 @@ int ReportError(const std::exception& e) {
 
 int RunScenario(const RunOptions& options) {
   try {
-    const ConfigNode root = ConfigNode::LoadFile(options.scenario_path);
+    const ConfigNode root =
+        ConfigNode::LoadFile(options.scenario_path, ParseOverrides(options.set));
     return RunLoaded(root, options, options.scenario_path, {fs::path(options.scenario_path)});
   } catch (const std::exception& e) {
     return ReportError(e);
@@ -322,10 +331,11 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
       }
       line("--candidates", c + "]");
     }
-    const ConfigNode root = ConfigNode::LoadString(y.str(), kIdentifyName);
+    const ConfigNode root = ConfigNode::LoadString(y.str(), kIdentifyName, ParseOverrides(o.set));
     RunOptions run;
     run.out_dir = o.out_dir;
     run.force = o.force;
+    run.set = o.set;  // recorded in summary.json
     try {
       return RunLoaded(root, run, "identify command line",
                        {fs::path(o.declared), fs::path(declared.model_path),

@@ -20,6 +20,7 @@ struct RunOptions {
   std::optional<std::uint64_t> seed;   // overrides the file's seed
   bool check_gates = false;
   bool force = false;  // --out may replace a folder that is not a previous result
+  std::vector<std::string> set;        // --set KEY=VALUE overrides, in order
 };
 
 // Runs one scenario; prints one line on stderr for bad input. Returns an exit code.
@@ -41,6 +42,7 @@ struct IdentifyCliOptions {
   bool no_cross_validation = false;
   std::string out_dir = "out/identify";
   bool force = false;
+  std::vector<std::string> set;  // --set KEY=VALUE on the closed_loop keys it configures
 };
 
 // `flexbench identify`: a closed_loop run on a user's files (paths as given on the command

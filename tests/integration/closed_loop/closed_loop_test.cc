@@ -785,6 +785,12 @@ TEST(IdentifyCommand, ReadingNoiseSizesTheSourcesOnWhatTheDataLeaves) {
   // Without the readings' noise the stated point noise stands in, with the 1e-6 floor.
   const auto point = identify("complete", "", "_point");
   EXPECT_EQ(point["source_scale_from"], "point_std_m (floor 1e-6)");
+  // --set reaches identify's closed_loop keys too, and is recorded.
+  const auto none = identify("complete", " --set max_effects=0", "_set");
+  EXPECT_EQ(none["verdict"], "unexplained");
+  EXPECT_EQ(nlohmann::json::parse(testing::ReadFile(dir / "out_complete_set" / "summary.json"))
+                ["overrides"],
+            (nlohmann::json{"max_effects=0"}));
   fs::remove_all(dir);
 }
 

@@ -37,6 +37,40 @@ std::string LastLine(const std::string& err) {
   return nl == std::string::npos ? e : e.substr(nl + 1);
 }
 
+// --set KEY=VALUE on `run` (issue 17): the value is used and recorded; a wrong path or type is
+// bad input naming the override, with nothing written.
+TEST(Reliability, SetOverridesAKeyAndIsRecordedOrNamed) {
+  const fs::path dir = fs::temp_directory_path() / ("flexbench_set_" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  const fs::path s = dir / "smoke.yaml";
+  WriteFile(s, SmokeYaml());
+  CommandResult r = RunCommand(
+      RunCmd(s, dir / "ok", "--set seed=11 --set configuration.joint2=-0.5 --set render.mode=fast"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto summary = nlohmann::json::parse(ReadFile(dir / "ok" / "summary.json"));
+  EXPECT_EQ(summary["seed"], 11);
+  EXPECT_EQ(summary["overrides"],
+            (nlohmann::json{"seed=11", "configuration.joint2=-0.5", "render.mode=fast"}));
+  // Without overrides the key is absent (same bytes as before for every existing run).
+  r = RunCommand(RunCmd(s, dir / "plain"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(nlohmann::json::parse(ReadFile(dir / "plain" / "summary.json")).contains("overrides"));
+  const std::pair<const char*, const char*> bad[] = {
+      {"--set descripton=typo", "--set descripton: unknown key 'descripton'"},
+      {"--set seed=abc", "--set seed: key 'seed': expected an integer"},
+      {"--set seed.x=1", "--set seed.x: 'seed'"},
+      {"--set nonsense", "--set 'nonsense': expected KEY=VALUE"}};
+  int k = 0;
+  for (const auto& [arg, expected] : bad) {
+    const fs::path out = dir / ("bad" + std::to_string(k++));
+    r = RunCommand(RunCmd(s, out, arg));
+    EXPECT_EQ(r.exit_code, 2) << arg << ": " << r.err;
+    EXPECT_NE(LastLine(r.err).find(expected), std::string::npos) << arg << ": " << r.err;
+    EXPECT_FALSE(fs::exists(out)) << arg;
+  }
+  fs::remove_all(dir);
+}
+
 TEST(Reliability, OutThatHoldsUserFilesIsRefusedAndKept) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";

@@ -28,6 +28,54 @@ TEST(ConfigNode, ReadsTypedValues) {
   EXPECT_NO_THROW(root.CheckNoUnknownKeys());
 }
 
+// --set KEY=VALUE: the value replaces or adds the key (maps created along the path), siblings
+// stay, and every error about it names "--set KEY" rather than a line of the file.
+TEST(ConfigOverrides, ReplaceAddAndKeepSiblings) {
+  const std::string text = "a: 1\nsub:\n  x: 2\n  y: [1, 2]\nlist:\n  - {k: 1}\n";
+  const ConfigNode root = ConfigNode::LoadString(
+      text, "f.yaml",
+      {ParseOverride("sub.x=5"), ParseOverride("sub.deep.z=[3, 4]"), ParseOverride("b=text"),
+       ParseOverride("a=2.5")});
+  EXPECT_DOUBLE_EQ(root.GetDouble("a"), 2.5);
+  EXPECT_EQ(root.GetString("b"), "text");
+  EXPECT_DOUBLE_EQ(root.Child("sub").GetDouble("x"), 5.0);
+  EXPECT_EQ(root.Child("sub").Child("y").AsDoubleList(), (std::vector<double>{1.0, 2.0}));
+  EXPECT_EQ(root.Child("sub").Child("deep").Child("z").AsDoubleList(),
+            (std::vector<double>{3.0, 4.0}));
+  EXPECT_EQ(root.Child("list").Items()[0].GetInt("k"), 1);
+  EXPECT_NO_THROW(root.CheckNoUnknownKeys());
+}
+
+TEST(ConfigOverrides, ErrorsNameTheOverride) {
+  const std::string text = "a: 1\nsub:\n  x: 2\n";
+  // A wrong type.
+  const ConfigNode typed = ConfigNode::LoadString(text, "f.yaml", {ParseOverride("sub.x=abc")});
+  std::string e = ErrorOf([&] { typed.Child("sub").GetDouble("x"); });
+  EXPECT_NE(e.find("--set sub.x: key 'sub.x': expected a number"), std::string::npos) << e;
+  // A key nothing reads.
+  const ConfigNode typo = ConfigNode::LoadString(text, "f.yaml", {ParseOverride("sub.xx=1")});
+  typo.GetDouble("a");
+  typo.Child("sub").GetDouble("x");
+  e = ErrorOf([&] { typo.CheckNoUnknownKeys(); });
+  EXPECT_NE(e.find("--set sub.xx: unknown key 'sub.xx'"), std::string::npos) << e;
+  // Through a scalar, bad YAML, a malformed argument.
+  e = ErrorOf([&] { ConfigNode::LoadString(text, "f.yaml", {ParseOverride("a.b=1")}); });
+  EXPECT_NE(e.find("--set a.b: 'a' in f.yaml is not a mapping"), std::string::npos) << e;
+  e = ErrorOf([&] { ConfigNode::LoadString(text, "f.yaml", {ParseOverride("a=[1,")}); });
+  EXPECT_NE(e.find("--set a: YAML syntax error"), std::string::npos) << e;
+  e = ErrorOf([&] { ConfigNode::LoadString(text, "f.yaml", {ParseOverride("a={? [x]: 1}")}); });
+  EXPECT_NE(e.find("--set a"), std::string::npos) << e;
+  for (const char* bad : {"noequals", "=1", ".a=1", "a..b=1", "a.=1", "a b=1"}) {
+    e = ErrorOf([&] { ParseOverride(bad); });
+    EXPECT_NE(e.find("--set '"), std::string::npos) << bad << ": " << e;
+  }
+  // Errors about keys the override did not touch keep their file and line.
+  const ConfigNode other = ConfigNode::LoadString(text + "b: zz\n", "f.yaml",
+                                                  {ParseOverride("sub.x=3")});
+  e = ErrorOf([&] { other.GetDouble("b"); });
+  EXPECT_NE(e.find("f.yaml:4: key 'b'"), std::string::npos) << e;
+}
+
 TEST(ConfigNode, SyntaxErrorNamesFileAndLine) {
   const std::string e = ErrorOf([] { ConfigNode::LoadString("a: 1\nb: [1,\n", "f.yaml"); });
   EXPECT_NE(e.find("f.yaml:"), std::string::npos) << e;
