@@ -31,6 +31,7 @@
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/tag_tracking.h"
+#include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/declared_chain.h"
@@ -103,7 +104,10 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
     render::Renderer renderer(sim_->model(), mode_);
     render::TagDetector detector(detector_);
     ctx.log("(a) tracking with the declared model");
-    const std::vector<Track> before = Follow(ctx, renderer, detector, *chain_, 0);
+    TrajectoryRecorder before_trajectories, after_trajectories;
+    const std::vector<Track> before =
+        Follow(ctx, renderer, detector, *chain_, 0, &before_trajectories);
+    before_trajectories.Write(*ctx.out, "base", "before");
     ctx.log("(b) calibration routine and identification (identify/)");
     const fs::path augmented = Identify(ctx);
     std::unique_ptr<sim::DeclaredChain> aug_chain;
@@ -114,8 +118,10 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       ctx.log("no augmented model (see identify/summary.json): tracking again as declared");
     }
     ctx.log("(c) tracking a new trajectory with the augmented model");
-    const std::vector<Track> after =
-        Follow(ctx, renderer, detector, aug_chain ? *aug_chain : *chain_, 1);
+    const std::vector<Track> after = Follow(ctx, renderer, detector,
+                                            aug_chain ? *aug_chain : *chain_, 1,
+                                            &after_trajectories);
+    after_trajectories.Write(*ctx.out, "base", "after");
     (*ctx.summary)["metrics"]["augmented_model_used"] = aug_chain != nullptr;
     Report(ctx, before, after);
   }
@@ -180,7 +186,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
 
   std::vector<Track> Follow(RunContext& ctx, render::Renderer& renderer,
                             render::TagDetector& detector, const sim::DeclaredChain& chain,
-                            int index) {
+                            int index, TrajectoryRecorder* trajectories) {
     seed_ = ctx.seed;
     auto instances = Instances(chain);
     const std::map<int, kinematics::FrameId> tag_frames = TagFrames(chain);
@@ -210,6 +216,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
               ? lie::SE3()
               : ToSE3(sim_->BodyPose(sim::ObjectName(sim_->model(), mjOBJ_BODY, chain.base_body)));
       const lie::SE3 T_base_ee = T_w_base.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
+      trajectories->AddTruth(joints.t, T_base_ee);
       for (size_t e = 0; e < instances.size(); ++e) {
         estimators::Estimator& est = *instances[e];
         est.Predict(joints.t);
@@ -218,6 +225,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
         const estimators::Belief b = est.Estimate();
         Track& tr = tracks[e];
         tr.stats.Add(b.T_base_ee, b.cov, T_base_ee);
+        trajectories->Add(specs_[e].name, joints.t, b.T_base_ee, b.cov);
         tr.pos_err.push_back(tr.stats.last_pos());
       }
       ctx.progress(stage, k + 1, steps_);

@@ -21,6 +21,7 @@
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/tag_tracking.h"
+#include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
@@ -148,6 +149,7 @@ class TagFusionKind : public ScenarioKind {
     if (random_count_ > 0) SampleConfigurations(renderer, ctx);
     const PinholeCamera& cam = setup_.cameras[0].intrinsics;
     std::vector<ErrorStats> stats(instances_.size());
+    TrajectoryRecorder trajectories;
     std::vector<std::map<std::string, int>> status_counts(instances_.size());
     std::ofstream csv(ctx.out->File("configurations.csv"));
     csv << "config,estimator,tags_used,pos_err_m,lateral_err_m,rot_err_deg,nees\n";
@@ -191,6 +193,7 @@ class TagFusionKind : public ScenarioKind {
         render::DrawPolyline(&overlay, {d.corners.begin(), d.corners.end()}, true, render::kYellow,
                              1);
       }
+      trajectories.AddTruth(joints.t, T_base_ee);
       for (size_t e = 0; e < instances_.size(); ++e) {
         estimators::Estimator& est = *instances_[e];
         est.Reset();
@@ -201,6 +204,7 @@ class TagFusionKind : public ScenarioKind {
         }
         const estimators::Belief b = est.Estimate();
         stats[e].Add(b.T_base_ee, b.cov, T_base_ee);
+        trajectories.Add(estimators_[e].name, joints.t, b.T_base_ee, b.cov);
         {
           const render::Color colors[] = {render::kMagenta, render::kCyan, render::kYellow,
                                           render::kGreen, render::kRed};
@@ -234,6 +238,8 @@ class TagFusionKind : public ScenarioKind {
     Json& metrics = (*ctx.summary)["metrics"];
     metrics["configurations"] = static_cast<int>(configurations_.size());
     metrics["estimated_in"] = estimate_in_.empty() ? "base" : estimate_in_;
+    // One "pose" per configuration (the timestamp is its index): evo_ape reads them as is.
+    trajectories.Write(*ctx.out, estimate_in_.empty() ? "base" : estimate_in_);
     if (random_count_ > 0) metrics["configuration_attempts"] = attempts_;
     metrics["tags_detected_total"] = total_tags;
     metrics["configurations_without_tags"] = configs_without_tags;

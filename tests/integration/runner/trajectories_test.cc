@@ -1,0 +1,93 @@
+// TUM trajectories (issue 17): written for the truth and every estimator of a tag-fusion run,
+// read back as evo would, and the scenario's own position error recomputed from the files.
+#include "scenarios/runner/common/trajectories.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "scenarios/runner/runner.h"
+#include "tests/common/test_util.h"
+
+namespace flexbench::scenarios {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Row {
+  double t;
+  Vec3 p;
+  Eigen::Quaterniond q;
+};
+
+std::vector<Row> ReadTum(const fs::path& path) {
+  std::ifstream in(path);
+  std::vector<Row> rows;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream s(line);
+    Row r;
+    double qx, qy, qz, qw;
+    s >> r.t >> r.p.x() >> r.p.y() >> r.p.z() >> qx >> qy >> qz >> qw;
+    EXPECT_FALSE(s.fail()) << path << ": " << line;
+    r.q = Eigen::Quaterniond(qw, qx, qy, qz);
+    EXPECT_NEAR(r.q.norm(), 1.0, 1e-12);
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+TEST(Trajectories, TumFilesGiveBackTheScenariosPositionError) {
+  RunOptions o;
+  o.scenario_path = testing::SourceDir() + "/scenarios/rover_apriltag_exp1.yaml";
+  o.out_dir = (fs::temp_directory_path() / ("flexbench_tum_" + std::to_string(getpid()))).string();
+  ASSERT_EQ(RunScenario(o), kExitOk);
+  const auto summary =
+      nlohmann::json::parse(testing::ReadFile(fs::path(o.out_dir) / "summary.json"));
+  const fs::path dir = fs::path(o.out_dir) / "trajectories" / "base";
+  const std::vector<Row> truth = ReadTum(dir / "truth.tum");
+  ASSERT_EQ(static_cast<int>(truth.size()), summary["metrics"]["configurations"].get<int>());
+  int estimators = 0;
+  for (const auto& [name, e] : summary["estimators"].items()) {
+    const std::vector<Row> est = ReadTum(dir / (name + ".tum"));
+    ASSERT_EQ(est.size(), truth.size()) << name;
+    double sum = 0.0;
+    for (size_t k = 0; k < est.size(); ++k) {
+      EXPECT_EQ(est[k].t, truth[k].t);
+      sum += (est[k].p - truth[k].p).norm();
+    }
+    EXPECT_NEAR(sum / est.size(), e["metrics"]["pos_err_mean_m"].get<double>(), 1e-9) << name;
+    // The covariance beside it: a header and one row of timestamp + 21 entries per pose.
+    std::ifstream cov(dir / (name + ".cov.csv"));
+    std::string line;
+    int rows = -1;
+    while (std::getline(cov, line)) {
+      if (rows >= 0) EXPECT_EQ(std::count(line.begin(), line.end(), ','), 21) << line;
+      ++rows;
+    }
+    EXPECT_EQ(rows, static_cast<int>(truth.size())) << name;
+    ++estimators;
+  }
+  EXPECT_GE(estimators, 2);
+  fs::remove_all(o.out_dir);
+}
+
+TEST(Trajectories, TumLineIsTimestampPositionQuaternionXyzw) {
+  const lie::SE3 T(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix(), Vec3(1, 2, 3));
+  std::istringstream s(TumLine(0.5, T));
+  double v[8];
+  for (double& x : v) s >> x;
+  EXPECT_EQ(v[0], 0.5);
+  EXPECT_EQ(v[1], 1.0);
+  EXPECT_EQ(v[3], 3.0);
+  EXPECT_NEAR(v[6], std::sqrt(0.5), 1e-15);  // qz
+  EXPECT_NEAR(v[7], std::sqrt(0.5), 1e-15);  // qw last
+}
+
+}  // namespace
+}  // namespace flexbench::scenarios
