@@ -13,6 +13,7 @@
 #include "estimators/estimator.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -93,6 +94,7 @@ class ContactFusionKind : public ScenarioKind {
            "eig1,eig2,eig3,eig4,eig5,eig6\n";
     render::Figure fig(1500, 500, 1, 3);
     fig.title = "Fingertip on the table: PPOE (solid) vs naive (dashed)";
+    TrajectoryRecorder trajectories;
     for (size_t e = 0; e < instances_.size(); ++e) {
       estimators::Estimator& est = *instances_[e];
       est.Reset();
@@ -141,6 +143,9 @@ class ContactFusionKind : public ScenarioKind {
         }
         eig_min.push_back(std::log10(std::max(smallest, 1e-300)));
         if (it == iterations_) stats.Add(b.T_base_ee, b.cov, T_w_tip);
+        // Every iteration (timestamp: its index); the metrics score the last.
+        if (e == 0) trajectories.AddTruth(it, T_w_tip);
+        trajectories.Add(estimators_[e].name, it, b.T_base_ee, b.cov);
       }
       Json& m = (*ctx.summary)["estimators"][estimators_[e].name]["metrics"];
       m["pos_err_initial_m"] = std::sqrt(ex[0] * ex[0] + ey[0] * ey[0] + ez[0] * ez[0]) / 100;
@@ -179,6 +184,7 @@ class ContactFusionKind : public ScenarioKind {
       lo.line = style;
       lo.color = render::PaletteColor(3);
     }
+    trajectories.Write(*ctx.out, estimate_in_.empty() ? "base" : estimate_in_);
     for (int k = 0; k < 3; ++k) {
       fig.axes(0, k).x_min = 0.0;
       fig.axes(0, k).x_max = iterations_;

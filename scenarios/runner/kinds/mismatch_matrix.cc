@@ -16,6 +16,7 @@
 #include "estimators/stats/chi_square.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -88,12 +89,14 @@ class MismatchMatrixKind : public ScenarioKind {
       configs.push_back(q);
     }
     const size_t E = instances_.size(), C = columns_.size();
-    std::vector<std::vector<ErrorStats>> stats(E, std::vector<ErrorStats>(C, ErrorStats(std::min(10, count_))));
+    std::vector<std::vector<ErrorStats>> stats(
+        E, std::vector<ErrorStats>(C, ErrorStats(std::min(10, count_))));
     // Detection delay: the running-NEES test over the configurations in their order.
 
     const sim::FrameRef ee = sims_[0]->Frame(declared_.end_effector);
     for (size_t col = 0; col < C; ++col) {
       sim::Simulation& sim = *sims_[col];
+      TrajectoryRecorder trajectories;  // one pose per configuration (timestamp: its index)
       std::vector<int> act(nq);
       for (int k = 0; k < nq; ++k) {
         const auto& names = sim.actuated_joints();
@@ -140,11 +143,14 @@ class MismatchMatrixKind : public ScenarioKind {
             est.Update(point);
           }
         }
+        trajectories.AddTruth(c, T_true);
         for (size_t e = 0; e < E; ++e) {
           const estimators::Belief b = instances_[e]->Estimate();
           stats[e][col].Add(b.T_base_ee, b.cov, T_true);
+          trajectories.Add(specs_[e].name, c, b.T_base_ee, b.cov);
         }
       }
+      trajectories.Write(*ctx.out, "base", columns_[col]);
     }
     // Metrics, CSV, heat maps.
     std::ostringstream csv;

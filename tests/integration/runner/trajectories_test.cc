@@ -77,6 +77,35 @@ TEST(Trajectories, TumFilesGiveBackTheScenariosPositionError) {
   fs::remove_all(o.out_dir);
 }
 
+// mismatch_matrix: one folder per effect column, the cell's error from its files.
+TEST(Trajectories, MismatchMatrixCellsGiveBackTheirErrors) {
+  RunOptions o;
+  o.scenario_path = testing::SourceDir() + "/scenarios/mismatch_matrix.yaml";
+  o.out_dir =
+      (fs::temp_directory_path() / ("flexbench_tum_mm_" + std::to_string(getpid()))).string();
+  ASSERT_EQ(RunScenario(o), kExitOk);
+  const auto summary =
+      nlohmann::json::parse(testing::ReadFile(fs::path(o.out_dir) / "summary.json"));
+  int cells = 0;
+  for (const auto& [name, e] : summary["estimators"].items()) {
+    for (const auto& [column, m] : e["metrics"].items()) {
+      if (!m.is_object() || !m.contains("pos_err_mean_m")) continue;
+      const fs::path dir = fs::path(o.out_dir) / "trajectories" / "base" / column;
+      const std::vector<Row> truth = ReadTum(dir / "truth.tum");
+      const std::vector<Row> est = ReadTum(dir / (name + ".tum"));
+      ASSERT_EQ(est.size(), truth.size()) << name << " " << column;
+      ASSERT_FALSE(est.empty());
+      double sum = 0.0;
+      for (size_t k = 0; k < est.size(); ++k) sum += (est[k].p - truth[k].p).norm();
+      EXPECT_NEAR(sum / est.size(), m["pos_err_mean_m"].get<double>(), 1e-9)
+          << name << " " << column;
+      ++cells;
+    }
+  }
+  EXPECT_GE(cells, 8);
+  fs::remove_all(o.out_dir);
+}
+
 TEST(Trajectories, TumLineIsTimestampPositionQuaternionXyzw) {
   const lie::SE3 T(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix(), Vec3(1, 2, 3));
   std::istringstream s(TumLine(0.5, T));
