@@ -314,6 +314,24 @@ std::vector<double> ConfigNode::AsDoubleList() const {
   return out;
 }
 
+std::string ConfigNode::AsYamlText() const {
+  Consume(node_, path_);
+  YAML::Emitter e;
+  e.SetMapFormat(YAML::Flow);
+  e.SetSeqFormat(YAML::Flow);
+  e << node_;
+  return e.c_str();
+}
+
+void ConfigNode::Consume(const YAML::Node& node, const std::string& path) const {
+  state_->consumed.insert(path);
+  if (node.IsMap()) {
+    for (const auto& kv : node) Consume(kv.second, JoinPath(path, kv.first.as<std::string>()));
+  } else if (node.IsSequence()) {
+    for (size_t i = 0; i < node.size(); ++i) Consume(node[i], path + "[" + std::to_string(i) + "]");
+  }
+}
+
 double ConfigNode::GetDouble(const std::string& key, double fallback) const {
   const auto c = Optional(key);
   return c ? c->AsDouble() : fallback;

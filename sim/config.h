@@ -63,6 +63,8 @@ class ConfigNode {
   bool AsBool() const;
   std::string AsString() const;
   std::vector<double> AsDoubleList() const;
+  // The node as one line of YAML (flow style), e.g. for a --set value; consumes the subtree.
+  std::string AsYamlText() const;
 
   double GetDouble(const std::string& key) const { return Child(key).AsDouble(); }
   int GetInt(const std::string& key) const { return Child(key).AsInt(); }
@@ -107,6 +109,7 @@ class ConfigNode {
       : state_(std::move(state)), node_(std::move(node)), path_(std::move(path)) {}
   ConfigNode MakeChild(const YAML::Node& node, const std::string& child_path) const;
   void CheckUnknown(const YAML::Node& node, const std::string& path) const;
+  void Consume(const YAML::Node& node, const std::string& path) const;
 
   std::shared_ptr<State> state_;
   YAML::Node node_;

@@ -5,6 +5,7 @@
 
 #include "scenarios/runner/inspect.h"
 #include "scenarios/runner/runner.h"
+#include "scenarios/sweep/sweep_command.h"
 #include "sim/mujoco_model.h"
 
 namespace {
@@ -75,6 +76,25 @@ int Main(int argc, char** argv) {
   identify_cmd->add_option("--out", id.out_dir, "output folder (default: out/identify)");
   identify_cmd->add_flag("--force", id.force,
                          "let --out replace an existing folder that is not a flexbench result");
+  flexbench::scenarios::sweep::SweepCliOptions sw;
+  CLI::App* sweep_cmd = app.add_subcommand(
+      "sweep", "run a scenario over seeds and a grid of overrides; statistics and gates");
+  sweep_cmd->add_option("sweep", sw.sweep_path, "sweep YAML file")->required();
+  sweep_cmd->add_option("--out", sw.out_dir, "output folder (default: out/sweeps/<sweep>)");
+  sweep_cmd->add_option("-j,--jobs", sw.jobs, "local worker processes (default: cores)");
+  sweep_cmd->add_option("--executor", sw.executor, "local (default) or slurm");
+  sweep_cmd->add_option("--shard", sw.shard, "run only shard i/n of the runs, no collect");
+  sweep_cmd->add_flag("--collect", sw.collect,
+                      "merge the runs in --out into sweep.csv and aggregate.json, gate");
+  sweep_cmd->add_option("--tasks", sw.slurm.tasks,
+                        "slurm: array tasks (shards; default one per run, at most 64)");
+  sweep_cmd->add_option("--partition", sw.slurm.partition, "slurm: sbatch --partition");
+  sweep_cmd->add_option("--time", sw.slurm.time, "slurm: sbatch --time");
+  sweep_cmd->add_option("--mem", sw.slurm.mem, "slurm: sbatch --mem");
+  sweep_cmd->add_option("--array", sw.slurm.array,
+                        "slurm: submit only these task indices (resubmit failed ones: 3,5)");
+  bool no_wait = false;
+  sweep_cmd->add_flag("--no-wait", no_wait, "slurm: submit and return; --collect later");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -83,6 +103,10 @@ int Main(int argc, char** argv) {
   }
   if (*seed_opt) run.seed = seed;
   if (*run_cmd) return flexbench::scenarios::RunScenario(run);
+  if (*sweep_cmd) {
+    sw.slurm.wait = !no_wait;
+    return flexbench::scenarios::sweep::SweepCommand(sw);
+  }
   if (*inspect_cmd) return flexbench::scenarios::InspectCommand(inspect_path);
   if (*identify_cmd) {
     if (id.out_dir.empty()) id.out_dir = "out/identify";

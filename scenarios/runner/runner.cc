@@ -53,26 +53,45 @@ std::vector<ConfigOverride> ParseOverrides(const std::vector<std::string>& args)
   return out;
 }
 
+// A loaded scenario with everything checked that can be wrong with the input, before any
+// work is done.
+struct Prepared {
+  std::string name;
+  std::string description;
+  std::uint64_t seed = 0;
+  std::unique_ptr<ScenarioKind> kind;
+  std::vector<GateSpec> gates;
+};
+
+Prepared Prepare(const ConfigNode& root, const RunOptions& options) {
+  Prepared p;
+  const ConfigNode name_node = root.Child("scenario");
+  p.name = name_node.AsString();
+  CheckScenarioName(name_node, p.name);
+  p.description = root.GetString("description", "");
+  const ConfigNode seed_node = root.Child("seed");
+  if (seed_node.AsInt() < 0) seed_node.Fail("seed must be >= 0");
+  p.seed = options.seed ? *options.seed : static_cast<std::uint64_t>(seed_node.AsInt());
+  p.kind = MakeKind(root.Child("kind"));
+  p.gates = ParseGates(root);
+  if (options.check_gates && p.gates.empty()) {
+    throw InputError(root.file() + ": --check-gates, but the scenario has no gates");
+  }
+  p.kind->Configure(root);
+  root.CheckNoUnknownKeys();
+  return p;
+}
+
 // Runs a loaded scenario. `inputs` are files the run reads (never replaced by --out).
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
               const std::vector<fs::path>& inputs) {
   const auto t_start = std::chrono::steady_clock::now();
-  // Everything that can be wrong with the input is checked before any work is done.
-  const ConfigNode name_node = root.Child("scenario");
-  const std::string name = name_node.AsString();
-  CheckScenarioName(name_node, name);
-  const std::string description = root.GetString("description", "");
-  const ConfigNode seed_node = root.Child("seed");
-  if (seed_node.AsInt() < 0) seed_node.Fail("seed must be >= 0");
-  const std::uint64_t seed =
-      options.seed ? *options.seed : static_cast<std::uint64_t>(seed_node.AsInt());
-  std::unique_ptr<ScenarioKind> kind = MakeKind(root.Child("kind"));
-  const std::vector<GateSpec> gates = ParseGates(root);
-  if (options.check_gates && gates.empty()) {
-    throw InputError(root.file() + ": --check-gates, but the scenario has no gates");
-  }
-  kind->Configure(root);
-  root.CheckNoUnknownKeys();
+  Prepared prepared = Prepare(root, options);
+  const std::string& name = prepared.name;
+  const std::string& description = prepared.description;
+  const std::uint64_t seed = prepared.seed;
+  std::unique_ptr<ScenarioKind>& kind = prepared.kind;
+  const std::vector<GateSpec>& gates = prepared.gates;
 
   const fs::path out_dir =
       options.out_dir.empty() ? fs::path("out") / name : fs::path(options.out_dir);
@@ -163,6 +182,15 @@ int RunScenario(const RunOptions& options) {
   } catch (const std::exception& e) {
     return ReportError(e);
   }
+}
+
+ScenarioCheck CheckScenario(const std::string& path, const std::vector<std::string>& set) {
+  const ConfigNode root = ConfigNode::LoadFile(path, ParseOverrides(set));
+  const Prepared p = Prepare(root, RunOptions{});
+  ScenarioCheck check;
+  check.name = p.name;
+  for (const GateSpec& g : p.gates) check.gate_names.push_back(g.name);
+  return check;
 }
 
 int ListScenarios(const std::string& scenarios_dir) {

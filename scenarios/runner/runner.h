@@ -50,6 +50,15 @@ struct IdentifyCliOptions {
 // Returns an exit code.
 int IdentifyCommand(const IdentifyCliOptions& options);
 
+// What a sweep needs to know of a scenario before it runs it.
+struct ScenarioCheck {
+  std::string name;
+  std::vector<std::string> gate_names;
+};
+// Loads `path` with the `set` overrides (KEY=VALUE) and configures its kind without running it:
+// every input error a run would report before working is thrown here (InputError).
+ScenarioCheck CheckScenario(const std::string& path, const std::vector<std::string>& set);
+
 // Prints the scenario kinds and the scenario files found under `scenarios_dir`.
 int ListScenarios(const std::string& scenarios_dir);
 

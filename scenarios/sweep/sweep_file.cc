@@ -1,0 +1,240 @@
+#include "scenarios/sweep/sweep_file.h"
+
+#include <algorithm>
+#include <cctype>
+#include <set>
+
+#include "sim/config.h"
+
+namespace flexbench::scenarios::sweep {
+namespace {
+
+constexpr size_t kMaxRuns = 1000000;
+
+const std::set<std::string>& ValueStats() {
+  static const std::set<std::string> s{"mean", "std",    "median",  "min",
+                                       "max",  "ci_low", "ci_high", "n"};
+  return s;
+}
+const std::set<std::string>& GateStats() {
+  static const std::set<std::string> s{"pass_fraction", "wilson_low", "wilson_high"};
+  return s;
+}
+
+std::string Trim(const std::string& s) {
+  size_t a = 0;
+  size_t b = s.size();
+  while (a < b && std::isspace(static_cast<unsigned char>(s[a]))) ++a;
+  while (b > a && std::isspace(static_cast<unsigned char>(s[b - 1]))) --b;
+  return s.substr(a, b - a);
+}
+
+bool IsPath(const std::string& s) {
+  if (s.empty() || s.front() == '.' || s.back() == '.' || s.find("..") != std::string::npos) {
+    return false;
+  }
+  return std::all_of(s.begin(), s.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' || c == '-';
+  });
+}
+
+// A point's folder name part: the value's text with anything outside [A-Za-z0-9._-] as '_'.
+std::string FolderSafe(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    out += std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-' ? c
+                                                                                           : '_';
+  }
+  return out;
+}
+
+std::vector<std::uint64_t> ParseSeeds(const ConfigNode& node) {
+  std::vector<std::uint64_t> seeds;
+  if (node.IsMap()) {
+    const ConfigNode from = node.Child("from");
+    const ConfigNode to = node.Child("to");
+    const int a = from.AsInt();
+    const int b = to.AsInt();
+    if (a < 0) from.Fail("seeds must be >= 0");
+    if (a > b) to.Fail("seed range is empty: from " + std::to_string(a) + " > to " +
+                       std::to_string(b));
+    if (static_cast<size_t>(b - a) >= kMaxRuns) to.Fail("more than 1000000 seeds");
+    for (int s = a; s <= b; ++s) seeds.push_back(static_cast<std::uint64_t>(s));
+  } else {
+    for (const ConfigNode& s : node.Items()) {
+      if (s.AsInt() < 0) s.Fail("seeds must be >= 0");
+      seeds.push_back(static_cast<std::uint64_t>(s.AsInt()));
+    }
+    if (seeds.empty()) node.Fail("no seeds");
+    std::set<std::uint64_t> unique(seeds.begin(), seeds.end());
+    if (unique.size() != seeds.size()) node.Fail("a seed is listed twice");
+  }
+  return seeds;
+}
+
+std::string KeyValue(const std::string& key, const ConfigNode& value) {
+  return key + "=" + value.AsYamlText();
+}
+
+}  // namespace
+
+Statistic ParseStatistic(const std::string& text, const std::string& where) {
+  Statistic s;
+  s.text = text;
+  const std::string t = Trim(text);
+  const size_t open = t.find('(');
+  const auto fail = [&](const std::string& why) {
+    throw InputError(where + ": metric '" + CapForMessage(text) + "': " + why +
+                     " (expected STAT(metric.path), STAT(ratio(A, B)) or "
+                     "pass_fraction(GATE_NAME))");
+  };
+  if (open == std::string::npos || t.back() != ')') fail("not of the form STAT(ARG)");
+  s.stat = Trim(t.substr(0, open));
+  const std::string arg = Trim(t.substr(open + 1, t.size() - open - 2));
+  s.of_gate = GateStats().count(s.stat) > 0;
+  if (!s.of_gate && !ValueStats().count(s.stat)) fail("unknown statistic '" + s.stat + "'");
+  if (arg.rfind("ratio(", 0) == 0) {
+    if (s.of_gate) fail(s.stat + " takes a scenario gate's name, not a ratio");
+    if (arg.back() != ')') fail("ratio( is not closed");
+    const std::string inner = arg.substr(6, arg.size() - 7);
+    const size_t comma = inner.find(',');
+    if (comma == std::string::npos) fail("ratio takes two metric paths: ratio(A, B)");
+    s.path = Trim(inner.substr(0, comma));
+    s.divisor = Trim(inner.substr(comma + 1));
+    if (!IsPath(s.path) || !IsPath(s.divisor)) fail("ratio's arguments must be metric paths");
+  } else {
+    s.path = arg;
+    if (!IsPath(s.path)) fail("'" + CapForMessage(arg) + "' is not a metric path or gate name");
+  }
+  return s;
+}
+
+SweepSpec LoadSweep(const std::string& path) {
+  const ConfigNode root = ConfigNode::LoadFile(path);
+  SweepSpec spec;
+  spec.file = path;
+  const ConfigNode name = root.Child("sweep");
+  spec.name = name.AsString();
+  if (spec.name.empty() || FolderSafe(spec.name) != spec.name || spec.name.size() > 200) {
+    name.Fail("must be a plain name of letters, digits, '.', '_' and '-'");
+  }
+  spec.description = root.GetString("description", "");
+  spec.scenario = root.ResolvePath(root.GetString("scenario"));
+  spec.seeds = ParseSeeds(root.Child("seeds"));
+  if (const auto set = root.Optional("set")) {
+    for (const std::string& key : set->Keys()) spec.set.push_back(KeyValue(key, set->Child(key)));
+  }
+  if (const auto grid = root.Optional("grid")) {
+    const std::vector<std::string> keys = grid->Keys();
+    if (keys.empty()) grid->Fail("empty grid: name at least one key with a list of values");
+    for (const std::string& key : keys) {
+      const ConfigNode values = grid->Child(key);
+      if (!IsPath(key)) values.Fail("a grid key must be a dotted scenario key");
+      SweepAxis axis{key, {}};
+      for (const ConfigNode& v : values.Items()) axis.values.push_back(v.AsYamlText());
+      if (axis.values.empty()) values.Fail("empty list of values");
+      std::set<std::string> unique(axis.values.begin(), axis.values.end());
+      if (unique.size() != axis.values.size()) values.Fail("a value is listed twice");
+      spec.grid.push_back(axis);
+    }
+  }
+  if (const auto gates = root.Optional("gates")) {
+    std::set<std::string> names;
+    for (const ConfigNode& g : gates->Items()) {
+      SweepGate gate;
+      gate.where = g.Where();
+      gate.name = g.GetString("name");
+      if (!names.insert(gate.name).second) g.Child("name").Fail("gate name used twice");
+      gate.metric = ParseStatistic(g.GetString("metric"), g.Child("metric").Where());
+      const ConfigNode op = g.Child("op");
+      gate.op = op.AsString();
+      static const std::set<std::string> ops{"<", "<=", ">", ">=", "==", "!="};
+      if (!ops.count(gate.op)) op.Fail("unknown operator '" + gate.op + "'");
+      const ConfigNode t = g.Child("threshold");
+      if (t.IsMap()) {
+        gate.threshold_is_statistic = true;
+        gate.threshold_metric = ParseStatistic(t.GetString("metric"), t.Child("metric").Where());
+        gate.scale = t.GetDouble("scale", 1.0);
+      } else {
+        gate.threshold = t.AsDouble();
+      }
+      gate.point = g.GetString("point", "");
+      spec.gates.push_back(gate);
+    }
+  }
+  if (const auto plot = root.Optional("plot")) {
+    for (const ConfigNode& m : plot->Child("metrics").Items()) {
+      if (!IsPath(m.AsString())) m.Fail("not a metric path");
+      spec.plot_metrics.push_back(m.AsString());
+    }
+    spec.plot_x = plot->GetString("x", "");
+    if (!spec.plot_x.empty() &&
+        std::none_of(spec.grid.begin(), spec.grid.end(),
+                     [&](const SweepAxis& a) { return a.key == spec.plot_x; })) {
+      plot->Child("x").Fail("not a grid key");
+    }
+  }
+  if (const auto b = root.Optional("bootstrap_resamples")) {
+    spec.bootstrap_resamples = b->AsInt();
+    if (spec.bootstrap_resamples < 100 || spec.bootstrap_resamples > 100000) {
+      b->Fail("must be between 100 and 100000");
+    }
+  }
+  root.CheckNoUnknownKeys();
+  size_t points = 1;
+  for (const SweepAxis& a : spec.grid) points *= a.values.size();
+  if (points * spec.seeds.size() > kMaxRuns) root.Fail("more than 1000000 runs");
+  // A gate's point must be one of the grid's.
+  const std::vector<SweepPoint> expanded = ExpandPoints(spec);
+  for (const SweepGate& g : spec.gates) {
+    if (g.point.empty()) continue;
+    if (std::none_of(expanded.begin(), expanded.end(),
+                     [&](const SweepPoint& p) { return p.name == g.point; })) {
+      throw InputError(g.where + ": gate '" + g.name + "': point '" + CapForMessage(g.point) +
+                       "' is not a point of this sweep");
+    }
+  }
+  return spec;
+}
+
+std::vector<SweepPoint> ExpandPoints(const SweepSpec& spec) {
+  std::vector<SweepPoint> points(1);
+  for (const SweepAxis& axis : spec.grid) {
+    std::vector<SweepPoint> next;
+    for (const SweepPoint& p : points) {
+      for (const std::string& v : axis.values) {
+        SweepPoint q = p;
+        q.set.push_back(axis.key + "=" + v);
+        q.values.push_back(v);
+        q.name += (q.name.empty() ? "" : "__") + FolderSafe(axis.key + "=" + v);
+        next.push_back(q);
+      }
+    }
+    points = next;
+  }
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (points[i].name.empty()) points[i].name = "base";
+    // Long or colliding names (values that differ only in unsafe characters) get an index.
+    if (points[i].name.size() > 120) points[i].name = "p" + std::to_string(i);
+  }
+  std::set<std::string> seen;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (!seen.insert(points[i].name).second) {
+      points[i].name = "p" + std::to_string(i) + "__" + points[i].name;
+      seen.insert(points[i].name);
+    }
+  }
+  return points;
+}
+
+std::vector<SweepRun> ExpandRuns(const SweepSpec& spec, const std::vector<SweepPoint>& points) {
+  std::vector<SweepRun> runs;
+  for (size_t p = 0; p < points.size(); ++p) {
+    for (std::uint64_t seed : spec.seeds) {
+      runs.push_back({p, seed, "runs/" + points[p].name + "/seed_" + std::to_string(seed)});
+    }
+  }
+  return runs;
+}
+
+}  // namespace flexbench::scenarios::sweep
