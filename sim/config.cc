@@ -243,6 +243,15 @@ std::string ConfigNode::Location(const YAML::Mark& mark, const std::string& path
       return "--set " + CapForMessage(key);
     }
   }
+  // A map the override created on its way to the key has no line: name the override.
+  if (mark.is_null()) {
+    for (const std::string& key : state_->overridden) {
+      if (key.size() > path.size() && key.compare(0, path.size(), path) == 0 &&
+          key[path.size()] == '.') {
+        return "--set " + CapForMessage(key);
+      }
+    }
+  }
   return state_->file + ":" + LineOf(mark);
 }
 
