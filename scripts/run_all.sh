@@ -24,6 +24,16 @@ for scenario in scenarios/*.yaml; do
   [ $rc -eq 0 ] || failed+=("$name (exit $rc)")
 done
 
+# The paper claims over seeds (scenarios/sweeps/), all of them; ctest runs a subset.
+for sweep in scenarios/sweeps/*.yaml; do
+  name=$(basename "$sweep" .yaml)
+  echo "== sweep $name"
+  rm -rf "$out/sweeps/$name"
+  build/bin/flexbench sweep "$sweep" --out "$out/sweeps/$name" -j "$(nproc 2>/dev/null || echo 2)"
+  rc=$?
+  [ $rc -eq 0 ] || failed+=("sweep $name (exit $rc)")
+done
+
 echo
 if [ ${#failed[@]} -eq 0 ]; then
   echo "all scenarios passed their gates; results in $out/"

@@ -13,6 +13,7 @@ PACKAGES=(
   libapriltag-dev apriltag        # AprilTag 3.3 (libapriltag + libapriltag-utils)
   libgtest-dev libbenchmark-dev   # GoogleTest, Google Benchmark
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev
+  slurmctld slurmd slurm-client munge procps   # a real single-node Slurm for the sweep tests
 )
 
 missing=()
