@@ -64,6 +64,12 @@ class TagFusionKind : public ScenarioKind {
       random_count_ = rnd->GetInt("count");
       min_tags_ = rnd->GetInt("min_tags", 1);
       max_attempts_ = rnd->GetInt("max_attempts", 50 * random_count_);
+      // The paper's exp. II kept the hand "barely rotated w.r.t. the camera": a configuration is
+      // kept only if the hand's axis is within this angle of the line of sight.
+      max_ee_axis_to_sight_deg_ = rnd->GetDouble("max_ee_axis_to_sight_deg", 180.0);
+      if (!(max_ee_axis_to_sight_deg_ > 0.0 && max_ee_axis_to_sight_deg_ <= 180.0)) {
+        rnd->Child("max_ee_axis_to_sight_deg").Fail("expected an angle in (0, 180]");
+      }
       const ConfigNode ranges = rnd->Child("ranges_deg");
       for (const std::string& j : ranges.Keys()) {
         const ConfigNode r = ranges.Child(j);
@@ -152,7 +158,7 @@ class TagFusionKind : public ScenarioKind {
     TrajectoryRecorder trajectories;
     std::vector<std::map<std::string, int>> status_counts(instances_.size());
     std::ofstream csv(ctx.out->File("configurations.csv"));
-    csv << "config,estimator,tags_used,pos_err_m,lateral_err_m,rot_err_deg,nees\n";
+    csv << "config,estimator,tags_used,view_angle_deg,ee_axis_to_sight_deg,pos_err_m,lateral_err_m,rot_err_deg,nees\n";
     int total_tags = 0;
     int configs_without_tags = 0;
     for (size_t c = 0; c < configurations_.size(); ++c) {
@@ -167,6 +173,8 @@ class TagFusionKind : public ScenarioKind {
           TagMeasurements(det, tags_, tag_frames_, use_corners_, pixel_std_, joints.t);
       total_tags += static_cast<int>(measurements.size());
       configs_without_tags += measurements.empty();
+      const double view_angle_deg = LargestViewAngleDeg(det);
+      const double ee_axis_deg = EeAxisToSightDeg();
 
       // The truth in the declared model's base frame.
       const lie::SE3 T_w_base = chain_->base_body == 0
@@ -222,8 +230,9 @@ class TagFusionKind : public ScenarioKind {
           }
         }
         char line[256];
-        std::snprintf(line, sizeof(line), "%zu,%s,%zu,%.9g,%.9g,%.9g,%.9g\n", c,
-                      estimators_[e].name.c_str(), measurements.size(), stats[e].last_pos(),
+        std::snprintf(line, sizeof(line), "%zu,%s,%zu,%.4f,%.4f,%.9g,%.9g,%.9g,%.9g\n", c,
+                      estimators_[e].name.c_str(), measurements.size(), view_angle_deg, ee_axis_deg,
+                      stats[e].last_pos(),
                       stats[e].last_lateral(), stats[e].last_rot_deg(), stats[e].last_nees());
         csv << line;
       }
@@ -308,6 +317,39 @@ class TagFusionKind : public ScenarioKind {
   }
 
  private:
+  // How obliquely the camera sees the tags it uses: the largest angle between a detected tag's
+  // normal and its line of sight (truth poses; 0 = face on, -1 = no tag). The paper's exp. II
+  // "ensured that the fiducial markers ... face towards the camera"; this column shows whether a
+  // scenario's configurations do.
+  double LargestViewAngleDeg(const render::DetectionResult& det) const {
+    double largest = -1.0;
+    const Eigen::Vector3d p_w_cam = sim_->Pose(camera_).translation();
+    for (const render::TagDetection& d : det.detections) {
+      if (tag_frames_.count(d.id) == 0) continue;
+      for (const render::TagInModel& tag : tags_) {
+        if (tag.id != d.id) continue;
+        const Eigen::Isometry3d T_w_geom =
+            sim_->Pose(sim::ObjectName(sim_->model(), mjOBJ_GEOM, tag.geom_id));
+        const auto& c = tag.corners_geom;
+        const Eigen::Vector3d n_w = T_w_geom.linear() * (c[1] - c[0]).cross(c[3] - c[0]).normalized();
+        const Eigen::Vector3d centre_w = T_w_geom * (0.25 * (c[0] + c[1] + c[2] + c[3]));
+        const double cosine = std::abs(n_w.dot((p_w_cam - centre_w).normalized()));
+        largest = std::max(largest, std::acos(std::min(1.0, cosine)) * 180.0 / M_PI);
+      }
+    }
+    return largest;
+  }
+
+  // The angle between the end effector's longitudinal (z) axis and the camera's line of sight
+  // to it (truth poses): near 0 the hand points away from the camera and its lateral directions
+  // (the scored ones) lie across the image, where a bearing sees them.
+  double EeAxisToSightDeg() const {
+    const Eigen::Isometry3d T_w_ee = sim_->Pose(declared_.end_effector);
+    const Eigen::Vector3d sight = T_w_ee.translation() - sim_->Pose(camera_).translation();
+    return std::acos(std::clamp(T_w_ee.linear().col(2).dot(sight.normalized()), -1.0, 1.0)) *
+           180.0 / M_PI;
+  }
+
   struct Range {
     std::string joint;
     double lo_deg, hi_deg;
@@ -327,7 +369,10 @@ class TagFusionKind : public ScenarioKind {
       if (attempts_ >= max_attempts_) {
         throw InputError("random_configurations: only " + std::to_string(configurations_.size()) +
                          " of " + std::to_string(random_count_) + " configurations show " +
-                         std::to_string(min_tags_) + " tag(s) after " + std::to_string(attempts_) +
+                         std::to_string(min_tags_) + " tag(s)" +
+                         (max_ee_axis_to_sight_deg_ < 180.0 ? " within max_ee_axis_to_sight_deg"
+                                                            : "") +
+                         " after " + std::to_string(attempts_) +
                          " attempts; widen ranges_deg");
       }
       ++attempts_;
@@ -337,6 +382,7 @@ class TagFusionKind : public ScenarioKind {
         cfg.emplace_back(r.joint, u(rng));
       }
       Command(cfg);
+      if (EeAxisToSightDeg() > max_ee_axis_to_sight_deg_) continue;
       const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
       int seen = 0;
       for (const auto& d : detector_instance_->Detect(frame).detections) {
@@ -362,6 +408,7 @@ class TagFusionKind : public ScenarioKind {
   int random_count_ = 0;
   int min_tags_ = 1;
   int max_attempts_ = 0;
+  double max_ee_axis_to_sight_deg_ = 180.0;
   int attempts_ = 0;
   std::vector<Range> ranges_;
   std::string aim_pan_, aim_tilt_, aim_at_;

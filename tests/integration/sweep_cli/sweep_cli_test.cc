@@ -2,7 +2,14 @@
 // order runs finished in, resumable, shards + collect equal to one local run, a failing run
 // recorded while the sweep goes on, statistical gates with exit 3, bad input exit 2 in one line.
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -119,6 +126,67 @@ TEST(SweepCli, AFailedRunIsRecordedAndTheSweepGoesOn) {
   EXPECT_EQ(again.exit_code, 0) << again.err;
   EXPECT_NE(again.err.find("1 runs to do"), std::string::npos);
   EXPECT_FALSE(fs::exists(out / "failed/base/seed_2.json"));
+}
+
+// The pid of a child of `parent` (a forked sweep worker), or -1: from /proc/<pid>/stat.
+pid_t ChildOf(pid_t parent) {
+  for (const auto& entry : fs::directory_iterator("/proc")) {
+    const std::string name = entry.path().filename();
+    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream stat(entry.path() / "stat");
+    std::string line;
+    if (!std::getline(stat, line)) continue;
+    // pid (comm) state ppid ...: comm may hold spaces, so read after the last ')'.
+    std::istringstream rest(line.substr(line.rfind(')') + 1));
+    std::string state;
+    pid_t ppid = 0;
+    if (rest >> state >> ppid && ppid == parent) return std::stoi(name);
+  }
+  return -1;
+}
+
+// A run that dies by a signal (here SIGKILL, as the OOM killer would) is recorded with the
+// signal and the sweep goes on with the next run.
+TEST(SweepCli, ARunKilledByASignalIsRecordedAndTheSweepGoesOn) {
+  TempDir tmp;
+  const fs::path file = tmp.path() / "s.yaml";
+  // Two runs of a ~1 s scenario, one worker: the first is killed while it runs.
+  WriteFile(file, "sweep: killed\nscenario: " + SourceDir() +
+                      "/scenarios/rover_apriltag_exp1.yaml\nseeds: {from: 1, to: 2}\n");
+  const fs::path out = tmp.path() / "out";
+  const std::string err_file = (tmp.path() / "err.txt").string();
+  const pid_t sweep = ::fork();
+  ASSERT_GE(sweep, 0);
+  if (sweep == 0) {
+    const std::string cmd = "exec " + Flexbench() + " sweep " + file.string() + " --out " +
+                            out.string() + " -j 1 </dev/null >/dev/null 2>" + err_file;
+    ::execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  pid_t worker = -1;
+  for (int k = 0; k < 3000 && worker < 0; ++k) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    worker = ChildOf(sweep);
+  }
+  ASSERT_GT(worker, 0) << "no worker appeared";
+  ASSERT_EQ(::kill(worker, SIGKILL), 0);
+  int status = 0;
+  ASSERT_EQ(::waitpid(sweep, &status, 0), sweep);
+  ASSERT_TRUE(WIFEXITED(status));
+  const std::string err = ReadFile(err_file);
+  EXPECT_EQ(WEXITSTATUS(status), 1) << err;
+  const Json a = Json::parse(ReadFile(out / "aggregate.json"));
+  ASSERT_EQ(a["failed"].size(), 1u) << a.dump();
+  // The first run, unless the machine was slow enough for it to end before the kill.
+  const int killed = a["failed"][0]["seed"].get<int>();
+  const std::string dir = "runs/base/seed_" + std::to_string(killed);
+  EXPECT_NE(err.find("run " + dir + " failed (signal 9)"), std::string::npos) << err;
+  EXPECT_EQ(a["failed"][0]["signal"], 9);
+  EXPECT_TRUE(a["failed"][0]["exit_code"].is_null());
+  EXPECT_EQ(a["succeeded"], 1);
+  EXPECT_TRUE(fs::is_regular_file(out / "runs/base" / ("seed_" + std::to_string(3 - killed)) /
+                                  "summary.json"));
+  EXPECT_FALSE(fs::exists(out / dir / "summary.json"));
 }
 
 TEST(SweepCli, StatisticalGatesPassFailAndNameTheirMetric) {
