@@ -26,6 +26,8 @@ int Main(int argc, char** argv) {
   run_cmd->add_option("--out", run.out_dir, "output folder (default: out/<scenario>)");
   CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "override the scenario's seed");
   run_cmd->add_flag("--check-gates", run.check_gates, "exit 3 when a gate fails");
+  run_cmd->add_flag("--quiet", run.quiet,
+                    "no progress and no informational lines (errors and failed gates remain)");
   run_cmd->add_option("--set", run.set,
                       "override a scenario key: KEY=VALUE, KEY a dotted path, VALUE YAML "
                       "(repeatable; recorded in summary.json)")
@@ -74,6 +76,7 @@ int Main(int argc, char** argv) {
                            "--set cv_min_gain=0.05)")
       ->allow_extra_args(false);
   identify_cmd->add_option("--out", id.out_dir, "output folder (default: out/identify)");
+  identify_cmd->add_flag("--quiet", id.quiet, "no progress and no informational lines");
   identify_cmd->add_flag("--force", id.force,
                          "let --out replace an existing folder that is not a flexbench result");
   flexbench::scenarios::sweep::SweepCliOptions sw;

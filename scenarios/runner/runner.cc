@@ -11,11 +11,13 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <sstream>
 
 #include "estimators/error.h"
 #include "scenarios/runner/gates.h"
 #include "scenarios/runner/output.h"
+#include "scenarios/runner/progress.h"
 #include "scenarios/runner/scenario_kind.h"
 #include "sim/config.h"
 #include "sim/declared_model.h"
@@ -108,20 +110,26 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   summary["estimators"] = Json::object();
   Json timing = Json::object();
 
-  const bool tty = isatty(fileno(stderr));
+  const auto info = [&options](const std::string& line) {
+    if (!options.quiet) Log(line);
+  };
   RunContext ctx;
   ctx.seed = seed;
   ctx.out = &out;
   ctx.summary = &summary;
   ctx.timing = &timing;
-  ctx.log = Log;
-  ctx.progress = [tty](const std::string& stage, int done, int total) {
-    if (!tty) return;
-    std::fprintf(stderr, "\r[flexbench] %s %d/%d%s", stage.c_str(), done, total,
-                 done == total ? "\n" : "");
+  ctx.log = info;
+  ProgressLine::Options progress_options;
+  progress_options.terminal = isatty(fileno(stderr));
+  progress_options.quiet = options.quiet;
+  auto progress = std::make_shared<ProgressLine>(progress_options, [](const std::string& text) {
+    std::fputs(text.c_str(), stderr);
     std::fflush(stderr);
+  });
+  ctx.progress = [progress](const std::string& stage, int done, int total) {
+    progress->Update(stage, done, total);
   };
-  Log("scenario " + name + " (" + shown_path + "), seed " + std::to_string(seed));
+  info("scenario " + name + " (" + shown_path + "), seed " + std::to_string(seed));
   kind->Run(ctx);
 
   CheckGateMetricsExist(gates, summary);
@@ -136,11 +144,12 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   out.Commit();
 
   for (const Json& g : summary["gates"]) {
+    if (options.quiet && g["passed"].get<bool>()) continue;
     Log(std::string(g["passed"].get<bool>() ? "PASS" : "FAIL") + " gate " +
         g["name"].get<std::string>() + ": " + g["metric"].get<std::string>() + " = " +
         g["value"].dump() + " " + g["op"].get<std::string>() + " " + g["threshold"].dump());
   }
-  Log("results in " + out.final_dir().string());
+  info("results in " + out.final_dir().string());
   if (options.check_gates && !all_passed) return kExitGateFailed;
   return kExitOk;
 }
@@ -364,6 +373,7 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
     run.out_dir = o.out_dir;
     run.force = o.force;
     run.set = o.set;  // recorded in summary.json
+    run.quiet = o.quiet;
     try {
       return RunLoaded(root, run, "identify command line",
                        {fs::path(o.declared), fs::path(declared.model_path),

@@ -21,6 +21,7 @@ struct RunOptions {
   bool check_gates = false;
   bool force = false;  // --out may replace a folder that is not a previous result
   std::vector<std::string> set;        // --set KEY=VALUE overrides, in order
+  bool quiet = false;  // no progress, no informational lines (errors and failed gates remain)
 };
 
 // Runs one scenario; prints one line on stderr for bad input. Returns an exit code.
@@ -43,6 +44,7 @@ struct IdentifyCliOptions {
   std::string out_dir = "out/identify";
   bool force = false;
   std::vector<std::string> set;  // --set KEY=VALUE on the closed_loop keys it configures
+  bool quiet = false;
 };
 
 // `flexbench identify`: a closed_loop run on a user's files (paths as given on the command

@@ -71,6 +71,24 @@ TEST(Reliability, SetOverridesAKeyAndIsRecordedOrNamed) {
   fs::remove_all(dir);
 }
 
+// --quiet (issue 17): a successful run says nothing; without it the run logs what it did.
+TEST(Reliability, QuietRunPrintsNothingButErrors) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "smoke.yaml";
+  WriteFile(s, SmokeYaml());
+  CommandResult r = RunCommand(RunCmd(s, tmp.path() / "quiet", "--quiet"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  EXPECT_TRUE(fs::exists(tmp.path() / "quiet" / "summary.json"));
+  r = RunCommand(RunCmd(s, tmp.path() / "loud"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("[flexbench] results in"), std::string::npos) << r.err;
+  // Bad input still gets its one line.
+  r = RunCommand(RunCmd(s, tmp.path() / "bad", "--quiet --set seed=abc"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(LastLine(r.err).find("--set seed"), std::string::npos) << r.err;
+}
+
 TEST(Reliability, OutThatHoldsUserFilesIsRefusedAndKept) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
