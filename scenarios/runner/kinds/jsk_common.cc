@@ -9,6 +9,8 @@
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/lie/so3.h"
 #include "render/plot.h"
+#include "scenarios/runner/common/pose.h"
+#include "scenarios/runner/common/trajectories.h"
 #include "sim/mujoco_model.h"
 #include "sim/rng.h"
 
@@ -221,7 +223,7 @@ Eigen::VectorXd Trajectory::AtTime(double t, int* segment) const {
 }
 
 void Trace::Add(double time, const estimators::Belief& b, const pf::ParticleSummary* pf,
-                const Vec3& p_true) {
+                const lie::SE3& T_true_step) {
   t.push_back(time);
   for (size_t j = 0; j < mean.size(); ++j) {
     const double m = b.q[j];
@@ -234,7 +236,10 @@ void Trace::Add(double time, const estimators::Belief& b, const pf::ParticleSumm
       upper[j].push_back(m + 1.96 * b.q_std[j]);
     }
   }
-  const Vec3 e = b.T_base_ee.translation() - p_true;
+  const Vec3 e = b.T_base_ee.translation() - T_true_step.translation();
+  T_est.push_back(b.T_base_ee);
+  cov.push_back(b.cov);
+  T_true.push_back(T_true_step);
   ee_err_m.push_back(e.norm());
   ee_err_z_m.push_back(e.z());
   ess.push_back(pf ? pf->ess : 0.0);
@@ -419,6 +424,18 @@ void WriteTraces(const Rig& rig, const std::vector<Trace>& traces,
       ee << line;
     }
   }
+  // TUM trajectories (a pose per step, t in seconds of the run; the synthetic kinds count steps).
+  TrajectoryRecorder trajectories;
+  if (!traces.empty()) {
+    const Trace& first = traces.front();
+    for (size_t i = 0; i < first.t.size(); ++i) trajectories.AddTruth(first.t[i], first.T_true[i]);
+  }
+  for (const Trace& tr : traces) {
+    for (size_t i = 0; i < tr.t.size(); ++i) {
+      trajectories.Add(tr.label, tr.t[i], tr.T_est[i], tr.cov[i]);
+    }
+  }
+  trajectories.Write(*out, "base");
 }
 
 SyntheticOptions ParseSyntheticOptions(const ConfigNode& root) {
@@ -451,7 +468,7 @@ SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,
   run.joints.resize(steps);
   run.orientations.resize(steps);
   run.positions.resize(steps);
-  run.p_true.resize(steps);
+  run.T_true.resize(steps);
   for (int s = 0; s < steps; ++s) {
     const Eigen::VectorXd ref = trajectory.AtStep(s);
     const Eigen::VectorXd g_act = rig.sim->GravityTorque(rig.ToActuators(ref));
@@ -477,12 +494,12 @@ SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,
       o.q_base_frame = Quat(data.T_base_frame[f].rotation() * lie::SO3Exp(d)).normalized();
       run.orientations[s].push_back(o);
     }
-    run.p_true[s] = data.T_base_frame[rig.chain->end_effector].translation();
+    run.T_true[s] = data.T_base_frame[rig.chain->end_effector];
     estimators::PositionReading& p = run.positions[s];
     p.t = s;
     p.frame = rig.chain->end_effector;
     for (int a = 0; a < 3; ++a)
-      p.p_base[a] = run.p_true[s][a] + pos_noise.Normal(options.position_std);
+      p.p_base[a] = run.T_true[s].translation()[a] + pos_noise.Normal(options.position_std);
     p.cov = Mat3::Identity() * std::max(options.position_std * options.position_std, 1e-12);
   }
   return run;
@@ -505,7 +522,7 @@ Trace RunSynthetic(const Rig& rig, const LabelledEstimator& spec, const Syntheti
     count(est->Update(run.joints[s]));
     for (const auto& o : run.orientations[s]) count(est->Update(o));
     count(est->Update(run.positions[s]));
-    tr.Add(s, est->Estimate(), PfSummary(*est), run.p_true[s]);
+    tr.Add(s, est->Estimate(), PfSummary(*est), run.T_true[s]);
   }
   return tr;
 }
@@ -581,7 +598,7 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
       s.imu_true.push_back(Quat(sim.SitePose(rig.imu_sites[k]).linear()));
     }
     const std::string ee = rig.declared.end_effector;
-    s.p_true = sim.Pose(ee).translation();
+    s.T_true = ToSE3(sim.Pose(ee));
     snaps.push_back(std::move(s));
     ctx.progress("simulation", static_cast<int>(snaps.size()), total_ticks);
   }
@@ -610,10 +627,10 @@ Trace RunOnSnapshots(const Rig& rig, const LabelledEstimator& spec,
       estimators::PositionReading p;
       p.t = s.t;
       p.frame = rig.chain->end_effector;
-      p.p_base = s.p_true;
+      p.p_base = s.T_true.translation();
       count(est->Update(p));
     }
-    tr.Add(s.t, est->Estimate(), PfSummary(*est), s.p_true);
+    tr.Add(s.t, est->Estimate(), PfSummary(*est), s.T_true);
     ctx.progress(spec.label, static_cast<int>(i + 1), static_cast<int>(snaps.size()));
   }
   return tr;

@@ -99,10 +99,14 @@ struct Trace {
   std::vector<double> ee_err_m;                         // |p_est - p_true| of the end effector
   std::vector<double> ee_err_z_m;                       // z component p_est - p_true
   std::vector<double> ess;
+  // The end effector's pose per step: the estimate (mean, covariance) and the truth, for the
+  // TUM trajectories.
+  std::vector<lie::SE3> T_est, T_true;
+  std::vector<Mat6> cov;
   void Resize(int nq) { mean.resize(nq), lower.resize(nq), upper.resize(nq); }
   // Appends one step from a belief (and the particle summary's interval when `pf` is set).
   void Add(double time, const estimators::Belief& b, const pf::ParticleSummary* pf,
-           const Vec3& p_true);
+           const lie::SE3& T_true);
 };
 
 // The particle summary of an estimator when it is a particle filter.
@@ -156,7 +160,7 @@ struct SyntheticRun {
   std::vector<estimators::JointReading> joints;
   std::vector<std::vector<estimators::OrientationReading>> orientations;
   std::vector<estimators::PositionReading> positions;
-  std::vector<Vec3> p_true;
+  std::vector<lie::SE3> T_true;  // the end effector in the base frame
   double deflection_max = 0.0;  // rad
   int steps() const { return static_cast<int>(joints.size()); }
 };
@@ -188,7 +192,7 @@ struct Snapshot {
   Eigen::VectorXd link;                              // true link-side angles (declared order)
   estimators::JointReading joints;                   // latest encoder readings
   std::vector<estimators::OrientationReading> imus;  // Madgwick orientations
-  Vec3 p_true = Vec3::Zero();                        // the end effector (declared) in the world
+  lie::SE3 T_true;                                   // the end effector (declared) in the world
   std::vector<Quat> imu_true;                        // true IMU orientations (for diagnostics)
 };
 

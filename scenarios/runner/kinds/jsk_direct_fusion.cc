@@ -54,7 +54,7 @@ class JskDirectFusionKind : public ScenarioKind {
     std::vector<double> z_true_cm;
     for (const jsk::Snapshot& s : snaps) {
       for (int j = 0; j < nq; ++j) reference[j].push_back(s.reference[j]);
-      z_true_cm.push_back(100.0 * s.p_true.z());
+      z_true_cm.push_back(100.0 * s.T_true.translation().z());
     }
     const auto is_locked = [&](const jsk::Snapshot& s) {
       return std::find(locked_.begin(), locked_.end(), s.segment) != locked_.end();
@@ -109,7 +109,7 @@ class JskDirectFusionKind : public ScenarioKind {
     for (size_t e = 0; e < traces.size(); ++e) {
       std::vector<double> z;
       for (size_t i = 0; i < snaps.size(); ++i) {
-        z.push_back(100.0 * (snaps[i].p_true.z() + traces[e].ee_err_z_m[i]));
+        z.push_back(100.0 * (snaps[i].T_true.translation().z() + traces[e].ee_err_z_m[i]));
       }
       render::Series& s = ax.AddLine(traces[e].label, traces[e].t, z);
       s.color = render::PaletteColor(static_cast<int>(e));

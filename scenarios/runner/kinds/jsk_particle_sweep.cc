@@ -23,6 +23,7 @@
 #include <cstdio>
 
 #include "render/plot.h"
+#include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/jsk_common.h"
 #include "scenarios/runner/kinds/kinds.h"
 
@@ -101,6 +102,13 @@ class JskParticleSweepKind : public ScenarioKind {
       std::vector<double> x, rmse, max, ess;
     };
     std::vector<Curve> n_curves(variants_.size()), k_curves(variants_.size());
+    // TUM trajectories, a folder per seed's run: its truth and every setting's estimate.
+    std::vector<TrajectoryRecorder> trajectories(seeds_);
+    for (int s = 0; s < seeds_; ++s) {
+      for (int step = 0; step < runs[s].steps(); ++step) {
+        trajectories[s].AddTruth(step, runs[s].T_true[step]);
+      }
+    }
     // sweep.csv: one row per run; traces.csv: per step of every run, the worst joint error and
     // the ESS (where a filter degenerates shows up as ESS collapsing before the error grows).
     std::string sweep_csv =
@@ -123,6 +131,9 @@ class JskParticleSweepKind : public ScenarioKind {
             const jsk::Trace tr =
                 jsk::RunSynthetic(rig_, Make(var, n, k, label), runs[s], seed, &rejected);
             const RunMetrics r = Score(tr, runs[s]);
+            for (size_t i = 0; i < tr.t.size(); ++i) {
+              trajectories[s].Add(label, tr.t[i], tr.T_est[i], tr.cov[i]);
+            }
             std::snprintf(line, sizeof(line), "%s,%s,%d,%.9g,%d,%.9g,%.9g,%.9g,%d\n",
                           vlabel.c_str(), pass == 0 ? "particles" : "kappa_v", static_cast<int>(n),
                           k, s, r.rmse_deg, r.err_max_deg, r.ess_mean, rejected);
@@ -161,6 +172,7 @@ class JskParticleSweepKind : public ScenarioKind {
     }
     WriteFileAtomic(ctx.out->File("sweep.csv"), sweep_csv);
     WriteFileAtomic(ctx.out->File("traces.csv"), traces_csv);
+    for (int s = 0; s < seeds_; ++s) trajectories[s].Write(*ctx.out, "base", "seed_" + std::to_string(s));
     metrics["seeds"] = seeds_;
     metrics["base_particles"] = base_n_;
     metrics["base_kappa_v"] = base_kappa_;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -105,6 +106,60 @@ TEST(Trajectories, MismatchMatrixCellsGiveBackTheirErrors) {
   EXPECT_GE(cells, 8);
   fs::remove_all(o.out_dir);
 }
+
+// The jsk kinds: a pose per step; pos_err_mean_m counts the steps after the burn-in (set here to
+// a value of the test's own, in seconds or in steps).
+struct JskCase {
+  const char* scenario;
+  const char* burn_in_key;
+  double burn_in;
+};
+
+class JskTrajectories : public ::testing::TestWithParam<JskCase> {};
+
+TEST_P(JskTrajectories, TumFilesGiveBackThePositionErrorAfterTheBurnIn) {
+  const JskCase c = GetParam();
+  RunOptions o;
+  o.scenario_path = testing::SourceDir() + "/scenarios/" + c.scenario + ".yaml";
+  o.out_dir = (fs::temp_directory_path() /
+               ("flexbench_tum_" + std::string(c.scenario) + std::to_string(getpid())))
+                  .string();
+  char set[64];
+  std::snprintf(set, sizeof(set), "%s=%g", c.burn_in_key, c.burn_in);
+  o.set = {set};
+  o.quiet = true;
+  ASSERT_EQ(RunScenario(o), kExitOk);
+  const auto summary =
+      nlohmann::json::parse(testing::ReadFile(fs::path(o.out_dir) / "summary.json"));
+  const fs::path dir = fs::path(o.out_dir) / "trajectories" / "base";
+  const std::vector<Row> truth = ReadTum(dir / "truth.tum");
+  const bool in_steps = std::string(c.burn_in_key) == "burn_in_steps";
+  int estimators = 0;
+  for (const auto& [name, e] : summary["estimators"].items()) {
+    const std::vector<Row> est = ReadTum(dir / (name + ".tum"));
+    ASSERT_EQ(est.size(), truth.size()) << name;
+    double sum = 0.0;
+    int n = 0;
+    for (size_t k = 0; k < est.size(); ++k) {
+      EXPECT_EQ(est[k].t, truth[k].t);
+      if (in_steps ? k < c.burn_in : truth[k].t < c.burn_in) continue;
+      sum += (est[k].p - truth[k].p).norm();
+      ++n;
+    }
+    ASSERT_GT(n, 0);
+    EXPECT_NEAR(sum / n, e["metrics"]["pos_err_mean_m"].get<double>(), 1e-9) << name;
+    ++estimators;
+  }
+  EXPECT_GE(estimators, 4);
+  fs::remove_all(o.out_dir);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Kinds, JskTrajectories,
+    ::testing::Values(JskCase{"jsk_flexible_arm", "burn_in_s", 1.5},
+                      JskCase{"jsk_direct_fusion", "burn_in_s", 1.5},
+                      JskCase{"jsk_sim_deflection", "burn_in_steps", 7}),
+    [](const ::testing::TestParamInfo<JskCase>& i) { return std::string(i.param.scenario); });
 
 TEST(Trajectories, TumLineIsTimestampPositionQuaternionXyzw) {
   const lie::SE3 T(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix(), Vec3(1, 2, 3));
