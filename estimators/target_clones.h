@@ -6,11 +6,18 @@
 // bit-identical between the two: the build pins -ffp-contract=off (no fused multiply-adds) and
 // GCC does not reorder floating-point arithmetic without -ffast-math. Sanitizer builds, other
 // compilers and -DFLEXBENCH_NO_TARGET_CLONES get the baseline only.
+//
+// FLEXBENCH_MULTIVERSION (same conditions) is for code that needs a different algorithm per
+// CPU rather than the same source compiled twice: it dispatches by hand with
+// __builtin_cpu_supports("x86-64-v3") (ForwardKinematicsWithCovariance: vector transports on
+// x86-64-v3, scalar ones on the baseline, where 4-wide vector code split in two was slower).
 #pragma once
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && \
     !defined(__SANITIZE_ADDRESS__) && !defined(FLEXBENCH_NO_TARGET_CLONES)
 #define FLEXBENCH_TARGET_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#define FLEXBENCH_MULTIVERSION 1
 #else
 #define FLEXBENCH_TARGET_CLONES
+#define FLEXBENCH_MULTIVERSION 0
 #endif

@@ -29,6 +29,14 @@ void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
                                      const Eigen::Ref<const Eigen::VectorXd>& q,
                                      lie::CompoundOrder order);
 
+namespace internal {
+// The baseline-CPU path of ForwardKinematicsWithCovariance (no input checks), callable on any
+// CPU so that tests compare it bit for bit with the dispatched one.
+void ForwardKinematicsWithCovarianceBaseline(const PpoeModel& model, PpoeData& data,
+                                             const Eigen::Ref<const Eigen::VectorXd>& q,
+                                             lie::CompoundOrder order);
+}  // namespace internal
+
 // Covariance of the relative pose T_ref_frame = T_base_ref^-1 T_base_frame in its local tangent
 // space, to 2nd order (eq. 18): the sum over every source k on the path from the two frames'
 // lowest common ancestor down to either frame of Ad_{T_kp_frame^-1} Sigma_k Ad^T, with

@@ -249,6 +249,84 @@ EIGEN_ALWAYS_INLINE void TransportBlocks(const Mat3& R_in, const Vec3& t, const 
   o[29] = o[34];
 }
 
+// TransportBlocks in scalar code, every element by the same operations in the same order as
+// its lane in the vector code, so the bits agree (tested): for CPUs without AVX2, where GCC
+// splits each 4-wide operation and lowers the lane shuffles through memory, this is faster.
+EIGEN_ALWAYS_INLINE void TransportBlocksScalar(const Mat3& R_in, const Vec3& t, const Mat6& Sigma1,
+                                               const Mat6* Sigma2, Mat6* out) {
+  double A[3][3], B[3][3], Bt[3][3], C[3][3];  // [column][row] of each 3x3 block
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i < 3; ++i) {
+      A[j][i] = Sigma1(i, j);
+      B[j][i] = Sigma1(i, 3 + j);
+      Bt[j][i] = Sigma1(3 + i, j);
+      C[j][i] = Sigma1(3 + i, 3 + j);
+    }
+  }
+  if (Sigma2 != nullptr) {
+    const Mat6& S2 = *Sigma2;
+    for (int j = 0; j < 3; ++j) {
+      for (int i = 0; i < 3; ++i) {
+        A[j][i] += S2(i, j);
+        B[j][i] += S2(i, 3 + j);
+        Bt[j][i] += S2(3 + i, j);
+        C[j][i] += S2(3 + i, 3 + j);
+      }
+    }
+  }
+  const double s[3] = {-t[0], -t[1], -t[2]};
+  // s x v, lane by lane as CrossV4.
+  const auto cross = [&s](const double* v, double* o) {
+    o[0] = s[1] * v[2] - s[2] * v[1];
+    o[1] = s[2] * v[0] - s[0] * v[2];
+    o[2] = s[0] * v[1] - s[1] * v[0];
+  };
+  double D[3][3], G[3][3], x[3];
+  for (int j = 0; j < 3; ++j) {
+    cross(C[j], x);
+    for (int i = 0; i < 3; ++i) D[j][i] = B[j][i] + x[i];
+  }
+  // G_j = A_j + s x Bt_j - (D_{j+1} s_{j+2} - D_{j+2} s_{j+1}).
+  for (int j = 0; j < 3; ++j) {
+    cross(Bt[j], x);
+    const int a = (j + 1) % 3, b = (j + 2) % 3;
+    for (int i = 0; i < 3; ++i) G[j][i] = A[j][i] + x[i] - (D[a][i] * s[b] - D[b][i] * s[a]);
+  }
+  const double* R = R_in.data();
+  // R^T M R by columns, as RotateBlockV4.
+  const auto rotate = [R](const double (*M)[3], double (*o)[3]) {
+    for (int j = 0; j < 3; ++j) {
+      double P[3];
+      for (int i = 0; i < 3; ++i) {
+        P[i] = M[0][i] * R[3 * j] + M[1][i] * R[3 * j + 1] + M[2][i] * R[3 * j + 2];
+      }
+      for (int i = 0; i < 3; ++i) {
+        o[j][i] = R[3 * i] * P[0] + R[3 * i + 1] * P[1] + R[3 * i + 2] * P[2];
+      }
+    }
+  };
+  double TL[3][3], TR[3][3], BR[3][3];
+  rotate(G, TL);
+  rotate(D, TR);
+  rotate(C, BR);
+  Mat6& o = *out;
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i < 3; ++i) {
+      o(i, j) = TL[j][i];
+      o(3 + i, j) = TR[i][j];
+      o(i, 3 + j) = TR[j][i];
+      o(3 + i, 3 + j) = BR[j][i];
+    }
+  }
+  // Mirror the upper triangles of the two symmetric blocks, as the vector code does.
+  o(1, 0) = o(0, 1);
+  o(2, 0) = o(0, 2);
+  o(2, 1) = o(1, 2);
+  o(4, 3) = o(3, 4);
+  o(5, 3) = o(3, 5);
+  o(5, 4) = o(4, 5);
+}
+
 }  // namespace internal
 
 // Sigma -> Ad_{X^-1} Sigma Ad_{X^-1}^T: moves a local covariance at Y to the local tangent space

@@ -202,6 +202,27 @@ TEST(ForwardKinematicsCovariance, SameBitsAsTheBaselineRecursion) {
   }
 }
 
+TEST(ForwardKinematicsCovariance, BaselineCpuPathHasTheDispatchedPathsBits) {
+  // On an AVX2 machine the dispatched call runs the vector transports; the baseline entry runs
+  // the scalar ones that CPUs without AVX2 get. Both orders, every frame, every bit.
+  std::mt19937_64 rng(22);
+  const testing::RandomChainOptions o = testing::EveryFeature(12, 0.01, 0.05);
+  const PpoeModel model = testing::RandomChain(rng, o);
+  PpoeData dispatched(model), baseline(model);
+  for (const CompoundOrder order : {CompoundOrder::kSecond, CompoundOrder::kFourth}) {
+    for (int trial = 0; trial < 5; ++trial) {
+      const Eigen::VectorXd q = testing::RandomQ(rng, model);
+      ForwardKinematicsWithCovariance(model, dispatched, q, order);
+      internal::ForwardKinematicsWithCovarianceBaseline(model, baseline, q, order);
+      for (FrameId i = 1; i < model.num_frames(); ++i) {
+        EXPECT_TRUE(dispatched.Sigma_frame[i] == baseline.Sigma_frame[i])
+            << model.frame(i).name << " order " << static_cast<int>(order) << " trial " << trial;
+        EXPECT_TRUE(dispatched.T_base_frame[i].Matrix() == baseline.T_base_frame[i].Matrix());
+      }
+    }
+  }
+}
+
 TEST(ForwardKinematicsCovariance, SingleSourceIsExactAtBothOrders) {
   // Only the first joint is uncertain (paper Fig. 3a): every frame's covariance is the exactly
   // transported source, so both orders agree with each other and with Monte Carlo.

@@ -290,6 +290,33 @@ TEST_P(SE3AtPose, CongruenceIsSymmetricAndMayAlias) {
   EXPECT_TRUE(in2 == sum);
 }
 
+TEST_P(SE3AtPose, ScalarTransportHasTheVectorTransportsBits) {
+  // The baseline-CPU path of the covariance recursion uses the scalar twin; "same seed, same
+  // bytes" across machines needs every bit equal, with and without the summed source, in place.
+  std::mt19937_64 rng(8);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (int trial = 0; trial < 20; ++trial) {
+    Mat6 A;
+    for (int i = 0; i < 36; ++i) A(i) = n(rng);
+    const Mat6 S1 = A * A.transpose();
+    for (int i = 0; i < 36; ++i) A(i) = n(rng);
+    const Mat6 S2 = A * A.transpose();
+    const Mat3 R = X().rotation();
+    const Vec3 t = X().translation();
+    Mat6 vec, scal;
+    internal::TransportBlocks(R, t, S1, nullptr, &vec);
+    internal::TransportBlocksScalar(R, t, S1, nullptr, &scal);
+    EXPECT_TRUE(vec == scal) << "trial " << trial;
+    internal::TransportBlocks(R, t, S1, &S2, &vec);
+    internal::TransportBlocksScalar(R, t, S1, &S2, &scal);
+    EXPECT_TRUE(vec == scal) << "sum, trial " << trial;
+    Mat6 in1 = S1, in2 = S2;
+    internal::TransportBlocksScalar(R, t, in1, &S2, &in1);
+    internal::TransportBlocksScalar(R, t, S1, &in2, &in2);
+    EXPECT_TRUE(in1 == vec && in2 == vec) << "in place, trial " << trial;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Poses, SE3AtPose, ::testing::ValuesIn(testing::StandardPoseCases()),
                          [](const auto& info) { return info.param.name; });
 
