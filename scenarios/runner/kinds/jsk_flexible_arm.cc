@@ -14,6 +14,7 @@
 
 #include "estimators/kinematics/forward_kinematics.h"
 #include "render/plot.h"
+#include "scenarios/runner/common/stage_timer.h"
 #include "scenarios/runner/kinds/jsk_common.h"
 #include "scenarios/runner/kinds/kinds.h"
 
@@ -38,8 +39,11 @@ class JskFlexibleArmKind : public ScenarioKind {
 
   void Run(RunContext& ctx) override {
     sim::SensorSuite sensors = sim::SensorSuite::Parse(*sensors_node_, *rig_.sim, ctx.seed);
-    const std::vector<jsk::Snapshot> snaps =
-        jsk::SimulateDynamic(rig_, trajectory_, sensors, options_, ctx);
+    StageTimer timer;  // the pipeline's throughput: timing.pipeline_steps_per_s
+    const std::vector<jsk::Snapshot> snaps = [&] {
+      const auto t = timer.Time("simulate");
+      return jsk::SimulateDynamic(rig_, trajectory_, sensors, options_, ctx);
+    }();
     const int nq = rig_.nq();
     const int waypoints = static_cast<int>(trajectory_.waypoints.size());
 
@@ -60,7 +64,10 @@ class JskFlexibleArmKind : public ScenarioKind {
     Json& all = (*ctx.summary)["estimators"];
     for (const jsk::LabelledEstimator& spec : estimators_) {
       int rejected = 0;
-      jsk::Trace tr = jsk::RunOnSnapshots(rig_, spec, snaps, ctx.seed, false, ctx, &rejected);
+      jsk::Trace tr = [&] {
+        const auto t = timer.Time(spec.label);
+        return jsk::RunOnSnapshots(rig_, spec, snaps, ctx.seed, false, ctx, &rejected);
+      }();
       double sum = 0.0, max = 0.0, ess = 0.0;
       int n = 0;
       std::vector<double> hold_sum(waypoints, 0.0);
@@ -90,6 +97,7 @@ class JskFlexibleArmKind : public ScenarioKind {
       traces.push_back(std::move(tr));
     }
 
+    timer.Write(ctx.timing, "step", static_cast<int>(snaps.size()));
     Json& metrics = (*ctx.summary)["metrics"];
     metrics["snapshots"] = static_cast<int>(snaps.size());
     metrics["duration_s"] = trajectory_.Duration();

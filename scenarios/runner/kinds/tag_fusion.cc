@@ -21,6 +21,7 @@
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/tag_tracking.h"
+#include "scenarios/runner/common/stage_timer.h"
 #include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -161,10 +162,20 @@ class TagFusionKind : public ScenarioKind {
     csv << "config,estimator,tags_used,view_angle_deg,ee_axis_to_sight_deg,pos_err_m,lateral_err_m,rot_err_deg,nees\n";
     int total_tags = 0;
     int configs_without_tags = 0;
+    StageTimer timer;  // the pipeline's throughput: timing.pipeline_frames_per_s
     for (size_t c = 0; c < configurations_.size(); ++c) {
-      Command(configurations_[c]);
-      const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
-      const render::DetectionResult det = detector_instance_->Detect(frame);
+      {
+        const auto t = timer.Time("simulate");
+        Command(configurations_[c]);
+      }
+      const render::Image frame = [&] {
+        const auto t = timer.Time("render");
+        return renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
+      }();
+      const render::DetectionResult det = [&] {
+        const auto t = timer.Time("detect");
+        return detector_instance_->Detect(frame);
+      }();
       render::Image overlay = frame;
 
       const estimators::JointReading joints =
@@ -203,14 +214,17 @@ class TagFusionKind : public ScenarioKind {
       }
       trajectories.AddTruth(joints.t, T_base_ee);
       for (size_t e = 0; e < instances_.size(); ++e) {
-        estimators::Estimator& est = *instances_[e];
-        est.Reset();
-        est.Predict(joints.t);
-        ++status_counts[e][estimators::ToString(est.Update(joints))];
-        for (const auto& m : measurements) {
-          ++status_counts[e][estimators::ToString(est.Update(m))];
-        }
-        const estimators::Belief b = est.Estimate();
+        const estimators::Belief b = [&] {
+          const auto t = timer.Time("estimate");
+          estimators::Estimator& est = *instances_[e];
+          est.Reset();
+          est.Predict(joints.t);
+          ++status_counts[e][estimators::ToString(est.Update(joints))];
+          for (const auto& m : measurements) {
+            ++status_counts[e][estimators::ToString(est.Update(m))];
+          }
+          return est.Estimate();
+        }();
         stats[e].Add(b.T_base_ee, b.cov, T_base_ee);
         trajectories.Add(estimators_[e].name, joints.t, b.T_base_ee, b.cov);
         {
@@ -244,6 +258,7 @@ class TagFusionKind : public ScenarioKind {
       ctx.progress("configurations", static_cast<int>(c + 1),
                    static_cast<int>(configurations_.size()));
     }
+    timer.Write(ctx.timing, "frame", static_cast<int>(configurations_.size()));
     Json& metrics = (*ctx.summary)["metrics"];
     metrics["configurations"] = static_cast<int>(configurations_.size());
     metrics["estimated_in"] = estimate_in_.empty() ? "base" : estimate_in_;

@@ -43,6 +43,23 @@ std::vector<Row> ReadTum(const fs::path& path) {
   return rows;
 }
 
+// summary.json's throughput (issue 18): every stage timed, and the pipeline's rate is the count
+// over the stages' summed time.
+void ExpectPipelineTiming(const nlohmann::json& timing, const std::string& unit,
+                          const std::vector<std::string>& stages, int count) {
+  double ms = 0.0;
+  for (const std::string& stage : stages) {
+    const std::string key = stage + "_ms_per_" + unit;
+    ASSERT_TRUE(timing.contains(key)) << key << " in " << timing.dump();
+    EXPECT_GT(timing[key].get<double>(), 0.0) << key;
+    ms += timing[key].get<double>();
+  }
+  const std::string rate = "pipeline_" + unit + "s_per_s";
+  ASSERT_TRUE(timing.contains(rate)) << timing.dump();
+  EXPECT_NEAR(timing[rate].get<double>(), 1e3 / ms, 1e-9 * timing[rate].get<double>());
+  EXPECT_LT(count / timing[rate].get<double>(), timing["total_s"].get<double>());
+}
+
 TEST(Trajectories, TumFilesGiveBackTheScenariosPositionError) {
   RunOptions o;
   o.scenario_path = testing::SourceDir() + "/scenarios/rover_apriltag_exp1.yaml";
@@ -68,13 +85,17 @@ TEST(Trajectories, TumFilesGiveBackTheScenariosPositionError) {
     std::string line;
     int rows = -1;
     while (std::getline(cov, line)) {
-      if (rows >= 0) EXPECT_EQ(std::count(line.begin(), line.end(), ','), 21) << line;
+      if (rows >= 0) {
+        EXPECT_EQ(std::count(line.begin(), line.end(), ','), 21) << line;
+      }
       ++rows;
     }
     EXPECT_EQ(rows, static_cast<int>(truth.size())) << name;
     ++estimators;
   }
   EXPECT_GE(estimators, 2);
+  ExpectPipelineTiming(summary["timing"], "frame", {"simulate", "render", "detect", "estimate"},
+                       summary["metrics"]["configurations"].get<int>());
   fs::remove_all(o.out_dir);
 }
 
@@ -151,6 +172,12 @@ TEST_P(JskTrajectories, TumFilesGiveBackThePositionErrorAfterTheBurnIn) {
     ++estimators;
   }
   EXPECT_GE(estimators, 4);
+  if (std::string(c.scenario) == "jsk_flexible_arm") {
+    std::vector<std::string> stages = {"simulate"};
+    for (const auto& [name, e] : summary["estimators"].items()) stages.push_back(name);
+    ExpectPipelineTiming(summary["timing"], "step", stages,
+                         summary["metrics"]["snapshots"].get<int>());
+  }
   fs::remove_all(o.out_dir);
 }
 
