@@ -20,7 +20,9 @@ class CircularQuantileScratch {
                                         double, double, const double*, int, double*,
                                         CircularQuantileScratch*);
   std::vector<double> key_;
+  std::vector<double> lo_, hi_, wk_;  // per particle: key or +-inf, weight or 0 (kept or not)
   std::vector<int> bin_;  // -1: a negligible particle
+  std::vector<int> idx_;  // the particles gathered near a quantile (n + 1: one spare write)
   std::vector<std::pair<double, double>> pairs_;
   std::array<double, kBins> mass_{};
 };

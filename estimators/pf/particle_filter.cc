@@ -12,6 +12,7 @@
 #include "estimators/lie/so3.h"
 #include "estimators/pf/bessel.h"
 #include "estimators/pf/particle_loop.h"
+#include "estimators/pf/pose_spread.h"
 
 namespace flexbench::pf {
 namespace {
@@ -487,16 +488,9 @@ const ParticleSummary& ParticleFilter::Summary() const {
     for (int j = 0; j < nq_; ++j) q_mean_[j] = out.mean[j];
     kinematics::ForwardKinematics(*model_, fk_data_, q_mean_);
     const lie::SE3 mean = fk_data_.T_base_frame[config_.end_effector];
-    const lie::SE3 mean_inv = mean.Inverse();
     // The particles' spread about it, in its local tangent space.
-    Mat6 cov = Mat6::Zero();
-    for (int i = 0; i < n_; ++i) {
-      if (w[i] < negligible) continue;
-      const Vec6 xi = (mean_inv * fk_.Pose(k, i)).Log();
-      cov.noalias() += w[i] * xi * xi.transpose();
-    }
+    PoseSpread(fk_, k, mean, w, n_, negligible, &out.cov_ee);
     out.T_base_ee = mean;
-    out.cov_ee = cov;
   }
   summary_valid_ = true;
   return out;
