@@ -293,3 +293,17 @@ def test_estimator_in_camera_frame(model, ref):
     T_cam = model.fk(ref["q"], "mast_camera")
     np.testing.assert_allclose(T, np.linalg.solve(T_cam, model.fk(ref["q"])), atol=1e-12)
     assert est.belief()["q"].shape == (8,)
+
+
+@pytest.mark.parametrize("content", [None, "actuated_joints: [j1, jx]\nend_effector: ee\n"])
+def test_load_bad_declared_same_message_as_cli(tmp_path, content):
+    # A missing declared file, or one naming a joint the model lacks: the message `flexbench
+    # run` prints for a scenario given that file.
+    path = tmp_path / "robot.declared.yaml"
+    if content is not None:
+        path.write_text(f"model: {SOURCE / 'models' / 'rover_arm.xml'}\n" + content)
+    with pytest.raises(ValueError) as e:
+        flexbench.DeclaredModel.load(str(path))
+    cli = _cli_error("run", "scenarios/rover_apriltag_exp1.yaml", "--out", str(tmp_path / "o"),
+                     "--quiet", "--set", f"declared={path}")
+    assert cli == "flexbench: error: " + str(e.value)
