@@ -4,16 +4,18 @@
 Both are timed in the same process, interleaved, on the rover arm's declared model (8 joint
 variables, 9 sources): the C++ side is ForwardKinematicsWithCovariance looped in C++
 (flexbench._bench_fk_cov), the Python side is `model.fk_cov(q, frame)` timed with timeit.
-Prints the median per-call time of each over several repeats and their difference.
+Prints the median per-call time of each over several repeats and their difference. Both sides
+use the same clock: the process's CPU time by default (on a shared machine other processes'
+load then inflates neither), or wall time with --clock wall.
 
   PYTHONPATH=build/python /usr/bin/python3 scripts/bench_python.py [--repeats 15] [--check 3.0]
 
 --check US exits 1 when the median added overhead exceeds US microseconds.
 """
 import argparse
-import os
 import statistics
 import sys
+import time
 import timeit
 from pathlib import Path
 
@@ -31,7 +33,9 @@ def main():
     ap.add_argument("--calls", type=int, default=20000, help="calls per repeat")
     ap.add_argument("--order", type=int, default=2)
     ap.add_argument("--check", type=float, default=None, metavar="US")
+    ap.add_argument("--clock", choices=["cpu", "wall"], default="cpu")
     args = ap.parse_args()
+    timer = time.process_time if args.clock == "cpu" else time.perf_counter
 
     model = flexbench.DeclaredModel.load(args.declared)
     q = np.linspace(-0.6, 0.7, model.nq)
@@ -45,17 +49,24 @@ def main():
     }
     n = args.calls
     cpp, py = [], {k: [] for k in cases}
-    flexbench._bench_fk_cov(model, q, n, order)  # warm up
+    bench = flexbench._bench_fk_cov
+
+    def cpp_loop():
+        t0 = timer()
+        bench(model, q, n, order)  # n calls looped in C++
+        return timer() - t0
+
+    cpp_loop()  # warm up
     for f in cases.values():
-        timeit.timeit(f, number=n // 10)
+        timeit.timeit(f, number=n // 10, timer=timer)
     for _ in range(args.repeats):
-        cpp.append(flexbench._bench_fk_cov(model, q, n, order) / n)
+        cpp.append(cpp_loop() / n)
         for k, f in cases.items():
-            py[k].append(timeit.timeit(f, number=n) / n)
+            py[k].append(timeit.timeit(f, number=n, timer=timer) / n)
 
     c = statistics.median(cpp)
-    print(f"model {args.declared} nq={model.nq}, order {order}, "
-          f"{args.repeats} repeats x {n} calls, medians per call:")
+    print(f"model {args.declared} nq={model.nq} ({len(model.frame_names)} frames), order {order}, "
+          f"{args.repeats} repeats x {n} calls, {args.clock} time, medians per call:")
     print(f"  C++ ForwardKinematicsWithCovariance: {c * 1e6:8.3f} us")
     worst = 0.0
     for k, v in py.items():

@@ -515,7 +515,7 @@ PYBIND11_MODULE(flexbench, m) {
       "flexbench: declared PPOE models, probabilistic forward kinematics, the estimators by "
       "name, and the runner (run_scenario, identify). See docs/python.md.";
   m.attr("__version__") = FLEXBENCH_VERSION;
-  py::register_exception_translator(&TranslateExceptions);
+  py::register_local_exception_translator(&TranslateExceptions);
 
   py::class_<Model, std::shared_ptr<Model>>(m, "DeclaredModel",
                                             "A declared model (models/<name>.declared.yaml) built "
