@@ -307,3 +307,40 @@ def test_load_bad_declared_same_message_as_cli(tmp_path, content):
     cli = _cli_error("run", "scenarios/rover_apriltag_exp1.yaml", "--out", str(tmp_path / "o"),
                      "--quiet", "--set", f"declared={path}")
     assert cli == "flexbench: error: " + str(e.value)
+
+
+GARBAGE = [None, "x", 1.5, [1.0, 2.0], np.zeros((3, 3)), np.zeros(7, dtype=np.int32),
+           np.full(3, np.nan), {"a": 1}, object()]
+
+
+def test_garbage_never_crashes(model, ref):
+    # Every entry point given nonsense in every array slot raises a Python exception (ValueError
+    # for bad values, TypeError where pybind11 rejects an argument's type); none takes the
+    # interpreter down.
+    est = flexbench.make_estimator("ppoe_ekf", model)
+    q = ref["q"]
+    calls = [
+        lambda g: model.fk(g), lambda g: model.fk_cov(g), lambda g: model.jacobian(g),
+        lambda g: model.fk(q, g), lambda g: model.fk_cov(q, "ee", g),
+        lambda g: est.update_joints(0.0, g, 1e-3), lambda g: est.update_joints(0.0, q, g),
+        lambda g: est.update_imu(0.0, g, np.zeros(3)),
+        lambda g: est.update_orientation(0.0, "ee", g),
+        lambda g: est.update_pixel(0.0, "ee", np.zeros(3), g),
+        lambda g: est.update_tag(0.0, "ee", g, np.zeros((4, 2))),
+        lambda g: est.update_contact(0.0, "ee", np.zeros(3), g),
+        lambda g: est.update_position(0.0, g, np.zeros(3), np.zeros(3)),
+        lambda g: est.update_pose(0.0, "ee", np.eye(4), g),
+        lambda g: flexbench.make_estimator(g, model),
+        lambda g: flexbench.make_estimator("ppoe_ekf", g),
+        lambda g: flexbench.run_scenario(g, "/nonexistent/out"),
+        lambda g: flexbench.run_scenario(str(SOURCE / "scenarios" / "smoke.yaml"),
+                                         "/nonexistent/out", overrides=g),
+    ]
+    for call in calls:
+        for g in GARBAGE:
+            try:
+                call(g)
+            except (ValueError, TypeError):
+                pass
+    # Still alive and still right.
+    assert np.array_equal(model.fk_cov(q)[1].ravel(), ref["fk_cov2_S"])
