@@ -122,7 +122,8 @@ py::array_t<double> AsFloat64(const py::handle& obj, const char* what) {
   if (py::isinstance<py::str>(obj) || py::isinstance<py::bytes>(obj) ||
       !(py::isinstance<py::sequence>(obj) || py::isinstance<py::float_>(obj) ||
         py::isinstance<py::int_>(obj))) {
-    throw ValueErrorMessage(std::string(what) + ": expected a float64 array or a list of numbers, got " +
+    throw ValueErrorMessage(std::string(what) +
+                            ": expected a float64 array or a list of numbers, got " +
                             py::str(py::type::handle_of(obj).attr("__name__")).cast<std::string>());
   }
   py::array a;
@@ -309,8 +310,8 @@ class Model {
     auto m = std::shared_ptr<Model>(new Model());
     m->declared_ = sim::LoadDeclaredModel(path);
     m->mj_ = sim::LoadModel(m->declared_.model_path);
-    m->chain_ = std::make_unique<sim::DeclaredChain>(
-        sim::BuildDeclaredChain(m->mj_.get(), m->declared_));
+    m->chain_ =
+        std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(m->mj_.get(), m->declared_));
     m->data_ = std::make_unique<kinematics::PpoeData>(m->chain_->model);
     const kinematics::PpoeModel& pm = m->chain_->model;
     for (FrameId i = 0; i < pm.num_frames(); ++i) m->frames_[pm.frame(i).name] = i;
@@ -498,7 +499,8 @@ py::object RunCommand(F&& command, const std::string& out) {
   }
   const std::string summary = (std::filesystem::path(out) / "summary.json").string();
   py::object json = py::module_::import("json");
-  py::object f = py::module_::import("io").attr("open")(summary, "r", py::arg("encoding") = "utf-8");
+  py::object f =
+      py::module_::import("io").attr("open")(summary, "r", py::arg("encoding") = "utf-8");
   py::object result = json.attr("load")(f);
   f.attr("close")();
   return result;
@@ -523,9 +525,9 @@ PYBIND11_MODULE(flexbench, m) {
       .def_static("load", &Model::Load, py::arg("path"),
                   "Loads a declared-model YAML file (and the MJCF/URDF it names).")
       .def_property_readonly("nq", &Model::nq, "number of joint variables (len(q))")
-      .def_property_readonly("joint_names",
-                             [](const Model& self) { return self.chain().q_joints; },
-                             "MJCF joint of each entry of q")
+      .def_property_readonly(
+          "joint_names", [](const Model& self) { return self.chain().q_joints; },
+          "MJCF joint of each entry of q")
       .def_property_readonly(
           "frame_names",
           [](const Model& self) {
@@ -541,8 +543,9 @@ PYBIND11_MODULE(flexbench, m) {
       .def_property_readonly("file", [](const Model& self) { return self.declared().file; })
       .def_property_readonly("model_path",
                              [](const Model& self) { return self.declared().model_path; })
-      .def("frame_id", [](const Model& self, const py::object& frame) { return self.Frame(frame); },
-           py::arg("frame"), "id of a frame given by name (or id, checked)")
+      .def(
+          "frame_id", [](const Model& self, const py::object& frame) { return self.Frame(frame); },
+          py::arg("frame"), "id of a frame given by name (or id, checked)")
       .def(
           "fk",
           [](Model& self, const py::object& q, const py::object& frame) {
@@ -582,14 +585,15 @@ PYBIND11_MODULE(flexbench, m) {
           py::arg("q"), py::arg("frame") = py::none(),
           "6 x nq local Jacobian: T(q + dq) = T(q) Exp(J dq) to first order.")
       .def("__repr__", [](const Model& self) {
-        return "<flexbench.DeclaredModel '" + self.declared().file + "' nq=" +
-               std::to_string(self.nq()) + ">";
+        return "<flexbench.DeclaredModel '" + self.declared().file +
+               "' nq=" + std::to_string(self.nq()) + ">";
       });
 
   py::class_<PyEstimator>(m, "Estimator", "An estimator made by flexbench.make_estimator.")
       .def_property_readonly("name", &PyEstimator::name)
       .def("reset", [](PyEstimator& self) { self.get().Reset(); })
-      .def("predict", [](PyEstimator& self, double t) { self.get().Predict(t); }, py::arg("t"))
+      .def(
+          "predict", [](PyEstimator& self, double t) { self.get().Predict(t); }, py::arg("t"))
       .def(
           "estimate",
           [](PyEstimator& self) {
@@ -771,13 +775,13 @@ PYBIND11_MODULE(flexbench, m) {
 
   m.def(
       "identify",
-      [](const std::string& declared, const std::string& calibration,
-         const std::string& validation, const std::string& out, const std::string& model,
+      [](const std::string& declared, const std::string& calibration, const std::string& validation,
+         const std::string& out, const std::string& model,
          const std::vector<std::string>& candidates, double point_std,
          std::optional<double> reading_std_deg, std::optional<int> max_effects,
          std::optional<double> bic_threshold, std::optional<std::string> folds_by,
-         std::optional<double> outlier_iqr, bool no_cross_validation,
-         const py::object& overrides, bool force) {
+         std::optional<double> outlier_iqr, bool no_cross_validation, const py::object& overrides,
+         bool force) {
         scenarios::IdentifyCliOptions o;
         o.declared = declared;
         o.calibration_csv = calibration;
