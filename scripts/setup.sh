@@ -15,7 +15,7 @@ PACKAGES=(
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev
   slurmctld slurmd slurm-client munge procps   # a real single-node Slurm for the sweep tests
   chromium                        # headless browser that renders report.html in its test
-  pybind11-dev python3-pybind11 python3-numpy python3-pytest   # the Python module and its tests
+  pybind11-dev python3-pybind11 python3-dev python3-numpy python3-pytest   # the Python module + tests
 )
 
 missing=()
