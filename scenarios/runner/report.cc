@@ -33,12 +33,12 @@ th,td{border:1px solid #bbb;padding:3px 8px;text-align:left;vertical-align:top}
 th{background:#eef1f5}td.num{text-align:right;font-family:monospace}
 tr.pass td.verdict{background:#d8f0d8;color:#15561a;font-weight:bold}
 tr.fail td.verdict{background:#f6d5d5;color:#8a1414;font-weight:bold}
-pre{background:#f4f4f4;border:1px solid #ddd;padding:8px;white-space:pre-wrap;word-break:break-all}
+pre{margin:0;background:#f4f4f4;border:1px solid #ddd;padding:8px;white-space:pre-wrap;word-break:break-all}
 figure{margin:12px 0 20px;padding:8px;border:1px solid #ddd;display:inline-block;max-width:96%;
 vertical-align:top}
 figure img{max-width:100%;max-height:900px;display:block}
 figcaption{font-size:13px;margin-top:6px;color:#333}
-.scroll{overflow-x:auto}.muted{color:#666}
+.scroll{overflow-x:auto}li{font-family:monospace;font-size:13px}.muted{color:#666}
 )";
 
 std::string Num(double v) {
@@ -100,9 +100,9 @@ Json ReadJson(const fs::path& path) {
 
 // --- The folder's files ---------------------------------------------------------------------
 
+// No sizes: summary.json's varies with its wall-clock timing, and the page must not.
 struct FileEntry {
   std::string rel;  // generic, relative to the folder
-  std::uintmax_t size = 0;
 };
 
 std::string Extension(const std::string& rel) {
@@ -129,7 +129,6 @@ std::vector<FileEntry> ListFiles(const fs::path& dir) {
     FileEntry f;
     f.rel = it->path().lexically_relative(dir).generic_string();
     if (f.rel == kReportName || Extension(f.rel) == "part") continue;
-    f.size = it->file_size(ec);
     files.push_back(f);
   }
   std::sort(files.begin(), files.end(),
@@ -235,13 +234,12 @@ void EstimatorTable(const Json& estimators, std::ostringstream* h) {
   std::set<std::string> seen;
   for (auto it = estimators.begin(); it != estimators.end(); ++it) {
     names.push_back(it.key());
-    // "metrics." is every estimator's first level: left out for shorter rows.
-    const Json& e = it.value();
-    const Json& m = e.is_object() && e.size() == 1 && e.contains("metrics") ? e["metrics"] : e;
     std::vector<std::pair<std::string, Json>> rows;
-    Flatten(m, "", &rows);
+    Flatten(it.value(), "", &rows);
     values.emplace_back();
-    for (auto& [key, v] : rows) {
+    for (auto& [path, v] : rows) {
+      // Every estimator's metrics are under "metrics.": left out for shorter rows.
+      const std::string key = path.rfind("metrics.", 0) == 0 ? path.substr(8) : path;
       if (seen.insert(key).second) keys.push_back(key);
       values.back()[key] = v;
     }
@@ -279,13 +277,13 @@ void Figures(const std::vector<FileEntry>& files, bool top_level_only, std::ostr
 // Links to the data files; `keep` chooses which.
 template <typename Keep>
 void FileLinks(const std::vector<FileEntry>& files, Keep keep, std::ostringstream* h) {
-  *h << "<div class=\"scroll\"><table>\n<tr><th>file</th><th>bytes</th></tr>\n";
+  *h << "<ul>\n";
   for (const FileEntry& f : files) {
     if (!IsDataFile(f.rel) || !keep(f.rel)) continue;
-    *h << "<tr><td><a href=\"" << HtmlEscape(UrlPath(f.rel)) << "\">" << HtmlEscape(f.rel)
-       << "</a></td><td class=\"num\">" << f.size << "</td></tr>\n";
+    *h << "<li><a href=\"" << HtmlEscape(UrlPath(f.rel)) << "\">" << HtmlEscape(f.rel)
+       << "</a></li>\n";
   }
-  *h << "</table></div>\n";
+  *h << "</ul>\n";
 }
 
 // --- A run ----------------------------------------------------------------------------------

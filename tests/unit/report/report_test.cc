@@ -33,7 +33,7 @@ void MakeRunFolder(const fs::path& dir) {
   "overrides": ["a=<1>"],
   "metrics": {"rmse_px": 0.5, "nested": {"k": 1}, "label": "<script>alert(1)</script>",
               "series": [1, 2, 3], "missing": null},
-  "estimators": {"ekf": {"metrics": {"pos_err_m": 0.01}},
+  "estimators": {"ekf": {"metrics": {"pos_err_m": 0.01}, "updates": {"accepted": 3}},
                  "pf<1>": {"metrics": {"pos_err_m": 0.02, "ess": 100}}},
   "gates": [
     {"name": "g1", "metric": "rmse_px", "op": "<", "threshold": 1.0, "value": 0.5,
@@ -105,6 +105,9 @@ TEST(Report, MetricsAreTables) {
             std::string::npos);
   EXPECT_NE(html.find("<tr><td>ess</td><td></td><td class=\"num\">100</td></tr>"),
             std::string::npos);
+  // Only the common "metrics." level is left out of the row names.
+  EXPECT_NE(html.find("<tr><td>updates.accepted</td><td class=\"num\">3</td><td></td></tr>"),
+            std::string::npos);
   // Wall-clock timing is not a result: the page is the same for every run of a seed.
   EXPECT_EQ(html.find("total_s"), std::string::npos);
 }
@@ -133,6 +136,11 @@ TEST(Report, SameFolderSameBytesAndTheReportIsNotListed) {
   TempDir tmp;
   MakeRunFolder(tmp.path());
   const std::string first = RenderReport(tmp.path());
+  // Timing of another length (so another summary.json size) gives the same page.
+  std::string summary = ReadFile(tmp.path() / "summary.json");
+  summary.replace(summary.find("1.25"), 4, "1.2345678");
+  WriteFile(tmp.path() / "summary.json", summary);
+  EXPECT_EQ(RenderReport(tmp.path()), first);
   scenarios::WriteReport(tmp.path());
   EXPECT_EQ(ReadFile(tmp.path() / "report.html"), first);
   EXPECT_EQ(RenderReport(tmp.path()), first);
