@@ -29,7 +29,8 @@ body{font-family:sans-serif;margin:24px;color:#222;background:#fff;max-width:140
 h1{font-size:24px;margin:0 0 4px}h2{font-size:19px;margin:28px 0 8px;border-bottom:1px solid #ccc}
 h3{font-size:16px;margin:18px 0 6px}
 table{border-collapse:collapse;margin:6px 0 12px;font-size:13px}
-th,td{border:1px solid #bbb;padding:3px 8px;text-align:left;vertical-align:top}
+th,td{border:1px solid #bbb;padding:3px 8px;text-align:left;vertical-align:top;max-width:36em;
+overflow-wrap:anywhere}
 th{background:#eef1f5}td.num{text-align:right;font-family:monospace}
 tr.pass td.verdict{background:#d8f0d8;color:#15561a;font-weight:bold}
 tr.fail td.verdict{background:#f6d5d5;color:#8a1414;font-weight:bold}
@@ -38,7 +39,7 @@ figure{margin:12px 0 20px;padding:8px;border:1px solid #ddd;display:inline-block
 vertical-align:top}
 figure img{max-width:100%;max-height:900px;display:block}
 figcaption{font-size:13px;margin-top:6px;color:#333}
-.scroll{overflow-x:auto}li{font-family:monospace;font-size:13px}.muted{color:#666}
+table.kv td{max-width:none}.scroll{overflow-x:auto}li{font-family:monospace;font-size:13px}.muted{color:#666}
 )";
 
 std::string Num(double v) {
@@ -182,10 +183,11 @@ void Tail(const std::string& source, std::ostringstream* h) {
      << "</body>\n</html>\n";
 }
 
-// A two-column table of key/value rows.
+// A two-column table of key/value rows; its cells are not width-capped (a long command stays on
+// as few lines as the page allows).
 void KeyValueTable(const std::vector<std::pair<std::string, std::string>>& rows,
                    std::ostringstream* h) {
-  *h << "<table>\n";
+  *h << "<table class=\"kv\">\n";
   for (const auto& [key, html] : rows) {
     *h << "<tr><th>" << HtmlEscape(key) << "</th><td>" << html << "</td></tr>\n";
   }
@@ -510,7 +512,32 @@ std::string RenderReport(const fs::path& dir) {
                    ": not a flexbench result (no summary.json or aggregate.json)");
 }
 
-void WriteReport(const fs::path& dir) { WriteFileAtomic(dir / kReportName, RenderReport(dir)); }
+// Folders below a run's `dir` that are results themselves (e.g. closed_loop_estimators'
+// identify/), deepest first: their reports exist before a page above links them.
+std::vector<fs::path> NestedResults(const fs::path& dir) {
+  std::vector<fs::path> nested;
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->is_directory(ec) && fs::is_regular_file(it->path() / "summary.json", ec)) {
+      nested.push_back(it->path());
+    }
+  }
+  std::sort(nested.begin(), nested.end(), [](const fs::path& a, const fs::path& b) {
+    const auto depth = [](const fs::path& p) { return std::distance(p.begin(), p.end()); };
+    return depth(a) != depth(b) ? depth(a) > depth(b) : a < b;
+  });
+  return nested;
+}
+
+void WriteReport(const fs::path& dir) {
+  std::error_code ec;
+  if (fs::is_regular_file(dir / "summary.json", ec)) {
+    for (const fs::path& sub : NestedResults(dir)) {
+      WriteFileAtomic(sub / kReportName, RunReport(sub));
+    }
+  }
+  WriteFileAtomic(dir / kReportName, RenderReport(dir));
+}
 
 int ReportCommand(const std::string& dir) {
   try {

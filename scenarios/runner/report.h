@@ -33,7 +33,8 @@ std::string CommandLine(const std::vector<std::string>& args);
 // aggregate.json. Throws InputError naming `dir` when it holds neither or one is not JSON.
 std::string RenderReport(const std::filesystem::path& dir);
 
-// Writes RenderReport(dir) to dir/report.html through a temporary file and a rename.
+// Writes RenderReport(dir) to dir/report.html through a temporary file and a rename; in a
+// run's folder first the reports of the results inside it (folders with summary.json).
 void WriteReport(const std::filesystem::path& dir);
 
 // `flexbench report DIR`: regenerates DIR/report.html. Returns an exit code (2: DIR is not a

@@ -147,6 +147,21 @@ TEST(Report, SameFolderSameBytesAndTheReportIsNotListed) {
   EXPECT_FALSE(fs::exists(tmp.path() / "report.html.part"));
 }
 
+TEST(Report, ResultsInsideARunGetTheirOwnReportLinkedFromTheRuns) {
+  TempDir tmp;
+  MakeRunFolder(tmp.path());
+  WriteFile(tmp.path() / "identify" / "summary.json",
+            R"json({"scenario": "identify", "seed": 0, "metrics": {"x": 1}})json");
+  WriteFile(tmp.path() / "identify" / "fit.png", "png");
+  scenarios::WriteReport(tmp.path());
+  const std::string inner = ReadFile(tmp.path() / "identify" / "report.html");
+  EXPECT_NE(inner.find("<h1>identify</h1>"), std::string::npos);
+  EXPECT_NE(inner.find("<img src=\"fit.png\""), std::string::npos);
+  const std::string outer = ReadFile(tmp.path() / "report.html");
+  EXPECT_NE(outer.find("<a href=\"identify/report.html\">"), std::string::npos);
+  EXPECT_NE(outer.find("<img src=\"identify/fit.png\""), std::string::npos);
+}
+
 TEST(Report, FolderWithoutResultIsInputError) {
   TempDir tmp;
   WriteFile(tmp.path() / "data.csv", "a\n");
