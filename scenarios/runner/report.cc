@@ -34,12 +34,14 @@ overflow-wrap:anywhere}
 th{background:#eef1f5}td.num{text-align:right;font-family:monospace}
 tr.pass td.verdict{background:#d8f0d8;color:#15561a;font-weight:bold}
 tr.fail td.verdict{background:#f6d5d5;color:#8a1414;font-weight:bold}
-pre{margin:0;background:#f4f4f4;border:1px solid #ddd;padding:8px;white-space:pre-wrap;word-break:break-all}
+pre{margin:0;background:#f4f4f4;border:1px solid #ddd;padding:8px;white-space:pre-wrap;
+word-break:break-all}
 figure{margin:12px 0 20px;padding:8px;border:1px solid #ddd;display:inline-block;max-width:96%;
 vertical-align:top}
 figure img{max-width:100%;max-height:900px;display:block}
 figcaption{font-size:13px;margin-top:6px;color:#333}
-table.kv td{max-width:none}.scroll{overflow-x:auto}li{font-family:monospace;font-size:13px}.muted{color:#666}
+table.kv td{max-width:none}.scroll{overflow-x:auto}.muted{color:#666}
+li{font-family:monospace;font-size:13px}
 )";
 
 std::string Num(double v) {
@@ -138,21 +140,23 @@ std::vector<FileEntry> ListFiles(const fs::path& dir) {
 }
 
 bool IsDataFile(const std::string& rel) {
-  static const std::set<std::string> kData = {"csv",  "tum", "json", "yaml", "yml",
-                                              "html", "txt", "log"};
+  static const std::set<std::string> kData = {"csv", "tum",  "json", "yaml",
+                                              "yml", "html", "txt",  "log"};
   return kData.count(Extension(rel)) > 0;
 }
 
 // What a figure shows, for the file names the kinds write (README "Outputs").
 std::string FigureDescription(const std::string& rel) {
   static const std::pair<const char*, const char*> kKnown[] = {
-      {"config_", "the rendered camera image with the detections, truth axes and each "
-                  "estimate's 95% position ellipse"},
+      {"config_",
+       "the rendered camera image with the detections, truth axes and each "
+       "estimate's 95% position ellipse"},
       {"lateral_error", "Table I: lateral error per estimator beside the paper's values"},
       {"fig5_contact", "error and covariance over the contact iterations"},
       {"loop", "position error and NEES before and after identification, per estimator"},
-      {"residual_before_after", "residual against the quantity that exposed the first chosen "
-                                "effect, before and after"},
+      {"residual_before_after",
+       "residual against the quantity that exposed the first chosen "
+       "effect, before and after"},
       {"residual_structure", "the residual's structure per joint"},
       {"matrix", "error and NEES per estimator and mismatch effect"},
       {"deflection", "the hand's deflection per configuration"},
@@ -268,10 +272,10 @@ void Figures(const std::vector<FileEntry>& files, bool top_level_only, std::ostr
     const std::string src = HtmlEscape(UrlPath(f.rel));
     const std::string description = FigureDescription(f.rel);
     ++n;
-    *h << "<figure><a href=\"" << src << "\"><img src=\"" << src << "\" alt=\""
-       << HtmlEscape(f.rel) << "\"></a><figcaption>Figure " << n << ": <code>"
-       << HtmlEscape(f.rel) << "</code>" << (description.empty() ? "" : " &mdash; ")
-       << HtmlEscape(description) << "</figcaption></figure>\n";
+    *h << "<figure><a href=\"" << src << "\"><img src=\"" << src << "\" alt=\"" << HtmlEscape(f.rel)
+       << "\"></a><figcaption>Figure " << n << ": <code>" << HtmlEscape(f.rel) << "</code>"
+       << (description.empty() ? "" : " &mdash; ") << HtmlEscape(description)
+       << "</figcaption></figure>\n";
   }
   if (n == 0) *h << "<p class=\"muted\">No figures.</p>\n";
 }
@@ -305,10 +309,11 @@ std::string RunReport(const fs::path& dir) {
       {"kind", Cell(s.value("kind", Json()))},
       {"seed", Cell(s.value("seed", Json()))}};
   if (s.contains("command")) {
-    rows.emplace_back("command", "<pre>" + HtmlEscape(s["command"].is_string()
-                                                          ? s["command"].get<std::string>()
-                                                          : s["command"].dump()) +
-                                     "</pre>");
+    rows.emplace_back("command",
+                      "<pre>" +
+                          HtmlEscape(s["command"].is_string() ? s["command"].get<std::string>()
+                                                              : s["command"].dump()) +
+                          "</pre>");
   }
   std::string overrides = "none";
   if (s.contains("overrides") && s["overrides"].is_array() && !s["overrides"].empty()) {
@@ -334,7 +339,8 @@ std::string RunReport(const fs::path& dir) {
   h << "<h2>Figures</h2>\n";
   Figures(files, false, &h);
   h << "<h2>Files</h2>\n";
-  FileLinks(files, [](const std::string&) { return true; }, &h);
+  FileLinks(
+      files, [](const std::string&) { return true; }, &h);
   Tail("summary.json", &h);
   return h.str();
 }
@@ -399,12 +405,14 @@ std::string SweepReport(const fs::path& dir) {
   std::ostringstream h;
   Head(name + " - flexbench sweep report", &h);
   h << "<h1>Sweep " << HtmlEscape(name) << "</h1>\n";
-  std::vector<std::pair<std::string, std::string>> rows = {{"sweep", Cell(a.value("sweep", Json()))}};
+  std::vector<std::pair<std::string, std::string>> rows = {
+      {"sweep", Cell(a.value("sweep", Json()))}};
   for (const char* key : {"sweep_file", "scenario"}) {
     if (how.contains(key)) rows.emplace_back(key, Cell(how[key]));
   }
   rows.emplace_back("seeds", SeedRanges(a.value("seeds", Json::array())));
-  if (how.contains("command")) rows.emplace_back("command", "<pre>" + Cell(how["command"]) + "</pre>");
+  if (how.contains("command"))
+    rows.emplace_back("command", "<pre>" + Cell(how["command"]) + "</pre>");
   rows.emplace_back("runs", Cell(a.value("runs", Json())) + " (" +
                                 Cell(a.value("succeeded", Json())) + " succeeded)");
   rows.emplace_back("bootstrap resamples", Cell(a.value("bootstrap_resamples", Json())));
@@ -429,9 +437,9 @@ std::string SweepReport(const fs::path& dir) {
     std::string set;
     const Json ps = p.value("set", Json::object());
     for (auto it = ps.begin(); it != ps.end(); ++it) {
-      set += (set.empty() ? "" : ", ") + Code(it.key() + "=" +
-                                              (it.value().is_string() ? it.value().get<std::string>()
-                                                                      : it.value().dump()));
+      set += (set.empty() ? "" : ", ") +
+             Code(it.key() + "=" +
+                  (it.value().is_string() ? it.value().get<std::string>() : it.value().dump()));
     }
     h << "<p>" << (set.empty() ? std::string("no grid values") : set) << "; "
       << Cell(p.value("succeeded", Json())) << " of " << Cell(p.value("runs", Json()))
@@ -443,13 +451,14 @@ std::string SweepReport(const fs::path& dir) {
   Figures(files, true, &h);
   h << "<h2>Files</h2>\n<p>Each run's folder has its own report.</p>\n";
   // Under runs/ only the runs' reports and summaries: their other files are in their reports.
-  FileLinks(files,
-            [](const std::string& rel) {
-              if (rel.rfind("runs/", 0) != 0) return true;
-              const std::string name = fs::path(rel).filename().string();
-              return name == kReportName || name == "summary.json";
-            },
-            &h);
+  FileLinks(
+      files,
+      [](const std::string& rel) {
+        if (rel.rfind("runs/", 0) != 0) return true;
+        const std::string name = fs::path(rel).filename().string();
+        return name == kReportName || name == "summary.json";
+      },
+      &h);
   Tail("aggregate.json", &h);
   return h.str();
 }
@@ -461,12 +470,23 @@ std::string HtmlEscape(const std::string& text) {
   out.reserve(text.size());
   for (char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&#39;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&#39;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -488,10 +508,9 @@ std::string UrlPath(const std::string& relative) {
 }
 
 std::string ShellQuote(const std::string& arg) {
-  const bool safe =
-      !arg.empty() && std::all_of(arg.begin(), arg.end(), [](unsigned char c) {
-        return std::isalnum(c) || std::string("_@%+=:,./-").find(c) != std::string::npos;
-      });
+  const bool safe = !arg.empty() && std::all_of(arg.begin(), arg.end(), [](unsigned char c) {
+    return std::isalnum(c) || std::string("_@%+=:,./-").find(c) != std::string::npos;
+  });
   if (safe) return arg;
   std::string q = "'";
   for (char c : arg) q += c == '\'' ? std::string("'\\''") : std::string(1, c);

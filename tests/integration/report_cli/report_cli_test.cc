@@ -4,11 +4,10 @@
 // folder that decodes.
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-
-#include <nlohmann/json.hpp>
 #include <regex>
 #include <set>
 
@@ -156,13 +155,14 @@ int CountPngs(const fs::path& dir, bool recursive) {
 }
 
 TEST(ReportBrowser, ChromiumRendersARunsReportWithEveryImage) {
-  if (!fs::exists(kChromium)) GTEST_SKIP() << kChromium << " is not installed (apt install chromium)";
+  if (!fs::exists(kChromium))
+    GTEST_SKIP() << kChromium << " is not installed (apt install chromium)";
   TempDir tmp;
   const fs::path out = tmp.path() / "run";
   // Several figures and trajectories: the hand-angle experiment's report.
-  const CommandResult r = RunCommand(
-      Flexbench() + " run " + SourceDir() + "/scenarios/rover_apriltag_exp1.yaml --quiet --out " +
-      out.string());
+  const CommandResult r =
+      RunCommand(Flexbench() + " run " + SourceDir() +
+                 "/scenarios/rover_apriltag_exp1.yaml --quiet --out " + out.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const int pngs = CountPngs(out, true);
   ASSERT_GT(pngs, 1);
@@ -174,7 +174,8 @@ TEST(ReportBrowser, ChromiumRendersARunsReportWithEveryImage) {
 }
 
 TEST(ReportBrowser, ChromiumRendersASweepsReport) {
-  if (!fs::exists(kChromium)) GTEST_SKIP() << kChromium << " is not installed (apt install chromium)";
+  if (!fs::exists(kChromium))
+    GTEST_SKIP() << kChromium << " is not installed (apt install chromium)";
   TempDir tmp;
   const fs::path file = tmp.path() / "s.yaml";
   WriteFile(file, "sweep: browser_test\nscenario: " + SourceDir() +

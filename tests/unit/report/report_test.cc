@@ -122,8 +122,8 @@ TEST(Report, EveryPngIsAFigureAndDataFilesAreLinked) {
     EXPECT_NE(html.find(std::string("<img src=\"") + src + "\""), std::string::npos) << src;
   }
   EXPECT_NE(html.find("<figcaption>Figure 2: <code>frames/b c#1.png</code>"), std::string::npos);
-  for (const char* file : {"data.csv", "summary.json", "trajectories/base/ekf.tum",
-                           "trajectories/base/truth.tum"}) {
+  for (const char* file :
+       {"data.csv", "summary.json", "trajectories/base/ekf.tum", "trajectories/base/truth.tum"}) {
     EXPECT_NE(html.find(std::string("<a href=\"") + file + "\">" + file + "</a>"),
               std::string::npos)
         << file;
