@@ -31,7 +31,8 @@ h3{font-size:16px;margin:18px 0 6px}
 table{border-collapse:collapse;margin:6px 0 12px;font-size:13px}
 th,td{border:1px solid #bbb;padding:3px 8px;text-align:left;vertical-align:top;max-width:36em;
 overflow-wrap:anywhere}
-th{background:#eef1f5}td.num{text-align:right;font-family:monospace}
+th{background:#eef1f5}
+td.num{text-align:right;font-family:monospace;white-space:nowrap;overflow-wrap:normal}
 tr.pass td.verdict{background:#d8f0d8;color:#15561a;font-weight:bold}
 tr.fail td.verdict{background:#f6d5d5;color:#8a1414;font-weight:bold}
 pre{margin:0;background:#f4f4f4;border:1px solid #ddd;padding:8px;white-space:pre-wrap;
