@@ -2,8 +2,11 @@
 #include <CLI/CLI.hpp>
 #include <filesystem>
 #include <iostream>
+#include <string>
+#include <vector>
 
 #include "scenarios/runner/inspect.h"
+#include "scenarios/runner/report.h"
 #include "scenarios/runner/runner.h"
 #include "scenarios/sweep/sweep_command.h"
 #include "sim/mujoco_model.h"
@@ -98,6 +101,12 @@ int Main(int argc, char** argv) {
                         "slurm: submit only these task indices (resubmit failed ones: 3,5)");
   bool no_wait = false;
   sweep_cmd->add_flag("--no-wait", no_wait, "slurm: submit and return; --collect later");
+
+  std::string report_dir;
+  CLI::App* report_cmd = app.add_subcommand(
+      "report", "write report.html in a run's or a sweep's result folder (again)");
+  report_cmd->add_option("dir", report_dir, "result folder (holds summary.json or aggregate.json)")
+      ->required();
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -105,6 +114,13 @@ int Main(int argc, char** argv) {
     return code == 0 ? 0 : flexbench::scenarios::kExitBadInput;
   }
   if (*seed_opt) run.seed = seed;
+  // The command line as typed, recorded with the results.
+  const std::string command =
+      flexbench::scenarios::CommandLine(std::vector<std::string>(argv, argv + argc));
+  run.command = command;
+  id.command = command;
+  sw.command = command;
+  if (*report_cmd) return flexbench::scenarios::ReportCommand(report_dir);
   if (*run_cmd) return flexbench::scenarios::RunScenario(run);
   if (*sweep_cmd) {
     sw.slurm.wait = !no_wait;

@@ -18,6 +18,7 @@
 #include "scenarios/runner/gates.h"
 #include "scenarios/runner/output.h"
 #include "scenarios/runner/progress.h"
+#include "scenarios/runner/report.h"
 #include "scenarios/runner/scenario_kind.h"
 #include "sim/config.h"
 #include "sim/declared_model.h"
@@ -84,6 +85,22 @@ Prepared Prepare(const ConfigNode& root, const RunOptions& options) {
   return p;
 }
 
+// The `flexbench run` line that repeats a run given without its command line (a sweep's).
+std::string EquivalentCommand(const RunOptions& options, const fs::path& out_dir) {
+  std::vector<std::string> args = {"flexbench", "run", options.scenario_path, "--out",
+                                   out_dir.string()};
+  if (options.seed) {
+    args.push_back("--seed");
+    args.push_back(std::to_string(*options.seed));
+  }
+  for (const std::string& s : options.set) {
+    args.push_back("--set");
+    args.push_back(s);
+  }
+  if (options.check_gates) args.push_back("--check-gates");
+  return CommandLine(args);
+}
+
 // Runs a loaded scenario. `inputs` are files the run reads (never replaced by --out).
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
               const std::vector<fs::path>& inputs) {
@@ -104,6 +121,9 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   summary["kind"] = root.GetString("kind");
   if (!description.empty()) summary["description"] = description;
   summary["seed"] = seed;
+  // How to make this result again (it names --out: the same invocation, the same bytes).
+  summary["command"] =
+      options.command.empty() ? EquivalentCommand(options, out_dir) : options.command;
   // What the command line changed, so that a result says how it was made.
   if (!options.set.empty()) summary["overrides"] = options.set;
   summary["metrics"] = Json::object();
@@ -141,6 +161,13 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   // Strings from data files (labels, paths) that are not UTF-8 are replaced, never fatal.
   WriteFileAtomic(out.File("summary.json"),
                   summary.dump(2, ' ', false, Json::error_handler_t::replace) + "\n");
+  // Inside the temporary folder, so the report moves into place with the results. A report
+  // that cannot be made costs the page, never the run: `flexbench report` can retry.
+  try {
+    WriteReport(out.File("summary.json").parent_path());
+  } catch (const std::exception& e) {
+    Log(std::string("report.html not written: ") + e.what());
+  }
   out.Commit();
 
   for (const Json& g : summary["gates"]) {
@@ -374,6 +401,7 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
     run.force = o.force;
     run.set = o.set;  // recorded in summary.json
     run.quiet = o.quiet;
+    run.command = o.command;
     try {
       return RunLoaded(root, run, "identify command line",
                        {fs::path(o.declared), fs::path(declared.model_path),

@@ -22,6 +22,9 @@ struct RunOptions {
   bool force = false;  // --out may replace a folder that is not a previous result
   std::vector<std::string> set;        // --set KEY=VALUE overrides, in order
   bool quiet = false;  // no progress, no informational lines (errors and failed gates remain)
+  // The command line as typed (shell-quoted), recorded in summary.json and the report; empty
+  // (a sweep's run): the equivalent `flexbench run` line is recorded.
+  std::string command;
 };
 
 // Runs one scenario; prints one line on stderr for bad input. Returns an exit code.
@@ -45,6 +48,7 @@ struct IdentifyCliOptions {
   bool force = false;
   std::vector<std::string> set;  // --set KEY=VALUE on the closed_loop keys it configures
   bool quiet = false;
+  std::string command;  // the command line as typed, recorded in summary.json
 };
 
 // `flexbench identify`: a closed_loop run on a user's files (paths as given on the command

@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "scenarios/runner/output.h"
+#include "scenarios/runner/report.h"
 #include "scenarios/runner/runner.h"
 #include "scenarios/sweep/collect.h"
 #include "scenarios/sweep/local_executor.h"
@@ -94,11 +95,29 @@ std::set<std::string> CheckPoints(const SweepSpec& spec, const std::vector<Sweep
   return gate_names;
 }
 
+// How the sweep was collected, for its report; aggregate.json stays free of it, so that it is
+// the same bytes whichever executor or folder made it.
+void WriteSweepCommand(const fs::path& out, const SweepSpec& spec, const std::string& command) {
+  Json how;
+  how["command"] = command;
+  how["sweep_file"] = spec.file;
+  how["scenario"] = spec.scenario;
+  WriteFileAtomic(out / kSweepCommandFile,
+                  how.dump(2, ' ', false, Json::error_handler_t::replace) + "\n");
+}
+
 int CollectAndGate(const SweepSpec& spec, const std::vector<SweepPoint>& points,
-                   const std::vector<SweepRun>& runs, const fs::path& out) {
+                   const std::vector<SweepRun>& runs, const fs::path& out,
+                   const std::string& command) {
   const std::vector<RunOutcome> outcomes = ReadOutcomes(out, points, runs);
   const Collected c = Collect(spec, points, runs, outcomes);
   WriteCollected(out, spec, points, c);
+  if (!command.empty()) WriteSweepCommand(out, spec, command);
+  try {
+    WriteReport(out);
+  } catch (const std::exception& e) {
+    Log(std::string("report.html not written: ") + e.what());
+  }
   size_t failed = 0, missing = 0;
   for (const RunOutcome& o : outcomes) {
     failed += o.present && !o.ok;
@@ -110,7 +129,7 @@ int CollectAndGate(const SweepSpec& spec, const std::vector<SweepPoint>& points,
         g["metric"].get<std::string>() + " = " + g["value"].dump() + " " +
         g["op"].get<std::string>() + " " + g["threshold"].dump());
   }
-  Log("results in " + out.string() + " (sweep.csv, aggregate.json)");
+  Log("results in " + out.string() + " (sweep.csv, aggregate.json, report.html)");
   if (failed || missing) {
     Log(std::to_string(failed) + " runs failed, " + std::to_string(missing) +
         " have no result (see aggregate.json \"failed\")");
@@ -144,7 +163,7 @@ int RunOnSlurm(const SweepCliOptions& o, const SweepSpec& spec,
     Log("resubmit the failed tasks alone: flexbench sweep " + spec.file + " --out " +
         out.string() + " --executor slurm --tasks " + std::to_string(tasks) + " --array " + list);
   }
-  return CollectAndGate(spec, points, runs, out);
+  return CollectAndGate(spec, points, runs, out, o.command);
 }
 
 }  // namespace
@@ -168,7 +187,7 @@ int SweepCommand(const SweepCliOptions& o) {
       if (!fs::is_regular_file(out / kMarker, ec)) {
         throw InputError("--out " + CapForMessage(out.string()) + ": not a sweep's folder");
       }
-      return CollectAndGate(spec, points, runs, out);
+      return CollectAndGate(spec, points, runs, out, o.command);
     }
     CheckPoints(spec, points);
     PrepareOutDir(out, spec);
@@ -182,7 +201,7 @@ int SweepCommand(const SweepCliOptions& o) {
         std::to_string(todo.size()) + " runs to do, -j " + std::to_string(jobs));
     const int failed = RunLocal(spec, points, runs, todo, out, jobs);
     if (shard_count) return failed ? kExitInternal : kExitOk;
-    return CollectAndGate(spec, points, runs, out);
+    return CollectAndGate(spec, points, runs, out, o.command);
   } catch (const std::exception& e) {
     return ReportError(e);
   }

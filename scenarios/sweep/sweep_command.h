@@ -15,6 +15,7 @@ struct SweepCliOptions {
   std::string shard;    // "i/n": run only shard i of n (what a Slurm task does), no collect
   bool collect = false; // only merge the runs already in the folder
   SlurmOptions slurm;
+  std::string command;  // the command line as typed: recorded beside aggregate.json
 };
 
 // Exit codes: 0; 2 bad input; 3 a sweep gate failed; 1 runs failed or are missing (listed).

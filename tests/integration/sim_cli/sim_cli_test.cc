@@ -141,6 +141,11 @@ std::map<std::string, std::string> ReadTree(const fs::path& root) {
     if (!e.is_regular_file()) continue;
     std::string text = ReadFile(e.path());
     const std::string rel = fs::relative(e.path(), root).string();
+    // The recorded command names --out (summary.json, report.html).
+    const std::string out = root.string();
+    for (size_t p = text.find(out); p != std::string::npos; p = text.find(out, p + 1)) {
+      text.replace(p, out.size(), "OUT");
+    }
     if (rel == "summary.json") {
       Json j = Json::parse(text);
       j.erase("timing");

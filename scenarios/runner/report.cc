@@ -1,0 +1,572 @@
+#include "scenarios/runner/report.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <utility>
+
+#include "estimators/error.h"
+#include "scenarios/runner/output.h"
+#include "scenarios/runner/runner.h"
+#include "scenarios/runner/scenario_kind.h"
+
+namespace fs = std::filesystem;
+
+namespace flexbench::scenarios {
+namespace {
+
+constexpr const char* kReportName = "report.html";
+
+// Inline only: the page must render offline and identically everywhere.
+constexpr const char* kStyle = R"(
+body{font-family:sans-serif;margin:24px;color:#222;background:#fff;max-width:1400px}
+h1{font-size:24px;margin:0 0 4px}h2{font-size:19px;margin:28px 0 8px;border-bottom:1px solid #ccc}
+h3{font-size:16px;margin:18px 0 6px}
+table{border-collapse:collapse;margin:6px 0 12px;font-size:13px}
+th,td{border:1px solid #bbb;padding:3px 8px;text-align:left;vertical-align:top;max-width:36em;
+overflow-wrap:anywhere}
+th{background:#eef1f5}
+td.num{text-align:right;font-family:monospace;white-space:nowrap;overflow-wrap:normal}
+tr.pass td.verdict{background:#d8f0d8;color:#15561a;font-weight:bold}
+tr.fail td.verdict{background:#f6d5d5;color:#8a1414;font-weight:bold}
+pre{margin:0;background:#f4f4f4;border:1px solid #ddd;padding:8px;white-space:pre-wrap;
+word-break:break-all}
+figure{margin:12px 0 20px;padding:8px;border:1px solid #ddd;display:inline-block;max-width:96%;
+vertical-align:top}
+figure img{max-width:100%;max-height:900px;display:block}
+figcaption{font-size:13px;margin-top:6px;color:#333}
+table.kv td{max-width:none}.scroll{overflow-x:auto}.muted{color:#666}
+li{font-family:monospace;font-size:13px}
+)";
+
+std::string Num(double v) {
+  if (!std::isfinite(v)) return std::isnan(v) ? "NaN" : (v > 0 ? "inf" : "-inf");
+  char b[32];
+  std::snprintf(b, sizeof(b), "%.6g", v);
+  return b;
+}
+
+// A JSON value as table text (escaped): numbers to 6 significant digits, short arrays inline,
+// null as a dash (what NaN becomes in JSON).
+std::string Cell(const Json& v) {
+  if (v.is_null()) return "&mdash;";
+  if (v.is_boolean()) return v.get<bool>() ? "true" : "false";
+  if (v.is_number_integer() || v.is_number_unsigned()) return v.dump();
+  if (v.is_number()) return Num(v.get<double>());
+  if (v.is_string()) return HtmlEscape(v.get<std::string>());
+  if (v.is_array()) {
+    constexpr size_t kShown = 8;
+    std::string s = "[";
+    for (size_t i = 0; i < v.size() && i < kShown; ++i) {
+      s += (i ? ", " : "") + (v[i].is_structured() ? std::string("&hellip;") : Cell(v[i]));
+    }
+    if (v.size() > kShown) s += ", &hellip; (" + std::to_string(v.size()) + " values)";
+    return s + "]";
+  }
+  return HtmlEscape(v.dump(-1, ' ', false, Json::error_handler_t::replace));
+}
+
+bool IsNumeric(const Json& v) { return v.is_number() || v.is_null(); }
+
+std::string Td(const Json& v) {
+  return std::string(IsNumeric(v) ? "<td class=\"num\">" : "<td>") + Cell(v) + "</td>";
+}
+
+// Leaves of `j` as ("a.b.c", value) in document order; arrays are leaves.
+void Flatten(const Json& j, const std::string& prefix,
+             std::vector<std::pair<std::string, Json>>* out) {
+  if (!j.is_object()) {
+    out->emplace_back(prefix, j);
+    return;
+  }
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    Flatten(it.value(), prefix.empty() ? it.key() : prefix + "." + it.key(), out);
+  }
+}
+
+Json ReadJson(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(CapForMessage(path.string()) + ": cannot read");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  try {
+    return Json::parse(ss.str());
+  } catch (const Json::parse_error& e) {
+    throw InputError(CapForMessage(path.string()) + ": not JSON (" + e.what() + ")");
+  }
+}
+
+// --- The folder's files ---------------------------------------------------------------------
+
+// No sizes: summary.json's varies with its wall-clock timing, and the page must not.
+struct FileEntry {
+  std::string rel;  // generic, relative to the folder
+};
+
+std::string Extension(const std::string& rel) {
+  const size_t dot = rel.rfind('.');
+  const size_t slash = rel.rfind('/');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+  std::string e = rel.substr(dot + 1);
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
+  return e;
+}
+
+// Regular files under `dir`, sorted by path, without hidden files, temporaries (".part") and
+// the report itself: the listing is the same in the run's temporary folder and afterwards.
+std::vector<FileEntry> ListFiles(const fs::path& dir) {
+  std::vector<FileEntry> files;
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (!name.empty() && name[0] == '.') {
+      if (it->is_directory(ec)) it.disable_recursion_pending();
+      continue;
+    }
+    if (!it->is_regular_file(ec)) continue;
+    FileEntry f;
+    f.rel = it->path().lexically_relative(dir).generic_string();
+    if (f.rel == kReportName || Extension(f.rel) == "part") continue;
+    files.push_back(f);
+  }
+  std::sort(files.begin(), files.end(),
+            [](const FileEntry& a, const FileEntry& b) { return a.rel < b.rel; });
+  return files;
+}
+
+bool IsDataFile(const std::string& rel) {
+  static const std::set<std::string> kData = {"csv", "tum",  "json", "yaml",
+                                              "yml", "html", "txt",  "log"};
+  return kData.count(Extension(rel)) > 0;
+}
+
+// What a figure shows, for the file names the kinds write (README "Outputs").
+std::string FigureDescription(const std::string& rel) {
+  static const std::pair<const char*, const char*> kKnown[] = {
+      {"config_",
+       "the rendered camera image with the detections, truth axes and each "
+       "estimate's 95% position ellipse"},
+      {"lateral_error", "Table I: lateral error per estimator beside the paper's values"},
+      {"fig5_contact", "error and covariance over the contact iterations"},
+      {"loop", "position error and NEES before and after identification, per estimator"},
+      {"residual_before_after",
+       "residual against the quantity that exposed the first chosen "
+       "effect, before and after"},
+      {"residual_structure", "the residual's structure per joint"},
+      {"matrix", "error and NEES per estimator and mismatch effect"},
+      {"deflection", "the hand's deflection per configuration"},
+      {"sweep_", "a rendered frame of the detection sweep"},
+      {"sweep", "mean over seeds with its 95% bootstrap confidence interval"},
+      {"smoke", "the rendered tag with detected and true corners"},
+      {"fig", "joint estimates with their 95% bands against the truth"},
+  };
+  const std::string name = fs::path(rel).filename().string();
+  for (const auto& [prefix, text] : kKnown) {
+    if (name.rfind(prefix, 0) == 0) return text;
+  }
+  return "";
+}
+
+// --- Page parts -----------------------------------------------------------------------------
+
+void Head(const std::string& title, std::ostringstream* h) {
+  *h << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+     << "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
+     << "<title>" << HtmlEscape(title) << "</title>\n<style>" << kStyle << "</style>\n"
+     << "</head>\n<body>\n";
+}
+
+void Tail(const std::string& source, std::ostringstream* h) {
+  *h << "<p class=\"muted\">Made by flexbench " << HtmlEscape(FLEXBENCH_VERSION) << " from "
+     << HtmlEscape(source) << "; <code>flexbench report DIR</code> makes it again.</p>\n"
+     << "</body>\n</html>\n";
+}
+
+// A two-column table of key/value rows; its cells are not width-capped (a long command stays on
+// as few lines as the page allows).
+void KeyValueTable(const std::vector<std::pair<std::string, std::string>>& rows,
+                   std::ostringstream* h) {
+  *h << "<table class=\"kv\">\n";
+  for (const auto& [key, html] : rows) {
+    *h << "<tr><th>" << HtmlEscape(key) << "</th><td>" << html << "</td></tr>\n";
+  }
+  *h << "</table>\n";
+}
+
+std::string Code(const std::string& text) { return "<code>" + HtmlEscape(text) + "</code>"; }
+
+// The gates of a run or a sweep: one row each with its verdict as a word, not only a colour.
+void GateTable(const Json& gates, bool with_point, std::ostringstream* h) {
+  if (!gates.is_array() || gates.empty()) {
+    *h << "<p class=\"muted\">No gates.</p>\n";
+    return;
+  }
+  int passed = 0;
+  for (const Json& g : gates) passed += g.value("passed", false) ? 1 : 0;
+  *h << "<p>" << passed << " of " << gates.size() << " gates passed.</p>\n";
+  *h << "<div class=\"scroll\"><table>\n<tr><th>gate</th>" << (with_point ? "<th>point</th>" : "")
+     << "<th>metric</th><th>value</th><th>op</th><th>threshold</th><th>result</th></tr>\n";
+  for (const Json& g : gates) {
+    const bool ok = g.value("passed", false);
+    *h << "<tr class=\"" << (ok ? "pass" : "fail") << "\"><td>" << Cell(g.value("name", Json()))
+       << "</td>";
+    if (with_point) *h << "<td>" << Cell(g.value("point", Json())) << "</td>";
+    *h << "<td>" << Cell(g.value("metric", Json())) << "</td>" << Td(g.value("value", Json()))
+       << "<td>" << Cell(g.value("op", Json())) << "</td>" << Td(g.value("threshold", Json()))
+       << "<td class=\"verdict\">" << (ok ? "PASS" : "FAIL") << "</td></tr>\n";
+  }
+  *h << "</table></div>\n";
+}
+
+void FlatTable(const Json& j, std::ostringstream* h) {
+  std::vector<std::pair<std::string, Json>> rows;
+  Flatten(j, "", &rows);
+  *h << "<div class=\"scroll\"><table>\n<tr><th>metric</th><th>value</th></tr>\n";
+  for (const auto& [key, v] : rows) {
+    *h << "<tr><td>" << HtmlEscape(key) << "</td>" << Td(v) << "</tr>\n";
+  }
+  *h << "</table></div>\n";
+}
+
+// Estimators side by side: a row per metric (the union, in first-seen order), a column each.
+void EstimatorTable(const Json& estimators, std::ostringstream* h) {
+  std::vector<std::string> names, keys;
+  std::vector<std::map<std::string, Json>> values;
+  std::set<std::string> seen;
+  for (auto it = estimators.begin(); it != estimators.end(); ++it) {
+    names.push_back(it.key());
+    std::vector<std::pair<std::string, Json>> rows;
+    Flatten(it.value(), "", &rows);
+    values.emplace_back();
+    for (auto& [path, v] : rows) {
+      // Every estimator's metrics are under "metrics.": left out for shorter rows.
+      const std::string key = path.rfind("metrics.", 0) == 0 ? path.substr(8) : path;
+      if (seen.insert(key).second) keys.push_back(key);
+      values.back()[key] = v;
+    }
+  }
+  *h << "<div class=\"scroll\"><table>\n<tr><th>metric</th>";
+  for (const std::string& n : names) *h << "<th>" << HtmlEscape(n) << "</th>";
+  *h << "</tr>\n";
+  for (const std::string& key : keys) {
+    *h << "<tr><td>" << HtmlEscape(key) << "</td>";
+    for (const auto& col : values) {
+      const auto it = col.find(key);
+      *h << (it == col.end() ? std::string("<td></td>") : Td(it->second));
+    }
+    *h << "</tr>\n";
+  }
+  *h << "</table></div>\n";
+}
+
+void Figures(const std::vector<FileEntry>& files, bool top_level_only, std::ostringstream* h) {
+  int n = 0;
+  for (const FileEntry& f : files) {
+    if (Extension(f.rel) != "png") continue;
+    if (top_level_only && f.rel.find('/') != std::string::npos) continue;
+    const std::string src = HtmlEscape(UrlPath(f.rel));
+    const std::string description = FigureDescription(f.rel);
+    ++n;
+    *h << "<figure><a href=\"" << src << "\"><img src=\"" << src << "\" alt=\"" << HtmlEscape(f.rel)
+       << "\"></a><figcaption>Figure " << n << ": <code>" << HtmlEscape(f.rel) << "</code>"
+       << (description.empty() ? "" : " &mdash; ") << HtmlEscape(description)
+       << "</figcaption></figure>\n";
+  }
+  if (n == 0) *h << "<p class=\"muted\">No figures.</p>\n";
+}
+
+// Links to the data files; `keep` chooses which.
+template <typename Keep>
+void FileLinks(const std::vector<FileEntry>& files, Keep keep, std::ostringstream* h) {
+  *h << "<ul>\n";
+  for (const FileEntry& f : files) {
+    if (!IsDataFile(f.rel) || !keep(f.rel)) continue;
+    *h << "<li><a href=\"" << HtmlEscape(UrlPath(f.rel)) << "\">" << HtmlEscape(f.rel)
+       << "</a></li>\n";
+  }
+  *h << "</ul>\n";
+}
+
+// --- A run ----------------------------------------------------------------------------------
+
+std::string RunReport(const fs::path& dir) {
+  const Json s = ReadJson(dir / "summary.json");
+  const std::vector<FileEntry> files = ListFiles(dir);
+  const std::string scenario = s.value("scenario", std::string("(unnamed)"));
+  std::ostringstream h;
+  Head(scenario + " - flexbench report", &h);
+  h << "<h1>" << HtmlEscape(scenario) << "</h1>\n";
+  if (s.contains("description") && s["description"].is_string()) {
+    h << "<p>" << HtmlEscape(s["description"].get<std::string>()) << "</p>\n";
+  }
+  std::vector<std::pair<std::string, std::string>> rows = {
+      {"scenario", Cell(s.value("scenario", Json()))},
+      {"kind", Cell(s.value("kind", Json()))},
+      {"seed", Cell(s.value("seed", Json()))}};
+  if (s.contains("command")) {
+    rows.emplace_back("command",
+                      "<pre>" +
+                          HtmlEscape(s["command"].is_string() ? s["command"].get<std::string>()
+                                                              : s["command"].dump()) +
+                          "</pre>");
+  }
+  std::string overrides = "none";
+  if (s.contains("overrides") && s["overrides"].is_array() && !s["overrides"].empty()) {
+    overrides.clear();
+    for (const Json& o : s["overrides"]) {
+      overrides += (overrides.empty() ? "" : "<br>") +
+                   Code("--set " + (o.is_string() ? o.get<std::string>() : o.dump()));
+    }
+  }
+  rows.emplace_back("overrides", overrides);
+  KeyValueTable(rows, &h);
+
+  h << "<h2>Gates</h2>\n";
+  GateTable(s.value("gates", Json()), false, &h);
+  h << "<h2>Metrics</h2>\n";
+  if (s.contains("metrics") && s["metrics"].is_object() && !s["metrics"].empty()) {
+    FlatTable(s["metrics"], &h);
+  }
+  if (s.contains("estimators") && s["estimators"].is_object() && !s["estimators"].empty()) {
+    h << "<h3>Estimators</h3>\n";
+    EstimatorTable(s["estimators"], &h);
+  }
+  h << "<h2>Figures</h2>\n";
+  Figures(files, false, &h);
+  h << "<h2>Files</h2>\n";
+  FileLinks(
+      files, [](const std::string&) { return true; }, &h);
+  Tail("summary.json", &h);
+  return h.str();
+}
+
+// --- A sweep --------------------------------------------------------------------------------
+
+// Seeds as ranges: "1-32" rather than 32 numbers.
+std::string SeedRanges(const Json& seeds) {
+  std::vector<long long> v;
+  for (const Json& s : seeds) {
+    if (s.is_number_integer() || s.is_number_unsigned()) v.push_back(s.get<long long>());
+  }
+  std::string out;
+  for (size_t i = 0; i < v.size();) {
+    size_t j = i;
+    while (j + 1 < v.size() && v[j + 1] == v[j] + 1) ++j;
+    out += (out.empty() ? "" : ", ") + std::to_string(v[i]) +
+           (j > i ? "&ndash;" + std::to_string(v[j]) : std::string());
+    i = j + 1;
+  }
+  return out + " (" + std::to_string(v.size()) + " seeds)";
+}
+
+void PointMetrics(const Json& point, std::ostringstream* h) {
+  *h << "<div class=\"scroll\"><table>\n<tr><th>metric</th><th>n</th><th>mean</th>"
+        "<th>95% CI of the mean</th><th>std</th><th>median</th><th>min</th><th>max</th></tr>\n";
+  for (const char* group : {"metrics", "ratios"}) {
+    if (!point.contains(group) || !point[group].is_object()) continue;
+    for (auto it = point[group].begin(); it != point[group].end(); ++it) {
+      const Json& m = it.value();
+      *h << "<tr><td>" << HtmlEscape(it.key()) << "</td>" << Td(m.value("n", Json()))
+         << Td(m.value("mean", Json())) << "<td class=\"num\">[" << Cell(m.value("ci_low", Json()))
+         << ", " << Cell(m.value("ci_high", Json())) << "]</td>" << Td(m.value("std", Json()))
+         << Td(m.value("median", Json())) << Td(m.value("min", Json()))
+         << Td(m.value("max", Json())) << "</tr>\n";
+    }
+  }
+  *h << "</table></div>\n";
+}
+
+void PointGates(const Json& point, std::ostringstream* h) {
+  if (!point.contains("gates") || !point["gates"].is_object() || point["gates"].empty()) return;
+  *h << "<table>\n<tr><th>scenario gate</th><th>passes / runs</th><th>pass fraction</th>"
+        "<th>95% Wilson interval</th></tr>\n";
+  for (auto it = point["gates"].begin(); it != point["gates"].end(); ++it) {
+    const Json& g = it.value();
+    *h << "<tr><td>" << HtmlEscape(it.key()) << "</td><td class=\"num\">"
+       << Cell(g.value("passes", Json())) << " / " << Cell(g.value("n", Json())) << "</td>"
+       << Td(g.value("pass_fraction", Json())) << "<td class=\"num\">["
+       << Cell(g.value("wilson_low", Json())) << ", " << Cell(g.value("wilson_high", Json()))
+       << "]</td></tr>\n";
+  }
+  *h << "</table>\n";
+}
+
+std::string SweepReport(const fs::path& dir) {
+  const Json a = ReadJson(dir / "aggregate.json");
+  Json how = Json::object();
+  if (fs::is_regular_file(dir / kSweepCommandFile)) how = ReadJson(dir / kSweepCommandFile);
+  const std::vector<FileEntry> files = ListFiles(dir);
+  const std::string name = a.value("sweep", std::string("(unnamed)"));
+  std::ostringstream h;
+  Head(name + " - flexbench sweep report", &h);
+  h << "<h1>Sweep " << HtmlEscape(name) << "</h1>\n";
+  std::vector<std::pair<std::string, std::string>> rows = {
+      {"sweep", Cell(a.value("sweep", Json()))}};
+  for (const char* key : {"sweep_file", "scenario"}) {
+    if (how.contains(key)) rows.emplace_back(key, Cell(how[key]));
+  }
+  rows.emplace_back("seeds", SeedRanges(a.value("seeds", Json::array())));
+  if (how.contains("command"))
+    rows.emplace_back("command", "<pre>" + Cell(how["command"]) + "</pre>");
+  rows.emplace_back("runs", Cell(a.value("runs", Json())) + " (" +
+                                Cell(a.value("succeeded", Json())) + " succeeded)");
+  rows.emplace_back("bootstrap resamples", Cell(a.value("bootstrap_resamples", Json())));
+  KeyValueTable(rows, &h);
+
+  h << "<h2>Sweep gates</h2>\n";
+  GateTable(a.value("gates", Json()), true, &h);
+  const Json failed = a.value("failed", Json::array());
+  if (failed.is_array() && !failed.empty()) {
+    h << "<h2>Failed runs</h2>\n<table>\n<tr><th>point</th><th>seed</th><th>status</th>"
+         "<th>error</th></tr>\n";
+    for (const Json& f : failed) {
+      h << "<tr><td>" << Cell(f.value("point", Json())) << "</td>" << Td(f.value("seed", Json()))
+        << "<td>" << Cell(f.value("status", Json())) << "</td><td>"
+        << Cell(f.value("error", Json())) << "</td></tr>\n";
+    }
+    h << "</table>\n";
+  }
+  h << "<h2>Aggregate per point</h2>\n";
+  for (const Json& p : a.value("points", Json::array())) {
+    h << "<h3>Point " << Cell(p.value("point", Json())) << "</h3>\n";
+    std::string set;
+    const Json ps = p.value("set", Json::object());
+    for (auto it = ps.begin(); it != ps.end(); ++it) {
+      set += (set.empty() ? "" : ", ") +
+             Code(it.key() + "=" +
+                  (it.value().is_string() ? it.value().get<std::string>() : it.value().dump()));
+    }
+    h << "<p>" << (set.empty() ? std::string("no grid values") : set) << "; "
+      << Cell(p.value("succeeded", Json())) << " of " << Cell(p.value("runs", Json()))
+      << " runs succeeded.</p>\n";
+    PointGates(p, &h);
+    PointMetrics(p, &h);
+  }
+  h << "<h2>Figures</h2>\n";
+  Figures(files, true, &h);
+  h << "<h2>Files</h2>\n<p>Each run's folder has its own report.</p>\n";
+  // Under runs/ only the runs' reports and summaries: their other files are in their reports.
+  FileLinks(
+      files,
+      [](const std::string& rel) {
+        if (rel.rfind("runs/", 0) != 0) return true;
+        const std::string name = fs::path(rel).filename().string();
+        return name == kReportName || name == "summary.json";
+      },
+      &h);
+  Tail("aggregate.json", &h);
+  return h.str();
+}
+
+}  // namespace
+
+std::string HtmlEscape(const std::string& text) {
+  std::string out;
+  out.reserve(text.size());
+  for (char c : text) {
+    switch (c) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&#39;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+std::string UrlPath(const std::string& relative) {
+  static const char* kHex = "0123456789ABCDEF";
+  std::string out;
+  for (unsigned char c : relative) {
+    if (std::isalnum(c) || c == '-' || c == '.' || c == '_' || c == '~' || c == '/') {
+      out += static_cast<char>(c);
+    } else {
+      out += '%';
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
+    }
+  }
+  return out;
+}
+
+std::string ShellQuote(const std::string& arg) {
+  const bool safe = !arg.empty() && std::all_of(arg.begin(), arg.end(), [](unsigned char c) {
+    return std::isalnum(c) || std::string("_@%+=:,./-").find(c) != std::string::npos;
+  });
+  if (safe) return arg;
+  std::string q = "'";
+  for (char c : arg) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+std::string CommandLine(const std::vector<std::string>& args) {
+  std::string line;
+  for (const std::string& a : args) line += (line.empty() ? "" : " ") + ShellQuote(a);
+  return line;
+}
+
+std::string RenderReport(const fs::path& dir) {
+  std::error_code ec;
+  if (fs::is_regular_file(dir / "summary.json", ec)) return RunReport(dir);
+  if (fs::is_regular_file(dir / "aggregate.json", ec)) return SweepReport(dir);
+  throw InputError(CapForMessage(dir.string()) +
+                   ": not a flexbench result (no summary.json or aggregate.json)");
+}
+
+// Folders below a run's `dir` that are results themselves (e.g. closed_loop_estimators'
+// identify/), deepest first: their reports exist before a page above links them.
+std::vector<fs::path> NestedResults(const fs::path& dir) {
+  std::vector<fs::path> nested;
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->is_directory(ec) && fs::is_regular_file(it->path() / "summary.json", ec)) {
+      nested.push_back(it->path());
+    }
+  }
+  std::sort(nested.begin(), nested.end(), [](const fs::path& a, const fs::path& b) {
+    const auto depth = [](const fs::path& p) { return std::distance(p.begin(), p.end()); };
+    return depth(a) != depth(b) ? depth(a) > depth(b) : a < b;
+  });
+  return nested;
+}
+
+void WriteReport(const fs::path& dir) {
+  std::error_code ec;
+  if (fs::is_regular_file(dir / "summary.json", ec)) {
+    for (const fs::path& sub : NestedResults(dir)) {
+      WriteFileAtomic(sub / kReportName, RunReport(sub));
+    }
+  }
+  WriteFileAtomic(dir / kReportName, RenderReport(dir));
+}
+
+int ReportCommand(const std::string& dir) {
+  try {
+    WriteReport(dir);
+    std::cerr << "[flexbench] wrote " << (fs::path(dir) / kReportName).string() << "\n";
+    return kExitOk;
+  } catch (const std::exception& e) {
+    return ReportError(e);
+  }
+}
+
+}  // namespace flexbench::scenarios
