@@ -293,7 +293,9 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
       if (!fs::is_regular_file(st)) OptionError(option, path, "not a regular file");
     }
     if (!(std::isfinite(o.point_std_m) && o.point_std_m >= 1e-7 && o.point_std_m <= 1.0)) {
-      OptionError("--point-std", std::to_string(o.point_std_m),
+      char v[32];
+      std::snprintf(v, sizeof(v), "%g", o.point_std_m);  // to_string: 1e-300 -> "0.000000"
+      OptionError("--point-std", v,
                   "must be between 1e-7 and 1 (metres)");
     }
     // The model is the declared file's; --model, when given, must be that file.

@@ -258,6 +258,52 @@ TEST(Reliability, ScenarioNameCannotLeaveTheOutputFolder) {
   EXPECT_NE(r.err.find("key 'scenario': must be a plain name"), std::string::npos) << r.err;
 }
 
+// A closed_loop scenario on a user's CSV with an inline declared block (issue 21).
+std::string ClosedLoopYaml(const fs::path& dir, const std::string& declared_model,
+                           const std::string& distances) {
+  std::string csv = "joint1,joint2,joint3,group\n";
+  for (int i = 0; i < 12; ++i) {
+    char row[120];
+    std::snprintf(row, sizeof(row), "%.3f,%.3f,%.3f,g%d\n", 0.05 * i, -0.03 * i, 0.02 * i, i % 2);
+    csv += row;
+  }
+  WriteFile(dir / "cal.csv", csv);
+  return "scenario: cl\nkind: closed_loop\nseed: 1\nmodel: " + SourceDir() +
+         "/models/planar3.xml\ndeclared:\n  model: " + declared_model +
+         "\n  actuated_joints: [joint1, joint2, joint3]\n  end_effector: ee\n"
+         "  sources:\n    - {at: joint1, about_axis_deg: 1}\n"
+         "calibration: {csv: " +
+         (dir / "cal.csv").string() + ", distances: " + distances +
+         "}\nvalidation: {csv: " + (dir / "cal.csv").string() + "}\ncandidates: [joint_offset]\n";
+}
+
+TEST(Reliability, InlineDeclaredModelMustBeTheScenariosModel) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "cl.yaml";
+  WriteFile(s, ClosedLoopYaml(tmp.path(), SourceDir() + "/models/rover_arm.xml", "[]"));
+  const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("cl.yaml:6: key 'declared.model': names "), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("not the scenario's model"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+}
+
+TEST(Reliability, CsvGroupDistancesMustBePositiveAndBetweenTwoGroups) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "cl.yaml";
+  const std::string model = SourceDir() + "/models/planar3.xml";
+  for (const char* bad : {"[[g0, g1, -0.05]]", "[[g0, g1, 0]]", "[[g0, g1, 1e300]]",
+                          "[[g0, g1, .nan]]", "[[g0, g0, 0.05]]"}) {
+    WriteFile(s, ClosedLoopYaml(tmp.path(), model, bad));
+    const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.err;
+    EXPECT_NE(LastLine(r.err).find("cl.yaml:11: key 'calibration.distances[0]"), std::string::npos)
+        << bad << ": " << r.err;
+    EXPECT_FALSE(fs::exists(tmp.path() / "out")) << bad;
+  }
+}
+
 // identify: configured in memory, errors name the option, --model used or rejected.
 class IdentifyCli : public ::testing::Test {
  protected:
@@ -307,7 +353,7 @@ TEST_F(IdentifyCli, OptionErrorsNameTheOptionNotATemporaryFile) {
   EXPECT_EQ(r.err.find("/tmp/flexbench_identify"), std::string::npos) << r.err;
   r = Identify("--point-std 1e-300");
   EXPECT_EQ(r.exit_code, 2) << r.err;
-  EXPECT_NE(r.err.find("--point-std"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--point-std 1e-300: must be between"), std::string::npos) << r.err;
   r = Identify("--point-std -1");
   EXPECT_EQ(r.exit_code, 2) << r.err;
 }
