@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "scenarios/identify/calibration_data.h"
 #include "scenarios/runner/gates.h"
 #include "scenarios/runner/output.h"
 #include "scenarios/runner/progress.h"
@@ -314,6 +315,15 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
                     "is not the model the declared file names (" +
                         CapForMessage(declared.model_path) +
                         "); omit --model or name the same file");
+      }
+    }
+    // Size caps before the same-rows comparison reads both files whole.
+    for (const auto& [option, path] : {std::pair{"--calibration", o.calibration_csv},
+                                       std::pair{"--validation", o.validation_csv}}) {
+      try {
+        CheckInputFile(path, identify::kMaxCalibrationCsvBytes);
+      } catch (const InputError& e) {
+        throw InputError(std::string(option) + ": " + e.what());
       }
     }
     {

@@ -304,6 +304,44 @@ TEST(Reliability, CsvGroupDistancesMustBePositiveAndBetweenTwoGroups) {
   }
 }
 
+// The README's size caps (16 MiB YAML, 64 MiB model, 512 MiB CSV): files one byte over are bad
+// input, refused before they are read (sparse files: nothing is written to disk).
+TEST(Reliability, FilesOverTheSizeCapsAreRefusedUnread) {
+  TempDir tmp;
+  const auto sparse = [&](const std::string& name, std::uintmax_t bytes) {
+    const fs::path p = tmp.path() / name;
+    WriteFile(p, "");
+    fs::resize_file(p, bytes);
+    return p;
+  };
+  const fs::path big_yaml = sparse("big.yaml", (16u << 20) + 1);
+  CommandResult r = RunCommand(RunCmd(big_yaml, tmp.path() / "out"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("big.yaml: 16777217 bytes, more than the 16777216 allowed"),
+            std::string::npos)
+      << r.err;
+  const fs::path big_xml = sparse("big.xml", (64u << 20) + 1);
+  const fs::path s = tmp.path() / "s.yaml";
+  WriteFile(s, SmokeYaml("", big_xml.string()));
+  r = RunCommand(RunCmd(s, tmp.path() / "out"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("big.xml: 67108865 bytes, more than"), std::string::npos)
+      << r.err;
+  // Two different oversized CSVs: refused by size, not read whole to compare them.
+  const fs::path big_csv = sparse("big.csv", (512ull << 20) + 1);
+  const fs::path big_csv2 = sparse("big2.csv", (512ull << 20) + 1);
+  r = RunCommand(Flexbench() + " identify --declared " + SourceDir() +
+                 "/models/planar3.declared.yaml --calibration " + big_csv.string() +
+                 " --validation " + big_csv2.string() + " --out " +
+                 (tmp.path() / "out").string() + " </dev/null");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("--calibration: " + big_csv.string() +
+                                 ": 536870913 bytes, more than"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+}
+
 // identify: configured in memory, errors name the option, --model used or rejected.
 class IdentifyCli : public ::testing::Test {
  protected:
