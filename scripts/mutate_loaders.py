@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 # Mutation testing of flexbench's loaders (issue 21): scenario YAML, declared-model YAML,
-# calibration CSV (point and group formats), a MUKCa folder (../shared/data/mukca) and MJCF are
+# calibration CSV (point and group formats), a closed_loop scenario (inline declared block, group
+# distances), a MUKCa folder (../shared/data/mukca) and MJCF are
 # mutated (byte flips, cuts, inserted tokens, duplicated or dropped lines, absurd numbers) and
 # run through build/bin/flexbench (a copy, so rebuilding meanwhile is safe). Counts exit codes
 # per loader; a problem is an exit code outside {0, 2, 3}, a bad-input exit without an error
@@ -65,7 +66,13 @@ def run(cmd, cwd):
 
 hist = collections.defaultdict(collections.Counter); bad = []
 start = time.time(); n = 0
-loaders = ["scenario", "declared", "csv", "csv_group", "mjcf"] + (["mukca"] if os.path.isdir(muk_src) else [])
+# A closed_loop scenario on a group CSV with an inline declared block and group distances.
+cl_yaml = (b"scenario: cl\nkind: closed_loop\nseed: 1\nmodel: " + (SRC + "/models/planar3.xml").encode() +
+           b"\ndeclared:\n  model: " + (SRC + "/models/planar3.xml").encode() +
+           b"\n  actuated_joints: [joint1, joint2, joint3]\n  end_effector: ee\n  sources:\n"
+           b"    - {at: joint1, about_axis_deg: 1}\ncalibration: {csv: cal.csv, distances: [[g0, g1, 0.05]]}\n"
+           b"validation: {csv: val.csv}\ncandidates: [joint_offset]\nmax_effects: 2\n")
+loaders = ["scenario", "declared", "csv", "csv_group", "mjcf", "closed_loop"] + (["mukca"] if os.path.isdir(muk_src) else [])
 while time.time() - start < budget_s:
     kind = loaders[n % len(loaders)]; n += 1
     case = os.path.join(W, "c"); shutil.rmtree(case, ignore_errors=True); os.makedirs(case)
@@ -88,6 +95,10 @@ while time.time() - start < budget_s:
         y = muk_scenario(case + "/m")
         if rng.random() < 0.3: y = mutate(y)
         open(case + "/s.yaml", "wb").write(y); cmd = [F, "run", "s.yaml", "--out", out]
+    elif kind == "closed_loop":
+        open(case + "/s.yaml", "wb").write(mutate(cl_yaml)); open(case + "/cal.csv", "wb").write(csvg)
+        open(case + "/val.csv", "wb").write(csv)
+        cmd = [F, "run", "s.yaml", "--out", out]
     else:
         open(case + "/m.xml", "wb").write(mutate(planar_xml))
         open(case + "/s.yaml", "wb").write(smoke.replace((SRC + "/models/planar3.xml").encode(), b"m.xml"))

@@ -68,7 +68,7 @@ double ParseNumber(const std::string& cell, const std::string& where, const std:
 class CsvLines {
  public:
   explicit CsvLines(const std::string& path) : path_(CapForMessage(path)) {
-    CheckInputFile(path, kMaxCsvBytes);
+    CheckInputFile(path, kMaxCalibrationCsvBytes);
     in_.open(path, std::ios::binary);
     if (!in_) throw InputError(path_ + ": cannot open");
   }
@@ -92,7 +92,6 @@ class CsvLines {
   std::ifstream in_;
   std::string path_;
   int line_no_ = 0;
-  static constexpr std::uintmax_t kMaxCsvBytes = 512u << 20;
 };
 
 // Group labels are global: rows with one label share one fixed point whatever their set. A

@@ -17,12 +17,16 @@
 // Rows must have the header's column count; empty cells, NaN and infinities are errors, as are
 // column names that are neither a joint of the model nor one of the above.
 #pragma once
+#include <cstdint>
 #include <string>
 #include <vector>
 
 #include "scenarios/identify/identify.h"
 
 namespace flexbench::identify {
+
+// The largest calibration CSV read (bigger is bad input, refused before reading).
+constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 
 // Appends the file's rows to `data` (groups and sets are matched by label; pixel rows need
 // data->camera). Throws InputError

@@ -1,6 +1,8 @@
 #include "scenarios/identify/effect_model.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <memory>
 
 #include "estimators/error.h"
@@ -288,6 +290,15 @@ ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const {
   L.M_mid_unit.assign(n, Vec3::Zero());
   L.axis_base = Eigen::Matrix3Xd::Zero(3, model.nq());
   L.R_mid_T.assign(n, Mat3::Identity());
+  // PredictPose's untouched-frame form with every dq zero (q + 0.0 as there, same bits).
+  L.q_nominal = q;
+  L.T_nominal.assign(n, lie::SE3());
+  for (FrameId f = 1; f < n; ++f) {
+    if (!on_path_[f]) continue;
+    const kinematics::PpoeFrame& fr = model.frame(f);
+    const double qf = fr.q_index >= 0 ? q[fr.q_index] + 0.0 : 0.0;
+    L.T_nominal[f] = L.T_nominal[fr.parent] * fr.FixedTimesMotion(qf);
+  }
   if (!has_masses_) return L;
   kinematics::PpoeData pd(model);
   kinematics::ForwardKinematics(model, pd, q);
@@ -458,6 +469,13 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
   }
   ws.T[0] = lie::SE3();
   const bool mount_turns = !mount_rot.isZero();
+  // Until the first frame the effects touch, the poses are the cached nominal ones (when cached
+  // for this very q: the diagnostics predict at perturbed readings with a row's loads).
+  bool nominal = static_cast<int>(L.T_nominal.size()) == n && L.q_nominal.size() == q.size() &&
+                 std::equal(q.data(), q.data() + q.size(), L.q_nominal.data(),
+                            [](double a, double b) {
+                              return std::memcmp(&a, &b, sizeof(double)) == 0;
+                            });
   for (FrameId f = 1; f < n; ++f) {
     if (!on_path_[f]) continue;
     const kinematics::PpoeFrame& fr = model.frame(f);
@@ -465,10 +483,17 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
         ws.origin[f].isZero(0.0) && ws.bend[f].isZero(0.0) && ws.tilt[f].isZero(0.0) &&
         !(f == mount_ && mount_turns)) {
       // Untouched by the active effects (most frames, most calls): the FK kernels' form.
-      const double qf = fr.q_index >= 0 ? q[fr.q_index] + ws.dq[fr.q_index] : 0.0;
+      const double dqf = fr.q_index >= 0 ? ws.dq[fr.q_index] : 0.0;
+      if (nominal && dqf == 0.0 && !std::signbit(dqf)) {
+        ws.T[f] = L.T_nominal[f];
+        continue;
+      }
+      nominal = false;
+      const double qf = fr.q_index >= 0 ? q[fr.q_index] + dqf : 0.0;
       ws.T[f] = ws.T[fr.parent] * fr.FixedTimesMotion(qf);
       continue;
     }
+    nominal = false;
     const Vec3& t0 = fr.T_parent_ip.translation();
     Vec3 tr = t0 * (1.0 + scale);
     if (ws.dlen[f] != 0.0) tr += ws.dlen[f] * t0.normalized();

@@ -124,6 +124,11 @@ struct ConfigLoads {
   Mat3 R_mount_T = Mat3::Identity();
   // Per joint: the sign of its last motion (+1, -1; 0 unknown), from the data.
   Eigen::VectorXd motion_sign;
+  // The chain's poses at `q_nominal` without effects, per frame on the predicted path (issue 21,
+  // identify on 10,000 rows): PredictPose copies the frames before the first one its effects
+  // touch instead of recomputing them (the same operations, the same bits). Empty: not cached.
+  Eigen::VectorXd q_nominal;
+  std::vector<lie::SE3> T_nominal;
 };
 
 // The augmented kinematics. Constant after construction; Predict needs a Workspace.

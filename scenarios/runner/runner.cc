@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "scenarios/identify/calibration_data.h"
 #include "scenarios/runner/gates.h"
 #include "scenarios/runner/output.h"
 #include "scenarios/runner/progress.h"
@@ -320,7 +321,9 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
       if (!fs::is_regular_file(st)) OptionError(option, path, "not a regular file");
     }
     if (!(std::isfinite(o.point_std_m) && o.point_std_m >= 1e-7 && o.point_std_m <= 1.0)) {
-      OptionError("--point-std", std::to_string(o.point_std_m),
+      char v[32];
+      std::snprintf(v, sizeof(v), "%g", o.point_std_m);  // to_string: 1e-300 -> "0.000000"
+      OptionError("--point-std", v,
                   "must be between 1e-7 and 1 (metres)");
     }
     // The model is the declared file's; --model, when given, must be that file.
@@ -339,6 +342,15 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
                     "is not the model the declared file names (" +
                         CapForMessage(declared.model_path) +
                         "); omit --model or name the same file");
+      }
+    }
+    // Size caps before the same-rows comparison reads both files whole.
+    for (const auto& [option, path] : {std::pair{"--calibration", o.calibration_csv},
+                                       std::pair{"--validation", o.validation_csv}}) {
+      try {
+        CheckInputFile(path, identify::kMaxCalibrationCsvBytes);
+      } catch (const InputError& e) {
+        throw InputError(std::string(option) + ": " + e.what());
       }
     }
     {

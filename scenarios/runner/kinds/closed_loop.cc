@@ -68,7 +68,13 @@ Source ParseSource(const ConfigNode& n) {
       for (const ConfigNode& e : d->Items()) {
         const std::vector<ConfigNode> it = e.Items();
         if (it.size() != 3) e.Fail("expected [group_a, group_b, metres]");
-        s.distances.emplace_back(it[0].AsString(), it[1].AsString(), it[2].AsDouble());
+        const double m = it[2].AsDouble();
+        // As MUKCa's socket_distance_m (issue 21: a negative distance was fitted silently).
+        if (!(std::isfinite(m) && m > 0.0 && m <= 10.0)) {
+          it[2].Fail("a distance must be > 0 and at most 10 m");
+        }
+        if (it[0].AsString() == it[1].AsString()) e.Fail("a distance needs two different groups");
+        s.distances.emplace_back(it[0].AsString(), it[1].AsString(), m);
       }
     }
   } else if (const auto sim = n.Optional("simulate")) {

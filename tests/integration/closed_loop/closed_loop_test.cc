@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -154,6 +155,61 @@ TEST(EffectModel, WithoutEffectsItIsMujocosKinematics) {
           g[std::find(names.begin(), names.end(), chain.q_joints[k]) - names.begin()];
       EXPECT_NEAR(L.tau[k], tau_mj, 1e-9 * (1.0 + std::abs(tau_mj))) << chain.q_joints[k];
     }
+  }
+}
+
+// Issue 21 (identify on 10,000 rows): the loads cache the effect-free chain poses at their q;
+// a prediction with the cache is bit-identical to one without, for every candidate alone and in
+// pairs, and a prediction at another q (the diagnostics' perturbed readings) ignores the cache.
+TEST(EffectModel, CachedNominalPosesGiveTheSameBits) {
+  const sim::MjModelPtr m = sim::LoadModel(testing::SourceDir() + "/models/rover_arm.xml");
+  const sim::DeclaredModel d =
+      sim::LoadDeclaredModel(testing::SourceDir() + "/models/rover_arm.declared.yaml");
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), d);
+  const EffectModel em(m.get(), chain, chain.end_effector);
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.2, 1.2), t(-1e-2, 1e-2);
+  const int nc = static_cast<int>(em.candidates().size());
+  ASSERT_GT(nc, 10);
+  const auto same = [](const lie::SE3& a, const lie::SE3& b) {
+    return std::memcmp(a.rotation().data(), b.rotation().data(), 9 * sizeof(double)) == 0 &&
+           std::memcmp(a.translation().data(), b.translation().data(), 3 * sizeof(double)) == 0;
+  };
+  for (int trial = 0; trial < 4; ++trial) {
+    Eigen::VectorXd q(chain.model.nq());
+    for (int k = 0; k < q.size(); ++k) q[k] = u(rng);
+    const ConfigLoads L = em.Loads(q);
+    ASSERT_FALSE(L.T_nominal.empty());
+    ConfigLoads L_plain = L;
+    L_plain.T_nominal.clear();
+    std::vector<double> theta(64);
+    for (double& v : theta) v = t(rng);
+    EXPECT_TRUE(same(em.PredictPose(q, L, {}, nullptr, ws),
+                     em.PredictPose(q, L_plain, {}, nullptr, ws)));
+    for (int a = 0; a < nc; ++a) {
+      if (em.candidates()[a].type == EffectType::kCameraOffset) continue;
+      const int b = (a * 7 + trial) % nc;
+      for (const std::vector<int>& act : {std::vector<int>{a}, std::vector<int>{b, a}}) {
+        if (em.candidates()[b].type == EffectType::kCameraOffset || (act.size() == 2 && a == b)) {
+          continue;
+        }
+        EXPECT_TRUE(same(em.PredictPose(q, L, act, theta.data(), ws),
+                         em.PredictPose(q, L_plain, act, theta.data(), ws)))
+            << ToString(em.candidates()[a].type) << "@" << em.candidates()[a].location;
+      }
+    }
+    // Another reading with this row's loads: the cache is not used.
+    Eigen::VectorXd q2 = q;
+    q2[0] += 0.1;
+    const int j2 = em.FindCandidate("joint_compliance@j2");
+    ASSERT_GE(j2, 0);
+    EXPECT_TRUE(same(em.PredictPose(q2, L, {}, nullptr, ws),
+                     em.PredictPose(q2, L_plain, {}, nullptr, ws)));
+    EXPECT_TRUE(same(em.PredictPose(q2, L, {j2}, theta.data(), ws),
+                     em.PredictPose(q2, L_plain, {j2}, theta.data(), ws)));
+    EXPECT_FALSE(same(em.PredictPose(q2, L, {}, nullptr, ws),
+                      em.PredictPose(q, L, {}, nullptr, ws)));
   }
 }
 

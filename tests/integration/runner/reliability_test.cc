@@ -258,6 +258,90 @@ TEST(Reliability, ScenarioNameCannotLeaveTheOutputFolder) {
   EXPECT_NE(r.err.find("key 'scenario': must be a plain name"), std::string::npos) << r.err;
 }
 
+// A closed_loop scenario on a user's CSV with an inline declared block (issue 21).
+std::string ClosedLoopYaml(const fs::path& dir, const std::string& declared_model,
+                           const std::string& distances) {
+  std::string csv = "joint1,joint2,joint3,group\n";
+  for (int i = 0; i < 12; ++i) {
+    char row[120];
+    std::snprintf(row, sizeof(row), "%.3f,%.3f,%.3f,g%d\n", 0.05 * i, -0.03 * i, 0.02 * i, i % 2);
+    csv += row;
+  }
+  WriteFile(dir / "cal.csv", csv);
+  return "scenario: cl\nkind: closed_loop\nseed: 1\nmodel: " + SourceDir() +
+         "/models/planar3.xml\ndeclared:\n  model: " + declared_model +
+         "\n  actuated_joints: [joint1, joint2, joint3]\n  end_effector: ee\n"
+         "  sources:\n    - {at: joint1, about_axis_deg: 1}\n"
+         "calibration: {csv: " +
+         (dir / "cal.csv").string() + ", distances: " + distances +
+         "}\nvalidation: {csv: " + (dir / "cal.csv").string() + "}\ncandidates: [joint_offset]\n";
+}
+
+TEST(Reliability, InlineDeclaredModelMustBeTheScenariosModel) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "cl.yaml";
+  WriteFile(s, ClosedLoopYaml(tmp.path(), SourceDir() + "/models/rover_arm.xml", "[]"));
+  const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("cl.yaml:6: key 'declared.model': names "), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("not the scenario's model"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+}
+
+TEST(Reliability, CsvGroupDistancesMustBePositiveAndBetweenTwoGroups) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "cl.yaml";
+  const std::string model = SourceDir() + "/models/planar3.xml";
+  for (const char* bad : {"[[g0, g1, -0.05]]", "[[g0, g1, 0]]", "[[g0, g1, 1e300]]",
+                          "[[g0, g1, .nan]]", "[[g0, g0, 0.05]]"}) {
+    WriteFile(s, ClosedLoopYaml(tmp.path(), model, bad));
+    const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.err;
+    EXPECT_NE(LastLine(r.err).find("cl.yaml:11: key 'calibration.distances[0]"), std::string::npos)
+        << bad << ": " << r.err;
+    EXPECT_FALSE(fs::exists(tmp.path() / "out")) << bad;
+  }
+}
+
+// The README's size caps (16 MiB YAML, 64 MiB model, 512 MiB CSV): files one byte over are bad
+// input, refused before they are read (sparse files: nothing is written to disk).
+TEST(Reliability, FilesOverTheSizeCapsAreRefusedUnread) {
+  TempDir tmp;
+  const auto sparse = [&](const std::string& name, std::uintmax_t bytes) {
+    const fs::path p = tmp.path() / name;
+    WriteFile(p, "");
+    fs::resize_file(p, bytes);
+    return p;
+  };
+  const fs::path big_yaml = sparse("big.yaml", (16u << 20) + 1);
+  CommandResult r = RunCommand(RunCmd(big_yaml, tmp.path() / "out"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("big.yaml: 16777217 bytes, more than the 16777216 allowed"),
+            std::string::npos)
+      << r.err;
+  const fs::path big_xml = sparse("big.xml", (64u << 20) + 1);
+  const fs::path s = tmp.path() / "s.yaml";
+  WriteFile(s, SmokeYaml("", big_xml.string()));
+  r = RunCommand(RunCmd(s, tmp.path() / "out"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("big.xml: 67108865 bytes, more than"), std::string::npos)
+      << r.err;
+  // Two different oversized CSVs: refused by size, not read whole to compare them.
+  const fs::path big_csv = sparse("big.csv", (512ull << 20) + 1);
+  const fs::path big_csv2 = sparse("big2.csv", (512ull << 20) + 1);
+  r = RunCommand(Flexbench() + " identify --declared " + SourceDir() +
+                 "/models/planar3.declared.yaml --calibration " + big_csv.string() +
+                 " --validation " + big_csv2.string() + " --out " +
+                 (tmp.path() / "out").string() + " </dev/null");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(LastLine(r.err).find("--calibration: " + big_csv.string() +
+                                 ": 536870913 bytes, more than"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+}
+
 // identify: configured in memory, errors name the option, --model used or rejected.
 class IdentifyCli : public ::testing::Test {
  protected:
@@ -307,7 +391,7 @@ TEST_F(IdentifyCli, OptionErrorsNameTheOptionNotATemporaryFile) {
   EXPECT_EQ(r.err.find("/tmp/flexbench_identify"), std::string::npos) << r.err;
   r = Identify("--point-std 1e-300");
   EXPECT_EQ(r.exit_code, 2) << r.err;
-  EXPECT_NE(r.err.find("--point-std"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--point-std 1e-300: must be between"), std::string::npos) << r.err;
   r = Identify("--point-std -1");
   EXPECT_EQ(r.exit_code, 2) << r.err;
 }
