@@ -152,7 +152,9 @@ TEST_P(AugmentedModel, EachEffectPredictsAsTheIdentificationModel) {
     aug.identified_effects.push_back({c.Name(), v, {}, c.unit, "test:1"});
     const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
     // A payload alone moves nothing (it loads compliances that are not there).
-    if (c.type != EffectType::kPayload) ASSERT_NE(chain.effects_or_null(), nullptr) << c.Name();
+    if (c.type != EffectType::kPayload) {
+      ASSERT_NE(chain.effects_or_null(), nullptr) << c.Name();
+    }
     for (const Eigen::VectorXd& q : qs) {
       const lie::SE3 expected = rig->em->PredictPose(q, rig->em->Loads(q), {static_cast<int>(i)},
                                                      v.data(), ws);
