@@ -41,7 +41,7 @@ figure{margin:12px 0 20px;padding:8px;border:1px solid #ddd;display:inline-block
 vertical-align:top}
 figure img{max-width:100%;max-height:900px;display:block}
 figcaption{font-size:13px;margin-top:6px;color:#333}
-table.kv td{max-width:none}.scroll{overflow-x:auto}.muted{color:#666}
+table.kv td{max-width:none}table.kv th{white-space:nowrap}.scroll{overflow-x:auto}.muted{color:#666}
 li{font-family:monospace;font-size:13px}
 )";
 
