@@ -47,6 +47,12 @@ TEST_P(FuzzReplay, EveryCorpusAndRegressionFileIsAcceptedOrAnInputError) {
   std::vector<fs::path> files = corpus;
   const std::vector<fs::path> regressions = Files(root / "regressions" / target.name);
   files.insert(files.end(), regressions.begin(), regressions.end());
+  // A fuzzer's own corpus replayed the same way: FLEXBENCH_FUZZ_REPLAY_EXTRA=<dir> holding
+  // <target>/ folders (e.g. the first folder given to build-fuzz/bin/fuzz_<target>).
+  if (const char* extra = std::getenv("FLEXBENCH_FUZZ_REPLAY_EXTRA")) {
+    const std::vector<fs::path> more = Files(fs::path(extra) / target.name);
+    files.insert(files.end(), more.begin(), more.end());
+  }
   const std::string& work = flexbench::fuzz::WorkDir();
   int accepted = 0, rejected = 0;
   for (const fs::path& file : files) {
@@ -74,8 +80,9 @@ TEST_P(FuzzReplay, EveryCorpusAndRegressionFileIsAcceptedOrAnInputError) {
     EXPECT_NE(error->find(work), std::string::npos) << "message names no input file: " << *error;
     EXPECT_LT(error->size(), 2000u) << *error;
   }
-  std::printf("[ fuzz     ] %s: %zu corpus + %zu regression files, %d accepted, %d rejected\n",
-              target.name, corpus.size(), regressions.size(), accepted, rejected);
+  std::printf("[ fuzz     ] %s: %zu corpus + %zu regression files (%zu in all), %d accepted, "
+              "%d rejected\n",
+              target.name, corpus.size(), regressions.size(), files.size(), accepted, rejected);
 }
 
 INSTANTIATE_TEST_SUITE_P(Targets, FuzzReplay, testing::ValuesIn(flexbench::fuzz::Targets()),
