@@ -1,0 +1,176 @@
+#include "tests/fuzz/fuzz_entry.h"
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <stdexcept>
+
+#include "estimators/error.h"
+#include "scenarios/identify/calibration_data.h"
+#include "scenarios/runner/gates.h"
+#include "scenarios/runner/runner.h"
+#include "sim/config.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "sim/mujoco_model.h"
+
+namespace fs = std::filesystem;
+
+namespace flexbench::fuzz {
+namespace {
+
+std::string g_work_dir;
+
+void RemoveWorkDir() {
+  std::error_code ec;
+  if (!g_work_dir.empty()) fs::remove_all(g_work_dir, ec);
+}
+
+void MakeWorkDir() {
+  const char* tmp = std::getenv("TMPDIR");
+  std::string pattern = std::string(tmp && *tmp ? tmp : "/tmp") + "/flexbench-fuzz-XXXXXX";
+  if (!mkdtemp(pattern.data())) throw std::runtime_error("fuzz: cannot create " + pattern);
+  g_work_dir = pattern;
+  std::atexit(RemoveWorkDir);
+  const fs::path w(g_work_dir);
+  for (const char* d : {"scenarios", "declared", "calibration", "mukca/front", "gates", "mjcf"}) {
+    fs::create_directories(w / d);
+  }
+  // Scenario files name their models as ../models/<file>, declared files as <file> (links to
+  // the repository's models; the declared reader checks that the file exists).
+  const fs::path models = fs::path(FLEXBENCH_SOURCE_DIR) / "models";
+  fs::create_directory_symlink(models, w / "models");
+  for (const fs::directory_entry& e : fs::directory_iterator(models)) {
+    fs::create_symlink(e.path(), w / "declared" / e.path().filename());
+  }
+}
+
+// Writes `size` bytes to `path` (replacing it); returns the path.
+std::string WriteFile(const fs::path& path, const std::uint8_t* data, std::size_t size) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  f.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
+  f.close();
+  if (!f) throw std::runtime_error("fuzz: cannot write " + path.string());
+  return path.string();
+}
+
+fs::path Work(const char* relative) { return fs::path(WorkDir()) / relative; }
+
+// Runs `body`; an InputError becomes its message, everything else escapes.
+template <class F>
+std::optional<std::string> Guard(F&& body) {
+  try {
+    body();
+  } catch (const InputError& e) {
+    return std::string(e.what());
+  }
+  return std::nullopt;
+}
+
+// The fixed MJCFs of the declared-model target, loaded once, by file name.
+const sim::MjModelPtr& FixedModel(const std::string& model_path) {
+  static const std::map<std::string, sim::MjModelPtr> models = [] {
+    std::map<std::string, sim::MjModelPtr> m;
+    for (const char* name : {"planar3.xml", "jsk_arm.xml", "rover_arm.xml", "humanoid_upper.xml"}) {
+      m.emplace(name, sim::LoadModel(std::string(FLEXBENCH_SOURCE_DIR) + "/models/" + name));
+    }
+    return m;
+  }();
+  const auto it = models.find(fs::path(model_path).filename().string());
+  return it != models.end() ? it->second : models.at("planar3.xml");
+}
+
+}  // namespace
+
+void Init() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    sim::InstallMujocoHandlers();
+    MakeWorkDir();
+  });
+}
+
+const std::string& WorkDir() {
+  Init();
+  return g_work_dir;
+}
+
+std::optional<std::string> Scenario(const std::uint8_t* data, std::size_t size) {
+  const std::string path = WriteFile(Work("scenarios/fuzz.yaml"), data, size);
+  return Guard([&] { scenarios::CheckScenario(path, {}); });
+}
+
+std::optional<std::string> DeclaredModel(const std::uint8_t* data, std::size_t size) {
+  const std::string path = WriteFile(Work("declared/fuzz.declared.yaml"), data, size);
+  return Guard([&] {
+    const sim::DeclaredModel declared = sim::LoadDeclaredModel(path);
+    sim::BuildDeclaredChain(FixedModel(declared.model_path).get(), declared);
+  });
+}
+
+std::optional<std::string> CalibrationCsv(const std::uint8_t* data, std::size_t size) {
+  const std::string path = WriteFile(Work("calibration/data.csv"), data, size);
+  return Guard([&] {
+    identify::DataSet d;
+    d.camera.present = true;
+    d.camera.fx = d.camera.fy = 500.0;
+    d.camera.cx = 320.0;
+    d.camera.cy = 240.0;
+    identify::ReadCalibrationCsv(path, {"j1", "j2"}, &d);
+  });
+}
+
+std::optional<std::string> Mukca(const std::uint8_t* data, std::size_t size) {
+  const std::string text(reinterpret_cast<const char*>(data), size);
+  std::string hole0 = text, hole1 = text;
+  const std::string line = "----\n";
+  size_t cut = text.rfind(line, 0) == 0 ? 0 : text.find("\n" + line);
+  if (cut != std::string::npos) {
+    if (cut > 0) ++cut;  // keep hole_0's last newline
+    hole0 = text.substr(0, cut);
+    hole1 = text.substr(cut + line.size());
+  }
+  const fs::path dir = Work("mukca/front");
+  auto bytes = [](const std::string& s) { return reinterpret_cast<const std::uint8_t*>(s.data()); };
+  WriteFile(dir / "hole_0.csv", bytes(hole0), hole0.size());
+  WriteFile(dir / "hole_1.csv", bytes(hole1), hole1.size());
+  return Guard([&] {
+    identify::DataSet d;
+    identify::ReadMukcaPlacement(dir.string(), "front", 7, 0.05, &d);
+  });
+}
+
+std::optional<std::string> Gates(const std::uint8_t* data, std::size_t size) {
+  const std::string path = WriteFile(Work("gates/gates.yaml"), data, size);
+  return Guard([&] {
+    const ConfigNode root = ConfigNode::LoadFile(path);
+    const std::vector<scenarios::GateSpec> gates = scenarios::ParseGates(root);
+    root.CheckNoUnknownKeys();
+    static const scenarios::Json summary = scenarios::Json::parse(R"({
+      "scenario": "fuzz", "metrics": {"detections": 1, "corner_rmse_px": 0.25, "ok": true,
+                                      "none": null, "text": "x"},
+      "estimators": {"ppoe_ekf": {"metrics": {"lateral_err_mean_m": 0.001}},
+                     "naive_ekf": {"metrics": {"lateral_err_mean_m": 0.002}}}})");
+    bool all_passed = false;
+    scenarios::EvaluateGates(gates, summary, &all_passed);
+    scenarios::CheckGateMetricsExist(gates, summary);
+  });
+}
+
+std::optional<std::string> Mjcf(const std::uint8_t* data, std::size_t size) {
+  const std::string path = WriteFile(Work("mjcf/model.xml"), data, size);
+  return Guard([&] { sim::LoadModel(path); });
+}
+
+const std::vector<Target>& Targets() {
+  static const std::vector<Target> targets = {
+      {"scenario", Scenario},          {"declared_model", DeclaredModel},
+      {"calibration_csv", CalibrationCsv}, {"mukca", Mukca},
+      {"gates", Gates},                {"mjcf", Mjcf},
+  };
+  return targets;
+}
+
+}  // namespace flexbench::fuzz
