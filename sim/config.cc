@@ -5,6 +5,8 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <yaml-cpp/eventhandler.h>
+#include <yaml-cpp/parser.h>
 
 namespace flexbench {
 namespace {
@@ -197,6 +199,54 @@ void ApplyOverride(YAML::Node root, const ConfigOverride& o, const std::string& 
 
 }  // namespace
 
+namespace {
+
+// Where each document of a YAML stream starts; nothing else is kept.
+class DocumentStarts : public YAML::EventHandler {
+ public:
+  std::vector<YAML::Mark> starts;
+  void OnDocumentStart(const YAML::Mark& mark) override { starts.push_back(mark); }
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                const std::string&) override {}
+  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {}
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {}
+  void OnMapEnd() override {}
+};
+
+// The one document of `text`, or an InputError. Never YAML::LoadAll: yaml-cpp 0.7 loops forever
+// on some malformed streams (a file holding only ',' allocates until memory runs out; found by
+// tests/fuzz, yaml-cpp issue 1040), handing out the same broken document again and again without
+// moving on. Here at most two documents are parsed, and a second one starting where the first
+// did is that loop: a syntax error at that place.
+YAML::Node LoadOneDocument(const std::string& text, const std::string& name) {
+  DocumentStarts events;
+  {
+    std::istringstream in(text);
+    YAML::Parser parser(in);
+    while (events.starts.size() < 2 && parser.HandleNextDocument(events)) {
+    }
+  }
+  if (events.starts.size() > 1) {
+    const YAML::Mark& first = events.starts[0];
+    const YAML::Mark& second = events.starts[1];
+    if (second.pos == first.pos) {
+      throw InputError(name + ":" + LineOf(second) +
+                       ": YAML syntax error: a token where no value can start");
+    }
+    throw InputError(name + ":" + LineOf(second) +
+                     ": a second YAML document ('---'); a file holds one");
+  }
+  return YAML::Load(text);
+}
+
+}  // namespace
+
 ConfigNode ConfigNode::LoadFile(const std::string& path,
                                 const std::vector<ConfigOverride>& overrides) {
   CheckInputFile(path, kMaxConfigFileBytes);
@@ -214,26 +264,20 @@ ConfigNode ConfigNode::LoadString(const std::string& text, const std::string& na
   auto state = std::make_shared<State>();
   state->file = name;
   CheckUtf8(text, name);
-  std::vector<YAML::Node> docs;
+  YAML::Node doc;
   try {
-    docs = YAML::LoadAll(text);
+    doc = LoadOneDocument(text, name);
   } catch (const YAML::Exception& e) {
     throw InputError(name + ":" + LineOf(e.mark) + ": YAML syntax error: " + CapForMessage(e.msg));
   }
-  if (docs.size() > 1) {
-    throw InputError(name + ":" + LineOf(docs[1].Mark()) +
-                     ": a second YAML document ('---'); a file holds one");
-  }
-  if (docs.empty() || !docs[0].IsMap()) {
-    throw InputError(name + ": expected a YAML mapping at the top level");
-  }
+  if (!doc.IsMap()) throw InputError(name + ": expected a YAML mapping at the top level");
   size_t visited = 0;
-  CheckStructure(docs[0], name, "", &visited);
+  CheckStructure(doc, name, "", &visited);
   for (const ConfigOverride& o : overrides) {
-    ApplyOverride(docs[0], o, name);
+    ApplyOverride(doc, o, name);
     state->overridden.push_back(o.key);
   }
-  return ConfigNode(state, docs[0], "");
+  return ConfigNode(state, doc, "");
 }
 
 std::string ConfigNode::Location(const YAML::Mark& mark, const std::string& path) const {
