@@ -810,7 +810,10 @@ class ClosedLoopKind : public ScenarioKind {
     }
     y << "identified_effects:\n";
     for (const auto& e : res.effects) {
-      y << "  - effect: " << e.name << "\n    value: [";
+      // An equivalence set's name lists every member; the values are the fitted member's.
+      const std::string fitted = em_->candidates()[e.candidate].Name();
+      if (e.name != fitted) y << "  # equivalent in these data: " << e.name << "\n";
+      y << "  - effect: " << fitted << "\n    value: [";
       for (size_t k = 0; k < e.value.size(); ++k) y << (k ? ", " : "") << Num(e.value[k]);
       y << "]\n    std: [";
       for (size_t k = 0; k < e.std.size(); ++k) y << (k ? ", " : "") << Num(e.std[k]);
