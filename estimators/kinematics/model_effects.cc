@@ -93,6 +93,29 @@ void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffe
   }
 }
 
+Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& first_moment,
+               const Vec3& g, Eigen::Matrix2d* J_theta_c) {
+  const Vec3& s = first_moment;
+  const double sg = s.dot(g);
+  // A = I - C S on the x, y block (S = g s^T - (s . g) I).
+  const double cx = compliance.x(), cy = compliance.y();
+  Eigen::Matrix2d A;
+  A << 1.0 - cx * (g.x() * s.x() - sg), -cx * g.x() * s.y(),  //
+      -cy * g.y() * s.x(), 1.0 - cy * (g.y() * s.y() - sg);
+  const double det = A(0, 0) * A(1, 1) - A(0, 1) * A(1, 0);
+  // det <= 0: the load would tip the mount over (no stable equilibrium); keep the linear tilt.
+  Eigen::Matrix2d A_inv = Eigen::Matrix2d::Identity();
+  if (det > 0.0) A_inv << A(1, 1) / det, -A(0, 1) / det, -A(1, 0) / det, A(0, 0) / det;
+  const Eigen::Vector2d theta = A_inv * Eigen::Vector2d(cx * M0.x(), cy * M0.y());
+  if (J_theta_c) {
+    // A dtheta = dC (M0 + S theta): column i is A^-1 e_i (M0 + S theta)_i.
+    const Vec3 t3(theta.x(), theta.y(), 0.0);
+    const Vec3 M = M0 + g * s.dot(t3) - sg * t3;
+    *J_theta_c = A_inv * Eigen::Vector2d(M.x(), M.y()).asDiagonal();
+  }
+  return Vec3(theta.x(), theta.y(), 0.0);
+}
+
 EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* effects)
     : declared_(&declared),
       effects_(effects && !effects->empty() ? effects : nullptr),
@@ -210,8 +233,8 @@ void EffectiveChain::UpdateSources(const Eigen::Ref<const Eigen::VectorXd>& q_re
       c.noalias() += var * fr.zeta * fr.zeta.transpose();
     }
     if (f == e.mount) {
-      c(kRotIdx, kRotIdx) += u.mount_compliance.x() * mount_moment_.x() * mount_moment_.x();
-      c(kRotIdx + 1, kRotIdx + 1) += u.mount_compliance.y() * mount_moment_.y() * mount_moment_.y();
+      c.block<2, 2>(kRotIdx, kRotIdx).noalias() +=
+          J_mount_c_ * u.mount_compliance.asDiagonal() * J_mount_c_.transpose();
     }
     if (u.bend[f] != 0.0) c.noalias() += u.bend[f] * bend_twist_[f] * bend_twist_[f].transpose();
     if (f == path_end_ && u.thermal != 0.0) {
@@ -252,9 +275,10 @@ void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_rea
     }
     if (f == e.mount && !e.mount_compliance.isZero(0.0)) {
       const lie::SE3 T_pre = T[fr.parent] * fr.T_parent_ip;
-      mount_moment_ = T_pre.rotation().transpose() * moment(f, T_pre.translation());
-      const Vec3& M = mount_moment_;
-      mount_rot_ = Vec3(e.mount_compliance.x() * M.x(), e.mount_compliance.y() * M.y(), 0.0);
+      const Mat3 R_T = T_pre.rotation().transpose();
+      const Vec3 M0 = R_T * moment(f, T_pre.translation());
+      const Vec3 s = R_T * (subtree_first_[f] - subtree_mass_[f] * T_pre.translation());
+      mount_rot_ = MountTilt(e.mount_compliance, M0, s, R_T * e.g_base, &J_mount_c_);
     }
   }
 }

@@ -104,6 +104,21 @@ struct ModelEffects {
 void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffects& effects,
                    std::vector<double>* subtree_mass, std::vector<Vec3>* subtree_first);
 
+// Tilt of a compliant mount (rotation vector about its x and y axes, z = 0) under the weight it
+// carries, and the moment that tilts it, both in the mount's pre-tilt axes. The mount turns the
+// load with it, so the moment is taken at the tilted configuration: gravity seen from the
+// mount is R(theta)^T g = g - theta x g, and the moment r x m (R^T g) summed over the load is
+// M0 + S theta with S = g s^T - (s . g) I (s: the load's first moment about the pivot). The
+// static equilibrium theta = C (M0 + S theta) is then a 2x2 solve. A load above the pivot tips
+// further than C M0 (the P-delta effect: the stiffness seems k - m g h); at the rover's plate
+// (k = 1300 N m/rad, arm centre of mass up to 0.4 m above the plate) that is ~1% of the tilt,
+// ~0.1 mm at the hand, what a linear C M0 leaves when fitted stretched out and used raised.
+// `first_moment` is s and `g` gravity, both in the mount's axes; `J_theta_c` (optional) gets
+// d theta_xy / d (c_x, c_y), for the compliance's uncertainty. Used by the identification and by
+// EffectiveChain alike (the same bits).
+Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& first_moment,
+               const Vec3& g, Eigen::Matrix2d* J_theta_c = nullptr);
+
 // The declared model at one joint reading with the effects applied: model() and q() are what an
 // estimator's kinematics use instead of the declared model and the reading. Without effects
 // (nullptr or empty) they are the declared model and the reading themselves.
@@ -141,7 +156,7 @@ class EffectiveChain {
   std::vector<lie::SE3> T_;       // per frame: corrected mean poses (bending pass)
   std::vector<Vec3> bend_;        // per frame: the link's bend (rotation vector, start's axes)
   Vec3 mount_rot_ = Vec3::Zero();
-  Vec3 mount_moment_ = Vec3::Zero();  // the weight's moment at the mount, mount axes
+  Eigen::Matrix2d J_mount_c_ = Eigen::Matrix2d::Zero();  // d mount tilt / d compliance
   // Parameter uncertainty (ModelEffects::Uncertainty) as PPOE sources.
   std::vector<Mat6> source_fixed_;   // per frame: declared source + the constant terms
   std::vector<char> source_varies_;  // per frame: a term changes with the reading

@@ -7,6 +7,7 @@
 
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/kinematics/model_effects.h"
 #include "estimators/lie/so3.h"
 
 namespace flexbench::identify {
@@ -355,6 +356,14 @@ ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const {
     L.M_mount = T_pre.rotation().transpose() * moment(frame_body_[mount_], T_pre.translation());
     L.M_mount_unit = T_pre.rotation().transpose() * unit_moment(T_pre.translation());
     L.R_mount_T = T_pre.rotation().transpose();
+    const int b = frame_body_[mount_];
+    const Vec3 c = R_w_base.transpose() * (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1],
+                                                d->subtree_com[3 * b + 2]) -
+                                           p_w_base);
+    L.s_mount = L.R_mount_T * (m_->body_subtreemass[b] * (c - T_pre.translation()));
+    L.s_mount_unit = L.R_mount_T * (p_ee - T_pre.translation());
+    L.R_mount_point = L.R_mount_T * pd.T_base_frame[point_frame_].rotation();
+    L.g_mount = L.R_mount_T * g_base;
   }
   // (R_ee s) x g = -[g]x R_ee s.
   L.M_first = -lie::Skew(g_base) * pd.T_base_frame[point_frame_].rotation();
@@ -381,12 +390,14 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
   const int n = model.num_frames();
   double payload = 0.0;
   Vec3 couple = Vec3::Zero();  // base axes
+  Vec3 payload_first = Vec3::Zero();  // end-effector axes
   {
     const double* t = theta;
     for (int i : active) {
       if (candidates_[i].type == EffectType::kPayload) {
         payload = t[0];
-        couple = L.M_first * Vec3(t[1], t[2], t[3]);
+        payload_first = Vec3(t[1], t[2], t[3]);
+        couple = L.M_first * payload_first;
       }
       t += candidates_[i].num_params;
     }
@@ -436,8 +447,8 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
       }
       case EffectType::kBaseCompliance: {
         const Vec3 M = L.M_mount + payload * L.M_mount_unit + L.R_mount_T * couple;
-        mount_rot.x() += t[0] * M.x();
-        mount_rot.y() += t[1] * M.y();
+        const Vec3 s = L.s_mount + payload * L.s_mount_unit + L.R_mount_point * payload_first;
+        mount_rot += kinematics::MountTilt(Eigen::Vector2d(t[0], t[1]), M, s, L.g_mount);
         break;
       }
       case EffectType::kThermalExpansion:

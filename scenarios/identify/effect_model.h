@@ -122,6 +122,13 @@ struct ConfigLoads {
   Eigen::Matrix3Xd axis_base;  // joint axes, base coordinates
   std::vector<Mat3> R_mid_T;   // base -> start-joint axes, per link
   Mat3 R_mount_T = Mat3::Identity();
+  // For the mount's tilted equilibrium (kinematics::MountTilt), mount axes: the first moment of
+  // its load about the pivot, the same of 1 kg at the end effector, the end effector's axes
+  // (to carry a payload's first moment there) and gravity.
+  Vec3 s_mount = Vec3::Zero();
+  Vec3 s_mount_unit = Vec3::Zero();
+  Mat3 R_mount_point = Mat3::Identity();
+  Vec3 g_mount = Vec3::Zero();
   // Per joint: the sign of its last motion (+1, -1; 0 unknown), from the data.
   Eigen::VectorXd motion_sign;
   // The chain's poses at `q_nominal` without effects, per frame on the predicted path (issue 21,
