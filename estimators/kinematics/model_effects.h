@@ -12,7 +12,7 @@
 //
 // where tau is the gravity torque the joint holds, B turns a bent link about its middle by
 // c * (the moment of the weight beyond it, across the link), and Exp(mount) tilts the arm's
-// mount by (c_x M_x, c_y M_y). The loads come from the declared masses at the nominal chain's
+// mount by C M at its loaded equilibrium (MountTilt). The loads come from the declared masses at the nominal chain's
 // configuration q_read (as the identification computes them), with the payload as a mass on its
 // frame. A backlash rests on the flank its gravity torque presses (the identification's rule
 // for data without recorded motion; a flank that follows the motion is not tracked at run time).

@@ -15,8 +15,10 @@
 //   link_bending@J        the link from the previous joint to J turns by c * M_perp(q) about
 //                         its middle (Euler-Bernoulli beam under an end moment: the tip
 //                         turns like a hinge at mid-length)              c [rad/(N m)]
-//   base_compliance@J1    rotation (c_x M_x, c_y M_y) about the first joint's anchor (the plate
-//                         under the arm tilts), frame axes before the joint turns  c [rad/(N m)]
+//   base_compliance@J1    rotation theta = C (M0 + S theta) about the first joint's anchor (the
+//                         plate under the arm tilts, the load's moment taken at the tilted
+//                         pose: kinematics::MountTilt), frame axes before the joint turns
+//                         C = diag(c_x, c_y) [rad/(N m)]
 //   thermal_expansion@all every link translation scaled by (1 + e)  e [-] (alpha * delta T)
 //   payload@ee            a mass m [kg] with its centre at offset c from the end effector (its
 //                         frame); parameters (m, m c) [kg, kg m] keep the loads linear in them
