@@ -116,6 +116,17 @@ Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& fi
   return Vec3(theta.x(), theta.y(), 0.0);
 }
 
+Mat3 MountRotation(const Vec3& theta) {
+  double sx, cx, sy, cy;
+  lie::SinCos(theta.x(), &sx, &cx);
+  lie::SinCos(theta.y(), &sy, &cy);
+  Mat3 R;
+  R << cy, sy * sx, sy * cx,  //
+      0.0, cx, -sx,           //
+      -sy, cy * sx, cy * cx;
+  return R;
+}
+
 EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* effects)
     : declared_(&declared),
       effects_(effects && !effects->empty() ? effects : nullptr),
@@ -313,7 +324,7 @@ void EffectiveChain::CorrectFrames() {
               local.rotation().transpose() * Vec3(mid.cross(dw) - local.translation().cross(dw));
         }
       }
-      if (f == e.mount) local = local * lie::SE3(lie::SO3Exp(mount_rot_), Vec3::Zero());
+      if (f == e.mount) local = local * lie::SE3(MountRotation(mount_rot_), Vec3::Zero());
       const Vec3& tilt = e.frames[f].tilt;
       if (!tilt.isZero(0.0)) local = local * lie::SE3(lie::SO3Exp(tilt), Vec3::Zero());
       // The source stays where the static geometry put it: the load turns it by milliradians.

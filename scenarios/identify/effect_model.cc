@@ -520,7 +520,7 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
       ws.T[f] = lie::SE3(Rb, mid - Rb * mid) * ws.T[f];
     }
     if (f == mount_ && mount_turns) {
-      ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(mount_rot), Vec3::Zero());
+      ws.T[f] = ws.T[f] * lie::SE3(kinematics::MountRotation(mount_rot), Vec3::Zero());
     }
     if (!ws.tilt[f].isZero()) ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(ws.tilt[f]), Vec3::Zero());
     if (fr.q_index >= 0) ws.T[f] = ws.T[f] * fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]);
