@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstring>
 
 #include <fstream>
 #include <system_error>
@@ -145,16 +146,24 @@ void OutputDir::Commit() {
 
 void WriteFileAtomic(const fs::path& path, const std::string& text) {
   const fs::path tmp = path.string() + ".part";
-  {
-    std::ofstream out(tmp, std::ios::binary);
-    if (!out) throw InputError(Shown(path) + ": cannot write");
-    out << text;
-    out.flush();
-    if (!out) throw InputError(Shown(path) + ": write failed");
-  }
+  // On failure the partial ".part" file is removed: a full disk must leave nothing half-written
+  // (e.g. report.html.part was moved into a result, sweep.csv.part stayed in a sweep folder).
+  // errno after a failed stream operation is the system's reason ("No space left on device").
+  const auto fail = [&](const std::string& what, int err) {
+    std::error_code rm;
+    fs::remove(tmp, rm);
+    throw InputError(Shown(path) + ": " + what + (err ? ": " + std::string(std::strerror(err)) : ""));
+  };
+  errno = 0;
+  std::ofstream out(tmp, std::ios::binary);
+  if (!out) fail("cannot write", errno);
+  errno = 0;
+  out << text;
+  out.close();  // flushes; a write error shows here at the latest
+  if (!out) fail("write failed", errno);
   std::error_code ec;
   fs::rename(tmp, path, ec);
-  if (ec) throw InputError(Shown(path) + ": cannot write: " + ec.message());
+  if (ec) fail("cannot write", ec.value());
 }
 
 }  // namespace flexbench::scenarios
