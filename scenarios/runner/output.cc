@@ -36,6 +36,21 @@ fs::path Normal(const fs::path& p) {
   return ec ? fs::absolute(p).lexically_normal() : a;
 }
 
+// True while process `pid` runs. A zombie has ended: killed with its parent (a sweep's workers
+// when the sweep is killed), it waits to be reaped by init, and kill(pid, 0) still succeeds,
+// which kept a killed run's temporaries as if it were alive.
+bool ProcessRunning(pid_t pid) {
+  if (kill(pid, 0) != 0 && errno == ESRCH) return false;
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return true;  // no /proc: trust kill()
+  // "pid (comm) state ...": comm may hold spaces and parentheses, so read after the last ')'.
+  const size_t paren = line.rfind(')');
+  if (paren == std::string::npos || paren + 2 >= line.size()) return true;
+  const char state = line[paren + 2];
+  return state != 'Z' && state != 'X';
+}
+
 // Removes "<name>.tmp-PID" and "<name>.old-PID" beside `final_dir` whose process is gone.
 void RemoveStaleTemporaries(const fs::path& final_dir) {
   const std::string name = final_dir.filename().string();
@@ -52,7 +67,7 @@ void RemoveStaleTemporaries(const fs::path& final_dir) {
       }
       const pid_t pid = static_cast<pid_t>(std::stol(digits));
       if (pid <= 0 || pid == getpid()) continue;
-      if (kill(pid, 0) == 0 || errno != ESRCH) continue;  // a live run's
+      if (ProcessRunning(pid)) continue;  // a live run's
       std::error_code rm;
       fs::remove_all(it->path(), rm);
     }
