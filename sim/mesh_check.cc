@@ -157,7 +157,9 @@ void CheckInlineMesh(const Element& mesh, const std::string& what) {
   if (vertex) {
     const std::vector<std::string> v = Tokens(*vertex);
     for (const std::string& t : v) {
-      if (!ParseFinite(t)) throw InputError(what + ": vertex value " + Quoted(t) + " is not a finite number");
+      if (!ParseFinite(t)) {
+        throw InputError(what + ": vertex value " + Quoted(t) + " is not a finite number");
+      }
     }
     if (v.size() % 3 != 0) {
       throw InputError(what + ": vertex has " + std::to_string(v.size()) +
@@ -203,8 +205,10 @@ void CheckObj(const fs::path& file, const std::string& what) {
       ++line_no;
       size_t p = pos;
       while (p < eol && (text[p] == ' ' || text[p] == '\t')) ++p;
-      const bool vertex_line = p + 1 < eol && text[p] == 'v' && (text[p + 1] == ' ' || text[p + 1] == '\t');
-      const bool face_line = p + 1 < eol && text[p] == 'f' && (text[p + 1] == ' ' || text[p + 1] == '\t');
+      const bool vertex_line =
+          p + 1 < eol && text[p] == 'v' && (text[p + 1] == ' ' || text[p + 1] == '\t');
+      const bool face_line =
+          p + 1 < eol && text[p] == 'f' && (text[p + 1] == ' ' || text[p + 1] == '\t');
       if (vertex_line) ++seen;
       if (face_line && pass == 1) {
         std::string rest = text.substr(p + 1, eol - p - 1);
@@ -265,8 +269,8 @@ struct Scanned {
   Element element;
 };
 
-void Collect(const std::string& xml, const std::string& file, const fs::path& main_dir,
-             int depth, std::set<fs::path>* visited, std::vector<Scanned>* out) {
+void Collect(const std::string& xml, const std::string& file, const fs::path& main_dir, int depth,
+             std::set<fs::path>* visited, std::vector<Scanned>* out) {
   const fs::path dir = fs::path(file).parent_path();
   for (Element& e : StartTags(xml)) {
     if (e.name == "include" && depth < kMaxIncludeDepth) {

@@ -162,12 +162,14 @@ void OutputDir::Commit() {
 void WriteFileAtomic(const fs::path& path, const std::string& text) {
   const fs::path tmp = path.string() + ".part";
   // On failure the partial ".part" file is removed: a full disk must leave nothing half-written
-  // (e.g. report.html.part was moved into a result, sweep.csv.part stayed in a sweep folder).
-  // errno after a failed stream operation is the system's reason ("No space left on device").
+  // (report.html.part was moved into a result; outside a run's temporary folder, e.g. a sweep's
+  // sweep.csv, it would stay). errno after a failed stream operation is the system's reason
+  // ("No space left on device").
   const auto fail = [&](const std::string& what, int err) {
     std::error_code rm;
     fs::remove(tmp, rm);
-    throw InputError(Shown(path) + ": " + what + (err ? ": " + std::string(std::strerror(err)) : ""));
+    const std::string reason = err ? ": " + std::string(std::strerror(err)) : "";
+    throw InputError(Shown(path) + ": " + what + reason);
   };
   errno = 0;
   std::ofstream out(tmp, std::ios::binary);

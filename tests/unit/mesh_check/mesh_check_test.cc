@@ -2,6 +2,8 @@
 // list corrupt memory inside mj_loadXML, so they must be refused before MuJoCo sees them, as
 // one line naming the file and the mesh, while valid meshes (inline, OBJ with relative and
 // v/vt indices, MSH) still load.
+#include "sim/mesh_check.h"
+
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -10,7 +12,6 @@
 #include <vector>
 
 #include "estimators/error.h"
-#include "sim/mesh_check.h"
 #include "sim/mujoco_model.h"
 #include "tests/common/test_util.h"
 
@@ -44,9 +45,9 @@ std::string Inline(const std::string& vertex, const std::string& face) {
 
 std::string Msh(const std::vector<float>& v, const std::vector<std::int32_t>& f,
                 std::int32_t nvertex_in_header = -1) {
-  std::int32_t header[4] = {nvertex_in_header >= 0 ? nvertex_in_header
-                                                   : static_cast<std::int32_t>(v.size() / 3),
-                            0, 0, static_cast<std::int32_t>(f.size() / 3)};
+  std::int32_t header[4] = {
+      nvertex_in_header >= 0 ? nvertex_in_header : static_cast<std::int32_t>(v.size() / 3), 0, 0,
+      static_cast<std::int32_t>(f.size() / 3)};
   std::string out(reinterpret_cast<const char*>(header), sizeof(header));
   out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(float));
   out.append(reinterpret_cast<const char*>(f.data()), f.size() * sizeof(std::int32_t));
@@ -63,11 +64,10 @@ TEST(MeshCheck, ValidMeshesLoad) {
   // OBJ: 1-based, negative (relative) and v/vt indices; found through <compiler meshdir>.
   WriteFile(tmp.path() / "meshes/t.obj",
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf -4 -1 -2\nf 2/1 3/1 4/1\n");
-  WriteFile(tmp.path() / "obj.xml",
-            Model("file=\"t.obj\"", "  <compiler meshdir=\"meshes\"/>\n"));
+  WriteFile(tmp.path() / "obj.xml", Model("file=\"t.obj\"", "  <compiler meshdir=\"meshes\"/>\n"));
   EXPECT_NO_THROW(sim::LoadModel((tmp.path() / "obj.xml").string()));
-  WriteFile(tmp.path() / "t.msh", Msh({0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1},
-                                      {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3}));
+  WriteFile(tmp.path() / "t.msh",
+            Msh({0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1}, {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3}));
   WriteFile(tmp.path() / "msh.xml", Model("file=\"t.msh\""));
   EXPECT_NO_THROW(sim::LoadModel((tmp.path() / "msh.xml").string()));
 }
@@ -91,10 +91,12 @@ TEST(MeshCheck, InlineMeshesOutOfRangeOrRaggedAreOneLineNamingFileAndMesh) {
     EXPECT_EQ(e.find('\n'), std::string::npos) << e;
   }
   // A quoted '>' does not end the tag early, so the face list is still seen.
-  const std::string quoted = "<mujoco><asset><mesh name=\"a>b\" vertex='0 0 0' face='0 0 1'/>"
-                             "</asset></mujoco>";
-  EXPECT_NE(ErrorOf([&] { sim::CheckMjcfMeshes(quoted, "q.xml"); }).find("mesh 'a>b': face index 1"),
-            std::string::npos);
+  const std::string quoted =
+      "<mujoco><asset><mesh name=\"a>b\" vertex='0 0 0' face='0 0 1'/>"
+      "</asset></mujoco>";
+  EXPECT_NE(
+      ErrorOf([&] { sim::CheckMjcfMeshes(quoted, "q.xml"); }).find("mesh 'a>b': face index 1"),
+      std::string::npos);
 }
 
 TEST(MeshCheck, MeshFilesAndIncludesAreCheckedToo) {
