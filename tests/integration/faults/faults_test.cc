@@ -121,17 +121,30 @@ void ExpectComplete(const fs::path& dir) {
   }
 }
 
-// A long run (rover_apriltag_exp2: ~5 s, 40 files written as it goes: rendered frames,
-// trajectories, CSV, summary, report) is killed at random times, with and without a previous
-// result at --out, and once just as its summary.json appears in the temporary folder (the
-// last moments before the results move into place).
+// Regular files below `dir` now (0 when it does not exist or is moved away meanwhile).
+int FilesIn(const fs::path& dir) {
+  int n = 0;
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    n += it->is_regular_file(ec);
+  }
+  return n;
+}
+
+// A long run (rover_apriltag_exp2: ~3-5 s, 40 files written as it goes: 29 rendered frames,
+// then a plot, trajectories, CSV, summary, report) is killed with and without a previous result
+// at --out. The kill points (seed 19) are: one random time in the first 0.3 s (loading, before
+// the temporary folder exists); five random counts of files written into the temporary
+// folder, from 0 to the number of frames, so that they land at the same stage on a fast or a
+// slow machine; and one as summary.json appears (best effort: the last milliseconds before
+// the results move into place; the run may finish first).
 TEST(Faults, KilledRunLeavesNothingOrACompleteResult) {
   TempDir tmp;
   const fs::path out = tmp.path() / "out";
   const fs::path log = tmp.path() / "log.txt";
-  const std::vector<std::string> args = {Flexbench(), "run",
-                                         SourceDir() + "/scenarios/rover_apriltag_exp2.yaml",
-                                         "--out", out.string(), "--quiet"};
+  const std::vector<std::string> args = {
+      Flexbench(), "run",        SourceDir() + "/scenarios/rover_apriltag_exp2.yaml",
+      "--out",     out.string(), "--quiet"};
   // The reference: an uninterrupted run to the same --out (the command it records names it).
   const Clock::time_point t0 = Clock::now();
   const Ended ref = KillWhen(Spawn(args, log), [] { return false; });
@@ -139,7 +152,9 @@ TEST(Faults, KilledRunLeavesNothingOrACompleteResult) {
   ASSERT_TRUE(WIFEXITED(ref.status) && WEXITSTATUS(ref.status) == 0) << ReadFile(log);
   ExpectComplete(out);
   const std::map<std::string, std::string> reference = Files(out);
-  ASSERT_GT(reference.size(), 10u);
+  int frames = 0;
+  for (const auto& [rel, bytes] : reference) frames += rel.rfind("frames/config_", 0) == 0;
+  ASSERT_GT(frames, 10);
   const fs::path previous = tmp.path() / "previous";  // a previous result, put back at --out
   fs::copy(out, previous, fs::copy_options::recursive);
 
@@ -160,92 +175,111 @@ TEST(Faults, KilledRunLeavesNothingOrACompleteResult) {
   };
 
   std::mt19937 rng(19);
-  std::uniform_real_distribution<double> fraction(0.02, 1.0);
-  constexpr int kRandomKills = 5;
+  std::uniform_real_distribution<double> early_s(0.0, 0.3);
+  std::uniform_int_distribution<int> files_written(0, frames);
+  constexpr int kRounds = 7;
   int killed = 0, absent = 0;
-  for (int k = 0; k <= kRandomKills; ++k) {
-    const bool targeted = k == kRandomKills;
-    // Odd rounds start from nothing at --out; even ones, and the last, replace a previous result.
+  for (int k = 0; k < kRounds; ++k) {
+    const bool early = k == 0, targeted = k == kRounds - 1;
+    // Odd rounds start from nothing at --out; even ones replace a previous result.
+    const bool replace = k % 2 == 0;
     fs::remove_all(out);
-    if (k % 2 == 0 || targeted) fs::copy(previous, out, fs::copy_options::recursive);
-    const double at = targeted ? 0.0 : fraction(rng) * duration;
+    if (replace) fs::copy(previous, out, fs::copy_options::recursive);
+    const double at_s = early ? early_s(rng) : 0.0;
+    const int at_files = early || targeted ? 0 : files_written(rng);
     const pid_t pid = Spawn(args, log);
-    const fs::path tmp_summary = out.parent_path() /
-                                 (out.filename().string() + ".tmp-" + std::to_string(pid)) /
-                                 "summary.json";
+    const fs::path work =
+        out.parent_path() / (out.filename().string() + ".tmp-" + std::to_string(pid));
     const Clock::time_point start = Clock::now();
     const Ended e = KillWhen(pid, [&] {
-      return targeted ? fs::exists(tmp_summary) : Seconds(Clock::now() - start) >= at;
+      if (early) return Seconds(Clock::now() - start) >= at_s;
+      if (targeted) return fs::exists(work / "summary.json");
+      return fs::exists(work) && FilesIn(work) >= at_files;
     });
     killed += e.killed;
     absent += !fs::exists(out);
-    std::printf("[ faults   ] run %d (%s): %s at %.2f s of %.2f s%s: --out %s\n", k,
-                k % 2 == 0 || targeted ? "replacing a result" : "new --out",
-                e.killed ? "killed" : "ended", Seconds(Clock::now() - start), duration,
-                targeted ? " (as summary.json appeared)" : "",
+    std::string point = early      ? "at " + std::to_string(at_s).substr(0, 4) + " s"
+                        : targeted ? "as summary.json appeared"
+                                   : "after " + std::to_string(at_files) + " files";
+    std::printf("[ faults   ] run %d (%s): %s %s (%.2f s; uninterrupted %.2f s): --out %s\n", k,
+                replace ? "replacing a result" : "new --out", e.killed ? "killed" : "ended",
+                point.c_str(), Seconds(Clock::now() - start), duration,
                 fs::exists(out) ? "holds a result" : "does not exist");
+    if (!targeted) {
+      EXPECT_TRUE(e.killed) << "run " << k << " ended before its kill point";
+    }
     if (!e.killed) {
       EXPECT_TRUE(WIFEXITED(e.status) && WEXITSTATUS(e.status) == 0) << ReadFile(log);
     }
     expect_absent_or_reference("after kill " + std::to_string(k));
   }
-  EXPECT_GE(killed, kRandomKills - 1) << "the runs ended before they could be killed";
   // The next run completes and removes the killed runs' temporaries (their processes are gone).
   const Ended last = KillWhen(Spawn(args, log), [] { return false; });
   ASSERT_TRUE(WIFEXITED(last.status) && WEXITSTATUS(last.status) == 0) << ReadFile(log);
   expect_absent_or_reference("after the last run");
   EXPECT_TRUE(fs::exists(out));
   EXPECT_EQ(Temporaries(out), std::vector<std::string>{});
-  std::printf("[ faults   ] %d of %d runs killed, --out absent after %d\n", killed,
-              kRandomKills + 1, absent);
+  std::printf("[ faults   ] %d of %d runs killed, --out absent after %d\n", killed, kRounds,
+              absent);
 }
 
-// A sweep (24 short runs, 2 workers) is killed three times at random points, its workers with
-// it, and resumed each time; the final sweep.csv and aggregate.json are the bytes of an
-// uninterrupted sweep, every run folder is absent or complete after each kill, and nothing
-// temporary is left at the end.
+// Runs of a sweep folder that have their summary.json.
+int RunsDone(const fs::path& sweep, int seeds) {
+  int done = 0;
+  for (int seed = 1; seed <= seeds; ++seed) {
+    done += fs::exists(sweep / "runs/base" / ("seed_" + std::to_string(seed)) / "summary.json");
+  }
+  return done;
+}
+
+// A sweep (24 short runs, 2 workers) is killed three times, its workers with it, and resumed
+// each time; the final sweep.csv and aggregate.json are the bytes of an uninterrupted sweep,
+// every run folder is absent or complete after each kill, and nothing temporary is left at the
+// end. The kill points (seed 1919) are counts of runs finished since the start of that attempt
+// (0 to 6, so each attempt is killed before the sweep can end), which puts them at the same
+// stage on a fast or a slow machine; the other worker is then mid-run.
 TEST(Faults, KilledSweepResumesToTheSameBytes) {
   TempDir tmp;
+  constexpr int kSeeds = 24;
   const fs::path file = tmp.path() / "sweep.yaml";
   WriteFile(file, "sweep: faults\nscenario: " + SourceDir() +
-                      "/scenarios/humanoid_table_contact.yaml\nseeds: {from: 1, to: 24}\n");
+                      "/scenarios/humanoid_table_contact.yaml\nseeds: {from: 1, to: " +
+                      std::to_string(kSeeds) + "}\n");
   const fs::path log = tmp.path() / "log.txt";
   auto args = [&](const fs::path& out) {
     return std::vector<std::string>{Flexbench(), "sweep", file.string(), "--out", out.string(),
-                                     "-j", "2"};
+                                    "-j",        "2"};
   };
   const fs::path ref = tmp.path() / "ref";
-  const Clock::time_point t0 = Clock::now();
   const Ended r = KillWhen(Spawn(args(ref), log), [] { return false; });
-  const double duration = Seconds(Clock::now() - t0);
   ASSERT_TRUE(WIFEXITED(r.status) && WEXITSTATUS(r.status) == 0) << ReadFile(log);
 
   const fs::path out = tmp.path() / "killed";
   std::mt19937 rng(1919);
-  std::uniform_real_distribution<double> fraction(0.1, 0.5);
-  int killed = 0;
+  std::uniform_int_distribution<int> runs_finished(0, 6);
   for (int k = 0; k < 3; ++k) {
-    const double at = fraction(rng) * duration;
+    const int before = RunsDone(out, kSeeds);
+    const int more = runs_finished(rng);
     const Clock::time_point start = Clock::now();
-    const Ended e = KillWhen(Spawn(args(out), log),
-                             [&] { return Seconds(Clock::now() - start) >= at; });
-    killed += e.killed;
-    int done = 0;
-    for (int seed = 1; seed <= 24; ++seed) {
+    const Ended e =
+        KillWhen(Spawn(args(out), log), [&] { return RunsDone(out, kSeeds) >= before + more; });
+    EXPECT_TRUE(e.killed) << "sweep " << k << " ended before its kill point";
+    int present = 0;
+    for (int seed = 1; seed <= kSeeds; ++seed) {
       const fs::path run = out / "runs/base" / ("seed_" + std::to_string(seed));
       if (!fs::exists(run)) continue;
-      ++done;
+      ++present;
       SCOPED_TRACE("after kill " + std::to_string(k));
       ExpectComplete(run);
     }
-    std::printf("[ faults   ] sweep %d: %s at %.2f s of %.2f s, %d of 24 runs done\n", k,
-                e.killed ? "killed" : "ended", at, duration, done);
+    std::printf("[ faults   ] sweep %d: %s after %d more runs (%.2f s), %d of %d runs done\n", k,
+                e.killed ? "killed" : "ended", more, Seconds(Clock::now() - start), present,
+                kSeeds);
   }
-  EXPECT_GE(killed, 2) << "the sweeps ended before they could be killed";
   const Ended resumed = KillWhen(Spawn(args(out), log), [] { return false; });
   ASSERT_TRUE(WIFEXITED(resumed.status) && WEXITSTATUS(resumed.status) == 0) << ReadFile(log);
   const std::string csv = ReadFile(out / "sweep.csv");
-  EXPECT_EQ(CountLines(csv), 25);  // the header and 24 runs
+  EXPECT_EQ(CountLines(csv), kSeeds + 1);  // the header and a row per run
   EXPECT_TRUE(csv == ReadFile(ref / "sweep.csv")) << csv;
   EXPECT_TRUE(ReadFile(out / "aggregate.json") == ReadFile(ref / "aggregate.json"));
   for (const auto& e : fs::recursive_directory_iterator(out)) {
@@ -323,7 +357,8 @@ TEST(Faults, FullDiskIsOneLineAndLeavesNothingPartial) {
       EXPECT_EQ(CountLines(r.err), 1) << r.err;
       EXPECT_NE(r.err.find("No space left on device"), std::string::npos) << r.err;
       std::smatch m;
-      if (std::regex_search(r.err, m, failed_file)) failed_in.insert(fs::path(m[1].str()).filename().string());
+      if (std::regex_search(r.err, m, failed_file))
+        failed_in.insert(fs::path(m[1].str()).filename().string());
       EXPECT_EQ(Entries(mnt), std::set<std::string>{"filler"});
       continue;
     }
