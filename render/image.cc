@@ -1,6 +1,11 @@
 #include "render/image.h"
 
 #include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <vector>
+
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -28,13 +33,28 @@ void WritePng(const Image& image, const std::string& path) {
   } else {
     bgr = src;
   }
+  // Encoded in memory and written here: cv::imwrite lets libpng print "libpng error: Write
+  // Error" on stderr when the disk is full (a second line beside ours) and gives no reason.
+  std::vector<std::uint8_t> png;
   bool ok = false;
   try {
-    ok = cv::imwrite(path, bgr, {cv::IMWRITE_PNG_COMPRESSION, 6});
+    ok = cv::imencode(".png", bgr, png, {cv::IMWRITE_PNG_COMPRESSION, 6});
   } catch (const cv::Exception&) {
     ok = false;
   }
-  if (!ok) throw InputError(path + ": cannot write PNG");
+  if (!ok) throw InputError(path + ": cannot encode PNG");
+  errno = 0;
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f) throw InputError(path + ": cannot write PNG: " + std::strerror(errno ? errno : EIO));
+  errno = 0;
+  const size_t written = std::fwrite(png.data(), 1, png.size(), f);
+  int err = written == png.size() ? 0 : (errno ? errno : EIO);
+  errno = 0;
+  if (std::fclose(f) != 0 && err == 0) err = errno ? errno : EIO;
+  if (err != 0) {
+    std::remove(path.c_str());  // never a truncated image
+    throw InputError(path + ": cannot write PNG: " + std::strerror(err));
+  }
 }
 
 bool IsConstant(const Image& image) {

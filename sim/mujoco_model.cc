@@ -5,12 +5,14 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <filesystem>
 #include <mutex>
 
 #include "estimators/error.h"
 #include "sim/config.h"
+#include "sim/mesh_check.h"
 
 namespace flexbench::sim {
 namespace {
@@ -128,6 +130,9 @@ std::string PrepareUrdf(const std::string& urdf, const std::string& path,
         drop = true;
         warnings->push_back(path + ": mesh '" + file + "' cannot be read; its " + tag +
                             " geometry is dropped (the kinematics are kept)");
+      } else {
+        // MuJoCo 2.2.2 corrupts memory on out-of-range face indices (sim/mesh_check.h).
+        CheckMeshFile(dir / file, CapForMessage(path) + ": mesh '" + CapForMessage(file) + "'");
       }
     }
     out += urdf.substr(pos, start - pos);
@@ -166,6 +171,12 @@ MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings
     const std::string prepared = PrepareUrdf(text.str(), path, sink);
     return LoadModelFromString(prepared, path, sink);
   }
+  {
+    // Meshes MuJoCo 2.2.2 would corrupt memory on are refused first (sim/mesh_check.h).
+    std::ifstream in(path, std::ios::binary);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    CheckMjcfMeshes(text, path);
+  }
   std::lock_guard<std::mutex> lock(g_load_mutex);
   std::vector<std::string> local;
   WarningScope scope(warnings ? warnings : &local);
@@ -181,6 +192,7 @@ MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings
 MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name,
                                std::vector<std::string>* warnings) {
   InstallMujocoHandlers();
+  CheckMjcfMeshes(xml, name);  // see LoadModel
   std::lock_guard<std::mutex> lock(g_load_mutex);
   std::vector<std::string> local;
   WarningScope scope(warnings ? warnings : &local);

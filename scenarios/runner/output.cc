@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstring>
 
 #include <fstream>
 #include <system_error>
@@ -35,6 +36,21 @@ fs::path Normal(const fs::path& p) {
   return ec ? fs::absolute(p).lexically_normal() : a;
 }
 
+// True while process `pid` runs. A zombie has ended: killed with its parent (a sweep's workers
+// when the sweep is killed), it waits to be reaped by init, and kill(pid, 0) still succeeds,
+// which kept a killed run's temporaries as if it were alive.
+bool ProcessRunning(pid_t pid) {
+  if (kill(pid, 0) != 0 && errno == ESRCH) return false;
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return true;  // no /proc: trust kill()
+  // "pid (comm) state ...": comm may hold spaces and parentheses, so read after the last ')'.
+  const size_t paren = line.rfind(')');
+  if (paren == std::string::npos || paren + 2 >= line.size()) return true;
+  const char state = line[paren + 2];
+  return state != 'Z' && state != 'X';
+}
+
 // Removes "<name>.tmp-PID" and "<name>.old-PID" beside `final_dir` whose process is gone.
 void RemoveStaleTemporaries(const fs::path& final_dir) {
   const std::string name = final_dir.filename().string();
@@ -51,7 +67,7 @@ void RemoveStaleTemporaries(const fs::path& final_dir) {
       }
       const pid_t pid = static_cast<pid_t>(std::stol(digits));
       if (pid <= 0 || pid == getpid()) continue;
-      if (kill(pid, 0) == 0 || errno != ESRCH) continue;  // a live run's
+      if (ProcessRunning(pid)) continue;  // a live run's
       std::error_code rm;
       fs::remove_all(it->path(), rm);
     }
@@ -145,16 +161,26 @@ void OutputDir::Commit() {
 
 void WriteFileAtomic(const fs::path& path, const std::string& text) {
   const fs::path tmp = path.string() + ".part";
-  {
-    std::ofstream out(tmp, std::ios::binary);
-    if (!out) throw InputError(Shown(path) + ": cannot write");
-    out << text;
-    out.flush();
-    if (!out) throw InputError(Shown(path) + ": write failed");
-  }
+  // On failure the partial ".part" file is removed: a full disk must leave nothing half-written
+  // (report.html.part was moved into a result; outside a run's temporary folder, e.g. a sweep's
+  // sweep.csv, it would stay). errno after a failed stream operation is the system's reason
+  // ("No space left on device").
+  const auto fail = [&](const std::string& what, int err) {
+    std::error_code rm;
+    fs::remove(tmp, rm);
+    const std::string reason = err ? ": " + std::string(std::strerror(err)) : "";
+    throw InputError(Shown(path) + ": " + what + reason);
+  };
+  errno = 0;
+  std::ofstream out(tmp, std::ios::binary);
+  if (!out) fail("cannot write", errno);
+  errno = 0;
+  out << text;
+  out.close();  // flushes; a write error shows here at the latest
+  if (!out) fail("write failed", errno);
   std::error_code ec;
   fs::rename(tmp, path, ec);
-  if (ec) throw InputError(Shown(path) + ": cannot write: " + ec.message());
+  if (ec) fail("cannot write", ec.value());
 }
 
 }  // namespace flexbench::scenarios

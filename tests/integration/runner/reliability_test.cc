@@ -3,6 +3,7 @@
 // echoed values capped, results moved into place whole, nothing removed that is not a result.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <nlohmann/json.hpp>
@@ -152,6 +153,29 @@ TEST(Reliability, TemporariesOfKilledRunsAreRemovedByTheNextRun) {
   EXPECT_FALSE(fs::exists(tmp.path() / "out.old-99999998"));
   EXPECT_TRUE(fs::exists(tmp.path() / live));
   EXPECT_TRUE(fs::exists(tmp.path() / "out.tmp-notapid"));
+}
+
+// A run killed together with its parent (a sweep's worker) is a zombie until init reaps it;
+// kill(pid, 0) still succeeds then, so its temporary looked like a live run's and stayed.
+TEST(Reliability, TemporariesOfZombieRunsAreRemovedByTheNextRun) {
+  TempDir tmp;
+  const fs::path s = tmp.path() / "s.yaml";
+  WriteFile(s, SmokeYaml());
+  const pid_t zombie = ::fork();
+  ASSERT_GE(zombie, 0);
+  if (zombie == 0) ::_exit(0);
+  // Not reaped until the end of the test: it stays a zombie ('Z' in /proc/PID/stat).
+  for (int k = 0; k < 500; ++k) {
+    const std::string stat = ReadFile("/proc/" + std::to_string(zombie) + "/stat");
+    if (stat.find(") Z") != std::string::npos) break;
+    ::usleep(2000);
+  }
+  const fs::path stale = tmp.path() / ("out.tmp-" + std::to_string(zombie));
+  WriteFile(stale / "summary.json", "{}");
+  const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
+  ::waitpid(zombie, nullptr, 0);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(stale));
 }
 
 TEST(Reliability, NonUtf8ScenarioIsBadInputBeforeAnyWork) {
