@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "estimators/kinematics/model_effects.h"
@@ -91,9 +92,12 @@ TEST_P(MountTiltTest, MatchesMujocoEquilibriumWhereTheLinearTiltDoesNot) {
   };
   const double err = error(tilt), err_linear = error(linear);
   const double err_exp = lie::SO3Log(R_truth.transpose() * lie::SO3Exp(tilt)).norm();
-  SCOPED_TRACE(std::string(l.name) + ": MuJoCo tilt " + std::to_string(truth.norm()) +
-               " rad, MountTilt error " + std::to_string(err) + " (as one Exp " +
-               std::to_string(err_exp) + "), linear error " + std::to_string(err_linear));
+  const std::string figures = std::string(l.name) + ": MuJoCo tilt " +
+                              std::to_string(truth.norm()) + " rad, MountTilt error " +
+                              std::to_string(err) + " (as one Exp " + std::to_string(err_exp) +
+                              "), linear error " + std::to_string(err_linear);
+  SCOPED_TRACE(figures);
+  std::printf("%s\n", figures.c_str());
   // What is left is second order in the tilt (a few mrad): R(theta)^T g taken to first order.
   EXPECT_LT(err, 0.01 * truth.squaredNorm());
   // The P-delta term the linear tilt lacks: m g h / k of the tilt about y, at least.
