@@ -93,27 +93,61 @@ void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffe
   }
 }
 
+namespace {
+
+// What each hinge's spring holds at tilt theta: the load's weight moment (R(theta) s) x g about
+// the roll axis (x, turned by the pitch) and about the pitch axis (y). From the potential
+// -g . R(theta) s: d/d theta_y gives y . M, d/d theta_x gives (R_y x) . M.
+Eigen::Vector2d HingeMoments(const Vec3& theta, const Vec3& s, const Vec3& g) {
+  const Vec3 M = (MountRotation(theta) * s).cross(g);
+  double sy, cy;
+  lie::SinCos(theta.y(), &sy, &cy);
+  return Eigen::Vector2d(cy * M.x() - sy * M.z(), M.y());
+}
+
+}  // namespace
+
 Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& first_moment,
                const Vec3& g, Eigen::Matrix2d* J_theta_c) {
   const Vec3& s = first_moment;
   const double sg = s.dot(g);
-  // A = I - C S on the x, y block (S = g s^T - (s . g) I).
+  // The linearised equilibrium first: A = I - C S on the x, y block (S = g s^T - (s . g) I).
   const double cx = compliance.x(), cy = compliance.y();
+  const Eigen::Matrix2d C = compliance.asDiagonal();
   Eigen::Matrix2d A;
   A << 1.0 - cx * (g.x() * s.x() - sg), -cx * g.x() * s.y(),  //
       -cy * g.y() * s.x(), 1.0 - cy * (g.y() * s.y() - sg);
   const double det = A(0, 0) * A(1, 1) - A(0, 1) * A(1, 0);
-  // det <= 0: the load would tip the mount over (no stable equilibrium); keep the linear tilt.
-  Eigen::Matrix2d A_inv = Eigen::Matrix2d::Identity();
-  if (det > 0.0) A_inv << A(1, 1) / det, -A(0, 1) / det, -A(1, 0) / det, A(0, 0) / det;
-  const Eigen::Vector2d theta = A_inv * Eigen::Vector2d(cx * M0.x(), cy * M0.y());
-  if (J_theta_c) {
-    // A dtheta = dC (M0 + S theta): column i is A^-1 e_i (M0 + S theta)_i.
-    const Vec3 t3(theta.x(), theta.y(), 0.0);
-    const Vec3 M = M0 + g * s.dot(t3) - sg * t3;
-    *J_theta_c = A_inv * Eigen::Vector2d(M.x(), M.y()).asDiagonal();
+  if (!(det > 0.0)) {
+    // The load would tip the mount over (no stable equilibrium): the linear tilt, C M0.
+    if (J_theta_c) *J_theta_c = Eigen::Vector2d(M0.x(), M0.y()).asDiagonal();
+    return Vec3(cx * M0.x(), cy * M0.y(), 0.0);
   }
-  return Vec3(theta.x(), theta.y(), 0.0);
+  Eigen::Matrix2d A_inv;
+  A_inv << A(1, 1) / det, -A(0, 1) / det, -A(1, 0) / det, A(0, 0) / det;
+  Vec3 theta = Vec3::Zero();
+  theta.head<2>() = A_inv * Eigen::Vector2d(cx * M0.x(), cy * M0.y());
+  // Then the exact one, theta = C m(theta), by fixed-point steps: they contract by about
+  // |C dm/dtheta| ~ c m g h (1-2% for the rover's plate), so three take the linearised
+  // solution's second-order error (a few urad stretched out) below 1e-10 rad.
+  for (int it = 0; it < 3; ++it) theta.head<2>() = C * HingeMoments(theta, s, g);
+  if (J_theta_c) {
+    // Implicit: (I - C D) dtheta = dC m(theta), D = dm/dtheta by central differences.
+    constexpr double kStep = 1e-6;
+    Eigen::Matrix2d D;
+    for (int k = 0; k < 2; ++k) {
+      Vec3 tp = theta, tm = theta;
+      tp[k] += kStep;
+      tm[k] -= kStep;
+      D.col(k) = (HingeMoments(tp, s, g) - HingeMoments(tm, s, g)) / (2.0 * kStep);
+    }
+    const Eigen::Matrix2d B = Eigen::Matrix2d::Identity() - C * D;
+    const double det_b = B(0, 0) * B(1, 1) - B(0, 1) * B(1, 0);
+    Eigen::Matrix2d B_inv;
+    B_inv << B(1, 1) / det_b, -B(0, 1) / det_b, -B(1, 0) / det_b, B(0, 0) / det_b;
+    *J_theta_c = B_inv * HingeMoments(theta, s, g).asDiagonal();
+  }
+  return theta;
 }
 
 Mat3 MountRotation(const Vec3& theta) {

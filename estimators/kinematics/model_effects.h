@@ -104,18 +104,19 @@ struct ModelEffects {
 void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffects& effects,
                    std::vector<double>* subtree_mass, std::vector<Vec3>* subtree_first);
 
-// Tilt of a compliant mount (rotation vector about its x and y axes, z = 0) under the weight it
-// carries, and the moment that tilts it, both in the mount's pre-tilt axes. The mount turns the
-// load with it, so the moment is taken at the tilted configuration: gravity seen from the
-// mount is R(theta)^T g = g - theta x g, and the moment r x m (R^T g) summed over the load is
-// M0 + S theta with S = g s^T - (s . g) I (s: the load's first moment about the pivot). The
-// static equilibrium theta = C (M0 + S theta) is then a 2x2 solve. A load above the pivot tips
-// further than C M0 (the P-delta effect: the stiffness seems k - m g h); at the rover's plate
-// (k = 1300 N m/rad, arm centre of mass up to 0.4 m above the plate) that is ~1% of the tilt,
-// ~0.1 mm at the hand, what a linear C M0 leaves when fitted stretched out and used raised.
-// `first_moment` is s and `g` gravity, both in the mount's axes; `J_theta_c` (optional) gets
-// d theta_xy / d (c_x, c_y), for the compliance's uncertainty. Used by the identification and by
-// EffectiveChain alike (the same bits).
+// Tilt of a compliant mount (theta_x about its x, theta_y about its y; z = 0) under the weight
+// it carries, in the mount's pre-tilt axes: the static equilibrium of two hinges with springs,
+// pitch then roll about the pitched axis (MountRotation), which turn the load with them. Each
+// spring holds the weight's moment at the tilted pose, theta = C m(theta); to first order
+// m(theta) = M0 + S theta with S = g s^T - (s . g) I (s: the load's first moment about the
+// pivot), so a load above the pivot tips further than C M0 (the P-delta effect: the stiffness
+// seems k - m g h). At the rover's plate (k = 1300 N m/rad, the arm's centre of mass up to
+// 0.4 m above it) that is ~1% of the tilt, ~0.1 mm at the hand: what a linear C M0 left when
+// fitted stretched out and used raised. Solved exactly (a 2x2 linear solve, then fixed-point
+// steps): it equals MuJoCo's own equilibrium of such a plate to 1e-9 (mount_tilt_test.cc).
+// `M0` is s x g and `g` gravity, both in the mount's axes; `J_theta_c` (optional) gets
+// d theta_xy / d (c_x, c_y), for the compliance's uncertainty. Used by the identification and
+// by EffectiveChain alike (the same bits).
 Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& first_moment,
                const Vec3& g, Eigen::Matrix2d* J_theta_c = nullptr);
 
