@@ -373,6 +373,7 @@ EffectModel::Workspace EffectModel::MakeWorkspace() const {
   ws.origin.assign(model.num_frames(), Vec6::Zero());
   ws.T.assign(model.num_frames(), lie::SE3());
   ws.y.assign(model.num_frames(), Vec3::Zero());
+  ws.touched.assign(model.num_frames(), 0);
   return ws;
 }
 
@@ -648,18 +649,21 @@ bool EffectModel::Touched(FrameId f, const Workspace& ws) const {
          (f == mount_ && !ws.mount_rot.isZero());
 }
 
-void EffectModel::PointInFrames(const Eigen::VectorXd& q, Workspace& ws) const {
+void EffectModel::PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace& ws) const {
   const kinematics::PpoeModel& model = chain_->model;
-  ws.y[point_frame_].setZero();
-  for (FrameId g = point_frame_; g > 0; g = model.frame(g).parent) {
+  Vec3 y = Vec3::Zero();  // in the current frame's coordinates
+  for (FrameId g = point_frame_; g >= top && g > 0; g = model.frame(g).parent) {
     const kinematics::PpoeFrame& fr = model.frame(g);
-    if (!Touched(g, ws)) {
-      const double qf = fr.q_index >= 0 ? q[fr.q_index] + ws.dq[fr.q_index] : 0.0;
-      ws.y[fr.parent] = fr.FixedTimesMotion(qf) * ws.y[g];
+    const lie::SE3 motion =
+        fr.q_index >= 0 ? fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]) : lie::SE3();
+    ws.y[g] = motion * y;
+    ws.touched[g] = Touched(g, ws);
+    if (!ws.touched[g]) {
+      y = fr.T_parent_ip * ws.y[g];
       continue;
     }
     const Stages st = FrameStages(g, q, ws);
-    ws.y[fr.parent] = st.L4 * (st.R_tilt * (st.motion * ws.y[g]));
+    y = st.L4 * (st.R_tilt * ws.y[g]);
   }
 }
 
@@ -668,9 +672,17 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
                                     Tangent* out) const {
   const FrameId f = c.frame;
   const kinematics::PpoeFrame& fr = chain_->model.frame(f);
-  const Stages st = FrameStages(f, q, ws);
+  // Most candidates sit at frames the active effects leave alone: there T2 = T4 = T5 = T_parent
+  // T_parent_ip, and only their rotation matters below (a bend needs its pivot: all stages).
+  Stages st;
+  if (ws.touched[f] || c.type == EffectType::kLinkBending) {
+    st = FrameStages(f, q, ws);
+  } else {
+    st.T2 = lie::SE3(ws.T[fr.parent].rotation() * fr.T_parent_ip.rotation(), Vec3::Zero());
+    st.T4 = st.T5 = st.T2;
+  }
   // The point in the coordinates of T5 (before the joint moves), T4 and T2.
-  const Vec3 y5 = st.motion * ws.y[f];
+  const Vec3& y5 = ws.y[f];
   const Vec3 y4 = st.R_tilt * y5;
   const Vec3 y2 = st.R_mount * y4;  // no bend at f here (HasTangent)
   // A body twist (v, w) of the stage pose T with the point at y there.
@@ -769,7 +781,10 @@ lie::SE3 EffectModel::PoseTangents(const Eigen::VectorXd& q, const ConfigLoads& 
                                    Tangent* out) const {
   AccumulateTerms(q, L, active, theta, ws);
   ChainPoses(q, L, ws);
-  PointInFrames(q, ws);
+  // Frames ids grow away from the base: the point is needed from the highest candidate down.
+  FrameId top = point_frame_;
+  for (int c : cs) top = std::min(top, candidates_[c].frame);
+  PointInFrames(q, top, ws);
   for (int c : cs) {
     CandidateTangents(candidates_[c], q, L, ws, out);
     out += candidates_[c].num_params;

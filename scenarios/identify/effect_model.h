@@ -155,7 +155,9 @@ class EffectModel {
     std::vector<Vec3> tilt;
     std::vector<Vec6> origin;
     std::vector<lie::SE3> T;
-    std::vector<Vec3> y;  // PoseTangents: the point in each frame's coordinates
+    std::vector<Vec3> y;  // PoseTangents: the point in each frame's coordinates before its joint
+                          // moves (T5 of its step)
+    std::vector<char> touched;  // PoseTangents: whether the frame's step is ChainPoses' touched one
     // Chain-wide terms of the last AccumulateTerms (payload, its couple in base axes, thermal
     // strain, the mount's rotation vector).
     double payload = 0.0;
@@ -218,8 +220,9 @@ class EffectModel {
   Stages FrameStages(FrameId f, const Eigen::VectorXd& q, const Workspace& ws) const;
   // Whether ChainPoses takes frame f's touched-frame step.
   bool Touched(FrameId f, const Workspace& ws) const;
-  // ws.y: the point in each path frame's coordinates, from the point frame up.
-  void PointInFrames(const Eigen::VectorXd& q, Workspace& ws) const;
+  // ws.y: the point in each path frame's T5 coordinates, from the point frame up to frame `top`
+  // (the steps below in their own coordinates: structural zeros stay exact); ws.touched.
+  void PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace& ws) const;
   // The tangents of candidate c's parameters at the terms in ws (PointInFrames done).
   void CandidateTangents(const Candidate& c, const Eigen::VectorXd& q, const ConfigLoads& L,
                          const Workspace& ws, Tangent* out) const;

@@ -214,8 +214,11 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& theta,
         em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data());
     RowTangentMap(o, T, data_.camera, T_base_cam, opt_, &G);
     for (Eigen::Index k = 0; k < D.cols(); ++k) {
-      D.block(offset_[i], k, G.rows(), 1).noalias() =
+      // Through a fixed-size vector: Eigen picks its summation order by the destination's
+      // alignment, and a column must not depend on which others are computed with it.
+      Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> dr =
           G.leftCols<3>() * tangent[k].w + G.rightCols<3>() * tangent[k].dp;
+      D.block(offset_[i], k, G.rows(), 1) = dr;
     }
   }
   return D;
@@ -294,6 +297,29 @@ Eigen::MatrixXd Problem::CandidateColumns(const Eigen::VectorXd& x, int c) const
   if (!em_.HasTangent(c, active_)) return NumericCandidateColumns(x, c);
   // Added at zero, c changes no prediction: its derivatives at the active effects' theta.
   return TangentColumns(Theta(x), {c});
+}
+
+std::vector<Eigen::MatrixXd> Problem::CandidateColumns(const Eigen::VectorXd& x,
+                                                       const std::vector<int>& cs) const {
+  std::vector<int> analytic;
+  for (int c : cs) {
+    if (em_.HasTangent(c, active_)) analytic.push_back(c);
+  }
+  const Eigen::MatrixXd D =
+      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(Theta(x), analytic);
+  std::vector<Eigen::MatrixXd> out;
+  out.reserve(cs.size());
+  int d = 0;
+  for (int c : cs) {
+    if (em_.HasTangent(c, active_)) {
+      const int np = em_.candidates()[c].num_params;
+      out.push_back(D.middleCols(d, np));
+      d += np;
+    } else {
+      out.push_back(NumericCandidateColumns(x, c));
+    }
+  }
+  return out;
 }
 
 Eigen::MatrixXd Problem::NumericCandidateColumns(const Eigen::VectorXd& x, int c) const {

@@ -61,6 +61,9 @@ class Problem {
   // Sensitivity (whitened) of the row residuals to the full parameters of candidate `c` added
   // to the model at zero, at state x: analytic where covered, else central differences.
   Eigen::MatrixXd CandidateColumns(const Eigen::VectorXd& x, int c) const;
+  // The same for each of `cs`, the analytic ones in one pass over the rows.
+  std::vector<Eigen::MatrixXd> CandidateColumns(const Eigen::VectorXd& x,
+                                                const std::vector<int>& cs) const;
   // The same two by central differences throughout (the reference the analytic columns are
   // tested against; each column re-predicts every row twice).
   Eigen::MatrixXd NumericJacobian(const Eigen::VectorXd& x) const;

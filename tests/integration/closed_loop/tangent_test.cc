@@ -3,7 +3,7 @@
 // of PredictPose, for every candidate they cover, at random configurations and random sets of
 // active effects of realistic size; and the identification problem's Jacobian and candidate
 // columns equal their all-numeric forms on rows of every kind (points, groups with distances,
-// poses, pixels).
+// poses, pixels), one candidate at a time or all in one pass.
 //
 // Tolerance 1e-7 relative (plus 1e-7 absolute, in the units of the derivative): central
 // differences err by h^2 |f'''| / 6 + eps |f| / h. With the candidates' steps (h = 1e-6 for
@@ -220,8 +220,14 @@ TEST_P(TangentTest, ProblemJacobianEqualsCentralDifferences) {
     }
     // The group points' and distances' columns are exact in both.
     EXPECT_TRUE(J.rightCols(6) == Jn.rightCols(6));
+    // All candidates in one pass give each one's columns, bit for bit.
+    std::vector<int> all(em.candidates().size());
+    for (size_t c = 0; c < all.size(); ++c) all[c] = static_cast<int>(c);
+    const std::vector<Eigen::MatrixXd> batch = pr.CandidateColumns(x, all);
+    ASSERT_EQ(batch.size(), all.size());
     for (size_t c = 0; c < em.candidates().size(); ++c) {
       const Eigen::MatrixXd Cc = pr.CandidateColumns(x, static_cast<int>(c));
+      EXPECT_TRUE(batch[c] == Cc) << em.candidates()[c].Name();
       const Eigen::MatrixXd Cn = pr.NumericCandidateColumns(x, static_cast<int>(c));
       for (Eigen::Index k = 0; k < Cc.cols(); ++k) {
         EXPECT_LE((Cc.col(k) - Cn.col(k)).lpNorm<Eigen::Infinity>(),
