@@ -374,6 +374,7 @@ EffectModel::Workspace EffectModel::MakeWorkspace() const {
   ws.T.assign(model.num_frames(), lie::SE3());
   ws.y.assign(model.num_frames(), Vec3::Zero());
   ws.touched.assign(model.num_frames(), 0);
+  ws.stages.resize(model.num_frames());
   return ws;
 }
 
@@ -611,8 +612,7 @@ bool EffectModel::HasTangent(int c, const std::vector<int>& active) const {
   }
 }
 
-EffectModel::Stages EffectModel::FrameStages(FrameId f, const Eigen::VectorXd& q,
-                                             const Workspace& ws) const {
+EffectModel::Stages EffectModel::FrameStages(FrameId f, const Workspace& ws) const {
   const kinematics::PpoeFrame& fr = chain_->model.frame(f);
   Stages st;
   const Vec3& t0 = fr.T_parent_ip.translation();
@@ -639,7 +639,6 @@ EffectModel::Stages EffectModel::FrameStages(FrameId f, const Eigen::VectorXd& q
   st.L4 = st.L4 * lie::SE3(st.R_mount, Vec3::Zero());
   st.T4 = T_parent * st.L4;
   st.T5 = st.T4 * lie::SE3(st.R_tilt, Vec3::Zero());
-  st.motion = fr.q_index >= 0 ? fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]) : lie::SE3();
   return st;
 }
 
@@ -662,8 +661,8 @@ void EffectModel::PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace
       y = fr.T_parent_ip * ws.y[g];
       continue;
     }
-    const Stages st = FrameStages(g, q, ws);
-    y = st.L4 * (st.R_tilt * ws.y[g]);
+    ws.stages[g] = FrameStages(g, ws);
+    y = ws.stages[g].L4 * (ws.stages[g].R_tilt * ws.y[g]);
   }
 }
 
@@ -675,8 +674,10 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
   // Most candidates sit at frames the active effects leave alone: there T2 = T4 = T5 = T_parent
   // T_parent_ip, and only their rotation matters below (a bend needs its pivot: all stages).
   Stages st;
-  if (ws.touched[f] || c.type == EffectType::kLinkBending) {
-    st = FrameStages(f, q, ws);
+  if (ws.touched[f]) {
+    st = ws.stages[f];  // PointInFrames'
+  } else if (c.type == EffectType::kLinkBending) {
+    st = FrameStages(f, ws);
   } else {
     st.T2 = lie::SE3(ws.T[fr.parent].rotation() * fr.T_parent_ip.rotation(), Vec3::Zero());
     st.T4 = st.T5 = st.T2;

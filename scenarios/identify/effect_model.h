@@ -147,6 +147,16 @@ class EffectModel {
 
   ConfigLoads Loads(const Eigen::VectorXd& q) const;
 
+  // A frame's step under the effects' terms (ChainPoses' touched-frame step, intermediates
+  // kept; FrameStages):
+  // L2 = (R_p, t) Exp(origin) and L4 (with the bend and the mount's turn) relative to the
+  // parent, T2, T4, T5 in the base frame, the tilt's and the mount's rotations, the bend's
+  // rotation vector (base axes) and pivot.
+  struct Stages {
+    lie::SE3 L2, L4, T2, T4, T5;
+    Mat3 R_mount = Mat3::Identity(), R_tilt = Mat3::Identity();
+    Vec3 phi = Vec3::Zero(), mid = Vec3::Zero();
+  };
   struct Workspace {
     Eigen::VectorXd dq;
     std::vector<double> dlen;
@@ -158,6 +168,7 @@ class EffectModel {
     std::vector<Vec3> y;  // PoseTangents: the point in each frame's coordinates before its joint
                           // moves (T5 of its step)
     std::vector<char> touched;  // PoseTangents: whether the frame's step is ChainPoses' touched one
+    std::vector<Stages> stages;  // PoseTangents: a touched frame's stages
     // Chain-wide terms of the last AccumulateTerms (payload, its couple in base axes, thermal
     // strain, the mount's rotation vector).
     double payload = 0.0;
@@ -208,16 +219,7 @@ class EffectModel {
   // Whether frame f lies on a link that an active link_bending turns: the bend's pivot (the
   // link's middle) moves when f's translation does (`at_bend`: f's own bend counts too).
   bool OnBentLink(FrameId f, const std::vector<int>& active, bool at_bend) const;
-  // Frame f's step under the terms in ws (ChainPoses' touched-frame step, intermediates kept):
-  // L2 = (R_p, t) Exp(origin) and L4 (with the bend and the mount's turn) relative to the
-  // parent, T2, T4, T5 in the base frame, the tilt's and the mount's rotations, the joint's
-  // motion, the bend's rotation vector (base axes) and pivot.
-  struct Stages {
-    lie::SE3 L2, L4, T2, T4, T5, motion;
-    Mat3 R_mount = Mat3::Identity(), R_tilt = Mat3::Identity();
-    Vec3 phi = Vec3::Zero(), mid = Vec3::Zero();
-  };
-  Stages FrameStages(FrameId f, const Eigen::VectorXd& q, const Workspace& ws) const;
+  Stages FrameStages(FrameId f, const Workspace& ws) const;
   // Whether ChainPoses takes frame f's touched-frame step.
   bool Touched(FrameId f, const Workspace& ws) const;
   // ws.y: the point in each path frame's T5 coordinates, from the point frame up to frame `top`
