@@ -95,14 +95,34 @@ void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffe
 
 namespace {
 
-// What each hinge's spring holds at tilt theta: the load's weight moment (R(theta) s) x g about
-// the roll axis (x, turned by the pitch) and about the pitch axis (y). From the potential
-// -g . R(theta) s: d/d theta_y gives y . M, d/d theta_x gives (R_y x) . M.
-Eigen::Vector2d HingeMoments(const Vec3& theta, const Vec3& s, const Vec3& g) {
-  const Vec3 M = (MountRotation(theta) * s).cross(g);
+// What each hinge's spring holds at tilt theta: the load's weight moment M = (R(theta) s) x g
+// about the roll axis (x, turned by the pitch) and about the pitch axis (y), and its
+// derivative D = dm/dtheta. From the potential -g . R(theta) s: d/d theta_y gives y . M,
+// d/d theta_x gives (R_y x) . M. With R = R_y R_x: dR/dtheta_x = R [x]x, dR/dtheta_y = [y]x R.
+Eigen::Vector2d HingeMoments(const Vec3& theta, const Vec3& s, const Vec3& g,
+                             Eigen::Matrix2d* D) {
+  const Mat3 R = MountRotation(theta);
+  const Vec3 Rs = R * s;
+  const Vec3 M = Rs.cross(g);
   double sy, cy;
   lie::SinCos(theta.y(), &sy, &cy);
-  return Eigen::Vector2d(cy * M.x() - sy * M.z(), M.y());
+  const Eigen::Vector2d m(cy * M.x() - sy * M.z(), M.y());
+  if (D) {
+    const Vec3 dM_x = (R * Vec3::UnitX().cross(s)).cross(g);
+    const Vec3 dM_y = Vec3::UnitY().cross(Rs).cross(g);
+    (*D)(0, 0) = cy * dM_x.x() - sy * dM_x.z();
+    (*D)(0, 1) = cy * dM_y.x() - sy * dM_y.z() - sy * M.x() - cy * M.z();
+    (*D)(1, 0) = dM_x.y();
+    (*D)(1, 1) = dM_y.y();
+  }
+  return m;
+}
+
+Eigen::Matrix2d Inverse2(const Eigen::Matrix2d& A) {
+  const double det = A(0, 0) * A(1, 1) - A(0, 1) * A(1, 0);
+  Eigen::Matrix2d inv;
+  inv << A(1, 1) / det, -A(0, 1) / det, -A(1, 0) / det, A(0, 0) / det;
+  return inv;
 }
 
 }  // namespace
@@ -123,29 +143,29 @@ Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& fi
     if (J_theta_c) *J_theta_c = Eigen::Vector2d(M0.x(), M0.y()).asDiagonal();
     return Vec3(cx * M0.x(), cy * M0.y(), 0.0);
   }
-  Eigen::Matrix2d A_inv;
-  A_inv << A(1, 1) / det, -A(0, 1) / det, -A(1, 0) / det, A(0, 0) / det;
   Vec3 theta = Vec3::Zero();
-  theta.head<2>() = A_inv * Eigen::Vector2d(cx * M0.x(), cy * M0.y());
-  // Then the exact one, theta = C m(theta), by fixed-point steps: they contract by about
-  // |C dm/dtheta| ~ c m g h (1-2% for the rover's plate), so three take the linearised
-  // solution's second-order error (a few urad stretched out) below 1e-10 rad.
-  for (int it = 0; it < 3; ++it) theta.head<2>() = C * HingeMoments(theta, s, g);
+  theta.head<2>() = Inverse2(A) * Eigen::Vector2d(cx * M0.x(), cy * M0.y());
+  // Then the exact one, theta = C m(theta), by Newton on theta - C m(theta) from there. It
+  // converges quadratically with a factor of about |C dm/dtheta| ~ c m g h (< 0.1), so once a
+  // step is below 1e-8 of the tilt what is left is below rounding, and the implicit Jacobian
+  // below is the derivative of what is returned (an identification differentiates it). From
+  // the linearised solution (a few urad off stretched out) that is the second step.
+  Eigen::Matrix2d D;
+  Eigen::Vector2d m = HingeMoments(theta, s, g, &D);
+  bool fresh = true;  // m and D are at theta
+  for (int it = 0; it < 20; ++it) {
+    const Eigen::Vector2d step =
+        Inverse2(Eigen::Matrix2d::Identity() - C * D) * (C * m - theta.head<2>());
+    theta.head<2>() += step;
+    fresh = false;
+    if (step.lpNorm<Eigen::Infinity>() <= 1e-8 * theta.head<2>().lpNorm<Eigen::Infinity>()) break;
+    m = HingeMoments(theta, s, g, &D);
+    fresh = true;
+  }
   if (J_theta_c) {
-    // Implicit: (I - C D) dtheta = dC m(theta), D = dm/dtheta by central differences.
-    constexpr double kStep = 1e-6;
-    Eigen::Matrix2d D;
-    for (int k = 0; k < 2; ++k) {
-      Vec3 tp = theta, tm = theta;
-      tp[k] += kStep;
-      tm[k] -= kStep;
-      D.col(k) = (HingeMoments(tp, s, g) - HingeMoments(tm, s, g)) / (2.0 * kStep);
-    }
-    const Eigen::Matrix2d B = Eigen::Matrix2d::Identity() - C * D;
-    const double det_b = B(0, 0) * B(1, 1) - B(0, 1) * B(1, 0);
-    Eigen::Matrix2d B_inv;
-    B_inv << B(1, 1) / det_b, -B(0, 1) / det_b, -B(1, 0) / det_b, B(0, 0) / det_b;
-    *J_theta_c = B_inv * HingeMoments(theta, s, g).asDiagonal();
+    // Implicit: (I - C D) dtheta = dC m(theta).
+    if (!fresh) m = HingeMoments(theta, s, g, &D);
+    *J_theta_c = Inverse2(Eigen::Matrix2d::Identity() - C * D) * m.asDiagonal();
   }
   return theta;
 }
@@ -323,7 +343,10 @@ void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_rea
       const Mat3 R_T = T_pre.rotation().transpose();
       const Vec3 M0 = R_T * moment(f, T_pre.translation());
       const Vec3 s = R_T * (subtree_first_[f] - subtree_mass_[f] * T_pre.translation());
-      mount_rot_ = MountTilt(e.mount_compliance, M0, s, R_T * e.g_base, &J_mount_c_);
+      // The compliance's Jacobian only where its uncertainty is carried (UpdateSources).
+      const bool need_J = sources_vary_ && !e.uncertainty.mount_compliance.isZero(0.0);
+      mount_rot_ =
+          MountTilt(e.mount_compliance, M0, s, R_T * e.g_base, need_J ? &J_mount_c_ : nullptr);
     }
   }
 }

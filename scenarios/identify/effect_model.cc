@@ -8,6 +8,8 @@
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/kinematics/model_effects.h"
+#include "estimators/lie/se3.h"
+#include "estimators/lie/sincos.h"
 #include "estimators/lie/so3.h"
 
 namespace flexbench::identify {
@@ -380,14 +382,24 @@ EffectModel::Workspace EffectModel::MakeWorkspace() const {
   ws.tilt.assign(model.num_frames(), Vec3::Zero());
   ws.origin.assign(model.num_frames(), Vec6::Zero());
   ws.T.assign(model.num_frames(), lie::SE3());
+  ws.y.assign(model.num_frames(), Vec3::Zero());
+  ws.touched.assign(model.num_frames(), 0);
+  ws.stages.resize(model.num_frames());
   return ws;
 }
 
 lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L,
                                   const std::vector<int>& active, const double* theta,
                                   Workspace& ws) const {
-  const kinematics::PpoeModel& model = chain_->model;
-  const int n = model.num_frames();
+  AccumulateTerms(q, L, active, theta, ws);
+  ChainPoses(q, L, ws);
+  ClearTerms(active, ws);
+  return ws.T[point_frame_];
+}
+
+void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L,
+                                  const std::vector<int>& active, const double* theta,
+                                  Workspace& ws) const {
   double payload = 0.0;
   Vec3 couple = Vec3::Zero();  // base axes
   Vec3 payload_first = Vec3::Zero();  // end-effector axes
@@ -408,6 +420,8 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
   ws.dq.setZero();
   double scale = 0.0;
   Vec3 mount_rot = Vec3::Zero();
+  Eigen::Vector2d mount_c = Eigen::Vector2d::Zero();
+  ws.mount_active = false;
   const double* t = theta;
   for (int i : active) {
     const Candidate& c = candidates_[i];
@@ -445,12 +459,11 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
         ws.bend[c.frame] += t[0] * (M - M.dot(dir) * dir);
         break;
       }
-      case EffectType::kBaseCompliance: {
-        const Vec3 M = L.M_mount + payload * L.M_mount_unit + L.R_mount_T * couple;
-        const Vec3 s = L.s_mount + payload * L.s_mount_unit + L.R_mount_point * payload_first;
-        mount_rot += kinematics::MountTilt(Eigen::Vector2d(t[0], t[1]), M, s, L.g_mount);
+      case EffectType::kBaseCompliance:
+        // Copies add their compliances (a screened candidate on top of itself): one mount.
+        mount_c += Eigen::Vector2d(t[0], t[1]);
+        ws.mount_active = true;
         break;
-      }
       case EffectType::kThermalExpansion:
         scale += t[0];
         break;
@@ -478,6 +491,23 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
     }
     t += c.num_params;
   }
+  if (ws.mount_active) {
+    const Vec3 M = L.M_mount + payload * L.M_mount_unit + L.R_mount_T * couple;
+    const Vec3 s = L.s_mount + payload * L.s_mount_unit + L.R_mount_point * payload_first;
+    mount_rot = kinematics::MountTilt(mount_c, M, s, L.g_mount, &ws.mount_J);
+  }
+  ws.payload = payload;
+  ws.couple = couple;
+  ws.scale = scale;
+  ws.mount_rot = mount_rot;
+}
+
+void EffectModel::ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L,
+                             Workspace& ws) const {
+  const kinematics::PpoeModel& model = chain_->model;
+  const int n = model.num_frames();
+  const double scale = ws.scale;
+  const Vec3& mount_rot = ws.mount_rot;
   ws.T[0] = lie::SE3();
   const bool mount_turns = !mount_rot.isZero();
   // Until the first frame the effects touch, the poses are the cached nominal ones (when cached
@@ -525,6 +555,9 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
     if (!ws.tilt[f].isZero()) ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(ws.tilt[f]), Vec3::Zero());
     if (fr.q_index >= 0) ws.T[f] = ws.T[f] * fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]);
   }
+}
+
+void EffectModel::ClearTerms(const std::vector<int>& active, Workspace& ws) const {
   for (int i : active) {
     const int f = candidates_[i].frame;
     if (f < 0) continue;
@@ -534,6 +567,256 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
     ws.tilt[f].setZero();
     ws.origin[f].setZero();
   }
+}
+
+// Analytic derivatives of PredictPose (issue 21: finite differences re-predicted every row twice
+// per parameter). PredictPose's step of frame f is T1 = T_parent (R_p, t), T2 = T1 Exp(origin),
+// T3 = Bend T2, T4 = T3 Exp(mount), T5 = T4 Exp(tilt), T_f = T5 Exp(zeta (q + dq)). A parameter
+// acting at one stage moves the frames below it rigidly (they are that stage's pose times
+// factors the parameter does not touch; a link_bending below turns about a pivot that moves
+// with them), so the point moves as a point fixed in that stage's frame: d p = R_s (w_s x y_s +
+// v_s) for a body twist (v_s, w_s) of stage pose T_s and y_s the point in T_s's coordinates.
+// The body twists use d Exp(x) = Exp(x) [Jr(x) dx] on SO(3) and SE(3) (Sola et al., "A micro
+// Lie theory", eqs. 143-144 and 179-180). y_s comes from the frames below in their own
+// coordinates (ChainPoses' steps without the base pose), so a point on a joint's axis, or on
+// an origin's rotation axis, gets a derivative of exactly zero, as the finite differences did:
+// selection tells an unobservable candidate by its zero column.
+
+double EffectModel::JointLoad(const ConfigLoads& L, int k, const Workspace& ws) const {
+  return L.tau[k] + ws.payload * L.tau_unit[k] - L.axis_base.col(k).dot(ws.couple);
+}
+
+namespace {
+
+// A load below a nanonewton-metre is the rounding residue of a zero one (gravity about a
+// vertical axis): its effect's derivative is zero, as the finite differences found (the change
+// it makes falls below the last bit of the joint angle), and selection tells an unidentifiable
+// candidate by its zero column.
+double Load(double load) { return std::abs(load) < 1e-9 ? 0.0 : load; }
+Vec3 Load(const Vec3& load) { return Vec3(Load(load.x()), Load(load.y()), Load(load.z())); }
+
+}  // namespace
+
+bool EffectModel::OnBentLink(FrameId f, const std::vector<int>& active, bool at_bend) const {
+  const kinematics::PpoeModel& model = chain_->model;
+  for (int i : active) {
+    const Candidate& b = candidates_[i];
+    if (b.type != EffectType::kLinkBending) continue;
+    if (at_bend && b.frame == f) return true;
+    for (FrameId g = model.frame(b.frame).parent; g > 0 && g != prev_joint_[b.frame];
+         g = model.frame(g).parent) {
+      if (g == f) return true;
+    }
+  }
+  return false;
+}
+
+bool EffectModel::HasTangent(int c, const std::vector<int>& active) const {
+  const Candidate& cand = candidates_[c];
+  switch (cand.type) {
+    case EffectType::kThermalExpansion:
+    case EffectType::kPayload:
+    case EffectType::kCameraOffset:
+      return false;
+    case EffectType::kLinkLength:
+    case EffectType::kLinkOffset:
+    case EffectType::kJointOrigin:
+      // Before the bend of f: the pivot of a bend at f or around it moves with the parameter.
+      return !OnBentLink(cand.frame, active, true);
+    case EffectType::kBaseCompliance:
+      return !OnBentLink(cand.frame, active, false);
+    default:
+      return true;
+  }
+}
+
+EffectModel::Stages EffectModel::FrameStages(FrameId f, const Workspace& ws) const {
+  const kinematics::PpoeFrame& fr = chain_->model.frame(f);
+  Stages st;
+  const Vec3& t0 = fr.T_parent_ip.translation();
+  Vec3 tr = t0 * (1.0 + ws.scale);
+  if (ws.dlen[f] != 0.0) tr += ws.dlen[f] * t0.normalized();
+  tr += ws.offset[f];
+  st.L2 = lie::SE3(fr.T_parent_ip.rotation(), tr);
+  if (!ws.origin[f].isZero()) st.L2 = st.L2 * lie::SE3::Exp(ws.origin[f]);
+  const lie::SE3& T_parent = ws.T[fr.parent];
+  st.T2 = T_parent * st.L2;
+  st.L4 = st.L2;
+  if (prev_joint_[f] >= 0) {
+    const lie::SE3& Tp = ws.T[prev_joint_[f]];
+    st.phi = Tp.rotation() * ws.bend[f];
+    st.mid = 0.5 * (Tp.translation() + st.T2.translation());
+    if (!ws.bend[f].isZero()) {
+      // The bend, a base-frame turn about the middle, seen from the parent.
+      const Mat3 Rb = lie::SO3Exp(st.phi);
+      st.L4 = T_parent.Inverse() * lie::SE3(Rb, st.mid - Rb * st.mid) * st.T2;
+    }
+  }
+  if (f == mount_ && !ws.mount_rot.isZero()) st.R_mount = kinematics::MountRotation(ws.mount_rot);
+  if (!ws.tilt[f].isZero()) st.R_tilt = lie::SO3Exp(ws.tilt[f]);
+  st.L4 = st.L4 * lie::SE3(st.R_mount, Vec3::Zero());
+  st.T4 = T_parent * st.L4;
+  st.T5 = st.T4 * lie::SE3(st.R_tilt, Vec3::Zero());
+  return st;
+}
+
+bool EffectModel::Touched(FrameId f, const Workspace& ws) const {
+  return ws.scale != 0.0 || ws.dlen[f] != 0.0 || !ws.offset[f].isZero(0.0) ||
+         !ws.origin[f].isZero(0.0) || !ws.bend[f].isZero(0.0) || !ws.tilt[f].isZero(0.0) ||
+         (f == mount_ && !ws.mount_rot.isZero());
+}
+
+void EffectModel::PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace& ws) const {
+  const kinematics::PpoeModel& model = chain_->model;
+  Vec3 y = Vec3::Zero();  // in the current frame's coordinates
+  for (FrameId g = point_frame_; g >= top && g > 0; g = model.frame(g).parent) {
+    const kinematics::PpoeFrame& fr = model.frame(g);
+    const lie::SE3 motion =
+        fr.q_index >= 0 ? fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]) : lie::SE3();
+    ws.y[g] = motion * y;
+    ws.touched[g] = Touched(g, ws);
+    if (!ws.touched[g]) {
+      y = fr.T_parent_ip * ws.y[g];
+      continue;
+    }
+    ws.stages[g] = FrameStages(g, ws);
+    y = ws.stages[g].L4 * (ws.stages[g].R_tilt * ws.y[g]);
+  }
+}
+
+void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q,
+                                    const ConfigLoads& L, const Workspace& ws,
+                                    Tangent* out) const {
+  const FrameId f = c.frame;
+  const kinematics::PpoeFrame& fr = chain_->model.frame(f);
+  // Most candidates sit at frames the active effects leave alone: there T2 = T4 = T5 = T_parent
+  // T_parent_ip, and only their rotation matters below (a bend needs its pivot: all stages).
+  Stages st;
+  if (ws.touched[f]) {
+    st = ws.stages[f];  // PointInFrames'
+  } else if (c.type == EffectType::kLinkBending) {
+    st = FrameStages(f, ws);
+  } else {
+    st.T2 = lie::SE3(ws.T[fr.parent].rotation() * fr.T_parent_ip.rotation(), Vec3::Zero());
+    st.T4 = st.T5 = st.T2;
+  }
+  // The point in the coordinates of T5 (before the joint moves), T4 and T2.
+  const Vec3& y5 = ws.y[f];
+  const Vec3 y4 = st.R_tilt * y5;
+  const Vec3 y2 = st.R_mount * y4;  // no bend at f here (HasTangent)
+  // A body twist (v, w) of the stage pose T with the point at y there.
+  const auto body = [](const lie::SE3& T, const Vec3& y, const Vec3& v, const Vec3& w) {
+    Tangent d;
+    d.w = T.rotation() * w;
+    d.dp = T.rotation() * (w.cross(y) + v);
+    return d;
+  };
+  // The joint moving by dq' (d/dq Exp(zeta q) = Exp(zeta q) zeta).
+  const auto joint = [&](double dq_ds) {
+    const Vec3 w = dq_ds * fr.joint.axis;
+    if (fr.joint.type == kinematics::JointType::kPrismatic) {
+      return body(st.T5, y5, w, Vec3::Zero());
+    }
+    return body(st.T5, y5 - fr.joint.point, Vec3::Zero(), w);
+  };
+  switch (c.type) {
+    case EffectType::kJointOffset:
+      out[0] = joint(1.0);
+      break;
+    case EffectType::kJointCompliance:
+      out[0] = joint(Load(JointLoad(L, c.q_index, ws)));
+      break;
+    case EffectType::kBacklash: {
+      // The flank as AccumulateTerms picks it (a sign: constant in the parameter).
+      const double tau = JointLoad(L, c.q_index, ws);
+      const double motion = L.motion_sign.size() ? L.motion_sign[c.q_index] : 0.0;
+      out[0] = joint(motion != 0.0 ? motion : tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0);
+      break;
+    }
+    case EffectType::kTransmissionError:
+    case EffectType::kJointErrorCurve: {
+      const double qj = q[c.q_index];
+      for (int h = 1; 2 * h <= c.num_params; ++h) {
+        out[2 * h - 2] = joint(std::cos(h * qj));
+        out[2 * h - 1] = joint(std::sin(h * qj));
+      }
+      break;
+    }
+    case EffectType::kStiffeningSpring: {
+      constexpr double kTau0 = 10.0;
+      const double tau = Load(JointLoad(L, c.q_index, ws));
+      out[0] = joint(tau);
+      out[1] = joint(tau * tau * tau / (kTau0 * kTau0));
+      break;
+    }
+    case EffectType::kAxisTilt:
+      out[0] = body(st.T5, y5, Vec3::Zero(),
+                    lie::SO3RightJacobian(ws.tilt[f]) * (c.axis ? tilt_b_[f] : tilt_a_[f]));
+      break;
+    case EffectType::kBaseCompliance: {
+      // d tilt / d c: MountTilt's at the active compliance; at none, the moment at rest.
+      const Vec3 M = Load(L.M_mount + ws.payload * L.M_mount_unit + L.R_mount_T * ws.couple);
+      const Eigen::Matrix2d J =
+          ws.mount_active ? ws.mount_J : Eigen::Matrix2d(Eigen::Vector2d(M.x(), M.y()).asDiagonal());
+      // Body rates of MountRotation = R_y(theta_y) R_x(theta_x): x for theta_x, R_x^T y for
+      // theta_y.
+      double sx, cx;
+      lie::SinCos(ws.mount_rot.x(), &sx, &cx);
+      const Vec3 by(0.0, cx, -sx);
+      for (int k = 0; k < 2; ++k) {
+        out[k] = body(st.T4, y4, Vec3::Zero(), Vec3(J(0, k), 0.0, 0.0) + J(1, k) * by);
+      }
+      break;
+    }
+    case EffectType::kLinkBending: {
+      // T3 = (Rb, mid - Rb mid) T2, Rb = Exp(phi): a base-frame turn about the link's middle.
+      const Vec3& dir = link_dir_[f];
+      const Vec3 M = L.M_mid[f] + ws.payload * L.M_mid_unit[f] + L.R_mid_T[f] * ws.couple;
+      const Vec3 dphi = ws.T[prev_joint_[f]].rotation() * Load(Vec3(M - M.dot(dir) * dir));
+      out[0].w = lie::SO3LeftJacobian(st.phi) * dphi;
+      out[0].dp = out[0].w.cross(ws.T[point_frame_].translation() - st.mid);
+      break;
+    }
+    case EffectType::kLinkLength:
+      out[0].w.setZero();
+      out[0].dp = ws.T[fr.parent].rotation() * fr.T_parent_ip.translation().normalized();
+      break;
+    case EffectType::kLinkOffset:
+      for (int k = 0; k < 3; ++k) {
+        out[k].w.setZero();
+        out[k].dp = ws.T[fr.parent].rotation().col(k);
+      }
+      break;
+    case EffectType::kJointOrigin: {
+      // T2 = T1 Exp(xi): body twist Jr(xi) e_k, xi = [rho; theta].
+      const Mat6 Jr = lie::SE3RightJacobian(ws.origin[f]);
+      for (int k = 0; k < 6; ++k) {
+        out[k] = body(st.T2, y2, Jr.col(k).head<3>(), Jr.col(k).tail<3>());
+      }
+      break;
+    }
+    case EffectType::kThermalExpansion:
+    case EffectType::kPayload:
+    case EffectType::kCameraOffset:
+      break;  // HasTangent is false
+  }
+}
+
+lie::SE3 EffectModel::PoseTangents(const Eigen::VectorXd& q, const ConfigLoads& L,
+                                   const std::vector<int>& active, const double* theta,
+                                   const std::vector<int>& cs, Workspace& ws,
+                                   Tangent* out) const {
+  AccumulateTerms(q, L, active, theta, ws);
+  ChainPoses(q, L, ws);
+  // Frames ids grow away from the base: the point is needed from the highest candidate down.
+  FrameId top = point_frame_;
+  for (int c : cs) top = std::min(top, candidates_[c].frame);
+  PointInFrames(q, top, ws);
+  for (int c : cs) {
+    CandidateTangents(candidates_[c], q, L, ws, out);
+    out += candidates_[c].num_params;
+  }
+  ClearTerms(active, ws);
   return ws.T[point_frame_];
 }
 

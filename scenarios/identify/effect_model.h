@@ -156,6 +156,16 @@ class EffectModel {
 
   ConfigLoads Loads(const Eigen::VectorXd& q) const;
 
+  // A frame's step under the effects' terms (ChainPoses' touched-frame step, intermediates
+  // kept; FrameStages):
+  // L2 = (R_p, t) Exp(origin) and L4 (with the bend and the mount's turn) relative to the
+  // parent, T2, T4, T5 in the base frame, the tilt's and the mount's rotations, the bend's
+  // rotation vector (base axes) and pivot.
+  struct Stages {
+    lie::SE3 L2, L4, T2, T4, T5;
+    Mat3 R_mount = Mat3::Identity(), R_tilt = Mat3::Identity();
+    Vec3 phi = Vec3::Zero(), mid = Vec3::Zero();
+  };
   struct Workspace {
     Eigen::VectorXd dq;
     std::vector<double> dlen;
@@ -164,6 +174,19 @@ class EffectModel {
     std::vector<Vec3> tilt;
     std::vector<Vec6> origin;
     std::vector<lie::SE3> T;
+    std::vector<Vec3> y;  // PoseTangents: the point in each frame's coordinates before its joint
+                          // moves (T5 of its step)
+    std::vector<char> touched;  // PoseTangents: whether the frame's step is ChainPoses' touched one
+    std::vector<Stages> stages;  // PoseTangents: a touched frame's stages
+    // Chain-wide terms of the last AccumulateTerms (payload, its couple in base axes, thermal
+    // strain, the mount's rotation vector).
+    double payload = 0.0;
+    Vec3 couple = Vec3::Zero();
+    double scale = 0.0;
+    Vec3 mount_rot = Vec3::Zero();
+    // d mount_rot_xy / d (c_x, c_y) where a base compliance is active (kinematics::MountTilt).
+    bool mount_active = false;
+    Eigen::Matrix2d mount_J = Eigen::Matrix2d::Zero();
   };
   Workspace MakeWorkspace() const;
 
@@ -177,7 +200,47 @@ class EffectModel {
   lie::SE3 PredictPose(const Eigen::VectorXd& q, const ConfigLoads& loads,
                        const std::vector<int>& active, const double* theta, Workspace& ws) const;
 
+  // A first-order change of the point frame's pose (base frame): d R = [w]x R, and d p.
+  struct Tangent {
+    Vec3 w = Vec3::Zero();
+    Vec3 dp = Vec3::Zero();
+  };
+  // Whether PoseTangents' analytic derivatives cover every parameter of candidate c with the
+  // effects `active` in the model (c itself may be active or not). Not covered (the caller
+  // differentiates numerically): thermal expansion and payload (they act on every frame or
+  // load), the camera offset (not on the chain), and a translation or joint origin on a link
+  // that an active link_bending turns (the bend's pivot moves with it).
+  bool HasTangent(int c, const std::vector<int>& active) const;
+  // PredictPose, and the derivative of the point frame's pose with respect to each parameter
+  // k of candidate cs[i] (its value adds to any active one's; derivatives at theta) in
+  // out[offset(i) + k], offsets being the running sum of num_params. Every cs[i] must pass
+  // HasTangent(cs[i], active). Allocates nothing.
+  lie::SE3 PoseTangents(const Eigen::VectorXd& q, const ConfigLoads& loads,
+                        const std::vector<int>& active, const double* theta,
+                        const std::vector<int>& cs, Workspace& ws, Tangent* out) const;
+
  private:
+  // PredictPose in three steps: the per-frame terms of `active` into ws, the chain's poses
+  // ws.T under them, and the terms back to zero.
+  void AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L,
+                       const std::vector<int>& active, const double* theta, Workspace& ws) const;
+  void ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L, Workspace& ws) const;
+  void ClearTerms(const std::vector<int>& active, Workspace& ws) const;
+  // The load a load-driven effect at joint k answers to (tau_J with the payload's share).
+  double JointLoad(const ConfigLoads& L, int k, const Workspace& ws) const;
+  // Whether frame f lies on a link that an active link_bending turns: the bend's pivot (the
+  // link's middle) moves when f's translation does (`at_bend`: f's own bend counts too).
+  bool OnBentLink(FrameId f, const std::vector<int>& active, bool at_bend) const;
+  Stages FrameStages(FrameId f, const Workspace& ws) const;
+  // Whether ChainPoses takes frame f's touched-frame step.
+  bool Touched(FrameId f, const Workspace& ws) const;
+  // ws.y: the point in each path frame's T5 coordinates, from the point frame up to frame `top`
+  // (the steps below in their own coordinates: structural zeros stay exact); ws.touched.
+  void PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace& ws) const;
+  // The tangents of candidate c's parameters at the terms in ws (PointInFrames done).
+  void CandidateTangents(const Candidate& c, const Eigen::VectorXd& q, const ConfigLoads& L,
+                         const Workspace& ws, Tangent* out) const;
+
   const sim::DeclaredChain* chain_;
   FrameId point_frame_;
   FrameId mount_ = 0;

@@ -68,6 +68,14 @@ Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data,
   return pr.CandidateColumns(StateOf(pr, fit), c);
 }
 
+std::vector<Eigen::MatrixXd> CandidateJacobians(const EffectModel& em, const DataSet& data,
+                                                const std::vector<ConfigLoads>& loads,
+                                                const Fit& fit, const std::vector<int>& cs,
+                                                const IdentifyOptions& opt) {
+  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
+  return pr.CandidateColumns(StateOf(pr, fit), cs);
+}
+
 namespace {
 
 // `fit` without its e-th effect, the others at their values (no refit).

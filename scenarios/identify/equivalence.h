@@ -43,6 +43,11 @@ Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data,
 Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data,
                                   const std::vector<ConfigLoads>& loads, const Fit& fit, int c,
                                   const IdentifyOptions& opt);
+// CandidateJacobian for each of `cs`, the analytic ones in one pass over the rows.
+std::vector<Eigen::MatrixXd> CandidateJacobians(const EffectModel& em, const DataSet& data,
+                                                const std::vector<ConfigLoads>& loads,
+                                                const Fit& fit, const std::vector<int>& cs,
+                                                const IdentifyOptions& opt);
 
 // Equivalence sets of the chosen effects of `fit` among `candidates`; fills
 // result->equivalence and result->indistinguishable, and the effects' display names.

@@ -157,25 +157,89 @@ Eigen::VectorXd Problem::Residuals(const Eigen::VectorXd& x) const {
   return ResidualsAt(x, Theta(x), active_);
 }
 
-Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
-  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(num_residuals(), num_params());
-  int col = 0, t = 0;
-  const Eigen::VectorXd theta = Theta(x);
-  for (size_t e = 0; e < active_.size(); ++e) {
-    const Eigen::MatrixXd& B = basis_[e];
-    const double step = em_.candidates()[active_[e]].step;
-    for (int k = 0; k < B.cols(); ++k) {
-      Eigen::VectorXd tp = theta, tm = theta;
-      tp.segment(t, B.rows()) += step * B.col(k);
-      tm.segment(t, B.rows()) -= step * B.col(k);
-      J.col(col + k) = (ResidualsAt(x, tp, active_) - ResidualsAt(x, tm, active_)) / (2 * step);
+namespace {
+
+// Whitened residual change of row o, predicted pose T, per unit change (w, d p) of the point
+// frame's pose (d R = [w]x R; columns: w, then d p). A pose row's rotation residual r =
+// Log(R_obs^T R) moves by Jr^-1(r) R^T w (d Exp(r) = Exp(r) [Jr(r) dr]); a pixel by the
+// pinhole's derivative at the camera-frame point (z held at its floor, as Project).
+using RowMap = Eigen::Matrix<double, Eigen::Dynamic, 6, 0, 6, 6>;
+void RowTangentMap(const Observation& o, const lie::SE3& T, const CameraModel& cam,
+                   const lie::SE3& T_base_cam, const IdentifyOptions& opt, RowMap* G) {
+  switch (o.type) {
+    case ObservationType::kGroup:
+    case ObservationType::kPoint:
+      G->resize(3, 6);
+      G->leftCols<3>().setZero();
+      G->rightCols<3>() = Mat3::Identity() / opt.point_std_m;
+      break;
+    case ObservationType::kPose: {
+      G->resize(6, 6);
+      G->setZero();
+      G->topRightCorner<3, 3>() = Mat3::Identity() / opt.point_std_m;
+      const Vec3 r = lie::SO3Log(o.R_base.transpose() * T.rotation());
+      G->bottomLeftCorner<3, 3>() =
+          lie::SO3RightJacobianInverse(r) * T.rotation().transpose() / opt.rotation_std_rad;
+      break;
     }
-    col += static_cast<int>(B.cols());
-    t += static_cast<int>(B.rows());
+    case ObservationType::kPixel: {
+      const Mat3 Rt = T_base_cam.rotation().transpose();
+      const Vec3 p = Rt * (T.translation() - T_base_cam.translation());
+      const bool floor = !(p.z() > 1e-6);
+      const double z = std::max(p.z(), 1e-6);
+      Eigen::Matrix<double, 2, 3> dproj;
+      dproj << cam.fx / z, 0.0, floor ? 0.0 : -cam.fx * p.x() / (z * z),  //
+          0.0, cam.fy / z, floor ? 0.0 : -cam.fy * p.y() / (z * z);
+      G->resize(2, 6);
+      G->leftCols<3>().setZero();
+      G->rightCols<3>() = dproj * Rt / opt.pixel_std_px;
+      break;
+    }
   }
+}
+
+}  // namespace
+
+Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& theta,
+                                        const std::vector<int>& cs) const {
+  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), NumTheta(em_, cs));
+  EffectModel::Workspace ws = em_.MakeWorkspace();
+  std::vector<EffectModel::Tangent> tangent(D.cols());
+  const lie::SE3 T_base_cam =
+      data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
+  RowMap G(3, 6);
+  for (size_t i = 0; i < data_.rows.size(); ++i) {
+    const Observation& o = data_.rows[i];
+    const lie::SE3 T =
+        em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data());
+    RowTangentMap(o, T, data_.camera, T_base_cam, opt_, &G);
+    for (Eigen::Index k = 0; k < D.cols(); ++k) {
+      // Through a fixed-size vector: Eigen picks its summation order by the destination's
+      // alignment, and a column must not depend on which others are computed with it.
+      Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> dr =
+          G.leftCols<3>() * tangent[k].w + G.rightCols<3>() * tangent[k].dp;
+      D.block(offset_[i], k, G.rows(), 1) = dr;
+    }
+  }
+  return D;
+}
+
+void Problem::NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                                   size_t e, int col, int t, Eigen::MatrixXd* J) const {
+  const Eigen::MatrixXd& B = basis_[e];
+  const double step = em_.candidates()[active_[e]].step;
+  for (int k = 0; k < B.cols(); ++k) {
+    Eigen::VectorXd tp = theta, tm = theta;
+    tp.segment(t, B.rows()) += step * B.col(k);
+    tm.segment(t, B.rows()) -= step * B.col(k);
+    J->col(col + k) = (ResidualsAt(x, tp, active_) - ResidualsAt(x, tm, active_)) / (2 * step);
+  }
+}
+
+void Problem::PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
   for (size_t r = 0; r < data_.rows.size(); ++r) {
     if (data_.rows[r].type == ObservationType::kGroup) {
-      J.block<3, 3>(offset_[r], num_alpha_ + 3 * data_.rows[r].group) =
+      J->block<3, 3>(offset_[r], num_alpha_ + 3 * data_.rows[r].group) =
           -Mat3::Identity() / opt_.point_std_m;
     }
   }
@@ -186,13 +250,79 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
     if (len < 1e-12) continue;
     const Eigen::RowVector3d u = diff.transpose() / (len * opt_.distance_std_m);
     const int row = rows_dim_ + static_cast<int>(k);
-    J.block<1, 3>(row, num_alpha_ + 3 * d.a) += u;
-    J.block<1, 3>(row, num_alpha_ + 3 * d.b) -= u;
+    J->block<1, 3>(row, num_alpha_ + 3 * d.a) += u;
+    J->block<1, 3>(row, num_alpha_ + 3 * d.b) -= u;
   }
+}
+
+Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(num_residuals(), num_params());
+  const Eigen::VectorXd theta = Theta(x);
+  std::vector<int> analytic;
+  for (int c : active_) {
+    if (em_.HasTangent(c, active_)) analytic.push_back(c);
+  }
+  const Eigen::MatrixXd D =
+      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(theta, analytic);
+  int col = 0, t = 0, d = 0;
+  for (size_t e = 0; e < active_.size(); ++e) {
+    const Eigen::MatrixXd& B = basis_[e];
+    if (em_.HasTangent(active_[e], active_)) {
+      J.middleCols(col, B.cols()).noalias() = D.middleCols(d, B.rows()) * B;
+      d += static_cast<int>(B.rows());
+    } else {
+      NumericEffectColumns(x, theta, e, col, t, &J);
+    }
+    col += static_cast<int>(B.cols());
+    t += static_cast<int>(B.rows());
+  }
+  PointColumns(x, &J);
+  return J;
+}
+
+Eigen::MatrixXd Problem::NumericJacobian(const Eigen::VectorXd& x) const {
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(num_residuals(), num_params());
+  const Eigen::VectorXd theta = Theta(x);
+  int col = 0, t = 0;
+  for (size_t e = 0; e < active_.size(); ++e) {
+    NumericEffectColumns(x, theta, e, col, t, &J);
+    col += static_cast<int>(basis_[e].cols());
+    t += static_cast<int>(basis_[e].rows());
+  }
+  PointColumns(x, &J);
   return J;
 }
 
 Eigen::MatrixXd Problem::CandidateColumns(const Eigen::VectorXd& x, int c) const {
+  if (!em_.HasTangent(c, active_)) return NumericCandidateColumns(x, c);
+  // Added at zero, c changes no prediction: its derivatives at the active effects' theta.
+  return TangentColumns(Theta(x), {c});
+}
+
+std::vector<Eigen::MatrixXd> Problem::CandidateColumns(const Eigen::VectorXd& x,
+                                                       const std::vector<int>& cs) const {
+  std::vector<int> analytic;
+  for (int c : cs) {
+    if (em_.HasTangent(c, active_)) analytic.push_back(c);
+  }
+  const Eigen::MatrixXd D =
+      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(Theta(x), analytic);
+  std::vector<Eigen::MatrixXd> out;
+  out.reserve(cs.size());
+  int d = 0;
+  for (int c : cs) {
+    if (em_.HasTangent(c, active_)) {
+      const int np = em_.candidates()[c].num_params;
+      out.push_back(D.middleCols(d, np));
+      d += np;
+    } else {
+      out.push_back(NumericCandidateColumns(x, c));
+    }
+  }
+  return out;
+}
+
+Eigen::MatrixXd Problem::NumericCandidateColumns(const Eigen::VectorXd& x, int c) const {
   const Candidate& cand = em_.candidates()[c];
   std::vector<int> act = active_;
   act.push_back(c);

@@ -54,15 +54,32 @@ class Problem {
 
   void Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) const;
   Eigen::VectorXd Residuals(const Eigen::VectorXd& x) const;
-  // Central differences for alpha, exact columns for the group points and distances.
+  // d residuals / dx: analytic columns for the effects EffectModel::HasTangent covers (one
+  // prediction a row for all of them), central differences for the others, exact columns for
+  // the group points and distances.
   Eigen::MatrixXd Jacobian(const Eigen::VectorXd& x) const;
-  // Sensitivity (central differences, whitened) of the row residuals to the full parameters of
-  // candidate `c` added to the model at zero, at state x.
+  // Sensitivity (whitened) of the row residuals to the full parameters of candidate `c` added
+  // to the model at zero, at state x: analytic where covered, else central differences.
   Eigen::MatrixXd CandidateColumns(const Eigen::VectorXd& x, int c) const;
+  // The same for each of `cs`, the analytic ones in one pass over the rows.
+  std::vector<Eigen::MatrixXd> CandidateColumns(const Eigen::VectorXd& x,
+                                                const std::vector<int>& cs) const;
+  // The same two by central differences throughout (the reference the analytic columns are
+  // tested against; each column re-predicts every row twice).
+  Eigen::MatrixXd NumericJacobian(const Eigen::VectorXd& x) const;
+  Eigen::MatrixXd NumericCandidateColumns(const Eigen::VectorXd& x, int c) const;
 
  private:
   Eigen::VectorXd ResidualsAt(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                               const std::vector<int>& active) const;
+  // Central-difference columns of active effect e (its alpha directions) into J.
+  void NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta, size_t e,
+                            int col, int t, Eigen::MatrixXd* J) const;
+  // Analytic d residuals / d theta for the full parameters of candidates `cs` (concatenated),
+  // at theta of the active effects; the distance rows are zero.
+  Eigen::MatrixXd TangentColumns(const Eigen::VectorXd& theta, const std::vector<int>& cs) const;
+  // The group-point and distance columns (exact) into J.
+  void PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
 
   const EffectModel& em_;
   const DataSet& data_;

@@ -33,13 +33,17 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
   const Projector proj(FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt));
   IdentifyOptions screen = ctx.opt;
   screen.max_iterations = 4;
-  std::vector<Trial> trials;
+  std::vector<int> screened;
   for (int c : pool) {
-    if (Contains(cur.active, c)) continue;
+    if (!Contains(cur.active, c)) screened.push_back(c);
+  }
+  const std::vector<Eigen::MatrixXd> Jc =
+      CandidateJacobians(ctx.em, ctx.data, ctx.loads, cur, screened, ctx.opt);
+  std::vector<Trial> trials;
+  for (size_t i = 0; i < screened.size(); ++i) {
+    const int c = screened[i];
     double rel = 0.0;
-    const Eigen::MatrixXd B = ObservableBasis(
-        CandidateJacobian(ctx.em, ctx.data, ctx.loads, cur, c, ctx.opt), proj, ctx.opt.rank_tol,
-        &rel);
+    const Eigen::MatrixXd B = ObservableBasis(Jc[i], proj, ctx.opt.rank_tol, &rel);
     if (B.cols() == 0) continue;
     // Never more unknowns than residuals.
     if (cur.num_params + B.cols() >= cur.num_residuals) continue;

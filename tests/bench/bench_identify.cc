@@ -172,9 +172,13 @@ BENCHMARK(BM_IdentifyRows)
 // Issue 21's case as the CLI runs it: `flexbench identify` on a point-format CSV of N rows
 // (planar3, every candidate, a planted joint offset; the file is written outside the timing):
 // the CSV read, the loads and the whole identification. The issue measured 1,000 rows 3.6 s,
-// 4,000 rows 44 s, 8,000 rows 99 s; target 10,000 rows under 5 s. Now linear (BigO N, RMS 2 %)
-// but not there: medians of 3, CPU time, 2 shared cores: 1,000 rows 1.26 s, 4,000 5.27 s,
-// 10,000 13.1 s (every FD column is a full ResidualsAt over the rows).
+// 4,000 rows 44 s, 8,000 rows 99 s; target 10,000 rows under 5 s. Linear (BigO N) but not
+// there yet. Medians of 3, CPU time, 2 cores shared (load ~4), both builds in one session: with
+// every Jacobian column by central differences 1,000 rows 1.29 s, 4,000 5.35 s, 10,000 13.7 s;
+// with the analytic columns (EffectModel::PoseTangents) 0.69 s, 2.94 s, 7.07 s (1.9x; callgrind
+// on 1,000 rows 145 -> 75 G instructions). What remains is the screening's Levenberg-Marquardt
+// itself: 43% residual passes (PredictPose per row), 47% one PoseTangents pass per Jacobian
+// (its chain 11%, the point's walk up the frames 15%, the tangents 7%).
 void BM_IdentifyPointCsv(benchmark::State& state) {
   const int rows = static_cast<int>(state.range(0));
   const std::string dir = std::string(FLEXBENCH_SOURCE_DIR) + "/models/";
