@@ -89,17 +89,58 @@ double HeldOutSquares(const EffectModel& em, const DataSet& data,
                       const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
                       const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries) {
   const Problem pr(em, data, loads, active, {}, opt);
-  std::vector<lie::SE3> T;
-  pr.Poses(theta, &T);
-  std::vector<Vec3> points(T.size());
-  for (size_t r = 0; r < T.size(); ++r) points[r] = T[r].translation();
-  const std::vector<Vec3> mean = GroupMeans(data, points);
   Eigen::VectorXd x(pr.num_params());
   x.head(pr.num_alpha()) = theta;
-  for (size_t g = 0; g < mean.size(); ++g) x.segment<3>(pr.num_alpha() + 3 * g) = mean[g];
+  if (!data.groups.empty()) {
+    std::vector<lie::SE3> T;
+    pr.Poses(theta, &T);
+    std::vector<Vec3> points(T.size());
+    for (size_t r = 0; r < T.size(); ++r) points[r] = T[r].translation();
+    const std::vector<Vec3> mean = GroupMeans(data, points);
+    for (size_t g = 0; g < mean.size(); ++g) x.segment<3>(pr.num_alpha() + 3 * g) = mean[g];
+  }
   const Eigen::VectorXd r = pr.Residuals(x);
   *entries = static_cast<int>(r.size());
   return r.squaredNorm();
+}
+
+namespace {
+
+FoldData MakeFoldData(const DataSet& data, const std::vector<ConfigLoads>& loads,
+                      const std::vector<int>& test) {
+  std::vector<char> in_test(data.rows.size(), 0);
+  for (int r : test) in_test[r] = 1;
+  std::vector<int> train;
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    if (!in_test[r]) train.push_back(static_cast<int>(r));
+  }
+  FoldData f;
+  f.train = Subset(data, train);
+  f.train_loads = SubsetLoads(loads, train);
+  f.test = Subset(data, test);
+  f.test_loads = SubsetLoads(loads, test);
+  return f;
+}
+
+size_t HeapBytes(const ConfigLoads& L) {
+  return sizeof(double) * (L.tau.size() + L.tau_unit.size() + L.axis_base.size() +
+                           L.motion_sign.size() + L.q_nominal.size()) +
+         sizeof(Vec3) * (L.M_mid.size() + L.M_mid_unit.size()) +
+         sizeof(Mat3) * L.R_mid_T.size() + sizeof(lie::SE3) * L.T_nominal.size();
+}
+
+}  // namespace
+
+void CacheFolds(const DataSet& data, const std::vector<ConfigLoads>& loads, Folds* folds,
+                size_t max_bytes) {
+  folds->cache.clear();
+  size_t row_bytes = sizeof(Observation) + sizeof(ConfigLoads);
+  if (!loads.empty()) row_bytes += HeapBytes(loads.front());
+  if (!data.rows.empty()) row_bytes += sizeof(double) * data.rows.front().q.size();
+  if (row_bytes * data.rows.size() * folds->test_rows.size() > max_bytes) return;
+  for (const std::vector<int>& test : folds->test_rows) {
+    folds->cache.push_back(MakeFoldData(data, loads, test));
+  }
 }
 
 double CrossValidate(const EffectModel& em, const DataSet& data,
@@ -107,26 +148,22 @@ double CrossValidate(const EffectModel& em, const DataSet& data,
                      const IdentifyOptions& opt) {
   double ss = 0.0;
   int entries = 0;
-  std::vector<char> in_test(data.rows.size());
   // Each fold starts from the full-data fit, a few steps from its own optimum.
   IdentifyOptions fold_opt = opt;
   fold_opt.max_iterations = std::min(opt.max_iterations, 8);
-  for (const std::vector<int>& test : folds.test_rows) {
-    std::fill(in_test.begin(), in_test.end(), 0);
-    for (int r : test) in_test[r] = 1;
-    std::vector<int> train;
-    for (size_t r = 0; r < data.rows.size(); ++r) {
-      if (!in_test[r]) train.push_back(static_cast<int>(r));
+  for (size_t k = 0; k < folds.test_rows.size(); ++k) {
+    FoldData made;
+    if (folds.cache.size() != folds.test_rows.size()) {
+      made = MakeFoldData(data, loads, folds.test_rows[k]);
     }
-    const DataSet tr = Subset(data, train);
-    const std::vector<ConfigLoads> tr_loads = SubsetLoads(loads, train);
+    const FoldData& f = folds.cache.size() == folds.test_rows.size() ? folds.cache[k] : made;
     Eigen::VectorXd theta = fit.theta;
     if (!fit.active.empty()) {
-      theta = FitEffects(em, tr, tr_loads, fit.active, fit.basis, fit.theta, fold_opt).theta;
+      theta = FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt)
+                  .theta;
     }
     int n = 0;
-    ss += HeldOutSquares(em, Subset(data, test), SubsetLoads(loads, test), fit.active, theta, opt,
-                         &n);
+    ss += HeldOutSquares(em, f.test, f.test_loads, fit.active, theta, opt, &n);
     entries += n;
   }
   return entries > 0 ? ss / entries : 0.0;

@@ -61,6 +61,13 @@ Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data,
   return pr.Jacobian(StateOf(pr, fit));
 }
 
+Eigen::VectorXd FitResiduals(const EffectModel& em, const DataSet& data,
+                             const std::vector<ConfigLoads>& loads, const Fit& fit,
+                             const IdentifyOptions& opt) {
+  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
+  return pr.Residuals(StateOf(pr, fit));
+}
+
 Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data,
                                   const std::vector<ConfigLoads>& loads, const Fit& fit, int c,
                                   const IdentifyOptions& opt) {

@@ -40,6 +40,10 @@ Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj
 Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data,
                             const std::vector<ConfigLoads>& loads, const Fit& fit,
                             const IdentifyOptions& opt);
+// Its whitened residuals there.
+Eigen::VectorXd FitResiduals(const EffectModel& em, const DataSet& data,
+                             const std::vector<ConfigLoads>& loads, const Fit& fit,
+                             const IdentifyOptions& opt);
 Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data,
                                   const std::vector<ConfigLoads>& loads, const Fit& fit, int c,
                                   const IdentifyOptions& opt);

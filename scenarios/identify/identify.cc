@@ -300,7 +300,8 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
       }
     }
   }
-  const Folds folds = MakeFolds(data, opt.folds_by);
+  Folds folds = MakeFolds(data, opt.folds_by);
+  if (opt.cross_validation) CacheFolds(data, loads, &folds);
   res.folds_by = opt.cross_validation ? folds.by : "";
   res.num_folds = opt.cross_validation ? static_cast<int>(folds.test_rows.size()) : 0;
   if (opt.cross_validation && folds.test_rows.size() < 2) {

@@ -85,6 +85,8 @@ struct IdentifyOptions {
   double rank_tol = 1e-3;  // share of a sensitivity outside the span of the others
   int max_effects = 8;
   int max_iterations = 50;  // Levenberg-Marquardt
+  // Threads of a pass over the rows (0: one per core; parallel.h); any number, the same bits.
+  int threads = 0;
 };
 
 struct FittedEffect {

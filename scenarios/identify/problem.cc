@@ -8,6 +8,7 @@
 #include <cstdio>
 
 #include "estimators/lie/so3.h"
+#include "scenarios/identify/parallel.h"
 
 namespace flexbench::identify {
 
@@ -108,43 +109,51 @@ Eigen::VectorXd Problem::Alpha(const Eigen::VectorXd& theta) const {
   return alpha;
 }
 
+int Problem::threads() const {
+  return PassThreads(static_cast<int>(data_.rows.size()), opt_.threads);
+}
+
 void Problem::Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) const {
-  EffectModel::Workspace ws = em_.MakeWorkspace();
   T->resize(data_.rows.size());
-  for (size_t r = 0; r < data_.rows.size(); ++r) {
-    (*T)[r] = em_.PredictPose(data_.rows[r].q, loads_[r], active_, theta.data(), ws);
-  }
+  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+    EffectModel::Workspace ws = em_.MakeWorkspace();
+    for (int r = begin; r < end; ++r) {
+      (*T)[r] = em_.PredictPose(data_.rows[r].q, loads_[r], active_, theta.data(), ws);
+    }
+  });
 }
 
 Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                                      const std::vector<int>& active) const {
-  EffectModel::Workspace ws = em_.MakeWorkspace();
   Eigen::VectorXd r(num_residuals());
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active, theta.data()) : lie::SE3();
   const auto group_point = [&](int g) -> Vec3 { return x.segment<3>(num_alpha_ + 3 * g); };
-  for (size_t i = 0; i < data_.rows.size(); ++i) {
-    const Observation& o = data_.rows[i];
-    const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws);
-    const int k = offset_[i];
-    const Vec3 p = T.translation();
-    switch (o.type) {
-      case ObservationType::kGroup:
-        r.segment<3>(k) = (p - group_point(o.group)) / opt_.point_std_m;
-        break;
-      case ObservationType::kPoint:
-        r.segment<3>(k) = (p - o.p_base) / opt_.point_std_m;
-        break;
-      case ObservationType::kPose:
-        r.segment<3>(k) = (p - o.p_base) / opt_.point_std_m;
-        r.segment<3>(k + 3) =
-            lie::SO3Log(o.R_base.transpose() * T.rotation()) / opt_.rotation_std_rad;
-        break;
-      case ObservationType::kPixel:
-        r.segment<2>(k) = (Project(data_.camera, T_base_cam, p) - o.uv) / opt_.pixel_std_px;
-        break;
+  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+    EffectModel::Workspace ws = em_.MakeWorkspace();
+    for (int i = begin; i < end; ++i) {
+      const Observation& o = data_.rows[i];
+      const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws);
+      const int k = offset_[i];
+      const Vec3 p = T.translation();
+      switch (o.type) {
+        case ObservationType::kGroup:
+          r.segment<3>(k) = (p - group_point(o.group)) / opt_.point_std_m;
+          break;
+        case ObservationType::kPoint:
+          r.segment<3>(k) = (p - o.p_base) / opt_.point_std_m;
+          break;
+        case ObservationType::kPose:
+          r.segment<3>(k) = (p - o.p_base) / opt_.point_std_m;
+          r.segment<3>(k + 3) =
+              lie::SO3Log(o.R_base.transpose() * T.rotation()) / opt_.rotation_std_rad;
+          break;
+        case ObservationType::kPixel:
+          r.segment<2>(k) = (Project(data_.camera, T_base_cam, p) - o.uv) / opt_.pixel_std_px;
+          break;
+      }
     }
-  }
+  });
   for (size_t k = 0; k < data_.distances.size(); ++k) {
     const GroupDistance& d = data_.distances[k];
     r[rows_dim_ + k] =
@@ -203,24 +212,26 @@ void RowTangentMap(const Observation& o, const lie::SE3& T, const CameraModel& c
 Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& theta,
                                         const std::vector<int>& cs) const {
   Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), NumTheta(em_, cs));
-  EffectModel::Workspace ws = em_.MakeWorkspace();
-  std::vector<EffectModel::Tangent> tangent(D.cols());
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
-  RowMap G(3, 6);
-  for (size_t i = 0; i < data_.rows.size(); ++i) {
-    const Observation& o = data_.rows[i];
-    const lie::SE3 T =
-        em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data());
-    RowTangentMap(o, T, data_.camera, T_base_cam, opt_, &G);
-    for (Eigen::Index k = 0; k < D.cols(); ++k) {
-      // Through a fixed-size vector: Eigen picks its summation order by the destination's
-      // alignment, and a column must not depend on which others are computed with it.
-      Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> dr =
-          G.leftCols<3>() * tangent[k].w + G.rightCols<3>() * tangent[k].dp;
-      D.block(offset_[i], k, G.rows(), 1) = dr;
+  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+    EffectModel::Workspace ws = em_.MakeWorkspace();
+    std::vector<EffectModel::Tangent> tangent(D.cols());
+    RowMap G(3, 6);
+    for (int i = begin; i < end; ++i) {
+      const Observation& o = data_.rows[i];
+      const lie::SE3 T =
+          em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data());
+      RowTangentMap(o, T, data_.camera, T_base_cam, opt_, &G);
+      for (Eigen::Index k = 0; k < D.cols(); ++k) {
+        // Through a fixed-size vector: Eigen picks its summation order by the destination's
+        // alignment, and a column must not depend on which others are computed with it.
+        Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> dr =
+            G.leftCols<3>() * tangent[k].w + G.rightCols<3>() * tangent[k].dp;
+        D.block(offset_[i], k, G.rows(), 1) = dr;
+      }
     }
-  }
+  });
   return D;
 }
 
@@ -338,6 +349,22 @@ Eigen::MatrixXd Problem::NumericCandidateColumns(const Eigen::VectorXd& x, int c
   return out;
 }
 
+Fit MakeFit(const Problem& pr, const std::vector<int>& active, const Eigen::VectorXd& x,
+            double rss) {
+  const int G = (pr.num_params() - pr.num_alpha()) / 3;
+  Fit f;
+  f.active = active;
+  for (size_t e = 0; e < active.size(); ++e) f.basis.push_back(pr.basis(e));
+  f.theta = pr.Theta(x);
+  f.group_points.resize(G);
+  for (int g = 0; g < G; ++g) f.group_points[g] = x.segment<3>(pr.num_alpha() + 3 * g);
+  f.rss = rss;
+  f.num_residuals = pr.num_residuals();
+  f.num_params = pr.num_params();
+  f.bic = Bic(rss, f.num_residuals, pr.num_params());
+  return f;
+}
+
 Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
   Eigen::VectorXd x(pr.num_params());
   x.head(pr.num_alpha()) = pr.Alpha(fit.theta);
@@ -358,7 +385,7 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
   theta0.head(n_init) = init.head(n_init);
   Eigen::VectorXd x = Eigen::VectorXd::Zero(pr.num_params());
   x.head(pr.num_alpha()) = pr.Alpha(theta0);
-  {
+  if (G > 0) {
     // Group points start at their rows' mean.
     std::vector<lie::SE3> T;
     pr.Poses(pr.Theta(x), &T);
@@ -399,17 +426,44 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
     }
     if (!improved) break;
   }
-  Fit f;
-  f.active = active;
-  for (size_t e = 0; e < active.size(); ++e) f.basis.push_back(pr.basis(e));
-  f.theta = pr.Theta(x);
-  f.group_points.resize(G);
-  for (int g = 0; g < G; ++g) f.group_points[g] = x.segment<3>(pr.num_alpha() + 3 * g);
-  f.rss = rss;
-  f.num_residuals = pr.num_residuals();
-  f.num_params = pr.num_params();
-  f.bic = Bic(rss, f.num_residuals, pr.num_params());
-  return f;
+  return MakeFit(pr, active, x, rss);
+}
+
+Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+               const Fit& fit, int c, const Eigen::MatrixXd& basis_c,
+               const Eigen::MatrixXd& J_fit, const Eigen::MatrixXd& J_c,
+               const Eigen::VectorXd& r_fit, const IdentifyOptions& opt) {
+  std::vector<int> act = fit.active;
+  act.push_back(c);
+  std::vector<Eigen::MatrixXd> basis = fit.basis;
+  basis.resize(fit.active.size());
+  basis.push_back(basis_c);
+  const Problem pr(em, data, loads, act, basis, opt);
+  const int na = static_cast<int>(J_fit.cols()) - 3 * static_cast<int>(data.groups.size());
+  const int m = static_cast<int>(basis_c.cols());
+  const int n = pr.num_params();
+  Eigen::VectorXd theta0 = Eigen::VectorXd::Zero(pr.num_theta());
+  theta0.head(fit.theta.size()) = fit.theta;
+  Eigen::VectorXd x(n);
+  x.head(pr.num_alpha()) = pr.Alpha(theta0);
+  for (size_t g = 0; g < fit.group_points.size(); ++g) {
+    x.segment<3>(pr.num_alpha() + 3 * g) = fit.group_points[g];
+  }
+  Eigen::MatrixXd J(J_fit.rows(), n);
+  J << J_fit.leftCols(na), J_c * basis_c, J_fit.rightCols(n - na - m);
+  // A Gauss-Newton step, undamped: a candidate nearly equivalent to a chosen effect (a link's
+  // bending beside its joint's compliance) moves along a narrow valley that a damped step
+  // (Levenberg-Marquardt's first) barely enters. ObservableBasis keeps such directions well
+  // enough apart (rank_tol) for the normal equations.
+  const Eigen::MatrixXd A = J.transpose() * J;
+  const Eigen::VectorXd g = J.transpose() * r_fit;
+  const Eigen::VectorXd dx = -A.ldlt().solve(g);
+  if (dx.allFinite()) {
+    const Eigen::VectorXd xn = x + dx;
+    const double rss = pr.Residuals(xn).squaredNorm();
+    if (std::isfinite(rss) && rss < fit.rss) return MakeFit(pr, act, xn, rss);
+  }
+  return FitWith(em, data, loads, fit, c, basis_c, opt);
 }
 
 Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,

@@ -70,6 +70,7 @@ class Problem {
   Eigen::MatrixXd NumericCandidateColumns(const Eigen::VectorXd& x, int c) const;
 
  private:
+  int threads() const;  // for a pass over the rows (parallel.h)
   Eigen::VectorXd ResidualsAt(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                               const std::vector<int>& active) const;
   // Central-difference columns of active effect e (its alpha directions) into J.
@@ -96,11 +97,25 @@ class Problem {
 // The state vector x of a fit (alpha, then group points).
 Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit);
 
+// The fit of `pr`'s effects `active` at state x with sum of squares rss.
+Fit MakeFit(const Problem& pr, const std::vector<int>& active, const Eigen::VectorXd& x,
+            double rss);
+
 // Fits `active` (in the directions of `basis`, empty = all) plus the group points by
 // Levenberg-Marquardt from `init` (theta; may be empty or shorter).
 Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
                const Eigen::VectorXd& init, const IdentifyOptions& options);
+
+// Screening (issue 21: a screening fit per candidate was most of identifying 10,000 rows): c
+// added to `fit` by Levenberg-Marquardt's first step from fit's state with the columns
+// already computed (J_fit: fit's Jacobian at its state, J_c: c's full-parameter columns there,
+// r_fit: fit's residuals), scored by one residual pass. Where that step does not lower the sum
+// of squares, FitWith from zero instead.
+Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+               const Fit& fit, int c, const Eigen::MatrixXd& basis_c,
+               const Eigen::MatrixXd& J_fit, const Eigen::MatrixXd& J_c,
+               const Eigen::VectorXd& r_fit, const IdentifyOptions& opt);
 
 // The same fit with `fit`'s e-th effect removed (the others start from their values).
 Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,

@@ -30,7 +30,9 @@ struct Trial {
 // Screened fits of every pool candidate beside `cur`, best BIC first.
 std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
                                     const std::vector<int>& pool) {
-  const Projector proj(FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt));
+  const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+  const Projector proj(J_cur);
+  const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
   IdentifyOptions screen = ctx.opt;
   screen.max_iterations = 4;
   std::vector<int> screened;
@@ -47,7 +49,7 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
     if (B.cols() == 0) continue;
     // Never more unknowns than residuals.
     if (cur.num_params + B.cols() >= cur.num_residuals) continue;
-    Fit f = FitWith(ctx.em, ctx.data, ctx.loads, cur, c, B, screen);
+    Fit f = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[i], r_cur, screen);
     if (std::isfinite(f.bic)) trials.push_back({c, std::move(f)});
   }
   std::stable_sort(trials.begin(), trials.end(), [](const Trial& a, const Trial& b) {

@@ -14,6 +14,7 @@
 
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/identify.h"
+#include "scenarios/identify/parallel.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
@@ -219,22 +220,25 @@ void BM_IdentifyPointCsv(benchmark::State& state) {
     DataSet data;
     ReadCalibrationCsv(path, chain.q_joints, &data);
     const std::vector<ConfigLoads> loads = ComputeLoads(em, data);
-    const IdentifyResult r = Identify(em, data, loads, candidates, IdentifyOptions{});
+    IdentifyOptions opt;
+    opt.threads = static_cast<int>(state.range(1));
+    const IdentifyResult r = Identify(em, data, loads, candidates, opt);
     found = r.effects.size();
     benchmark::DoNotOptimize(found);
   }
   std::filesystem::remove(path);
   state.counters["effects_found"] = found;
   state.counters["candidates"] = candidates.size();
-  state.SetComplexityN(rows);
+  state.counters["threads"] = PassThreads(rows, static_cast<int>(state.range(1)));
 }
+// Args: rows, threads of the row passes (1; 0: one per core). Wall time (what a user waits)
+// and the whole process's CPU time (all threads).
 BENCHMARK(BM_IdentifyPointCsv)
-    ->Arg(1000)
-    ->Arg(4000)
-    ->Arg(10000)
+    ->ArgsProduct({{1000, 4000, 10000}, {1, 0}})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1)
-    ->Complexity();
+    ->UseRealTime()
+    ->MeasureProcessCPUTime();
 
 }  // namespace
 }  // namespace flexbench::identify

@@ -142,6 +142,10 @@ class ClosedLoopKind : public ScenarioKind {
     if (!(opt_.cv_min_gain >= 0.0 && opt_.cv_min_gain < 1.0)) {
       root.Child("cv_min_gain").Fail("must be in [0, 1)");
     }
+    // Threads of the identification's row passes (0: one per core); the results' bits do not
+    // depend on it.
+    opt_.threads = root.GetInt("threads", opt_.threads);
+    if (opt_.threads < 0 || opt_.threads > 64) root.Child("threads").Fail("must be in [0, 64]");
     opt_.outlier_iqr = root.GetDouble("outlier_iqr", opt_.outlier_iqr);
     if (!(opt_.outlier_iqr >= 0.0)) root.Child("outlier_iqr").Fail("must be >= 0 (0: off)");
     opt_.diagnostic_p = root.GetDouble("diagnostic_p", opt_.diagnostic_p);
