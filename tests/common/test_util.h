@@ -7,14 +7,27 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <sstream>
 #include <string>
+
+#include "estimators/error.h"
 
 namespace flexbench::testing {
 
 inline std::string SourceDir() { return FLEXBENCH_SOURCE_DIR; }
 inline std::string BinDir() { return FLEXBENCH_BIN_DIR; }
+
+// The message of the InputError that f throws; "" when it throws none.
+inline std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
 
 struct CommandResult {
   int exit_code = -1;

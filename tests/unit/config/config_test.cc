@@ -6,18 +6,12 @@
 
 #include "sim/config.h"
 #include "scenarios/runner/gates.h"
+#include "tests/common/test_util.h"
 
 namespace flexbench::scenarios {
 namespace {
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
+using testing::ErrorOf;
 
 TEST(ConfigNode, ReadsTypedValues) {
   const ConfigNode root =

@@ -20,15 +20,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
-
 // A tetrahedron with outward faces; MuJoCo checks the orientation.
 const char* kVertices = "0 0 0  1 0 0  0 1 0  0 0 1";
 const char* kFaces = "0 2 1  0 1 3  0 3 2  1 2 3";
