@@ -47,10 +47,4 @@ FamilyPtr MakeFamily(const std::string& name, const std::string& key) {
   throw InputError(key + ": unknown AprilTag family '" + name + "' (known: " + known + ")");
 }
 
-std::vector<std::string> FamilyNames() {
-  std::vector<std::string> names;
-  for (const auto& e : kFamilies) names.emplace_back(e.name);
-  return names;
-}
-
 }  // namespace flexbench::render

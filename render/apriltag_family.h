@@ -19,7 +19,4 @@ using FamilyPtr = std::unique_ptr<apriltag_family, FamilyDeleter>;
 // InputError naming `key` for an unknown family.
 FamilyPtr MakeFamily(const std::string& name, const std::string& key = "family");
 
-// Names MakeFamily accepts.
-std::vector<std::string> FamilyNames();
-
 }  // namespace flexbench::render

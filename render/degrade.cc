@@ -23,13 +23,6 @@ double Uniform01(std::mt19937_64& rng) {
   return static_cast<double>(rng() >> 11) * (1.0 / 9007199254740992.0);  // 2^-53
 }
 
-double StandardNormal(std::mt19937_64& rng) {
-  // 1 - u is in (0, 1], so the logarithm is finite.
-  const double u1 = 1.0 - Uniform01(rng);
-  const double u2 = Uniform01(rng);
-  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
-}
-
 void ValidateDegradation(const Degradation& deg, const std::string& key) {
   if (!(deg.noise_std >= 0.0)) throw InputError(key + ".noise_std: must be >= 0");
   if (!(deg.blur_sigma_px >= 0.0)) throw InputError(key + ".blur_sigma_px: must be >= 0");

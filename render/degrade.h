@@ -62,9 +62,6 @@ DegradationReport ApplyDegradation(const Degradation& deg, std::mt19937_64& rng,
 // For a gray image it is `noise_std` itself.
 double GrayNoiseStd(const Degradation& deg, int channels);
 
-// A standard normal draw from `rng` by the Box-Muller transform on two 53-bit uniforms
-// (portable: depends only on mt19937_64, which the standard fully specifies, and libm).
-double StandardNormal(std::mt19937_64& rng);
 // A uniform draw in [0, 1) with 53 random bits.
 double Uniform01(std::mt19937_64& rng);
 

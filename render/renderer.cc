@@ -122,12 +122,6 @@ void Renderer::RenderRgbInto(mjData* d, int cam_id, Image* image) {
   if (IsConstant(*image)) ThrowConstantFrame(d, cam_id);
 }
 
-Image Renderer::RenderGray(mjData* d, int cam_id) {
-  Image image;
-  RenderGrayInto(d, cam_id, &image);
-  return image;
-}
-
 void Renderer::RenderGrayInto(mjData* d, int cam_id, Image* gray) {
   Draw(d, cam_id);
   // Flip and convert in one pass with ToGray's conversion (OpenCV's fixed-point BT.601), so

@@ -34,7 +34,6 @@ class Renderer {
   void RenderRgbInto(mjData* d, int cam_id, Image* rgb);
   // Grayscale (BT.601, as ToGray) straight from the readback: one pass, no RGB copy.
   void RenderGrayInto(mjData* d, int cam_id, Image* gray);
-  Image RenderGray(mjData* d, int cam_id);
 
   void UploadTexture(int tex_id);
 

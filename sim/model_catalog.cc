@@ -20,18 +20,6 @@ std::vector<std::string> SplitWords(const std::string& text) {
 
 }  // namespace
 
-const char* JointRoleName(JointRole role) {
-  switch (role) {
-    case JointRole::kActuated:
-      return "actuated";
-    case JointRole::kPassive:
-      return "passive";
-    case JointRole::kCoupled:
-      return "coupled";
-  }
-  return "?";
-}
-
 ModelCatalog ModelCatalog::Build(const mjModel* m, const std::string& model_name) {
   ModelCatalog c;
   c.model_name = model_name;

@@ -18,7 +18,6 @@
 namespace flexbench::sim {
 
 enum class JointRole { kActuated, kPassive, kCoupled };
-const char* JointRoleName(JointRole role);
 
 struct JointEntry {
   std::string name;

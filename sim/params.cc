@@ -76,20 +76,6 @@ std::vector<std::string> Params::GetStringList(const std::string& key,
   return out;
 }
 
-std::map<std::string, double> Params::GetPerName(const std::string& key,
-                                                 const std::vector<std::string>& names) const {
-  std::map<std::string, double> out;
-  const auto c = Optional(key);
-  if (!c) return out;
-  if (c->IsMap()) {
-    for (const std::string& name : c->Keys()) out[name] = c->GetDouble(name);
-  } else {
-    const double v = c->AsDouble();
-    for (const std::string& name : names) out[name] = v;
-  }
-  return out;
-}
-
 void Params::Fail(const std::string& message) const {
   throw InputError(where_ + ": " + message);
 }

@@ -34,10 +34,6 @@ class Params {
   Vec3 GetVec3(const std::string& key, const Vec3& fallback) const;
   std::vector<std::string> GetStringList(const std::string& key,
                                          const std::vector<std::string>& fallback) const;
-  // A number for every name, or a map {name: number}. `names` is the default set for the scalar
-  // form; map keys are returned as written (callers check that they exist).
-  std::map<std::string, double> GetPerName(const std::string& key,
-                                           const std::vector<std::string>& names) const;
 
   [[noreturn]] void Fail(const std::string& message) const;
   // Fails naming `key` (its file line when present).

@@ -26,20 +26,6 @@ void ChainSampler::Sample(const Eigen::Ref<const Eigen::VectorXd>& q, std::mt199
   }
 }
 
-Mat6 ChainSampler::SampleCovariance(const Eigen::Ref<const Eigen::VectorXd>& q, FrameId frame,
-                                    int n, std::mt19937_64& rng) {
-  PpoeData data(model_);
-  ForwardKinematics(model_, data, q);
-  const lie::SE3& mean = data.T_base_frame[frame];
-  Mat6 sum = Mat6::Zero();
-  for (int s = 0; s < n; ++s) {
-    Sample(q, rng, &scratch_);
-    const Vec6 xi = mean.Between(scratch_[frame]).Log();
-    sum += xi * xi.transpose();
-  }
-  return sum / n;
-}
-
 Mat6 ChainSampler::SampleCovarianceControlVariate(const Eigen::Ref<const Eigen::VectorXd>& q,
                                                   FrameId frame, int n, std::mt19937_64& rng,
                                                   Mat6* linear) {

@@ -22,12 +22,8 @@ class ChainSampler {
   void Sample(const Eigen::Ref<const Eigen::VectorXd>& q, std::mt19937_64& rng,
               std::vector<lie::SE3>* poses);
 
-  // Second moment about the nominal pose, E[Log(Tbar^-1 T) Log(Tbar^-1 T)^T], of `frame`
-  // from n draws (the definition of eq. 9).
-  Mat6 SampleCovariance(const Eigen::Ref<const Eigen::VectorXd>& q, FrameId frame, int n,
-                        std::mt19937_64& rng);
-
-  // The same second moment with a control variate: xi_lin = sum_i Ad_{Tbar_frame^-1 Tbar_ip}
+  // Second moment about the nominal pose, E[Log(Tbar^-1 T) Log(Tbar^-1 T)^T], of `frame` from
+  // n draws (the definition of eq. 9), with a control variate: xi_lin = sum_i Ad_{Tbar_frame^-1 Tbar_ip}
   // xi_i, the first-order image of the drawn sources, has the exactly known covariance
   // Sigma_lin = sum_i Ad Sigma_i Ad^T, so Sigma_lin + mean(xi xi^T - xi_lin xi_lin^T) estimates
   // E[xi xi^T] with the sampling error of a 4th-order difference only. This is what resolves

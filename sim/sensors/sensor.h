@@ -74,8 +74,6 @@ struct CameraReading {
 
 using SensorReading = std::variant<EncoderReading, ImuReading, ContactReading, CameraReading>;
 
-double ReadingTime(const SensorReading& r);
-
 class Sensor {
  public:
   virtual ~Sensor() = default;

@@ -242,10 +242,6 @@ void Sensor::ReadRate(const Params& params, double fallback_hz) {
   rate_hz_ = params.GetPositive("rate_hz", fallback_hz);
 }
 
-double ReadingTime(const SensorReading& r) {
-  return std::visit([](const auto& x) { return x.t; }, r);
-}
-
 std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& name,
                                    const Params& params, const Simulation& sim,
                                    std::uint64_t seed) {
