@@ -1,4 +1,4 @@
-// The one place where flexbench's conventions are written in code (DESIGN.md, "Conventions").
+// The one place where flexbench's conventions are written in code (docs/design.md, "Conventions").
 // tests/unit/conventions/ pins every statement here.
 //
 // - SE(3) tangent vectors are xi = [rho; theta]: translation first, rotation second
