@@ -1,4 +1,4 @@
-// The runtime interface of every estimator and the explicit registry (DESIGN.md, "Plug-ins").
+// The runtime interface of every estimator and the explicit registry (docs/design.md).
 //
 // An estimator knows only its declared PPOE model, the sensors' set-up (camera intrinsics and
 // frames, IMU frames) and its parameters; it sees typed measurements (measurement.h) and

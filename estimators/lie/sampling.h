@@ -1,5 +1,5 @@
 // Seeded sampling in tangent spaces: Monte-Carlo oracles in tests and particle methods.
-// Every stream is a caller-owned std::mt19937_64 (DESIGN.md: same seed, same bytes out).
+// Every stream is a caller-owned std::mt19937_64 (docs/design.md: same seed, same bytes out).
 #pragma once
 
 #include <Eigen/Eigenvalues>

@@ -8,7 +8,7 @@
 
 namespace flexbench::scenarios {
 
-// Exit codes of the runner contract (DESIGN.md).
+// Exit codes of the runner contract (docs/design.md).
 inline constexpr int kExitOk = 0;
 inline constexpr int kExitInternal = 1;
 inline constexpr int kExitBadInput = 2;

@@ -50,7 +50,7 @@ struct EffectEntry {
   std::unique_ptr<Effect> (*make)();
 };
 
-// The explicit list of effects (effects/registry.cc).
+// The explicit list of effects (EffectRegistry in sim/effects/effects.cc).
 const std::vector<EffectEntry>& EffectRegistry();
 
 // A configured effect by name; throws InputError "<where>: unknown effect '<name>' (known: ...)".

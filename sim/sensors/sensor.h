@@ -106,7 +106,7 @@ struct SensorEntry {
   std::unique_ptr<Sensor> (*make)();
 };
 
-// The explicit list of sensor kinds (sensors/registry.cc).
+// The explicit list of sensor kinds (SensorRegistry in sim/sensors/sensors.cc).
 const std::vector<SensorEntry>& SensorRegistry();
 
 // A configured sensor; throws InputError "<where>: unknown sensor kind '<kind>' (known: ...)"

@@ -1,4 +1,4 @@
-// Pins every statement of estimators/conventions.h (DESIGN.md, "Conventions").
+// Pins every statement of estimators/conventions.h (docs/design.md, "Conventions").
 #include "estimators/conventions.h"
 
 #include <gtest/gtest.h>
