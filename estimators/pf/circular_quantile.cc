@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "estimators/pf/particle_loop.h"
 
@@ -58,10 +59,222 @@ FLEXBENCH_PARTICLE_LOOP void KeptRange(const double* __restrict lo, const double
   *kept = (s4[0] + s4[1]) + (s4[2] + s4[3]);
 }
 
+
+typedef double V4 __attribute__((vector_size(32)));
+typedef long long V4i __attribute__((vector_size(32)));
+
+inline V4 Load4(const double* p) {
+  V4 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+
+inline double LaneSum(V4 v) { return (v[0] + v[1]) + (v[2] + v[3]); }
+
+// GCC vector casts reinterpret the bits; spelled out.
+inline V4i Bits(V4 v) {
+  V4i b;
+  std::memcpy(&b, &v, sizeof b);
+  return b;
+}
+
+inline V4 FromBits(V4i b) {
+  V4 v;
+  std::memcpy(&v, &b, sizeof v);
+  return v;
+}
+
+// What the band pass adds up besides the per-particle band codes.
+struct BandMass {
+  double kept = 0.0;
+  double lower_deep = 0.0, upper_deep = 0.0;  // mass beyond -outer and beyond outer
+  long long lower_deep_count = 0, upper_deep_count = 0;
+};
+
+// The band pass on four particles; lanes as in the sums. (ci, si), (co, so): cos and sin of inner
+// and outer. A deviation (x, y) lies below -a when it is in the closed lower half-plane (sign bit
+// of y, as atan2 puts (-1, -0) at -pi) and clockwise of (cos a, -sin a); above a likewise.
+inline void BandLanes(V4 c, V4 s, V4 w, double cm, double sm, double negligible, double ci,
+                      double si, double co, double so, V4i* code, V4* kept, V4* lo_mass,
+                      V4* hi_mass, V4i* lo_count, V4i* hi_count) {
+  const V4 x = c * cm + s * sm;
+  const V4 y = s * cm - c * sm;
+  const V4i zero = {0, 0, 0, 0};
+  const V4i neg = Bits(y) < zero;
+  const V4i keep = w >= negligible;
+  const V4i lo_in = neg & (ci * y + si * x < 0.0) & keep;
+  const V4i lo_deep = neg & (co * y + so * x < 0.0) & keep;
+  const V4i hi_in = ~neg & (ci * y - si * x > 0.0) & keep;
+  const V4i hi_deep = ~neg & (co * y - so * x > 0.0) & keep;
+  const V4i one = {1, 1, 1, 1};
+  *code = (lo_in & ~lo_deep & one) | (hi_in & ~hi_deep & (one + one));
+  const V4i wb = Bits(w);
+  *kept += FromBits(wb & keep);
+  *lo_mass += FromBits(wb & lo_deep);
+  *hi_mass += FromBits(wb & hi_deep);
+  *lo_count -= lo_deep;
+  *hi_count -= hi_deep;
+}
+
+// Band codes (1 lower, 2 upper, 0 neither) of every particle, and the masses beyond the bands.
+FLEXBENCH_PARTICLE_LOOP void BandPass(const double* __restrict c, const double* __restrict s,
+                                      const double* __restrict w, int n, double cm, double sm,
+                                      double negligible, double ci, double si, double co,
+                                      double so, long long* __restrict band, BandMass* mass) {
+  V4 kept = {0.0, 0.0, 0.0, 0.0}, lo = kept, hi = kept;
+  V4i lo_count = {0, 0, 0, 0}, hi_count = lo_count;
+  V4i code;
+  const int n4 = n & ~3;
+  for (int i = 0; i < n4; i += 4) {
+    BandLanes(Load4(c + i), Load4(s + i), Load4(w + i), cm, sm, negligible, ci, si, co, so, &code,
+              &kept, &lo, &hi, &lo_count, &hi_count);
+    std::memcpy(band + i, &code, sizeof code);
+  }
+  if (n4 < n) {  // the last particles, padded with unkept ones (w = -1)
+    V4 cr = {1.0, 1.0, 1.0, 1.0}, sr = {0.0, 0.0, 0.0, 0.0}, wr = {-1.0, -1.0, -1.0, -1.0};
+    for (int i = n4; i < n; ++i) {
+      cr[i - n4] = c[i];
+      sr[i - n4] = s[i];
+      wr[i - n4] = w[i];
+    }
+    BandLanes(cr, sr, wr, cm, sm, negligible, ci, si, co, so, &code, &kept, &lo, &hi, &lo_count,
+              &hi_count);
+    for (int i = n4; i < n; ++i) band[i] = code[i - n4];
+  }
+  mass->kept = LaneSum(kept);
+  mass->lower_deep = LaneSum(lo);
+  mass->upper_deep = LaneSum(hi);
+  mass->lower_deep_count = (lo_count[0] + lo_count[1]) + (lo_count[2] + lo_count[3]);
+  mass->upper_deep_count = (hi_count[0] + hi_count[1]) + (hi_count[2] + hi_count[3]);
+}
+
+// The pseudo-angle of DiamondKeys for one deviation.
+inline double DiamondKey(double y, double x) {
+  const double l1 = std::abs(x) + std::abs(y);
+  const double r = y / (l1 > 0.0 ? l1 : 1.0);
+  return x >= 0.0 ? r : std::copysign(2.0, y) - r;
+}
+
+// Far enough inside a band that rounding cannot have put a particle of that deviation on the
+// wrong side of its edges (the edge tests are exact to a few ulp).
+constexpr double kBandMargin = 1e-9;
+
+using BandEntry = CircularQuantileScratch::BandEntry;
+
+// What a tail walk needs of the particles: their deviations and weights.
+struct Particles {
+  const double* c;
+  const double* s;
+  const double* w;
+  double cm, sm;
+  double Deviation(int i) const { return std::atan2(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm); }
+};
+
+// The definition's walk (the first particle whose mid-step reaches the target, interpolated from
+// the one before) over the lower band, starting at the mass `below` of the particles beyond
+// -outer (`deep`: whether there are any). False when the step or the particle before it is not
+// safely inside (-outer, -inner).
+bool LowerWalk(const Particles& p, const std::vector<BandEntry>& band, double below,
+               bool deep, double target, double inner, double outer, double* out) {
+  double cum = below;
+  double prev_mid = 0.0;
+  for (size_t j = 0; j < band.size(); ++j) {
+    const double wi = band[j].w;
+    const double mid = cum + 0.5 * wi;
+    if (mid >= target) {
+      if (j == 0 && deep) return false;  // the particle before is beyond the band
+      const double d = p.Deviation(band[j].i);
+      if (!(d <= -inner - kBandMargin)) return false;
+      if (j == 0) {  // the first particle of all
+        *out = d;
+        return true;
+      }
+      const double prev_d = p.Deviation(band[j - 1].i);
+      if (!(prev_d >= -outer + kBandMargin)) return false;
+      *out = prev_d + (d - prev_d) * (target - prev_mid) / (mid - prev_mid);
+      return true;
+    }
+    cum += wi;
+    prev_mid = mid;
+  }
+  return false;
+}
+
+// The same walk over the upper band from the top: `above` is the mass beyond outer, `kept` all
+// the kept mass; mid-steps are kept - (mass from the particle up) + w / 2.
+bool UpperWalk(const Particles& p, const std::vector<BandEntry>& band, double above,
+               bool deep, double kept, double target, double inner, double outer, double* out) {
+  double from_top = above;
+  double next_mid = 0.0;  // the mid-step of the particle after (above) this one
+  for (size_t j = band.size(); j-- > 0;) {
+    const double wi = band[j].w;
+    from_top += wi;
+    const double mid = (kept - from_top) + 0.5 * wi;
+    if (mid < target) {
+      const bool top = j + 1 == band.size();
+      if (top && deep) return false;  // the particle after is beyond the band
+      const double d = p.Deviation(band[j].i);
+      if (!(d >= inner + kBandMargin)) return false;
+      if (top) {  // the last particle of all: no mid-step reaches the target
+        *out = d;
+        return true;
+      }
+      const double next_d = p.Deviation(band[j + 1].i);
+      if (!(next_d <= outer - kBandMargin)) return false;
+      *out = d + (next_d - d) * (target - mid) / (next_mid - mid);
+      return true;
+    }
+    next_mid = mid;
+  }
+  return false;
+}
+
 }  // namespace
 
-CircularQuantileScratch::CircularQuantileScratch(int n) : key_(n), lo_(n), hi_(n), wk_(n), bin_(n), idx_(n + 1) {
+// The gathered particles sorted by (pseudo-angle, weight): the definition's order, (d, w), up
+// to rounding (a pseudo-angle ties another only for the same or an ulp-close deviation; equal
+// particles must still go by weight, as the interpolation depends on which comes first). A
+// counting sort into as many buckets as particles over the band's pseudo-angle range, then an
+// insertion sort for the few out of order within a bucket: std::sort of the ~100 particles of a
+// band was a fifth of a summary.
+void SortBand(const double* c, const double* s, const double* w, const int* idx, int count,
+              double cm, double sm, CircularQuantileScratch* scratch) {
+  std::vector<BandEntry>& raw = scratch->band_unsorted_;
+  std::vector<BandEntry>& band = scratch->band_pairs_;
+  raw.resize(count);
+  band.resize(count);
+  double kmin = HUGE_VAL, kmax = -HUGE_VAL;
+  for (int j = 0; j < count; ++j) {
+    const int i = idx[j];
+    const double key = DiamondKey(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm);
+    raw[j] = {key, w[i], i, 0};
+    kmin = std::min(kmin, key);
+    kmax = std::max(kmax, key);
+  }
+  // Monotone in the key: the buckets' order is the keys' order.
+  const double scale = kmax > kmin ? count / (kmax - kmin) : 0.0;
+  int* start = scratch->bucket_start_.data();
+  std::fill(start, start + count + 1, 0);
+  for (BandEntry& e : raw) {
+    e.bucket = std::min(count - 1, static_cast<int>((e.key - kmin) * scale));
+    ++start[e.bucket + 1];
+  }
+  for (int b = 0; b < count; ++b) start[b + 1] += start[b];
+  for (const BandEntry& e : raw) band[start[e.bucket]++] = e;
+  for (int j = 1; j < count; ++j) {
+    const BandEntry e = band[j];
+    int k = j;
+    for (; k > 0 && e < band[k - 1]; --k) band[k] = band[k - 1];
+    band[k] = e;
+  }
+}
+
+CircularQuantileScratch::CircularQuantileScratch(int n)
+    : key_(n), lo_(n), hi_(n), wk_(n), bin_(n), idx_(n + 1), idx_lo_(n + 1), idx_hi_(n + 1), band_(n) {
   pairs_.reserve(n);
+  band_pairs_.reserve(n);
+  band_unsorted_.reserve(n);
+  bucket_start_.assign(n + 1, 0);
 }
 
 void WeightedCircularQuantiles(const double* c, const double* s, const double* w, int n, double cm,
@@ -151,6 +364,57 @@ void WeightedCircularQuantiles(const double* c, const double* s, const double* w
     }
     out[k] = result;
   }
+}
+
+int WeightedCircularTailQuantiles(const double* c, const double* s, const double* w, int n,
+                                  double cm, double sm, double negligible, double inner,
+                                  double outer, const double* probs, int np, double* out,
+                                  CircularQuantileScratch* scratch) {
+  int fallbacks = 0;
+  const bool bands = inner > 0.0 && inner < outer && inner < M_PI;
+  BandMass mass;
+  int* lower = scratch->idx_lo_.data();
+  int* upper = scratch->idx_hi_.data();
+  int nl = 0, nu = 0;
+  if (bands) {
+    outer = std::min(outer, M_PI);  // cos, sin of pi: (-1, ~1e-16): nothing beyond
+    const double so = outer == M_PI ? 0.0 : std::sin(outer);
+    BandPass(c, s, w, n, cm, sm, negligible, std::cos(inner), std::sin(inner), std::cos(outer),
+             so, scratch->band_.data(), &mass);
+    // Branch-free gather of the two bands (which particles are in one is unpredictable).
+    const long long* band = scratch->band_.data();
+    for (int i = 0; i < n; ++i) {
+      lower[nl] = i;
+      upper[nu] = i;
+      nl += band[i] == 1;
+      nu += band[i] == 2;
+    }
+  }
+  const Particles p{c, s, w, cm, sm};
+  bool lower_sorted = false, upper_sorted = false;
+  std::vector<BandEntry>& sorted = scratch->band_pairs_;
+  for (int k = 0; k < np; ++k) {
+    const double target = probs[k] * mass.kept;
+    bool done = false;
+    if (bands && mass.kept > 0.0 && probs[k] <= 0.5) {
+      if (!lower_sorted) SortBand(c, s, w, lower, nl, cm, sm, scratch);
+      lower_sorted = true;
+      upper_sorted = false;
+      done = LowerWalk(p, sorted, mass.lower_deep, mass.lower_deep_count > 0, target, inner, outer,
+                       &out[k]);
+    } else if (bands && mass.kept > 0.0) {
+      if (!upper_sorted) SortBand(c, s, w, upper, nu, cm, sm, scratch);
+      upper_sorted = true;
+      lower_sorted = false;
+      done = UpperWalk(p, sorted, mass.upper_deep, mass.upper_deep_count > 0, mass.kept, target,
+                       inner, outer, &out[k]);
+    }
+    if (!done) {
+      ++fallbacks;
+      WeightedCircularQuantiles(c, s, w, n, cm, sm, negligible, &probs[k], 1, &out[k], scratch);
+    }
+  }
+  return fallbacks;
 }
 
 }  // namespace flexbench::pf
