@@ -91,21 +91,26 @@ struct BandMass {
   long long lower_deep_count = 0, upper_deep_count = 0;
 };
 
-// The band pass on four particles; lanes as in the sums. (ci, si), (co, so): cos and sin of inner
-// and outer. A deviation (x, y) lies below -a when it is in the closed lower half-plane (sign bit
-// of y, as atan2 puts (-1, -0) at -pi) and clockwise of (cos a, -sin a); above a likewise.
-inline void BandLanes(V4 c, V4 s, V4 w, double cm, double sm, double negligible, double ci,
-                      double si, double co, double so, V4i* code, V4* kept, V4* lo_mass,
+// cos and sin of a band's inner and outer edge.
+struct BandEdges {
+  double ci, si, co, so;
+};
+
+// The band pass on four particles; lanes as in the sums. A deviation (x, y) lies below -a when it
+// is in the closed lower half-plane (sign bit of y, as atan2 puts (-1, -0) at -pi) and clockwise
+// of (cos a, -sin a); above a likewise.
+inline void BandLanes(V4 c, V4 s, V4 w, double cm, double sm, double negligible,
+                      const BandEdges& lo, const BandEdges& hi, V4i* code, V4* kept, V4* lo_mass,
                       V4* hi_mass, V4i* lo_count, V4i* hi_count) {
   const V4 x = c * cm + s * sm;
   const V4 y = s * cm - c * sm;
   const V4i zero = {0, 0, 0, 0};
   const V4i neg = Bits(y) < zero;
   const V4i keep = w >= negligible;
-  const V4i lo_in = neg & (ci * y + si * x < 0.0) & keep;
-  const V4i lo_deep = neg & (co * y + so * x < 0.0) & keep;
-  const V4i hi_in = ~neg & (ci * y - si * x > 0.0) & keep;
-  const V4i hi_deep = ~neg & (co * y - so * x > 0.0) & keep;
+  const V4i lo_in = neg & (lo.ci * y + lo.si * x < 0.0) & keep;
+  const V4i lo_deep = neg & (lo.co * y + lo.so * x < 0.0) & keep;
+  const V4i hi_in = ~neg & (hi.ci * y - hi.si * x > 0.0) & keep;
+  const V4i hi_deep = ~neg & (hi.co * y - hi.so * x > 0.0) & keep;
   const V4i one = {1, 1, 1, 1};
   *code = (lo_in & ~lo_deep & one) | (hi_in & ~hi_deep & (one + one));
   const V4i wb = Bits(w);
@@ -119,15 +124,15 @@ inline void BandLanes(V4 c, V4 s, V4 w, double cm, double sm, double negligible,
 // Band codes (1 lower, 2 upper, 0 neither) of every particle, and the masses beyond the bands.
 FLEXBENCH_PARTICLE_LOOP void BandPass(const double* __restrict c, const double* __restrict s,
                                       const double* __restrict w, int n, double cm, double sm,
-                                      double negligible, double ci, double si, double co,
-                                      double so, long long* __restrict band, BandMass* mass) {
+                                      double negligible, BandEdges lo_edges, BandEdges hi_edges,
+                                      long long* __restrict band, BandMass* mass) {
   V4 kept = {0.0, 0.0, 0.0, 0.0}, lo = kept, hi = kept;
   V4i lo_count = {0, 0, 0, 0}, hi_count = lo_count;
   V4i code;
   const int n4 = n & ~3;
   for (int i = 0; i < n4; i += 4) {
-    BandLanes(Load4(c + i), Load4(s + i), Load4(w + i), cm, sm, negligible, ci, si, co, so, &code,
-              &kept, &lo, &hi, &lo_count, &hi_count);
+    BandLanes(Load4(c + i), Load4(s + i), Load4(w + i), cm, sm, negligible, lo_edges, hi_edges,
+              &code, &kept, &lo, &hi, &lo_count, &hi_count);
     std::memcpy(band + i, &code, sizeof code);
   }
   if (n4 < n) {  // the last particles, padded with unkept ones (w = -1)
@@ -137,8 +142,8 @@ FLEXBENCH_PARTICLE_LOOP void BandPass(const double* __restrict c, const double* 
       sr[i - n4] = s[i];
       wr[i - n4] = w[i];
     }
-    BandLanes(cr, sr, wr, cm, sm, negligible, ci, si, co, so, &code, &kept, &lo, &hi, &lo_count,
-              &hi_count);
+    BandLanes(cr, sr, wr, cm, sm, negligible, lo_edges, hi_edges, &code, &kept, &lo, &hi,
+              &lo_count, &hi_count);
     for (int i = n4; i < n; ++i) band[i] = code[i - n4];
   }
   mass->kept = LaneSum(kept);
@@ -170,40 +175,43 @@ struct Particles {
   double Deviation(int i) const { return std::atan2(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm); }
 };
 
+// Where a band walk found its quantile's step, or which way the band should move.
+enum class Walk { kFound, kDeeper, kShallower };
+
 // The definition's walk (the first particle whose mid-step reaches the target, interpolated from
-// the one before) over the lower band, starting at the mass `below` of the particles beyond
-// -outer (`deep`: whether there are any). False when the step or the particle before it is not
-// safely inside (-outer, -inner).
-bool LowerWalk(const Particles& p, const std::vector<BandEntry>& band, double below,
-               bool deep, double target, double inner, double outer, double* out) {
+// the one before) over the lower band (-outer, -inner), starting at the mass `below` of the
+// particles beyond -outer (`deep`: whether there are any). The step and the particle before it
+// must be safely inside the band.
+Walk LowerWalk(const Particles& p, const std::vector<BandEntry>& band, double below, bool deep,
+               double target, double inner, double outer, double* out) {
   double cum = below;
   double prev_mid = 0.0;
   for (size_t j = 0; j < band.size(); ++j) {
     const double wi = band[j].w;
     const double mid = cum + 0.5 * wi;
     if (mid >= target) {
-      if (j == 0 && deep) return false;  // the particle before is beyond the band
+      if (j == 0 && deep) return Walk::kDeeper;  // the particle before is beyond the band
       const double d = p.Deviation(band[j].i);
-      if (!(d <= -inner - kBandMargin)) return false;
+      if (!(d <= -inner - kBandMargin)) return Walk::kShallower;
       if (j == 0) {  // the first particle of all
         *out = d;
-        return true;
+        return Walk::kFound;
       }
       const double prev_d = p.Deviation(band[j - 1].i);
-      if (!(prev_d >= -outer + kBandMargin)) return false;
+      if (!(prev_d >= -outer + kBandMargin)) return Walk::kDeeper;
       *out = prev_d + (d - prev_d) * (target - prev_mid) / (mid - prev_mid);
-      return true;
+      return Walk::kFound;
     }
     cum += wi;
     prev_mid = mid;
   }
-  return false;
+  return Walk::kShallower;
 }
 
-// The same walk over the upper band from the top: `above` is the mass beyond outer, `kept` all
-// the kept mass; mid-steps are kept - (mass from the particle up) + w / 2.
-bool UpperWalk(const Particles& p, const std::vector<BandEntry>& band, double above,
-               bool deep, double kept, double target, double inner, double outer, double* out) {
+// The same walk over the upper band (inner, outer) from the top: `above` is the mass beyond
+// outer, `kept` all the kept mass; mid-steps are kept - (mass from the particle up) + w / 2.
+Walk UpperWalk(const Particles& p, const std::vector<BandEntry>& band, double above, bool deep,
+               double kept, double target, double inner, double outer, double* out) {
   double from_top = above;
   double next_mid = 0.0;  // the mid-step of the particle after (above) this one
   for (size_t j = band.size(); j-- > 0;) {
@@ -212,22 +220,36 @@ bool UpperWalk(const Particles& p, const std::vector<BandEntry>& band, double ab
     const double mid = (kept - from_top) + 0.5 * wi;
     if (mid < target) {
       const bool top = j + 1 == band.size();
-      if (top && deep) return false;  // the particle after is beyond the band
+      if (top && deep) return Walk::kDeeper;  // the particle after is beyond the band
       const double d = p.Deviation(band[j].i);
-      if (!(d >= inner + kBandMargin)) return false;
+      if (!(d >= inner + kBandMargin)) return Walk::kShallower;
       if (top) {  // the last particle of all: no mid-step reaches the target
         *out = d;
-        return true;
+        return Walk::kFound;
       }
       const double next_d = p.Deviation(band[j + 1].i);
-      if (!(next_d <= outer - kBandMargin)) return false;
+      if (!(next_d <= outer - kBandMargin)) return Walk::kDeeper;
       *out = d + (next_d - d) * (target - mid) / (next_mid - mid);
-      return true;
+      return Walk::kFound;
     }
     next_mid = mid;
   }
-  return false;
+  return Walk::kShallower;
 }
+
+// (inner, outer) of a band, in rad from the mean.
+struct Band {
+  double inner, outer;
+  bool operator==(const Band& o) const { return inner == o.inner && outer == o.outer; }
+  // Valid: a non-empty range that starts inside the circle.
+  bool ok() const { return inner > 0.0 && inner < outer && inner < M_PI; }
+  // The next guess after a walk missed: beyond the band, or between it and the mean (overlapping
+  // it a little), or the quantile's own band once found.
+  Band Moved(Walk miss) const {
+    if (miss == Walk::kDeeper) return {0.95 * outer, std::min(1.6 * outer, M_PI)};
+    return {0.5 * inner, 1.05 * inner};
+  }
+};
 
 }  // namespace
 
@@ -366,48 +388,101 @@ void WeightedCircularQuantiles(const double* c, const double* s, const double* w
   }
 }
 
+namespace {
+
+// The scratch arrays of the band passes.
+struct BandBuffers {
+  long long* band;  // per particle: 1 lower band, 2 upper band, 0 neither
+  int* either;      // the particles in a band (n + 1)
+  int* lower;       // those of the lower band (n + 1)
+  int* upper;       // those of the upper band (n + 1)
+};
+
+// The band pass for the lower and upper bands, and the gathers of their particles.
+struct BandState {
+  Band lower{0.0, 0.0}, upper{0.0, 0.0};  // those of the last pass
+  BandMass mass;
+  int nl = 0, nu = 0;
+  int sorted = 0;  // 1: the lower band's particles are in band_pairs_, 2: the upper's
+
+  void Pass(const double* c, const double* s, const double* w, int n, double cm, double sm,
+            double negligible, Band lo, Band hi, const BandBuffers& buf);
+};
+
+// cos and sin of the band's edges; sin(pi) is not 0 in doubles, and a band out to pi must reach
+// the end of the circle.
+BandEdges Edges(Band b) {
+  const double outer = std::min(b.outer, M_PI);
+  return {std::cos(b.inner), std::sin(b.inner), std::cos(outer),
+          outer == M_PI ? 0.0 : std::sin(outer)};
+}
+
+void BandState::Pass(const double* c, const double* s, const double* w, int n, double cm,
+                     double sm, double negligible, Band lo, Band hi, const BandBuffers& buf) {
+  BandPass(c, s, w, n, cm, sm, negligible, Edges(lo), Edges(hi), buf.band, &mass);
+  // Branch-free gathers (which particles are in a band is unpredictable): first those in
+  // either band (one store per particle), then the few of them split by band.
+  int ne = 0;
+  for (int i = 0; i < n; ++i) {
+    buf.either[ne] = i;
+    ne += buf.band[i] != 0;
+  }
+  nl = 0;
+  nu = 0;
+  for (int j = 0; j < ne; ++j) {
+    const int i = buf.either[j];
+    buf.lower[nl] = i;
+    buf.upper[nu] = i;
+    nl += buf.band[i] == 1;
+    nu += buf.band[i] == 2;
+  }
+  lower = lo;
+  upper = hi;
+  sorted = 0;
+}
+
+// Band passes a quantile may take before the histogram: the guess, and two moves.
+constexpr int kBandAttempts = 3;
+
+}  // namespace
+
 int WeightedCircularTailQuantiles(const double* c, const double* s, const double* w, int n,
                                   double cm, double sm, double negligible, double inner,
                                   double outer, const double* probs, int np, double* out,
                                   CircularQuantileScratch* scratch) {
   int fallbacks = 0;
-  const bool bands = inner > 0.0 && inner < outer && inner < M_PI;
-  BandMass mass;
-  int* lower = scratch->idx_lo_.data();
-  int* upper = scratch->idx_hi_.data();
-  int nl = 0, nu = 0;
-  if (bands) {
-    outer = std::min(outer, M_PI);  // cos, sin of pi: (-1, ~1e-16): nothing beyond
-    const double so = outer == M_PI ? 0.0 : std::sin(outer);
-    BandPass(c, s, w, n, cm, sm, negligible, std::cos(inner), std::sin(inner), std::cos(outer),
-             so, scratch->band_.data(), &mass);
-    // Branch-free gather of the two bands (which particles are in one is unpredictable).
-    const long long* band = scratch->band_.data();
-    for (int i = 0; i < n; ++i) {
-      lower[nl] = i;
-      upper[nu] = i;
-      nl += band[i] == 1;
-      nu += band[i] == 2;
-    }
-  }
   const Particles p{c, s, w, cm, sm};
-  bool lower_sorted = false, upper_sorted = false;
-  std::vector<BandEntry>& sorted = scratch->band_pairs_;
+  BandState state;
+  const BandBuffers buf{scratch->band_.data(), scratch->idx_.data(), scratch->idx_lo_.data(),
+                        scratch->idx_hi_.data()};
+  const Band guess{inner, std::min(outer, M_PI)};
+  Band lo = guess, hi = guess;  // the next pass's bands: one pass serves both tails' guesses
   for (int k = 0; k < np; ++k) {
-    const double target = probs[k] * mass.kept;
+    const bool low = probs[k] <= 0.5;
+    (low ? lo : hi) = guess;
     bool done = false;
-    if (bands && mass.kept > 0.0 && probs[k] <= 0.5) {
-      if (!lower_sorted) SortBand(c, s, w, lower, nl, cm, sm, scratch);
-      lower_sorted = true;
-      upper_sorted = false;
-      done = LowerWalk(p, sorted, mass.lower_deep, mass.lower_deep_count > 0, target, inner, outer,
-                       &out[k]);
-    } else if (bands && mass.kept > 0.0) {
-      if (!upper_sorted) SortBand(c, s, w, upper, nu, cm, sm, scratch);
-      upper_sorted = true;
-      lower_sorted = false;
-      done = UpperWalk(p, sorted, mass.upper_deep, mass.upper_deep_count > 0, mass.kept, target,
-                       inner, outer, &out[k]);
+    for (int attempt = 0; attempt < kBandAttempts && !done; ++attempt) {
+      const Band& band = low ? lo : hi;
+      if (!band.ok()) break;
+      if (!(state.lower == lo && state.upper == hi)) {
+        state.Pass(c, s, w, n, cm, sm, negligible, lo, hi, buf);
+      }
+      if (!(state.mass.kept > 0.0)) break;
+      const int side = low ? 1 : 2;
+      if (state.sorted != side) {
+        SortBand(c, s, w, low ? buf.lower : buf.upper,
+                 low ? state.nl : state.nu, cm, sm, scratch);
+        state.sorted = side;
+      }
+      const double target = probs[k] * state.mass.kept;
+      const Walk walk =
+          low ? LowerWalk(p, scratch->band_pairs_, state.mass.lower_deep,
+                          state.mass.lower_deep_count > 0, target, lo.inner, lo.outer, &out[k])
+              : UpperWalk(p, scratch->band_pairs_, state.mass.upper_deep,
+                          state.mass.upper_deep_count > 0, state.mass.kept, target, hi.inner,
+                          hi.outer, &out[k]);
+      done = walk == Walk::kFound;
+      if (!done) (low ? lo : hi) = band.Moved(walk);
     }
     if (!done) {
       ++fallbacks;
