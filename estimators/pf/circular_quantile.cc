@@ -88,7 +88,6 @@ inline V4 FromBits(V4i b) {
 struct BandMass {
   double kept = 0.0;
   double lower_deep = 0.0, upper_deep = 0.0;  // mass beyond -outer and beyond outer
-  long long lower_deep_count = 0, upper_deep_count = 0;
 };
 
 // cos and sin of a band's inner and outer edge.
@@ -96,43 +95,69 @@ struct BandEdges {
   double ci, si, co, so;
 };
 
-// The band pass on four particles; lanes as in the sums. A deviation (x, y) lies below -a when it
-// is in the closed lower half-plane (sign bit of y, as atan2 puts (-1, -0) at -pi) and clockwise
-// of (cos a, -sin a); above a likewise.
-inline void BandLanes(V4 c, V4 s, V4 w, double cm, double sm, double negligible,
-                      const BandEdges& lo, const BandEdges& hi, V4i* code, V4* kept, V4* lo_mass,
-                      V4* hi_mass, V4i* lo_count, V4i* hi_count) {
-  const V4 x = c * cm + s * sm;
-  const V4 y = s * cm - c * sm;
+// The band tests as linear forms in a particle's (c, s). The deviation (x, y) = (c cm + s sm,
+// s cm - c sm) lies below -a when it is in the closed lower half-plane (sign bit of y, as atan2
+// puts (-1, -0) at -pi) and clockwise of (cos a, -sin a): cos a y + sin a x < 0, which is
+// s (cos a cm + sin a sm) + c (sin a cm - cos a sm) < 0; above a likewise. y itself is formed as
+// the definition forms it, so the sides agree with its atan2; the edges' rounding is the walks'
+// margin.
+struct BandForms {
+  V4 cm, sm;            // y = s cm - c sm
+  V4 lo_in_s, lo_in_c;  // < 0: beyond -inner
+  V4 lo_deep_s, lo_deep_c;
+  V4 hi_in_s, hi_in_c;  // > 0: beyond inner
+  V4 hi_deep_s, hi_deep_c;
+  V4 negligible;
+};
+
+BandForms Forms(double cm, double sm, double negligible, const BandEdges& lo,
+                const BandEdges& hi) {
+  const auto v = [](double a) { return V4{a, a, a, a}; };
+  BandForms f;
+  f.cm = v(cm);
+  f.sm = v(sm);
+  f.lo_in_s = v(lo.ci * cm + lo.si * sm);
+  f.lo_in_c = v(lo.si * cm - lo.ci * sm);
+  f.lo_deep_s = v(lo.co * cm + lo.so * sm);
+  f.lo_deep_c = v(lo.so * cm - lo.co * sm);
+  // cos a y - sin a x = s (cos a cm - sin a sm) - c (cos a sm + sin a cm).
+  f.hi_in_s = v(hi.ci * cm - hi.si * sm);
+  f.hi_in_c = v(-(hi.ci * sm + hi.si * cm));
+  f.hi_deep_s = v(hi.co * cm - hi.so * sm);
+  f.hi_deep_c = v(-(hi.co * sm + hi.so * cm));
+  f.negligible = v(negligible);
+  return f;
+}
+
+// The band pass on four particles; lanes as in the sums.
+inline V4i BandLanes(V4 c, V4 s, V4 w, const BandForms& f, V4* kept, V4* lo_mass, V4* hi_mass) {
+  const V4 y = s * f.cm - c * f.sm;
   const V4i zero = {0, 0, 0, 0};
   const V4i neg = Bits(y) < zero;
-  const V4i keep = w >= negligible;
-  const V4i lo_in = neg & (lo.ci * y + lo.si * x < 0.0) & keep;
-  const V4i lo_deep = neg & (lo.co * y + lo.so * x < 0.0) & keep;
-  const V4i hi_in = ~neg & (hi.ci * y - hi.si * x > 0.0) & keep;
-  const V4i hi_deep = ~neg & (hi.co * y - hi.so * x > 0.0) & keep;
-  const V4i one = {1, 1, 1, 1};
-  *code = (lo_in & ~lo_deep & one) | (hi_in & ~hi_deep & (one + one));
+  const V4i keep = w >= f.negligible;
+  const V4i lo = neg & keep;
+  const V4i hi = ~neg & keep;
+  const V4i lo_deep = lo & (s * f.lo_deep_s + c * f.lo_deep_c < 0.0);
+  const V4i hi_deep = hi & (s * f.hi_deep_s + c * f.hi_deep_c > 0.0);
+  const V4i lo_band = lo & (s * f.lo_in_s + c * f.lo_in_c < 0.0) & ~lo_deep;
+  const V4i hi_band = hi & (s * f.hi_in_s + c * f.hi_in_c > 0.0) & ~hi_deep;
   const V4i wb = Bits(w);
   *kept += FromBits(wb & keep);
   *lo_mass += FromBits(wb & lo_deep);
   *hi_mass += FromBits(wb & hi_deep);
-  *lo_count -= lo_deep;
-  *hi_count -= hi_deep;
+  const V4i one = {1, 1, 1, 1}, two = {2, 2, 2, 2};
+  return (lo_band & one) | (hi_band & two);
 }
 
 // Band codes (1 lower, 2 upper, 0 neither) of every particle, and the masses beyond the bands.
 FLEXBENCH_PARTICLE_LOOP void BandPass(const double* __restrict c, const double* __restrict s,
-                                      const double* __restrict w, int n, double cm, double sm,
-                                      double negligible, BandEdges lo_edges, BandEdges hi_edges,
+                                      const double* __restrict w, int n, const BandForms& forms,
                                       long long* __restrict band, BandMass* mass) {
+  const BandForms f = forms;
   V4 kept = {0.0, 0.0, 0.0, 0.0}, lo = kept, hi = kept;
-  V4i lo_count = {0, 0, 0, 0}, hi_count = lo_count;
-  V4i code;
   const int n4 = n & ~3;
   for (int i = 0; i < n4; i += 4) {
-    BandLanes(Load4(c + i), Load4(s + i), Load4(w + i), cm, sm, negligible, lo_edges, hi_edges,
-              &code, &kept, &lo, &hi, &lo_count, &hi_count);
+    const V4i code = BandLanes(Load4(c + i), Load4(s + i), Load4(w + i), f, &kept, &lo, &hi);
     std::memcpy(band + i, &code, sizeof code);
   }
   if (n4 < n) {  // the last particles, padded with unkept ones (w = -1)
@@ -142,15 +167,12 @@ FLEXBENCH_PARTICLE_LOOP void BandPass(const double* __restrict c, const double* 
       sr[i - n4] = s[i];
       wr[i - n4] = w[i];
     }
-    BandLanes(cr, sr, wr, cm, sm, negligible, lo_edges, hi_edges, &code, &kept, &lo, &hi,
-              &lo_count, &hi_count);
+    const V4i code = BandLanes(cr, sr, wr, f, &kept, &lo, &hi);
     for (int i = n4; i < n; ++i) band[i] = code[i - n4];
   }
   mass->kept = LaneSum(kept);
   mass->lower_deep = LaneSum(lo);
   mass->upper_deep = LaneSum(hi);
-  mass->lower_deep_count = (lo_count[0] + lo_count[1]) + (lo_count[2] + lo_count[3]);
-  mass->upper_deep_count = (hi_count[0] + hi_count[1]) + (hi_count[2] + hi_count[3]);
 }
 
 // The pseudo-angle of DiamondKeys for one deviation.
@@ -419,7 +441,7 @@ BandEdges Edges(Band b) {
 
 void BandState::Pass(const double* c, const double* s, const double* w, int n, double cm,
                      double sm, double negligible, Band lo, Band hi, const BandBuffers& buf) {
-  BandPass(c, s, w, n, cm, sm, negligible, Edges(lo), Edges(hi), buf.band, &mass);
+  BandPass(c, s, w, n, Forms(cm, sm, negligible, Edges(lo), Edges(hi)), buf.band, &mass);
   // Branch-free gathers (which particles are in a band is unpredictable): first those in
   // either band (one store per particle), then the few of them split by band.
   int ne = 0;
@@ -463,7 +485,8 @@ int WeightedCircularTailQuantiles(const double* c, const double* s, const double
     bool done = false;
     for (int attempt = 0; attempt < kBandAttempts && !done; ++attempt) {
       const Band& band = low ? lo : hi;
-      if (!band.ok()) break;
+      // negligible > 0: every kept particle has mass, so mass beyond a band means particles.
+      if (!band.ok() || !(negligible > 0.0)) break;
       if (!(state.lower == lo && state.upper == hi)) {
         state.Pass(c, s, w, n, cm, sm, negligible, lo, hi, buf);
       }
@@ -477,9 +500,9 @@ int WeightedCircularTailQuantiles(const double* c, const double* s, const double
       const double target = probs[k] * state.mass.kept;
       const Walk walk =
           low ? LowerWalk(p, scratch->band_pairs_, state.mass.lower_deep,
-                          state.mass.lower_deep_count > 0, target, lo.inner, lo.outer, &out[k])
+                          state.mass.lower_deep > 0.0, target, lo.inner, lo.outer, &out[k])
               : UpperWalk(p, scratch->band_pairs_, state.mass.upper_deep,
-                          state.mass.upper_deep_count > 0, state.mass.kept, target, hi.inner,
+                          state.mass.upper_deep > 0.0, state.mass.kept, target, hi.inner,
                           hi.outer, &out[k]);
       done = walk == Walk::kFound;
       if (!done) (low ? lo : hi) = band.Moved(walk);

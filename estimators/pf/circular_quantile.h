@@ -58,13 +58,16 @@ void WeightedCircularQuantiles(const double* c, const double* s, const double* w
                                double* out, CircularQuantileScratch* scratch);
 
 // The same quantiles, looked for first in two bands of deviations: p <= 1/2 among the particles
-// with deviation in (-outer, -inner], p > 1/2 in [inner, outer) (0 < inner < outer). One
-// vectorised pass sorts the particles into the bands and adds up the mass beyond them, which is
-// all the definition needs of those; only the bands' particles are ordered (by the pseudo-angle;
-// atan2 for the two that the interpolation uses). A quantile whose step or its neighbour is not
-// safely inside its band (the bands were a guess, e.g. 1.6 and 2.5 circular standard deviations
-// for the 2.5% and 97.5% quantiles) is computed by WeightedCircularQuantiles instead. The result
-// is the definition's up to rounding either way; returns how many quantiles needed the fallback.
+// with deviation in (-outer, -inner), p > 1/2 in (inner, outer) (0 < inner < outer). One
+// vectorised pass puts the particles into the bands and adds up the mass beyond them, which is
+// all the definition needs of those; only the bands' particles are ordered (by the pseudo-angle,
+// a counting sort; atan2 only for the two that the interpolation uses). The bands are a guess
+// (the summary's: 1.6 to 2.5 circular standard deviations for the 2.5% and 97.5% quantiles);
+// when a quantile's step or the particle before it is not safely inside its band, the band moves
+// (beyond it, or towards the mean) and the pass is repeated, twice at most, before
+// WeightedCircularQuantiles computes that quantile instead (also for negligible <= 0). The result
+// is the definition's up to rounding either way (tests/unit/pf/circular_quantile_test.cc); returns
+// how many quantiles needed the fallback.
 int WeightedCircularTailQuantiles(const double* c, const double* s, const double* w, int n,
                                   double cm, double sm, double negligible, double inner,
                                   double outer, const double* probs, int np, double* out,
