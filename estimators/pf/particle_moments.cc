@@ -54,6 +54,17 @@ inline double ExpNonPositiveInline(double x) {
   return underflow ? 0.0 : e * scale;
 }
 
+// Weights below e^-345 (1e-150) are set to 0: next to the largest, 1, no sum here can see them
+// (nor a quantile or covariance: they are far below the negligible weight), and their squares
+// and products would be subnormal, each a microcode assist of a hundred cycles (a filter whose
+// position readings are sharp has many such particles).
+constexpr double kFlushLogWeight = -345.0;
+
+inline double Weight(double lw) {
+  const double e = ExpNonPositiveInline(lw);
+  return lw < kFlushLogWeight ? 0.0 : e;
+}
+
 // e_i = exp(lw_i) into w, and sum e, sum e^2 in four fixed lanes (lane i % 4).
 FLEXBENCH_PARTICLE_LOOP void ExpAndSums(const double* __restrict lw, int n, double* __restrict w,
                                         double* sum, double* sum2) {
@@ -62,13 +73,13 @@ FLEXBENCH_PARTICLE_LOOP void ExpAndSums(const double* __restrict lw, int n, doub
   const int n4 = n & ~3;
   for (int i = 0; i < n4; i += 4) {
     V4 e;
-    for (int l = 0; l < 4; ++l) e[l] = ExpNonPositiveInline(lw[i + l]);
+    for (int l = 0; l < 4; ++l) e[l] = Weight(lw[i + l]);
     Store4(w + i, e);
     s4 += e;
     q4 += e * e;
   }
   for (int i = n4; i < n; ++i) {
-    const double e = ExpNonPositiveInline(lw[i]);
+    const double e = Weight(lw[i]);
     w[i] = e;
     s4[i & 3] += e;
     q4[i & 3] += e * e;
