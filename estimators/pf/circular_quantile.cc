@@ -275,25 +275,43 @@ struct Band {
 
 }  // namespace
 
-// The gathered particles sorted by (pseudo-angle, weight): the definition's order, (d, w), up
-// to rounding (a pseudo-angle ties another only for the same or an ulp-close deviation; equal
-// particles must still go by weight, as the interpolation depends on which comes first). A
+// Half-widths of a band below which its particles are ordered by sin(d - centre) instead of the
+// pseudo-angle.
+constexpr double kLinearKeyHalfWidth = 1.3;
+
+// The gathered particles sorted by (key, weight), the key sin(d - centre) for a band narrower
+// than 2 kLinearKeyHalfWidth, else the pseudo-angle: the definition's order, (d, w), up to
+// rounding (a key ties another only for the same or a 1e-15-close deviation; equal particles
+// must still go by weight, as the interpolation depends on which comes first). A
 // counting sort into as many buckets as particles over the band's pseudo-angle range, then an
 // insertion sort for the few out of order within a bucket: std::sort of the ~100 particles of a
 // band was a fifth of a summary.
 void SortBand(const double* c, const double* s, const double* w, const int* idx, int count,
-              double cm, double sm, CircularQuantileScratch* scratch) {
+              double cm, double sm, double centre, double half_width,
+              CircularQuantileScratch* scratch) {
   std::vector<BandEntry>& raw = scratch->band_unsorted_;
   std::vector<BandEntry>& band = scratch->band_pairs_;
   raw.resize(count);
   band.resize(count);
+  if (half_width < kLinearKeyHalfWidth) {
+    // sin(d - centre) = y cos(centre) - x sin(centre), linear in (c, s): no division. Its slope
+    // is at least cos(kLinearKeyHalfWidth) over the band.
+    const double ks = cm * std::cos(centre) - sm * std::sin(centre);
+    const double kc = sm * std::cos(centre) + cm * std::sin(centre);
+    for (int j = 0; j < count; ++j) {
+      const int i = idx[j];
+      raw[j] = {s[i] * ks - c[i] * kc, w[i], i, 0};
+    }
+  } else {
+    for (int j = 0; j < count; ++j) {
+      const int i = idx[j];
+      raw[j] = {DiamondKey(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm), w[i], i, 0};
+    }
+  }
   double kmin = HUGE_VAL, kmax = -HUGE_VAL;
-  for (int j = 0; j < count; ++j) {
-    const int i = idx[j];
-    const double key = DiamondKey(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm);
-    raw[j] = {key, w[i], i, 0};
-    kmin = std::min(kmin, key);
-    kmax = std::max(kmax, key);
+  for (const BandEntry& e : raw) {
+    kmin = std::min(kmin, e.key);
+    kmax = std::max(kmax, e.key);
   }
   // Monotone in the key: the buckets' order is the keys' order.
   const double scale = kmax > kmin ? count / (kmax - kmin) : 0.0;
@@ -493,8 +511,10 @@ int WeightedCircularTailQuantiles(const double* c, const double* s, const double
       if (!(state.mass.kept > 0.0)) break;
       const int side = low ? 1 : 2;
       if (state.sorted != side) {
-        SortBand(c, s, w, low ? buf.lower : buf.upper,
-                 low ? state.nl : state.nu, cm, sm, scratch);
+        const double centre = 0.5 * (band.inner + std::min(band.outer, M_PI));
+        SortBand(c, s, w, low ? buf.lower : buf.upper, low ? state.nl : state.nu, cm, sm,
+                 low ? -centre : centre, 0.5 * (std::min(band.outer, M_PI) - band.inner),
+                 scratch);
         state.sorted = side;
       }
       const double target = probs[k] * state.mass.kept;

@@ -27,7 +27,7 @@ class CircularQuantileScratch {
                                         double, double, const double*, int, double*,
                                         CircularQuantileScratch*);
   friend void SortBand(const double*, const double*, const double*, const int*, int, double,
-                       double, CircularQuantileScratch*);
+                       double, double, double, CircularQuantileScratch*);
   friend int WeightedCircularTailQuantiles(const double*, const double*, const double*, int,
                                            double, double, double, double, double, const double*,
                                            int, double*, CircularQuantileScratch*);
