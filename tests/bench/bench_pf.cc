@@ -8,10 +8,10 @@
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true.
 //
 // Issue 18 (the estimate at most 0.25x of a step), medians of 3 repetitions in one run, CPU time,
-// this 2-core machine shared with other work (load average 6-7, wall time about twice CPU):
-//   BM_PfStep/2048 253 us, BM_Summary/2048 80.6 us: 0.32x (was 137 us, 0.55x; target not met).
-//   BM_PfStepWithEstimate (us) N = 256 53.4, 512 93.9, 1024 176, 2048 335, 4096 662, 8192 1355
-//   (BM_PfStep 30.7, 63.5, 128, 253, 509, 1055).
+// this 2-core machine shared with other work (load average 3-5, wall time 1.5-2x CPU):
+//   BM_PfStep/2048 256 us, BM_Summary/2048 78.1 us: 0.31x (was 137 us, 0.55x; target not met).
+//   BM_PfStepWithEstimate (us) N = 256 53.6, 512 94.0, 1024 175, 2048 334, 4096 663, 8192 1356
+//   (BM_PfStep 31.2, 64.7, 130, 256, 514, 1057).
 // Where BM_Summary/2048 goes (timers around each part): the end-effector spread about 39 us
 // (the per-particle SE3 log, about 210 4-wide operations per 4 particles, and the 21 products;
 // compute-bound), the four joints' 95% intervals about 29 us (per joint: the band pass 2.5, the
