@@ -59,7 +59,6 @@ FLEXBENCH_PARTICLE_LOOP void KeptRange(const double* __restrict lo, const double
   *kept = (s4[0] + s4[1]) + (s4[2] + s4[3]);
 }
 
-
 typedef double V4 __attribute__((vector_size(32)));
 typedef long long V4i __attribute__((vector_size(32)));
 
@@ -110,8 +109,7 @@ struct BandForms {
   V4 negligible;
 };
 
-BandForms Forms(double cm, double sm, double negligible, const BandEdges& lo,
-                const BandEdges& hi) {
+BandForms Forms(double cm, double sm, double negligible, const BandEdges& lo, const BandEdges& hi) {
   const auto v = [](double a) { return V4{a, a, a, a}; };
   BandForms f;
   f.cm = v(cm);
@@ -332,7 +330,15 @@ void SortBand(const double* c, const double* s, const double* w, const int* idx,
 }
 
 CircularQuantileScratch::CircularQuantileScratch(int n)
-    : key_(n), lo_(n), hi_(n), wk_(n), bin_(n), idx_(n + 1), idx_lo_(n + 1), idx_hi_(n + 1), band_(n) {
+    : key_(n),
+      lo_(n),
+      hi_(n),
+      wk_(n),
+      bin_(n),
+      idx_(n + 1),
+      idx_lo_(n + 1),
+      idx_hi_(n + 1),
+      band_(n) {
   pairs_.reserve(n);
   band_pairs_.reserve(n);
   band_unsorted_.reserve(n);
@@ -457,8 +463,8 @@ BandEdges Edges(Band b) {
           outer == M_PI ? 0.0 : std::sin(outer)};
 }
 
-void BandState::Pass(const double* c, const double* s, const double* w, int n, double cm,
-                     double sm, double negligible, Band lo, Band hi, const BandBuffers& buf) {
+void BandState::Pass(const double* c, const double* s, const double* w, int n, double cm, double sm,
+                     double negligible, Band lo, Band hi, const BandBuffers& buf) {
   BandPass(c, s, w, n, Forms(cm, sm, negligible, Edges(lo), Edges(hi)), buf.band, &mass);
   // Branch-free gathers (which particles are in a band is unpredictable): first those in
   // either band (one store per particle), then the few of them split by band.
@@ -513,8 +519,7 @@ int WeightedCircularTailQuantiles(const double* c, const double* s, const double
       if (state.sorted != side) {
         const double centre = 0.5 * (band.inner + std::min(band.outer, M_PI));
         SortBand(c, s, w, low ? buf.lower : buf.upper, low ? state.nl : state.nu, cm, sm,
-                 low ? -centre : centre, 0.5 * (std::min(band.outer, M_PI) - band.inner),
-                 scratch);
+                 low ? -centre : centre, 0.5 * (std::min(band.outer, M_PI) - band.inner), scratch);
         state.sorted = side;
       }
       const double target = probs[k] * state.mass.kept;
@@ -522,8 +527,8 @@ int WeightedCircularTailQuantiles(const double* c, const double* s, const double
           low ? LowerWalk(p, scratch->band_pairs_, state.mass.lower_deep,
                           state.mass.lower_deep > 0.0, target, lo.inner, lo.outer, &out[k])
               : UpperWalk(p, scratch->band_pairs_, state.mass.upper_deep,
-                          state.mass.upper_deep > 0.0, state.mass.kept, target, hi.inner,
-                          hi.outer, &out[k]);
+                          state.mass.upper_deep > 0.0, state.mass.kept, target, hi.inner, hi.outer,
+                          &out[k]);
       done = walk == Walk::kFound;
       if (!done) (low ? lo : hi) = band.Moved(walk);
     }

@@ -26,17 +26,17 @@ class CircularQuantileScratch {
   friend void WeightedCircularQuantiles(const double*, const double*, const double*, int, double,
                                         double, double, const double*, int, double*,
                                         CircularQuantileScratch*);
-  friend void SortBand(const double*, const double*, const double*, const int*, int, double,
-                       double, double, double, CircularQuantileScratch*);
-  friend int WeightedCircularTailQuantiles(const double*, const double*, const double*, int,
-                                           double, double, double, double, double, const double*,
-                                           int, double*, CircularQuantileScratch*);
+  friend void SortBand(const double*, const double*, const double*, const int*, int, double, double,
+                       double, double, CircularQuantileScratch*);
+  friend int WeightedCircularTailQuantiles(const double*, const double*, const double*, int, double,
+                                           double, double, double, double, const double*, int,
+                                           double*, CircularQuantileScratch*);
   std::vector<double> key_;
   std::vector<double> lo_, hi_, wk_;  // per particle: key or +-inf, weight or 0 (kept or not)
   std::vector<int> bin_;  // -1: a negligible particle
   std::vector<int> idx_;  // the particles gathered near a quantile (n + 1: one spare write)
   std::vector<int> idx_lo_, idx_hi_;  // the lower and upper bands' particles (n + 1)
-  std::vector<long long> band_;  // per particle: 1 lower band, 2 upper band, 0 neither
+  std::vector<long long> band_;       // per particle: 1 lower band, 2 upper band, 0 neither
   std::vector<std::pair<double, double>> pairs_;
   std::vector<BandEntry> band_pairs_, band_unsorted_;
   std::vector<int> bucket_start_;  // the band's counting sort (n + 1)

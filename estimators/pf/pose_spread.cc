@@ -17,8 +17,8 @@ constexpr double kSmallAngle = 0.2;   // lie/so3.cc: Jl^-1's coefficient by its 
 // Below pi/4 atan(y / x); above, pi/2 - atan(x / y), the ratio t in (-1, 1] either way (y and x
 // are never both zero for a rotation's sin and cos). Cephes' atan: t + t z P(z) / Q(z), z = t^2,
 // on |t| <= 0.66; above, pi/4 + atan((|t| - 1) / (|t| + 1)), that argument formed from y and x
-// directly: one division, not two (the divider bounds LogBlock). Both branches are computed and
-// one selected, never a branch: the particle loops vectorise.
+// directly: one division, not two (a 4-wide division occupies the divider for about 8 cycles).
+// Both branches are computed and one selected, never a branch: the particle loops vectorise.
 inline double Atan2Upper(double y, double x) {
   constexpr double kP[5] = {-8.750608600031904122785e-1, -1.615753718733365076637e1,
                             -7.500855792314704667340e1, -1.228866684490136173410e2,
@@ -49,9 +49,9 @@ inline double Atan2Upper(double y, double x) {
 // kNearPiCos are the caller's to fix). Every alternative is computed and selected, no branch and
 // no call: the loop vectorises.
 FLEXBENCH_PARTICLE_LOOP void LogBlock(const BatchKinematics& fk, int k, const Mat3& Rm,
-                                     const Vec3& tm, const double* __restrict w, double negligible,
-                                     int b, int m, double (*__restrict xi)[kBlock],
-                                     double* __restrict wb, double* __restrict cos_angle) {
+                                      const Vec3& tm, const double* __restrict w, double negligible,
+                                      int b, int m, double (*__restrict xi)[kBlock],
+                                      double* __restrict wb, double* __restrict cos_angle) {
   // Plain locals, not arrays of pointers: the vectoriser needs to see every load's address.
   const double* __restrict R00 = fk.R(k, 0, 0) + b;
   const double* __restrict R01 = fk.R(k, 0, 1) + b;
@@ -94,8 +94,8 @@ FLEXBENCH_PARTICLE_LOOP void LogBlock(const BatchKinematics& fk, int k, const Ma
     const double x = Atan2Upper(s, std::max(c, kNearPiCos));
     const double x2 = x * x;
     const double s_safe = std::max(s, 1e-300), x_safe = std::max(x, 1e-150);
-    // Products, not quotients: the divider is the bottleneck. inv_xs = 1 / (x s) gives x / s,
-    // 1 / x and cot(x/2) / x below with one division.
+    // Products, not quotients: inv_xs = 1 / (x s) gives x / s, 1 / x and cot(x/2) / x below
+    // with one division (LogBlock had nine; with three it is bound by its ~200 other operations).
     const double tiny_series = 1.0 + x2 * (1.0 / 6.0) * (1.0 + 7.0 / 60.0 * x2);
     const double inv_xs = 1.0 / (x_safe * s_safe);
     const double ratio = x2 * inv_xs;
@@ -104,9 +104,8 @@ FLEXBENCH_PARTICLE_LOOP void LogBlock(const BatchKinematics& fk, int k, const Ma
     // Jl^-1(o) v = v - o x v / 2 + dcoef o x (o x v); dcoef = 1/x^2 - cot(x/2) / (2x) with
     // cot(x/2) = (1 + cos x) / sin x.
     const double small_series =
-        1.0 / 12.0 +
-        x2 * (1.0 / 720.0 +
-              x2 * (1.0 / 30240.0 + x2 * (1.0 / 1209600.0 + x2 * (1.0 / 47900160.0))));
+        1.0 / 12.0 + x2 * (1.0 / 720.0 +
+                           x2 * (1.0 / 30240.0 + x2 * (1.0 / 1209600.0 + x2 * (1.0 / 47900160.0))));
     const double inv_x = s_safe * inv_xs;
     const double closed = inv_x * inv_x - 0.5 * (1.0 + c) * inv_xs;
     const double dcoef = x < kSmallAngle ? small_series : closed;

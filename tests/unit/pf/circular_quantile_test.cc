@@ -136,10 +136,9 @@ TEST_P(TailQuantilesTest, EqualTheSortedDefinition) {
       CircularQuantileScratch scratch(n);
       for (const auto& band : bands) {
         double out[4];
-        const int missed =
-            WeightedCircularTailQuantiles(cl.c.data(), cl.s.data(), cl.w.data(), n, cl.cm, cl.sm,
-                                          1e-14, band[0] * sigma, band[1] * sigma, probs, 4, out,
-                                          &scratch);
+        const int missed = WeightedCircularTailQuantiles(cl.c.data(), cl.s.data(), cl.w.data(), n,
+                                                         cl.cm, cl.sm, 1e-14, band[0] * sigma,
+                                                         band[1] * sigma, probs, 4, out, &scratch);
         fallbacks += missed;
         fast += 4 - missed;
         for (int k = 0; k < 4; ++k) {

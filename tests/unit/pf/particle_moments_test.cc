@@ -46,7 +46,7 @@ TEST_P(MomentsTest, EqualThePlainSums) {
     c[i] = std::cos(a);
     s[i] = std::sin(a);
   }
-  log_w[0] = 0.0;  // max-normalised
+  log_w[0] = 0.0;                // max-normalised
   if (n > 1) log_w[1] = -400.0;  // flushed to 0: far below anything a sum here can see
   double sum = 0.0, sum2 = 0.0;
   for (int i = 0; i < n; ++i) {

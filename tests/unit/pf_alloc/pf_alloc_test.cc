@@ -112,10 +112,9 @@ TEST(NoAllocation, TailQuantilesOnEveryPath) {
   int fallbacks = 0;
   const long allocations = CountAllocations([&] {
     for (const double inner : {1.6, 0.2, 2.9}) {
-      fallbacks += WeightedCircularTailQuantiles(c.data(), s.data(), w.data(), n, sc / r,
-                                                     ss / r, 1e-14, inner * sigma,
-                                                     (inner + 0.3) * sigma, probs, 3, out,
-                                                     &scratch);
+      fallbacks += WeightedCircularTailQuantiles(c.data(), s.data(), w.data(), n, sc / r, ss / r,
+                                                 1e-14, inner * sigma, (inner + 0.3) * sigma, probs,
+                                                 3, out, &scratch);
     }
   });
   EXPECT_EQ(allocations, 0);
