@@ -12,12 +12,16 @@
 #include "estimators/lie/so3.h"
 #include "estimators/pf/bessel.h"
 #include "estimators/pf/particle_loop.h"
+#include "estimators/pf/particle_moments.h"
 #include "estimators/pf/pose_spread.h"
 
 namespace flexbench::pf {
 namespace {
 
 constexpr double kNegInf = -std::numeric_limits<double>::infinity();
+// The bands (in circular standard deviations) where Summary looks for the 95% interval's ends.
+constexpr double kTailInner = 1.6;
+constexpr double kTailOuter = 2.5;
 
 void CheckPositiveFinite(double v, const std::string& what, const std::string& name) {
   if (!(v > 0.0) || !std::isfinite(v)) {
@@ -444,17 +448,7 @@ const ParticleSummary& ParticleFilter::Summary() const {
   if (summary_valid_) return summary_;
   ParticleSummary& out = summary_;
   out.nq = nq_;
-  double sum = 0.0;
-  double sum2 = 0.0;
-  for (int i = 0; i < n_; ++i) {
-    const double w = std::exp(log_w_[i]);
-    scratch_w_[i] = w;
-    sum += w;
-    sum2 += w * w;
-  }
-  out.ess = sum * sum / sum2;
-  const double inv = 1.0 / sum;
-  for (int i = 0; i < n_; ++i) scratch_w_[i] *= inv;
+  out.ess = NormalisedWeights(log_w_.data(), n_, scratch_w_.data());
   const double* w = scratch_w_.data();
   // Particles below this normalised weight do not move a quantile or a covariance.
   const double negligible = 1e-14;
@@ -462,20 +456,20 @@ const ParticleSummary& ParticleFilter::Summary() const {
     const double* c = cos_.data() + static_cast<size_t>(j) * stride_;
     const double* s = sin_.data() + static_cast<size_t>(j) * stride_;
     double sc = 0.0, ss = 0.0;
-    for (int i = 0; i < n_; ++i) {
-      sc += w[i] * c[i];
-      ss += w[i] * s[i];
-    }
+    WeightedResultant(c, s, w, n_, &sc, &ss);
     const double mean = std::atan2(ss, sc);
     const double r = std::min(1.0, std::hypot(sc, ss));
     out.mean[j] = mean >= M_PI ? -M_PI : mean;
     out.circular_std[j] =
         r > 0.0 ? std::sqrt(-2.0 * std::log(r)) : std::numeric_limits<double>::infinity();
-    // Weighted 2.5% / 97.5% quantiles of the deviation from the mean (no full sort).
+    // Weighted 2.5% / 97.5% quantiles of the deviation from the mean (no full sort), looked
+    // for first between 1.6 and 2.5 circular standard deviations (1.96 for a wrapped normal).
     const double cm = sc / std::max(r, 1e-300), sm = ss / std::max(r, 1e-300);
     static constexpr double kProbs[2] = {0.025, 0.975};
+    const double sigma = out.circular_std[j];
     double dev[2];
-    WeightedCircularQuantiles(c, s, w, n_, cm, sm, negligible, kProbs, 2, dev, &quantiles_);
+    WeightedCircularTailQuantiles(c, s, w, n_, cm, sm, negligible, kTailInner * sigma,
+                                  kTailOuter * sigma, kProbs, 2, dev, &quantiles_);
     out.lower95[j] = out.mean[j] + dev[0];
     out.upper95[j] = out.mean[j] + dev[1];
   }

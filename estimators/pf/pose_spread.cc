@@ -14,9 +14,12 @@ constexpr double kNearPiCos = -0.7;
 constexpr double kTinyAngle = 1e-4;   // lie/so3.cc: theta / sin(theta) by its series below
 constexpr double kSmallAngle = 0.2;   // lie/so3.cc: Jl^-1's coefficient by its series below
 
-// Cephes atan: x + x z P(z) / Q(z), z = x^2, on |x| <= 0.66; above, pi/4 + atan((x-1)/(x+1)).
-// Both arguments are computed and one selected, never a branch: the particle loops vectorise.
-inline double AtanUnit(double x) {
+// Below pi/4 atan(y / x); above, pi/2 - atan(x / y), the ratio t in (-1, 1] either way (y and x
+// are never both zero for a rotation's sin and cos). Cephes' atan: t + t z P(z) / Q(z), z = t^2,
+// on |t| <= 0.66; above, pi/4 + atan((|t| - 1) / (|t| + 1)), that argument formed from y and x
+// directly: one division, not two (a 4-wide division occupies the divider for about 8 cycles).
+// Both branches are computed and one selected, never a branch: the particle loops vectorise.
+inline double Atan2Upper(double y, double x) {
   constexpr double kP[5] = {-8.750608600031904122785e-1, -1.615753718733365076637e1,
                             -7.500855792314704667340e1, -1.228866684490136173410e2,
                             -6.485021904942025371773e1};
@@ -24,34 +27,31 @@ inline double AtanUnit(double x) {
                             4.328810604912902668951e2, 4.853903996359136964868e2,
                             1.945506571482613964425e2};
   constexpr double kMoreBits = 6.123233995736765886130e-17;  // pi/2 - double(pi/2)
-  const double ax = std::abs(x);
-  const bool reduce = ax > 0.66;
-  const double reduced = (ax - 1.0) / (ax + 1.0);
-  const double xr = reduce ? reduced : ax;
+  const bool steep = y > x;
+  const double num = steep ? x : y;
+  const double den = steep ? y : x;  // > 0
+  const double an = std::abs(num);
+  const bool reduce = an > 0.66 * den;
+  const double xr = (reduce ? an - den : an) / (reduce ? an + den : den);
   const double z = xr * xr;
   const double p = (((kP[0] * z + kP[1]) * z + kP[2]) * z + kP[3]) * z + kP[4];
   const double q = ((((z + kQ[0]) * z + kQ[1]) * z + kQ[2]) * z + kQ[3]) * z + kQ[4];
   const double r = xr * (z * p / q) + xr;
   const double shifted = M_PI_4 + (r + 0.5 * kMoreBits);
-  return std::copysign(reduce ? shifted : r, x);
-}
-
-// Below pi/4 atan(y / x); above, pi/2 - atan(x / y), the ratio in (-1, 1] either way (y and x
-// are never both zero for a rotation's sin and cos).
-inline double Atan2Upper(double y, double x) {
-  const bool steep = y > x;
-  const double a = AtanUnit((steep ? x : y) / (steep ? y : x));
+  const double a = std::copysign(reduce ? shifted : r, num);
   const double complement = M_PI_2 - a;
   return steep ? complement : a;
 }
 
-// xi = Log(T_mean^-1 T_i) of the block's particles [b, b + m) into xi[6][kBlock] and the cosine
-// of each rotation angle into cos_angle (those at or below kNearPiCos are the caller's to fix).
-// Every alternative is computed and selected, no branch and no call: the loop vectorises.
+// xi = Log(T_mean^-1 T_i) of the block's particles [b, b + m) into xi[6][kBlock] (0 for a
+// particle with w_i < negligible, never 0 * inf), their weights or 0 into wb, and the cosine of
+// each kept particle's rotation angle into cos_angle (1 for the others; those at or below
+// kNearPiCos are the caller's to fix). Every alternative is computed and selected, no branch and
+// no call: the loop vectorises.
 FLEXBENCH_PARTICLE_LOOP void LogBlock(const BatchKinematics& fk, int k, const Mat3& Rm,
-                                      const Vec3& tm, int b, int m,
-                                      double (*__restrict xi)[kBlock],
-                                      double* __restrict cos_angle) {
+                                      const Vec3& tm, const double* __restrict w, double negligible,
+                                      int b, int m, double (*__restrict xi)[kBlock],
+                                      double* __restrict wb, double* __restrict cos_angle) {
   // Plain locals, not arrays of pointers: the vectoriser needs to see every load's address.
   const double* __restrict R00 = fk.R(k, 0, 0) + b;
   const double* __restrict R01 = fk.R(k, 0, 1) + b;
@@ -91,29 +91,35 @@ FLEXBENCH_PARTICLE_LOOP void LogBlock(const BatchKinematics& fk, int k, const Ma
     const double w2 = 0.5 * (d10 - d01);
     const double s = std::sqrt(w0 * w0 + w1 * w1 + w2 * w2);
     const double c = std::min(1.0, std::max(-1.0, 0.5 * (d00 + d11 + d22 - 1.0)));
-    cos_angle[i] = c;
     const double x = Atan2Upper(s, std::max(c, kNearPiCos));
     const double x2 = x * x;
     const double s_safe = std::max(s, 1e-300), x_safe = std::max(x, 1e-150);
-    const double tiny_series = 1.0 + x2 / 6.0 * (1.0 + 7.0 / 60.0 * x2);
-    const double ratio = x / s_safe;
+    // Products, not quotients: inv_xs = 1 / (x s) gives x / s, 1 / x and cot(x/2) / x below
+    // with one division (LogBlock had nine; with three it is bound by its ~200 other operations).
+    const double tiny_series = 1.0 + x2 * (1.0 / 6.0) * (1.0 + 7.0 / 60.0 * x2);
+    const double inv_xs = 1.0 / (x_safe * s_safe);
+    const double ratio = x2 * inv_xs;
     const double x_over_s = x < kTinyAngle ? tiny_series : ratio;
     const double o0 = x_over_s * w0, o1 = x_over_s * w1, o2 = x_over_s * w2;
     // Jl^-1(o) v = v - o x v / 2 + dcoef o x (o x v); dcoef = 1/x^2 - cot(x/2) / (2x) with
     // cot(x/2) = (1 + cos x) / sin x.
     const double small_series =
-        1.0 / 12.0 +
-        x2 * (1.0 / 720.0 + x2 * (1.0 / 30240.0 + x2 * (1.0 / 1209600.0 + x2 / 47900160.0)));
-    const double closed = 1.0 / (x_safe * x_safe) - (1.0 + c) / (2.0 * x_safe * s_safe);
+        1.0 / 12.0 + x2 * (1.0 / 720.0 +
+                           x2 * (1.0 / 30240.0 + x2 * (1.0 / 1209600.0 + x2 * (1.0 / 47900160.0))));
+    const double inv_x = s_safe * inv_xs;
+    const double closed = inv_x * inv_x - 0.5 * (1.0 + c) * inv_xs;
     const double dcoef = x < kSmallAngle ? small_series : closed;
     const double a0 = o1 * v2 - o2 * v1, a1 = o2 * v0 - o0 * v2, a2 = o0 * v1 - o1 * v0;
     const double b0 = o1 * a2 - o2 * a1, b1 = o2 * a0 - o0 * a2, b2 = o0 * a1 - o1 * a0;
-    xi[kTransIdx][i] = v0 - 0.5 * a0 + dcoef * b0;
-    xi[kTransIdx + 1][i] = v1 - 0.5 * a1 + dcoef * b1;
-    xi[kTransIdx + 2][i] = v2 - 0.5 * a2 + dcoef * b2;
-    xi[kRotIdx][i] = o0;
-    xi[kRotIdx + 1][i] = o1;
-    xi[kRotIdx + 2][i] = o2;
+    const bool keep = w[b + i] >= negligible;
+    wb[i] = keep ? w[b + i] : 0.0;
+    cos_angle[i] = keep ? c : 1.0;
+    xi[kTransIdx][i] = keep ? v0 - 0.5 * a0 + dcoef * b0 : 0.0;
+    xi[kTransIdx + 1][i] = keep ? v1 - 0.5 * a1 + dcoef * b1 : 0.0;
+    xi[kTransIdx + 2][i] = keep ? v2 - 0.5 * a2 + dcoef * b2 : 0.0;
+    xi[kRotIdx][i] = keep ? o0 : 0.0;
+    xi[kRotIdx + 1][i] = keep ? o1 : 0.0;
+    xi[kRotIdx + 2][i] = keep ? o2 : 0.0;
   }
 }
 
@@ -156,20 +162,16 @@ void PoseSpread(const BatchKinematics& fk, int k, const lie::SE3& T_mean, const 
   double acc[21][4] = {};
   for (int b = 0; b < n; b += kBlock) {
     const int m = std::min(kBlock, n - b);
-    LogBlock(fk, k, Rm, tm, b, m, xi, cos_angle);
+    LogBlock(fk, k, Rm, tm, w, negligible, b, m, xi, wb, cos_angle);
     const int padded = (m + 3) & ~3;
     for (int i = m; i < padded; ++i) {
       wb[i] = 0.0;
       for (int r = 0; r < 6; ++r) xi[r][i] = 0.0;
     }
     for (int i = 0; i < m; ++i) {
-      const bool keep = w[b + i] >= negligible;
-      wb[i] = keep ? w[b + i] : 0.0;
-      if (keep && cos_angle[i] <= kNearPiCos) {
+      if (cos_angle[i] <= kNearPiCos) {
         const Vec6 x = (T_mean_inv * fk.Pose(k, b + i)).Log();
         for (int r = 0; r < 6; ++r) xi[r][i] = x[r];
-      } else if (!keep) {
-        for (int r = 0; r < 6; ++r) xi[r][i] = 0.0;  // never 0 * inf
       }
     }
     AccumulateBlock(xi, wb, padded, acc);

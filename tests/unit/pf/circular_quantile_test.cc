@@ -1,7 +1,8 @@
 // WeightedCircularQuantiles against the sorted definition it replaces (the particle filter's
 // 95% intervals before issue 18): every particle's deviation through atan2, all sorted, the
 // midpoint walk. Concentrated, broad and wrapped clouds, heavy and negligible weights, ties,
-// far outliers and tiny particle counts.
+// far outliers and tiny particle counts. WeightedCircularTailQuantiles (the summary's fast path)
+// against the same definition, per seed, with bands that hold the quantiles and bands that miss.
 #include "estimators/pf/circular_quantile.h"
 
 #include <gtest/gtest.h>
@@ -9,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -107,6 +109,53 @@ TEST(WeightedCircularQuantiles, EqualTheSortedDefinition) {
   }
   EXPECT_EQ(cases, 6 * 4 * 3 * 4);
 }
+
+// (seed, spread of the cloud in rad): clouds centred anywhere on the circle, so that many wrap
+// through +-pi, with the quantiles' bands guessed from the circular standard deviation as the
+// summary does and deliberately off.
+class TailQuantilesTest : public ::testing::TestWithParam<std::tuple<int, double>> {};
+
+TEST_P(TailQuantilesTest, EqualTheSortedDefinition) {
+  const auto [seed, spread] = GetParam();
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> centre(-M_PI, M_PI);
+  const double probs[4] = {0.025, 0.975, 0.5, 1e-6};
+  // (inner, outer) in circular standard deviations: the summary's, narrow, missing, beyond pi.
+  const double bands[5][2] = {{1.6, 2.5}, {1.9, 2.0}, {0.1, 0.5}, {3.0, 9.0}, {1.0, 100.0}};
+  int fast = 0, fallbacks = 0;
+  for (int n : {1, 2, 7, 64, 513, 2048}) {
+    for (int variant = 0; variant < 4; ++variant) {
+      const Cloud cl = Make(rng, n, centre(rng), spread, variant == 1 ? 3.0 : 0.3,
+                            variant == 2 ? 0.3 : 0.0, variant == 3 ? 5 : 0, variant == 1);
+      bool any_kept = false;
+      for (double wi : cl.w) any_kept = any_kept || wi >= 1e-14;
+      if (!any_kept) continue;
+      double sc = 0.0, ss = 0.0;
+      for (int i = 0; i < n; ++i) sc += cl.w[i] * cl.c[i], ss += cl.w[i] * cl.s[i];
+      const double sigma = std::sqrt(-2.0 * std::log(std::min(1.0, std::hypot(sc, ss))));
+      CircularQuantileScratch scratch(n);
+      for (const auto& band : bands) {
+        double out[4];
+        const int missed = WeightedCircularTailQuantiles(cl.c.data(), cl.s.data(), cl.w.data(), n,
+                                                         cl.cm, cl.sm, 1e-14, band[0] * sigma,
+                                                         band[1] * sigma, probs, 4, out, &scratch);
+        fallbacks += missed;
+        fast += 4 - missed;
+        for (int k = 0; k < 4; ++k) {
+          const double ref = SortedQuantile(cl.c, cl.s, cl.w, cl.cm, cl.sm, 1e-14, probs[k]);
+          EXPECT_NEAR(out[k], ref, 1e-12) << "n " << n << " variant " << variant << " band "
+                                          << band[0] << " " << band[1] << " p " << probs[k];
+        }
+      }
+    }
+  }
+  EXPECT_GT(fast, 0);       // the bands held some quantiles
+  EXPECT_GT(fallbacks, 0);  // and missed others (at least p = 0.5)
+}
+
+INSTANTIATE_TEST_SUITE_P(SeedsAndSpreads, TailQuantilesTest,
+                         ::testing::Combine(::testing::Values(1, 2, 3, 18),
+                                            ::testing::Values(1e-6, 0.05, 0.5, 2.0)));
 
 }  // namespace
 }  // namespace flexbench::pf

@@ -4,11 +4,14 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstdlib>
 #include <new>
+#include <vector>
 
 #include "estimators/estimator.h"
 #include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/pf/circular_quantile.h"
 #include "estimators/pf/particle_filter.h"
 #include "tests/unit/pf/pf_test_models.h"
 
@@ -85,6 +88,37 @@ TEST_P(NoAllocationTest, FilterStepsDoNotAllocate) {
     pf.Reset();
   });
   EXPECT_EQ(n, 0);
+}
+
+// The summary's tail quantiles on every path: the bands hold the quantiles, miss and move, or
+// miss until the histogram fallback (and p = 0.5, always the fallback).
+TEST(NoAllocation, TailQuantilesOnEveryPath) {
+  const int n = 1000;
+  std::vector<double> c(n), s(n), w(n);
+  double sc = 0.0, ss = 0.0;
+  for (int i = 0; i < n; ++i) {
+    const double a = 0.002 * (i - 500) + (i % 7 == 0 ? 0.05 * std::sin(i) : 0.0);
+    c[i] = std::cos(3.1 + a);
+    s[i] = std::sin(3.1 + a);
+    w[i] = (1.0 + (i % 3)) / (2.0 * n);
+    sc += w[i] * c[i];
+    ss += w[i] * s[i];
+  }
+  const double r = std::hypot(sc, ss);
+  const double sigma = std::sqrt(-2.0 * std::log(r));
+  CircularQuantileScratch scratch(n);
+  const double probs[3] = {0.025, 0.975, 0.5};
+  double out[3];
+  int fallbacks = 0;
+  const long allocations = CountAllocations([&] {
+    for (const double inner : {1.6, 0.2, 2.9}) {
+      fallbacks += WeightedCircularTailQuantiles(c.data(), s.data(), w.data(), n, sc / r, ss / r,
+                                                 1e-14, inner * sigma, (inner + 0.3) * sigma, probs,
+                                                 3, out, &scratch);
+    }
+  });
+  EXPECT_EQ(allocations, 0);
+  EXPECT_GE(fallbacks, 3);  // at least the medians
 }
 
 TEST_P(NoAllocationTest, EstimatorInterfaceDoesNotAllocate) {

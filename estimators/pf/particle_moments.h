@@ -1,0 +1,26 @@
+// The particle filter summary's weight and resultant loops (issue 18): branch-free and in fixed
+// lanes, so they vectorise in the AVX2 clone and give the same bits in the baseline. With libm's
+// exp and a plain running sum they were a sixth of a summary.
+#pragma once
+
+namespace flexbench::pf {
+
+// w_i = exp(lw_i) / sum_j exp(lw_j) for the max-normalised log weights lw_i <= 0 (eq. 21; -inf
+// allowed, as for a rejected particle); returns the effective sample size (sum e)^2 / sum e^2 of
+// the unnormalised e_i = exp(lw_i). exp(lw_i) below 1e-150 counts as 0 (invisible next to the
+// largest, 1; no subnormal arithmetic).
+double NormalisedWeights(const double* log_w, int n, double* w);
+
+// (sum_i w_i c_i, sum_i w_i s_i): the weighted resultant of the unit vectors (c_i, s_i), whose
+// direction is the circular mean (eq. 5) and whose length is R.
+void WeightedResultant(const double* c, const double* s, const double* w, int n, double* sc,
+                       double* ss);
+
+namespace internal {
+// exp(x) for x <= 0 (Cephes' exp: x = k ln 2 + r, a Pade form of exp(r), scaled by 2^k built in
+// the exponent bits, no branch): within 2 ulp of std::exp down to x = -708 (tested); 0 below
+// and for -inf. A log weight that low (e^-708 ~ 1e-308) contributes nothing to any sum here.
+double ExpNonPositive(double x);
+}  // namespace internal
+
+}  // namespace flexbench::pf
