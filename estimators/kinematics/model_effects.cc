@@ -1,5 +1,6 @@
 #include "estimators/kinematics/model_effects.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "estimators/error.h"
@@ -199,18 +200,15 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
   }
   needs_loads_ = e.NeedsLoads();
   torque_needed_.assign(declared.nq(), 0);
+  harmonic_.assign(declared.nq(), 0);
   for (int k = 0; k < declared.nq(); ++k) {
     const ModelEffects::JointTerms& j = e.joints[k];
     torque_needed_[k] =
         declared.frame(declared.joint_frame(k)).joint.type == JointType::kRevolute &&
         (j.backlash != 0.0 || j.compliance != 0.0 || j.cubic != 0.0);
+    for (double h : j.harmonic) harmonic_[k] = harmonic_[k] || h != 0.0;
   }
-  varies_.assign(n, 0);
-  for (FrameId f = 1; f < n; ++f) varies_[f] = e.FrameVaries(f);
-  subtree_mass_.assign(n, 0.0);
-  subtree_first_.assign(n, Vec3::Zero());
   static_.assign(n, lie::SE3());
-  T_.assign(n, lie::SE3());
   bend_.assign(n, Vec3::Zero());
   for (FrameId f = 1; f < n; ++f) {
     const ModelEffects::FrameTerms& t = e.frames[f];
@@ -224,13 +222,57 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
     static_[f] = S;
     if (e.FrameVaries(f)) {
       last_varying_ = f;
-      if (t.bend != 0.0) last_pose_needed_ = f;  // poses of the frames above it are needed
+      varying_frames_.push_back(f);
       continue;
     }
     if (!t.tilt.isZero(0.0)) S = S * lie::SE3(lie::SO3Exp(t.tilt), Vec3::Zero());
     effective_.SetFixedTransform(f, S);
   }
+  if (needs_loads_) SetConstantLoads();
   if (!e.uncertainty.empty()) SetConstantSources();
+}
+
+// The masses do not change with the configuration: each frame's own first moment and each
+// subtree's mass are summed once, and the frames whose poses the loads need are found once.
+void EffectiveChain::SetConstantLoads() {
+  const ModelEffects& e = *effects_;
+  const PpoeModel& model = *declared_;
+  const int n = model.num_frames();
+  frame_first_.assign(n, Vec3::Zero());
+  subtree_mass_.assign(n, 0.0);
+  loaded_.assign(n, 0);
+  for (FrameId f = 0; f < n; ++f) {
+    FrameMass fm = e.masses[f];
+    if (f == e.payload_frame) {
+      fm.mass += e.payload.mass;
+      fm.first_moment += e.payload.first_moment;
+    }
+    subtree_mass_[f] = fm.mass;
+    frame_first_[f] = fm.first_moment;
+    loaded_[f] = fm.mass != 0.0 || !fm.first_moment.isZero(0.0);
+  }
+  // Children have larger ids than their parents.
+  for (FrameId f = n - 1; f > 0; --f) {
+    const FrameId p = model.frame(f).parent;
+    subtree_mass_[p] += subtree_mass_[f];
+    loaded_[p] = loaded_[p] || loaded_[f];
+    if (loaded_[f]) last_rel_ = std::max(last_rel_, f);
+  }
+  // Gravity is needed in the axes of a joint with a torque-driven term, of a bent link's start
+  // and of the mount's parent; its ancestors' relative poses carry it there.
+  for (int k = 0; k < model.nq(); ++k) {
+    if (torque_needed_[k]) last_gravity_ = std::max(last_gravity_, model.joint_frame(k));
+  }
+  for (const FrameId f : varying_frames_) {
+    if (e.frames[f].bend != 0.0) last_gravity_ = std::max(last_gravity_, e.frames[f].bend_start);
+    if (f == e.mount) last_gravity_ = std::max(last_gravity_, model.frame(f).parent);
+    last_rel_ = std::max(last_rel_, model.frame(f).parent);  // a bend's end: rel_ to its parent
+  }
+  last_rel_ = std::max(last_rel_, last_gravity_);
+  rel_.assign(n, lie::SE3());
+  first_.assign(n, Vec3::Zero());
+  gravity_.assign(n, Vec3::Zero());
+  gravity_[kBaseFrame] = e.g_base;
 }
 
 // The parameters' variances as twists at each frame's source (F_{i,p}): a joint term moves the
@@ -312,41 +354,61 @@ void EffectiveChain::UpdateSources(const Eigen::Ref<const Eigen::VectorXd>& q_re
   }
 }
 
+// Each subtree's first moment about its frame's origin, in its frame's axes (the backward pass
+// of a recursive Newton-Euler at rest), and gravity in each frame's axes (forward): the moments
+// the effects need then follow without any frame's pose in base coordinates.
+void EffectiveChain::SubtreeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
+  const PpoeModel& model = *declared_;
+  for (FrameId f = 1; f <= last_rel_; ++f) {
+    const PpoeFrame& fr = model.frame(f);
+    rel_[f] = fr.FixedTimesMotion(fr.q_index >= 0 ? q_read[fr.q_index] : 0.0);
+  }
+  for (FrameId f = 1; f <= last_gravity_; ++f) {
+    gravity_[f].noalias() = rel_[f].rotation().transpose() * gravity_[model.frame(f).parent];
+  }
+  for (FrameId f = 0; f <= last_rel_; ++f) first_[f] = frame_first_[f];
+  for (FrameId f = last_rel_; f > 0; --f) {
+    if (!loaded_[f]) continue;
+    first_[model.frame(f).parent] += subtree_mass_[f] * rel_[f].translation() +
+                                     rel_[f].rotation() * first_[f];
+  }
+}
+
 void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
   const ModelEffects& e = *effects_;
   const PpoeModel& model = *declared_;
-  ForwardKinematics(model, nominal_, q_read);
-  SubtreeMasses(model, nominal_, e, &subtree_mass_, &subtree_first_);
-  const std::vector<lie::SE3>& T = nominal_.T_base_frame;
-  // Moment about a (base coordinates) of the weight of frame f's subtree.
+  SubtreeLoads(q_read);
+  // The weight's moment about point a of frame f's subtree, both in f's axes.
   const auto moment = [&](FrameId f, const Vec3& a) {
-    return Vec3((subtree_first_[f] - subtree_mass_[f] * a).cross(e.g_base));
+    return Vec3((first_[f] - subtree_mass_[f] * a).cross(gravity_[f]));
   };
   for (int k = 0; k < model.nq(); ++k) {
     if (!torque_needed_[k]) continue;
     const FrameId f = model.joint_frame(k);
-    const PpoeFrame& fr = model.frame(f);
-    tau_[k] = -(T[f].rotation() * fr.joint.axis).dot(moment(f, T[f] * fr.joint.point));
+    const Joint& joint = model.frame(f).joint;
+    tau_[k] = -joint.axis.dot(moment(f, joint.point));
   }
-  for (FrameId f = 1; f <= last_varying_; ++f) {
+  for (const FrameId f : varying_frames_) {
     const ModelEffects::FrameTerms& t = e.frames[f];
     const PpoeFrame& fr = model.frame(f);
     if (t.bend != 0.0) {
+      // About the link's middle: halfway from the start's origin to the link's end.
       const FrameId p = t.bend_start;
-      const Vec3 end = T[fr.parent] * fr.T_parent_ip.translation();
-      const Vec3 mid = 0.5 * (T[p].translation() + end);
-      const Vec3 M = T[p].rotation().transpose() * moment(p, mid);
+      Vec3 end = fr.T_parent_ip.translation();
+      for (FrameId k = fr.parent; k != p; k = model.frame(k).parent) end = rel_[k] * end;
+      const Vec3 M = moment(p, 0.5 * end);
       bend_[f] = t.bend * (M - M.dot(t.bend_dir) * t.bend_dir);
     }
     if (f == e.mount && !e.mount_compliance.isZero(0.0)) {
-      const lie::SE3 T_pre = T[fr.parent] * fr.T_parent_ip;
-      const Mat3 R_T = T_pre.rotation().transpose();
-      const Vec3 M0 = R_T * moment(f, T_pre.translation());
-      const Vec3 s = R_T * (subtree_first_[f] - subtree_mass_[f] * T_pre.translation());
+      // The subtree's first moment about the mount's pivot, and gravity, in the pivot's axes.
+      const Mat3& R_ip = fr.T_parent_ip.rotation();
+      const Vec3 s = R_ip.transpose() * (subtree_mass_[f] * (rel_[f].translation() -
+                                                             fr.T_parent_ip.translation()) +
+                                         rel_[f].rotation() * first_[f]);
+      const Vec3 g = R_ip.transpose() * gravity_[fr.parent];
       // The compliance's Jacobian only where its uncertainty is carried (UpdateSources).
       const bool need_J = sources_vary_ && !e.uncertainty.mount_compliance.isZero(0.0);
-      mount_rot_ =
-          MountTilt(e.mount_compliance, M0, s, R_T * e.g_base, need_J ? &J_mount_c_ : nullptr);
+      mount_rot_ = MountTilt(e.mount_compliance, s.cross(g), s, g, need_J ? &J_mount_c_ : nullptr);
     }
   }
 }
@@ -355,51 +417,43 @@ void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_rea
 // rotation its start joint's frame carries (at the corrected poses upstream), the mount tilts.
 void EffectiveChain::CorrectFrames() {
   const ModelEffects& e = *effects_;
-  T_[kBaseFrame] = lie::SE3();
-  for (FrameId f = 1; f <= last_varying_; ++f) {
-    const PpoeFrame& fr = effective_.frame(f);
-    if (varies_[f]) {
-      lie::SE3 local = static_[f];
-      if (e.frames[f].bend != 0.0) {
-        // The turn about the link's middle, in the parent's coordinates (conjugated there
-        // rather than applied in base coordinates and undone: one product instead of three).
-        const FrameId p = e.frames[f].bend_start;
-        const Mat3& R_parent = T_[fr.parent].rotation();
-        const Mat3 R_parent_start = R_parent.transpose() * T_[p].rotation();
-        const Vec3 start =
-            R_parent.transpose() * (T_[p].translation() - T_[fr.parent].translation());
-        const Vec3 mid = 0.5 * (start + static_[f].translation());
-        const Mat3 Rb = lie::SO3Exp(R_parent_start * bend_[f]);
-        local = lie::SE3(Rb, mid - Rb * mid) * static_[f];
-        if (sources_vary_ && e.uncertainty.bend[f] != 0.0) {
-          // A unit of bending compliance turns the frame by dw about `mid` (parent axes): the
-          // twist [mid x dw; dw] there, taken to the frame's own coordinates.
-          const Vec3 dw = R_parent_start * (bend_[f] / e.frames[f].bend);
-          Vec6& xi = bend_twist_[f];
-          xi.segment<3>(kRotIdx).noalias() = local.rotation().transpose() * dw;
-          xi.segment<3>(kTransIdx).noalias() =
-              local.rotation().transpose() * Vec3(mid.cross(dw) - local.translation().cross(dw));
-        }
-      }
-      if (f == e.mount) local = local * lie::SE3(MountRotation(mount_rot_), Vec3::Zero());
-      const Vec3& tilt = e.frames[f].tilt;
-      if (!tilt.isZero(0.0)) local = local * lie::SE3(lie::SO3Exp(tilt), Vec3::Zero());
-      // The source stays where the static geometry put it: the load turns it by milliradians.
-      effective_.SetFixedTransform(f, local, /*move_source=*/false);
-    }
-    if (f >= last_pose_needed_) continue;  // no later frame needs the poses
-    // T_parent_ip Exp(zeta q) from the precomputed Rodrigues terms (as ForwardKinematics).
-    const double qf = fr.q_index >= 0 ? q_[fr.q_index] : 0.0;
-    if (fr.joint.type == JointType::kRevolute) {
-      double sh, ch;
-      lie::SinCos(0.5 * qf, &sh, &ch);
-      const double a = 2.0 * sh * ch, b = 2.0 * sh * sh;
-      T_[f] = T_[fr.parent] * lie::SE3(fr.T_parent_ip.rotation() + a * fr.K1 + b * fr.K2,
-                                       fr.u0 + a * fr.u1 + b * fr.u2);
-    } else {
-      T_[f] = T_[fr.parent] * lie::SE3(fr.T_parent_ip.rotation(), fr.u0 + qf * fr.u1);
-    }
+  for (const FrameId f : varying_frames_) {
+    lie::SE3 local = e.frames[f].bend != 0.0 ? BentFixedPart(f) : static_[f];
+    if (f == e.mount) local = local * lie::SE3(MountRotation(mount_rot_), Vec3::Zero());
+    const Vec3& tilt = e.frames[f].tilt;
+    if (!tilt.isZero(0.0)) local = local * lie::SE3(lie::SO3Exp(tilt), Vec3::Zero());
+    // The source stays where the static geometry put it: the load turns it by milliradians.
+    effective_.SetFixedTransform(f, local, /*move_source=*/false);
   }
+}
+
+// The turn of a bent link about its middle, in the parent's coordinates (conjugated there rather
+// than applied in base coordinates and undone: one product instead of three). The start's pose
+// relative to the parent is that of the corrected chain (frames above f are corrected first).
+lie::SE3 EffectiveChain::BentFixedPart(FrameId f) {
+  const ModelEffects::FrameTerms& t = effects_->frames[f];
+  const PpoeFrame& fr = effective_.frame(f);
+  // T_start_parent: the corrected chain from the link's start down to f's parent.
+  lie::SE3 T_start_parent;
+  for (FrameId k = fr.parent; k != t.bend_start; k = effective_.frame(k).parent) {
+    const PpoeFrame& fk = effective_.frame(k);
+    T_start_parent = fk.FixedTimesMotion(fk.q_index >= 0 ? q_[fk.q_index] : 0.0) * T_start_parent;
+  }
+  const Mat3 R_parent_start = T_start_parent.rotation().transpose();
+  const Vec3 start = -(R_parent_start * T_start_parent.translation());
+  const Vec3 mid = 0.5 * (start + static_[f].translation());
+  const Mat3 Rb = lie::SO3Exp(R_parent_start * bend_[f]);
+  const lie::SE3 local = lie::SE3(Rb, mid - Rb * mid) * static_[f];
+  if (sources_vary_ && effects_->uncertainty.bend[f] != 0.0) {
+    // A unit of bending compliance turns the frame by dw about `mid` (parent axes): the twist
+    // [mid x dw; dw] there, taken to the frame's own coordinates.
+    const Vec3 dw = R_parent_start * (bend_[f] / t.bend);
+    Vec6& xi = bend_twist_[f];
+    xi.segment<3>(kRotIdx).noalias() = local.rotation().transpose() * dw;
+    xi.segment<3>(kTransIdx).noalias() =
+        local.rotation().transpose() * Vec3(mid.cross(dw) - local.translation().cross(dw));
+  }
+  return local;
 }
 
 void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
@@ -416,16 +470,13 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
   }
   const ModelEffects& e = *effects_;
   const bool loads = needs_loads_;
-  if (loads) {
-    ComputeLoads(q_read);
-  } else if (sources_vary_ && e.uncertainty.thermal != 0.0) {
-    ForwardKinematics(*declared_, nominal_, q_read);
-  }
+  if (loads) ComputeLoads(q_read);
+  if (sources_vary_ && e.uncertainty.thermal != 0.0) ForwardKinematics(*declared_, nominal_, q_read);
   for (int k = 0; k < declared_->nq(); ++k) {
     const ModelEffects::JointTerms& j = e.joints[k];
     const double qk = q_read[k];
     double dq = j.offset;
-    for (int h = 1; h <= 3; ++h) {
+    for (int h = 1; h <= 3 && harmonic_[k]; ++h) {
       if (j.harmonic[2 * h - 2] != 0.0 || j.harmonic[2 * h - 1] != 0.0) {
         dq += j.harmonic[2 * h - 2] * std::cos(h * qk) + j.harmonic[2 * h - 1] * std::sin(h * qk);
       }
