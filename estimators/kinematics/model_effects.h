@@ -115,10 +115,12 @@ void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffe
 // fitted stretched out and used raised. Solved exactly (a 2x2 linear solve, then fixed-point
 // steps): it equals MuJoCo's own equilibrium of such a plate to 1e-9 (mount_tilt_test.cc).
 // `M0` is s x g and `g` gravity, both in the mount's axes; `J_theta_c` (optional) gets
-// d theta_xy / d (c_x, c_y), for the compliance's uncertainty. Used by the identification and
-// by EffectiveChain alike (the same bits).
+// d theta_xy / d (c_x, c_y), for the compliance's uncertainty; `rotation` (optional) gets
+// MountRotation(theta) from the solver's own sines and cosines (equal to it but for the last
+// bit: two sincos calls fewer). Used by the identification and by EffectiveChain alike (the
+// same bits).
 Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& first_moment,
-               const Vec3& g, Eigen::Matrix2d* J_theta_c = nullptr);
+               const Vec3& g, Eigen::Matrix2d* J_theta_c = nullptr, Mat3* rotation = nullptr);
 
 // The mount's rotation for a tilt (theta_x, theta_y): a turn theta_y about y (the plate bending
 // about its root line), then theta_x about the turned x (the plate twisting about its own long
@@ -174,7 +176,7 @@ class EffectiveChain {
   std::vector<FrameId> varying_frames_;  // ModelEffects::FrameVaries, in increasing order
   std::vector<lie::SE3> static_;  // per frame: the fixed part without load-driven terms
   std::vector<Vec3> bend_;        // per frame: the link's bend (rotation vector, start's axes)
-  Vec3 mount_rot_ = Vec3::Zero();
+  Mat3 mount_R_ = Mat3::Identity();  // the mount's tilt at the reading, MountRotation
   Eigen::Matrix2d J_mount_c_ = Eigen::Matrix2d::Zero();  // d mount tilt / d compliance
   // Parameter uncertainty (ModelEffects::Uncertainty) as PPOE sources.
   std::vector<Mat6> source_fixed_;   // per frame: declared source + the constant terms
@@ -186,6 +188,7 @@ class EffectiveChain {
   bool needs_loads_ = false;
   std::vector<char> torque_needed_;  // per joint: a term acts through its torque
   std::vector<char> harmonic_;       // per joint: a harmonic term is set
+  std::vector<FrameId> joint_frames_;  // per joint: PpoeModel::joint_frame
   FrameId last_varying_ = 0;         // frames past it keep their fixed part
 };
 
