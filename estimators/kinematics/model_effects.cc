@@ -1,5 +1,6 @@
 #include "estimators/kinematics/model_effects.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "estimators/error.h"
@@ -95,17 +96,61 @@ void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffe
 
 namespace {
 
-// What each hinge's spring holds at tilt theta: the load's weight moment M = (R(theta) s) x g
-// about the roll axis (x, turned by the pitch) and about the pitch axis (y), and its
-// derivative D = dm/dtheta. From the potential -g . R(theta) s: d/d theta_y gives y . M,
+// Sines and cosines of the two hinge angles, carried along the Newton steps of MountTilt.
+struct HingeTrig {
+  double sx = 0.0, cx = 1.0, sy = 0.0, cy = 1.0;
+};
+
+HingeTrig TrigAt(const Vec3& theta) {
+  HingeTrig t;
+  lie::SinCos(theta.x(), &t.sx, &t.cx);
+  lie::SinCos(theta.y(), &t.sy, &t.cy);
+  return t;
+}
+
+// sin and cos of a + d from those of a, for |d| < kSmallStep: the step's own sine and cosine
+// from their series (the first terms left out, d^7 / 7! and d^6 / 6!, are below 1e-21 there).
+// The coefficients are constants to multiply by: dividing by 6.0 is a division at run time.
+constexpr double kSmallStep = 1e-3;
+void AddSmallAngle(double d, double* s, double* c) {
+  const double d2 = d * d;
+  const double sd = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0)));
+  const double cd = 1.0 + d2 * (-1.0 / 2.0 + d2 * (1.0 / 24.0));
+  const double s0 = *s, c0 = *c;
+  *s = s0 * cd + c0 * sd;
+  *c = c0 * cd - s0 * sd;
+}
+
+// The trigonometry at theta = the previous tilt + step. A Newton step from the linearised tilt
+// is a few urad and the next one far less, so two angle additions replace two sincos calls (the
+// same values but for the last bit); a larger step takes them afresh.
+void Advance(const Vec3& theta, const Eigen::Vector2d& step, HingeTrig* t) {
+  if (std::abs(step.x()) < kSmallStep && std::abs(step.y()) < kSmallStep) {
+    AddSmallAngle(step.x(), &t->sx, &t->cx);
+    AddSmallAngle(step.y(), &t->sy, &t->cy);
+  } else {
+    *t = TrigAt(theta);
+  }
+}
+
+// MountRotation from the hinges' trigonometry.
+Mat3 RotationFrom(const HingeTrig& t) {
+  Mat3 R;
+  R << t.cy, t.sy * t.sx, t.sy * t.cx,  //
+      0.0, t.cx, -t.sx,                 //
+      -t.sy, t.cy * t.sx, t.cy * t.cx;
+  return R;
+}
+
+// What each hinge's spring holds at the tilt whose trigonometry is `t`: the load's weight moment
+// M = (R(theta) s) x g about the roll axis (x, turned by the pitch) and about the pitch axis (y),
+// and its derivative D = dm/dtheta. From the potential -g . R(theta) s: d/d theta_y gives y . M,
 // d/d theta_x gives (R_y x) . M. With R = R_y R_x: dR/dtheta_x = R [x]x, dR/dtheta_y = [y]x R.
-Eigen::Vector2d HingeMoments(const Vec3& theta, const Vec3& s, const Vec3& g,
-                             Eigen::Matrix2d* D) {
-  const Mat3 R = MountRotation(theta);
+Eigen::Vector2d HingeMoments(const HingeTrig& t, const Vec3& s, const Vec3& g, Eigen::Matrix2d* D) {
+  const Mat3 R = RotationFrom(t);
   const Vec3 Rs = R * s;
   const Vec3 M = Rs.cross(g);
-  double sy, cy;
-  lie::SinCos(theta.y(), &sy, &cy);
+  const double sy = t.sy, cy = t.cy;
   const Eigen::Vector2d m(cy * M.x() - sy * M.z(), M.y());
   if (D) {
     const Vec3 dM_x = (R * Vec3::UnitX().cross(s)).cross(g);
@@ -118,17 +163,61 @@ Eigen::Vector2d HingeMoments(const Vec3& theta, const Vec3& s, const Vec3& g,
   return m;
 }
 
+// One division, not four: the Newton steps are a chain of these.
 Eigen::Matrix2d Inverse2(const Eigen::Matrix2d& A) {
-  const double det = A(0, 0) * A(1, 1) - A(0, 1) * A(1, 0);
+  const double inv_det = 1.0 / (A(0, 0) * A(1, 1) - A(0, 1) * A(1, 0));
   Eigen::Matrix2d inv;
-  inv << A(1, 1) / det, -A(0, 1) / det, -A(1, 0) / det, A(0, 0) / det;
+  inv << A(1, 1) * inv_det, -A(0, 1) * inv_det, -A(1, 0) * inv_det, A(0, 0) * inv_det;
   return inv;
+}
+
+// T_parent_ip Exp(zeta q) from the precomputed Rodrigues terms (PpoeFrame::FixedTimesMotion,
+// inlined: the loads take it for every frame of the chain).
+EIGEN_ALWAYS_INLINE lie::SE3 RelativePose(const PpoeFrame& f,
+                                          const Eigen::Ref<const Eigen::VectorXd>& q) {
+  const double qf = f.q_index >= 0 ? q[f.q_index] : 0.0;
+  if (f.joint.type == JointType::kRevolute) {
+    double sh, ch;
+    lie::SinCos(0.5 * qf, &sh, &ch);
+    const double a = 2.0 * sh * ch, b = 2.0 * sh * sh;
+    return lie::SE3(f.T_parent_ip.rotation() + a * f.K1 + b * f.K2, f.u0 + a * f.u1 + b * f.u2);
+  }
+  if (f.joint.type == JointType::kPrismatic) {
+    return lie::SE3(f.T_parent_ip.rotation(), f.u0 + qf * f.u1);
+  }
+  return f.T_parent_ip;
+}
+
+// Exp of a rotation vector below kSmallRotation rad, as lie::SO3Exp without its square root,
+// divisions and sincos: sin x / x and (1 - cos x) / x^2 by their series in x^2 (the first terms
+// left out, x^12 / 13! and x^12 / 14!, are below 1e-17 there). A link's bend is milliradians.
+constexpr double kSmallRotation = 0.25;
+Mat3 SmallRotationExp(const Vec3& w) {
+  const double x2 = w.squaredNorm();
+  if (!(x2 < kSmallRotation * kSmallRotation)) return lie::SO3Exp(w);
+  // (-1)^k / (2k+1)! and (-1)^k / (2k+2)!, k = 0..5.
+  constexpr double a1 = -1.0 / 6, a2 = 1.0 / 120, a3 = -1.0 / 5040, a4 = 1.0 / 362880,
+                   a5 = -1.0 / 39916800;
+  constexpr double b1 = -1.0 / 24, b2 = 1.0 / 720, b3 = -1.0 / 40320, b4 = 1.0 / 3628800,
+                   b5 = -1.0 / 479001600;
+  const double a = 1.0 + x2 * (a1 + x2 * (a2 + x2 * (a3 + x2 * (a4 + x2 * a5))));
+  const double b = 0.5 + x2 * (b1 + x2 * (b2 + x2 * (b3 + x2 * (b4 + x2 * b5))));
+  // I + a [w]x + b [w]x^2, with [w]x^2 = w w^T - x^2 I.
+  Mat3 R = b * w * w.transpose();
+  R.diagonal().array() += 1.0 - b * x2;
+  R(0, 1) -= a * w.z();
+  R(1, 0) += a * w.z();
+  R(0, 2) += a * w.y();
+  R(2, 0) -= a * w.y();
+  R(1, 2) -= a * w.x();
+  R(2, 1) += a * w.x();
+  return R;
 }
 
 }  // namespace
 
 Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& first_moment,
-               const Vec3& g, Eigen::Matrix2d* J_theta_c) {
+               const Vec3& g, Eigen::Matrix2d* J_theta_c, Mat3* rotation) {
   const Vec3& s = first_moment;
   const double sg = s.dot(g);
   // The linearised equilibrium first: A = I - C S on the x, y block (S = g s^T - (s . g) I).
@@ -141,7 +230,9 @@ Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& fi
   if (!(det > 0.0)) {
     // The load would tip the mount over (no stable equilibrium): the linear tilt, C M0.
     if (J_theta_c) *J_theta_c = Eigen::Vector2d(M0.x(), M0.y()).asDiagonal();
-    return Vec3(cx * M0.x(), cy * M0.y(), 0.0);
+    const Vec3 theta(cx * M0.x(), cy * M0.y(), 0.0);
+    if (rotation) *rotation = MountRotation(theta);
+    return theta;
   }
   Vec3 theta = Vec3::Zero();
   theta.head<2>() = Inverse2(A) * Eigen::Vector2d(cx * M0.x(), cy * M0.y());
@@ -150,36 +241,30 @@ Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& fi
   // step is below 1e-8 of the tilt what is left is below rounding, and the implicit Jacobian
   // below is the derivative of what is returned (an identification differentiates it). From
   // the linearised solution (a few urad off stretched out) that is the second step.
+  HingeTrig trig = TrigAt(theta);
   Eigen::Matrix2d D;
-  Eigen::Vector2d m = HingeMoments(theta, s, g, &D);
+  Eigen::Vector2d m = HingeMoments(trig, s, g, &D);
   bool fresh = true;  // m and D are at theta
   for (int it = 0; it < 20; ++it) {
     const Eigen::Vector2d step =
         Inverse2(Eigen::Matrix2d::Identity() - C * D) * (C * m - theta.head<2>());
     theta.head<2>() += step;
+    Advance(theta, step, &trig);
     fresh = false;
     if (step.lpNorm<Eigen::Infinity>() <= 1e-8 * theta.head<2>().lpNorm<Eigen::Infinity>()) break;
-    m = HingeMoments(theta, s, g, &D);
+    m = HingeMoments(trig, s, g, &D);
     fresh = true;
   }
   if (J_theta_c) {
     // Implicit: (I - C D) dtheta = dC m(theta).
-    if (!fresh) m = HingeMoments(theta, s, g, &D);
+    if (!fresh) m = HingeMoments(trig, s, g, &D);
     *J_theta_c = Inverse2(Eigen::Matrix2d::Identity() - C * D) * m.asDiagonal();
   }
+  if (rotation) *rotation = RotationFrom(trig);
   return theta;
 }
 
-Mat3 MountRotation(const Vec3& theta) {
-  double sx, cx, sy, cy;
-  lie::SinCos(theta.x(), &sx, &cx);
-  lie::SinCos(theta.y(), &sy, &cy);
-  Mat3 R;
-  R << cy, sy * sx, sy * cx,  //
-      0.0, cx, -sx,           //
-      -sy, cy * sx, cy * cx;
-  return R;
-}
+Mat3 MountRotation(const Vec3& theta) { return RotationFrom(TrigAt(theta)); }
 
 EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* effects)
     : declared_(&declared),
@@ -199,18 +284,17 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
   }
   needs_loads_ = e.NeedsLoads();
   torque_needed_.assign(declared.nq(), 0);
+  harmonic_.assign(declared.nq(), 0);
+  joint_frames_.resize(declared.nq());
   for (int k = 0; k < declared.nq(); ++k) {
+    joint_frames_[k] = declared.joint_frame(k);
     const ModelEffects::JointTerms& j = e.joints[k];
     torque_needed_[k] =
         declared.frame(declared.joint_frame(k)).joint.type == JointType::kRevolute &&
         (j.backlash != 0.0 || j.compliance != 0.0 || j.cubic != 0.0);
+    for (double h : j.harmonic) harmonic_[k] = harmonic_[k] || h != 0.0;
   }
-  varies_.assign(n, 0);
-  for (FrameId f = 1; f < n; ++f) varies_[f] = e.FrameVaries(f);
-  subtree_mass_.assign(n, 0.0);
-  subtree_first_.assign(n, Vec3::Zero());
   static_.assign(n, lie::SE3());
-  T_.assign(n, lie::SE3());
   bend_.assign(n, Vec3::Zero());
   for (FrameId f = 1; f < n; ++f) {
     const ModelEffects::FrameTerms& t = e.frames[f];
@@ -224,13 +308,57 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
     static_[f] = S;
     if (e.FrameVaries(f)) {
       last_varying_ = f;
-      if (t.bend != 0.0) last_pose_needed_ = f;  // poses of the frames above it are needed
+      varying_frames_.push_back(f);
       continue;
     }
     if (!t.tilt.isZero(0.0)) S = S * lie::SE3(lie::SO3Exp(t.tilt), Vec3::Zero());
     effective_.SetFixedTransform(f, S);
   }
+  if (needs_loads_) SetConstantLoads();
   if (!e.uncertainty.empty()) SetConstantSources();
+}
+
+// The masses do not change with the configuration: each frame's own first moment and each
+// subtree's mass are summed once, and the frames whose poses the loads need are found once.
+void EffectiveChain::SetConstantLoads() {
+  const ModelEffects& e = *effects_;
+  const PpoeModel& model = *declared_;
+  const int n = model.num_frames();
+  frame_first_.assign(n, Vec3::Zero());
+  subtree_mass_.assign(n, 0.0);
+  loaded_.assign(n, 0);
+  for (FrameId f = 0; f < n; ++f) {
+    FrameMass fm = e.masses[f];
+    if (f == e.payload_frame) {
+      fm.mass += e.payload.mass;
+      fm.first_moment += e.payload.first_moment;
+    }
+    subtree_mass_[f] = fm.mass;
+    frame_first_[f] = fm.first_moment;
+    loaded_[f] = fm.mass != 0.0 || !fm.first_moment.isZero(0.0);
+  }
+  // Children have larger ids than their parents.
+  for (FrameId f = n - 1; f > 0; --f) {
+    const FrameId p = model.frame(f).parent;
+    subtree_mass_[p] += subtree_mass_[f];
+    loaded_[p] = loaded_[p] || loaded_[f];
+    if (loaded_[f]) last_rel_ = std::max(last_rel_, f);
+  }
+  // Gravity is needed in the axes of a joint with a torque-driven term, of a bent link's start
+  // and of the mount's parent; its ancestors' relative poses carry it there.
+  for (int k = 0; k < model.nq(); ++k) {
+    if (torque_needed_[k]) last_gravity_ = std::max(last_gravity_, model.joint_frame(k));
+  }
+  for (const FrameId f : varying_frames_) {
+    if (e.frames[f].bend != 0.0) last_gravity_ = std::max(last_gravity_, e.frames[f].bend_start);
+    if (f == e.mount) last_gravity_ = std::max(last_gravity_, model.frame(f).parent);
+    last_rel_ = std::max(last_rel_, model.frame(f).parent);  // a bend's end: rel_ to its parent
+  }
+  last_rel_ = std::max(last_rel_, last_gravity_);
+  rel_.assign(n, lie::SE3());
+  first_.assign(n, Vec3::Zero());
+  gravity_.assign(n, Vec3::Zero());
+  gravity_[kBaseFrame] = e.g_base;
 }
 
 // The parameters' variances as twists at each frame's source (F_{i,p}): a joint term moves the
@@ -312,41 +440,62 @@ void EffectiveChain::UpdateSources(const Eigen::Ref<const Eigen::VectorXd>& q_re
   }
 }
 
+// Each subtree's first moment about its frame's origin, in its frame's axes (the backward pass
+// of a recursive Newton-Euler at rest), and gravity in each frame's axes (forward): the moments
+// the effects need then follow without any frame's pose in base coordinates.
+void EffectiveChain::SubtreeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
+  const std::vector<PpoeFrame>& frames = declared_->frames();  // ids checked at construction
+  for (FrameId f = 1; f <= last_rel_; ++f) {
+    const PpoeFrame& fr = frames[f];
+    rel_[f] = RelativePose(fr, q_read);
+    if (f <= last_gravity_) {
+      gravity_[f].noalias() = rel_[f].rotation().transpose() * gravity_[fr.parent];
+    }
+    first_[f] = frame_first_[f];
+  }
+  first_[kBaseFrame] = frame_first_[kBaseFrame];
+  for (FrameId f = last_rel_; f > 0; --f) {
+    if (!loaded_[f]) continue;
+    first_[frames[f].parent] +=
+        subtree_mass_[f] * rel_[f].translation() + rel_[f].rotation() * first_[f];
+  }
+}
+
 void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
   const ModelEffects& e = *effects_;
-  const PpoeModel& model = *declared_;
-  ForwardKinematics(model, nominal_, q_read);
-  SubtreeMasses(model, nominal_, e, &subtree_mass_, &subtree_first_);
-  const std::vector<lie::SE3>& T = nominal_.T_base_frame;
-  // Moment about a (base coordinates) of the weight of frame f's subtree.
+  const std::vector<PpoeFrame>& frames = declared_->frames();
+  SubtreeLoads(q_read);
+  // The weight's moment about point a of frame f's subtree, both in f's axes.
   const auto moment = [&](FrameId f, const Vec3& a) {
-    return Vec3((subtree_first_[f] - subtree_mass_[f] * a).cross(e.g_base));
+    return Vec3((first_[f] - subtree_mass_[f] * a).cross(gravity_[f]));
   };
-  for (int k = 0; k < model.nq(); ++k) {
+  for (int k = 0; k < tau_.size(); ++k) {
     if (!torque_needed_[k]) continue;
-    const FrameId f = model.joint_frame(k);
-    const PpoeFrame& fr = model.frame(f);
-    tau_[k] = -(T[f].rotation() * fr.joint.axis).dot(moment(f, T[f] * fr.joint.point));
+    const FrameId f = joint_frames_[k];
+    const Joint& joint = frames[f].joint;
+    tau_[k] = -joint.axis.dot(moment(f, joint.point));
   }
-  for (FrameId f = 1; f <= last_varying_; ++f) {
+  for (const FrameId f : varying_frames_) {
     const ModelEffects::FrameTerms& t = e.frames[f];
-    const PpoeFrame& fr = model.frame(f);
+    const PpoeFrame& fr = frames[f];
     if (t.bend != 0.0) {
+      // About the link's middle: halfway from the start's origin to the link's end.
       const FrameId p = t.bend_start;
-      const Vec3 end = T[fr.parent] * fr.T_parent_ip.translation();
-      const Vec3 mid = 0.5 * (T[p].translation() + end);
-      const Vec3 M = T[p].rotation().transpose() * moment(p, mid);
+      Vec3 end = fr.T_parent_ip.translation();
+      for (FrameId k = fr.parent; k != p; k = frames[k].parent) end = rel_[k] * end;
+      const Vec3 M = moment(p, 0.5 * end);
       bend_[f] = t.bend * (M - M.dot(t.bend_dir) * t.bend_dir);
     }
     if (f == e.mount && !e.mount_compliance.isZero(0.0)) {
-      const lie::SE3 T_pre = T[fr.parent] * fr.T_parent_ip;
-      const Mat3 R_T = T_pre.rotation().transpose();
-      const Vec3 M0 = R_T * moment(f, T_pre.translation());
-      const Vec3 s = R_T * (subtree_first_[f] - subtree_mass_[f] * T_pre.translation());
+      // The subtree's first moment about the mount's pivot, and gravity, in the pivot's axes.
+      const Mat3& R_ip = fr.T_parent_ip.rotation();
+      const Vec3 s = R_ip.transpose() *
+                     (subtree_mass_[f] * (rel_[f].translation() - fr.T_parent_ip.translation()) +
+                      rel_[f].rotation() * first_[f]);
+      const Vec3 g = R_ip.transpose() * gravity_[fr.parent];
       // The compliance's Jacobian only where its uncertainty is carried (UpdateSources).
       const bool need_J = sources_vary_ && !e.uncertainty.mount_compliance.isZero(0.0);
-      mount_rot_ =
-          MountTilt(e.mount_compliance, M0, s, R_T * e.g_base, need_J ? &J_mount_c_ : nullptr);
+      MountTilt(e.mount_compliance, s.cross(g), s, g, need_J ? &J_mount_c_ : nullptr, &mount_R_);
     }
   }
 }
@@ -355,51 +504,49 @@ void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_rea
 // rotation its start joint's frame carries (at the corrected poses upstream), the mount tilts.
 void EffectiveChain::CorrectFrames() {
   const ModelEffects& e = *effects_;
-  T_[kBaseFrame] = lie::SE3();
-  for (FrameId f = 1; f <= last_varying_; ++f) {
-    const PpoeFrame& fr = effective_.frame(f);
-    if (varies_[f]) {
-      lie::SE3 local = static_[f];
-      if (e.frames[f].bend != 0.0) {
-        // The turn about the link's middle, in the parent's coordinates (conjugated there
-        // rather than applied in base coordinates and undone: one product instead of three).
-        const FrameId p = e.frames[f].bend_start;
-        const Mat3& R_parent = T_[fr.parent].rotation();
-        const Mat3 R_parent_start = R_parent.transpose() * T_[p].rotation();
-        const Vec3 start =
-            R_parent.transpose() * (T_[p].translation() - T_[fr.parent].translation());
-        const Vec3 mid = 0.5 * (start + static_[f].translation());
-        const Mat3 Rb = lie::SO3Exp(R_parent_start * bend_[f]);
-        local = lie::SE3(Rb, mid - Rb * mid) * static_[f];
-        if (sources_vary_ && e.uncertainty.bend[f] != 0.0) {
-          // A unit of bending compliance turns the frame by dw about `mid` (parent axes): the
-          // twist [mid x dw; dw] there, taken to the frame's own coordinates.
-          const Vec3 dw = R_parent_start * (bend_[f] / e.frames[f].bend);
-          Vec6& xi = bend_twist_[f];
-          xi.segment<3>(kRotIdx).noalias() = local.rotation().transpose() * dw;
-          xi.segment<3>(kTransIdx).noalias() =
-              local.rotation().transpose() * Vec3(mid.cross(dw) - local.translation().cross(dw));
-        }
-      }
-      if (f == e.mount) local = local * lie::SE3(MountRotation(mount_rot_), Vec3::Zero());
-      const Vec3& tilt = e.frames[f].tilt;
-      if (!tilt.isZero(0.0)) local = local * lie::SE3(lie::SO3Exp(tilt), Vec3::Zero());
-      // The source stays where the static geometry put it: the load turns it by milliradians.
-      effective_.SetFixedTransform(f, local, /*move_source=*/false);
-    }
-    if (f >= last_pose_needed_) continue;  // no later frame needs the poses
-    // T_parent_ip Exp(zeta q) from the precomputed Rodrigues terms (as ForwardKinematics).
-    const double qf = fr.q_index >= 0 ? q_[fr.q_index] : 0.0;
-    if (fr.joint.type == JointType::kRevolute) {
-      double sh, ch;
-      lie::SinCos(0.5 * qf, &sh, &ch);
-      const double a = 2.0 * sh * ch, b = 2.0 * sh * sh;
-      T_[f] = T_[fr.parent] * lie::SE3(fr.T_parent_ip.rotation() + a * fr.K1 + b * fr.K2,
-                                       fr.u0 + a * fr.u1 + b * fr.u2);
-    } else {
-      T_[f] = T_[fr.parent] * lie::SE3(fr.T_parent_ip.rotation(), fr.u0 + qf * fr.u1);
-    }
+  for (const FrameId f : varying_frames_) {
+    lie::SE3 local = e.frames[f].bend != 0.0 ? BentFixedPart(f) : static_[f];
+    if (f == e.mount) local = lie::SE3(local.rotation() * mount_R_, local.translation());
+    const Vec3& tilt = e.frames[f].tilt;
+    if (!tilt.isZero(0.0)) local = local * lie::SE3(lie::SO3Exp(tilt), Vec3::Zero());
+    // The source stays where the static geometry put it: the load turns it by milliradians.
+    effective_.SetFixedTransform(f, local, /*move_source=*/false);
   }
+}
+
+// The turn of a bent link about its middle, in the parent's coordinates (conjugated there rather
+// than applied in base coordinates and undone: one product instead of three). The start's pose
+// relative to the parent is that of the corrected chain (frames above f are corrected first).
+lie::SE3 EffectiveChain::BentFixedPart(FrameId f) {
+  const ModelEffects::FrameTerms& t = effects_->frames[f];
+  const std::vector<PpoeFrame>& frames = effective_.frames();
+  // The link's start (origin) and its bend, in the parent's coordinates: where the link starts
+  // at the parent (the usual case) they are there already.
+  Vec3 start = Vec3::Zero();
+  Vec3 w = bend_[f];
+  if (frames[f].parent != t.bend_start) {
+    // T_start_parent: the corrected chain from the link's start down to f's parent.
+    lie::SE3 T_start_parent;
+    for (FrameId k = frames[f].parent; k != t.bend_start; k = frames[k].parent) {
+      T_start_parent = RelativePose(frames[k], q_) * T_start_parent;
+    }
+    const Mat3 R_parent_start = T_start_parent.rotation().transpose();
+    start = -(R_parent_start * T_start_parent.translation());
+    w = R_parent_start * bend_[f];
+  }
+  const Vec3 mid = 0.5 * (start + static_[f].translation());
+  const Mat3 Rb = SmallRotationExp(w);
+  const lie::SE3 local = lie::SE3(Rb, mid - Rb * mid) * static_[f];
+  if (sources_vary_ && effects_->uncertainty.bend[f] != 0.0) {
+    // A unit of bending compliance turns the frame by dw about `mid` (parent axes): the twist
+    // [mid x dw; dw] there, taken to the frame's own coordinates.
+    const Vec3 dw = w / t.bend;
+    Vec6& xi = bend_twist_[f];
+    xi.segment<3>(kRotIdx).noalias() = local.rotation().transpose() * dw;
+    xi.segment<3>(kTransIdx).noalias() =
+        local.rotation().transpose() * Vec3(mid.cross(dw) - local.translation().cross(dw));
+  }
+  return local;
 }
 
 void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
@@ -416,16 +563,14 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
   }
   const ModelEffects& e = *effects_;
   const bool loads = needs_loads_;
-  if (loads) {
-    ComputeLoads(q_read);
-  } else if (sources_vary_ && e.uncertainty.thermal != 0.0) {
+  if (loads) ComputeLoads(q_read);
+  if (sources_vary_ && e.uncertainty.thermal != 0.0)
     ForwardKinematics(*declared_, nominal_, q_read);
-  }
   for (int k = 0; k < declared_->nq(); ++k) {
     const ModelEffects::JointTerms& j = e.joints[k];
     const double qk = q_read[k];
     double dq = j.offset;
-    for (int h = 1; h <= 3; ++h) {
+    for (int h = 1; h <= 3 && harmonic_[k]; ++h) {
       if (j.harmonic[2 * h - 2] != 0.0 || j.harmonic[2 * h - 1] != 0.0) {
         dq += j.harmonic[2 * h - 2] * std::cos(h * qk) + j.harmonic[2 * h - 1] * std::sin(h * qk);
       }

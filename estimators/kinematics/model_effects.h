@@ -115,10 +115,12 @@ void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffe
 // fitted stretched out and used raised. Solved exactly (a 2x2 linear solve, then fixed-point
 // steps): it equals MuJoCo's own equilibrium of such a plate to 1e-9 (mount_tilt_test.cc).
 // `M0` is s x g and `g` gravity, both in the mount's axes; `J_theta_c` (optional) gets
-// d theta_xy / d (c_x, c_y), for the compliance's uncertainty. Used by the identification and
-// by EffectiveChain alike (the same bits).
+// d theta_xy / d (c_x, c_y), for the compliance's uncertainty; `rotation` (optional) gets
+// MountRotation(theta) from the solver's own sines and cosines (equal to it but for the last
+// bit: two sincos calls fewer). Used by the identification and by EffectiveChain alike (the
+// same bits).
 Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& first_moment,
-               const Vec3& g, Eigen::Matrix2d* J_theta_c = nullptr);
+               const Vec3& g, Eigen::Matrix2d* J_theta_c = nullptr, Mat3* rotation = nullptr);
 
 // The mount's rotation for a tilt (theta_x, theta_y): a turn theta_y about y (the plate bending
 // about its root line), then theta_x about the turned x (the plate twisting about its own long
@@ -149,21 +151,32 @@ class EffectiveChain {
   const Eigen::VectorXd& tau() const { return tau_; }
 
  private:
+  void SetConstantLoads();
   void ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read);
+  void SubtreeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_read);
   void CorrectFrames();
+  lie::SE3 BentFixedPart(FrameId f);
   void SetConstantSources();
   void UpdateSources(const Eigen::Ref<const Eigen::VectorXd>& q_read);
 
   const PpoeModel* declared_;
   const ModelEffects* effects_;
   PpoeModel effective_;
-  PpoeData nominal_;  // the declared chain at the reading, for the loads
-  std::vector<double> subtree_mass_;
-  std::vector<Vec3> subtree_first_;
+  PpoeData nominal_;  // the declared chain at the reading (for the thermal source only)
+  // The loads, in each frame's own coordinates (no base poses needed): constant per-frame and
+  // subtree masses (payload included), set at construction.
+  std::vector<Vec3> frame_first_;     // per frame: its own first moment
+  std::vector<double> subtree_mass_;  // per frame: the mass of its subtree
+  std::vector<char> loaded_;          // per frame: its subtree carries a mass
+  std::vector<lie::SE3> rel_;         // per frame: T_parent_frame of the declared chain at q_read
+  std::vector<Vec3> first_;           // per frame: its subtree's first moment about its origin
+  std::vector<Vec3> gravity_;         // per frame: gravity in its axes
+  FrameId last_rel_ = 0;              // rel_ is needed up to here
+  FrameId last_gravity_ = 0;          // gravity_ is needed up to here
+  std::vector<FrameId> varying_frames_;  // ModelEffects::FrameVaries, in increasing order
   std::vector<lie::SE3> static_;  // per frame: the fixed part without load-driven terms
-  std::vector<lie::SE3> T_;       // per frame: corrected mean poses (bending pass)
   std::vector<Vec3> bend_;        // per frame: the link's bend (rotation vector, start's axes)
-  Vec3 mount_rot_ = Vec3::Zero();
+  Mat3 mount_R_ = Mat3::Identity();  // the mount's tilt at the reading, MountRotation
   Eigen::Matrix2d J_mount_c_ = Eigen::Matrix2d::Zero();  // d mount tilt / d compliance
   // Parameter uncertainty (ModelEffects::Uncertainty) as PPOE sources.
   std::vector<Mat6> source_fixed_;   // per frame: declared source + the constant terms
@@ -174,9 +187,9 @@ class EffectiveChain {
   Eigen::VectorXd q_, tau_;
   bool needs_loads_ = false;
   std::vector<char> torque_needed_;  // per joint: a term acts through its torque
-  std::vector<char> varies_;         // per frame: ModelEffects::FrameVaries
+  std::vector<char> harmonic_;       // per joint: a harmonic term is set
+  std::vector<FrameId> joint_frames_;  // per joint: PpoeModel::joint_frame
   FrameId last_varying_ = 0;         // frames past it keep their fixed part
-  FrameId last_pose_needed_ = 0;     // the corrected poses of frames before it are needed (bends)
 };
 
 }  // namespace flexbench::kinematics
