@@ -563,9 +563,12 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
   }
   const ModelEffects& e = *effects_;
   const bool loads = needs_loads_;
-  if (loads) ComputeLoads(q_read);
   if (sources_vary_ && e.uncertainty.thermal != 0.0)
     ForwardKinematics(*declared_, nominal_, q_read);
+  // The kinematic joint terms first (offset, periodic error): the weight acts where the arm
+  // is, at the corrected angles, so the loads are taken there (issue 15: a 0.4 deg encoder
+  // offset at j2 moves the centre of mass, and a compliant mount's tilt with it, by ~1% of the
+  // tilt; 39-69 um at a raised hand). identify::EffectModel::LoadsFor does the same.
   for (int k = 0; k < declared_->nq(); ++k) {
     const ModelEffects::JointTerms& j = e.joints[k];
     const double qk = q_read[k];
@@ -575,13 +578,18 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
         dq += j.harmonic[2 * h - 2] * std::cos(h * qk) + j.harmonic[2 * h - 1] * std::sin(h * qk);
       }
     }
-    if (loads && torque_needed_[k]) {
+    q_[k] = qk + dq;
+  }
+  if (loads) {
+    ComputeLoads(q_);
+    for (int k = 0; k < declared_->nq(); ++k) {
+      if (!torque_needed_[k]) continue;
+      const ModelEffects::JointTerms& j = e.joints[k];
       const double tau = tau_[k];
       // The identification's flank: the side the gravity load presses (none below 1 mN m).
       const double flank = tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0;
-      dq += j.backlash * flank + j.compliance * tau + j.cubic * tau * tau * tau;
+      q_[k] += j.backlash * flank + j.compliance * tau + j.cubic * tau * tau * tau;
     }
-    q_[k] = qk + dq;
   }
   if (last_varying_ > 0) CorrectFrames();
   if (sources_vary_) UpdateSources(q_read);

@@ -283,7 +283,58 @@ int EffectModel::FindCandidate(const std::string& name) const {
   return -1;
 }
 
-ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const {
+ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const { return Loads(q, q); }
+
+Eigen::VectorXd EffectModel::ReadingShift(const Eigen::VectorXd& q, const std::vector<int>& active,
+                                          const double* theta) const {
+  Eigen::VectorXd dq = Eigen::VectorXd::Zero(q.size());
+  const double* t = theta;
+  for (int i : active) {
+    const Candidate& c = candidates_[i];
+    if (c.type == EffectType::kJointOffset) dq[c.q_index] += t[0];
+    if (c.type == EffectType::kTransmissionError || c.type == EffectType::kJointErrorCurve) {
+      const double qj = q[c.q_index];
+      for (int h = 1; 2 * h <= c.num_params; ++h) {
+        dq[c.q_index] += t[2 * h - 2] * std::cos(h * qj) + t[2 * h - 1] * std::sin(h * qj);
+      }
+    }
+    t += c.num_params;
+  }
+  return dq;
+}
+
+bool EffectModel::LoadsShift(const std::vector<int>& active) const {
+  if (!has_masses_) return false;
+  bool shift = false, loaded = false;
+  for (int i : active) {
+    switch (candidates_[i].type) {
+      case EffectType::kJointOffset:
+      case EffectType::kTransmissionError:
+      case EffectType::kJointErrorCurve:
+        shift = true;
+        break;
+      case EffectType::kJointCompliance:
+      case EffectType::kBacklash:
+      case EffectType::kLinkBending:
+      case EffectType::kBaseCompliance:
+      case EffectType::kStiffeningSpring:
+      case EffectType::kPayload:
+        loaded = true;
+        break;
+      default:
+        break;
+    }
+  }
+  return shift && loaded;
+}
+
+ConfigLoads EffectModel::LoadsFor(const Eigen::VectorXd& q, const std::vector<int>& active,
+                                  const double* theta) const {
+  if (!LoadsShift(active)) return Loads(q);
+  return Loads(q, q + ReadingShift(q, active, theta));
+}
+
+ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load) const {
   const kinematics::PpoeModel& model = chain_->model;
   const int n = model.num_frames();
   ConfigLoads L;
@@ -304,11 +355,11 @@ ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const {
   }
   if (!has_masses_) return L;
   kinematics::PpoeData pd(model);
-  kinematics::ForwardKinematics(model, pd, q);
+  kinematics::ForwardKinematics(model, pd, q_load);
   if (!d_) d_ = sim::MakeData(m_);
   mjData* d = d_.get();
   mju_copy(d->qpos, m_->qpos0, m_->nq);
-  chain_->WriteQpos(q, d->qpos);
+  chain_->WriteQpos(q_load, d->qpos);
   mj_kinematics(m_, d);
   mj_comPos(m_, d);
   const int base = chain_->base_body;

@@ -155,6 +155,21 @@ class EffectModel {
   bool has_masses() const { return has_masses_; }
 
   ConfigLoads Loads(const Eigen::VectorXd& q) const;
+  // The loads of the arm standing at q_load, for predictions at reading q (the nominal poses
+  // cached at q). The weight acts where the arm is: at the reading corrected by the joint-level
+  // kinematic effects (issue 15: a 0.4 deg encoder offset at j2 moves the centre of mass, and
+  // the compliant mount's tilt with it, by ~1% of the tilt: 39-69 um at a raised hand).
+  ConfigLoads Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load) const;
+  // The joint-level kinematic correction of `active` at reading q (offsets, periodic errors):
+  // the reading -> joint angle map's part that does not depend on the load.
+  Eigen::VectorXd ReadingShift(const Eigen::VectorXd& q, const std::vector<int>& active,
+                               const double* theta) const;
+  // Whether `active` moves the loads: a kinematic joint correction beside a load-driven effect.
+  bool LoadsShift(const std::vector<int>& active) const;
+  // Loads(q, q + ReadingShift(q, active, theta)) where LoadsShift, else Loads(q): the loads a
+  // prediction of (active, theta) at reading q uses, as kinematics::EffectiveChain computes them.
+  ConfigLoads LoadsFor(const Eigen::VectorXd& q, const std::vector<int>& active,
+                       const double* theta) const;
 
   // A frame's step under the effects' terms (ChainPoses' touched-frame step, intermediates
   // kept; FrameStages):

@@ -248,6 +248,27 @@ Fit PreferSimpler(const SelectionContext& ctx, const std::vector<int>& candidate
   return cur;
 }
 
+// `fit` refitted with the loads at the joint angles its own kinematic corrections give
+// (EffectModel::LoadsFor), until those corrections settle (they move the loads by ~1%, so one
+// or two passes); `*loads` those loads, left empty when the model does not shift them.
+Fit RefitAtCorrectedLoads(const EffectModel& em, const DataSet& data, Fit fit,
+                          const IdentifyOptions& opt, std::vector<ConfigLoads>* loads) {
+  loads->clear();
+  if (!em.LoadsShift(fit.active)) return fit;
+  Eigen::VectorXd theta_used;
+  for (int pass = 0; pass < 4; ++pass) {
+    if (theta_used.size() == fit.theta.size() &&
+        (fit.theta - theta_used).lpNorm<Eigen::Infinity>() <=
+            1e-9 * std::max(1e-12, fit.theta.lpNorm<Eigen::Infinity>())) {
+      break;
+    }
+    theta_used = fit.theta;
+    *loads = ComputeLoads(em, data, fit.active, fit.theta);
+    fit = FitEffects(em, data, *loads, fit.active, fit.basis, fit.theta, opt);
+  }
+  return fit;
+}
+
 }  // namespace
 
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data) {
@@ -255,6 +276,19 @@ std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data
   loads.reserve(data.rows.size());
   for (const Observation& o : data.rows) {
     loads.push_back(em.Loads(o.q));
+    loads.back().motion_sign = o.motion_sign;
+  }
+  return loads;
+}
+
+std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data,
+                                      const std::vector<int>& active,
+                                      const Eigen::VectorXd& theta) {
+  if (!em.LoadsShift(active)) return ComputeLoads(em, data);
+  std::vector<ConfigLoads> loads;
+  loads.reserve(data.rows.size());
+  for (const Observation& o : data.rows) {
+    loads.push_back(em.LoadsFor(o.q, active, theta.data()));
     loads.back().motion_sign = o.motion_sign;
   }
   return loads;
@@ -326,23 +360,28 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
     cur = AddGeometryBlock(ctx, cur, generic, &cv);
   }
   cur = PreferSimpler(ctx, candidates, std::move(cur), &cv);
+  // The selection ran on the loads at the readings; the chosen model's values are refitted on
+  // the loads where its own joint corrections put the arm, and analysed there.
+  std::vector<ConfigLoads> shifted;
+  cur = RefitAtCorrectedLoads(em, data, std::move(cur), opt, &shifted);
+  const std::vector<ConfigLoads>& final_loads = shifted.empty() ? loads : shifted;
   res.after = cur;
   res.cv_after = cv;
-  res.finding = FindResidualStructure(em, data, loads, cur, opt);
+  res.finding = FindResidualStructure(em, data, final_loads, cur, opt);
   if (!cur.active.empty() || !res.unlocked.empty()) {
     res.steps.push_back(std::string("diagnostics after: ") + res.finding.message +
                         (res.finding.significant ? " (significant)" : ""));
   }
   FindAlternatives(ctx, candidates, &res);
-  FindEquivalents(em, data, loads, cur, candidates, opt, &res);
-  FindSimplerEquivalents(em, data, loads, cur, candidates, opt, &res);
+  FindEquivalents(em, data, final_loads, cur, candidates, opt, &res);
+  FindSimplerEquivalents(em, data, final_loads, cur, candidates, opt, &res);
   for (const EquivalenceSet& s : res.equivalence) {
     if (s.members.size() > 1) {
       res.steps.push_back("equivalent on this data (named by all): " + s.name);
     }
   }
-  FindUnidentifiable(em, data, loads, cur, candidates, opt, &res);
-  Report(em, data, loads, opt, &res);
+  FindUnidentifiable(em, data, final_loads, cur, candidates, opt, &res);
+  Report(em, data, final_loads, opt, &res);
   return res;
 }
 

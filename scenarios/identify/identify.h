@@ -199,8 +199,13 @@ DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop);
 //                       alternative explains the held-out data as well.
 std::string Verdict(const IdentifyResult& result, double val_before, double val_after);
 
-// Precomputed per-row loads for a data set.
+// Precomputed per-row loads for a data set, the arm at its readings.
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data);
+// The same for predictions of (active, theta): the arm where its joint corrections put it
+// (EffectModel::LoadsFor); what a fitted model's predictions (validation, residuals) use.
+std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data,
+                                      const std::vector<int>& active,
+                                      const Eigen::VectorXd& theta);
 
 // Fits `active` (all directions, plus group points) by Levenberg-Marquardt from `init` (theta;
 // may be empty). problem.h has the form with fitted directions.

@@ -246,10 +246,15 @@ class ClosedLoopKind : public ScenarioKind {
       const auto pix = identify::PredictPixels(*em_, d, L, act, th);
       return std::make_pair(identify::RowErrors(d, p, pix), p);
     };
+    // The augmented model predicts with the loads where its joint corrections put the arm.
+    const std::vector<identify::ConfigLoads> cal_loads_after =
+        identify::ComputeLoads(*em_, cal, res.after.active, res.after.theta);
+    const std::vector<identify::ConfigLoads> val_loads_after =
+        identify::ComputeLoads(*em_, val, res.after.active, res.after.theta);
     const auto [cal_before, cal_p0] = errors(cal, cal_loads, false);
-    const auto [cal_after, cal_p1] = errors(cal, cal_loads, true);
+    const auto [cal_after, cal_p1] = errors(cal, cal_loads_after, true);
     const auto [val_before, val_p0] = errors(val, val_loads, false);
-    const auto [val_after, val_p1] = errors(val, val_loads, true);
+    const auto [val_after, val_p1] = errors(val, val_loads_after, true);
 
     Json& m = (*ctx.summary)["metrics"];
     std::vector<std::string> found;
@@ -322,7 +327,7 @@ class ClosedLoopKind : public ScenarioKind {
     // NEES of the declared PPOE covariance (plus the point noise) before and after; the
     // augmented model's sources are scaled to what the remaining residual supports.
     const std::vector<Mat3> noise_before = RowNoise(val, val_loads, nullptr);
-    const std::vector<Mat3> noise_after = RowNoise(val, val_loads, &res);
+    const std::vector<Mat3> noise_after = RowNoise(val, val_loads_after, &res);
     const double nees_before = MeanNees(val, val_p0, noise_before);
     const double nees_after = MeanNees(val, val_p1, noise_after);
     const stats::ChiSquareBounds nb =

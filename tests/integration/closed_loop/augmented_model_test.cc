@@ -181,7 +181,8 @@ TEST_P(AugmentedModel, AllEffectsAtOnce) {
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
   EffectModel::Workspace ws = rig->em->MakeWorkspace();
   for (const Eigen::VectorXd& q : Configurations(chain.model.nq(), rng)) {
-    const lie::SE3 expected = rig->em->PredictPose(q, rig->em->Loads(q), active, theta.data(), ws);
+    const lie::SE3 expected =
+        rig->em->PredictPose(q, rig->em->LoadsFor(q, active, theta.data()), active, theta.data(), ws);
     ExpectSamePose(AugmentedPose(chain, q), expected, "all effects");
     // The correction is not nothing: the declared chain alone is millimetres away.
     kinematics::PpoeData plain(chain.model);
@@ -325,7 +326,8 @@ TEST(AugmentedModelEstimators, FkEqualsTheIdentificationPrediction) {
     z.std = estimators::JointVector::Constant(q.size(), 1e-3);
     ASSERT_EQ(fk->Update(z), estimators::UpdateStatus::kAccepted);
     ExpectSamePose(fk->Estimate().T_base_ee,
-                   rig->em->PredictPose(q, rig->em->Loads(q), active, theta, ws), "fk");
+                   rig->em->PredictPose(q, rig->em->LoadsFor(q, active, theta), active, theta, ws),
+                   "fk");
   }
 }
 
