@@ -2,9 +2,9 @@
 // tests/unit/conventions/ pins every statement here.
 //
 // - SE(3) tangent vectors are xi = [rho; theta]: translation first, rotation second
-//   (PPOE paper, eq. 2). Index ranges below name the two blocks.
+//   [PPOE eq. 2]. Index ranges below name the two blocks.
 // - Perturbations are right-multiplied (local): X = Xbar * Exp(xi). Covariances live in the
-//   tangent space at Xbar; Ad_X (eq. 7) maps them to the global frame (eq. 10).
+//   tangent space at Xbar; Ad_X [PPOE eq. 7] maps them to the global frame [PPOE eq. 10].
 // - Quaternions: MuJoCo stores (w, x, y, z); Eigen's coeffs() are (x, y, z, w); the
 //   particle-filter paper writes (x, y, z, w) with w >= 0. Convert only at boundaries, with the
 //   helpers below, never by indexing raw arrays elsewhere.

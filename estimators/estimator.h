@@ -61,7 +61,7 @@ struct EstimatorSetup {
   FrameId end_effector = -1;
   std::vector<CameraSetup> cameras;
   std::vector<ImuSetup> imus;
-  // The frame the estimate is made in (PPOE paper eq. 25: X is the end effector in the camera
+  // The frame the estimate is made in ([PPOE eq. 25]: X is the end effector in the camera
   // frame). Default: the model's base. When set, Belief::T_base_ee is T_ref_ee, its prior
   // covariance counts only the sources not shared by ref and end effector
   // (kinematics::RelativeCovariance, 2nd order), and poses carried by measurements

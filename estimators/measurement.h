@@ -44,8 +44,8 @@ struct OrientationReading {
   Quat q_base_frame = Quat::Identity();
 };
 
-// Pixel position of a point fixed to a frame, seen by camera setup.cameras[camera] (PPOE
-// paper, eq. 25).
+// Pixel position of a point fixed to a frame, seen by camera setup.cameras[camera]
+// [PPOE eq. 25].
 struct PixelPoint {
   double t = 0.0;
   int camera = 0;

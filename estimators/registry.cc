@@ -13,7 +13,7 @@ const std::vector<EstimatorEntry>& EstimatorRegistry() {
        MakeFkEstimator},
       {"ppoe_ekf", "Lie-group EKF with the configuration-dependent PPOE prior", MakePpoeEkf},
       {"naive_ekf", "Lie-group EKF with a static diagonal end-effector prior", MakeNaiveEkf},
-      {"pf_encoders", "von Mises particle filter: reference angles only (PF paper eq. 28)", MakePfEncoders},
+      {"pf_encoders", "von Mises particle filter: reference angles only [PF eq. 28]", MakePfEncoders},
       {"pf_encoders_ee", "von Mises particle filter: reference angles + end-effector position", MakePfEncodersEe},
       {"pf_encoders_imu", "von Mises particle filter: reference angles + axis-symmetric Bingham IMUs", MakePfEncodersImu},
       {"pf_all", "von Mises particle filter: reference angles + end-effector position + IMUs", MakePfAll},

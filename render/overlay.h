@@ -40,7 +40,7 @@ bool DrawFrameAxes(Image* image, const PinholeCamera& camera, const Eigen::Isome
                    double length_m, int thickness = 2);
 
 // The 2-D covariance of the projection of a point p_cam with 3-D covariance cov_cam (both in
-// the optical frame), to first order: J cov J^T with J = d(pinhole)/dp (PPOE paper eq. 25):
+// the optical frame), to first order: J cov J^T with J = d(pinhole)/dp [PPOE eq. 25]:
 //   J = [fx / z, 0, -fx x / z^2; 0, fy / z, -fy y / z^2].
 Eigen::Matrix2d ProjectCovariance(const PinholeCamera& camera, const Eigen::Vector3d& p_cam,
                                   const Eigen::Matrix3d& cov_cam);

@@ -1,4 +1,4 @@
-// The nominal kinematic chain of a MuJoCo model as a PPOE model (PPOE paper, eq. 16-17),
+// The nominal kinematic chain of a MuJoCo model as a PPOE model [PPOE eqs. 16-17],
 // extracted for a declared model: actuated joints become PPOE joints, fixed geometry becomes
 // the static transforms p_i, passive joints are held at their reference angle, and the declared
 // perturbation sources sit at their joints or bodies. With the passive joints at qpos0 the mean

@@ -5,7 +5,7 @@
 //   actuated_joints: [j1, j2]       # hinge/slide joints an estimator reads
 //   end_effector: ee                # MJCF site (or body)
 //   observed_frames: [tag_ee_top]   # sites, bodies, geoms or cameras an estimator may predict
-//   sources:                        # PPOE perturbation sources (PPOE paper, eq. 16)
+//   sources:                        # PPOE perturbation sources [PPOE eq. 16]
 //     - at: plate_pitch             # a joint (frame at its anchor, axes of its body) or a body
 //       std_rot_deg: [0, 5, 0]      # rotation std about x, y, z of that frame
 //       std_trans_m: [0, 0, 0]      # translation std

@@ -1,5 +1,5 @@
-// `fk`: forward kinematics of the declared model alone (PPOE paper, eq. 17 with xi = 0), with
-// the PPOE covariance it declares (eq. 18) so its NEES says whether that declaration is honest.
+// `fk`: forward kinematics of the declared model alone ([PPOE eq. 17] with xi = 0), with
+// the PPOE covariance it declares [PPOE eq. 18] so its NEES says whether that declaration is honest.
 #pragma once
 
 #include <memory>

@@ -1,5 +1,5 @@
 // Pinhole camera model shared by the renderer's ground truth and the estimators' measurement
-// models (PPOE paper, eq. 25: u = f * p / z + c).
+// models ([PPOE eq. 25]: u = f * p / z + c).
 //
 // Pixel coordinates follow libapriltag 3.3: the top-left pixel covers [0,1] x [0,1], so its
 // centre is (0.5, 0.5); u to the right, v down. (Measured: rendered tags projected with the

@@ -1,10 +1,10 @@
-// The Lie-group EKF update on SE(3) (PPOE paper, sec. V-A, eqs. 20-24), iterated.
+// The Lie-group EKF update on SE(3) [PPOE sec. V-A, eqs. 20-24], iterated.
 //
 // State: X = T_base_ee with covariance P in its local tangent space (X_true = X Exp(xi)).
 // One update with measurement model r(X, v) = z (-) h(X, v) (measurement_model.h) runs a
-// Gauss-Newton (iterated EKF) on the manifold. The first iteration is exactly eqs. 20-23:
+// Gauss-Newton (iterated EKF) on the manifold. The first iteration is exactly [PPOE eqs. 20-23]:
 //   K = P H^T (H P H^T + M Sigma_v M^T)^-1,  m = K r(X, 0),  X+ = X Exp(m),  P+ = (I - K H) P,
-// with H = -dr/d(delta) and M = -dr/dv (eq. 24). Later iterations relinearise at X_i and carry
+// with H = -dr/d(delta) and M = -dr/dv [PPOE eq. 24]. Later iterations relinearise at X_i and carry
 // the prior residual e_i = Log(X^-1 X_i) with P_i = Jr(e_i) P Jr(e_i)^T, until |m| < tol. The
 // covariance uses the Joseph form, is symmetrised, and the innovation covariance is solved by
 // LDLT (no explicit inverse). No heap allocation.

@@ -1,10 +1,10 @@
 // Measurement models of an end-effector pose X = T_base_ee for the Lie-group EKF (PPOE paper,
-// eq. 19: z = h(X, v), v ~ N(0, Sigma_v)).
+// [PPOE eq. 19]: z = h(X, v), v ~ N(0, Sigma_v)).
 //
 // A model returns the residual r(X, v) = z (-) h(X, v) (plain difference for Euclidean
 // measurements, Log for poses) and, where it has them, the analytic Jacobians
 // J_r_X = dr/d(delta) for X (+) delta = X Exp(delta) and J_r_v = dr/dv at v = 0. The paper's
-// H and M (eq. 24) are H = -J_r_X and M = -J_r_v. NumericJacobians gives both by central
+// H and M [PPOE eq. 24] are H = -J_r_X and M = -J_r_v. NumericJacobians gives both by central
 // differences on the manifold for any model; a test checks they agree with the analytic ones.
 //
 // Sizes are bounded (kMaxMeasDim, kMaxNoiseDim) so that no update allocates.
@@ -49,7 +49,7 @@ class MeasurementModel {
 bool NumericJacobians(const MeasurementModel& model, const lie::SE3& X, MeasJac* J_r_X,
                       NoiseJac* J_r_v, double eps = 1e-6);
 
-// Pixel projection of a point fixed to the end effector (PPOE paper, eq. 25):
+// Pixel projection of a point fixed to the end effector [PPOE eq. 25]:
 // h = pi(T_cam_base X p_ee) + v, v ~ N(0, Sigma_uv).
 class PixelPointModel : public MeasurementModel {
  public:

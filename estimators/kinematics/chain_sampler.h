@@ -1,4 +1,4 @@
-// Monte-Carlo oracle of the PPOE model: the exact chain of eq. 16 with every source drawn,
+// Monte-Carlo oracle of the PPOE model: the exact chain of [PPOE eq. 16] with every source drawn,
 // xi_i ~ N(0, Sigma_i), no compounding approximation. The covariances of
 // ForwardKinematicsWithCovariance are checked against it, and scenarios draw samples from it.
 #pragma once
@@ -23,7 +23,7 @@ class ChainSampler {
               std::vector<lie::SE3>* poses);
 
   // Second moment about the nominal pose, E[Log(Tbar^-1 T) Log(Tbar^-1 T)^T], of `frame` from
-  // n draws (the definition of eq. 9), with a control variate: xi_lin = sum_i Ad_{Tbar_frame^-1 Tbar_ip}
+  // n draws (the definition of [PPOE eq. 9]), with a control variate: xi_lin = sum_i Ad_{Tbar_frame^-1 Tbar_ip}
   // xi_i, the first-order image of the drawn sources, has the exactly known covariance
   // Sigma_lin = sum_i Ad Sigma_i Ad^T, so Sigma_lin + mean(xi xi^T - xi_lin xi_lin^T) estimates
   // E[xi xi^T] with the sampling error of a 4th-order difference only. This is what resolves

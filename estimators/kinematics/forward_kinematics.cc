@@ -127,7 +127,7 @@ struct ScalarTransport {
   }
 };
 
-// eqs. 14-18 along the tree; inlined into each CPU's entry point so that the transports compile
+// [PPOE eqs. 14-18] along the tree; inlined into each CPU's entry point so that the transports compile
 // for that CPU.
 template <class Transport>
 EIGEN_ALWAYS_INLINE void CovarianceRecursion(const PpoeModel& model, PpoeData& data,
@@ -150,7 +150,7 @@ EIGEN_ALWAYS_INLINE void CovarianceRecursion(const PpoeModel& model, PpoeData& d
     data.sigma_is_zero[i] = parent_zero && !f.has_source;
 
     if (!f.has_source) {
-      // No source: the whole of eq. 16 is a fixed transform, moved exactly (eq. 11b).
+      // No source: the whole of [PPOE eq. 16] is a fixed transform, moved exactly [PPOE eq. 11b].
       if (parent_zero) {
         Sigma_i.setZero();
       } else {
@@ -159,7 +159,7 @@ EIGEN_ALWAYS_INLINE void CovarianceRecursion(const PpoeModel& model, PpoeData& d
       continue;
     }
     if (parent_zero || !fourth) {
-      // eq. 18: without the BCH terms the source adds linearly, so it joins the upstream
+      // [PPOE eq. 18]: without the BCH terms the source adds linearly, so it joins the upstream
       // covariance at the parent frame and both cross T_parent_i(q) in one exact transport.
       if (parent_zero) {
         Transport::Run(T_parent_i, f.source_cov_parent, nullptr, &Sigma_i);

@@ -14,16 +14,16 @@ namespace flexbench::kinematics {
 
 using Matrix6Xd = Eigen::Matrix<double, 6, Eigen::Dynamic>;
 
-// Mean poses of all frames, eqs. 16-17 with xi = 0: data.T_base_frame. Throws InputError if
+// Mean poses of all frames, [PPOE eqs. 16-17] with xi = 0: data.T_base_frame. Throws InputError if
 // q.size() != model.nq(), if any q is NaN or infinite (naming the joint), or if data was built
 // for another model.
 void ForwardKinematics(const PpoeModel& model, PpoeData& data,
                        const Eigen::Ref<const Eigen::VectorXd>& q);
 
 // Mean poses and local covariances of all frames: data.T_base_frame and data.Sigma_frame.
-// Covariances are compounded source by source along the tree (eq. 14): the fixed parts of
-// eq. 16 move the accumulated covariance exactly by the adjoint (eq. 11b); at each source the
-// accumulated and the new perturbation are combined with eq. 15 / eq. 18 (kSecond) or the
+// Covariances are compounded source by source along the tree [PPOE eq. 14]: the fixed parts of
+// [PPOE eq. 16] move the accumulated covariance exactly by the adjoint [PPOE eq. 11b]; at each source the
+// accumulated and the new perturbation are combined with [PPOE eq. 15] / [PPOE eq. 18] (kSecond) or the
 // 4th-order BCH moments (kFourth, see lie/compound.h), assuming sources are independent.
 void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
                                      const Eigen::Ref<const Eigen::VectorXd>& q,
@@ -38,12 +38,12 @@ void ForwardKinematicsWithCovarianceBaseline(const PpoeModel& model, PpoeData& d
 }  // namespace internal
 
 // Covariance of the relative pose T_ref_frame = T_base_ref^-1 T_base_frame in its local tangent
-// space, to 2nd order (eq. 18): the sum over every source k on the path from the two frames'
+// space, to 2nd order [PPOE eq. 18]: the sum over every source k on the path from the two frames'
 // lowest common ancestor down to either frame of Ad_{T_kp_frame^-1} Sigma_k Ad^T, with
 // T_kp_frame = T_base_kp^-1 T_base_frame (a source on `ref`'s branch enters with a minus sign,
 // which the covariance does not see). Sources on the common trunk move both frames alike and
 // cancel exactly. This is the prior of an estimate made in a sensor's frame, e.g. the end
-// effector seen from a camera on another branch (PPOE paper eq. 25: X is the end effector in
+// effector seen from a camera on another branch ([PPOE eq. 25]: X is the end effector in
 // the camera frame). With ref = kBaseFrame it equals ForwardKinematicsWithCovariance's kSecond
 // Sigma_frame. Reads the mean poses in `data` (call ForwardKinematics* with the same q first);
 // does not allocate. Throws InputError for a frame id the model lacks.

@@ -5,7 +5,7 @@
 // uncertainty). Every other frame i has a parent frame (added earlier, so index order is a
 // topological order) and is placed by
 //
-//   T_parent_i(q) = Exp(p_i) * Exp(xi_i) * Exp(zeta_i q_i)                        (eq. 16)
+//   T_parent_i(q) = Exp(p_i) * Exp(xi_i) * Exp(zeta_i q_i)                        [PPOE eq. 16]
 //                   \_ T_parent_ip _/  \_ source _/  \_ joint _/
 //
 // - p_i is stored as the SE(3) pose T_parent_ip of the intermediate frame F_{i,p} (the nominal
@@ -21,7 +21,7 @@
 // - F_i (the link frame, moving with q_i) is the frame after the joint.
 //
 // Links are frames with a joint (AddLink); extra frames are rigid (AddFrame, joint fixed):
-// end-effector (eq. 17's Exp(p_{n+1})), tags, camera points, and a grasp frame whose uncertain
+// end-effector ([PPOE eq. 17]'s Exp(p_{n+1})), tags, camera points, and a grasp frame whose uncertain
 // xi_grasp is its source (the paper's grasp-linkage extension). A passive compliance with no
 // actuator (e.g. a base plate) is a frame with a fixed joint and a source. Any frame can be a
 // parent, so tree-structured robots are chains sharing a trunk.
@@ -86,7 +86,7 @@ struct PpoeFrame {
 
   // The source expressed at the parent frame, Ad_{T_parent_ip} Sigma_i Ad^T: T_parent Exp(eta)
   // T_parent_ip Exp(xi_i) = T_parent Exp(eta) Exp(Ad xi_i) T_parent_ip exactly, so to 2nd order
-  // (eq. 18) a frame's covariance is one transport of (Sigma_parent + this) through
+  // [PPOE eq. 18] a frame's covariance is one transport of (Sigma_parent + this) through
   // T_parent_i(q): one 6x6 congruence per frame.
   Mat6 source_cov_parent = Mat6::Zero();
 
@@ -133,7 +133,7 @@ class PpoeModel {
   explicit PpoeModel(std::string name = "ppoe");
 
   // Adds a frame with a joint (revolute or prismatic; Joint::Fixed() is allowed too) below
-  // `parent`: T_parent_i(q) = T_parent_ip * Exp(xi_i) * Exp(zeta_i q_i) (eq. 16), xi_i ~ N(0,
+  // `parent`: T_parent_i(q) = T_parent_ip * Exp(xi_i) * Exp(zeta_i q_i) [PPOE eq. 16], xi_i ~ N(0,
   // source_cov). Returns the new frame's id. Throws InputError on an unknown parent, an empty or
   // duplicate name, a non-rotation in T_parent_ip, a zero or non-finite joint axis, or a source
   // covariance that is not finite, symmetric and positive semi-definite (naming the frame).
@@ -141,7 +141,7 @@ class PpoeModel {
                   const Joint& joint, const Mat6& source_cov = Mat6::Zero());
 
   // Adds a rigid frame: T_parent_f = T_parent_fp * Exp(xi_f), xi_f ~ N(0, source_cov); e.g. the
-  // end-effector Exp(p_{n+1}) of eq. 17 (no source) or a grasp frame with its xi_grasp.
+  // end-effector Exp(p_{n+1}) of [PPOE eq. 17] (no source) or a grasp frame with its xi_grasp.
   FrameId AddFrame(FrameId parent, const std::string& name, const lie::SE3& T_parent_fp,
                    const Mat6& source_cov = Mat6::Zero());
 

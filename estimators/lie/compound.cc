@@ -1,5 +1,5 @@
 // Derivation of the 4th-order terms (a = xi1', b = xi2, zero-mean jointly Gaussian, Sa = E[aa^T],
-// Sb = E[bb^T], C = E[ab^T]; ad(.) is the curly wedge of eq. 13):
+// Sb = E[bb^T], C = E[ab^T]; ad(.) is the curly wedge of [PPOE eq. 13]):
 //
 //   E[c c^T] = E[(a+b)(a+b)^T]                                   (2nd order)
 //            + 1/4 E[(ad_a b)(ad_a b)^T]                          (2nd x 2nd)

@@ -1,9 +1,9 @@
 // Compounding uncertain SE(3) poses with right (local) perturbations (PPOE paper sec. III-C).
 //
 //   X1 Exp(xi1) * X2 Exp(xi2) = X1 X2 Exp(xi1') Exp(xi2) = X1 X2 Exp(xi12),
-//   xi1' = Ad_{X2^-1} xi1  (eq. 11b, exact)
+//   xi1' = Ad_{X2^-1} xi1  ([PPOE eq. 11b], exact)
 //   xi12 = BCH(xi1', xi2) = xi1' + xi2 + 1/2 ad(xi1') xi2 + 1/12 ad(xi1')^2 xi2
-//          + 1/12 ad(xi2)^2 xi1' - 1/24 ad(xi2) ad(xi1')^2 xi2 + ...  (eq. 12)
+//          + 1/12 ad(xi2)^2 xi1' - 1/24 ad(xi2) ad(xi1')^2 xi2 + ...  [PPOE eq. 12]
 //
 // This is Barfoot & Furgale 2014 ("Associating uncertainty with three-dimensional poses for use
 // in estimation problems", IEEE T-RO) mirrored to the right convention: in their left form
@@ -14,11 +14,11 @@
 // Sigma2' -> Sigma2.
 //
 // The covariance returned is the second moment E[xi12 xi12^T] about the nominal mean X1 X2
-// (eq. 9). For correlated inputs xi12 has a mean of 1/2 E[ad(xi1') xi2] (second order); it is
+// [PPOE eq. 9]. For correlated inputs xi12 has a mean of 1/2 E[ad(xi1') xi2] (second order); it is
 // part of the second moment (so the result stays consistent about X1 X2) and available from
 // BchMean.
 //
-// "Order" counts powers of the perturbation in the moment expansion (eq. 14): kSecond is eq. 15,
+// "Order" counts powers of the perturbation in the moment expansion [PPOE eq. 14]: kSecond is [PPOE eq. 15],
 // kFourth adds every 4th-order moment term (Barfoot & Furgale's 4th-order form; for correlated
 // inputs derived with Isserlis' theorem, see compound.cc).
 #pragma once
@@ -50,7 +50,7 @@ Mat6 BchSecondMoment(const Mat6& Sigma_a, const Mat6& Sigma_b, const Mat6& C_ab,
 // E[BCH(a, b)] to second order: 1/2 E[ad_a b]; zero for independent inputs.
 Vec6 BchMean(const Mat6& C_ab);
 
-// eq. 15 (kSecond) or its 4th-order extension: covariance of xi12 for independent xi1, xi2.
+// [PPOE eq. 15] (kSecond) or its 4th-order extension: covariance of xi12 for independent xi1, xi2.
 Mat6 CompoundCovariance(const SE3& X2, const Mat6& Sigma1, const Mat6& Sigma2, CompoundOrder order);
 // Correlated inputs, C12 = E[xi1 xi2^T] (at X1 and X2 respectively). The cross-covariance moves
 // with xi1' = Ad_{X2^-1} xi1: C1'2 = Ad_{X2^-1} C12.

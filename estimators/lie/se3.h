@@ -1,11 +1,11 @@
 // SE(3) as a small value type (rotation + translation, 12 doubles, no alignment requirement).
 //
 // Conventions (conventions.h, PPOE paper sec. III):
-// - Tangent vectors xi = [rho; theta] (translation first), hat(xi) = [[theta]x, rho; 0, 0] (eq. 2).
+// - Tangent vectors xi = [rho; theta] (translation first), hat(xi) = [[theta]x, rho; 0, 0] [PPOE eq. 2].
 // - Right (local) perturbations: X = Xbar * Exp(xi); "X (+) xi" = X * Exp(xi) and
 //   "Y (-) X" = Log(X^-1 * Y). Covariances live in the tangent space at the mean.
-// - Ad_X = [[R, [t]x R], [0, R]] (eq. 7) maps local tangent vectors at X to global ones at the
-//   identity: Exp(Ad_X xi) * X = X * Exp(xi) (eqs. 5-6).
+// - Ad_X = [[R, [t]x R], [0, R]] [PPOE eq. 7] maps local tangent vectors at X to global ones at the
+//   identity: Exp(Ad_X xi) * X = X * Exp(xi) [PPOE eqs. 5-6].
 // - Jacobians follow manif's naming J_out_in and are right Jacobians:
 //   f(X (+) d) = f(X) (+) (J_f_X * d) to first order.
 // - An SE3 T_a_b is the pose of frame b in frame a; it maps points p_b to p_a = T_a_b * p_b.
@@ -63,7 +63,7 @@ class SE3 {
   // this (-) X = Log(X^-1 * this). J_out_this = Jr^-1(out), J_out_X = -Jl^-1(out).
   Vec6 Minus(const SE3& X, Mat6* J_out_this = nullptr, Mat6* J_out_X = nullptr) const;
 
-  // Ad_X = [[R, [t]x R], [0, R]] (eq. 7).
+  // Ad_X = [[R, [t]x R], [0, R]] [PPOE eq. 7].
   Mat6 Adjoint() const;
   // Ad_X * xi without forming the 6x6 matrix.
   Vec6 AdjointTimes(const Vec6& xi) const;
@@ -77,11 +77,11 @@ class SE3 {
   Vec3 t_;
 };
 
-// hat(xi) = [[theta]x, rho; 0, 0] (eq. 2) and its inverse.
+// hat(xi) = [[theta]x, rho; 0, 0] [PPOE eq. 2] and its inverse.
 Mat4 SE3Hat(const Vec6& xi);
 Vec6 SE3Vee(const Mat4& xi_hat);
 
-// The 6x6 "curly wedge" ad_xi = [[theta]x, [rho]x], [0, [theta]x]] (eq. 13): the matrix of the
+// The 6x6 "curly wedge" ad_xi = [[theta]x, [rho]x], [0, [theta]x]] [PPOE eq. 13]: the matrix of the
 // Lie bracket, ad_a b = [a, b], with Ad_{Exp(xi)} = exp(ad_xi).
 Mat6 CurlyWedge(const Vec6& xi);
 
@@ -135,7 +135,7 @@ inline Mat6 CongruenceAdjoint(const Mat3& R, const Vec3& t, const Mat6& Sigma) {
   return out;
 }
 
-// Sigma -> Ad_X Sigma Ad_X^T (eq. 10): a local covariance at X expressed at the identity.
+// Sigma -> Ad_X Sigma Ad_X^T [PPOE eq. 10]: a local covariance at X expressed at the identity.
 inline Mat6 TransformCovariance(const SE3& X, const Mat6& Sigma) {
   return CongruenceAdjoint(X.rotation(), X.translation(), Sigma);
 }
@@ -330,7 +330,7 @@ EIGEN_ALWAYS_INLINE void TransportBlocksScalar(const Mat3& R_in, const Vec3& t, 
 }  // namespace internal
 
 // Sigma -> Ad_{X^-1} Sigma Ad_{X^-1}^T: moves a local covariance at Y to the local tangent space
-// at Y * X, exactly (Y Exp(xi) X = Y X Exp(Ad_{X^-1} xi)); the transport step of eqs. 15, 18.
+// at Y * X, exactly (Y Exp(xi) X = Y X Exp(Ad_{X^-1} xi)); the transport step of [PPOE eqs. 15, 18].
 // Sigma must be symmetric; `out` may alias it.
 EIGEN_ALWAYS_INLINE void TransportCovariance(const SE3& X, const Mat6& Sigma, Mat6* out) {
   internal::TransportBlocks(X.rotation(), X.translation(), Sigma, nullptr, out);
@@ -341,7 +341,7 @@ inline Mat6 TransportCovariance(const SE3& X, const Mat6& Sigma) {
   return out;
 }
 
-// Ad_{X^-1} (Sigma1 + Sigma2) Ad_{X^-1}^T without forming the sum; the hot step of eq. 18.
+// Ad_{X^-1} (Sigma1 + Sigma2) Ad_{X^-1}^T without forming the sum; the hot step of [PPOE eq. 18].
 EIGEN_ALWAYS_INLINE void TransportCovarianceSum(const SE3& X, const Mat6& Sigma1,
                                                 const Mat6& Sigma2, Mat6* out) {
   internal::TransportBlocks(X.rotation(), X.translation(), Sigma1, &Sigma2, out);

@@ -14,7 +14,7 @@
 
 namespace flexbench::lie {
 
-// [v]x, the skew-symmetric matrix with [v]x w = v x w (the so(3) hat operator of eq. 2).
+// [v]x, the skew-symmetric matrix with [v]x w = v x w (the so(3) hat operator of [PPOE eq. 2]).
 inline Mat3 Skew(const Vec3& v) {
   Mat3 S;
   S << 0.0, -v.z(), v.y(),  //

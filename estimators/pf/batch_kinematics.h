@@ -1,12 +1,12 @@
 // Forward kinematics of many joint configurations at once, in structure-of-arrays form, from the
-// same PpoeModel the EKF uses (mean poses, eq. 16-17 with every source at zero). No MuJoCo, no
+// same PpoeModel the EKF uses (mean poses, [PPOE eqs. 16-17] with every source at zero). No MuJoCo, no
 // per-particle virtual call, no allocation after construction.
 //
 // The chain is compressed at construction: only the revolute joint frames on the paths from the
 // base to the requested output frames are kept ("nodes"), every fixed transform between two of
 // them is folded into one constant, and each node's Rodrigues terms are precomputed so that
 //
-//   R_parentnode_node = K0 + sin(q) K1 + (1 - cos q) K2,   t = u0 - R r               (eq. 16)
+//   R_parentnode_node = K0 + sin(q) K1 + (1 - cos q) K2,   t = u0 - R r               [PPOE eq. 16]
 //
 // needs only the particle's (cos q, sin q): the particle filter keeps its joint angles on the
 // unit circle, so no trigonometric function is evaluated per particle. Particles are processed in

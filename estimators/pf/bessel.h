@@ -1,5 +1,5 @@
 // Modified Bessel functions of the first kind, orders 0 and 1, in log form: what the von Mises
-// density (particle-filter paper, eq. 3), its mean resultant length and the Bingham normaliser
+// density [PF eq. 3], its mean resultant length and the Bingham normaliser
 // on S^3 (bingham.h) need, stable from kappa = 0 to kappa = 1e300.
 //
 // Method: the power series sum_k (x^2/4)^k / (k! (k+nu)!) for x < kSeriesLimit (all terms

@@ -105,14 +105,14 @@ void ValidateBinghamLambda(const Vec4& lambda, const std::string& what) {
   if (!(lambda(0) <= lambda(1) && lambda(1) <= lambda(2) && lambda(2) <= lambda(3))) {
     throw InputError(what +
                      ": bingham lambda must be sorted ascending (lambda1 <= lambda2 <= "
-                     "lambda3 <= lambda4, paper eq. 9), got " +
+                     "lambda3 <= lambda4, [PF eq. 9]), got " +
                      Format(lambda));
   }
   if (lambda(3) != 0.0) {
     const Vec4 shifted = lambda - Vec4::Constant(lambda(3));
     throw InputError(what +
                      ": bingham lambda must be shifted so that its largest entry is 0 "
-                     "(paper eqs. 8-9), got " +
+                     "[PF eqs. 8-9], got " +
                      Format(lambda) + "; the same distribution is " + Format(shifted));
   }
 }

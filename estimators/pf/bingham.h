@@ -6,7 +6,7 @@
 // - Quaternions are (x, y, z, w) ("xyzw", the paper's choice), so that with M = I4 the mode is
 //   the identity rotation. Convert from Eigen with QuatToXyzwPositive (conventions.h).
 // - lambda is sorted ascending, lambda1 <= lambda2 <= lambda3 <= lambda4, and shifted so that its
-//   largest entry is 0 (eqs. 8-9: adding a constant to every entry does not change the density).
+//   largest entry is 0 ([PF eqs. 8-9]: adding a constant to every entry does not change the density).
 //   Column k of the orthogonal M is the axis of lambda_k; the last column is the mode.
 // - Axis-symmetric case: lambda3 = lambda4 = 0. The density is then constant on the great circle
 //   spanned by the last two columns of M; with M = I4 and lambda = (l, l, 0, 0) (the paper's
@@ -55,7 +55,7 @@ double BinghamLogNormaliser(const Vec4& lambda);
 // log p(q_obs (.) q_pred^-1) up to the normaliser, as an affine function of the predicted
 // rotation matrix: c0 + sum_ij C(i,j) R_pred(i,j). The squares and products of a quaternion's
 // entries are linear in its rotation matrix, and R(q_obs q_pred^-1) = R_obs R_pred^T, so the
-// Bingham term of eq. 27 costs nine multiply-adds per particle, needs no quaternion of the
+// Bingham term of [PF eq. 27] costs nine multiply-adds per particle, needs no quaternion of the
 // particle, and is automatically antipodally symmetric.
 struct BinghamRotationForm {
   double c0 = 0.0;
@@ -65,7 +65,7 @@ struct BinghamRotationForm {
 
 class Bingham {
  public:
-  // lambda as in eq. 9 (validated); M orthogonal (validated to 1e-9).
+  // lambda as in [PF eq. 9] (validated); M orthogonal (validated to 1e-9).
   explicit Bingham(const Vec4& lambda, const Mat4& M = Mat4::Identity());
   // The axis-symmetric distribution of rotations about `axis` (unit after normalisation):
   // lambda = (l, l, 0, 0) with l < 0, the symmetric circle being the rotations about axis.
@@ -84,7 +84,7 @@ class Bingham {
   double LogNormaliser() const { return log_c_; }
   double LogDensity(const Vec4& x) const { return UnnormalisedLogDensity(x) - log_c_; }
 
-  // The likelihood form of eq. 27 for an observed orientation (Eigen quaternion, any sign;
+  // The likelihood form of [PF eq. 27] for an observed orientation (Eigen quaternion, any sign;
   // must be unit length within kUnitQuaternionTol).
   BinghamRotationForm RotationForm(const Quat& q_obs) const;
 

@@ -160,7 +160,7 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
 
 void ParticleFilter::Reset() {
   rng_.seed(seed_);
-  // Eq. 29: every joint of every particle from vM(kappa_0, 0), joint by joint.
+  // [PF eq. 29]: every joint of every particle from vM(kappa_0, 0), joint by joint.
   for (int j = 0; j < nq_; ++j) {
     double* c = cos_.data() + static_cast<size_t>(j) * stride_;
     double* s = sin_.data() + static_cast<size_t>(j) * stride_;

@@ -1,34 +1,34 @@
 // The von Mises / Bingham particle filter of the particle-filter paper (sec. III), on a declared
 // PpoeModel.
 //
-// State: the effective joint angles x in [-pi, pi)^m of the rigid model (eq. 22), one particle =
+// State: the effective joint angles x in [-pi, pi)^m of the rigid model [PF eq. 22], one particle =
 // one point of the torus, stored as (cos x_j, sin x_j) in structure-of-arrays form
 // (cos[j * stride + i], stride >= N). Propagating x + v is then a rotation of the unit vector, the
-// batch forward kinematics (batch_kinematics.h) needs no trigonometry, and the circular mean (eq.
-// 5) is a sum.
+// batch forward kinematics (batch_kinematics.h) needs no trigonometry, and the circular mean
+// [PF eq. 5] is a sum.
 //
-// Initial particles: vM(kappa_0, 0)^m (eq. 29). System model: x_t = x_{t-1} + v_t,
-// v_t ~ vM(kappa_v, 0)^m (eq. 30), one draw per Predict step (the paper's quasi-static model has
-// no time scale). Likelihood (eq. 23): the product of
-//   - the reference-angle term prod_j vM(kappa_w, 0)(u_j - x_j) (eq. 28) per JointReading u,
-//   - a Gaussian N(0, R_w)(p - Pos(F; x)) per position-observed frame F in F_P (eq. 26),
-//   - a Bingham B(M, lambda)(q (.) Rot(F; x)^-1) per orientation-observed frame in F_Q (eq. 27),
+// Initial particles: vM(kappa_0, 0)^m [PF eq. 29]. System model: x_t = x_{t-1} + v_t,
+// v_t ~ vM(kappa_v, 0)^m [PF eq. 30], one draw per Predict step (the paper's quasi-static model has
+// no time scale). Likelihood [PF eq. 23]: the product of
+//   - the reference-angle term prod_j vM(kappa_w, 0)(u_j - x_j) [PF eq. 28] per JointReading u,
+//   - a Gaussian N(0, R_w)(p - Pos(F; x)) per position-observed frame F in F_P [PF eq. 26],
+//   - a Bingham B(M, lambda)(q (.) Rot(F; x)^-1) per orientation-observed frame in F_Q [PF eq. 27],
 // each applied when its reading arrives; a frame without a reading in a step contributes
 // log-likelihood 0 (the paper's hidden marker). Weights live in the log domain and are
-// normalised by their maximum after every term (eq. 21), so they cannot all underflow; a
+// normalised by their maximum after every term [PF eq. 21], so they cannot all underflow; a
 // reading whose log-likelihood is -inf or NaN for every particle is rejected and changes
 // nothing. Resampling (stratified by default, systematic as an option) runs at the start of a
 // step when the effective sample size is below ess_threshold * N.
 //
 // Proposal. kBootstrap samples the system model (the paper). kEncoderConjugate uses that the
-// reference term (eq. 28) is conjugate to the von Mises system noise (eq. 30): for each joint
+// reference term [PF eq. 28] is conjugate to the von Mises system noise [PF eq. 30]: for each joint
 // vM(kappa_v, x_prev) vM(kappa_w, u) = I0(k) / (2 pi I0(kappa_v) I0(kappa_w)) vM(k, mu) with
 // k e^{i mu} = kappa_v e^{i x_prev} + kappa_w e^{i u}, so the particle is drawn from vM(k, mu) and
 // weighted by I0(k) (the locally optimal proposal for that term; same model, same posterior,
 // lower Monte-Carlo variance). Propagation is then deferred from Predict to the step's
 // JointReading; a step without one falls back to the bootstrap move at its first other reading.
 //
-// Output (Summary): per-joint circular mean (eq. 5), circular standard deviation and 95%
+// Output (Summary): per-joint circular mean [PF eq. 5], circular standard deviation and 95%
 // interval (2.5% and 97.5% weighted quantiles of the deviations from the mean), and the
 // end-effector pose at the mean angles (the paper's gripper "from estimated effective joint
 // angles") with the second moment of the particles' poses about it, in its local tangent space
@@ -60,13 +60,13 @@ inline constexpr int kMaxPfJoints = 32;
 
 struct ParticleFilterConfig {
   int num_particles = 2048;
-  double kappa_w = 15.0;  // reference angles, eq. 28
-  double kappa_v = 5.0;   // system noise, eq. 30
-  double kappa_0 = 0.1;   // initial particles, eq. 29
-  // F_P and its covariance R_w (eq. 26).
+  double kappa_w = 15.0;  // reference angles, [PF eq. 28]
+  double kappa_v = 5.0;   // system noise, [PF eq. 30]
+  double kappa_0 = 0.1;   // initial particles, [PF eq. 29]
+  // F_P and its covariance R_w [PF eq. 26].
   std::vector<FrameId> position_frames;
   Mat3 position_cov = 0.01 * Mat3::Identity();
-  // F_Q and its Bingham parameters (eq. 27); lambda as in eq. 9.
+  // F_Q and its Bingham parameters [PF eq. 27]; lambda as in [PF eq. 9].
   std::vector<FrameId> orientation_frames;
   Vec4 bingham_lambda = Vec4(-800.0, -800.0, 0.0, 0.0);
   Mat4 bingham_M = Mat4::Identity();
@@ -108,9 +108,9 @@ class ParticleFilter {
   int num_particles() const { return n_; }
   int nq() const { return nq_; }
 
-  // Back to the initial particles of eq. 29; reseeds the random stream (same seed, same run).
+  // Back to the initial particles of [PF eq. 29]; reseeds the random stream (same seed, same run).
   void Reset();
-  // One system-model step (eq. 30). With kEncoderConjugate the move waits for the step's
+  // One system-model step [PF eq. 30]. With kEncoderConjugate the move waits for the step's
   // JointReading.
   void Predict();
 
@@ -119,11 +119,11 @@ class ParticleFilter {
   // does not allocate.
   void SetModel(const kinematics::PpoeModel& model);
 
-  // Reference angles u (nq values; eq. 28). Non-finite values are rejected.
+  // Reference angles u (nq values; [PF eq. 28]). Non-finite values are rejected.
   PfStatus UpdateReference(const double* u, int n);
-  // Position p_base of the point p_frame on frame (eq. 26). Ignored for frames not in F_P.
+  // Position p_base of the point p_frame on frame [PF eq. 26]. Ignored for frames not in F_P.
   PfStatus UpdatePosition(FrameId frame, const Vec3& p_frame, const Vec3& p_base);
-  // Orientation of frame in the base frame (eq. 27). Ignored for frames not in F_Q; a quaternion
+  // Orientation of frame in the base frame [PF eq. 27]. Ignored for frames not in F_Q; a quaternion
   // whose norm differs from 1 by more than kUnitQuaternionTol is rejected (kRejectedOutside).
   PfStatus UpdateOrientation(FrameId frame, const Quat& q_base_frame);
 
@@ -160,8 +160,8 @@ class ParticleFilter {
   int n_;
   int nq_;
   std::mt19937_64 rng_;
-  VonMisesTableSampler system_noise_;  // eq. 30, the hot loop
-  VonMisesTableSampler initial_;       // eq. 29
+  VonMisesTableSampler system_noise_;  // [PF eq. 30], the hot loop
+  VonMisesTableSampler initial_;       // [PF eq. 29]
   Bingham bingham_;
   // The encoder-conjugate proposal: vM(k, mu) draws and log I0(k) weights for
   // k in [|kappa_v - kappa_w|, kappa_v + kappa_w].

@@ -5,14 +5,14 @@
 
 namespace flexbench::pf {
 
-// w_i = exp(lw_i) / sum_j exp(lw_j) for the max-normalised log weights lw_i <= 0 (eq. 21; -inf
+// w_i = exp(lw_i) / sum_j exp(lw_j) for the max-normalised log weights lw_i <= 0 ([PF eq. 21]; -inf
 // allowed, as for a rejected particle); returns the effective sample size (sum e)^2 / sum e^2 of
 // the unnormalised e_i = exp(lw_i). exp(lw_i) below 1e-150 counts as 0 (invisible next to the
 // largest, 1; no subnormal arithmetic).
 double NormalisedWeights(const double* log_w, int n, double* w);
 
 // (sum_i w_i c_i, sum_i w_i s_i): the weighted resultant of the unit vectors (c_i, s_i), whose
-// direction is the circular mean (eq. 5) and whose length is R.
+// direction is the circular mean [PF eq. 5] and whose length is R.
 void WeightedResultant(const double* c, const double* s, const double* w, int n, double* sc,
                        double* ss);
 

@@ -1,16 +1,16 @@
 // The particle filter (particle_filter.h) as a flexbench Estimator. The registry names choose
-// which readings enter the likelihood (eq. 23); the scenario's parameters set the numbers.
+// which readings enter the likelihood [PF eq. 23]; the scenario's parameters set the numbers.
 //
-//   pf_encoders          reference angles only (eq. 28)
-//   pf_encoders_ee       + the end-effector position (eq. 26)
-//   pf_encoders_imu      + the orientation of every IMU frame (eq. 27), lambda (-800,-800,0,0)
+//   pf_encoders          reference angles only [PF eq. 28]
+//   pf_encoders_ee       + the end-effector position [PF eq. 26]
+//   pf_encoders_imu      + the orientation of every IMU frame [PF eq. 27], lambda (-800,-800,0,0)
 //   pf_all               + both
 //   pf_bingham_unimodal  encoders + IMU orientations with lambda (-800,-800,-800,0)
 //   pf_bingham_axisym    encoders + IMU orientations with lambda (-800,-800,0,0)
 //
 // Measurements:
 //   JointReading        -> reference angles u (its `std` is not used: kappa_w is the model of
-//                          "the actual joint is close to the reference", eq. 28)
+//                          "the actual joint is close to the reference", [PF eq. 28])
 //   OrientationReading  -> Bingham term of its frame, if that frame is an orientation frame
 //   PositionReading     -> Gaussian term with R_w = diag(ee_variance), if its frame is in F_P (the
 //                          reading's own cov is not used: R_w is the paper's hyperparameter)
@@ -20,16 +20,16 @@
 //                          as in the paper's Fig. 5 (one Bingham term per IMU per step).
 //
 // Parameters (all optional; Params holds numbers, flags are 0 or 1):
-//   particles (2048), kappa_w (15), kappa_v (5), kappa_0 (0.1)          Table I, eq. 29
-//   bingham_lambda [4] (per name above; sorted ascending, largest 0)     eqs. 9, 27
-//   ee_variance [1 or 3] (0.01 m^2)                                      eq. 26, R_w
+//   particles (2048), kappa_w (15), kappa_v (5), kappa_0 (0.1)          Table I, [PF eq. 29]
+//   bingham_lambda [4] (per name above; sorted ascending, largest 0)     [PF eqs. 9, 27]
+//   ee_variance [1 or 3] (0.01 m^2)                                      [PF eq. 26], R_w
 //   imus [indices into setup.imus] (all IMUs for the names that use them, else none)
 //   ee_position (0/1) (per name above)
 //   ess_threshold (0.5): resample when ESS < ess_threshold * N
 //   systematic_resampling (0): 1 = systematic instead of stratified
 //   conjugate_proposal (0): 1 = the encoder-conjugate proposal (particle_filter.h)
 //
-// Predict(t) makes one system-model step (eq. 30) when t is later than the last step.
+// Predict(t) makes one system-model step [PF eq. 30] when t is later than the last step.
 #pragma once
 
 #include <memory>

@@ -109,7 +109,7 @@ class VonMisesSampler {
 void RenormaliseUnit(double* c, double* s, int n);
 
 // An exact sampler of vM(kappa, 0) for a fixed kappa, built for the filter's hot loop (the
-// system noise of eq. 30 is drawn N * m times per step). Rejection from a piecewise-constant
+// system noise of [PF eq. 30] is drawn N * m times per step). Rejection from a piecewise-constant
 // envelope of the density on [0, pi] (the density is symmetric and decreasing there):
 // kBins bins of width h up to x_max = min(pi, 12 / sqrt(kappa)) and one tail piece up to pi. Each
 // bin is split into the rectangle under its right-edge value (always accepted) and the cap above
@@ -128,7 +128,7 @@ class VonMisesTableSampler {
   double kappa() const { return kappa_; }
 
   // Rotates each (c[i], s[i]), i < n, by its own independent draw v ~ vM(kappa, 0): the
-  // system model x + v of eq. 30 on unit vectors. Each rotation moves |(c, s)| by an ulp or
+  // system model x + v of [PF eq. 30] on unit vectors. Each rotation moves |(c, s)| by an ulp or
   // so; callers put the vectors back with RenormaliseUnit every few moves. Same distribution as
   // SampleUnit, organised for throughput: all first draws are made up front into
   // `scratch` (n words), the ~98% of them that land under the envelope's lower part are used
@@ -222,7 +222,7 @@ class VonMises {
   double kappa() const { return kappa_; }
   double theta0() const { return theta0_; }
 
-  // log vM(kappa, theta0)(x), eq. 3, with log I0 from bessel.h (finite for any kappa).
+  // log vM(kappa, theta0)(x), [PF eq. 3], with log I0 from bessel.h (finite for any kappa).
   double LogDensity(double x) const { return kappa_ * std::cos(x - theta0_) - log_norm_; }
   double Density(double x) const { return std::exp(LogDensity(x)); }
   // kappa cos(x - theta0): the log-density up to its constant.
@@ -248,23 +248,23 @@ class VonMises {
 // Statistics of a (weighted) sample of angles. Weights must be >= 0 with a positive sum;
 // throws InputError otherwise (or when sizes differ).
 struct CircularSummary {
-  double mean = 0.0;                   // eq. 5: atan2(sum w sin x, sum w cos x)
+  double mean = 0.0;                   // [PF eq. 5]: atan2(sum w sin x, sum w cos x)
   double mean_resultant_length = 0.0;  // |sum w e^{ix}| / sum w, in [0, 1]
   double kappa_mle = 0.0;              // InverseBesselRatioA1(mean_resultant_length)
   double circular_std = 0.0;           // sqrt(-2 log R)
 };
 CircularSummary SummariseAngles(const std::vector<double>& angles,
                                 const std::vector<double>& weights = {});
-// Eq. 5 alone.
+// [PF eq. 5] alone.
 double CircularMean(const std::vector<double>& angles, const std::vector<double>& weights = {});
 // The naive arithmetic mean the paper warns against (Fig. 3), for comparisons.
 double NaiveMean(const std::vector<double>& angles);
 
-// The product of independent von Mises variables over m joints (eq. 6).
+// The product of independent von Mises variables over m joints [PF eq. 6].
 class VonMisesProduct {
  public:
   VonMisesProduct(std::vector<double> kappas, std::vector<double> theta0s);
-  // vM(kappa, 0)^m (eq. 29).
+  // vM(kappa, 0)^m [PF eq. 29].
   static VonMisesProduct Iid(int m, double kappa, double theta0 = 0.0);
 
   int size() const { return static_cast<int>(components_.size()); }

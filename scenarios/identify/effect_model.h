@@ -1,7 +1,7 @@
 // Candidate effects a declared model may lack, each with a physical location and a parametric
 // form, and the kinematics of the declared chain augmented by any subset of them.
 //
-// The declared chain is the nominal PPOE chain (PPOE paper, eq. 16-17, all sources at their
+// The declared chain is the nominal PPOE chain ([PPOE eqs. 16-17], all sources at their
 // mean). An effect perturbs it at its location:
 //   joint_offset@J        q_J += a                                  a [rad]
 //   joint_compliance@J    q_J += c * tau_J(q)                       c [rad/(N m)] (gear elasticity)

@@ -570,7 +570,7 @@ PYBIND11_MODULE(flexbench, m) {
           },
           py::arg("q"), py::arg("frame") = py::none(), py::arg("order") = 2,
           "(T 4x4, Sigma 6x6): mean pose and its covariance in the local tangent space "
-          "([rho; theta]), compounded to 2nd or 4th order (PPOE paper eq. 18).")
+          "([rho; theta]), compounded to 2nd or 4th order [PPOE eq. 18].")
       .def(
           "jacobian",
           [](Model& self, const py::object& q, const py::object& frame) {

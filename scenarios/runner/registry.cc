@@ -18,7 +18,7 @@ const std::vector<KindEntry>& ScenarioKinds() {
        MakeContactFusionKind},
       {"tag_detection_sweep", "one tag swept over distance, view angle and rotation: detection",
        MakeTagDetectionSweepKind},
-      {"jsk_sim_deflection", "PF paper sec. IV-B: eq. 31 deflection, filters with various sensors", MakeJskSimDeflectionKind},
+      {"jsk_sim_deflection", "PF paper sec. IV-B: [PF eq. 31] deflection, filters with various sensors", MakeJskSimDeflectionKind},
       {"jsk_flexible_arm", "PF paper sec. IV-C: gripper of the compliant jsk_arm, fk vs particle filters", MakeJskFlexibleArmKind},
       {"jsk_imu_yaw_drift", "PF paper sec. IV-E: drifting IMU yaw, unimodal vs axis-symmetric Bingham", MakeJskImuYawDriftKind},
       {"jsk_direct_fusion", "PF paper sec. IV-D: direct IMU fusion ('xyz', 'yxz') vs the filter", MakeJskDirectFusionKind},

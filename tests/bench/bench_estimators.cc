@@ -1,5 +1,5 @@
 // Speed of the Lie-group EKF (PPOE paper sec. V-A): one update with the tag-centre pixel model
-// (eq. 25) with analytic and with numeric Jacobians, and the PPOE prior (FK with covariance) of
+// [PPOE eq. 25] with analytic and with numeric Jacobians, and the PPOE prior (FK with covariance) of
 // rover_arm's declared model. Run with --benchmark_repetitions=5 and quote medians.
 #include <benchmark/benchmark.h>
 
@@ -36,7 +36,7 @@ void BM_EkfUpdateTagCentre(benchmark::State& state) {
   P0.bottomRightCorner<3, 3>() *= 0.1;
   LgEkfOptions options;
   options.numeric_jacobians = state.range(0) != 0;
-  options.max_iterations = 1;  // one update = one linearisation, eqs. 20-23
+  options.max_iterations = 1;  // one update = one linearisation, [PPOE eqs. 20-23]
   for (auto _ : state) {
     lie::SE3 X = X0;
     Mat6 P = P0;

@@ -1,6 +1,6 @@
 // One full step of the von Mises / Bingham particle filter (PF paper sec. III) on the 4-DoF
-// jsk_arm's declared model: predict (eq. 30), batch kinematics of the IMU and grasp frames,
-// the likelihood of eq. 23 (reference angles, two Bingham IMU terms, the grasp position) and
+// jsk_arm's declared model: predict [PF eq. 30], batch kinematics of the IMU and grasp frames,
+// the likelihood of [PF eq. 23] (reference angles, two Bingham IMU terms, the grasp position) and
 // ESS-triggered stratified resampling (which fires every step with these sensors). Target (one
 // core): N = 2048 in at most 200 us, no heap allocation per step (tests/unit/pf_alloc/).
 // Also: the scaling for N = 256 ... 8192, the encoder-conjugate proposal, and the batch

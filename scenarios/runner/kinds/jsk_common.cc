@@ -310,7 +310,7 @@ void PlotJointBands(const Rig& rig, const std::string& title, const std::vector<
       tr.color = render::Rgb{0, 0, 0};
     }
     // Head room above the data for the legend.
-    // (The first steps, where the prior of eq. 29 is still flat, do not set the range.)
+    // (The first steps, where the prior of [PF eq. 29] is still flat, do not set the range.)
     double lo = 1e300, hi = -1e300;
     const auto extend = [&](const std::vector<double>& v) {
       for (size_t i = std::min<size_t>(5, v.size() / 10); i < v.size(); ++i) {
@@ -474,7 +474,7 @@ SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,
     const Eigen::VectorXd g_act = rig.sim->GravityTorque(rig.ToActuators(ref));
     Eigen::VectorXd eff(nq);
     for (int j = 0; j < nq; ++j) {
-      eff[j] = ref[j] + options.k * g_act[rig.act_of_q[j]];  // eq. 31
+      eff[j] = ref[j] + options.k * g_act[rig.act_of_q[j]];  // [PF eq. 31]
       run.deflection_max = std::max(run.deflection_max, std::abs(eff[j] - ref[j]));
       run.truth[j].push_back(eff[j]);
       run.reference[j].push_back(ref[j]);

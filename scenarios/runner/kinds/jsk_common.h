@@ -142,7 +142,7 @@ void WriteTraces(const Rig& rig, const std::vector<Trace>& traces,
                  const std::vector<std::vector<double>>* truth,
                  const std::vector<std::vector<double>>& reference, OutputDir* out);
 
-// ---- Synthetic runs (sec. IV-B): theta_eff = theta_ref + k g(theta_ref) (eq. 31) with g the
+// ---- Synthetic runs (sec. IV-B): theta_eff = theta_ref + k g(theta_ref) [PF eq. 31] with g the
 // rigid nominal model's gravity torque; the virtual sensors read the rigid model at theta_eff.
 //
 //   deflection_k: 0.033

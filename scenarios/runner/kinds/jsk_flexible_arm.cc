@@ -1,11 +1,11 @@
 // The particle-filter paper's real-robot experiment (sec. IV-C, Fig. 8) on a flexible MuJoCo
 // arm: jsk_arm with its real compliance (elastic servo gears, bending links) moved slowly by its
 // servos through postures from vertical to horizontal. The filter's rigid model with effective
-// joint angles (eq. 22) now holds only approximately: a link that bends at mid-length is not a
+// joint angles [PF eq. 22] now holds only approximately: a link that bends at mid-length is not a
 // rotated rigid link. The paper scored the gripper position against AR markers; here the truth
 // is MuJoCo's grasp point.
 //
-//   burn_in_s: 1.0        # seconds left out of the metrics (the flat prior of eq. 29)
+//   burn_in_s: 1.0        # seconds left out of the metrics (the flat prior of [PF eq. 29])
 //
 // Metrics per estimator: pos_err_mean_m, pos_err_max_m, pos_err_hold_mean_m (per waypoint, at
 // rest), and for particle filters ess_mean. Scenario: gripper_deflection_max_m (truth vs the

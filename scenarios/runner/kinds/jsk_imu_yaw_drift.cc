@@ -2,7 +2,7 @@
 // drifts (a gyro bias about the vertical that Madgwick's filter cannot correct without a
 // magnetometer), fused with a unimodal Bingham observation noise, which reads the drift as a yaw
 // of the arm, and with the axis-symmetric one, whose likelihood is the same for every rotation
-// about the vertical (eq. 27 with lambda = (l, l, 0, 0)).
+// about the vertical ([PF eq. 27] with lambda = (l, l, 0, 0)).
 //
 // The truth is jsk_arm without compliance (its effective angles are its joint angles, so the
 // error is the estimator's alone), moved by its servos; the IMUs start with their true

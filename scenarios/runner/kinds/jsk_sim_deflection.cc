@@ -1,14 +1,14 @@
 // The particle-filter paper's simulation study (sec. IV-B, Fig. 6): the body deflection is
-// simulated by offsetting the reference angles, theta_eff = theta_ref + k g(theta_ref) (eq. 31),
+// simulated by offsetting the reference angles, theta_eff = theta_ref + k g(theta_ref) [PF eq. 31],
 // with g the generalised gravity torque of the rigid nominal jsk_arm (MuJoCo's qfrc_bias at zero
-// velocity, sim::Simulation::GravityTorque), so the paper's assumption (eq. 22) holds exactly.
+// velocity, sim::Simulation::GravityTorque), so the paper's assumption [PF eq. 22] holds exactly.
 // The virtual sensors read the rigid model at theta_eff: IMU orientations of the IMU frames, the
 // grasp point's position, and the encoders give theta_ref. Every estimator sees the same
 // readings; the truth is theta_eff.
 //
-//   deflection_k: 0.033          # rad per Nm (eq. 31)
+//   deflection_k: 0.033          # rad per Nm [PF eq. 31]
 //   noise: {reference_deg: 0, orientation_deg: 0, position_m: 0}   # optional sensor noise
-//   burn_in_steps: 5             # steps left out of the metrics (the prior of eq. 29 is flat)
+//   burn_in_steps: 5             # steps left out of the metrics (the prior of [PF eq. 29] is flat)
 //
 // Metrics per estimator: joint_rmse_deg (effective angles), joint_rmse_deg_per_joint,
 // joint_err_max_deg, pos_err_mean_m / pos_err_max_m of the grasp point, ess_mean; scenario:
@@ -94,7 +94,7 @@ class JskSimDeflectionKind : public ScenarioKind {
     std::snprintf(k_text, sizeof(k_text), "%g", options_.k);
     for (const jsk::Trace& tr : traces) {
       jsk::PlotJointBands(
-          rig_, std::string("Simulated deflection (eq. 31, k = ") + k_text + "): " + tr.label, {tr},
+          rig_, std::string("Simulated deflection ([PF eq. 31], k = ") + k_text + "): " + tr.label, {tr},
           &run.truth, run.reference,
           (ctx.out->FramesDir() / ("fig6_" + tr.label + ".png")).string(), "filter step");
     }

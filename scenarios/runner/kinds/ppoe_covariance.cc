@@ -1,6 +1,6 @@
 // The PPOE paper's Fig. 3: probabilistic forward kinematics of a declared model against the
 // Monte-Carlo truth of the same perturbations. For each case (a joint configuration and a set of
-// active sources) the end-effector covariance is compounded to 2nd order (eq. 15/18) and 4th
+// active sources) the end-effector covariance is compounded to 2nd order [PPOE eqs. 15/18] and 4th
 // order, and compared with 10,000 samples of the exact chain: the fraction of samples inside
 // the 80% region and the relative Frobenius error of each covariance.
 #include <Eigen/Eigenvalues>

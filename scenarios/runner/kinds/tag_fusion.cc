@@ -39,7 +39,7 @@ class TagFusionKind : public ScenarioKind {
     effects_ = sim::ParseEffects(root.Child("effects"));
     camera_ = root.GetString("camera");
     pixel_std_ = root.GetDouble("pixel_noise_std_px", 0.5);
-    // The paper fuses 2-D bearings: the tag centre's pixel (eq. 25). All four corners (8-D)
+    // The paper fuses 2-D bearings: the tag centre's pixel [PPOE eq. 25]. All four corners (8-D)
     // pin the pose almost alone, which hides the prior's role.
     const std::string measurement = root.GetString("measurement", "center");
     if (measurement != "center" && measurement != "corners") {
@@ -136,7 +136,7 @@ class TagFusionKind : public ScenarioKind {
     setup_.end_effector = chain_->end_effector;
     setup_.cameras.push_back(
         {sim::CameraIntrinsics(sim_->model(), camera_id_), chain_->ObservedFrame(camera_)});
-    // estimate_in: an observed frame (e.g. the camera, as in the paper's eq. 25) in which every
+    // estimate_in: an observed frame (e.g. the camera, as in [PPOE eq. 25]) in which every
     // estimator works and is scored; by default the declared base.
     if (root.Has("estimate_in")) {
       estimate_in_ = root.GetString("estimate_in");

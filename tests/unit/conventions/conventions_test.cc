@@ -16,7 +16,7 @@ namespace {
 
 using lie::SE3;
 
-// --- xi = [rho; theta], translation first (eq. 2) -------------------------------------------
+// --- xi = [rho; theta], translation first [PPOE eq. 2] -------------------------------------------
 
 TEST(Conventions, TangentBlockOffsets) {
   EXPECT_EQ(kTransIdx, 0);
@@ -30,7 +30,7 @@ TEST(Conventions, ExpOfPureRhoTranslatesByRho) {
   const SE3 X = SE3::Exp(xi);
   EXPECT_TRUE(X.rotation().isIdentity(0.0));
   EXPECT_TRUE(X.translation().isApprox(rho, 0.0));
-  // hat(xi) puts rho in the last column (eq. 2).
+  // hat(xi) puts rho in the last column [PPOE eq. 2].
   EXPECT_TRUE((lie::SE3Hat(xi).topRightCorner<3, 1>().isApprox(rho, 0.0)));
 }
 
@@ -49,7 +49,7 @@ TEST(Conventions, ExpOfPureThetaRotatesAboutThetaRightHanded) {
             1e-15);
 }
 
-// --- Right (local) perturbations and the adjoint (eqs. 5-8, 10) ------------------------------
+// --- Right (local) perturbations and the adjoint [PPOE eqs. 5-8, 10] ------------------------------
 
 TEST(Conventions, PerturbationsAreRightMultipliedAndLocal) {
   // X rotated +90 deg about z; a local step along x moves the frame along global y.
@@ -68,11 +68,11 @@ TEST(Conventions, AdjointMapsLocalToGlobal) {
   const SE3 X = lie::RandomSE3(rng, 2.0);
   Vec6 xi_local;
   xi_local << 0.1, -0.2, 0.3, 0.05, 0.2, -0.1;
-  // eq. 5-6: X Exp(X_xi) = Exp(Ad_X X_xi) X.
+  // [PPOE eqs. 5-6]: X Exp(X_xi) = Exp(Ad_X X_xi) X.
   const SE3 local = X * SE3::Exp(xi_local);
   const SE3 global = SE3::Exp(X.Adjoint() * xi_local) * X;
   EXPECT_LT((local.Matrix() - global.Matrix()).cwiseAbs().maxCoeff(), 1e-14);
-  // eq. 7 layout: translation row block carries [t]x R in the upper-right corner.
+  // [PPOE eq. 7] layout: translation row block carries [t]x R in the upper-right corner.
   EXPECT_TRUE((X.Adjoint().topRightCorner<3, 3>().isApprox(
       lie::Skew(X.translation()) * X.rotation(), 1e-15)));
   EXPECT_TRUE((X.Adjoint().bottomLeftCorner<3, 3>().isZero(0.0)));

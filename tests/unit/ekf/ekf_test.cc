@@ -1,5 +1,5 @@
 // The Lie-group EKF: analytic against numeric Jacobians on the manifold, the first iteration is
-// eqs. 20-23, Monte-Carlo consistency (NEES within chi-square bounds), bad input, no heap.
+// [PPOE eqs. 20-23], Monte-Carlo consistency (NEES within chi-square bounds), bad input, no heap.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -119,12 +119,12 @@ TEST(LgEkf, FirstIterationIsEquations20To23) {
   model.AnalyticJacobians(SE3::Identity(), &J, &M);
   const Eigen::Matrix<double, 3, 6> H = -J;
   const Mat3 S = H * P0 * H.transpose() + Mat3::Identity() * 1e-4;
-  const Eigen::Matrix<double, 6, 3> K = P0 * H.transpose() * S.inverse();  // eq. 20
+  const Eigen::Matrix<double, 6, 3> K = P0 * H.transpose() * S.inverse();  // [PPOE eq. 20]
   MeasVec r;
   model.Residual(SE3::Identity(), NoiseVec::Zero(3), &r);
-  const Vec6 m = K * r;                                                      // eq. 21
-  EXPECT_TRUE(X.IsApprox(SE3::Exp(m), 1e-12));                               // eq. 22
-  EXPECT_LT((P - (Mat6::Identity() - K * H) * P0).cwiseAbs().maxCoeff(), 1e-12);  // eq. 23
+  const Vec6 m = K * r;                                                      // [PPOE eq. 21]
+  EXPECT_TRUE(X.IsApprox(SE3::Exp(m), 1e-12));                               // [PPOE eq. 22]
+  EXPECT_LT((P - (Mat6::Identity() - K * H) * P0).cwiseAbs().maxCoeff(), 1e-12);  // [PPOE eq. 23]
 }
 
 // GTSAM-style Monte-Carlo consistency: truth drawn from the prior, a measurement drawn from

@@ -24,7 +24,7 @@ using testing::kDeg;
 // ---------------------------------------------------------------------------------------------
 // Oracles.
 
-// Mean poses by a direct product of 4x4 matrices, eq. 16-17 with xi = 0; the joint factor by
+// Mean poses by a direct product of 4x4 matrices, [PPOE eqs. 16-17] with xi = 0; the joint factor by
 // Eigen's matrix exponential of hat(zeta q), independent of lie::SE3::Exp.
 std::vector<Mat4> MeanPosesBy4x4(const PpoeModel& model, const Eigen::VectorXd& q) {
   std::vector<Mat4> T(model.num_frames(), Mat4::Identity());
@@ -153,7 +153,7 @@ TEST(ForwardKinematics, JointTypes) {
 // Covariances.
 
 TEST(ForwardKinematicsCovariance, SecondOrderIsTheSumOfAdjointMappedSources) {
-  // eq. 18 unrolled: Sigma_frame = sum over upstream sources s of
+  // [PPOE eq. 18] unrolled: Sigma_frame = sum over upstream sources s of
   // Ad_{T_frame^-1 T_{s,p}} Sigma_s Ad^T, with T_{s,p} the source's mean frame.
   std::mt19937_64 rng(2);
   const testing::RandomChainOptions o = testing::EveryFeature(7, 0.01, 0.05);
@@ -178,7 +178,7 @@ TEST(ForwardKinematicsCovariance, SecondOrderIsTheSumOfAdjointMappedSources) {
 
 TEST(ForwardKinematicsCovariance, SameBitsAsTheBaselineRecursion) {
   // ForwardKinematicsWithCovariance runs as an AVX2 clone where the CPU has it
-  // (estimators/target_clones.h); this file is compiled for the baseline only. Redo eq. 18's
+  // (estimators/target_clones.h); this file is compiled for the baseline only. Redo [PPOE eq. 18]'s
   // recursion here with the same inline transports: every bit must agree, or "same seed, same
   // bytes" would depend on the machine.
   std::mt19937_64 rng(21);
@@ -247,7 +247,7 @@ TEST(ForwardKinematicsCovariance, SingleSourceIsExactAtBothOrders) {
 }
 
 // The paper's planar 3R example with 10 deg perturbations about every joint axis: the 4th
-// order is closer to Monte Carlo than eq. 18 in the stretched (singular, Fig. 3b) and bent
+// order is closer to Monte Carlo than [PPOE eq. 18] in the stretched (singular, Fig. 3b) and bent
 // (Fig. 3c, d) configurations.
 class PlanarArmMonteCarlo : public ::testing::TestWithParam<Eigen::Vector3d> {};
 

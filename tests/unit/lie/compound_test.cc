@@ -92,7 +92,7 @@ TEST(CompoundBlocks, BchMeanMatchesBasisSum) {
 
 // An independent evaluation of the truncated moment series: write (a, b) = (La w, Lb w) with w
 // standard normal in R^12 and apply E[w_p w_q w_r w_s] = d_pq d_rs + d_pr d_qs + d_ps d_qr
-// directly to the BCH terms of eq. 12.
+// directly to the BCH terms of [PPOE eq. 12].
 Mat6 BruteForceFourthOrder(const Mat12& P) {
   GaussianSampler<12> factor(P);
   const Eigen::Matrix<double, 6, 12> La = factor.factor().topRows<6>();
@@ -359,7 +359,7 @@ TEST(Compound, MeanIsTheProductOfMeans) {
   const UncertainPose p2{RandomSE3(rng), Mat6::Identity() * 2e-4};
   const UncertainPose p12 = Compound(p1, p2, CompoundOrder::kFourth);
   EXPECT_TRUE(p12.mean.IsApprox(p1.mean * p2.mean, 1e-15));
-  // eq. 15 literally.
+  // [PPOE eq. 15] literally.
   const Mat6 Ad = p2.mean.Inverse().Adjoint();
   EXPECT_LT((Compound(p1, p2, CompoundOrder::kSecond).cov - (Ad * p1.cov * Ad.transpose() + p2.cov))
                 .cwiseAbs()

@@ -17,7 +17,7 @@ using testing::JacobianError;
 using testing::kFdSteps;
 using testing::NumericalJacobian;
 
-// Independent oracle: the matrix exponential of the 4x4 hat (eq. 3) by Eigen's Pade scaling and
+// Independent oracle: the matrix exponential of the 4x4 hat [PPOE eq. 3] by Eigen's Pade scaling and
 // squaring.
 Mat4 ExpmOfHat(const Vec6& xi) { return SE3Hat(xi).exp(); }
 
@@ -88,7 +88,7 @@ TEST_P(SE3Tangent, LeftJacobianIsAdjointTimesRightJacobian) {
 }
 
 TEST_P(SE3Tangent, CurlyWedgeExponentiatesToTheAdjoint) {
-  // Ad_{Exp(xi)} = exp(ad_xi) with ad from eq. 13.
+  // Ad_{Exp(xi)} = exp(ad_xi) with ad from [PPOE eq. 13].
   const Mat6 expm = CurlyWedge(xi()).exp();
   EXPECT_LT((SE3::Exp(xi()).Adjoint() - expm).cwiseAbs().maxCoeff(), 1e-13);
 }
@@ -320,7 +320,7 @@ TEST_P(SE3AtPose, ScalarTransportHasTheVectorTransportsBits) {
 INSTANTIATE_TEST_SUITE_P(Poses, SE3AtPose, ::testing::ValuesIn(testing::StandardPoseCases()),
                          [](const auto& info) { return info.param.name; });
 
-// Eq. 10 by Monte Carlo: samples X = Xbar Exp(xi_local), xi_local ~ N(0, Sigma); their global
+// [PPOE eq. 10] by Monte Carlo: samples X = Xbar Exp(xi_local), xi_local ~ N(0, Sigma); their global
 // perturbations Log(X Xbar^-1) have covariance Ad Sigma Ad^T (to first order in Sigma: small
 // Sigma so the BCH residue is far below the sampling error).
 TEST(SE3MonteCarlo, GlobalCovarianceIsAdjointCongruence) {

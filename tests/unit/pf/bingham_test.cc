@@ -1,4 +1,4 @@
-// The Bingham distribution on S^3 (PF paper eqs. 7-9, 27): the normaliser against a direct
+// The Bingham distribution on S^3 [PF eqs. 7-9, 27]: the normaliser against a direct
 // three-dimensional quadrature over S^3, closed forms and the concentrated limit; the
 // likelihood form against quaternion arithmetic; the sampler against the normaliser's
 // derivatives; conventions (xyzw, sorted and shifted lambda, antipodal and axis symmetry); bad
@@ -119,7 +119,7 @@ TEST(Bingham, NormaliserClosedFormsAndShift) {
     }
     EXPECT_NEAR(BinghamLogNormaliser(Vec4(a, a, a, 0.0)), std::log(4.0 * M_PI * sum), 1e-9) << a;
   }
-  // Eq. 8: C(lambda + c) = e^c C(lambda); order does not matter.
+  // [PF eq. 8]: C(lambda + c) = e^c C(lambda); order does not matter.
   const Vec4 l(-30.0, -8.0, -2.0, 0.0);
   EXPECT_NEAR(BinghamLogNormaliser(l + Vec4::Constant(7.5)), BinghamLogNormaliser(l) + 7.5, 1e-12);
   EXPECT_NEAR(BinghamLogNormaliser(Vec4(-2.0, 0.0, -30.0, -8.0)), BinghamLogNormaliser(l), 1e-13);
@@ -185,7 +185,7 @@ TEST(Bingham, RotationFormMatchesQuaternionProduct) {
     const Quat q_obs = RandomQuat(rng);
     const Quat q_pred = RandomQuat(rng);
     const BinghamRotationForm form = b.RotationForm(q_obs);
-    const Vec4 err = Xyzw(q_obs * q_pred.inverse());  // q_obs (.) Rot(F; x)^-1, eq. 27
+    const Vec4 err = Xyzw(q_obs * q_pred.inverse());  // q_obs (.) Rot(F; x)^-1, [PF eq. 27]
     EXPECT_NEAR(form.Evaluate(q_pred.toRotationMatrix()), b.UnnormalisedLogDensity(err),
                 1e-10 * 900.0);
     // The sign of either quaternion does not matter.

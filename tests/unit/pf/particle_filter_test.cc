@@ -168,7 +168,7 @@ INSTANTIATE_TEST_SUITE_P(Proposals, ConvergenceTest,
                          ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate));
 
 // The summary's means and 95% intervals (issue 18: no sort, bands guessed from the circular
-// std) against their definitions on the raw particles: eq. 5, and the weighted 2.5% / 97.5%
+// std) against their definitions on the raw particles: [PF eq. 5], and the weighted 2.5% / 97.5%
 // quantiles of the sorted deviations (midpoint walk), from the diffuse start to convergence, per
 // seed, with and without the position readings.
 class SummaryDefinitionTest : public ::testing::TestWithParam<std::tuple<int, bool>> {};
@@ -301,7 +301,7 @@ TEST(ParticleFilter, OutlierNeverGivesNanAndRecoversInBoundedSteps) {
   const double settled = std::abs(AngleDiff(pf.Summary().mean[1], q(1)));
   ASSERT_LT(settled, 2.0 * kDeg);
   // A marker 1 km away: every weight but one underflows in linear terms; the log-domain
-  // normalisation (eq. 21) keeps the best particle at weight 1.
+  // normalisation [PF eq. 21] keeps the best particle at weight 1.
   pf.Predict();
   EXPECT_EQ(pf.UpdatePosition(arm.grasp, Vec3::Zero(), Vec3(1000.0, -500.0, 3.0)),
             PfStatus::kAccepted);

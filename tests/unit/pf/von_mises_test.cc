@@ -1,4 +1,4 @@
-// The von Mises distribution (PF paper eq. 3-6): density normalisation, the Best-Fisher sampler
+// The von Mises distribution [PF eqs. 3-6]: density normalisation, the Best-Fisher sampler
 // against the density (moments, Kolmogorov-Smirnov, chi-square), the circular mean against the
 // naive mean (Fig. 3), kappa estimation, the product over joints, bad parameters.
 #include "estimators/pf/von_mises.h"
@@ -123,14 +123,14 @@ TEST_P(VonMisesSamplerTest, MomentsMatch) {
   if (kappa < 1e3) {
     EXPECT_NEAR(sc2 / n, a2, 5.0 * std::sqrt((1.0 - a2 * a2) / n) + 1e-12) << kappa;
   } else {
-    // Concentrated: x ~ N(0, 1/kappa) (eq. 4) to O(1/kappa^2).
+    // Concentrated: x ~ N(0, 1/kappa) [PF eq. 4] to O(1/kappa^2).
     EXPECT_NEAR(sx2 / n * kappa, 1.0, 0.02) << kappa;
   }
 }
 
 TEST_P(VonMisesSamplerTest, KolmogorovSmirnovAndChiSquare) {
   const double kappa = std::get<1>(GetParam());
-  // The oracle CDF: the tabulated density, or for kappa >= 1e3 the Gaussian limit of eq. 4
+  // The oracle CDF: the tabulated density, or for kappa >= 1e3 the Gaussian limit of [PF eq. 4]
   // (N(0, 1/kappa), whose CDF differs from the von Mises one by O(1/kappa)).
   const VonMisesCdf table(std::min(kappa, 1e3));
   const auto cdf = [&](double x) {
