@@ -67,17 +67,27 @@ bool ModelEffects::empty() const {
   return true;
 }
 
+namespace {
+
+// Frame f's own mass with the payload where it hangs.
+FrameMass WithPayload(const ModelEffects& effects, FrameId f) {
+  FrameMass fm = effects.masses[f];
+  if (f == effects.payload_frame) {
+    fm.mass += effects.payload.mass;
+    fm.first_moment += effects.payload.first_moment;
+  }
+  return fm;
+}
+
+}  // namespace
+
 void SubtreeMasses(const PpoeModel& model, const PpoeData& data, const ModelEffects& effects,
                    std::vector<double>* subtree_mass, std::vector<Vec3>* subtree_first) {
   std::vector<double>& m = *subtree_mass;
   std::vector<Vec3>& s = *subtree_first;
   const int n = model.num_frames();
   for (FrameId f = 0; f < n; ++f) {
-    FrameMass fm = effects.masses[f];
-    if (f == effects.payload_frame) {
-      fm.mass += effects.payload.mass;
-      fm.first_moment += effects.payload.first_moment;
-    }
+    const FrameMass fm = WithPayload(effects, f);
     m[f] = fm.mass;
     if (fm.mass == 0.0 && fm.first_moment.isZero(0.0)) {
       s[f].setZero();
@@ -328,11 +338,7 @@ void EffectiveChain::SetConstantLoads() {
   subtree_mass_.assign(n, 0.0);
   loaded_.assign(n, 0);
   for (FrameId f = 0; f < n; ++f) {
-    FrameMass fm = e.masses[f];
-    if (f == e.payload_frame) {
-      fm.mass += e.payload.mass;
-      fm.first_moment += e.payload.first_moment;
-    }
+    const FrameMass fm = WithPayload(e, f);
     subtree_mass_[f] = fm.mass;
     frame_first_[f] = fm.first_moment;
     loaded_[f] = fm.mass != 0.0 || !fm.first_moment.isZero(0.0);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "estimators/lie/se3.h"
 #include "estimators/pf/particle_loop.h"
 
 namespace flexbench::pf {
@@ -59,14 +60,11 @@ FLEXBENCH_PARTICLE_LOOP void KeptRange(const double* __restrict lo, const double
   *kept = (s4[0] + s4[1]) + (s4[2] + s4[3]);
 }
 
-typedef double V4 __attribute__((vector_size(32)));
-typedef long long V4i __attribute__((vector_size(32)));
-
-inline V4 Load4(const double* p) {
-  V4 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
+// The lanes of the kinematics' 4-wide code (lie/se3.h): lane-wise IEEE, the same bits on AVX2
+// and on the baseline build.
+using lie::internal::V4;
+using lie::internal::V4i;
+inline V4 Load4(const double* p) { return lie::internal::LoadV4(p); }
 
 inline double LaneSum(V4 v) { return (v[0] + v[1]) + (v[2] + v[3]); }
 
