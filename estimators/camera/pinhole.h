@@ -27,8 +27,10 @@ struct PinholeCamera {
     return true;
   }
 
+  // Whether uv falls on the sensor: [0, width] x [0, height] in the convention above (the
+  // outer edges of the border pixels), not the pixel centres' [-0.5, width - 0.5] of OpenCV's.
   bool InImage(const Eigen::Vector2d& uv) const {
-    return uv.x() >= -0.5 && uv.y() >= -0.5 && uv.x() <= width - 0.5 && uv.y() <= height - 0.5;
+    return uv.x() >= 0.0 && uv.y() >= 0.0 && uv.x() <= width && uv.y() <= height;
   }
 };
 

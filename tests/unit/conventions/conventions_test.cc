@@ -8,6 +8,7 @@
 #include <limits>
 #include <random>
 
+#include "estimators/camera/pinhole.h"
 #include "estimators/lie/sampling.h"
 #include "estimators/lie/se3.h"
 
@@ -141,6 +142,32 @@ void ExpectWrapped(double a) {
   // Same angle: the difference is a multiple of 2 pi (up to the rounding of a).
   const double k = (a - w) / (2.0 * M_PI);
   EXPECT_NEAR(k, std::round(k), 1e-9 * std::max(1.0, std::abs(k))) << "a = " << a;
+}
+
+// Pixel coordinates (estimators/camera/pinhole.h): the top-left pixel covers [0, 1]^2, so the
+// optical axis through (cx, cy) = (w/2, h/2) lands on the image's middle, and the sensor spans
+// [0, w] x [0, h]: a point a quarter pixel inside either edge is on it, a quarter pixel outside
+// is not (the pixel-centre convention would take the first column's left quarter as outside and
+// a quarter pixel beyond the last as inside).
+TEST(Conventions, PixelCoordinatesCoverTheSensorFromZeroToItsSize) {
+  PinholeCamera cam;
+  cam.fx = cam.fy = 500.0;
+  cam.width = 640;
+  cam.height = 480;
+  cam.cx = cam.width / 2.0;
+  cam.cy = cam.height / 2.0;
+  Eigen::Vector2d uv;
+  ASSERT_TRUE(cam.Project(Eigen::Vector3d(0.0, 0.0, 2.0), &uv));
+  EXPECT_EQ(uv, Eigen::Vector2d(320.0, 240.0));
+  EXPECT_TRUE(cam.InImage(Eigen::Vector2d(0.25, 0.25)));
+  EXPECT_TRUE(cam.InImage(Eigen::Vector2d(639.75, 479.75)));
+  EXPECT_TRUE(cam.InImage(Eigen::Vector2d(640.0, 480.0)));
+  EXPECT_FALSE(cam.InImage(Eigen::Vector2d(-0.25, 100.0)));
+  EXPECT_FALSE(cam.InImage(Eigen::Vector2d(100.0, -0.25)));
+  EXPECT_FALSE(cam.InImage(Eigen::Vector2d(640.25, 100.0)));
+  EXPECT_FALSE(cam.InImage(Eigen::Vector2d(100.0, 480.25)));
+  // Behind the camera: no pixel.
+  EXPECT_FALSE(cam.Project(Eigen::Vector3d(0.0, 0.0, -1.0), &uv));
 }
 
 TEST(Conventions, WrapAngleRange) {
