@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "estimators/camera/pinhole.h"
 #include "estimators/lie/se3.h"
 #include "scenarios/identify/effect_model.h"
 
@@ -48,12 +49,14 @@ struct GroupDistance {
   double distance_m = 0.0;
 };
 
-// A fixed pinhole camera observing the end-effector point (pixel rows).
+// A fixed camera that observes the end-effector point in pixels (pixel rows): the estimators'
+// pinhole model (its pixel convention, estimators/camera/pinhole.h) at a pose in the declared
+// base frame.
 struct CameraModel {
   bool present = false;
   std::string name = "camera";
-  double fx = 0, fy = 0, cx = 0, cy = 0;
-  lie::SE3 T_base_cam;  // optical frame: x right, y down, z forward
+  PinholeCamera intrinsics;  // fx, fy, cx, cy (width, height unused here)
+  lie::SE3 T_base_cam;       // optical frame: x right, y down, z forward
 };
 
 struct DataSet {

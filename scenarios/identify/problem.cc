@@ -60,7 +60,8 @@ lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vecto
 Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& p_base) {
   const Vec3 p = T_base_cam.rotation().transpose() * (p_base - T_base_cam.translation());
   const double z = std::max(p.z(), 1e-6);
-  return Eigen::Vector2d(cam.fx * p.x() / z + cam.cx, cam.fy * p.y() / z + cam.cy);
+  const PinholeCamera& k = cam.intrinsics;
+  return Eigen::Vector2d(k.fx * p.x() / z + k.cx, k.fy * p.y() / z + k.cy);
 }
 
 Problem::Problem(const EffectModel& em, const DataSet& data,
@@ -197,8 +198,9 @@ void RowTangentMap(const Observation& o, const lie::SE3& T, const CameraModel& c
       const bool floor = !(p.z() > 1e-6);
       const double z = std::max(p.z(), 1e-6);
       Eigen::Matrix<double, 2, 3> dproj;
-      dproj << cam.fx / z, 0.0, floor ? 0.0 : -cam.fx * p.x() / (z * z),  //
-          0.0, cam.fy / z, floor ? 0.0 : -cam.fy * p.y() / (z * z);
+      const PinholeCamera& k = cam.intrinsics;
+      dproj << k.fx / z, 0.0, floor ? 0.0 : -k.fx * p.x() / (z * z),  //
+          0.0, k.fy / z, floor ? 0.0 : -k.fy * p.y() / (z * z);
       G->resize(2, 6);
       G->leftCols<3>().setZero();
       G->rightCols<3>() = dproj * Rt / opt.pixel_std_px;

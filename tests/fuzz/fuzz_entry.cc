@@ -115,9 +115,9 @@ std::optional<std::string> CalibrationCsv(const std::uint8_t* data, std::size_t 
   return Guard([&] {
     identify::DataSet d;
     d.camera.present = true;
-    d.camera.fx = d.camera.fy = 500.0;
-    d.camera.cx = 320.0;
-    d.camera.cy = 240.0;
+    d.camera.intrinsics.fx = d.camera.intrinsics.fy = 500.0;
+    d.camera.intrinsics.cx = 320.0;
+    d.camera.intrinsics.cy = 240.0;
     identify::ReadCalibrationCsv(path, {"j1", "j2"}, &d);
   });
 }

@@ -156,10 +156,10 @@ class ClosedLoopKind : public ScenarioKind {
       // A fixed camera seeing the end-effector point (pixel rows in CSV data).
       camera_.present = true;
       camera_.name = c->GetString("name", "camera");
-      camera_.fx = c->GetDouble("fx");
-      camera_.fy = c->GetDouble("fy");
-      camera_.cx = c->GetDouble("cx");
-      camera_.cy = c->GetDouble("cy");
+      camera_.intrinsics.fx = c->GetDouble("fx");
+      camera_.intrinsics.fy = c->GetDouble("fy");
+      camera_.intrinsics.cx = c->GetDouble("cx");
+      camera_.intrinsics.cy = c->GetDouble("cy");
       const ConfigNode t = c->Child("T_base_cam");
       const std::vector<double> v = t.AsDoubleList();
       if (v.size() != 7) t.Fail("expected [x, y, z, qw, qx, qy, qz]");

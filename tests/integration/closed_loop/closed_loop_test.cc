@@ -624,9 +624,9 @@ TEST(Identify, PosesAndPixelsWithACameraOffset) {
     d.sets = {"s"};
     d.camera.present = true;
     d.camera.name = "cam";
-    d.camera.fx = d.camera.fy = 600.0;
-    d.camera.cx = 320.0;
-    d.camera.cy = 240.0;
+    d.camera.intrinsics.fx = d.camera.intrinsics.fy = 600.0;
+    d.camera.intrinsics.cx = 320.0;
+    d.camera.intrinsics.cy = 240.0;
     Mat3 R;
     R.col(0) = Vec3(0, 1, 0);   // x right
     R.col(1) = Vec3(0, 0, -1);  // y down

@@ -154,9 +154,9 @@ DataSet MixedRows(const EffectModel& em, std::mt19937_64& rng) {
   d.groups = {"g0", "g1"};
   d.distances = {{0, 1, 0.05}};
   d.camera.present = true;
-  d.camera.fx = d.camera.fy = 600.0;
-  d.camera.cx = 320.0;
-  d.camera.cy = 240.0;
+  d.camera.intrinsics.fx = d.camera.intrinsics.fy = 600.0;
+  d.camera.intrinsics.cx = 320.0;
+  d.camera.intrinsics.cy = 240.0;
   Mat3 R;
   R.col(0) = Vec3(0, 1, 0);
   R.col(1) = Vec3(0, 0, -1);
