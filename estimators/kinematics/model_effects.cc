@@ -181,21 +181,10 @@ Eigen::Matrix2d Inverse2(const Eigen::Matrix2d& A) {
   return inv;
 }
 
-// T_parent_ip Exp(zeta q) from the precomputed Rodrigues terms (PpoeFrame::FixedTimesMotion,
-// inlined: the loads take it for every frame of the chain).
+// T_parent_ip Exp(zeta q) of frame f at the joint values q.
 EIGEN_ALWAYS_INLINE lie::SE3 RelativePose(const PpoeFrame& f,
                                           const Eigen::Ref<const Eigen::VectorXd>& q) {
-  const double qf = f.q_index >= 0 ? q[f.q_index] : 0.0;
-  if (f.joint.type == JointType::kRevolute) {
-    double sh, ch;
-    lie::SinCos(0.5 * qf, &sh, &ch);
-    const double a = 2.0 * sh * ch, b = 2.0 * sh * sh;
-    return lie::SE3(f.T_parent_ip.rotation() + a * f.K1 + b * f.K2, f.u0 + a * f.u1 + b * f.u2);
-  }
-  if (f.joint.type == JointType::kPrismatic) {
-    return lie::SE3(f.T_parent_ip.rotation(), f.u0 + qf * f.u1);
-  }
-  return f.T_parent_ip;
+  return f.FixedTimesMotion(f.q_index >= 0 ? q[f.q_index] : 0.0);
 }
 
 // Exp of a rotation vector below kSmallRotation rad, as lie::SO3Exp without its square root,

@@ -91,7 +91,8 @@ struct PpoeFrame {
   Mat6 source_cov_parent = Mat6::Zero();
 
   // T_parent_ip * Exp(zeta q) from the precomputed Rodrigues terms (the FK kernels' form).
-  lie::SE3 FixedTimesMotion(double q) const {
+  // Forced inline: the augmented chain's loads and the identification take it for every frame.
+  EIGEN_ALWAYS_INLINE lie::SE3 FixedTimesMotion(double q) const {
     switch (joint.type) {
       case JointType::kRevolute: {
         double sh, ch;

@@ -102,6 +102,14 @@ void SetBounds(Candidate* c, bool prismatic) {
   }
 }
 
+// A periodic joint error (transmission error, error curve) at joint angle qj, harmonic by
+// harmonic onto *dq: sum_h a_h cos(h qj) + b_h sin(h qj).
+void AddPeriodicError(const Candidate& c, double qj, const double* t, double* dq) {
+  for (int h = 1; 2 * h <= c.num_params; ++h) {
+    *dq += t[2 * h - 2] * std::cos(h * qj) + t[2 * h - 1] * std::sin(h * qj);
+  }
+}
+
 }  // namespace
 
 const char* ToString(EffectType type) {
@@ -293,10 +301,7 @@ Eigen::VectorXd EffectModel::ReadingShift(const Eigen::VectorXd& q, const std::v
     const Candidate& c = candidates_[i];
     if (c.type == EffectType::kJointOffset) dq[c.q_index] += t[0];
     if (c.type == EffectType::kTransmissionError || c.type == EffectType::kJointErrorCurve) {
-      const double qj = q[c.q_index];
-      for (int h = 1; 2 * h <= c.num_params; ++h) {
-        dq[c.q_index] += t[2 * h - 2] * std::cos(h * qj) + t[2 * h - 1] * std::sin(h * qj);
-      }
+      AddPeriodicError(c, q[c.q_index], t, &dq[c.q_index]);
     }
     t += c.num_params;
   }
@@ -522,13 +527,9 @@ void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L
         for (int k = 0; k < 6; ++k) ws.origin[c.frame][k] += t[k];
         break;
       case EffectType::kTransmissionError:
-      case EffectType::kJointErrorCurve: {
-        const double qj = q[c.q_index];
-        for (int h = 1; 2 * h <= c.num_params; ++h) {
-          ws.dq[c.q_index] += t[2 * h - 2] * std::cos(h * qj) + t[2 * h - 1] * std::sin(h * qj);
-        }
+      case EffectType::kJointErrorCurve:
+        AddPeriodicError(c, q[c.q_index], t, &ws.dq[c.q_index]);
         break;
-      }
       case EffectType::kStiffeningSpring: {
         constexpr double kTau0 = 10.0;
         const double tau = L.tau[c.q_index] + payload * L.tau_unit[c.q_index] -

@@ -105,7 +105,9 @@ TEST_P(MountTiltTest, MatchesMujocoEquilibriumWhereTheLinearTiltDoesNot) {
   EXPECT_GT(err_linear, 0.5 * p_delta);
   EXPECT_LT(err, 0.1 * err_linear);
   // Pitch, then roll about the pitched axis: one Exp of both misses theta_x theta_y / 2.
-  if (std::abs(truth.x() * truth.y()) > 1e-6) EXPECT_LT(err, 0.2 * err_exp);
+  if (std::abs(truth.x() * truth.y()) > 1e-6) {
+    EXPECT_LT(err, 0.2 * err_exp);
+  }
 }
 
 // Stretched forward low, raised high above the plate, off to the side and hanging below it.
