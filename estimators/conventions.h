@@ -32,9 +32,7 @@ inline constexpr int kTransIdx = 0;
 inline constexpr int kRotIdx = 3;
 
 // MuJoCo (w, x, y, z) array -> Eigen quaternion.
-inline Quat QuatFromWxyz(const double* wxyz) {
-  return Quat(wxyz[0], wxyz[1], wxyz[2], wxyz[3]);
-}
+inline Quat QuatFromWxyz(const double* wxyz) { return Quat(wxyz[0], wxyz[1], wxyz[2], wxyz[3]); }
 
 // Eigen quaternion -> MuJoCo (w, x, y, z) array.
 inline void QuatToWxyz(const Quat& q, double* wxyz) {

@@ -42,11 +42,16 @@ void Params::CheckAllUsed(const std::string& estimator) const {
 
 const char* ToString(UpdateStatus s) {
   switch (s) {
-    case UpdateStatus::kAccepted: return "accepted";
-    case UpdateStatus::kIgnored: return "ignored";
-    case UpdateStatus::kRejectedNonFinite: return "rejected_non_finite";
-    case UpdateStatus::kRejectedOutside: return "rejected_outside";
-    case UpdateStatus::kRejectedGating: return "rejected_gating";
+    case UpdateStatus::kAccepted:
+      return "accepted";
+    case UpdateStatus::kIgnored:
+      return "ignored";
+    case UpdateStatus::kRejectedNonFinite:
+      return "rejected_non_finite";
+    case UpdateStatus::kRejectedOutside:
+      return "rejected_outside";
+    case UpdateStatus::kRejectedGating:
+      return "rejected_gating";
   }
   return "unknown";
 }

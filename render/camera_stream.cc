@@ -37,11 +37,7 @@ FrameStamp FrameClock::Take(double t_s) {
 
 CameraStream::CameraStream(Renderer* renderer, int cam_id, double rate_hz,
                            const Degradation& degradation, std::uint64_t seed)
-    : renderer_(renderer),
-      cam_id_(cam_id),
-      clock_(rate_hz),
-      degradation_(degradation),
-      rng_(seed) {
+    : renderer_(renderer), cam_id_(cam_id), clock_(rate_hz), degradation_(degradation), rng_(seed) {
   ValidateDegradation(degradation_);
 }
 

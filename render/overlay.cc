@@ -85,9 +85,9 @@ void DrawCovarianceEllipse(Image* image, const Eigen::Vector2d& center_px,
   DrawPolyline(image, points, true, color, thickness);
 }
 
-bool DrawPositionCovariance(Image* image, const PinholeCamera& camera,
-                            const Eigen::Vector3d& p_cam, const Eigen::Matrix3d& cov_cam,
-                            double confidence, Color color, int thickness) {
+bool DrawPositionCovariance(Image* image, const PinholeCamera& camera, const Eigen::Vector3d& p_cam,
+                            const Eigen::Matrix3d& cov_cam, double confidence, Color color,
+                            int thickness) {
   Eigen::Vector2d uv;
   if (!camera.Project(p_cam, &uv)) return false;
   DrawCovarianceEllipse(image, uv, ProjectCovariance(camera, p_cam, cov_cam), confidence, color,
@@ -110,15 +110,14 @@ void DrawMarker(Image* image, const Eigen::Vector2d& p, Color color, int size_px
   Line(image, p - Eigen::Vector2d(0, size_px), p + Eigen::Vector2d(0, size_px), color, thickness);
 }
 
-void DrawText(Image* image, const std::string& text, const Eigen::Vector2d& origin,
-              Color color, double scale) {
+void DrawText(Image* image, const std::string& text, const Eigen::Vector2d& origin, Color color,
+              double scale) {
   cv::Mat m = Wrap(image);
   const cv::Point o(static_cast<int>(std::lround(origin.x() - 0.5)),
                     static_cast<int>(std::lround(origin.y() - 0.5)));
   cv::putText(m, text, o, cv::FONT_HERSHEY_SIMPLEX, scale, ToScalar(*image, Color{0, 0, 0}), 3,
               cv::LINE_AA);
-  cv::putText(m, text, o, cv::FONT_HERSHEY_SIMPLEX, scale, ToScalar(*image, color), 1,
-              cv::LINE_AA);
+  cv::putText(m, text, o, cv::FONT_HERSHEY_SIMPLEX, scale, ToScalar(*image, color), 1, cv::LINE_AA);
 }
 
 }  // namespace flexbench::render

@@ -55,9 +55,9 @@ void DrawCovarianceEllipse(Image* image, const Eigen::Vector2d& center_px,
                            int thickness = 1);
 
 // Projects p_cam and cov_cam and draws the ellipse; false when p_cam is behind the camera.
-bool DrawPositionCovariance(Image* image, const PinholeCamera& camera,
-                            const Eigen::Vector3d& p_cam, const Eigen::Matrix3d& cov_cam,
-                            double confidence, Color color, int thickness = 1);
+bool DrawPositionCovariance(Image* image, const PinholeCamera& camera, const Eigen::Vector3d& p_cam,
+                            const Eigen::Matrix3d& cov_cam, double confidence, Color color,
+                            int thickness = 1);
 
 void DrawPolyline(Image* image, const std::vector<Eigen::Vector2d>& points_px, bool closed,
                   Color color, int thickness = 1);
@@ -68,7 +68,7 @@ void DrawMarker(Image* image, const Eigen::Vector2d& p_px, Color color, int size
 
 // Text with its baseline's left end at `origin_px`, drawn over a dark outline so it reads on
 // any background.
-void DrawText(Image* image, const std::string& text, const Eigen::Vector2d& origin_px,
-              Color color, double scale = 0.45);
+void DrawText(Image* image, const std::string& text, const Eigen::Vector2d& origin_px, Color color,
+              double scale = 0.45);
 
 }  // namespace flexbench::render

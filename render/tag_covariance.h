@@ -73,8 +73,8 @@ struct CornerNoiseModel {
 // What the model used for one edge (edge k runs from corner k to corner k+1).
 struct EdgeUncertainty {
   double length_px = 0.0;
-  int samples = 0;           // N
-  double contrast = 0.0;     // gray levels, outside minus inside (white minus black)
+  int samples = 0;             // N
+  double contrast = 0.0;       // gray levels, outside minus inside (white minus black)
   double sample_std_px = 0.0;  // sqrt(sigma_sample^2 + kappa sigma_n^2 / c^2)
   double offset_std_px = 0.0;  // of the fitted line at its centroid
   double angle_std_rad = 0.0;

@@ -41,7 +41,8 @@ struct TagDetection {
   int hamming = 0;
   double decision_margin = 0.0;
   // libapriltag's order (counter-clockwise in the image): tag-frame (-1,+1), (+1,+1), (+1,-1),
-  // (-1,-1), x right and y down on the printed tag. Pixel convention of estimators/camera/pinhole.h.
+  // (-1,-1), x right and y down on the printed tag. Pixel convention of
+  // estimators/camera/pinhole.h.
   std::array<Eigen::Vector2d, 4> corners;
   Eigen::Vector2d center;
   // Maps tag coordinates [-1, 1]^2 to pixels (libapriltag's det->H).
@@ -58,9 +59,9 @@ struct TagDetection {
 
 struct DetectionResult {
   std::vector<TagDetection> detections;
-  int dropped_small = 0;     // detections below min_edge_px
-  int dropped_grazing = 0;   // detections beyond max_view_angle_deg
-  int dropped_border = 0;    // detections within border_margin_px of the image border
+  int dropped_small = 0;    // detections below min_edge_px
+  int dropped_grazing = 0;  // detections beyond max_view_angle_deg
+  int dropped_border = 0;   // detections within border_margin_px of the image border
 
   int dropped() const { return dropped_small + dropped_grazing + dropped_border; }
 };

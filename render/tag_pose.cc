@@ -12,8 +12,8 @@
 namespace flexbench::render {
 namespace {
 
-double ReprojectionRms(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
-                       const TagDetection& det, const PinholeCamera& camera, double size_m) {
+double ReprojectionRms(const Eigen::Matrix3d& R, const Eigen::Vector3d& t, const TagDetection& det,
+                       const PinholeCamera& camera, double size_m) {
   const auto object = TagObjectCorners(size_m);
   double sum = 0.0;
   for (int k = 0; k < 4; ++k) {

@@ -28,8 +28,8 @@ std::optional<std::pair<std::string, int>> ParseTagTextureName(const std::string
   return std::make_pair(rest.substr(0, us), std::stoi(id_text));
 }
 
-void FillTexture(mjModel* m, int tex_id, const apriltag_family_t* family, int id,
-                 int quiet_cells, const std::string& tex_name) {
+void FillTexture(mjModel* m, int tex_id, const apriltag_family_t* family, int id, int quiet_cells,
+                 const std::string& tex_name) {
   const int cells = family->total_width + 2 * quiet_cells;
   const int w = m->tex_width[tex_id];
   const int h = m->tex_height[tex_id];

@@ -14,6 +14,7 @@ PACKAGES=(
   libgtest-dev libbenchmark-dev   # GoogleTest, Google Benchmark
   libyaml-cpp-dev nlohmann-json3-dev libcli11-dev
   slurmctld slurmd slurm-client munge procps   # a real single-node Slurm for the sweep tests
+  clang-format                    # scripts/check_format.sh (CI)
   chromium                        # headless browser that renders report.html in its test
   pybind11-dev python3-pybind11 python3-dev python3-numpy python3-pytest   # the Python module + tests
 )

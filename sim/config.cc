@@ -1,12 +1,13 @@
 #include "sim/config.h"
 
+#include <yaml-cpp/eventhandler.h>
+#include <yaml-cpp/parser.h>
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <yaml-cpp/eventhandler.h>
-#include <yaml-cpp/parser.h>
 
 namespace flexbench {
 namespace {
@@ -123,9 +124,9 @@ void CheckInputFile(const std::string& path, std::uintmax_t max_bytes) {
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
   if (ec || !fs::exists(st)) {
-    throw InputError(CapForMessage(path) + ": file not found or not readable" +
-                     (ec && ec != std::errc::no_such_file_or_directory ? " (" + ec.message() + ")"
-                                                                       : ""));
+    throw InputError(
+        CapForMessage(path) + ": file not found or not readable" +
+        (ec && ec != std::errc::no_such_file_or_directory ? " (" + ec.message() + ")" : ""));
   }
   if (fs::is_directory(st)) throw InputError(CapForMessage(path) + ": is a folder, not a file");
   if (!fs::is_regular_file(st)) {
@@ -134,8 +135,8 @@ void CheckInputFile(const std::string& path, std::uintmax_t max_bytes) {
   const std::uintmax_t size = fs::file_size(path, ec);
   if (ec) throw InputError(CapForMessage(path) + ": cannot read: " + ec.message());
   if (size > max_bytes) {
-    throw InputError(CapForMessage(path) + ": " + std::to_string(size) +
-                     " bytes, more than the " + std::to_string(max_bytes) + " allowed");
+    throw InputError(CapForMessage(path) + ": " + std::to_string(size) + " bytes, more than the " +
+                     std::to_string(max_bytes) + " allowed");
   }
 }
 
@@ -189,8 +190,7 @@ void ApplyOverride(YAML::Node root, const ConfigOverride& o, const std::string& 
       next.reset(cur[parts[i]]);
     } else if (!next.IsMap()) {
       throw InputError(where + ": '" + CapForMessage(path) + "' in " + file +
-                       " is not a mapping, so it has no key '" + CapForMessage(parts[i + 1]) +
-                       "'");
+                       " is not a mapping, so it has no key '" + CapForMessage(parts[i + 1]) + "'");
     }
     cur.reset(next);
   }
@@ -333,7 +333,8 @@ double ConfigNode::AsDouble() const {
   } catch (const YAML::Exception&) {
     Fail("expected a number, got '" + CapForMessage(node_.Scalar()) + "'");
   }
-  if (!std::isfinite(v)) Fail("expected a finite number, got '" + CapForMessage(node_.Scalar()) + "'");
+  if (!std::isfinite(v))
+    Fail("expected a finite number, got '" + CapForMessage(node_.Scalar()) + "'");
   return v;
 }
 

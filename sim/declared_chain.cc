@@ -110,8 +110,8 @@ class ChainBuilder {
     Mat6 cov = Mat6::Zero();
     for (const DeclaredSource* s : sources) {
       cov += s->cov;
-      cov.block<3, 3>(kRotIdx, kRotIdx) += s->about_axis_rad * s->about_axis_rad * axis *
-                                           axis.transpose();
+      cov.block<3, 3>(kRotIdx, kRotIdx) +=
+          s->about_axis_rad * s->about_axis_rad * axis * axis.transpose();
     }
     return cov;
   }
@@ -127,8 +127,7 @@ class ChainBuilder {
     // anchor and back (MuJoCo rotates each joint about its anchor in the current body frame).
     SE3 pending = PoseFrom(m_->body_pos + 3 * b, m_->body_quat + 4 * b);
     FrameId current = parent;
-    for (int j = m_->body_jntadr[b]; j >= 0 && j < m_->body_jntadr[b] + m_->body_jntnum[b];
-         ++j) {
+    for (int j = m_->body_jntadr[b]; j >= 0 && j < m_->body_jntadr[b] + m_->body_jntnum[b]; ++j) {
       const std::string jname = ObjectName(m_, mjOBJ_JOINT, j);
       const int type = m_->jnt_type[j];
       if (type != mjJNT_HINGE && type != mjJNT_SLIDE) {
@@ -153,7 +152,8 @@ class ChainBuilder {
       pending = SE3::Translation(-anchor);
     }
     const auto src = body_sources_.find(b);
-    const Mat6 cov = src == body_sources_.end() ? Mat6::Zero() : SourceCov(src->second, Vec3::Zero());
+    const Mat6 cov =
+        src == body_sources_.end() ? Mat6::Zero() : SourceCov(src->second, Vec3::Zero());
     const FrameId frame =
         out_->model.AddFrame(current, "body/" + ObjectName(m_, mjOBJ_BODY, b), pending, cov);
     body_frame_[b] = frame;

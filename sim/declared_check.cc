@@ -96,7 +96,8 @@ DeclaredCheckSummary CheckDeclaredFile(const std::string& path) {
         any = true;
       }
       if (const auto a = src.Optional("about_axis_deg")) {
-        if (d.at_kind != "joint") a->Fail("about_axis_deg needs a joint ('" + d.at + "' is a body)");
+        if (d.at_kind != "joint")
+          a->Fail("about_axis_deg needs a joint ('" + d.at + "' is a body)");
         if (a->AsDouble() < 0) a->Fail("standard deviations must be >= 0");
         any = true;
       }

@@ -21,14 +21,22 @@ struct TypeInfo {
 };
 const std::map<std::string, TypeInfo>& Types() {
   static const std::map<std::string, TypeInfo> types = {
-      {"joint_offset", {1, false}},       {"joint_compliance", {1, true}},
-      {"backlash", {1, true}},            {"link_length", {1, false}},
-      {"link_offset", {3, false}},        {"joint_axis_tilt_a", {1, false}},
-      {"joint_axis_tilt_b", {1, false}},  {"link_bending", {1, true}},
-      {"base_compliance", {2, true}},     {"thermal_expansion", {1, false}},
-      {"payload", {4, true}},             {"camera_offset", {6, false}},
-      {"joint_origin", {6, false}},       {"transmission_error", {4, false}},
-      {"joint_error_curve", {6, false}},  {"stiffening_spring", {2, true}},
+      {"joint_offset", {1, false}},
+      {"joint_compliance", {1, true}},
+      {"backlash", {1, true}},
+      {"link_length", {1, false}},
+      {"link_offset", {3, false}},
+      {"joint_axis_tilt_a", {1, false}},
+      {"joint_axis_tilt_b", {1, false}},
+      {"link_bending", {1, true}},
+      {"base_compliance", {2, true}},
+      {"thermal_expansion", {1, false}},
+      {"payload", {4, true}},
+      {"camera_offset", {6, false}},
+      {"joint_origin", {6, false}},
+      {"transmission_error", {4, false}},
+      {"joint_error_curve", {6, false}},
+      {"stiffening_spring", {2, true}},
   };
   return types;
 }
@@ -58,8 +66,8 @@ class EffectsBuilder {
       for (const IdentifiedEffect& ie : d_.identified_effects) {
         const auto it = Types().find(ie.effect.substr(0, ie.effect.find('@')));
         if (it != Types().end() && it->second.load_driven) {
-          Fail(ie, "acts through the gravity loads, but the model " +
-                       CapForMessage(d_.model_path) + " has no masses on the arm");
+          Fail(ie, "acts through the gravity loads, but the model " + CapForMessage(d_.model_path) +
+                       " has no masses on the arm");
         }
       }
     }
@@ -299,7 +307,8 @@ class EffectsBuilder {
 
   FrameId Frame(const IdentifiedEffect& ie, const std::string& typed, const char* what) const {
     if (!model_.HasFrame(typed)) {
-      Fail(ie, std::string("names ") + what + " '" + CapForMessage(typed.substr(typed.find('/') + 1)) +
+      Fail(ie, std::string("names ") + what + " '" +
+                   CapForMessage(typed.substr(typed.find('/') + 1)) +
                    "', which is not in the declared chain");
     }
     return model_.FindFrame(typed);
@@ -323,7 +332,8 @@ class EffectsBuilder {
 
 }  // namespace
 
-void ExtractMasses(const mjModel* m, const DeclaredChain& chain, kinematics::ModelEffects* effects) {
+void ExtractMasses(const mjModel* m, const DeclaredChain& chain,
+                   kinematics::ModelEffects* effects) {
   const kinematics::PpoeModel& model = chain.model;
   effects->masses.assign(model.num_frames(), kinematics::FrameMass{});
   std::map<int, FrameId> frame_of_body;
@@ -355,10 +365,12 @@ void ExtractMasses(const mjModel* m, const DeclaredChain& chain, kinematics::Mod
     const Vec3 com(d->xipos[3 * b], d->xipos[3 * b + 1], d->xipos[3 * b + 2]);
     kinematics::FrameMass& fm = effects->masses[it->second];
     fm.mass += m->body_mass[b];
-    fm.first_moment += m->body_mass[b] * (T_w_a.rotation().transpose() * (com - T_w_a.translation()));
+    fm.first_moment +=
+        m->body_mass[b] * (T_w_a.rotation().transpose() * (com - T_w_a.translation()));
   }
   const Mat3 R_w_base = pose(chain.base_body).rotation();
-  effects->g_base = R_w_base.transpose() * Vec3(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
+  effects->g_base =
+      R_w_base.transpose() * Vec3(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
 }
 
 void ApplyIdentifiedEffects(const mjModel* m, const DeclaredModel& declared, DeclaredChain* chain) {

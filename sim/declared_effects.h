@@ -15,8 +15,7 @@ namespace flexbench::sim {
 
 // Per-frame masses of the chain (each MuJoCo body's mass on the nearest chain frame at or above
 // it, passive joints at their reference angle) and gravity in the base frame.
-void ExtractMasses(const mjModel* m, const DeclaredChain& chain,
-                   kinematics::ModelEffects* effects);
+void ExtractMasses(const mjModel* m, const DeclaredChain& chain, kinematics::ModelEffects* effects);
 
 // Fills chain->effects from declared.identified_effects. Throws InputError naming the file, line
 // and key for an unknown effect type, a joint or frame the chain lacks, a wrong number of values,

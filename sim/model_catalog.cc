@@ -42,14 +42,12 @@ ModelCatalog ModelCatalog::Build(const mjModel* m, const std::string& model_name
   }
   for (int a = 0; a < m->nu; ++a) {
     const std::string an = ObjectName(m, mjOBJ_ACTUATOR, a);
-    const bool position_servo = m->actuator_trntype[a] == mjTRN_JOINT &&
-                                m->actuator_dyntype[a] == mjDYN_NONE &&
-                                m->actuator_gaintype[a] == mjGAIN_FIXED &&
-                                m->actuator_biastype[a] == mjBIAS_AFFINE &&
-                                m->actuator_gainprm[a * mjNGAIN] > 0 &&
-                                m->actuator_biasprm[a * mjNBIAS + 1] ==
-                                    -m->actuator_gainprm[a * mjNGAIN] &&
-                                m->actuator_biasprm[a * mjNBIAS + 2] == 0;
+    const bool position_servo =
+        m->actuator_trntype[a] == mjTRN_JOINT && m->actuator_dyntype[a] == mjDYN_NONE &&
+        m->actuator_gaintype[a] == mjGAIN_FIXED && m->actuator_biastype[a] == mjBIAS_AFFINE &&
+        m->actuator_gainprm[a * mjNGAIN] > 0 &&
+        m->actuator_biasprm[a * mjNBIAS + 1] == -m->actuator_gainprm[a * mjNGAIN] &&
+        m->actuator_biasprm[a * mjNBIAS + 2] == 0;
     if (!position_servo) {
       throw InputError(model_name + ": actuator '" + an +
                        "' is not a <position> servo on a joint (the truth commands joint angles)");

@@ -4,11 +4,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
-#include <sstream>
-#include <filesystem>
 #include <mutex>
+#include <sstream>
 
 #include "estimators/error.h"
 #include "sim/config.h"
@@ -76,7 +76,8 @@ int IdOrThrow(const mjModel* m, mjtObj type, const char* what, const std::string
 }
 
 bool EndsWith(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 }  // namespace
@@ -109,7 +110,8 @@ std::string PrepareUrdf(const std::string& urdf, const std::string& path,
     const size_t end_self = urdf.find("/>", start);
     const size_t end_open = urdf.find('>', start);
     size_t end = urdf.find(close, start);
-    if (end_open != std::string::npos && end_self != std::string::npos && end_self + 1 == end_open) {
+    if (end_open != std::string::npos && end_self != std::string::npos &&
+        end_self + 1 == end_open) {
       end = end_open + 1;  // <visual .../>
     } else if (end != std::string::npos) {
       end += close.size();
@@ -183,8 +185,8 @@ MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings
   char error[1024] = "";
   mjModel* m = mj_loadXML(path.c_str(), nullptr, error, sizeof(error));
   if (!m) {
-    throw InputError(CapForMessage(path) + ": MuJoCo rejected the model: " +
-                     CapForMessage(Trim(error), 400));
+    throw InputError(CapForMessage(path) +
+                     ": MuJoCo rejected the model: " + CapForMessage(Trim(error), 400));
   }
   return MjModelPtr(m);
 }
@@ -208,8 +210,8 @@ MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name,
   mjModel* m = mj_loadXML(name.c_str(), vfs.get(), error, sizeof(error));
   mj_deleteVFS(vfs.get());
   if (!m) {
-    throw InputError(CapForMessage(name) + ": MuJoCo rejected the model: " +
-                     CapForMessage(Trim(error), 400));
+    throw InputError(CapForMessage(name) +
+                     ": MuJoCo rejected the model: " + CapForMessage(Trim(error), 400));
   }
   return MjModelPtr(m);
 }

@@ -32,9 +32,10 @@ void InstallMujocoHandlers();
 // Largest model file read (bytes).
 inline constexpr std::uintmax_t kMaxModelFileBytes = 64u << 20;
 
-// Loads an MJCF or URDF file. URDF goes through MuJoCo's own importer after PrepareUrdf. Throws InputError("<path>: <MuJoCo's message>") when the file is
-// missing or MuJoCo rejects it. Warnings MuJoCo emits while compiling are appended to
-// `warnings` when given (e.g. URDF meshes it cannot read).
+// Loads an MJCF or URDF file. URDF goes through MuJoCo's own importer after PrepareUrdf. Throws
+// InputError("<path>: <MuJoCo's message>") when the file is missing or MuJoCo rejects it. Warnings
+// MuJoCo emits while compiling are appended to `warnings` when given (e.g. URDF meshes it cannot
+// read).
 MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings = nullptr);
 
 // Loads a model from an in-memory MJCF string (tests use inline models). `name` is used in

@@ -51,9 +51,7 @@ std::string Params::GetString(const std::string& key, const std::string& fallbac
   return c ? c->AsString() : fallback;
 }
 
-std::string Params::RequireString(const std::string& key) const {
-  return Require(key).AsString();
-}
+std::string Params::RequireString(const std::string& key) const { return Require(key).AsString(); }
 
 Vec3 Params::GetVec3(const std::string& key, const Vec3& fallback) const {
   const auto c = Optional(key);
@@ -76,9 +74,7 @@ std::vector<std::string> Params::GetStringList(const std::string& key,
   return out;
 }
 
-void Params::Fail(const std::string& message) const {
-  throw InputError(where_ + ": " + message);
-}
+void Params::Fail(const std::string& message) const { throw InputError(where_ + ": " + message); }
 
 void Params::FailKey(const std::string& key, const std::string& message) const {
   if (const auto c = Optional(key)) c->Fail(message);

@@ -220,9 +220,9 @@ void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const 
     const int dof = m->jnt_dofadr[j];
     double r = d->qfrc_bias[dof] - d->qfrc_passive[dof];
     if (catalog_.Joint(j).role == JointRole::kActuated) {
-      const int i = static_cast<int>(std::find(catalog_.actuated.begin(), catalog_.actuated.end(),
-                                               j) -
-                                     catalog_.actuated.begin());
+      const int i =
+          static_cast<int>(std::find(catalog_.actuated.begin(), catalog_.actuated.end(), j) -
+                           catalog_.actuated.begin());
       // The gear spring around the flank the load presses on (set by the backlash pass through
       // the unloaded position stored in qpos0 of the pass, see Settle).
       r -= setup_.gear[j].SpringTorque(gear_reference_[i] - x[k]);
@@ -256,14 +256,14 @@ SettleReport Simulation::Settle(const SettleOptions& options) {
     for (int i = 0; i < num_actuated(); ++i) {
       const int j = catalog_.actuated[i];
       const GearSpec& g = setup_.gear[j];
-      gear_reference_[i] = command_[i] + g.TransmissionError(command_[i]) - sign[j] * 0.5 * g.backlash;
+      gear_reference_[i] =
+          command_[i] + g.TransmissionError(command_[i]) - sign[j] * 0.5 * g.backlash;
     }
     // Start from the nominal state: the result does not depend on the previous configuration.
     for (int k = 0; k < n; ++k) {
       const int j = free_joints_[k];
-      x[k] = catalog_.Joint(j).role == JointRole::kActuated
-                 ? d->qpos[m->jnt_qposadr[j]]
-                 : m->qpos0[m->jnt_qposadr[j]];
+      x[k] = catalog_.Joint(j).role == JointRole::kActuated ? d->qpos[m->jnt_qposadr[j]]
+                                                            : m->qpos0[m->jnt_qposadr[j]];
     }
     ComputeStaticForces(free_joints_, x, &r);
     int it = 0;
@@ -294,8 +294,10 @@ SettleReport Simulation::Settle(const SettleOptions& options) {
       }
       Eigen::FullPivLU<Eigen::MatrixXd> lu(J);
       if (!lu.isInvertible()) {
-        throw SimulationError(model_name_ + ": quasi-static settle has a singular stiffness at "
-                              "iteration " + std::to_string(report.iterations + it) +
+        throw SimulationError(model_name_ +
+                              ": quasi-static settle has a singular stiffness at "
+                              "iteration " +
+                              std::to_string(report.iterations + it) +
                               " (a free joint without stiffness?)");
       }
       const Eigen::VectorXd dx = lu.solve(-r);
@@ -379,8 +381,9 @@ void Simulation::CheckStep() const {
   for (int w : {mjWARN_BADQACC, mjWARN_BADQVEL, mjWARN_BADQPOS}) {
     if (d->warning[w].number != warning_counts_[w]) {
       const int dof = d->warning[w].lastinfo;
-      const char* what = w == mjWARN_BADQACC ? "acceleration" : w == mjWARN_BADQVEL ? "velocity"
-                                                                                     : "position";
+      const char* what = w == mjWARN_BADQACC   ? "acceleration"
+                         : w == mjWARN_BADQVEL ? "velocity"
+                                               : "position";
       std::string joint = "?";
       if (w != mjWARN_BADQPOS && dof >= 0 && dof < m->nv) {
         joint = ObjectName(m, mjOBJ_JOINT, m->dof_jntid[dof]);
@@ -439,9 +442,9 @@ double Simulation::SettleDynamic(double max_time_s, double velocity_tol) {
     }
     if (worst < velocity_tol) return time() - t0;
   }
-  throw SimulationError(model_name_ + ": no equilibrium within " + Fmt(max_time_s) +
-                        " s (step " + std::to_string(steps_) + ", |qvel| = " + Fmt(worst) +
-                        " at joint '" + ObjectName(m, mjOBJ_JOINT, m->dof_jntid[worst_dof]) + "')");
+  throw SimulationError(model_name_ + ": no equilibrium within " + Fmt(max_time_s) + " s (step " +
+                        std::to_string(steps_) + ", |qvel| = " + Fmt(worst) + " at joint '" +
+                        ObjectName(m, mjOBJ_JOINT, m->dof_jntid[worst_dof]) + "')");
 }
 
 // ---------------------------------------------------------------- ground truth

@@ -31,14 +31,14 @@
 namespace flexbench::sim {
 
 struct SettleOptions {
-  double tolerance = 1e-9;   // largest |residual| accepted, Nm (N for slides)
-  int max_iterations = 50;   // Newton iterations per backlash pass
+  double tolerance = 1e-9;  // largest |residual| accepted, Nm (N for slides)
+  int max_iterations = 50;  // Newton iterations per backlash pass
 };
 
 struct SettleReport {
-  int iterations = 0;        // Newton iterations, all passes
-  double residual = 0.0;     // final max |residual|
-  int free_dofs = 0;         // DoFs solved for
+  int iterations = 0;     // Newton iterations, all passes
+  double residual = 0.0;  // final max |residual|
+  int free_dofs = 0;      // DoFs solved for
 };
 
 enum class FrameType { kSite, kCamera, kGeom, kBody };
@@ -60,14 +60,13 @@ class Simulation {
   Simulation(const Simulation&) = delete;
   Simulation& operator=(const Simulation&) = delete;
 
-  static std::unique_ptr<Simulation> Load(const std::string& path,
-                                          const EffectList& effects = {});
+  static std::unique_ptr<Simulation> Load(const std::string& path, const EffectList& effects = {});
   static std::unique_ptr<Simulation> FromString(const std::string& xml, const std::string& name,
                                                 const EffectList& effects = {});
 
   const std::string& model_name() const { return model_name_; }
   const ModelCatalog& catalog() const { return catalog_; }
-  const mjModel* model() const { return truth_.get(); }        // truth
+  const mjModel* model() const { return truth_.get(); }  // truth
   // The truth model for renderers that fill textures (render::ApplyTagTextures); physics
   // parameters must not be changed through it.
   mjModel* mutable_model() { return truth_.get(); }
@@ -152,8 +151,8 @@ class Simulation {
   std::vector<std::string> actuated_names_;
   Eigen::VectorXd command_;
   std::vector<double> gear_reference_;  // per actuated joint: unloaded gear-spring position
-  std::vector<int> locked_joints_;   // held at qpos0 (effects off)
-  std::vector<int> free_joints_;     // solved in Settle: released passive + elastic gears
+  std::vector<int> locked_joints_;      // held at qpos0 (effects off)
+  std::vector<int> free_joints_;        // solved in Settle: released passive + elastic gears
   long steps_ = 0;
   bool at_rest_ = false;
   mutable bool kinematics_current_ = false;

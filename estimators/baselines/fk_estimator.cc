@@ -1,8 +1,8 @@
 #include "estimators/baselines/fk_estimator.h"
 
 #include "estimators/error.h"
-#include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/estimator.h"
+#include "estimators/kinematics/forward_kinematics.h"
 
 namespace flexbench::estimators {
 namespace {

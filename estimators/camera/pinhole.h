@@ -4,8 +4,8 @@
 // Pixel coordinates follow libapriltag 3.3: the top-left pixel covers [0,1] x [0,1], so its
 // centre is (0.5, 0.5); u to the right, v down. (Measured: rendered tags projected with the
 // centre-at-0 convention were off by +0.5 px in u and v. OpenCV puts pixel centres at integers:
-// subtract 0.5 at that boundary.) The camera frame is the optical frame: x right, y down, z forward.
-// (MuJoCo cameras look along -z with y up; sim/render converts at the boundary.)
+// subtract 0.5 at that boundary.) The camera frame is the optical frame: x right, y down, z
+// forward. (MuJoCo cameras look along -z with y up; sim/render converts at the boundary.)
 #pragma once
 
 #include <Eigen/Core>

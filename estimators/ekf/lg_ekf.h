@@ -17,9 +17,9 @@ namespace flexbench::estimators {
 
 struct LgEkfOptions {
   int max_iterations = 10;
-  double tolerance = 1e-10;       // on |m|, the tangent-space correction
-  bool numeric_jacobians = false; // force numeric H and M even where analytic ones exist
-  double gate_nis = 0.0;          // reject when the NIS exceeds this (0: no gate)
+  double tolerance = 1e-10;        // on |m|, the tangent-space correction
+  bool numeric_jacobians = false;  // force numeric H and M even where analytic ones exist
+  double gate_nis = 0.0;           // reject when the NIS exceeds this (0: no gate)
 };
 
 struct LgEkfResult {

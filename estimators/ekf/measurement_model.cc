@@ -67,8 +67,7 @@ bool PixelPointModel::Residual(const lie::SE3& X, const NoiseVec& v, MeasVec* r)
   return true;
 }
 
-bool PixelPointModel::AnalyticJacobians(const lie::SE3& X, MeasJac* J_r_X,
-                                        NoiseJac* J_r_v) const {
+bool PixelPointModel::AnalyticJacobians(const lie::SE3& X, MeasJac* J_r_X, NoiseJac* J_r_v) const {
   const Vec3 p_cam = T_cam_base_ * (X * p_ee_);
   if (p_cam.z() <= 1e-9) return false;
   *J_r_X = -ProjectionJacobian(camera_, p_cam) * T_cam_base_.rotation() * PointJacobian(X, p_ee_);
@@ -94,8 +93,7 @@ bool TagCornersModel::Residual(const lie::SE3& X, const NoiseVec& v, MeasVec* r)
   return true;
 }
 
-bool TagCornersModel::AnalyticJacobians(const lie::SE3& X, MeasJac* J_r_X,
-                                        NoiseJac* J_r_v) const {
+bool TagCornersModel::AnalyticJacobians(const lie::SE3& X, MeasJac* J_r_X, NoiseJac* J_r_v) const {
   J_r_X->resize(8, 6);
   for (int k = 0; k < 4; ++k) {
     const Vec3 p_cam = T_cam_base_ * (X * p_ee_[k]);

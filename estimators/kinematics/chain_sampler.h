@@ -23,12 +23,12 @@ class ChainSampler {
               std::vector<lie::SE3>* poses);
 
   // Second moment about the nominal pose, E[Log(Tbar^-1 T) Log(Tbar^-1 T)^T], of `frame` from
-  // n draws (the definition of [PPOE eq. 9]), with a control variate: xi_lin = sum_i Ad_{Tbar_frame^-1 Tbar_ip}
-  // xi_i, the first-order image of the drawn sources, has the exactly known covariance
-  // Sigma_lin = sum_i Ad Sigma_i Ad^T, so Sigma_lin + mean(xi xi^T - xi_lin xi_lin^T) estimates
-  // E[xi xi^T] with the sampling error of a 4th-order difference only. This is what resolves
-  // 2nd- against 4th-order compounding at 10 deg, where their difference is smaller than the
-  // raw Monte-Carlo error of a million draws. Returns Sigma_lin in *linear when given.
+  // n draws (the definition of [PPOE eq. 9]), with a control variate: xi_lin = sum_i
+  // Ad_{Tbar_frame^-1 Tbar_ip} xi_i, the first-order image of the drawn sources, has the exactly
+  // known covariance Sigma_lin = sum_i Ad Sigma_i Ad^T, so Sigma_lin + mean(xi xi^T - xi_lin
+  // xi_lin^T) estimates E[xi xi^T] with the sampling error of a 4th-order difference only. This is
+  // what resolves 2nd- against 4th-order compounding at 10 deg, where their difference is smaller
+  // than the raw Monte-Carlo error of a million draws. Returns Sigma_lin in *linear when given.
   Mat6 SampleCovarianceControlVariate(const Eigen::Ref<const Eigen::VectorXd>& q, FrameId frame,
                                       int n, std::mt19937_64& rng, Mat6* linear = nullptr);
 

@@ -127,8 +127,8 @@ struct ScalarTransport {
   }
 };
 
-// [PPOE eqs. 14-18] along the tree; inlined into each CPU's entry point so that the transports compile
-// for that CPU.
+// [PPOE eqs. 14-18] along the tree; inlined into each CPU's entry point so that the transports
+// compile for that CPU.
 template <class Transport>
 EIGEN_ALWAYS_INLINE void CovarianceRecursion(const PpoeModel& model, PpoeData& data,
                                              const Eigen::Ref<const Eigen::VectorXd>& q,

@@ -22,9 +22,10 @@ void ForwardKinematics(const PpoeModel& model, PpoeData& data,
 
 // Mean poses and local covariances of all frames: data.T_base_frame and data.Sigma_frame.
 // Covariances are compounded source by source along the tree [PPOE eq. 14]: the fixed parts of
-// [PPOE eq. 16] move the accumulated covariance exactly by the adjoint [PPOE eq. 11b]; at each source the
-// accumulated and the new perturbation are combined with [PPOE eq. 15] / [PPOE eq. 18] (kSecond) or the
-// 4th-order BCH moments (kFourth, see lie/compound.h), assuming sources are independent.
+// [PPOE eq. 16] move the accumulated covariance exactly by the adjoint [PPOE eq. 11b]; at each
+// source the accumulated and the new perturbation are combined with [PPOE eq. 15] / [PPOE eq. 18]
+// (kSecond) or the 4th-order BCH moments (kFourth, see lie/compound.h), assuming sources are
+// independent.
 void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
                                      const Eigen::Ref<const Eigen::VectorXd>& q,
                                      lie::CompoundOrder order);

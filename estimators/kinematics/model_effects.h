@@ -12,10 +12,11 @@
 //
 // where tau is the gravity torque the joint holds, B turns a bent link about its middle by
 // c * (the moment of the weight beyond it, across the link), and Exp(mount) tilts the arm's
-// mount by C M at its loaded equilibrium (MountTilt). The loads come from the declared masses at the nominal chain's
-// configuration q_read (as the identification computes them), with the payload as a mass on its
-// frame. A backlash rests on the flank its gravity torque presses (the identification's rule
-// for data without recorded motion; a flank that follows the motion is not tracked at run time).
+// mount by C M at its loaded equilibrium (MountTilt). The loads come from the declared masses at
+// the nominal chain's configuration q_read (as the identification computes them), with the payload
+// as a mass on its frame. A backlash rests on the flank its gravity torque presses (the
+// identification's rule for data without recorded motion; a flank that follows the motion is not
+// tracked at run time).
 //
 // Model/Data split: ModelEffects is constant; EffectiveChain is the per-estimator workspace that
 // holds the corrected model at the last reading. Neither allocates after construction.
@@ -174,8 +175,8 @@ class EffectiveChain {
   FrameId last_rel_ = 0;              // rel_ is needed up to here
   FrameId last_gravity_ = 0;          // gravity_ is needed up to here
   std::vector<FrameId> varying_frames_;  // ModelEffects::FrameVaries, in increasing order
-  std::vector<lie::SE3> static_;  // per frame: the fixed part without load-driven terms
-  std::vector<Vec3> bend_;        // per frame: the link's bend (rotation vector, start's axes)
+  std::vector<lie::SE3> static_;         // per frame: the fixed part without load-driven terms
+  std::vector<Vec3> bend_;           // per frame: the link's bend (rotation vector, start's axes)
   Mat3 mount_R_ = Mat3::Identity();  // the mount's tilt at the reading, MountRotation
   Eigen::Matrix2d J_mount_c_ = Eigen::Matrix2d::Zero();  // d mount tilt / d compliance
   // Parameter uncertainty (ModelEffects::Uncertainty) as PPOE sources.
@@ -186,10 +187,10 @@ class EffectiveChain {
   bool sources_vary_ = false;
   Eigen::VectorXd q_, tau_;
   bool needs_loads_ = false;
-  std::vector<char> torque_needed_;  // per joint: a term acts through its torque
-  std::vector<char> harmonic_;       // per joint: a harmonic term is set
+  std::vector<char> torque_needed_;    // per joint: a term acts through its torque
+  std::vector<char> harmonic_;         // per joint: a harmonic term is set
   std::vector<FrameId> joint_frames_;  // per joint: PpoeModel::joint_frame
-  FrameId last_varying_ = 0;         // frames past it keep their fixed part
+  FrameId last_varying_ = 0;           // frames past it keep their fixed part
 };
 
 }  // namespace flexbench::kinematics

@@ -21,9 +21,9 @@
 // - F_i (the link frame, moving with q_i) is the frame after the joint.
 //
 // Links are frames with a joint (AddLink); extra frames are rigid (AddFrame, joint fixed):
-// end-effector ([PPOE eq. 17]'s Exp(p_{n+1})), tags, camera points, and a grasp frame whose uncertain
-// xi_grasp is its source (the paper's grasp-linkage extension). A passive compliance with no
-// actuator (e.g. a base plate) is a frame with a fixed joint and a source. Any frame can be a
+// end-effector ([PPOE eq. 17]'s Exp(p_{n+1})), tags, camera points, and a grasp frame whose
+// uncertain xi_grasp is its source (the paper's grasp-linkage extension). A passive compliance with
+// no actuator (e.g. a base plate) is a frame with a fixed joint and a source. Any frame can be a
 // parent, so tree-structured robots are chains sharing a trunk.
 //
 // Joint variables: each frame with a revolute or prismatic joint takes the next index of q in

@@ -18,9 +18,9 @@
 // part of the second moment (so the result stays consistent about X1 X2) and available from
 // BchMean.
 //
-// "Order" counts powers of the perturbation in the moment expansion [PPOE eq. 14]: kSecond is [PPOE eq. 15],
-// kFourth adds every 4th-order moment term (Barfoot & Furgale's 4th-order form; for correlated
-// inputs derived with Isserlis' theorem, see compound.cc).
+// "Order" counts powers of the perturbation in the moment expansion [PPOE eq. 14]: kSecond is [PPOE
+// eq. 15], kFourth adds every 4th-order moment term (Barfoot & Furgale's 4th-order form; for
+// correlated inputs derived with Isserlis' theorem, see compound.cc).
 #pragma once
 
 #include "estimators/conventions.h"

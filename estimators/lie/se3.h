@@ -1,7 +1,8 @@
 // SE(3) as a small value type (rotation + translation, 12 doubles, no alignment requirement).
 //
 // Conventions (conventions.h, PPOE paper sec. III):
-// - Tangent vectors xi = [rho; theta] (translation first), hat(xi) = [[theta]x, rho; 0, 0] [PPOE eq. 2].
+// - Tangent vectors xi = [rho; theta] (translation first), hat(xi) = [[theta]x, rho; 0, 0] [PPOE
+// eq. 2].
 // - Right (local) perturbations: X = Xbar * Exp(xi); "X (+) xi" = X * Exp(xi) and
 //   "Y (-) X" = Log(X^-1 * Y). Covariances live in the tangent space at the mean.
 // - Ad_X = [[R, [t]x R], [0, R]] [PPOE eq. 7] maps local tangent vectors at X to global ones at the
@@ -294,7 +295,7 @@ EIGEN_ALWAYS_INLINE void TransportBlocksScalar(const Mat3& R_in, const Vec3& t, 
   }
   const double* R = R_in.data();
   // R^T M R by columns, as RotateBlockV4.
-  const auto rotate = [R](const double (*M)[3], double (*o)[3]) {
+  const auto rotate = [R](const double(*M)[3], double(*o)[3]) {
     for (int j = 0; j < 3; ++j) {
       double P[3];
       for (int i = 0; i < 3; ++i) {
@@ -330,8 +331,8 @@ EIGEN_ALWAYS_INLINE void TransportBlocksScalar(const Mat3& R_in, const Vec3& t, 
 }  // namespace internal
 
 // Sigma -> Ad_{X^-1} Sigma Ad_{X^-1}^T: moves a local covariance at Y to the local tangent space
-// at Y * X, exactly (Y Exp(xi) X = Y X Exp(Ad_{X^-1} xi)); the transport step of [PPOE eqs. 15, 18].
-// Sigma must be symmetric; `out` may alias it.
+// at Y * X, exactly (Y Exp(xi) X = Y X Exp(Ad_{X^-1} xi)); the transport step of [PPOE eqs. 15,
+// 18]. Sigma must be symmetric; `out` may alias it.
 EIGEN_ALWAYS_INLINE void TransportCovariance(const SE3& X, const Mat6& Sigma, Mat6* out) {
   internal::TransportBlocks(X.rotation(), X.translation(), Sigma, nullptr, out);
 }

@@ -1,6 +1,6 @@
 // Forward kinematics of many joint configurations at once, in structure-of-arrays form, from the
-// same PpoeModel the EKF uses (mean poses, [PPOE eqs. 16-17] with every source at zero). No MuJoCo, no
-// per-particle virtual call, no allocation after construction.
+// same PpoeModel the EKF uses (mean poses, [PPOE eqs. 16-17] with every source at zero). No MuJoCo,
+// no per-particle virtual call, no allocation after construction.
 //
 // The chain is compressed at construction: only the revolute joint frames on the paths from the
 // base to the requested output frames are kept ("nodes"), every fixed transform between two of

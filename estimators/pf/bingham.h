@@ -6,8 +6,8 @@
 // - Quaternions are (x, y, z, w) ("xyzw", the paper's choice), so that with M = I4 the mode is
 //   the identity rotation. Convert from Eigen with QuatToXyzwPositive (conventions.h).
 // - lambda is sorted ascending, lambda1 <= lambda2 <= lambda3 <= lambda4, and shifted so that its
-//   largest entry is 0 ([PF eqs. 8-9]: adding a constant to every entry does not change the density).
-//   Column k of the orthogonal M is the axis of lambda_k; the last column is the mode.
+//   largest entry is 0 ([PF eqs. 8-9]: adding a constant to every entry does not change the
+//   density). Column k of the orthogonal M is the axis of lambda_k; the last column is the mode.
 // - Axis-symmetric case: lambda3 = lambda4 = 0. The density is then constant on the great circle
 //   spanned by the last two columns of M; with M = I4 and lambda = (l, l, 0, 0) (the paper's
 //   Table I) that circle is every rotation about the z axis, which is how the filter stops caring

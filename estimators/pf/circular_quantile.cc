@@ -351,8 +351,8 @@ void WeightedCircularQuantiles(const double* c, const double* s, const double* w
   std::vector<int>& bin = scratch->bin_;
   std::array<double, kBins>& mass = scratch->mass_;
   double kept = 0.0, kmin = HUGE_VAL, kmax = -HUGE_VAL;
-  DiamondKeys(c, s, w, n, cm, sm, negligible, key.data(), scratch->lo_.data(),
-              scratch->hi_.data(), scratch->wk_.data());
+  DiamondKeys(c, s, w, n, cm, sm, negligible, key.data(), scratch->lo_.data(), scratch->hi_.data(),
+              scratch->wk_.data());
   KeptRange(scratch->lo_.data(), scratch->hi_.data(), scratch->wk_.data(), n, &kmin, &kmax, &kept);
   if (!(kept > 0.0)) {
     for (int k = 0; k < np; ++k) out[k] = 0.0;

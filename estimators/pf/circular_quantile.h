@@ -33,7 +33,7 @@ class CircularQuantileScratch {
                                            double*, CircularQuantileScratch*);
   std::vector<double> key_;
   std::vector<double> lo_, hi_, wk_;  // per particle: key or +-inf, weight or 0 (kept or not)
-  std::vector<int> bin_;  // -1: a negligible particle
+  std::vector<int> bin_;              // -1: a negligible particle
   std::vector<int> idx_;  // the particles gathered near a quantile (n + 1: one spare write)
   std::vector<int> idx_lo_, idx_hi_;  // the lower and upper bands' particles (n + 1)
   std::vector<long long> band_;       // per particle: 1 lower band, 2 upper band, 0 neither

@@ -11,8 +11,8 @@ namespace {
 constexpr int kBlock = BatchKinematics::kBlock;
 // Past this cosine the skew part no longer carries the axis accurately (as lie::SO3Log).
 constexpr double kNearPiCos = -0.7;
-constexpr double kTinyAngle = 1e-4;   // lie/so3.cc: theta / sin(theta) by its series below
-constexpr double kSmallAngle = 0.2;   // lie/so3.cc: Jl^-1's coefficient by its series below
+constexpr double kTinyAngle = 1e-4;  // lie/so3.cc: theta / sin(theta) by its series below
+constexpr double kSmallAngle = 0.2;  // lie/so3.cc: Jl^-1's coefficient by its series below
 
 // Below pi/4 atan(y / x); above, pi/2 - atan(x / y), the ratio t in (-1, 1] either way (y and x
 // are never both zero for a rotation's sin and cos). Cephes' atan: t + t z P(z) / Q(z), z = t^2,

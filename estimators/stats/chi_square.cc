@@ -74,7 +74,8 @@ double ChiSquareQuantile(double p, double dof) {
 
 ChiSquareBounds MeanChiSquareBounds(double dof, int n, double alpha) {
   const double total = dof * n;
-  return {ChiSquareQuantile(0.5 * alpha, total) / n, ChiSquareQuantile(1.0 - 0.5 * alpha, total) / n};
+  return {ChiSquareQuantile(0.5 * alpha, total) / n,
+          ChiSquareQuantile(1.0 - 0.5 * alpha, total) / n};
 }
 
 }  // namespace flexbench::stats

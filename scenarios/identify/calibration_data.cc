@@ -4,15 +4,15 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <limits>
 #include <map>
 #include <set>
-#include <unordered_map>
 #include <sstream>
+#include <unordered_map>
 
 #include "estimators/error.h"
 #include "sim/config.h"
@@ -192,7 +192,8 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       for (size_t j = 0; j < joints.size(); ++j) {
         if (joints[j] == h.substr(7)) motion_col[j] = static_cast<int>(c), known = true;
       }
-      if (!known) throw InputError(hdr + ": column '" + CapForMessage(h) + "' names no actuated joint");
+      if (!known)
+        throw InputError(hdr + ": column '" + CapForMessage(h) + "' names no actuated joint");
     }
     if (h == "v") uv_col[1] = static_cast<int>(c), known = true;
     if (!known) {
@@ -287,8 +288,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
 
 void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_joints,
                         double socket_distance_m, DataSet* data) {
-  if (!(std::isfinite(socket_distance_m) && socket_distance_m > 0.0 &&
-        socket_distance_m <= 10.0)) {
+  if (!(std::isfinite(socket_distance_m) && socket_distance_m > 0.0 && socket_distance_m <= 10.0)) {
     char v[32];
     std::snprintf(v, sizeof(v), "%g", socket_distance_m);
     throw InputError(CapForMessage(dir) + ": socket_distance_m " + v +

@@ -20,13 +20,12 @@ Folds MakeFolds(const DataSet& data, const std::string& by) {
                       f.test_rows.end());
   };
   if (by == "auto" || by == "set") {
-    by_label("set", static_cast<int>(data.sets.size()),
-             [](const Observation& o) { return o.set; });
+    by_label("set", static_cast<int>(data.sets.size()), [](const Observation& o) { return o.set; });
     if (f.test_rows.size() >= 2 || by == "set") return f;
   }
-  if (by == "auto" || by == "group") by_label("group", static_cast<int>(data.groups.size()), [](const Observation& o) {
-    return o.type == ObservationType::kGroup ? o.group : -1;
-  });
+  if (by == "auto" || by == "group")
+    by_label("group", static_cast<int>(data.groups.size()),
+             [](const Observation& o) { return o.type == ObservationType::kGroup ? o.group : -1; });
   if (f.test_rows.size() >= 4 || by == "group") {
     // Rows without a group (points) join the folds in round robin.
     int k = 0;
@@ -125,8 +124,8 @@ FoldData MakeFoldData(const DataSet& data, const std::vector<ConfigLoads>& loads
 size_t HeapBytes(const ConfigLoads& L) {
   return sizeof(double) * (L.tau.size() + L.tau_unit.size() + L.axis_base.size() +
                            L.motion_sign.size() + L.q_nominal.size()) +
-         sizeof(Vec3) * (L.M_mid.size() + L.M_mid_unit.size()) +
-         sizeof(Mat3) * L.R_mid_T.size() + sizeof(lie::SE3) * L.T_nominal.size();
+         sizeof(Vec3) * (L.M_mid.size() + L.M_mid_unit.size()) + sizeof(Mat3) * L.R_mid_T.size() +
+         sizeof(lie::SE3) * L.T_nominal.size();
 }
 
 }  // namespace
@@ -159,8 +158,8 @@ double CrossValidate(const EffectModel& em, const DataSet& data,
     const FoldData& f = folds.cache.size() == folds.test_rows.size() ? folds.cache[k] : made;
     Eigen::VectorXd theta = fit.theta;
     if (!fit.active.empty()) {
-      theta = FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt)
-                  .theta;
+      theta =
+          FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt).theta;
     }
     int n = 0;
     ss += HeldOutSquares(em, f.test, f.test_loads, fit.active, theta, opt, &n);

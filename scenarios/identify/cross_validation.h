@@ -20,7 +20,7 @@ struct FoldData {
 };
 
 struct Folds {
-  std::string by;                          // "set", "group", "row"
+  std::string by;                           // "set", "group", "row"
   std::vector<std::vector<int>> test_rows;  // per fold, row indices into the data set
   // Per fold, its subsets made once (CacheFolds); empty: CrossValidate makes them per call.
   std::vector<FoldData> cache;

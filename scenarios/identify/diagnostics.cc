@@ -187,8 +187,8 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
   char line[256];
   if (best.kind == "periodic") {
     std::snprintf(line, sizeof(line), "residual periodic in %s, %d cycles/rev, %.3g deg, p %s %.2g",
-                  best.variable.c_str(), best.cycles, best.size,
-                  best.p_value <= 1e-16 ? "<" : "=", best.p_value);
+                  best.variable.c_str(), best.cycles, best.size, best.p_value <= 1e-16 ? "<" : "=",
+                  best.p_value);
   } else if (best.kind == "load") {
     std::snprintf(line, sizeof(line),
                   "residual follows the gravity torque of %s, %.3g %s, p %s %.2g",

@@ -457,7 +457,7 @@ void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L
                                   const std::vector<int>& active, const double* theta,
                                   Workspace& ws) const {
   double payload = 0.0;
-  Vec3 couple = Vec3::Zero();  // base axes
+  Vec3 couple = Vec3::Zero();         // base axes
   Vec3 payload_first = Vec3::Zero();  // end-effector axes
   {
     const double* t = theta;
@@ -554,8 +554,7 @@ void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L
   ws.mount_rot = mount_rot;
 }
 
-void EffectModel::ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L,
-                             Workspace& ws) const {
+void EffectModel::ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L, Workspace& ws) const {
   const kinematics::PpoeModel& model = chain_->model;
   const int n = model.num_frames();
   const double scale = ws.scale;
@@ -564,17 +563,15 @@ void EffectModel::ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L,
   const bool mount_turns = !mount_rot.isZero();
   // Until the first frame the effects touch, the poses are the cached nominal ones (when cached
   // for this very q: the diagnostics predict at perturbed readings with a row's loads).
-  bool nominal = static_cast<int>(L.T_nominal.size()) == n && L.q_nominal.size() == q.size() &&
-                 std::equal(q.data(), q.data() + q.size(), L.q_nominal.data(),
-                            [](double a, double b) {
-                              return std::memcmp(&a, &b, sizeof(double)) == 0;
-                            });
+  bool nominal =
+      static_cast<int>(L.T_nominal.size()) == n && L.q_nominal.size() == q.size() &&
+      std::equal(q.data(), q.data() + q.size(), L.q_nominal.data(),
+                 [](double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; });
   for (FrameId f = 1; f < n; ++f) {
     if (!on_path_[f]) continue;
     const kinematics::PpoeFrame& fr = model.frame(f);
-    if (scale == 0.0 && ws.dlen[f] == 0.0 && ws.offset[f].isZero(0.0) &&
-        ws.origin[f].isZero(0.0) && ws.bend[f].isZero(0.0) && ws.tilt[f].isZero(0.0) &&
-        !(f == mount_ && mount_turns)) {
+    if (scale == 0.0 && ws.dlen[f] == 0.0 && ws.offset[f].isZero(0.0) && ws.origin[f].isZero(0.0) &&
+        ws.bend[f].isZero(0.0) && ws.tilt[f].isZero(0.0) && !(f == mount_ && mount_turns)) {
       // Untouched by the active effects (most frames, most calls): the FK kernels' form.
       const double dqf = fr.q_index >= 0 ? ws.dq[fr.q_index] : 0.0;
       if (nominal && dqf == 0.0 && !std::signbit(dqf)) {
@@ -737,8 +734,7 @@ void EffectModel::PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace
 }
 
 void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q,
-                                    const ConfigLoads& L, const Workspace& ws,
-                                    Tangent* out) const {
+                                    const ConfigLoads& L, const Workspace& ws, Tangent* out) const {
   const FrameId f = c.frame;
   const kinematics::PpoeFrame& fr = chain_->model.frame(f);
   // Most candidates sit at frames the active effects leave alone: there T2 = T4 = T5 = T_parent
@@ -808,8 +804,9 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
     case EffectType::kBaseCompliance: {
       // d tilt / d c: MountTilt's at the active compliance; at none, the moment at rest.
       const Vec3 M = Load(L.M_mount + ws.payload * L.M_mount_unit + L.R_mount_T * ws.couple);
-      const Eigen::Matrix2d J =
-          ws.mount_active ? ws.mount_J : Eigen::Matrix2d(Eigen::Vector2d(M.x(), M.y()).asDiagonal());
+      const Eigen::Matrix2d J = ws.mount_active
+                                    ? ws.mount_J
+                                    : Eigen::Matrix2d(Eigen::Vector2d(M.x(), M.y()).asDiagonal());
       // Body rates of MountRotation = R_y(theta_y) R_x(theta_x): x for theta_x, R_x^T y for
       // theta_y.
       double sx, cx;
@@ -856,8 +853,7 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
 
 lie::SE3 EffectModel::PoseTangents(const Eigen::VectorXd& q, const ConfigLoads& L,
                                    const std::vector<int>& active, const double* theta,
-                                   const std::vector<int>& cs, Workspace& ws,
-                                   Tangent* out) const {
+                                   const std::vector<int>& cs, Workspace& ws, Tangent* out) const {
   AccumulateTerms(q, L, active, theta, ws);
   ChainPoses(q, L, ws);
   // Frames ids grow away from the base: the point is needed from the highest candidate down.

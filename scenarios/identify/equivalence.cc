@@ -244,10 +244,10 @@ void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
       names += (names.empty() ? "" : " + ") + em.candidates()[fit.active[e]].Name();
       params += em.candidates()[fit.active[e]].num_params;
     }
-    const bool listed = std::find(candidates.begin(), candidates.end(), se.candidate) !=
-                        candidates.end();
-    const std::string line = names + " together make the same correction as " + cand.Name() +
-                             " (" + std::to_string(cand.num_params) + " parameter(s) instead of " +
+    const bool listed =
+        std::find(candidates.begin(), candidates.end(), se.candidate) != candidates.end();
+    const std::string line = names + " together make the same correction as " + cand.Name() + " (" +
+                             std::to_string(cand.num_params) + " parameter(s) instead of " +
                              std::to_string(params) + (listed ? "" : "; not among the candidates") +
                              "): the cause is not singled out";
     result->simpler.push_back(line);

@@ -79,9 +79,10 @@ void Report(const EffectModel& em, const DataSet& data, const std::vector<Config
                    AlphaName(em, cur, idx[i]).c_str());
     }
     res->undetermined = combo;
-    res->steps.push_back(Fmt("near singular: the data does not determine %s (eigenvalue ratio "
-                             "%.2g); its standard deviations cover only the determined part",
-                             combo.c_str(), lam[0] / lmax));
+    res->steps.push_back(
+        Fmt("near singular: the data does not determine %s (eigenvalue ratio "
+            "%.2g); its standard deviations cover only the determined part",
+            combo.c_str(), lam[0] / lmax));
   }
   const int dof = std::max(1, pr.num_residuals() - pr.num_params());
   const Eigen::MatrixXd cov_x = (cur.rss / dof) * d.asDiagonal() * pinv * d.asDiagonal();
@@ -112,8 +113,7 @@ void Report(const EffectModel& em, const DataSet& data, const std::vector<Config
     double parts = 0.0;
     for (size_t e = 0, a = 0; e < cur.active.size(); ++e) {
       const int m = static_cast<int>(cur.basis[e].cols());
-      const Eigen::VectorXd d =
-          proj.Apply(J.middleCols(a, m) * StateOf(pr, cur).segment(a, m));
+      const Eigen::VectorXd d = proj.Apply(J.middleCols(a, m) * StateOf(pr, cur).segment(a, m));
       sum += d;
       parts += d.squaredNorm();
       a += m;
@@ -202,9 +202,9 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
     for (const auto& n : a.effects) names += (names.empty() ? "" : " + ") + n;
     const bool close = !alt.active.empty() && cv < (1.0 + ctx.opt.ambiguity_cv) * res->cv_after;
     if (close) res->attribution_unique = false;
-    res->steps.push_back(Fmt("without %s: %s reach held-out %.4g (chosen %.4g)%s",
-                             a.banned.c_str(), names.empty() ? "nothing" : names.c_str(), cv,
-                             res->cv_after, close ? ": as good, the cause is not singled out" : ""));
+    res->steps.push_back(Fmt("without %s: %s reach held-out %.4g (chosen %.4g)%s", a.banned.c_str(),
+                             names.empty() ? "nothing" : names.c_str(), cv, res->cv_after,
+                             close ? ": as good, the cause is not singled out" : ""));
     res->alternatives.push_back(std::move(a));
   }
 }
@@ -317,9 +317,10 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   IdentifyResult res;
   res.before = FitEffects(em, data, loads, {}, Eigen::VectorXd(), opt);
   if (res.before.num_residuals <= res.before.num_params) {
-    throw InputError(Fmt("identify: %d residuals for %d unknowns (group points): the data cannot "
-                         "determine its own sockets, let alone an effect",
-                         res.before.num_residuals, res.before.num_params));
+    throw InputError(
+        Fmt("identify: %d residuals for %d unknowns (group points): the data cannot "
+            "determine its own sockets, let alone an effect",
+            res.before.num_residuals, res.before.num_params));
   }
   {
     // A group of one row fixes its own point and nothing else: refused, not silently used.
@@ -348,8 +349,10 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   double cv = CvError(ctx, res.before);
   res.cv_before = cv;
   if (opt.cross_validation) {
-    res.steps.push_back(Fmt("cross-validation over %d folds by %s; declared model's held-out "
-                            "error %.4g", res.num_folds, folds.by.c_str(), cv));
+    res.steps.push_back(
+        Fmt("cross-validation over %d folds by %s; declared model's held-out "
+            "error %.4g",
+            res.num_folds, folds.by.c_str(), cv));
   }
   Fit cur = SelectEffects(ctx, res.before, Pool(em, candidates, false, false), true, &cv);
   cur = FollowFinding(ctx, candidates, std::move(cur), &cv, &res);

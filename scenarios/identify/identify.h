@@ -68,16 +68,16 @@ struct DataSet {
 };
 
 struct IdentifyOptions {
-  bool cross_validation = true;  // selection checked on held-out folds (cross_validation.h)
-  std::string folds_by = "auto";  // "auto", or insist on "set", "group" or "row" folds
-  double cv_min_gain = 0.02;     // share the held-out error must drop by to keep an effect
-  int cv_trials = 3;             // best-BIC candidates cross-validated per round
-  double outlier_iqr = 3.0;      // rows beyond Q3 + k IQR of the declared model's errors; 0: off
-  double diagnostic_p = 1e-6;    // significance of a residual finding (lets families in)
-  double explained_p = 1e-3;     // a finding this strong still forbids "explained"
-  double ambiguity_cv = 0.25;    // an alternative within this share of the held-out error is
-                                 // as good an explanation
-  double singular_tol = 1e-10;   // smallest / largest eigenvalue of the normalised information
+  bool cross_validation = true;    // selection checked on held-out folds (cross_validation.h)
+  std::string folds_by = "auto";   // "auto", or insist on "set", "group" or "row" folds
+  double cv_min_gain = 0.02;       // share the held-out error must drop by to keep an effect
+  int cv_trials = 3;               // best-BIC candidates cross-validated per round
+  double outlier_iqr = 3.0;        // rows beyond Q3 + k IQR of the declared model's errors; 0: off
+  double diagnostic_p = 1e-6;      // significance of a residual finding (lets families in)
+  double explained_p = 1e-3;       // a finding this strong still forbids "explained"
+  double ambiguity_cv = 0.25;      // an alternative within this share of the held-out error is
+                                   // as good an explanation
+  double singular_tol = 1e-10;     // smallest / largest eigenvalue of the normalised information
   double point_std_m = 1e-4;       // noise of a measured or grouped point
   double distance_std_m = 1e-4;    // of a known group distance
   double rotation_std_rad = 1e-3;  // of a measured orientation (pose rows)
@@ -94,9 +94,9 @@ struct IdentifyOptions {
 
 struct FittedEffect {
   int candidate = -1;
-  std::string name;            // all members of its equivalence set, "a | b"
-  std::vector<double> value;   // the observable part (minimum norm over unseen directions)
-  std::vector<double> std;     // of the observable part; 0 along unseen directions
+  std::string name;           // all members of its equivalence set, "a | b"
+  std::vector<double> value;  // the observable part (minimum norm over unseen directions)
+  std::vector<double> std;    // of the observable part; 0 along unseen directions
   std::vector<std::vector<double>> unobservable;  // parameter directions the data does not see
   double share = 0.0;  // fraction of the removed sum of squares it accounts for
 };
@@ -121,10 +121,10 @@ struct EquivalentMember {
 };
 
 struct EquivalenceSet {
-  int effect = -1;                       // index into IdentifyResult::effects
-  std::string name;                      // members joined by " | ", the chosen one first
+  int effect = -1;   // index into IdentifyResult::effects
+  std::string name;  // members joined by " | ", the chosen one first
   std::vector<EquivalentMember> members;
-  double correction_rms = 0.0;           // whitened RMS of the correction it makes
+  double correction_rms = 0.0;  // whitened RMS of the correction it makes
 };
 
 // The best model selection finds when one chosen effect is banned: if it reaches about the same
@@ -139,8 +139,8 @@ struct Alternative {
 struct ResidualFinding {
   bool significant = false;  // p < diagnostic_p
   bool notable = false;      // p < explained_p: too much left to call the data explained
-  std::string kind;      // "periodic", "load", "drift" ("" none tested)
-  std::string variable;  // joint name, or "row order, x"
+  std::string kind;          // "periodic", "load", "drift" ("" none tested)
+  std::string variable;      // joint name, or "row order, x"
   int q_index = -1;
   int cycles = 0;  // periodic: cycles per revolution of the strongest harmonic
   double size = 0.0;
@@ -172,8 +172,8 @@ struct IdentifyResult {
   // |sum of the effects' corrections|^2 / sum of their |correction|^2 (group points projected
   // out): about 1 for independent causes, well below 1 when effects cancel each other.
   double overlap = 1.0;
-  bool near_singular = false;              // information matrix near singular
-  std::string undetermined;                // the combination it does not determine
+  bool near_singular = false;  // information matrix near singular
+  std::string undetermined;    // the combination it does not determine
   Eigen::MatrixXd theta_cov;
   Eigen::MatrixXd theta_corr;
   double condition_number = 0.0;
@@ -207,8 +207,7 @@ std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data
 // The same for predictions of (active, theta): the arm where its joint corrections put it
 // (EffectModel::LoadsFor); what a fitted model's predictions (validation, residuals) use.
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data,
-                                      const std::vector<int>& active,
-                                      const Eigen::VectorXd& theta);
+                                      const std::vector<int>& active, const Eigen::VectorXd& theta);
 
 // Fits `active` (all directions, plus group points) by Levenberg-Marquardt from `init` (theta;
 // may be empty). problem.h has the form with fitted directions.

@@ -64,15 +64,15 @@ Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, cons
   return Eigen::Vector2d(k.fx * p.x() / z + k.cx, k.fy * p.y() / z + k.cy);
 }
 
-Problem::Problem(const EffectModel& em, const DataSet& data,
-                 const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
-                 const std::vector<Eigen::MatrixXd>& basis, const IdentifyOptions& opt)
+Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+                 const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
+                 const IdentifyOptions& opt)
     : em_(em), data_(data), loads_(loads), active_(active), opt_(opt) {
   basis_.resize(active.size());
   for (size_t e = 0; e < active.size(); ++e) {
     const int np = em.candidates()[active[e]].num_params;
-    basis_[e] = e < basis.size() && basis[e].size() > 0 ? basis[e]
-                                                         : Eigen::MatrixXd::Identity(np, np);
+    basis_[e] =
+        e < basis.size() && basis[e].size() > 0 ? basis[e] : Eigen::MatrixXd::Identity(np, np);
     num_alpha_ += static_cast<int>(basis_[e].cols());
     num_theta_ += np;
   }
@@ -101,8 +101,7 @@ Eigen::VectorXd Problem::Alpha(const Eigen::VectorXd& theta) const {
   int a = 0, t = 0;
   for (const Eigen::MatrixXd& B : basis_) {
     if (t + B.rows() <= theta.size() && B.cols() > 0) {
-      alpha.segment(a, B.cols()) =
-          B.colPivHouseholderQr().solve(theta.segment(t, B.rows()));
+      alpha.segment(a, B.cols()) = B.colPivHouseholderQr().solve(theta.segment(t, B.rows()));
     }
     a += static_cast<int>(B.cols());
     t += static_cast<int>(B.rows());
@@ -237,8 +236,8 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& theta,
   return D;
 }
 
-void Problem::NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
-                                   size_t e, int col, int t, Eigen::MatrixXd* J) const {
+void Problem::NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta, size_t e,
+                                   int col, int t, Eigen::MatrixXd* J) const {
   const Eigen::MatrixXd& B = basis_[e];
   const double step = em_.candidates()[active_[e]].step;
   for (int k = 0; k < B.cols(); ++k) {
@@ -275,8 +274,7 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   for (int c : active_) {
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
-  const Eigen::MatrixXd D =
-      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(theta, analytic);
+  const Eigen::MatrixXd D = analytic.empty() ? Eigen::MatrixXd() : TangentColumns(theta, analytic);
   int col = 0, t = 0, d = 0;
   for (size_t e = 0; e < active_.size(); ++e) {
     const Eigen::MatrixXd& B = basis_[e];
@@ -432,9 +430,9 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
 }
 
 Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-               const Fit& fit, int c, const Eigen::MatrixXd& basis_c,
-               const Eigen::MatrixXd& J_fit, const Eigen::MatrixXd& J_c,
-               const Eigen::VectorXd& r_fit, const IdentifyOptions& opt) {
+               const Fit& fit, int c, const Eigen::MatrixXd& basis_c, const Eigen::MatrixXd& J_fit,
+               const Eigen::MatrixXd& J_c, const Eigen::VectorXd& r_fit,
+               const IdentifyOptions& opt) {
   std::vector<int> act = fit.active;
   act.push_back(c);
   std::vector<Eigen::MatrixXd> basis = fit.basis;

@@ -113,9 +113,9 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
 // r_fit: fit's residuals), scored by one residual pass. Where that step does not lower the sum
 // of squares, FitWith from zero instead.
 Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-               const Fit& fit, int c, const Eigen::MatrixXd& basis_c,
-               const Eigen::MatrixXd& J_fit, const Eigen::MatrixXd& J_c,
-               const Eigen::VectorXd& r_fit, const IdentifyOptions& opt);
+               const Fit& fit, int c, const Eigen::MatrixXd& basis_c, const Eigen::MatrixXd& J_fit,
+               const Eigen::MatrixXd& J_c, const Eigen::VectorXd& r_fit,
+               const IdentifyOptions& opt);
 
 // The same fit with `fit`'s e-th effect removed (the others start from their values).
 Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,

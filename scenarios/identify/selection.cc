@@ -1,9 +1,9 @@
 #include "scenarios/identify/selection.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdarg>
 #include <cstdio>
-#include <cmath>
 #include <limits>
 
 #include "scenarios/identify/equivalence.h"
@@ -69,8 +69,8 @@ int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
     Trial& t = (*trials)[k];
     if (t.fit.bic - cur.bic > -ctx.opt.bic_threshold) break;
     ++tried;
-    t.fit = FitEffects(ctx.em, ctx.data, ctx.loads, t.fit.active, t.fit.basis, t.fit.theta,
-                       ctx.opt);
+    t.fit =
+        FitEffects(ctx.em, ctx.data, ctx.loads, t.fit.active, t.fit.basis, t.fit.theta, ctx.opt);
     const std::string name = ctx.em.candidates()[t.c].Name();
     // An earlier effect pushed past its bound by the new one is made redundant by it: it
     // leaves (the backward step's job, done here so the bound never sees it).
@@ -142,8 +142,8 @@ Fit SwapStep(const SelectionContext& ctx, Fit cur, const std::vector<int>& pool,
       }
       std::vector<Trial> trials = ScreenCandidates(ctx, without, others);
       if (trials.empty() || trials[0].fit.bic >= cur.bic - ctx.opt.ambiguity_bic) continue;
-      Fit best = FitEffects(ctx.em, ctx.data, ctx.loads, trials[0].fit.active,
-                            trials[0].fit.basis, trials[0].fit.theta, ctx.opt);
+      Fit best = FitEffects(ctx.em, ctx.data, ctx.loads, trials[0].fit.active, trials[0].fit.basis,
+                            trials[0].fit.theta, ctx.opt);
       if (best.bic >= cur.bic - ctx.opt.ambiguity_bic) continue;
       if (!BoundViolations(ctx.em, best).empty()) continue;
       const double cv = CvError(ctx, best);
@@ -194,9 +194,9 @@ Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::v
     if (Contains(block.active, c)) continue;
     const Projector proj(FitJacobian(ctx.em, ctx.data, ctx.loads, block, ctx.opt));
     double rel = 0.0;
-    const Eigen::MatrixXd B = ObservableBasis(
-        CandidateJacobian(ctx.em, ctx.data, ctx.loads, block, c, ctx.opt), proj,
-        ctx.opt.rank_tol, &rel);
+    const Eigen::MatrixXd B =
+        ObservableBasis(CandidateJacobian(ctx.em, ctx.data, ctx.loads, block, c, ctx.opt), proj,
+                        ctx.opt.rank_tol, &rel);
     if (B.cols() == 0 || block.num_params + B.cols() >= block.num_residuals) continue;
     block.active.push_back(c);
     block.basis.push_back(B);
@@ -206,21 +206,22 @@ Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::v
     ++added;
   }
   if (added == 0) return start;
-  Fit fit = FitEffects(ctx.em, ctx.data, ctx.loads, block.active, block.basis, block.theta,
-                       ctx.opt);
+  Fit fit =
+      FitEffects(ctx.em, ctx.data, ctx.loads, block.active, block.basis, block.theta, ctx.opt);
   const std::vector<std::string> out = BoundViolations(ctx.em, fit);
   const double cv_block = CvError(ctx, fit);
   if (!out.empty() || !CvLower(ctx.opt, cv_block, *cv)) {
-    ctx.log->push_back(Fmt("geometry block of %d joint origins (%d directions) not kept: "
-                           "held-out %.4g -> %.4g%s",
-                           added, fit.num_params - start.num_params, *cv, cv_block,
-                           out.empty() ? "" : ", outside bounds"));
+    ctx.log->push_back(
+        Fmt("geometry block of %d joint origins (%d directions) not kept: "
+            "held-out %.4g -> %.4g%s",
+            added, fit.num_params - start.num_params, *cv, cv_block,
+            out.empty() ? "" : ", outside bounds"));
     return start;
   }
-  ctx.log->push_back(Fmt("add geometry block of %d joint origins (%d directions): BIC %.1f -> "
-                         "%.1f, held-out %.4g -> %.4g",
-                         added, fit.num_params - start.num_params, start.bic, fit.bic, *cv,
-                         cv_block));
+  ctx.log->push_back(
+      Fmt("add geometry block of %d joint origins (%d directions): BIC %.1f -> "
+          "%.1f, held-out %.4g -> %.4g",
+          added, fit.num_params - start.num_params, start.bic, fit.bic, *cv, cv_block));
   *cv = cv_block;
   return fit;
 }
@@ -228,8 +229,8 @@ Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::v
 Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
                   bool backward, double* cv, bool swap) {
   Fit cur = start;
-  for (int round = 0; static_cast<int>(cur.active.size()) < ctx.opt.max_effects &&
-                      round < 3 * ctx.opt.max_effects;
+  for (int round = 0;
+       static_cast<int>(cur.active.size()) < ctx.opt.max_effects && round < 3 * ctx.opt.max_effects;
        ++round) {
     std::vector<Trial> trials = ScreenCandidates(ctx, cur, pool);
     if (trials.empty()) break;

@@ -93,8 +93,9 @@ Json EvaluateGates(const std::vector<GateSpec>& gates, const Json& summary, bool
       row["value"] = value ? *value : Json();
       if (value && value->is_boolean()) {
         const bool v = value->get<bool>();
-        passed = g.op == "==" ? v == g.threshold_bool : g.op == "!=" ? v != g.threshold_bool
-                                                                    : false;
+        passed = g.op == "=="   ? v == g.threshold_bool
+                 : g.op == "!=" ? v != g.threshold_bool
+                                : false;
       }
     } else {
       double threshold = g.threshold;

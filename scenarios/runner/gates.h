@@ -13,8 +13,8 @@
 #include <string>
 #include <vector>
 
-#include "sim/config.h"
 #include "scenarios/runner/scenario_kind.h"
+#include "sim/config.h"
 
 namespace flexbench::scenarios {
 

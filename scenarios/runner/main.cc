@@ -31,9 +31,10 @@ int Main(int argc, char** argv) {
   run_cmd->add_flag("--check-gates", run.check_gates, "exit 3 when a gate fails");
   run_cmd->add_flag("--quiet", run.quiet,
                     "no progress and no informational lines (errors and failed gates remain)");
-  run_cmd->add_option("--set", run.set,
-                      "override a scenario key: KEY=VALUE, KEY a dotted path, VALUE YAML "
-                      "(repeatable; recorded in summary.json)")
+  run_cmd
+      ->add_option("--set", run.set,
+                   "override a scenario key: KEY=VALUE, KEY a dotted path, VALUE YAML "
+                   "(repeatable; recorded in summary.json)")
       ->allow_extra_args(false);  // one KEY=VALUE per --set: never the scenario path after it
   run_cmd->add_flag("--force", run.force,
                     "let --out replace an existing folder that is not a flexbench result");
@@ -74,9 +75,10 @@ int Main(int argc, char** argv) {
                            "reject rows beyond Q3 + k IQR (default 3; 0: off)");
   identify_cmd->add_flag("--no-cross-validation", id.no_cross_validation,
                          "select by BIC alone (the issue-8 rule)");
-  identify_cmd->add_option("--set", id.set,
-                           "override a closed_loop key: KEY=VALUE (repeatable; e.g. "
-                           "--set cv_min_gain=0.05)")
+  identify_cmd
+      ->add_option("--set", id.set,
+                   "override a closed_loop key: KEY=VALUE (repeatable; e.g. "
+                   "--set cv_min_gain=0.05)")
       ->allow_extra_args(false);
   identify_cmd->add_option("--out", id.out_dir, "output folder (default: out/identify)");
   identify_cmd->add_flag("--quiet", id.quiet, "no progress and no informational lines");

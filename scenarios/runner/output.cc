@@ -5,7 +5,6 @@
 
 #include <cerrno>
 #include <cstring>
-
 #include <fstream>
 #include <system_error>
 
@@ -113,8 +112,9 @@ OutputDir::OutputDir(const fs::path& final_dir, bool force, const std::vector<fs
   CheckReplaceable(final_, force_, inputs_);
   std::error_code ec;
   fs::create_directories(final_.parent_path(), ec);
-  if (ec) throw InputError(Shown(final_.parent_path()) + ": cannot create output folder: " +
-                           ec.message());
+  if (ec)
+    throw InputError(Shown(final_.parent_path()) +
+                     ": cannot create output folder: " + ec.message());
   RemoveStaleTemporaries(final_);
   tmp_ = final_.parent_path() / (final_.filename().string() + ".tmp-" + std::to_string(getpid()));
   fs::remove_all(tmp_, ec);
@@ -146,8 +146,8 @@ fs::path OutputDir::File(const std::string& relative) const {
 
 void OutputDir::Commit() {
   std::error_code ec;
-  const fs::path old = final_.parent_path() /
-                       (final_.filename().string() + ".old-" + std::to_string(getpid()));
+  const fs::path old =
+      final_.parent_path() / (final_.filename().string() + ".old-" + std::to_string(getpid()));
   CheckReplaceable(final_, force_, inputs_);
   if (fs::exists(fs::symlink_status(final_, ec))) {
     fs::rename(final_, old, ec);

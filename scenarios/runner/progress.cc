@@ -6,8 +6,7 @@
 namespace flexbench::scenarios {
 
 double ProgressLine::SteadySeconds() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 ProgressLine::ProgressLine(Options options, std::function<void(const std::string&)> write,

@@ -6,8 +6,8 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -233,8 +233,8 @@ ScenarioCheck CheckScenario(const std::string& path, const std::vector<std::stri
 int ListScenarios(const std::string& scenarios_dir) {
   std::error_code ec;
   if (!fs::is_directory(scenarios_dir, ec)) {
-    std::cerr << "flexbench: error: --dir " << CapForMessage(scenarios_dir)
-              << ": not a folder" << (ec ? " (" + ec.message() + ")" : std::string()) << "\n";
+    std::cerr << "flexbench: error: --dir " << CapForMessage(scenarios_dir) << ": not a folder"
+              << (ec ? " (" + ec.message() + ")" : std::string()) << "\n";
     return kExitBadInput;
   }
   std::cout << "scenario kinds:\n";
@@ -323,8 +323,7 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
     if (!(std::isfinite(o.point_std_m) && o.point_std_m >= 1e-7 && o.point_std_m <= 1.0)) {
       char v[32];
       std::snprintf(v, sizeof(v), "%g", o.point_std_m);  // to_string: 1e-300 -> "0.000000"
-      OptionError("--point-std", v,
-                  "must be between 1e-7 and 1 (metres)");
+      OptionError("--point-std", v, "must be between 1e-7 and 1 (metres)");
     }
     // The model is the declared file's; --model, when given, must be that file.
     const std::string declared_abs = fs::absolute(o.declared).lexically_normal().string();

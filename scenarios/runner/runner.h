@@ -16,11 +16,11 @@ inline constexpr int kExitGateFailed = 3;
 
 struct RunOptions {
   std::string scenario_path;
-  std::string out_dir;                 // default: out/<scenario name>
-  std::optional<std::uint64_t> seed;   // overrides the file's seed
+  std::string out_dir;                // default: out/<scenario name>
+  std::optional<std::uint64_t> seed;  // overrides the file's seed
   bool check_gates = false;
-  bool force = false;  // --out may replace a folder that is not a previous result
-  std::vector<std::string> set;        // --set KEY=VALUE overrides, in order
+  bool force = false;            // --out may replace a folder that is not a previous result
+  std::vector<std::string> set;  // --set KEY=VALUE overrides, in order
   bool quiet = false;  // no progress, no informational lines (errors and failed gates remain)
   // The command line as typed (shell-quoted), recorded in summary.json and the report; empty
   // (a sweep's run): the equivalent `flexbench run` line is recorded.

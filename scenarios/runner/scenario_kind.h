@@ -2,16 +2,15 @@
 // key from one explicit list (registry.cc).
 #pragma once
 
-#include <nlohmann/json.hpp>
-
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
-#include "sim/config.h"
 #include "scenarios/runner/output.h"
+#include "sim/config.h"
 
 namespace flexbench::scenarios {
 using flexbench::ConfigNode;

@@ -76,9 +76,8 @@ std::string Column(const std::string& path, const std::set<std::string>& columns
 }
 
 Json SummaryJson(const SampleSummary& s) {
-  return Json{{"n", s.n},          {"mean", s.mean},     {"std", s.std},
-              {"median", s.median}, {"min", s.min},       {"max", s.max},
-              {"ci_low", s.ci_low}, {"ci_high", s.ci_high}};
+  return Json{{"n", s.n},     {"mean", s.mean}, {"std", s.std},       {"median", s.median},
+              {"min", s.min}, {"max", s.max},   {"ci_low", s.ci_low}, {"ci_high", s.ci_high}};
 }
 
 Json ProportionJson(const Proportion& p) {
@@ -181,7 +180,8 @@ std::vector<RunOutcome> ReadOutcomes(const fs::path& out, const std::vector<Swee
       std::ifstream in(summary);
       o.summary = Json::parse(in, nullptr, false);
       if (o.summary.is_discarded()) {
-        throw InputError(summary.string() + ": not valid JSON (a damaged run folder; remove it "
+        throw InputError(summary.string() +
+                         ": not valid JSON (a damaged run folder; remove it "
                          "and run the sweep again)");
       }
       o.present = o.ok = true;
@@ -298,10 +298,11 @@ Collected Collect(const SweepSpec& spec, const std::vector<SweepPoint>& points,
     for (size_t p = 0; p < points.size(); ++p) {
       if (!g.point.empty() && g.point != points[p].name) continue;
       Json& pj = point_list[p];
-      const double v = Evaluate(g.metric, data[p], columns, points[p].name,
-                                spec.bootstrap_resamples, &pj);
+      const double v =
+          Evaluate(g.metric, data[p], columns, points[p].name, spec.bootstrap_resamples, &pj);
       double t = g.threshold;
-      Json row{{"name", g.name}, {"metric", g.metric.text}, {"op", g.op}, {"point", points[p].name}};
+      Json row{
+          {"name", g.name}, {"metric", g.metric.text}, {"op", g.op}, {"point", points[p].name}};
       if (g.threshold_is_statistic) {
         t = g.scale * Evaluate(g.threshold_metric, data[p], columns, points[p].name,
                                spec.bootstrap_resamples, &pj);
@@ -374,7 +375,8 @@ void PlotGrid(const SweepSpec& spec, const std::vector<SweepPoint>& points, cons
   for (size_t p = 0; p < points.size(); ++p) {
     std::string rest;
     for (size_t a = 0; a < spec.grid.size(); ++a) {
-      if (a != xa) rest += (rest.empty() ? "" : ", ") + spec.grid[a].key + "=" + points[p].values[a];
+      if (a != xa)
+        rest += (rest.empty() ? "" : ", ") + spec.grid[a].key + "=" + points[p].values[a];
     }
     groups[rest].push_back(p);
   }
@@ -432,8 +434,8 @@ void PlotSeeds(const SweepSpec& spec, const Json& agg, const Collected& col,
     render::Series& m = ax->AddLine(metric + " mean", {x.front(), x.back()}, {mean, mean});
     m.color = c;
     for (double b : {lo, hi}) {
-      render::Series& l = ax->AddLine(b == lo ? metric + " 95% CI" : "", {x.front(), x.back()},
-                                      {b, b});
+      render::Series& l =
+          ax->AddLine(b == lo ? metric + " 95% CI" : "", {x.front(), x.back()}, {b, b});
       l.color = c;
       l.line = render::LineStyle::kDashed;
       l.line_width = 1;

@@ -66,10 +66,9 @@ class Progress {
     const size_t decile = total_ ? done * 10 / total_ : 10;
     if (!tty_ && decile == last_decile_ && done != total_) return;
     last_decile_ = decile;
-    std::fprintf(stderr, "%s[sweep] %zu/%zu runs%s, %.2f runs/s, ETA %.0f s%s",
-                 tty_ ? "\r" : "", done, total_,
-                 failed ? (", " + std::to_string(failed) + " failed").c_str() : "", rate, eta,
-                 tty_ && done != total_ ? "" : "\n");
+    std::fprintf(stderr, "%s[sweep] %zu/%zu runs%s, %.2f runs/s, ETA %.0f s%s", tty_ ? "\r" : "",
+                 done, total_, failed ? (", " + std::to_string(failed) + " failed").c_str() : "",
+                 rate, eta, tty_ && done != total_ ? "" : "\n");
     std::fflush(stderr);
   }
 
@@ -80,8 +79,8 @@ class Progress {
   size_t last_decile_ = static_cast<size_t>(-1);
 };
 
-void RecordOutcome(const SweepRun& run, const std::vector<SweepPoint>& points,
-                   const fs::path& out, int status, size_t* failed) {
+void RecordOutcome(const SweepRun& run, const std::vector<SweepPoint>& points, const fs::path& out,
+                   int status, size_t* failed) {
   const fs::path failure = out / FailurePath(run, points);
   std::error_code ec;
   const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0 &&

@@ -11,9 +11,8 @@ namespace flexbench::scenarios::sweep {
 
 // Indices of the runs without a summary.json (a resumed sweep skips the others); with
 // shard_count > 0 only those of shard `shard_index` (run k belongs to shard k % shard_count).
-std::vector<size_t> PendingRuns(const std::filesystem::path& out,
-                                const std::vector<SweepRun>& runs, int shard_index = 0,
-                                int shard_count = 0);
+std::vector<size_t> PendingRuns(const std::filesystem::path& out, const std::vector<SweepRun>& runs,
+                                int shard_index = 0, int shard_count = 0);
 
 // Runs `todo` with at most `jobs` at a time; every run's stderr goes to its log file. Prints a
 // progress line on stderr (done/total, rate, ETA). Returns the number of runs that failed.

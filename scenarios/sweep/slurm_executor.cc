@@ -125,8 +125,8 @@ std::string SubmitSlurm(const SweepSpec& spec, size_t run_count, const fs::path&
   const std::string reply = Trimmed(Capture(cmd, &status));
   if (status != 0) throw InputError("sbatch refused the sweep's job: " + CapForMessage(reply));
   const std::string id = reply.substr(0, reply.find(';'));  // "id;cluster" on some setups
-  std::ofstream(dir / "jobs.txt", std::ios::app) << id << (o.array.empty() ? "" : " " + o.array)
-                                                 << "\n";
+  std::ofstream(dir / "jobs.txt", std::ios::app)
+      << id << (o.array.empty() ? "" : " " + o.array) << "\n";
   return id;
 }
 

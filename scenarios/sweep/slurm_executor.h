@@ -17,8 +17,8 @@ struct SlurmOptions {
   std::string partition;  // passed through to sbatch when set
   std::string time;
   std::string mem;
-  std::string array;      // only these task indices ("3,5"): resubmitting failed tasks
-  bool wait = true;       // wait for the job and collect
+  std::string array;  // only these task indices ("3,5"): resubmitting failed tasks
+  bool wait = true;   // wait for the job and collect
 };
 
 struct SlurmTaskEnd {

@@ -14,7 +14,7 @@ struct SampleSummary {
   double median = 0.0;
   double min = 0.0;
   double max = 0.0;
-  double ci_low = 0.0;   // 95% percentile-bootstrap interval of the mean
+  double ci_low = 0.0;  // 95% percentile-bootstrap interval of the mean
   double ci_high = 0.0;
 };
 
@@ -26,8 +26,8 @@ SampleSummary Summarize(const std::vector<double>& x, std::uint64_t seed, int re
 struct Proportion {
   int passes = 0;
   int n = 0;
-  double fraction = 0.0;     // NaN for n = 0
-  double wilson_low = 0.0;   // 95% Wilson score interval
+  double fraction = 0.0;    // NaN for n = 0
+  double wilson_low = 0.0;  // 95% Wilson score interval
   double wilson_high = 0.0;
 };
 

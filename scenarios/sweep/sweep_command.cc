@@ -160,8 +160,8 @@ int RunOnSlurm(const SweepCliOptions& o, const SweepSpec& spec,
   if (!failed.empty()) {
     std::string list;
     for (int i : failed) list += (list.empty() ? "" : ",") + std::to_string(i);
-    Log("resubmit the failed tasks alone: flexbench sweep " + spec.file + " --out " +
-        out.string() + " --executor slurm --tasks " + std::to_string(tasks) + " --array " + list);
+    Log("resubmit the failed tasks alone: flexbench sweep " + spec.file + " --out " + out.string() +
+        " --executor slurm --tasks " + std::to_string(tasks) + " --array " + list);
   }
   return CollectAndGate(spec, points, runs, out, o.command);
 }
@@ -180,8 +180,8 @@ int SweepCommand(const SweepCliOptions& o) {
     const SweepSpec spec = LoadSweep(o.sweep_path);
     const std::vector<SweepPoint> points = ExpandPoints(spec);
     const std::vector<SweepRun> runs = ExpandRuns(spec, points);
-    const fs::path out = o.out_dir.empty() ? fs::path("out") / "sweeps" / spec.name
-                                           : fs::path(o.out_dir);
+    const fs::path out =
+        o.out_dir.empty() ? fs::path("out") / "sweeps" / spec.name : fs::path(o.out_dir);
     if (o.collect) {
       std::error_code ec;
       if (!fs::is_regular_file(out / kMarker, ec)) {
@@ -193,12 +193,12 @@ int SweepCommand(const SweepCliOptions& o) {
     PrepareOutDir(out, spec);
     if (o.executor == "slurm") return RunOnSlurm(o, spec, points, runs, out);
     const std::vector<size_t> todo = PendingRuns(out, runs, shard_index, shard_count);
-    const int jobs = o.jobs > 0 ? o.jobs
-                                : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+    const int jobs =
+        o.jobs > 0 ? o.jobs : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
     Log(spec.name + ": " + std::to_string(points.size()) + " points x " +
         std::to_string(spec.seeds.size()) + " seeds" +
-        (shard_count ? ", shard " + o.shard : std::string()) + ": " +
-        std::to_string(todo.size()) + " runs to do, -j " + std::to_string(jobs));
+        (shard_count ? ", shard " + o.shard : std::string()) + ": " + std::to_string(todo.size()) +
+        " runs to do, -j " + std::to_string(jobs));
     const int failed = RunLocal(spec, points, runs, todo, out, jobs);
     if (shard_count) return failed ? kExitInternal : kExitOk;
     return CollectAndGate(spec, points, runs, out, o.command);

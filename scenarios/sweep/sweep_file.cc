@@ -42,8 +42,8 @@ bool IsPath(const std::string& s) {
 std::string FolderSafe(const std::string& s) {
   std::string out;
   for (char c : s) {
-    out += std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-' ? c
-                                                                                           : '_';
+    out +=
+        std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-' ? c : '_';
   }
   return out;
 }
@@ -56,8 +56,8 @@ std::vector<std::uint64_t> ParseSeeds(const ConfigNode& node) {
     const int a = from.AsInt();
     const int b = to.AsInt();
     if (a < 0) from.Fail("seeds must be >= 0");
-    if (a > b) to.Fail("seed range is empty: from " + std::to_string(a) + " > to " +
-                       std::to_string(b));
+    if (a > b)
+      to.Fail("seed range is empty: from " + std::to_string(a) + " > to " + std::to_string(b));
     if (static_cast<size_t>(b - a) >= kMaxRuns) to.Fail("more than 1000000 seeds");
     for (int s = a; s <= b; ++s) seeds.push_back(static_cast<std::uint64_t>(s));
   } else {

@@ -32,8 +32,8 @@ struct SweepAxis {
 };
 
 struct SweepPoint {
-  std::string name;  // folder name: "base", or "<key>=<value>" parts joined by "__"
-  std::vector<std::string> set;  // KEY=VALUE overrides of this point (after the fixed ones)
+  std::string name;                 // folder name: "base", or "<key>=<value>" parts joined by "__"
+  std::vector<std::string> set;     // KEY=VALUE overrides of this point (after the fixed ones)
   std::vector<std::string> values;  // the axis values, in axis order
 };
 
@@ -46,8 +46,8 @@ struct SweepRun {
 // STAT(ARG) of a sweep gate or plot.
 struct Statistic {
   std::string stat;
-  std::string path;     // a metric path, or ratio's numerator, or a scenario gate's name
-  std::string divisor;  // ratio's denominator; empty: not a ratio
+  std::string path;      // a metric path, or ratio's numerator, or a scenario gate's name
+  std::string divisor;   // ratio's denominator; empty: not a ratio
   bool of_gate = false;  // pass_fraction, wilson_low, wilson_high
   std::string text;      // as written
 };

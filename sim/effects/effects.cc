@@ -349,8 +349,8 @@ class TransmissionErrorEffect : public Effect {
 class StiffeningJointEffect : public Effect {
  public:
   void Configure(const Params& p) override {
-    for (const auto& [key, out] : {std::pair{"stiffness_Nm_per_rad", &k1_},
-                                   std::pair{"cubic_Nm_per_rad3", &k3_}}) {
+    for (const auto& [key, out] :
+         {std::pair{"stiffness_Nm_per_rad", &k1_}, std::pair{"cubic_Nm_per_rad3", &k3_}}) {
       const ConfigNode c = p.Require(key);
       if (!c.IsMap()) c.Fail("expected {joint: value}");
       for (const std::string& j : c.Keys()) {
@@ -379,8 +379,8 @@ class StiffeningJointEffect : public Effect {
   std::string Describe() const override {
     std::string d;
     for (const auto& [j, v] : k1_) {
-      d += (d.empty() ? "" : " ") + j + "=" + Num(v) + "+" +
-           Num(k3_.count(j) ? k3_.at(j) : 0.0) + "d^3";
+      d += (d.empty() ? "" : " ") + j + "=" + Num(v) + "+" + Num(k3_.count(j) ? k3_.at(j) : 0.0) +
+           "d^3";
     }
     return d;
   }
@@ -400,7 +400,8 @@ class ThermalExpansionEffect : public Effect {
   }
   bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
     if (c.HasEffectParts("thermal_expansion")) return true;
-    *why = "no <custom><text name=\"effect:thermal_expansion\"> listing link bodies (or give bodies)";
+    *why =
+        "no <custom><text name=\"effect:thermal_expansion\"> listing link bodies (or give bodies)";
     return false;
   }
   void Apply(TruthSetup& s) const override {
@@ -528,10 +529,14 @@ const std::vector<EffectEntry>& EffectRegistry() {
        Make<EncoderOffsetEffect>},
       {"thermal_expansion", "links grow by alpha * delta_T (delta_T_K, alpha_per_K, bodies)",
        Make<ThermalExpansionEffect>},
-      {"transmission_error", "strain-wave gear: link ahead of the motor by a periodic error "
-       "(harmonics_deg: {joint: [A1, phase1, A2, phase2]})", Make<TransmissionErrorEffect>},
-      {"stiffening_joint", "gear spring stiffening with deflection, k d + k3 d^3 "
-       "(stiffness_Nm_per_rad, cubic_Nm_per_rad3)", Make<StiffeningJointEffect>},
+      {"transmission_error",
+       "strain-wave gear: link ahead of the motor by a periodic error "
+       "(harmonics_deg: {joint: [A1, phase1, A2, phase2]})",
+       Make<TransmissionErrorEffect>},
+      {"stiffening_joint",
+       "gear spring stiffening with deflection, k d + k3 d^3 "
+       "(stiffness_Nm_per_rad, cubic_Nm_per_rad3)",
+       Make<StiffeningJointEffect>},
       {"imu_bias", "IMU constant bias and bias random walk, hence yaw drift (gyro_bias_rad_s, ...)",
        Make<ImuBiasEffect>},
   };

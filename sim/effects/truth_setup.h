@@ -18,9 +18,9 @@ namespace flexbench::sim {
 #include <cmath>
 
 struct GearSpec {
-  double stiffness = 0.0;  // Nm/rad (N/m for slides); 0 = rigid
+  double stiffness = 0.0;        // Nm/rad (N/m for slides); 0 = rigid
   double stiffness_cubic = 0.0;  // Nm/rad^3: torque k d + k3 d^3, a spring that stiffens
-  double backlash = 0.0;   // total play, rad (m)
+  double backlash = 0.0;         // total play, rad (m)
   // Transmission error of a strain-wave gear: the link turns by
   // sum_h amplitude[h] sin((h + 1) motor + phase[h]) beyond the motor, 1 to 3 cycles per
   // revolution (rad).
@@ -40,10 +40,10 @@ struct GearSpec {
 
 // Errors of one 6-axis IMU beyond its white noise.
 struct ImuBiasSpec {
-  Vec3 gyro_bias = Vec3::Zero();    // rad/s, constant
-  Vec3 accel_bias = Vec3::Zero();   // m/s^2, constant
-  double gyro_walk = 0.0;           // rad/s/sqrt(s): bias random walk density
-  double accel_walk = 0.0;          // m/s^2/sqrt(s)
+  Vec3 gyro_bias = Vec3::Zero();   // rad/s, constant
+  Vec3 accel_bias = Vec3::Zero();  // m/s^2, constant
+  double gyro_walk = 0.0;          // rad/s/sqrt(s): bias random walk density
+  double accel_walk = 0.0;         // m/s^2/sqrt(s)
 };
 
 struct TruthSetup {
@@ -53,8 +53,8 @@ struct TruthSetup {
   // Per joint id: the joint moves (passive: spring-loaded; coupled: follows its linkage).
   // Joints that are not released are held at qpos0, i.e. at the nominal model's value.
   std::vector<char> released;
-  std::vector<GearSpec> gear;            // per joint id (actuated joints)
-  std::vector<double> encoder_offset;    // per joint id, rad (m)
+  std::vector<GearSpec> gear;                   // per joint id (actuated joints)
+  std::vector<double> encoder_offset;           // per joint id, rad (m)
   std::map<std::string, ImuBiasSpec> imu_bias;  // by IMU site; "*" applies to every IMU
   // Set by effects that change masses or geometry: the simulation then calls mj_setConst.
   bool constants_changed = false;

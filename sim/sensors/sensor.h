@@ -112,8 +112,7 @@ const std::vector<SensorEntry>& SensorRegistry();
 // A configured sensor; throws InputError "<where>: unknown sensor kind '<kind>' (known: ...)"
 // or naming the parameter / model object at fault.
 std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& name,
-                                   const Params& params, const Simulation& sim,
-                                   std::uint64_t seed);
+                                   const Params& params, const Simulation& sim, std::uint64_t seed);
 // Same with parameters as YAML text (tests, programmatic set-ups).
 std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& name,
                                    const std::string& params_yaml, const Simulation& sim,

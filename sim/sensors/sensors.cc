@@ -43,8 +43,7 @@ class EncoderSensor : public Sensor {
     for (const std::string& joint : joints) {
       const int j = mj_name2id(sim.model(), mjOBJ_JOINT, joint.c_str());
       if (j < 0) p.FailKey("joints", sim.model_name() + " has no joint named '" + joint + "'");
-      if (side_ == EncoderSide::kMotor &&
-          sim.catalog().Joint(j).role != JointRole::kActuated) {
+      if (side_ == EncoderSide::kMotor && sim.catalog().Joint(j).role != JointRole::kActuated) {
         p.FailKey("joints", "joint '" + joint + "' has no motor (not actuated)");
       }
       channels_.push_back(Channel{joint, j, sim.model()->jnt_type[j] == mjJNT_SLIDE,
@@ -159,8 +158,7 @@ class ContactSensor : public Sensor {
   }
   void Sample(const Simulation& sim, double t, std::vector<SensorReading>* out) override {
     const mjModel* m = sim.model();
-    const Eigen::Isometry3d T_w_g =
-        sim.Pose(FrameRef{FrameType::kGeom, geom_id_, surface_});
+    const Eigen::Isometry3d T_w_g = sim.Pose(FrameRef{FrameType::kGeom, geom_id_, surface_});
     const Vec3 p_w = sim.Pose(FrameRef{FrameType::kSite, site_id_, site_}).translation();
     const Vec3 p_g = T_w_g.inverse() * p_w;
     const double* size = m->geom_size + 3 * geom_id_;
@@ -175,8 +173,8 @@ class ContactSensor : public Sensor {
     r.site = site_;
     r.surface = surface_;
     r.touching = inside && d <= threshold_;
-    r.distance = r.touching ? d + noise_.Normal(noise_std_)
-                            : std::numeric_limits<double>::quiet_NaN();
+    r.distance =
+        r.touching ? d + noise_.Normal(noise_std_) : std::numeric_limits<double>::quiet_NaN();
     out->push_back(r);
   }
 
@@ -264,8 +262,7 @@ std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& n
   return MakeSensor(kind, name, Params::FromYaml(params_yaml, "sensor '" + name + "'"), sim, seed);
 }
 
-SensorSuite SensorSuite::Parse(const ConfigNode& list, const Simulation& sim,
-                               std::uint64_t seed) {
+SensorSuite SensorSuite::Parse(const ConfigNode& list, const Simulation& sim, std::uint64_t seed) {
   SensorSuite suite;
   std::set<std::string> names;
   for (const ConfigNode& item : list.Items()) {
@@ -282,8 +279,8 @@ SensorSuite SensorSuite::Parse(const ConfigNode& list, const Simulation& sim,
       known += std::string(known.empty() ? "" : ", ") + e.kind;
     }
     if (!found) kind_node.Fail("unknown sensor kind '" + kind + "' (known: " + known + ")");
-    suite.Add(MakeSensor(kind, name, Params(item, item.Where() + ": sensor '" + name + "'"), sim,
-                         seed));
+    suite.Add(
+        MakeSensor(kind, name, Params(item, item.Where() + ": sensor '" + name + "'"), sim, seed));
   }
   return suite;
 }
@@ -327,8 +324,8 @@ void WriteReadingCsv(std::ostream& out, const SensorReading& reading) {
                         r.sensor.c_str(), r.site.c_str(), r.gyro.x(), r.gyro.y(), r.gyro.z(),
                         r.accel.x(), r.accel.y(), r.accel.z());
         } else if constexpr (std::is_same_v<T, ContactReading>) {
-          std::snprintf(buf, sizeof(buf), "%.9g,%s,contact,%s,%d,%.9g,,,,\n", r.t,
-                        r.sensor.c_str(), r.site.c_str(), r.touching ? 1 : 0, r.distance);
+          std::snprintf(buf, sizeof(buf), "%.9g,%s,contact,%s,%d,%.9g,,,,\n", r.t, r.sensor.c_str(),
+                        r.site.c_str(), r.touching ? 1 : 0, r.distance);
         } else {
           std::snprintf(buf, sizeof(buf), "%.9g,%s,camera,%s,%.9g,%.9g,%.9g,%.9g,%d,%d\n", r.t,
                         r.sensor.c_str(), r.camera.c_str(), r.intrinsics.fx, r.intrinsics.fy,

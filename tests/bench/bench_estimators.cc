@@ -1,6 +1,6 @@
 // Speed of the Lie-group EKF (PPOE paper sec. V-A): one update with the tag-centre pixel model
-// [PPOE eq. 25] with analytic and with numeric Jacobians, and the PPOE prior (FK with covariance) of
-// rover_arm's declared model. Run with --benchmark_repetitions=5 and quote medians.
+// [PPOE eq. 25] with analytic and with numeric Jacobians, and the PPOE prior (FK with covariance)
+// of rover_arm's declared model. Run with --benchmark_repetitions=5 and quote medians.
 #include <benchmark/benchmark.h>
 
 #include "estimators/ekf/lg_ekf.h"
@@ -72,7 +72,8 @@ void BM_PpoePriorRover(benchmark::State& state) {
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), declared);
   kinematics::PpoeData data(chain.model);
   Eigen::VectorXd q = Eigen::VectorXd::Constant(chain.model.nq(), 0.3);
-  const auto order = state.range(0) == 4 ? lie::CompoundOrder::kFourth : lie::CompoundOrder::kSecond;
+  const auto order =
+      state.range(0) == 4 ? lie::CompoundOrder::kFourth : lie::CompoundOrder::kSecond;
   for (auto _ : state) {
     kinematics::ForwardKinematicsWithCovariance(chain.model, data, q, order);
     benchmark::DoNotOptimize(data.Sigma_frame[chain.end_effector]);

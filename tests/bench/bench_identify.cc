@@ -105,10 +105,10 @@ BENCHMARK(BM_Predict);
 void ReadPointCsv(benchmark::State& state, bool set_per_row) {
   Setup& s = Rover();
   const int rows = static_cast<int>(state.range(0));
-  const std::string path = (std::filesystem::temp_directory_path() /
-                            ("flexbench_bench_points_" + std::to_string(rows) +
-                             (set_per_row ? "_sets" : "") + ".csv"))
-                               .string();
+  const std::string path =
+      (std::filesystem::temp_directory_path() /
+       ("flexbench_bench_points_" + std::to_string(rows) + (set_per_row ? "_sets" : "") + ".csv"))
+          .string();
   {
     std::ofstream out(path);
     for (const std::string& j : s.chain.q_joints) out << j << ",";
@@ -177,12 +177,12 @@ BENCHMARK(BM_IdentifyRows)
 // 3, machine idle): 1,000 rows 0.29 s, 4,000 1.25 s, 10,000 3.20 s on one thread; 10,000 2.03 s
 // wall (3.32 s CPU) on two. Interleaved with the binary before screening by one Gauss-Newton
 // step (ScreenWith), the fold cache and the threads: 10,000 rows 7.53 -> 3.52 s on one thread
-// (0.47). The history: Medians of 3, CPU time, 2 cores shared (load ~4), both builds in one session: with
-// every Jacobian column by central differences 1,000 rows 1.29 s, 4,000 5.35 s, 10,000 13.7 s;
-// with the analytic columns (EffectModel::PoseTangents) 0.69 s, 2.94 s, 7.07 s (1.9x; callgrind
-// on 1,000 rows 145 -> 75 G instructions). What remains is the screening's Levenberg-Marquardt
-// itself: 43% residual passes (PredictPose per row), 47% one PoseTangents pass per Jacobian
-// (its chain 11%, the point's walk up the frames 15%, the tangents 7%).
+// (0.47). The history: Medians of 3, CPU time, 2 cores shared (load ~4), both builds in one
+// session: with every Jacobian column by central differences 1,000 rows 1.29 s, 4,000 5.35 s,
+// 10,000 13.7 s; with the analytic columns (EffectModel::PoseTangents) 0.69 s, 2.94 s, 7.07 s
+// (1.9x; callgrind on 1,000 rows 145 -> 75 G instructions). What remains is the screening's
+// Levenberg-Marquardt itself: 43% residual passes (PredictPose per row), 47% one PoseTangents pass
+// per Jacobian (its chain 11%, the point's walk up the frames 15%, the tangents 7%).
 void BM_IdentifyPointCsv(benchmark::State& state) {
   const int rows = static_cast<int>(state.range(0));
   const std::string dir = std::string(FLEXBENCH_SOURCE_DIR) + "/models/";

@@ -4,7 +4,8 @@
 //    joints of its declared chain: arm and mast) and humanoid_upper (12).
 //  - FrameJacobian vs mj_jacSite (after mj_kinematics + mj_comPos, as MuJoCo needs).
 //  - FK with 2nd-order covariance vs a plain Eigen baseline written here: a Matrix4d chain and
-//    one 6x6 adjoint sandwich per frame (what one writes from [PPOE eq. 18] without PPOE's kernels).
+//    one 6x6 adjoint sandwich per frame (what one writes from [PPOE eq. 18] without PPOE's
+//    kernels).
 //  - Batch kinematics for 2048 particles (what a PF step uses) vs one mj_kinematics per
 //    particle on jsk_arm; with BM_PfStep in the same run, the step a user without batch
 //    kinematics would have.

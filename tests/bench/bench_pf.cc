@@ -95,9 +95,7 @@ void BM_PfStep(benchmark::State& state) { FilterStep(state, Proposal::kBootstrap
 void BM_PfStepWithEstimate(benchmark::State& state) {
   FilterStep(state, Proposal::kBootstrap, true);
 }
-void BM_PfStepConjugate(benchmark::State& state) {
-  FilterStep(state, Proposal::kEncoderConjugate);
-}
+void BM_PfStepConjugate(benchmark::State& state) { FilterStep(state, Proposal::kEncoderConjugate); }
 
 void BM_BatchKinematics(benchmark::State& state) {
   const Arm& arm = TheArm();
@@ -136,7 +134,10 @@ void BM_Summary(benchmark::State& state) {
 }
 
 BENCHMARK(BM_PfStep)->RangeMultiplier(2)->Range(256, 8192)->Unit(benchmark::kMicrosecond);
-BENCHMARK(BM_PfStepWithEstimate)->RangeMultiplier(2)->Range(256, 8192)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_PfStepWithEstimate)
+    ->RangeMultiplier(2)
+    ->Range(256, 8192)
+    ->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_PfStepConjugate)->RangeMultiplier(2)->Range(256, 8192)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_BatchKinematics)->Arg(2048)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_Summary)->Arg(2048)->Unit(benchmark::kMicrosecond);

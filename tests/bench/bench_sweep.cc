@@ -15,7 +15,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-
 fs::path BinDir() { return fs::read_symlink("/proc/self/exe").parent_path(); }
 
 fs::path WorkDir() {
@@ -72,7 +71,12 @@ void BM_SweepLocal(benchmark::State& state) {
   }
   Report(state, wall, run_s);
 }
-BENCHMARK(BM_SweepLocal)->Arg(4)->Arg(32)->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime();
+BENCHMARK(BM_SweepLocal)
+    ->Arg(4)
+    ->Arg(32)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(3)
+    ->UseRealTime();
 
 void BM_ShellLoopOfRuns(benchmark::State& state) {
   const int kRuns = static_cast<int>(state.range(0));

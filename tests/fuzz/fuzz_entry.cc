@@ -166,9 +166,12 @@ std::optional<std::string> Mjcf(const std::uint8_t* data, std::size_t size) {
 
 const std::vector<Target>& Targets() {
   static const std::vector<Target> targets = {
-      {"scenario", Scenario},          {"declared_model", DeclaredModel},
-      {"calibration_csv", CalibrationCsv}, {"mukca", Mukca},
-      {"gates", Gates},                {"mjcf", Mjcf},
+      {"scenario", Scenario},
+      {"declared_model", DeclaredModel},
+      {"calibration_csv", CalibrationCsv},
+      {"mukca", Mukca},
+      {"gates", Gates},
+      {"mjcf", Mjcf},
   };
   return targets;
 }

@@ -71,7 +71,6 @@ class ErrorStats {
   std::vector<int> dof_, pos_dof_;
 };
 
-
 // NEES of error e against a possibly singular covariance: Mahalanobis distance on the
 // covariance's range (eigenvalues above 1e-12 of the largest), with that rank as dof.
 double Nees(const Vec6& e, const Mat6& cov, int* dof);

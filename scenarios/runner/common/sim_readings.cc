@@ -4,8 +4,8 @@
 
 namespace flexbench::scenarios {
 
-estimators::JointReading EncoderReading(const sim::Simulation& sim,
-                                        const sim::DeclaredChain& chain, double t) {
+estimators::JointReading EncoderReading(const sim::Simulation& sim, const sim::DeclaredChain& chain,
+                                        double t) {
   estimators::JointReading r;
   r.t = t;
   r.q.resize(chain.model.nq());

@@ -10,7 +10,7 @@ namespace flexbench::scenarios {
 // The encoders of the declared actuated joints, in the declared q order: the motor-side angle
 // (what a motor encoder sees through an elastic or backlashed gear) plus any encoder offset the
 // truth carries, relative to MuJoCo's reference qpos0. Noise-free: std = 0.
-estimators::JointReading EncoderReading(const sim::Simulation& sim,
-                                        const sim::DeclaredChain& chain, double t);
+estimators::JointReading EncoderReading(const sim::Simulation& sim, const sim::DeclaredChain& chain,
+                                        double t);
 
 }  // namespace flexbench::scenarios

@@ -25,7 +25,6 @@ void AimCamera(sim::Simulation* sim, const std::string& pan, const std::string& 
 // homography image of the tag centre, i.e. the projection of the 3-D centre), on camera 0.
 std::vector<estimators::Measurement> TagMeasurements(
     const render::DetectionResult& det, const std::vector<render::TagInModel>& tags,
-    const std::map<int, kinematics::FrameId>& tag_frames, bool corners, double pixel_std,
-    double t);
+    const std::map<int, kinematics::FrameId>& tag_frames, bool corners, double pixel_std, double t);
 
 }  // namespace flexbench::scenarios

@@ -388,8 +388,10 @@ class ClosedLoopKind : public ScenarioKind {
     if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
       WriteAugmented(ctx, res);
     } else {
-      ctx.log("declared_augmented.yaml not written: the identified model does not explain the "
-              "validation data (verdict " + verdict_ + ")");
+      ctx.log(
+          "declared_augmented.yaml not written: the identified model does not explain the "
+          "validation data (verdict " +
+          verdict_ + ")");
     }
     PlotFinding(ctx, res.finding.significant ? res.finding : res.first_finding);
     WriteResiduals(ctx, cal, cal_before, cal_after, cal_loads, cal_p0, "calibration");
@@ -572,13 +574,12 @@ class ClosedLoopKind : public ScenarioKind {
       kinematics::ForwardKinematicsWithCovariance(chain_->model, pd, d.rows[r].q,
                                                   lie::CompoundOrder::kSecond);
       const Mat3 R = pd.T_base_frame[chain_->end_effector].rotation();
-      const Mat3 S =
-          source_scale * R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() *
-              R.transpose() +
-          noise[r];
-      const Vec3 e = p[r] - (d.rows[r].type == identify::ObservationType::kGroup
-                                 ? mean[d.rows[r].group]
-                                 : d.rows[r].p_base);
+      const Mat3 S = source_scale * R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() *
+                         R.transpose() +
+                     noise[r];
+      const Vec3 e =
+          p[r] - (d.rows[r].type == identify::ObservationType::kGroup ? mean[d.rows[r].group]
+                                                                      : d.rows[r].p_base);
       sum += e.dot(S.ldlt().solve(e));
     }
     return n > 0 ? sum / n : std::nan("");
@@ -691,8 +692,8 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   static Json FindingJson(const identify::ResidualFinding& f) {
-    return {{"significant", f.significant}, {"kind", f.kind},   {"variable", f.variable},
-            {"cycles", f.cycles},           {"size", f.size},   {"unit", f.unit},
+    return {{"significant", f.significant}, {"kind", f.kind},      {"variable", f.variable},
+            {"cycles", f.cycles},           {"size", f.size},      {"unit", f.unit},
             {"p_value", f.p_value},         {"message", f.message}};
   }
 
@@ -726,7 +727,8 @@ class ClosedLoopKind : public ScenarioKind {
       double y = f.coefficients.empty() ? 0.0 : f.coefficients[0];
       if (angle) {
         for (int c = 1; c <= 3 && 2 * c < static_cast<int>(f.coefficients.size()); ++c) {
-          y += f.coefficients[2 * c - 1] * std::cos(c * v) + f.coefficients[2 * c] * std::sin(c * v);
+          y +=
+              f.coefficients[2 * c - 1] * std::cos(c * v) + f.coefficients[2 * c] * std::sin(c * v);
         }
       } else if (f.kind == "load" && f.coefficients.size() == 3) {
         const double scale = std::max(std::abs(*lo), std::abs(*hi));
@@ -743,11 +745,11 @@ class ClosedLoopKind : public ScenarioKind {
                   f.variable.c_str(), f.p_value, f.significant ? "" : " (not significant)");
     fig.title = title;
     render::Axes& ax = fig.axes();
-    ax.x_label = angle ? f.variable + " [deg]"
+    ax.x_label = angle              ? f.variable + " [deg]"
                  : f.kind == "load" ? "gravity torque at " + f.variable + " [N m]"
                                     : "row order (0 first, 1 last)";
-    ax.y_label = f.kind == "drift" ? "residual [mm]" : "residual as an angle error of " +
-                                                           f.variable + " [deg]";
+    ax.y_label = f.kind == "drift" ? "residual [mm]"
+                                   : "residual as an angle error of " + f.variable + " [deg]";
     ax.AddScatter("rows", x, z).marker = render::Marker::kCircle;
     ax.AddLine("fitted", cx, cz);
     ax.legend_position = render::LegendPosition::kTopRight;

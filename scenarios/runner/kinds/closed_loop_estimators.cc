@@ -118,9 +118,8 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       ctx.log("no augmented model (see identify/summary.json): tracking again as declared");
     }
     ctx.log("(c) tracking a new trajectory with the augmented model");
-    const std::vector<Track> after = Follow(ctx, renderer, detector,
-                                            aug_chain ? *aug_chain : *chain_, 1,
-                                            &after_trajectories);
+    const std::vector<Track> after =
+        Follow(ctx, renderer, detector, aug_chain ? *aug_chain : *chain_, 1, &after_trajectories);
     after_trajectories.Write(*ctx.out, "base", "after");
     (*ctx.summary)["metrics"]["augmented_model_used"] = aug_chain != nullptr;
     Report(ctx, before, after);
@@ -178,7 +177,8 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       for (size_t j = 0; j < ranges_.size(); ++j) {
         const Range& r = ranges_[j];
         const double mid = 0.5 * (r.lo_deg + r.hi_deg), half = 0.5 * (r.hi_deg - r.lo_deg);
-        traj[k].emplace_back(r.joint, mid + half * std::sin(pf[j].first + 2.0 * M_PI * pf[j].second * s));
+        traj[k].emplace_back(r.joint,
+                             mid + half * std::sin(pf[j].first + 2.0 * M_PI * pf[j].second * s));
       }
     }
     return traj;
@@ -206,7 +206,8 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       sim_->Settle();
       const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
       estimators::JointReading joints = EncoderReading(*sim_, chain, k);
-      for (int j = 0; j < joints.q.size(); ++j) joints.q[j] += encoder_noise_rad_ * noise(noise_rng);
+      for (int j = 0; j < joints.q.size(); ++j)
+        joints.q[j] += encoder_noise_rad_ * noise(noise_rng);
       joints.std.setConstant(encoder_noise_rad_);
       const auto measurements =
           TagMeasurements(detector.Detect(frame), tags_, tag_frames, false, pixel_std_, joints.t);
@@ -289,7 +290,8 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       em["mismatch_first_step_after"] = after[e].stats.mismatch().first_step();
       all_halved = all_halved && pa < 0.5 * pb;
       nees_fixed = nees_fixed && em["nees_fixed"].get<bool>();
-      flag_ok = flag_ok && (!before[e].stats.mismatch().flagged() || !after[e].stats.mismatch().flagged());
+      flag_ok = flag_ok &&
+                (!before[e].stats.mismatch().flagged() || !after[e].stats.mismatch().flagged());
       char line[320];
       std::snprintf(line, sizeof(line), "%s,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d\n",
                     specs_[e].name.c_str(), pb, pa, pa / pb, bm.value("nees_mean", 0.0),

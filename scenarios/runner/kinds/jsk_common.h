@@ -161,7 +161,7 @@ struct SyntheticRun {
   std::vector<std::vector<estimators::OrientationReading>> orientations;
   std::vector<estimators::PositionReading> positions;
   std::vector<lie::SE3> T_true;  // the end effector in the base frame
-  double deflection_max = 0.0;  // rad
+  double deflection_max = 0.0;   // rad
   int steps() const { return static_cast<int>(joints.size()); }
 };
 SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,

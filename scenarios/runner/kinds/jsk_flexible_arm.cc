@@ -54,8 +54,9 @@ class JskFlexibleArmKind : public ScenarioKind {
     std::vector<std::vector<double>> reference(nq);
     for (size_t i = 0; i < snaps.size(); ++i) {
       kinematics::ForwardKinematics(rig_.chain->model, data, snaps[i].reference);
-      deflection[i] =
-          (data.T_base_frame[rig_.chain->end_effector].translation() - snaps[i].T_true.translation()).norm();
+      deflection[i] = (data.T_base_frame[rig_.chain->end_effector].translation() -
+                       snaps[i].T_true.translation())
+                          .norm();
       deflection_max = std::max(deflection_max, deflection[i]);
       for (int j = 0; j < nq; ++j) reference[j].push_back(snaps[i].reference[j]);
     }

@@ -172,7 +172,8 @@ class JskParticleSweepKind : public ScenarioKind {
     }
     WriteFileAtomic(ctx.out->File("sweep.csv"), sweep_csv);
     WriteFileAtomic(ctx.out->File("traces.csv"), traces_csv);
-    for (int s = 0; s < seeds_; ++s) trajectories[s].Write(*ctx.out, "base", "seed_" + std::to_string(s));
+    for (int s = 0; s < seeds_; ++s)
+      trajectories[s].Write(*ctx.out, "base", "seed_" + std::to_string(s));
     metrics["seeds"] = seeds_;
     metrics["base_particles"] = base_n_;
     metrics["base_kappa_v"] = base_kappa_;

@@ -94,8 +94,8 @@ class JskSimDeflectionKind : public ScenarioKind {
     std::snprintf(k_text, sizeof(k_text), "%g", options_.k);
     for (const jsk::Trace& tr : traces) {
       jsk::PlotJointBands(
-          rig_, std::string("Simulated deflection ([PF eq. 31], k = ") + k_text + "): " + tr.label, {tr},
-          &run.truth, run.reference,
+          rig_, std::string("Simulated deflection ([PF eq. 31], k = ") + k_text + "): " + tr.label,
+          {tr}, &run.truth, run.reference,
           (ctx.out->FramesDir() / ("fig6_" + tr.label + ".png")).string(), "filter step");
     }
   }

@@ -101,7 +101,8 @@ class PpoeCovarianceKind : public ScenarioKind {
     }
     if (cases_.empty()) cases.Fail("needs at least one case");
     // Build every chain now: a bad declared file fails before any output exists.
-    for (const Case& c : cases_) chains_.push_back(sim::BuildDeclaredChain(model_.get(), Declared(c)));
+    for (const Case& c : cases_)
+      chains_.push_back(sim::BuildDeclaredChain(model_.get(), Declared(c)));
   }
 
   void Run(RunContext& ctx) override {
@@ -148,8 +149,9 @@ class PpoeCovarianceKind : public ScenarioKind {
         if (s < plot_samples_) {
           const Vec3& p = poses[ee].translation();
           char line[320];
-          std::snprintf(line, sizeof(line), "%d,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n",
-                        s, p.x(), p.y(), p.z(), xi[0], xi[1], xi[2], xi[3], xi[4], xi[5], d2);
+          std::snprintf(line, sizeof(line),
+                        "%d,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s, p.x(), p.y(),
+                        p.z(), xi[0], xi[1], xi[2], xi[3], xi[4], xi[5], d2);
           samples_csv << line;
           figure.samples.push_back(p);
         }
@@ -184,10 +186,10 @@ class PpoeCovarianceKind : public ScenarioKind {
         for (int b = a; b < range2.rank(); ++b) {
           for (int k = 0; k < 180; ++k) {
             const double phi = 2.0 * M_PI * k / 180.0;
-            const Vec6 xi = std::sqrt(q2 * range2.lambda[a]) * std::cos(phi) * range2.V.col(a) +
-                            (b == a ? Vec6::Zero()
-                                    : Vec6(std::sqrt(q2 * range2.lambda[b]) * std::sin(phi) *
-                                           range2.V.col(b)));
+            const Vec6 xi =
+                std::sqrt(q2 * range2.lambda[a]) * std::cos(phi) * range2.V.col(a) +
+                (b == a ? Vec6::Zero()
+                        : Vec6(std::sqrt(q2 * range2.lambda[b]) * std::sin(phi) * range2.V.col(b)));
             figure.boundary.push_back(mean.Plus(xi).translation());
           }
         }
@@ -196,7 +198,8 @@ class PpoeCovarianceKind : public ScenarioKind {
       kinematics::ForwardKinematics(model, data, c.q);
       figure.arm.push_back(Vec3::Zero());
       for (const auto& f : model.frames()) {
-        if (f.name.rfind("joint/", 0) == 0) figure.arm.push_back(data.T_base_frame[model.FindFrame(f.name)].translation());
+        if (f.name.rfind("joint/", 0) == 0)
+          figure.arm.push_back(data.T_base_frame[model.FindFrame(f.name)].translation());
       }
       figure.arm.push_back(mean.translation());
       DrawPpoeFigure(figure, (ctx.out->FramesDir() / ("planar3_" + c.name + ".png")).string());

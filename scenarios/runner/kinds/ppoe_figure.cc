@@ -23,7 +23,8 @@ void DrawPpoeFigure(const PpoeFigure& figure, const std::string& png_path) {
     for (const Vec3& q : p) v.push_back(q.y());
     return v;
   };
-  render::Series& region = ax.AddScatter("PPOE 80% boundary", xs(figure.boundary), ys(figure.boundary));
+  render::Series& region =
+      ax.AddScatter("PPOE 80% boundary", xs(figure.boundary), ys(figure.boundary));
   region.color = {40, 90, 220};
   region.marker = render::Marker::kCircle;
   region.marker_size = 1;

@@ -30,7 +30,9 @@ namespace {
 constexpr double kDeg = M_PI / 180.0;
 
 using Clock = std::chrono::steady_clock;
-double Seconds(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
+double Seconds(Clock::time_point a) {
+  return std::chrono::duration<double>(Clock::now() - a).count();
+}
 
 std::string Fmt(const char* format, double v) {
   char buf[64];
@@ -360,7 +362,8 @@ class RoverDeflectionKind : public ScenarioKind {
     render::WritePng(frame, (ctx.out->FramesDir() / name).string());
     if (overview_id_ >= 0) {
       std::snprintf(name, sizeof(name), "overview_config_%02d.png", c.index);
-      render::WritePng(renderer_->RenderRgb(d, overview_id_), (ctx.out->FramesDir() / name).string());
+      render::WritePng(renderer_->RenderRgb(d, overview_id_),
+                       (ctx.out->FramesDir() / name).string());
     }
     // Detections against the true corners projected through the true camera.
     const render::DetectionResult det = detector_->Detect(frame);

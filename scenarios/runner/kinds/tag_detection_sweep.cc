@@ -106,7 +106,8 @@ class TagDetectionSweepKind : public ScenarioKind {
     // Load now: every bad-input case fails before any output exists.
     model_ = sim::LoadModel(model_path_);
     if (model_->ncam == 0) {
-      throw InputError(model_path_ + ": the model has no camera; the sweep renders from an "
+      throw InputError(model_path_ +
+                       ": the model has no camera; the sweep renders from an "
                        "MJCF <camera>");
     }
     camera_id_ = sim::CameraId(model_.get(), camera_, model_path_);
@@ -146,12 +147,11 @@ class TagDetectionSweepKind : public ScenarioKind {
     // The board frame in the optical frame at view 0, rotation 0: the tag faces the camera,
     // printed x to the right and printed y down in the image (body +z towards the camera).
     const Mat3 R_cam_board0 = Eigen::Vector3d(1.0, -1.0, -1.0).asDiagonal();
-    const Eigen::Vector3d tag_center_geom =
-        0.25 * (tag_.corners_geom[0] + tag_.corners_geom[1] + tag_.corners_geom[2] +
-                tag_.corners_geom[3]);
+    const Eigen::Vector3d tag_center_geom = 0.25 * (tag_.corners_geom[0] + tag_.corners_geom[1] +
+                                                    tag_.corners_geom[2] + tag_.corners_geom[3]);
 
-    const int total = static_cast<int>(distances_.size() * views_.size() * rotations_.size()) *
-                      frames_per_pose_;
+    const int total =
+        static_cast<int>(distances_.size() * views_.size() * rotations_.size()) * frames_per_pose_;
     std::vector<FrameRow> rows;
     rows.reserve(total);
     const std::vector<int> save_at = SaveIndices(total);
@@ -167,8 +167,7 @@ class TagDetectionSweepKind : public ScenarioKind {
             const Mat3 R_cam_board =
                 R_cam_board0 *
                 Eigen::AngleAxisd((view + jv) * M_PI / 180, Eigen::Vector3d::UnitY()).matrix() *
-                Eigen::AngleAxisd((rotation + jr) * M_PI / 180, Eigen::Vector3d::UnitZ())
-                    .matrix();
+                Eigen::AngleAxisd((rotation + jr) * M_PI / 180, Eigen::Vector3d::UnitZ()).matrix();
             // Place the tag's centre (not the board origin) on the optical axis.
             const Mat3 R_board_geom = GeomInBody(m);
             const Eigen::Vector3d p_center_board =
@@ -197,8 +196,9 @@ class TagDetectionSweepKind : public ScenarioKind {
             double edge_sum = 0.0;
             for (int k = 0; k < 4; ++k) edge_sum += (truth[(k + 1) % 4] - truth[k]).norm();
             row.width_px = edge_sum / 4;
-            const double area = 0.5 * std::abs((truth[2] - truth[0]).x() * (truth[3] - truth[1]).y() -
-                                               (truth[2] - truth[0]).y() * (truth[3] - truth[1]).x());
+            const double area =
+                0.5 * std::abs((truth[2] - truth[0]).x() * (truth[3] - truth[1]).y() -
+                               (truth[2] - truth[0]).y() * (truth[3] - truth[1]).x());
             row.px_per_cell = std::sqrt(area) / tag_.border_cells;
 
             const render::PixelRect roi = BoundingBox(truth, cam);
@@ -225,9 +225,9 @@ class TagDetectionSweepKind : public ScenarioKind {
               row.corner_rmse_px = std::sqrt(sq / 4);
               row.corner_nees = nees / 4;
               Eigen::Vector2d c_true;
-              cam.Project(T_cam_w * (0.25 * (corners_w[0] + corners_w[1] + corners_w[2] +
-                                            corners_w[3])),
-                          &c_true);
+              cam.Project(
+                  T_cam_w * (0.25 * (corners_w[0] + corners_w[1] + corners_w[2] + corners_w[3])),
+                  &c_true);
               row.center_err_px = (det->center - c_true).norm();
               row.est_view_deg = det->view_angle_deg;
               row.decision_margin = det->decision_margin;
@@ -370,8 +370,8 @@ class TagDetectionSweepKind : public ScenarioKind {
       csv << r.frame << ',' << num(r.distance_m) << ',' << num(r.view_deg) << ','
           << num(r.rotation_deg) << ',' << num(r.width_px) << ',' << num(r.px_per_cell) << ','
           << (r.detected ? 1 : 0) << ',' << r.status << ',' << num(r.corner_rmse_px) << ','
-          << num(r.center_err_px) << ',' << num(r.corner_nees) << ',' << num(r.est_view_deg)
-          << ',' << num(r.decision_margin) << ',' << num(r.pose_rot_err_deg) << ','
+          << num(r.center_err_px) << ',' << num(r.corner_nees) << ',' << num(r.est_view_deg) << ','
+          << num(r.decision_margin) << ',' << num(r.pose_rot_err_deg) << ','
           << num(r.pose_pos_err_mm) << ',' << num(r.pose_det) << '\n';
     }
   }

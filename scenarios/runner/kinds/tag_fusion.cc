@@ -18,12 +18,12 @@
 #include "render/tag_texture.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/model_config.h"
+#include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/sim_readings.h"
-#include "scenarios/runner/common/tag_tracking.h"
 #include "scenarios/runner/common/stage_timer.h"
+#include "scenarios/runner/common/tag_tracking.h"
 #include "scenarios/runner/common/trajectories.h"
-#include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/declared_chain.h"
@@ -159,7 +159,8 @@ class TagFusionKind : public ScenarioKind {
     TrajectoryRecorder trajectories;
     std::vector<std::map<std::string, int>> status_counts(instances_.size());
     std::ofstream csv(ctx.out->File("configurations.csv"));
-    csv << "config,estimator,tags_used,view_angle_deg,ee_axis_to_sight_deg,pos_err_m,lateral_err_m,rot_err_deg,nees\n";
+    csv << "config,estimator,tags_used,view_angle_deg,ee_axis_to_sight_deg,pos_err_m,lateral_err_m,"
+           "rot_err_deg,nees\n";
     int total_tags = 0;
     int configs_without_tags = 0;
     StageTimer timer;  // the pipeline's throughput: timing.pipeline_frames_per_s
@@ -246,8 +247,8 @@ class TagFusionKind : public ScenarioKind {
         char line[256];
         std::snprintf(line, sizeof(line), "%zu,%s,%zu,%.4f,%.4f,%.9g,%.9g,%.9g,%.9g\n", c,
                       estimators_[e].name.c_str(), measurements.size(), view_angle_deg, ee_axis_deg,
-                      stats[e].last_pos(),
-                      stats[e].last_lateral(), stats[e].last_rot_deg(), stats[e].last_nees());
+                      stats[e].last_pos(), stats[e].last_lateral(), stats[e].last_rot_deg(),
+                      stats[e].last_nees());
         csv << line;
       }
       if (save_frames_) {
@@ -346,7 +347,8 @@ class TagFusionKind : public ScenarioKind {
         const Eigen::Isometry3d T_w_geom =
             sim_->Pose(sim::ObjectName(sim_->model(), mjOBJ_GEOM, tag.geom_id));
         const auto& c = tag.corners_geom;
-        const Eigen::Vector3d n_w = T_w_geom.linear() * (c[1] - c[0]).cross(c[3] - c[0]).normalized();
+        const Eigen::Vector3d n_w =
+            T_w_geom.linear() * (c[1] - c[0]).cross(c[3] - c[0]).normalized();
         const Eigen::Vector3d centre_w = T_w_geom * (0.25 * (c[0] + c[1] + c[2] + c[3]));
         const double cosine = std::abs(n_w.dot((p_w_cam - centre_w).normalized()));
         largest = std::max(largest, std::acos(std::min(1.0, cosine)) * 180.0 / M_PI);
@@ -382,13 +384,12 @@ class TagFusionKind : public ScenarioKind {
     std::mt19937_64 rng(ctx.seed * 7919ULL + 17);
     while (static_cast<int>(configurations_.size()) < random_count_) {
       if (attempts_ >= max_attempts_) {
-        throw InputError("random_configurations: only " + std::to_string(configurations_.size()) +
-                         " of " + std::to_string(random_count_) + " configurations show " +
-                         std::to_string(min_tags_) + " tag(s)" +
-                         (max_ee_axis_to_sight_deg_ < 180.0 ? " within max_ee_axis_to_sight_deg"
-                                                            : "") +
-                         " after " + std::to_string(attempts_) +
-                         " attempts; widen ranges_deg");
+        throw InputError(
+            "random_configurations: only " + std::to_string(configurations_.size()) + " of " +
+            std::to_string(random_count_) + " configurations show " + std::to_string(min_tags_) +
+            " tag(s)" +
+            (max_ee_axis_to_sight_deg_ < 180.0 ? " within max_ee_axis_to_sight_deg" : "") +
+            " after " + std::to_string(attempts_) + " attempts; widen ranges_deg");
       }
       ++attempts_;
       std::vector<std::pair<std::string, double>> cfg;

@@ -10,6 +10,8 @@
 // must follow chi-square(2):
 //  - the mean of d^2 lies within the two-sided 99% bounds of chi2(2N) / N, and
 //  - Pearson's goodness-of-fit statistic over 10 equiprobable bins is below chi2_0.99(9).
+#include "render/tag_covariance.h"
+
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -19,7 +21,6 @@
 #include "estimators/conventions.h"
 #include "render/degrade.h"
 #include "render/renderer.h"
-#include "render/tag_covariance.h"
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
 #include "sim/camera.h"
@@ -127,8 +128,8 @@ TEST_P(TagCovariance, MahalanobisDistancesFollowChiSquare2) {
     center_d2.push_back(Mahalanobis2(det.center - center, det.center_cov));
   }
   EXPECT_LE(missed, kFrames / 100) << "detection should not fail in these conditions";
-  for (const auto& [what, d2] : {std::make_pair("corner", &corner_d2),
-                                 std::make_pair("centre", &center_d2)}) {
+  for (const auto& [what, d2] :
+       {std::make_pair("corner", &corner_d2), std::make_pair("centre", &center_d2)}) {
     const Stats s = Evaluate(*d2);
     const double lo = Chi2Quantile(2.0 * s.n, -kZTwoSided) / s.n;
     const double hi = Chi2Quantile(2.0 * s.n, kZTwoSided) / s.n;
@@ -136,10 +137,10 @@ TEST_P(TagCovariance, MahalanobisDistancesFollowChiSquare2) {
     const double lo01 = Chi2Quantile(2.0 * s.n, -kZTwoSided01) / s.n;
     const double hi01 = Chi2Quantile(2.0 * s.n, kZTwoSided01) / s.n;
     const double critical01 = Chi2Quantile(9.0, kZOneSided01);
-    std::printf("[ %-20s ] %s: n=%d mean d2=%.3f (bounds %.3f..%.3f; at 0.01 each %.3f..%.3f)"
-                ", Pearson=%.1f (critical %.2f; at 0.01 each %.2f)\n",
-                c.name, what, s.n, s.mean, lo, hi, lo01, hi01, s.pearson, critical,
-                critical01);
+    std::printf(
+        "[ %-20s ] %s: n=%d mean d2=%.3f (bounds %.3f..%.3f; at 0.01 each %.3f..%.3f)"
+        ", Pearson=%.1f (critical %.2f; at 0.01 each %.2f)\n",
+        c.name, what, s.n, s.mean, lo, hi, lo01, hi01, s.pearson, critical, critical01);
     RecordProperty(std::string(what) + "_mean_d2", std::to_string(s.mean));
     RecordProperty(std::string(what) + "_pearson", std::to_string(s.pearson));
     EXPECT_GE(s.mean, lo) << what << ": covariance too large (conservative)";
@@ -149,20 +150,20 @@ TEST_P(TagCovariance, MahalanobisDistancesFollowChiSquare2) {
 }
 
 static_assert(kConditions == 5, "kChecks counts the conditions below");
-INSTANTIATE_TEST_SUITE_P(
-    NotTheCalibrationCondition, TagCovariance,
-    ::testing::Values(Condition{"near_0.45m_noise10", 0.45, 0.0, 10.0, 0.5, 11},
-                      Condition{"far_1.5m_noise8", 1.5, 0.0, 8.0, 0.5, 12},
-                      Condition{"oblique_45deg", 0.8, 45.0, 8.0, 0.5, 13},
-                      Condition{"bright_noise16", 0.8, 0.0, 16.0, 1.0, 14},
-                      Condition{"dim_1.1m_30deg", 1.1, 30.0, 6.0, 0.4, 15}),
-    [](const ::testing::TestParamInfo<Condition>& info) {
-      std::string name = info.param.name;
-      for (char& ch : name) {
-        if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
-      }
-      return name;
-    });
+INSTANTIATE_TEST_SUITE_P(NotTheCalibrationCondition, TagCovariance,
+                         ::testing::Values(Condition{"near_0.45m_noise10", 0.45, 0.0, 10.0, 0.5,
+                                                     11},
+                                           Condition{"far_1.5m_noise8", 1.5, 0.0, 8.0, 0.5, 12},
+                                           Condition{"oblique_45deg", 0.8, 45.0, 8.0, 0.5, 13},
+                                           Condition{"bright_noise16", 0.8, 0.0, 16.0, 1.0, 14},
+                                           Condition{"dim_1.1m_30deg", 1.1, 30.0, 6.0, 0.4, 15}),
+                         [](const ::testing::TestParamInfo<Condition>& info) {
+                           std::string name = info.param.name;
+                           for (char& ch : name) {
+                             if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
+                           }
+                           return name;
+                         });
 
 }  // namespace
 }  // namespace flexbench::render

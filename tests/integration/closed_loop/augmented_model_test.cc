@@ -60,8 +60,8 @@ std::unique_ptr<Rig> MakeRig(const std::string& which) {
     r->declared.actuated_joints = {"j1", "j2", "j3", "j4"};
     r->declared.end_effector = "ee";
   } else {
-    r->declared = sim::LoadDeclaredModel(testing::SourceDir() + "/models/" + which +
-                                         ".declared.yaml");
+    r->declared =
+        sim::LoadDeclaredModel(testing::SourceDir() + "/models/" + which + ".declared.yaml");
     r->owned = sim::LoadModel(r->declared.model_path);
   }
   r->m = r->owned.get();
@@ -156,8 +156,8 @@ TEST_P(AugmentedModel, EachEffectPredictsAsTheIdentificationModel) {
       ASSERT_NE(chain.effects_or_null(), nullptr) << c.Name();
     }
     for (const Eigen::VectorXd& q : qs) {
-      const lie::SE3 expected = rig->em->PredictPose(q, rig->em->Loads(q), {static_cast<int>(i)},
-                                                     v.data(), ws);
+      const lie::SE3 expected =
+          rig->em->PredictPose(q, rig->em->Loads(q), {static_cast<int>(i)}, v.data(), ws);
       ExpectSamePose(AugmentedPose(chain, q), expected, c.Name());
     }
     ++tested;
@@ -181,14 +181,15 @@ TEST_P(AugmentedModel, AllEffectsAtOnce) {
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
   EffectModel::Workspace ws = rig->em->MakeWorkspace();
   for (const Eigen::VectorXd& q : Configurations(chain.model.nq(), rng)) {
-    const lie::SE3 expected =
-        rig->em->PredictPose(q, rig->em->LoadsFor(q, active, theta.data()), active, theta.data(), ws);
+    const lie::SE3 expected = rig->em->PredictPose(q, rig->em->LoadsFor(q, active, theta.data()),
+                                                   active, theta.data(), ws);
     ExpectSamePose(AugmentedPose(chain, q), expected, "all effects");
     // The correction is not nothing: the declared chain alone is millimetres away.
     kinematics::PpoeData plain(chain.model);
     kinematics::ForwardKinematics(chain.model, plain, q);
-    EXPECT_GT((plain.T_base_frame[chain.end_effector].translation() - expected.translation()).norm(),
-              1e-3);
+    EXPECT_GT(
+        (plain.T_base_frame[chain.end_effector].translation() - expected.translation()).norm(),
+        1e-3);
   }
 }
 
@@ -237,8 +238,9 @@ TEST_P(AugmentedModel, ParameterStdsMatchMonteCarloThroughTheIdentificationModel
       }
       const double scale = std::max(mc.cwiseAbs().maxCoeff(), Sigma.cwiseAbs().maxCoeff());
       if (scale < 1e-18) continue;  // acts off the end effector's path (a camera's offset)
-      EXPECT_LT((mc - Sigma).cwiseAbs().maxCoeff(), 0.06 * scale)
-          << c.Name() << "\nMonte Carlo\n" << mc << "\nsources\n" << Sigma;
+      EXPECT_LT((mc - Sigma).cwiseAbs().maxCoeff(), 0.06 * scale) << c.Name() << "\nMonte Carlo\n"
+                                                                  << mc << "\nsources\n"
+                                                                  << Sigma;
       ++compared;
     }
   }
@@ -278,8 +280,8 @@ TEST(AugmentedModelEstimators, EveryEstimatorPredictsWithTheCorrectedModel) {
     a.end_effector = b.end_effector = chain.end_effector;
     a.seed = b.seed = 7;
     if (std::string(e.name) == "naive_ekf") {
-      a.params = b.params = estimators::Params({{"std_trans_m", {0.01, 0.01, 0.01}},
-                                                {"std_rot_deg", {1, 1, 1}}});
+      a.params = b.params =
+          estimators::Params({{"std_trans_m", {0.01, 0.01, 0.01}}, {"std_rot_deg", {1, 1, 1}}});
     }
     std::unique_ptr<estimators::Estimator> ea, eb;
     try {

@@ -187,8 +187,8 @@ TEST(EffectModel, CachedNominalPosesGiveTheSameBits) {
     L_plain.T_nominal.clear();
     std::vector<double> theta(64);
     for (double& v : theta) v = t(rng);
-    EXPECT_TRUE(same(em.PredictPose(q, L, {}, nullptr, ws),
-                     em.PredictPose(q, L_plain, {}, nullptr, ws)));
+    EXPECT_TRUE(
+        same(em.PredictPose(q, L, {}, nullptr, ws), em.PredictPose(q, L_plain, {}, nullptr, ws)));
     for (int a = 0; a < nc; ++a) {
       if (em.candidates()[a].type == EffectType::kCameraOffset) continue;
       const int b = (a * 7 + trial) % nc;
@@ -206,12 +206,12 @@ TEST(EffectModel, CachedNominalPosesGiveTheSameBits) {
     q2[0] += 0.1;
     const int j2 = em.FindCandidate("joint_compliance@j2");
     ASSERT_GE(j2, 0);
-    EXPECT_TRUE(same(em.PredictPose(q2, L, {}, nullptr, ws),
-                     em.PredictPose(q2, L_plain, {}, nullptr, ws)));
+    EXPECT_TRUE(
+        same(em.PredictPose(q2, L, {}, nullptr, ws), em.PredictPose(q2, L_plain, {}, nullptr, ws)));
     EXPECT_TRUE(same(em.PredictPose(q2, L, {j2}, theta.data(), ws),
                      em.PredictPose(q2, L_plain, {j2}, theta.data(), ws)));
-    EXPECT_FALSE(same(em.PredictPose(q2, L, {}, nullptr, ws),
-                      em.PredictPose(q, L, {}, nullptr, ws)));
+    EXPECT_FALSE(
+        same(em.PredictPose(q2, L, {}, nullptr, ws), em.PredictPose(q, L, {}, nullptr, ws)));
   }
 }
 
@@ -442,8 +442,7 @@ TEST(Identify, TwoCandidatesTheDataCannotTellApartAreBothNamedNeverOne) {
 // Points of kArm3 whose j3 turns by an error periodic in its own angle, 2 cycles per revolution
 // (a strain-wave transmission error): written with the declared chain's plain forward kinematics,
 // not with the effect model under test. Two sets, so cross-validation leaves one out.
-DataSet PeriodicErrorData(const EffectModel& em, double amplitude, int rows,
-                          std::mt19937_64& rng) {
+DataSet PeriodicErrorData(const EffectModel& em, double amplitude, int rows, std::mt19937_64& rng) {
   DataSet d;
   d.sets = {"a", "b"};
   std::uniform_real_distribution<double> u(-M_PI, M_PI);
@@ -744,8 +743,9 @@ TEST_F(CalibrationCsv, ByteOrderMarkIsNotPartOfTheFirstColumn) {
 }
 
 TEST_F(CalibrationCsv, FiniteAbsurdValuesAreOutOfRange) {
-  EXPECT_NE(Error("j1,j2,x,y,z\n1e200,0,1,2,3\n").find("data.csv:2: column 'j1': 1e200 is out "
-                                                       "of range"),
+  EXPECT_NE(Error("j1,j2,x,y,z\n1e200,0,1,2,3\n")
+                .find("data.csv:2: column 'j1': 1e200 is out "
+                      "of range"),
             std::string::npos);
   EXPECT_NE(Error("j1,j2,x,y,z\n0,0,1e308,2,3\n").find("column 'x': 1e308 is out of range"),
             std::string::npos);
@@ -762,11 +762,10 @@ TEST_F(CalibrationCsv, EchoedCellsAreCapped) {
 TEST_F(CalibrationCsv, AGroupSpanningSetsIsWarnedAbout) {
   DataSet d;
   ::testing::internal::CaptureStderr();
-  ReadCalibrationCsv(Write("j1,j2,group,set\n0,0,hole_0,front\n0,1,hole_0,left\n"),
-                     {"j1", "j2"}, &d);
+  ReadCalibrationCsv(Write("j1,j2,group,set\n0,0,hole_0,front\n0,1,hole_0,left\n"), {"j1", "j2"},
+                     &d);
   std::string err = ::testing::internal::GetCapturedStderr();
-  EXPECT_NE(err.find("data.csv:3: group 'hole_0' spans sets 'front' and 'left'"),
-            std::string::npos)
+  EXPECT_NE(err.find("data.csv:3: group 'hole_0' spans sets 'front' and 'left'"), std::string::npos)
       << err;
   EXPECT_NE(err.find("'left/hole_0'"), std::string::npos) << err;
   DataSet ok;
@@ -838,14 +837,14 @@ TEST(IdentifyCommand, FindsTheEffectInAUsersCsvAndRejectsABadRow) {
   ASSERT_EQ(aug.sources.size(), 1u);
   EXPECT_LT(aug.sources[0].about_axis_rad, 0.5 * M_PI / 180.0);  // reduced to what remains
   // Selection options on the command line: with no effect allowed, nothing is shipped.
-  const testing::CommandResult none = testing::RunCommand(
-      cmd + "0 --max-effects 0 --calibration " + (dir / "cal.csv").string());
+  const testing::CommandResult none =
+      testing::RunCommand(cmd + "0 --max-effects 0 --calibration " + (dir / "cal.csv").string());
   ASSERT_EQ(none.exit_code, 0) << none.err;
   EXPECT_NE(testing::ReadFile(dir / "out0" / "summary.json").find("\"verdict\": \"unexplained\""),
             std::string::npos);
   EXPECT_FALSE(fs::exists(dir / "out0" / "declared_augmented.yaml"));
-  const testing::CommandResult sets = testing::RunCommand(
-      cmd + "1 --folds-by set --calibration " + (dir / "cal.csv").string());
+  const testing::CommandResult sets =
+      testing::RunCommand(cmd + "1 --folds-by set --calibration " + (dir / "cal.csv").string());
   EXPECT_EQ(sets.exit_code, 2) << sets.err;
   EXPECT_NE(sets.err.find("cross-validation by set needs at least two sets"), std::string::npos)
       << sets.err;
@@ -931,8 +930,8 @@ TEST(IdentifyCommand, ReadingNoiseSizesTheSourcesOnWhatTheDataLeaves) {
   // --set reaches identify's closed_loop keys too, and is recorded.
   const auto none = identify("complete", " --set max_effects=0", "_set");
   EXPECT_EQ(none["verdict"], "unexplained");
-  EXPECT_EQ(nlohmann::json::parse(testing::ReadFile(dir / "out_complete_set" / "summary.json"))
-                ["overrides"],
+  EXPECT_EQ(nlohmann::json::parse(
+                testing::ReadFile(dir / "out_complete_set" / "summary.json"))["overrides"],
             (nlohmann::json{"max_effects=0"}));
   fs::remove_all(dir);
 }

@@ -5,10 +5,10 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <algorithm>
 #include <set>
 
 #include "scenarios/identify/effect_model.h"
@@ -76,8 +76,7 @@ TEST_P(ClosedLoopGuard, WithoutThePlantedFamilyItDoesNotClaimAnExplanation) {
     o.scenario_path = (dir / "guard.yaml").string();
     o.out_dir = (dir / "out").string();
     ASSERT_EQ(scenarios::RunScenario(o), scenarios::kExitOk) << family;
-    const nlohmann::json s =
-        nlohmann::json::parse(testing::ReadFile(dir / "out" / "summary.json"));
+    const nlohmann::json s = nlohmann::json::parse(testing::ReadFile(dir / "out" / "summary.json"));
     const nlohmann::json& m = s["metrics"];
     const std::string verdict = m["verdict"];
     EXPECT_NE(verdict, "explained")
@@ -94,15 +93,13 @@ TEST_P(ClosedLoopGuard, WithoutThePlantedFamilyItDoesNotClaimAnExplanation) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Planted, ClosedLoopGuard,
-                         ::testing::Values("closed_loop_base_plate", "closed_loop_link_bending",
-                                           "closed_loop_gear_elasticity",
-                                           "closed_loop_encoder_offset", "closed_loop_backlash",
-                                           "closed_loop_payload_and_plate",
-                                           "closed_loop_offset_and_gear",
-                                           "closed_loop_transmission_error",
-                                           "closed_loop_stiffening_spring",
-                                           "closed_loop_error_curve"));
+INSTANTIATE_TEST_SUITE_P(
+    Planted, ClosedLoopGuard,
+    ::testing::Values("closed_loop_base_plate", "closed_loop_link_bending",
+                      "closed_loop_gear_elasticity", "closed_loop_encoder_offset",
+                      "closed_loop_backlash", "closed_loop_payload_and_plate",
+                      "closed_loop_offset_and_gear", "closed_loop_transmission_error",
+                      "closed_loop_stiffening_spring", "closed_loop_error_curve"));
 
 }  // namespace
 }  // namespace flexbench::identify
@@ -114,7 +111,8 @@ namespace {
 TEST(ClosedLoopBadInput, FoldsThatCannotExistAndUnknownFamilies) {
   const fs::path src = fs::path(testing::SourceDir()) / "scenarios" / "closed_loop_backlash.yaml";
   const YAML::Node root = YAML::LoadFile(src.string());
-  const fs::path dir = fs::temp_directory_path() / ("flexbench_badsel_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("flexbench_badsel_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const auto run = [&](const YAML::Node& n) {
     {

@@ -46,8 +46,8 @@ TEST(LoadsAtCorrectedAngles, IdentificationModelEqualsMuJoCoStatics) {
   std::vector<int> motor(nq), jid(nq);
   for (int k = 0; k < nq; ++k) {
     const auto& names = sim->actuated_joints();
-    motor[k] = static_cast<int>(std::find(names.begin(), names.end(), chain.q_joints[k]) -
-                                names.begin());
+    motor[k] =
+        static_cast<int>(std::find(names.begin(), names.end(), chain.q_joints[k]) - names.begin());
     ASSERT_LT(motor[k], static_cast<int>(names.size()));
     jid[k] = mj_name2id(sim->model(), mjOBJ_JOINT, chain.q_joints[k].c_str());
   }
@@ -58,9 +58,9 @@ TEST(LoadsAtCorrectedAngles, IdentificationModelEqualsMuJoCoStatics) {
   EffectModel::Workspace ws = em.MakeWorkspace();
   estimators::EstimatorSetup setup;
   sim::DeclaredModel aug = declared;
-  aug.identified_effects = {{"joint_offset@j2", {theta[0]}, {}, "rad", "t:1"},
-                            {"base_compliance@base_plate", {theta[1], theta[2]}, {}, "rad/Nm",
-                             "t:2"}};
+  aug.identified_effects = {
+      {"joint_offset@j2", {theta[0]}, {}, "rad", "t:1"},
+      {"base_compliance@base_plate", {theta[1], theta[2]}, {}, "rad/Nm", "t:2"}};
   const sim::DeclaredChain aug_chain = sim::BuildDeclaredChain(sim->nominal_model(), aug);
   setup.model = &aug_chain.model;
   setup.effects = aug_chain.effects_or_null();

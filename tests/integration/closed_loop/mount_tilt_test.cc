@@ -111,13 +111,14 @@ TEST_P(MountTiltTest, MatchesMujocoEquilibriumWhereTheLinearTiltDoesNot) {
 }
 
 // Stretched forward low, raised high above the plate, off to the side and hanging below it.
-INSTANTIATE_TEST_SUITE_P(
-    Loads, MountTiltTest,
-    ::testing::Values(Load{"stretched", Vec3(0.6, 0.0, 0.1), 4.0},
-                      Load{"raised", Vec3(0.15, 0.05, 0.45), 4.0},
-                      Load{"sideways", Vec3(0.3, 0.25, 0.3), 4.0},
-                      Load{"hanging", Vec3(0.4, -0.1, -0.3), 3.0}),
-    [](const ::testing::TestParamInfo<Load>& i) { return std::string(i.param.name); });
+INSTANTIATE_TEST_SUITE_P(Loads, MountTiltTest,
+                         ::testing::Values(Load{"stretched", Vec3(0.6, 0.0, 0.1), 4.0},
+                                           Load{"raised", Vec3(0.15, 0.05, 0.45), 4.0},
+                                           Load{"sideways", Vec3(0.3, 0.25, 0.3), 4.0},
+                                           Load{"hanging", Vec3(0.4, -0.1, -0.3), 3.0}),
+                         [](const ::testing::TestParamInfo<Load>& i) {
+                           return std::string(i.param.name);
+                         });
 
 // With C = 0 nothing tilts, and the sensitivity to the compliance is the moment at rest.
 TEST(MountTilt, ZeroComplianceGivesNoTiltAndTheRestingMomentAsSensitivity) {

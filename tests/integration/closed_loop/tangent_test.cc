@@ -87,9 +87,7 @@ void RandomActive(const EffectModel& em, std::mt19937_64& rng, std::vector<int>*
   *theta = Eigen::Map<const Eigen::VectorXd>(t.data(), t.size());
 }
 
-bool Near(const Vec3& a, const Vec3& b) {
-  return (a - b).norm() <= kTol * (1.0 + b.norm());
-}
+bool Near(const Vec3& a, const Vec3& b) { return (a - b).norm() <= kTol * (1.0 + b.norm()); }
 
 class TangentTest : public ::testing::TestWithParam<std::string> {};
 

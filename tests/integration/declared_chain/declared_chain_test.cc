@@ -2,6 +2,8 @@
 // reference), for every model in models/ that has a declared-model file, and for inline models
 // with the joint layouts MuJoCo allows (anchors off the body origin, several joints per body,
 // slides, references, trees).
+#include "sim/declared_chain.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -10,7 +12,6 @@
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "sim/camera.h"
-#include "sim/declared_chain.h"
 #include "sim/mujoco_model.h"
 #include "tests/common/test_util.h"
 
@@ -189,8 +190,9 @@ TEST(DeclaredChain, ActuatedJointsOffTheChainsStillGetTheirBranch) {
 TEST(DeclaredModelFile, FormatErrorsNameFileLineAndKey) {
   testing::TempDir tmp;
   const auto path = tmp.path() / "x.declared.yaml";
-  testing::WriteFile(path, "model: planar3.xml\nactuated_joints: [j1]\nend_effector: ee\n"
-                           "sources:\n  - {at: j1, std_rot_deg: [1, 2]}\n");
+  testing::WriteFile(path,
+                     "model: planar3.xml\nactuated_joints: [j1]\nend_effector: ee\n"
+                     "sources:\n  - {at: j1, std_rot_deg: [1, 2]}\n");
   try {
     LoadDeclaredModel(path.string());
     FAIL();
@@ -228,15 +230,13 @@ TEST(DeclaredModelFile, RangesAndTheModelPathAreChecked) {
   const std::string head = "actuated_joints: [joint1]\nend_effector: ee\nsources:\n";
   EXPECT_NE(error(model + head + "  - {at: joint1, about_axis_deg: 1e6}\n").find("at most 90"),
             std::string::npos);
-  EXPECT_NE(error(model + head + "  - {at: joint1, std_rot_deg: [1, 1e6, 1]}\n")
-                .find("at most 90"),
+  EXPECT_NE(error(model + head + "  - {at: joint1, std_rot_deg: [1, 1e6, 1]}\n").find("at most 90"),
             std::string::npos);
-  EXPECT_NE(error(model + head + "  - {at: joint1, std_trans_m: [0, 0, 1e3]}\n")
-                .find("at most 10"),
+  EXPECT_NE(error(model + head + "  - {at: joint1, std_trans_m: [0, 0, 1e3]}\n").find("at most 10"),
             std::string::npos);
   EXPECT_EQ(error(model + head + "  - {at: joint1, about_axis_deg: 2}\n"), "");
-  const std::string e = error("model: /nonexistent/robot.xml\n" + head +
-                              "  - {at: joint1, about_axis_deg: 2}\n");
+  const std::string e =
+      error("model: /nonexistent/robot.xml\n" + head + "  - {at: joint1, about_axis_deg: 2}\n");
   EXPECT_NE(e.find(":1: key 'model': model file /nonexistent/robot.xml not found"),
             std::string::npos)
       << e;

@@ -70,7 +70,8 @@ TEST_P(FrontalTag, DetectedCornersMatchProjectedTruth) {
   ASSERT_EQ(result.detections.size(), 1u);
   EXPECT_EQ(result.detections[0].id, id);
   double sum_sq = 0.0;
-  for (int k = 0; k < 4; ++k) sum_sq += (result.detections[0].corners[k] - r.truth[k]).squaredNorm();
+  for (int k = 0; k < 4; ++k)
+    sum_sq += (result.detections[0].corners[k] - r.truth[k]).squaredNorm();
   EXPECT_LT(std::sqrt(sum_sq / 4), 0.5) << "corner RMSE against the projected truth";
 }
 
@@ -125,8 +126,7 @@ TEST(Render, TagIdOutsideFamilyIsBadInput) {
     ApplyTagTextures(m.get());
     FAIL() << "expected InputError";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("outside family tag36h11"), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("outside family tag36h11"), std::string::npos) << e.what();
   }
 }
 

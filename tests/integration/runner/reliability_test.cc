@@ -21,8 +21,7 @@ std::string Flexbench() { return BinDir() + "/flexbench"; }
 std::string SmokeYaml(const std::string& extra = "", const std::string& model = "") {
   const std::string model_path = model.empty() ? SourceDir() + "/models/planar3.xml" : model;
   return "scenario: smoke_copy\nkind: smoke\nseed: 3\nmodel: " + model_path +
-         "\ncamera: overview\nconfiguration: {joint1: 0.35, joint2: -0.6, joint3: 0.5}\n" +
-         extra;
+         "\ncamera: overview\nconfiguration: {joint1: 0.35, joint2: -0.6, joint3: 0.5}\n" + extra;
 }
 
 std::string RunCmd(const fs::path& scenario, const fs::path& out, const std::string& extra = "") {
@@ -45,8 +44,8 @@ TEST(Reliability, SetOverridesAKeyAndIsRecordedOrNamed) {
   fs::create_directories(dir);
   const fs::path s = dir / "smoke.yaml";
   WriteFile(s, SmokeYaml());
-  CommandResult r = RunCommand(
-      RunCmd(s, dir / "ok", "--set seed=11 --set configuration.joint2=-0.5 --set render.mode=fast"));
+  CommandResult r = RunCommand(RunCmd(
+      s, dir / "ok", "--set seed=11 --set configuration.joint2=-0.5 --set render.mode=fast"));
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto summary = nlohmann::json::parse(ReadFile(dir / "ok" / "summary.json"));
   EXPECT_EQ(summary["seed"], 11);
@@ -55,7 +54,8 @@ TEST(Reliability, SetOverridesAKeyAndIsRecordedOrNamed) {
   // Without overrides the key is absent (same bytes as before for every existing run).
   r = RunCommand(RunCmd(s, dir / "plain"));
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_FALSE(nlohmann::json::parse(ReadFile(dir / "plain" / "summary.json")).contains("overrides"));
+  EXPECT_FALSE(
+      nlohmann::json::parse(ReadFile(dir / "plain" / "summary.json")).contains("overrides"));
   const std::pair<const char*, const char*> bad[] = {
       {"--set descripton=typo", "--set descripton: unknown key 'descripton'"},
       {"--set seed=abc", "--set seed: key 'seed': expected an integer"},
@@ -211,8 +211,8 @@ TEST(Reliability, MujocoFatalErrorsAndBadOffscreenSizesAreBadInputWithoutAPrompt
   std::string xml = ReadFile(SourceDir() + "/models/planar3.xml");
   const std::string from = "offwidth=\"640\" offheight=\"480\"";
   ASSERT_NE(xml.find(from), std::string::npos);
-  for (const char* size : {"offwidth=\"60000\" offheight=\"60000\"",
-                           "offwidth=\"640\" offheight=\"-5\""}) {
+  for (const char* size :
+       {"offwidth=\"60000\" offheight=\"60000\"", "offwidth=\"640\" offheight=\"-5\""}) {
     std::string m = xml;
     m.replace(m.find(from), from.size(), size);
     WriteFile(tmp.path() / "m.xml", m);
@@ -250,7 +250,7 @@ TEST(Reliability, CheckGatesWithoutGatesAndGateTyposAreBadInput) {
   r = RunCommand(RunCmd(s, tmp.path() / "out", "--check-gates"));
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(LastLine(r.err).find(s.string() + ":8: gate 'typo': metric 'corner_rmse_pix' is "
-                                               "not in this scenario's results"),
+                                              "not in this scenario's results"),
             std::string::npos)
       << r.err;
   EXPECT_FALSE(fs::exists(tmp.path() / "out"));
@@ -259,8 +259,8 @@ TEST(Reliability, CheckGatesWithoutGatesAndGateTyposAreBadInput) {
 // Found by mutation testing: a huge detector setting crashed the AprilTag library (rc 139).
 TEST(Reliability, AbsurdDetectorSettingsAreBadInput) {
   TempDir tmp;
-  for (const char* setting : {"decimate: 1.1e300", "decimate: 500", "sigma: 1e300",
-                              "threads: 100000"}) {
+  for (const char* setting :
+       {"decimate: 1.1e300", "decimate: 500", "sigma: 1e300", "threads: 100000"}) {
     const fs::path s = tmp.path() / "s.yaml";
     WriteFile(s, SmokeYaml(std::string("detector:\n  family: tag36h11\n  ") + setting + "\n"));
     const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
@@ -276,8 +276,8 @@ TEST(Reliability, ScenarioNameCannotLeaveTheOutputFolder) {
   std::string y = SmokeYaml();
   y.replace(y.find("smoke_copy"), 10, "../../escape");
   WriteFile(s, y);
-  const CommandResult r = RunCommand("cd " + tmp.path().string() + " && " + Flexbench() +
-                                     " run " + s.string());
+  const CommandResult r =
+      RunCommand("cd " + tmp.path().string() + " && " + Flexbench() + " run " + s.string());
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("key 'scenario': must be a plain name"), std::string::npos) << r.err;
 }
@@ -349,19 +349,18 @@ TEST(Reliability, FilesOverTheSizeCapsAreRefusedUnread) {
   WriteFile(s, SmokeYaml("", big_xml.string()));
   r = RunCommand(RunCmd(s, tmp.path() / "out"));
   EXPECT_EQ(r.exit_code, 2) << r.err;
-  EXPECT_NE(LastLine(r.err).find("big.xml: 67108865 bytes, more than"), std::string::npos)
-      << r.err;
+  EXPECT_NE(LastLine(r.err).find("big.xml: 67108865 bytes, more than"), std::string::npos) << r.err;
   // Two different oversized CSVs: refused by size, not read whole to compare them.
   const fs::path big_csv = sparse("big.csv", (512ull << 20) + 1);
   const fs::path big_csv2 = sparse("big2.csv", (512ull << 20) + 1);
   r = RunCommand(Flexbench() + " identify --declared " + SourceDir() +
                  "/models/planar3.declared.yaml --calibration " + big_csv.string() +
-                 " --validation " + big_csv2.string() + " --out " +
-                 (tmp.path() / "out").string() + " </dev/null");
+                 " --validation " + big_csv2.string() + " --out " + (tmp.path() / "out").string() +
+                 " </dev/null");
   EXPECT_EQ(r.exit_code, 2) << r.err;
-  EXPECT_NE(LastLine(r.err).find("--calibration: " + big_csv.string() +
-                                 ": 536870913 bytes, more than"),
-            std::string::npos)
+  EXPECT_NE(
+      LastLine(r.err).find("--calibration: " + big_csv.string() + ": 536870913 bytes, more than"),
+      std::string::npos)
       << r.err;
   EXPECT_FALSE(fs::exists(tmp.path() / "out"));
 }
@@ -394,12 +393,12 @@ class IdentifyCli : public ::testing::Test {
 TEST_F(IdentifyCli, ModelIsTheDeclaredFilesOrRejected) {
   CommandResult r = Identify("--model /tmp");
   EXPECT_EQ(r.exit_code, 2) << r.err;
-  EXPECT_NE(r.err.find("--model /tmp: is not the model the declared file names"),
-            std::string::npos)
+  EXPECT_NE(r.err.find("--model /tmp: is not the model the declared file names"), std::string::npos)
       << r.err;
   r = Identify("--model " + SourceDir() + "/models/rover_arm.xml");
   EXPECT_EQ(r.exit_code, 2) << r.err;
-  r = Identify("--model " + SourceDir() + "/models/../models/planar3.xml --candidates "
+  r = Identify("--model " + SourceDir() +
+               "/models/../models/planar3.xml --candidates "
                "joint_offset");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   r = Identify("--candidates joint_offset");  // --model is optional
@@ -422,8 +421,8 @@ TEST_F(IdentifyCli, OptionErrorsNameTheOptionNotATemporaryFile) {
 
 TEST_F(IdentifyCli, RowsAreNamedByThePathAsGiven) {
   const CommandResult r = RunCommand(
-      "cd " + tmp_.path().string() + " && " + Flexbench() + " identify --declared " +
-      SourceDir() + "/models/planar3.declared.yaml --calibration cal.csv --validation ./val.csv "
+      "cd " + tmp_.path().string() + " && " + Flexbench() + " identify --declared " + SourceDir() +
+      "/models/planar3.declared.yaml --calibration cal.csv --validation ./val.csv "
       "--candidates joint_offset --out out </dev/null");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const std::string res = ReadFile(tmp_.path() / "out" / "calibration_residuals.csv");
@@ -431,12 +430,11 @@ TEST_F(IdentifyCli, RowsAreNamedByThePathAsGiven) {
 }
 
 TEST_F(IdentifyCli, SameRowsForCalibrationAndValidationAreRefused) {
-  const CommandResult r =
-      RunCommand(Flexbench() + " identify --declared " + SourceDir() +
-                 "/models/planar3.declared.yaml --calibration " +
-                 (tmp_.path() / "cal.csv").string() + " --validation " +
-                 (tmp_.path() / "cal.csv").string() + " --out " +
-                 (tmp_.path() / "out").string() + " </dev/null");
+  const CommandResult r = RunCommand(Flexbench() + " identify --declared " + SourceDir() +
+                                     "/models/planar3.declared.yaml --calibration " +
+                                     (tmp_.path() / "cal.csv").string() + " --validation " +
+                                     (tmp_.path() / "cal.csv").string() + " --out " +
+                                     (tmp_.path() / "out").string() + " </dev/null");
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("same rows as --calibration"), std::string::npos) << r.err;
 }

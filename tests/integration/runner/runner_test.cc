@@ -16,16 +16,15 @@ std::string Flexbench() { return BinDir() + "/flexbench"; }
 std::string SmokeYaml(const std::string& extra = "", const std::string& model = "") {
   const std::string model_path = model.empty() ? SourceDir() + "/models/planar3.xml" : model;
   return "scenario: smoke_copy\nkind: smoke\nseed: 3\nmodel: " + model_path +
-         "\ncamera: overview\nconfiguration: {joint1: 0.35, joint2: -0.6, joint3: 0.5}\n" +
-         extra;
+         "\ncamera: overview\nconfiguration: {joint1: 0.35, joint2: -0.6, joint3: 0.5}\n" + extra;
 }
 
 // A bad-input run: exit 2, exactly one line on stderr, no output folder left behind.
 void ExpectBadInput(const TempDir& tmp, const std::string& scenario_path,
                     const std::string& must_contain) {
   const fs::path out = tmp.path() / "out";
-  const CommandResult r = RunCommand(Flexbench() + " run " + scenario_path + " --out " +
-                                     out.string());
+  const CommandResult r =
+      RunCommand(Flexbench() + " run " + scenario_path + " --out " + out.string());
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_EQ(CountLines(r.err), 1) << r.err;
   EXPECT_NE(r.err.find(must_contain), std::string::npos) << r.err;
@@ -68,8 +67,9 @@ TEST(RunnerBadInput, UnknownNestedKeyIsNamedWithItsLine) {
 TEST(RunnerBadInput, ModelRejectedByMujocoPassesItsMessageOn) {
   TempDir tmp;
   const fs::path model = tmp.path() / "bad.xml";
-  WriteFile(model, "<mujoco><worldbody><geom type=\"sphere\" size=\"-1\"/>"
-                   "<body><joint type=\"bogus\"/></body></worldbody></mujoco>");
+  WriteFile(model,
+            "<mujoco><worldbody><geom type=\"sphere\" size=\"-1\"/>"
+            "<body><joint type=\"bogus\"/></body></worldbody></mujoco>");
   const fs::path path = tmp.path() / "s.yaml";
   WriteFile(path, SmokeYaml("", model.string()));
   ExpectBadInput(tmp, path.string(), "MuJoCo rejected the model");
@@ -126,8 +126,8 @@ TEST(Runner, FailedGateExitsThreeAndReportsIt) {
   WriteFile(path, SmokeYaml("gates:\n  - {name: impossible, metric: corner_rmse_px, op: '<', "
                             "threshold: 0.0}\n"));
   const fs::path out = tmp.path() / "out";
-  CommandResult r = RunCommand(Flexbench() + " run " + path.string() + " --out " +
-                               out.string() + " --check-gates");
+  CommandResult r = RunCommand(Flexbench() + " run " + path.string() + " --out " + out.string() +
+                               " --check-gates");
   EXPECT_EQ(r.exit_code, 3) << r.err;
   const auto summary = nlohmann::json::parse(ReadFile(out / "summary.json"));
   EXPECT_FALSE(summary["gates"][0]["passed"].get<bool>());
@@ -140,8 +140,7 @@ TEST(Runner, SummaryFollowsTheContract) {
   TempDir tmp;
   const fs::path out = tmp.path() / "out";
   const CommandResult r = RunCommand(Flexbench() + " run " + SourceDir() +
-                                     "/scenarios/smoke.yaml --out " + out.string() +
-                                     " --seed 11");
+                                     "/scenarios/smoke.yaml --out " + out.string() + " --seed 11");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto s = nlohmann::json::parse(ReadFile(out / "summary.json"));
   EXPECT_EQ(s["scenario"], "smoke");

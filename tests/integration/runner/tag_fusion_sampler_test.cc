@@ -41,7 +41,8 @@ std::vector<std::map<std::string, std::string>> ReadCsv(const fs::path& path) {
 RunOptions Exp2(const std::string& name, std::vector<std::string> set) {
   RunOptions o;
   o.scenario_path = testing::SourceDir() + "/scenarios/rover_apriltag_exp2.yaml";
-  o.out_dir = (fs::temp_directory_path() / ("flexbench_" + name + std::to_string(getpid()))).string();
+  o.out_dir =
+      (fs::temp_directory_path() / ("flexbench_" + name + std::to_string(getpid()))).string();
   o.set = {"random_configurations.count=6"};
   o.set.insert(o.set.end(), set.begin(), set.end());
   return o;
@@ -53,9 +54,9 @@ TEST(TagFusionSampler, HandAxisLimitHoldsForEveryConfiguration) {
   double largest_limited = 0.0, largest_free = 0.0;
   for (const auto& [limit, largest] :
        {std::pair<std::string, double*>{"30", &largest_limited}, {"180", &largest_free}}) {
-    const RunOptions o = Exp2("sampler_" + limit + "_",
-                              {"random_configurations.max_ee_axis_to_sight_deg=" + limit,
-                               "random_configurations.count=12"});
+    const RunOptions o =
+        Exp2("sampler_" + limit + "_", {"random_configurations.max_ee_axis_to_sight_deg=" + limit,
+                                        "random_configurations.count=12"});
     ASSERT_EQ(RunScenario(o), kExitOk);
     const auto rows = ReadCsv(fs::path(o.out_dir) / "configurations.csv");
     ASSERT_FALSE(rows.empty());
@@ -77,7 +78,8 @@ TEST(TagFusionSampler, HandAxisLimitHoldsForEveryConfiguration) {
 
 TEST(TagFusionSampler, LimitOutsideItsRangeIsBadInputNamingTheKey) {
   for (const std::string bad : {"0", "-5", "181", "nan"}) {
-    const RunOptions o = Exp2("sampler_bad_", {"random_configurations.max_ee_axis_to_sight_deg=" + bad});
+    const RunOptions o =
+        Exp2("sampler_bad_", {"random_configurations.max_ee_axis_to_sight_deg=" + bad});
     ::testing::internal::CaptureStderr();
     EXPECT_EQ(RunScenario(o), kExitBadInput) << bad;
     const std::string err = ::testing::internal::GetCapturedStderr();

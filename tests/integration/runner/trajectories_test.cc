@@ -181,12 +181,13 @@ TEST_P(JskTrajectories, TumFilesGiveBackThePositionErrorAfterTheBurnIn) {
   fs::remove_all(o.out_dir);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Kinds, JskTrajectories,
-    ::testing::Values(JskCase{"jsk_flexible_arm", "burn_in_s", 1.5},
-                      JskCase{"jsk_direct_fusion", "burn_in_s", 1.5},
-                      JskCase{"jsk_sim_deflection", "burn_in_steps", 7}),
-    [](const ::testing::TestParamInfo<JskCase>& i) { return std::string(i.param.scenario); });
+INSTANTIATE_TEST_SUITE_P(Kinds, JskTrajectories,
+                         ::testing::Values(JskCase{"jsk_flexible_arm", "burn_in_s", 1.5},
+                                           JskCase{"jsk_direct_fusion", "burn_in_s", 1.5},
+                                           JskCase{"jsk_sim_deflection", "burn_in_steps", 7}),
+                         [](const ::testing::TestParamInfo<JskCase>& i) {
+                           return std::string(i.param.scenario);
+                         });
 
 TEST(Trajectories, TumLineIsTimestampPositionQuaternionXyzw) {
   const lie::SE3 T(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix(), Vec3(1, 2, 3));

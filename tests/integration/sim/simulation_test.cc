@@ -1,6 +1,8 @@
 // The truth side on the real models: loading, the static solve against MuJoCo's own dynamic
 // equilibrium, g(q) against the potential energy, every effect off = nominal (and on = not),
 // deflection against reach and load, divergence and non-convergence errors.
+#include "sim/simulation.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -10,7 +12,6 @@
 #include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
 #include "sim/sensors/sensor.h"
-#include "sim/simulation.h"
 #include "sim/trajectory.h"
 
 namespace flexbench::sim {
@@ -87,7 +88,8 @@ TEST(Models, LoadWithoutWarningsWithTheExpectedJoints) {
       passive += j.role == JointRole::kPassive;
       coupled += j.role == JointRole::kCoupled;
       if (j.role != JointRole::kActuated) {
-        EXPECT_FALSE(j.effect.empty()) << e.name << ": passive joint " << j.name << " has no effect";
+        EXPECT_FALSE(j.effect.empty())
+            << e.name << ": passive joint " << j.name << " has no effect";
       }
     }
     EXPECT_EQ(static_cast<int>(c.actuated.size()), e.actuated) << e.name;
@@ -166,15 +168,22 @@ TEST(Settle, StaticSolveEqualsMujocosDynamicEquilibrium) {
        {{"j1", 30}, {"j2", 80}, {"j3", 20}, {"j5", -30}, {"mast_tilt", 20}},
        "ee",
        1e-6},
-      {"jsk_arm", {{"link_elasticity", ""}, {"joint_elasticity", ""}},
+      {"jsk_arm",
+       {{"link_elasticity", ""}, {"joint_elasticity", ""}},
        {{"link1_yaw_joint", 20}, {"link2_pitch_joint", 70}, {"link3_pitch_joint", 30}},
-       "grasp_point", 1e-6},
+       "grasp_point",
+       1e-6},
       // The wrist linkage is an equality constraint: MuJoCo's soft constraint gives a little
       // under load.
-      {"humanoid_upper", {{"neck_elasticity", ""}, {"nonlinear_wrist", ""}},
-       {{"neck_pitch", 25}, {"shoulder_pitch", -8}, {"elbow", -67}, {"wrist_pitch", 28},
+      {"humanoid_upper",
+       {{"neck_elasticity", ""}, {"nonlinear_wrist", ""}},
+       {{"neck_pitch", 25},
+        {"shoulder_pitch", -8},
+        {"elbow", -67},
+        {"wrist_pitch", 28},
         {"wrist_yaw", 15}},
-       "index_tip", 1e-4},
+       "index_tip",
+       1e-4},
   };
   for (const Case& c : cases) {
     auto sim = Simulation::Load(ModelPath(c.model), Effects(c.effects));
@@ -188,8 +197,7 @@ TEST(Settle, StaticSolveEqualsMujocosDynamicEquilibrium) {
     sim->Step(300);
     sim->SetCommand(q);
     sim->SettleDynamic(30.0, 1e-8);
-    EXPECT_LT((sim->Pose(c.frame).translation() - T_static.translation()).norm(), c.tol)
-        << c.model;
+    EXPECT_LT((sim->Pose(c.frame).translation() - T_static.translation()).norm(), c.tol) << c.model;
     EXPECT_GT(Deflection(*sim, c.frame), 1e-3) << c.model << ": effects on, but no deflection";
   }
 }
@@ -240,7 +248,10 @@ TEST(Effects, CompliantJointGroupsOffAreExactlyZero) {
       {"rover_arm", "link_elasticity", "link2_bend_y", "ee", kOutstretched},
       {"rover_arm", "camera_mount_sag", "mast_sag", "mast_camera", {{"mast_tilt", 30}}},
       {"humanoid_upper", "neck_elasticity", "neck_1_pitch", "head_camera", {{"neck_pitch", 25}}},
-      {"humanoid_upper", "nonlinear_wrist", "wrist_coupling_roll", "index_tip",
+      {"humanoid_upper",
+       "nonlinear_wrist",
+       "wrist_coupling_roll",
+       "index_tip",
        {{"wrist_pitch", 30}}},
       {"jsk_arm", "link_elasticity", "link2_bend_y", "grasp_point", {{"link2_pitch_joint", 90}}},
   };
@@ -271,7 +282,8 @@ TEST(Effects, CompliantJointGroupsOffAreExactlyZero) {
       EXPECT_EQ(off->JointPosition(j), 0.0) << c.effect << ": " << off->catalog().Joint(j).name;
     }
     EXPECT_GT(std::abs(on->JointPosition(c.joint)), 1e-4) << c.effect;
-    const double d_off = (off->Pose(c.frame).translation() - on->Pose(c.frame).translation()).norm();
+    const double d_off =
+        (off->Pose(c.frame).translation() - on->Pose(c.frame).translation()).norm();
     EXPECT_GT(d_off, 1e-4) << c.effect << " changes " << c.frame;
   }
 }
@@ -313,7 +325,8 @@ TEST(Effects, BacklashOffExactOnHalfThePlayAgainstTheLoad) {
 
 TEST(Effects, PayloadOffLeavesMassesOnAddsMassAndDeflection) {
   auto off = Rover({{"base_plate_compliance", ""}});
-  auto on = Rover({{"base_plate_compliance", ""}, {"payload", "{mass_kg: 1.0, offset_m: [0, 0, 0.1]}"}});
+  auto on =
+      Rover({{"base_plate_compliance", ""}, {"payload", "{mass_kg: 1.0, offset_m: [0, 0, 0.1]}"}});
   for (int b = 0; b < off->model()->nbody; ++b) {
     EXPECT_EQ(off->model()->body_mass[b], off->nominal_model()->body_mass[b]);
   }
@@ -346,9 +359,9 @@ TEST(Effects, ThermalExpansionOffLeavesGeometryOnStretchesTheLinks) {
   const Vec3 d = on->Pose("wrist1").translation() - off->Pose("wrist1").translation();
   EXPECT_NEAR(d.x(), grow, 1e-9);
   EXPECT_NEAR(d.z(), 0.0, 1e-9);
-  EXPECT_LT((off->Pose("ee").translation() - off->NominalPose("ee", off->command()).translation())
-                .norm(),
-            1e-12);
+  EXPECT_LT(
+      (off->Pose("ee").translation() - off->NominalPose("ee", off->command()).translation()).norm(),
+      1e-12);
 }
 
 TEST(Effects, EncoderOffsetAndImuBiasOffReadTheTruth) {
@@ -394,8 +407,8 @@ TEST(Effects, UnknownOrUnsupportedEffectsAreBadInput) {
     EXPECT_NE(std::string(e.what()).find("rover_arm.xml"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("neck_elasticity"), std::string::npos) << e.what();
   }
-  EXPECT_THROW(Rover({{"payload", "{}"}}), InputError);                       // needs mass_kg
-  EXPECT_THROW(Rover({{"backlash", "{width_deg: {j9: 1}}"}}), InputError);     // no such joint
+  EXPECT_THROW(Rover({{"payload", "{}"}}), InputError);                     // needs mass_kg
+  EXPECT_THROW(Rover({{"backlash", "{width_deg: {j9: 1}}"}}), InputError);  // no such joint
   EXPECT_THROW(Rover({{"link_elasticity", "{stiffness_scale: -1}"}}), InputError);
   EXPECT_THROW(Simulation::Load(ModelPath("humanoid_upper"), Effects({{"joint_elasticity", ""}})),
                InputError);  // the humanoid declares no gear stiffness
@@ -438,8 +451,8 @@ TEST(RoverDeflection, GrowsWithReachAndLoadSoftMoreThanStiff) {
   EXPECT_LT(out_defl, 0.025);
   EXPECT_LT(folded_defl, 0.01);
 
-  auto loaded = Rover({{"base_plate_compliance", ""}, {"link_elasticity", ""},
-                       {"payload", "{mass_kg: 0.5}"}});
+  auto loaded = Rover(
+      {{"base_plate_compliance", ""}, {"link_elasticity", ""}, {"payload", "{mass_kg: 0.5}"}});
   loaded->SetCommand(Command(*loaded, kOutstretched));
   loaded->Settle();
   EXPECT_GT(loaded->JointPosition("plate_pitch") / kDeg, out_tilt);

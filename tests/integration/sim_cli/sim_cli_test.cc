@@ -4,7 +4,6 @@
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
-
 #include <set>
 
 #include "tests/common/test_util.h"
@@ -72,8 +71,7 @@ TEST(Inspect, RoverModelAsJson) {
 }
 
 TEST(Inspect, DeclaredFileAndOtherModels) {
-  const CommandResult r =
-      RunCommand(Flexbench() + " inspect " + Model("jsk_arm.declared.yaml"));
+  const CommandResult r = RunCommand(Flexbench() + " inspect " + Model("jsk_arm.declared.yaml"));
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const Json j = Json::parse(r.out);
   EXPECT_EQ(j["declared"]["end_effector"], "grasp_point");
@@ -98,8 +96,9 @@ TEST(BadInput, DeclaredFileNamingAMissingJointOrFrame) {
 TEST(BadInput, MjcfErrorNamesTheFile) {
   TempDir tmp;
   const fs::path model = tmp.path() / "broken.xml";
-  WriteFile(model, "<mujoco><worldbody><body><joint type=\"hinge\" axis=\"0 0 0\"/>"
-                   "<geom size=\"0.1\"/></body></worldbody></mujoco>");
+  WriteFile(model,
+            "<mujoco><worldbody><body><joint type=\"hinge\" axis=\"0 0 0\"/>"
+            "<geom size=\"0.1\"/></body></worldbody></mujoco>");
   ExpectBadInput(Flexbench() + " inspect " + model.string(), model.string());
   const fs::path s = tmp.path() / "s.yaml";
   WriteFile(s, Scenario(model.string(), ""));

@@ -7,9 +7,8 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <thread>
-
 #include <nlohmann/json.hpp>
+#include <thread>
 
 #include "tests/common/test_util.h"
 
@@ -63,19 +62,20 @@ class SlurmCluster : public ::testing::Test {
     WriteFile(conf_,
               "ClusterName=flexbench\nSlurmctldHost=" + short_host +
                   "\nSlurmUser=root\nSlurmdUser=root\nAuthType=auth/munge\n"
-                  "AuthInfo=socket=" + socket_.string() + "\nCredType=cred/munge\n"
+                  "AuthInfo=socket=" +
+                  socket_.string() +
+                  "\nCredType=cred/munge\n"
                   "ProctrackType=proctrack/linuxproc\nTaskPlugin=task/none\n"
                   "SelectType=select/cons_tres\nSchedulerType=sched/backfill\n"
                   "MpiDefault=none\nReturnToService=2\nJobAcctGatherType=jobacct_gather/none\n"
                   "AccountingStorageType=accounting_storage/none\n"
-                  "StateSaveLocation=" + (dir_ / "state").string() +
-                  "\nSlurmdSpoolDir=" + (dir_ / "spool").string() +
+                  "StateSaveLocation=" +
+                  (dir_ / "state").string() + "\nSlurmdSpoolDir=" + (dir_ / "spool").string() +
                   "\nSlurmctldPidFile=" + (dir_ / "slurmctld.pid").string() +
                   "\nSlurmdPidFile=" + (dir_ / "slurmd.pid").string() +
                   "\nSlurmctldLogFile=" + (dir_ / "log" / "slurmctld.log").string() +
-                  "\nSlurmdLogFile=" + (dir_ / "log" / "slurmd.log").string() +
-                  "\nSlurmctldPort=" + std::to_string(port) +
-                  "\nSlurmdPort=" + std::to_string(port + 1) +
+                  "\nSlurmdLogFile=" + (dir_ / "log" / "slurmd.log").string() + "\nSlurmctldPort=" +
+                  std::to_string(port) + "\nSlurmdPort=" + std::to_string(port + 1) +
                   "\nNodeName=" + short_host + " CPUs=" + std::to_string(cpus) +
                   " RealMemory=2000 State=UNKNOWN\n"
                   "PartitionName=debug Nodes=ALL Default=YES MaxTime=INFINITE State=UP\n");
@@ -131,19 +131,18 @@ class SlurmCluster : public ::testing::Test {
 
 TEST_F(SlurmCluster, SweepOnSlurmEqualsTheLocalSweep) {
   const fs::path file = SweepFile("on_slurm", "grid:\n  distance_std_m: [0.001, 0.002]\n");
-  CommandResult local =
-      RunCommand(Flexbench() + " sweep " + file.string() + " --out " +
-                 (dir_ / "local").string() + " -j 2");
+  CommandResult local = RunCommand(Flexbench() + " sweep " + file.string() + " --out " +
+                                   (dir_ / "local").string() + " -j 2");
   ASSERT_EQ(local.exit_code, 0) << local.err;
-  const CommandResult r = RunCommand(
-      Env() + "timeout 300 " + Flexbench() + " sweep " + file.string() + " --out " +
-      (dir_ / "slurm").string() + " --executor slurm --tasks 4 --partition debug --time 10 " +
-      "--mem 200");
+  const CommandResult r =
+      RunCommand(Env() + "timeout 300 " + Flexbench() + " sweep " + file.string() + " --out " +
+                 (dir_ / "slurm").string() +
+                 " --executor slurm --tasks 4 --partition debug --time 10 " + "--mem 200");
   ASSERT_EQ(r.exit_code, 0) << r.err << Tail(dir_ / "log" / "slurmctld.log");
   EXPECT_NE(r.err.find("submitted Slurm job"), std::string::npos) << r.err;
   const std::string job = ReadFile(dir_ / "slurm" / "slurm" / "job.sh");
-  for (const char* line : {"#SBATCH --array=0-3", "#SBATCH --partition=debug",
-                           "#SBATCH --time=10", "#SBATCH --mem=200", "--shard \"$SLURM_ARRAY_"}) {
+  for (const char* line : {"#SBATCH --array=0-3", "#SBATCH --partition=debug", "#SBATCH --time=10",
+                           "#SBATCH --mem=200", "--shard \"$SLURM_ARRAY_"}) {
     EXPECT_NE(job.find(line), std::string::npos) << line << "\n" << job;
   }
   for (int i = 0; i < 4; ++i) {  // every task ran its shard

@@ -8,10 +8,9 @@
 
 #include <chrono>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
-
-#include <nlohmann/json.hpp>
 
 #include "tests/common/test_util.h"
 
@@ -196,19 +195,23 @@ TEST(SweepCli, StatisticalGatesPassFailAndNameTheirMetric) {
   WriteFile(pass, SweepYaml("gates:\n  - name: paired\n    metric: \"ci_high(ratio(" + metric +
                                 ", estimators.fk.metrics.pos_err_final_m))\"\n    op: \"<\"\n"
                                 "    threshold: 1000\n"
-                                "  - {name: finite, metric: \"n(" + metric + ")\", op: \"==\", "
-                                "threshold: 4}\n", ""));
+                                "  - {name: finite, metric: \"n(" +
+                                metric +
+                                ")\", op: \"==\", "
+                                "threshold: 4}\n",
+                            ""));
   CommandResult r = Sweep(pass, tmp.path() / "p");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("PASS gate paired @base"), std::string::npos) << r.err;
   const Json a = Json::parse(ReadFile(tmp.path() / "p" / "aggregate.json"));
   EXPECT_TRUE(a["gates_passed"].get<bool>());
-  EXPECT_TRUE(a["points"][0]["ratios"].contains(
-      "ratio(" + metric + ", estimators.fk.metrics.pos_err_final_m)"));
+  EXPECT_TRUE(a["points"][0]["ratios"].contains("ratio(" + metric +
+                                                ", estimators.fk.metrics.pos_err_final_m)"));
 
   const fs::path fail = tmp.path() / "fail.yaml";
   WriteFile(fail, SweepYaml("gates:\n  - {name: impossible, metric: \"mean(" + metric +
-                                ")\", op: \"<\", threshold: 0}\n", ""));
+                                ")\", op: \"<\", threshold: 0}\n",
+                            ""));
   r = Sweep(fail, tmp.path() / "f");
   EXPECT_EQ(r.exit_code, 3) << r.err;
   EXPECT_NE(r.err.find("FAIL gate impossible @base"), std::string::npos) << r.err;
@@ -216,7 +219,8 @@ TEST(SweepCli, StatisticalGatesPassFailAndNameTheirMetric) {
   // A metric no run has: bad input naming the gate's line, not a failed gate.
   const fs::path typo = tmp.path() / "typo.yaml";
   WriteFile(typo, SweepYaml("gates:\n  - {name: t, metric: \"mean(estimators.ppoe_ekf.metrics."
-                            "pos_err_finl_m)\", op: \"<\", threshold: 1}\n", ""));
+                            "pos_err_finl_m)\", op: \"<\", threshold: 1}\n",
+                            ""));
   r = Sweep(typo, tmp.path() / "t");
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(LastLine(r.err).find("typo.yaml:5: gate 't': metric"), std::string::npos) << r.err;
@@ -241,7 +245,8 @@ TEST(SweepCli, BadInputIsOneLineAndExit2) {
       {SweepYaml(), "--executor slurm", "sbatch not found on PATH"},
       {SweepYaml(), "--executor cloud", "--executor 'cloud'"},
       {SweepYaml("gates:\n  - {name: g, metric: pass_fraction(no_such_gate), op: \">\", "
-                 "threshold: 0}\n", ""),
+                 "threshold: 0}\n",
+                 ""),
        "", "'no_such_gate' is not a gate of the scenario"},
   };
   for (const Case& c : cases) {

@@ -381,8 +381,8 @@ void ExpectSweepBadInput(const std::string& yaml, const std::string& xml,
   const fs::path path = tmp.path() / "s.yaml";
   testing::WriteFile(path, yaml.empty() ? SweepYaml(model.string()) : yaml);
   const fs::path out = tmp.path() / "out";
-  const CommandResult r = RunCommand(testing::BinDir() + "/flexbench run " + path.string() +
-                                     " --out " + out.string());
+  const CommandResult r =
+      RunCommand(testing::BinDir() + "/flexbench run " + path.string() + " --out " + out.string());
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_EQ(testing::CountLines(r.err), 1) << r.err;
   EXPECT_NE(r.err.find(must_contain), std::string::npos) << r.err;
@@ -434,15 +434,14 @@ TEST(Sweep, SameSeedSameBytes) {
                                        " --out " + (tmp.path() / name).string());
     ASSERT_EQ(r.exit_code, 0) << r.err;
   }
-  for (const char* file : {"sweep.csv", "sweep.png", "frames/sweep_0000.png",
-                           "frames/sweep_0002.png"}) {
+  for (const char* file :
+       {"sweep.csv", "sweep.png", "frames/sweep_0000.png", "frames/sweep_0002.png"}) {
     const std::string a = testing::ReadFile(tmp.path() / "a" / file);
     EXPECT_FALSE(a.empty()) << file;
     EXPECT_EQ(a, testing::ReadFile(tmp.path() / "b" / file)) << file;
   }
   EXPECT_EQ(testing::CountLines(testing::ReadFile(tmp.path() / "a" / "sweep.csv")), 1 + 4);
-  const auto summary =
-      nlohmann::json::parse(testing::ReadFile(tmp.path() / "a" / "summary.json"));
+  const auto summary = nlohmann::json::parse(testing::ReadFile(tmp.path() / "a" / "summary.json"));
   EXPECT_EQ(summary["metrics"]["frames"], 4);
   EXPECT_EQ(summary["metrics"]["wrong_detections"], 0);
 }

@@ -29,7 +29,8 @@ std::string Models() { return std::string(FLEXBENCH_SOURCE_DIR) + "/models/"; }
 Eigen::VectorXd Command(const sim::Simulation& sim, const std::map<std::string, double>& deg) {
   Eigen::VectorXd q = Eigen::VectorXd::Zero(sim.num_actuated());
   const auto& names = sim.actuated_joints();
-  for (const auto& [j, v] : deg) q[std::find(names.begin(), names.end(), j) - names.begin()] = v * kDeg;
+  for (const auto& [j, v] : deg)
+    q[std::find(names.begin(), names.end(), j) - names.begin()] = v * kDeg;
   return q;
 }
 
@@ -39,8 +40,8 @@ void AimMast(const sim::Simulation& sim, Eigen::VectorXd* q) {
   const int pan = std::find(names.begin(), names.end(), "mast_pan") - names.begin();
   const int tilt = std::find(names.begin(), names.end(), "mast_tilt") - names.begin();
   (*q)[pan] = (*q)[tilt] = 0.0;
-  const Vec3 d = sim.NominalPose("ee", *q).translation() -
-                 sim.NominalPose("mast_tilt_link", *q).translation();
+  const Vec3 d =
+      sim.NominalPose("ee", *q).translation() - sim.NominalPose("mast_tilt_link", *q).translation();
   (*q)[pan] = std::atan2(d.y(), d.x());
   (*q)[tilt] = std::atan2(-d.z(), std::hypot(d.x(), d.y()));
 }
@@ -113,7 +114,8 @@ TEST(RoverTags, VisibleAndDetectedFromTheMastCameraInTypicalPoses) {
     EXPECT_LT(worst, 2.0) << "pose " << p;
     std::printf("pose %zu: %d tags, corner rmse %.3f px, worst %.3f px\n", p, matched,
                 std::sqrt(sum_sq / std::max(1, 4 * matched)), worst);
-    const double dist = (sim->Pose("ee").translation() - sim->Pose("mast_camera").translation()).norm();
+    const double dist =
+        (sim->Pose("ee").translation() - sim->Pose("mast_camera").translation()).norm();
     EXPECT_LT(dist, 1.7) << "pose " << p;
   }
 }
@@ -150,9 +152,12 @@ TEST(DeclaredFiles, NamesTheMissingJointOrFrameWithFileAndLine) {
       EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
     }
   };
-  expect_error(write("actuated_joints: [j1, j9]\nend_effector: ee\n"), ":2: key 'actuated_joints[1]'");
-  expect_error(write("actuated_joints: [j1, j9]\nend_effector: ee\n"), "no hinge or slide joint named 'j9'");
-  expect_error(write("actuated_joints: [j1]\nend_effector: nowhere\n"), "no site or body named 'nowhere'");
+  expect_error(write("actuated_joints: [j1, j9]\nend_effector: ee\n"),
+               ":2: key 'actuated_joints[1]'");
+  expect_error(write("actuated_joints: [j1, j9]\nend_effector: ee\n"),
+               "no hinge or slide joint named 'j9'");
+  expect_error(write("actuated_joints: [j1]\nend_effector: nowhere\n"),
+               "no site or body named 'nowhere'");
   expect_error(write("actuated_joints: [j1]\nend_effector: ee\nobserved_frames: [tag_99]\n"),
                "no site, camera, geom or body named 'tag_99'");
   expect_error(write("actuated_joints: [j1]\nend_effector: ee\nsources:\n  - {at: plate_yaw, "
@@ -161,7 +166,8 @@ TEST(DeclaredFiles, NamesTheMissingJointOrFrameWithFileAndLine) {
   expect_error(write("actuated_joints: [j1]\nend_effector: ee\nsources:\n  - {at: base_plate, "
                      "about_axis_deg: 1}\n"),
                "about_axis_deg needs a joint");
-  expect_error(write("actuated_joints: [j1]\nend_effector: ee\ncolour: red\n"), "unknown key 'colour'");
+  expect_error(write("actuated_joints: [j1]\nend_effector: ee\ncolour: red\n"),
+               "unknown key 'colour'");
 }
 
 }  // namespace

@@ -1,10 +1,11 @@
 // Scenario-file parsing: errors name file, line and key; unknown keys are caught; gates.
+#include "sim/config.h"
+
 #include <gtest/gtest.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "sim/config.h"
 #include "scenarios/runner/gates.h"
 #include "tests/common/test_util.h"
 
@@ -29,10 +30,10 @@ TEST(ConfigNode, ReadsTypedValues) {
 // stay, and every error about it names "--set KEY" rather than a line of the file.
 TEST(ConfigOverrides, ReplaceAddAndKeepSiblings) {
   const std::string text = "a: 1\nsub:\n  x: 2\n  y: [1, 2]\nlist:\n  - {k: 1}\n";
-  const ConfigNode root = ConfigNode::LoadString(
-      text, "f.yaml",
-      {ParseOverride("sub.x=5"), ParseOverride("sub.deep.z=[3, 4]"), ParseOverride("b=text"),
-       ParseOverride("a=2.5")});
+  const ConfigNode root =
+      ConfigNode::LoadString(text, "f.yaml",
+                             {ParseOverride("sub.x=5"), ParseOverride("sub.deep.z=[3, 4]"),
+                              ParseOverride("b=text"), ParseOverride("a=2.5")});
   EXPECT_DOUBLE_EQ(root.GetDouble("a"), 2.5);
   EXPECT_EQ(root.GetString("b"), "text");
   EXPECT_DOUBLE_EQ(root.Child("sub").GetDouble("x"), 5.0);
@@ -67,8 +68,8 @@ TEST(ConfigOverrides, ErrorsNameTheOverride) {
     EXPECT_NE(e.find("--set '"), std::string::npos) << bad << ": " << e;
   }
   // Errors about keys the override did not touch keep their file and line.
-  const ConfigNode other = ConfigNode::LoadString(text + "b: zz\n", "f.yaml",
-                                                  {ParseOverride("sub.x=3")});
+  const ConfigNode other =
+      ConfigNode::LoadString(text + "b: zz\n", "f.yaml", {ParseOverride("sub.x=3")});
   e = ErrorOf([&] { other.GetDouble("b"); });
   EXPECT_NE(e.find("f.yaml:4: key 'b'"), std::string::npos) << e;
 }
@@ -98,9 +99,8 @@ TEST(ConfigNode, NonFiniteNumbersAreRejected) {
 }
 
 TEST(ConfigNode, UnknownKeysAreReportedWithLine) {
-  const ConfigNode root =
-      ConfigNode::LoadString("a: 1\nsub:\n  known: 2\n  typo: 3\nlist:\n  - {k: 1, z: 2}\n",
-                             "f.yaml");
+  const ConfigNode root = ConfigNode::LoadString(
+      "a: 1\nsub:\n  known: 2\n  typo: 3\nlist:\n  - {k: 1, z: 2}\n", "f.yaml");
   root.GetDouble("a");
   root.Child("sub").GetDouble("known");
   std::string e = ErrorOf([&] { root.CheckNoUnknownKeys(); });
@@ -152,16 +152,14 @@ TEST(Gates, EvaluatesNumbersBooleansAndRelativeThresholds) {
 TEST(ConfigNode, NonUtf8TextIsBadInputNamingLineAndKey) {
   const std::string e = ErrorOf(
       [] { ConfigNode::LoadString("scenario: x\ndescription: caf\xe9 au lait\n", "f.yaml"); });
-  EXPECT_NE(e.find("f.yaml:2: key 'description': not valid UTF-8 (byte 0xE9)"),
-            std::string::npos)
+  EXPECT_NE(e.find("f.yaml:2: key 'description': not valid UTF-8 (byte 0xE9)"), std::string::npos)
       << e;
   EXPECT_NO_THROW(ConfigNode::LoadString("description: caf\xc3\xa9\n", "f.yaml"));
 }
 
 TEST(ConfigNode, KeyThatIsAListOrMapIsBadInput) {
   std::string e = ErrorOf([] { ConfigNode::LoadString("a: 1\n? [a, b]\n: 1\n", "f.yaml"); });
-  EXPECT_NE(e.find("f.yaml:2: a key under '(top level)' is a list or a mapping"),
-            std::string::npos)
+  EXPECT_NE(e.find("f.yaml:2: a key under '(top level)' is a list or a mapping"), std::string::npos)
       << e;
   e = ErrorOf([] { ConfigNode::LoadString("outer:\n  ? {x: 1}\n  : 2\n", "f.yaml"); });
   EXPECT_NE(e.find("f.yaml:2: a key under 'outer'"), std::string::npos) << e;
@@ -175,8 +173,7 @@ TEST(ConfigNode, DuplicateKeyIsBadInput) {
 }
 
 TEST(ConfigNode, SecondDocumentIsBadInput) {
-  const std::string e =
-      ErrorOf([] { ConfigNode::LoadString("a: 1\n---\nb: 2\n", "f.yaml"); });
+  const std::string e = ErrorOf([] { ConfigNode::LoadString("a: 1\n---\nb: 2\n", "f.yaml"); });
   // The line of the '---' that starts it.
   EXPECT_NE(e.find("f.yaml:2: a second YAML document"), std::string::npos) << e;
   EXPECT_NO_THROW(ConfigNode::LoadString("---\na: 1\n", "f.yaml"));
@@ -186,8 +183,8 @@ TEST(ConfigNode, SecondDocumentIsBadInput) {
 // tests/fuzz; a file holding only ',' ate all memory). Each is loaded in a child process with
 // 1 GB of address space and 20 s, so a regression fails this test instead of the machine.
 TEST(ConfigNode, StreamsThatLoopYamlCppAreSyntaxErrors) {
-  for (const std::string& text : {std::string(","), std::string("a: 1\n---\n,\n"),
-                                  std::string(", )\nes:\n")}) {
+  for (const std::string& text :
+       {std::string(","), std::string("a: 1\n---\n,\n"), std::string(", )\nes:\n")}) {
     int pipe_fd[2];
     ASSERT_EQ(pipe(pipe_fd), 0);
     const pid_t pid = fork();
@@ -208,7 +205,8 @@ TEST(ConfigNode, StreamsThatLoopYamlCppAreSyntaxErrors) {
     close(pipe_fd[0]);
     int status = 0;
     waitpid(pid, &status, 0);
-    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "'" << text << "': status " << status;
+    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0)
+        << "'" << text << "': status " << status;
     EXPECT_NE(message.find("f.yaml:"), std::string::npos) << "'" << text << "': " << message;
     EXPECT_EQ(message.find('\n'), std::string::npos) << message;
   }
@@ -226,8 +224,7 @@ TEST(ConfigNode, NonRegularAndHugeFilesAreRefused) {
 }
 
 TEST(ConfigNode, EchoedValuesAreCapped) {
-  const ConfigNode root =
-      ConfigNode::LoadString("a: " + std::string(5000, 'x') + "\n", "f.yaml");
+  const ConfigNode root = ConfigNode::LoadString("a: " + std::string(5000, 'x') + "\n", "f.yaml");
   const std::string e = ErrorOf([&] { root.GetDouble("a"); });
   EXPECT_NE(e.find("expected a number"), std::string::npos) << e;
   EXPECT_LT(e.size(), 300u);

@@ -50,7 +50,8 @@ TEST(Conventions, ExpOfPureThetaRotatesAboutThetaRightHanded) {
             1e-15);
 }
 
-// --- Right (local) perturbations and the adjoint [PPOE eqs. 5-8, 10] ------------------------------
+// --- Right (local) perturbations and the adjoint [PPOE eqs. 5-8, 10]
+// ------------------------------
 
 TEST(Conventions, PerturbationsAreRightMultipliedAndLocal) {
   // X rotated +90 deg about z; a local step along x moves the frame along global y.

@@ -48,8 +48,8 @@ SE3 CameraPose() {
 
 // Test poses: identity, near identity, random (fixed seed), all in front of the camera.
 std::vector<SE3> TestPoses() {
-  std::vector<SE3> poses = {SE3::Identity(), SE3::Exp((Vec6() << 1e-4, -2e-4, 1e-4, 1e-5, 2e-5,
-                                                       -3e-5).finished())};
+  std::vector<SE3> poses = {SE3::Identity(),
+                            SE3::Exp((Vec6() << 1e-4, -2e-4, 1e-4, 1e-5, 2e-5, -3e-5).finished())};
   std::mt19937_64 rng(7);
   for (int i = 0; i < 4; ++i) {
     SE3 X = lie::RandomSE3(rng, 0.1);
@@ -62,9 +62,8 @@ std::vector<SE3> TestPoses() {
 std::vector<std::unique_ptr<MeasurementModel>> Models() {
   std::vector<std::unique_ptr<MeasurementModel>> m;
   const Vec3 p_ee(0.02, -0.03, 0.05);
-  m.push_back(std::make_unique<PixelPointModel>(Camera(), CameraPose(), p_ee,
-                                                Eigen::Vector2d(300, 250),
-                                                Eigen::Matrix2d::Identity() * 0.25));
+  m.push_back(std::make_unique<PixelPointModel>(
+      Camera(), CameraPose(), p_ee, Eigen::Vector2d(300, 250), Eigen::Matrix2d::Identity() * 0.25));
   std::array<Vec3, 4> corners = {Vec3(-0.03, 0.03, 0.06), Vec3(0.03, 0.03, 0.06),
                                  Vec3(0.03, -0.03, 0.06), Vec3(-0.03, -0.03, 0.06)};
   std::array<Eigen::Vector2d, 4> uv = {Eigen::Vector2d(300, 250), Eigen::Vector2d(330, 250),
@@ -105,8 +104,7 @@ TEST_P(JacobianTest, AnalyticMatchesNumericOnTheManifold) {
 INSTANTIATE_TEST_SUITE_P(Models, JacobianTest, ::testing::Range(0, 5));
 
 TEST(LgEkf, FirstIterationIsEquations20To23) {
-  const PositionModel model(Vec3(0.0, 0.0, 0.3), Vec3(0.01, -0.02, 0.31),
-                            Mat3::Identity() * 1e-4);
+  const PositionModel model(Vec3(0.0, 0.0, 0.3), Vec3(0.01, -0.02, 0.31), Mat3::Identity() * 1e-4);
   SE3 X = SE3::Identity();
   Mat6 P = Mat6::Identity() * 1e-3;
   P(3, 3) = 4e-3;
@@ -122,8 +120,8 @@ TEST(LgEkf, FirstIterationIsEquations20To23) {
   const Eigen::Matrix<double, 6, 3> K = P0 * H.transpose() * S.inverse();  // [PPOE eq. 20]
   MeasVec r;
   model.Residual(SE3::Identity(), NoiseVec::Zero(3), &r);
-  const Vec6 m = K * r;                                                      // [PPOE eq. 21]
-  EXPECT_TRUE(X.IsApprox(SE3::Exp(m), 1e-12));                               // [PPOE eq. 22]
+  const Vec6 m = K * r;                                                           // [PPOE eq. 21]
+  EXPECT_TRUE(X.IsApprox(SE3::Exp(m), 1e-12));                                    // [PPOE eq. 22]
   EXPECT_LT((P - (Mat6::Identity() - K * H) * P0).cwiseAbs().maxCoeff(), 1e-12);  // [PPOE eq. 23]
 }
 
@@ -141,13 +139,12 @@ void ExpectConsistent(int model_index, double prior_scale, int runs) {
     const SE3 X_true = X_bar.Plus(prior.Sample(rng));
     // A measurement of the truth: residual 0 at the truth with noise drawn from Sigma_v.
     const MeasurementModel& proto = *models[model_index];
-    lie::GaussianSampler<kMaxNoiseDim> noise(
-        [&] {
-          Eigen::Matrix<double, kMaxNoiseDim, kMaxNoiseDim> S =
-              Eigen::Matrix<double, kMaxNoiseDim, kMaxNoiseDim>::Identity() * 1e-300;
-          S.topLeftCorner(proto.NoiseDim(), proto.NoiseDim()) = proto.Sigma_v();
-          return S;
-        }());
+    lie::GaussianSampler<kMaxNoiseDim> noise([&] {
+      Eigen::Matrix<double, kMaxNoiseDim, kMaxNoiseDim> S =
+          Eigen::Matrix<double, kMaxNoiseDim, kMaxNoiseDim>::Identity() * 1e-300;
+      S.topLeftCorner(proto.NoiseDim(), proto.NoiseDim()) = proto.Sigma_v();
+      return S;
+    }());
     const NoiseVec v = noise.Sample(rng).head(proto.NoiseDim());
     std::unique_ptr<MeasurementModel> model;
     if (model_index == 3) {

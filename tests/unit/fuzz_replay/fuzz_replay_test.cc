@@ -80,9 +80,10 @@ TEST_P(FuzzReplay, EveryCorpusAndRegressionFileIsAcceptedOrAnInputError) {
     EXPECT_NE(error->find(work), std::string::npos) << "message names no input file: " << *error;
     EXPECT_LT(error->size(), 2000u) << *error;
   }
-  std::printf("[ fuzz     ] %s: %zu corpus + %zu regression files (%zu in all), %d accepted, "
-              "%d rejected\n",
-              target.name, corpus.size(), regressions.size(), files.size(), accepted, rejected);
+  std::printf(
+      "[ fuzz     ] %s: %zu corpus + %zu regression files (%zu in all), %d accepted, "
+      "%d rejected\n",
+      target.name, corpus.size(), regressions.size(), files.size(), accepted, rejected);
 }
 
 INSTANTIATE_TEST_SUITE_P(Targets, FuzzReplay, testing::ValuesIn(flexbench::fuzz::Targets()),

@@ -24,8 +24,8 @@ using testing::kDeg;
 // ---------------------------------------------------------------------------------------------
 // Oracles.
 
-// Mean poses by a direct product of 4x4 matrices, [PPOE eqs. 16-17] with xi = 0; the joint factor by
-// Eigen's matrix exponential of hat(zeta q), independent of lie::SE3::Exp.
+// Mean poses by a direct product of 4x4 matrices, [PPOE eqs. 16-17] with xi = 0; the joint factor
+// by Eigen's matrix exponential of hat(zeta q), independent of lie::SE3::Exp.
 std::vector<Mat4> MeanPosesBy4x4(const PpoeModel& model, const Eigen::VectorXd& q) {
   std::vector<Mat4> T(model.num_frames(), Mat4::Identity());
   for (FrameId i = 1; i < model.num_frames(); ++i) {

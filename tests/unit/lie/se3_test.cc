@@ -17,8 +17,8 @@ using testing::JacobianError;
 using testing::kFdSteps;
 using testing::NumericalJacobian;
 
-// Independent oracle: the matrix exponential of the 4x4 hat [PPOE eq. 3] by Eigen's Pade scaling and
-// squaring.
+// Independent oracle: the matrix exponential of the 4x4 hat [PPOE eq. 3] by Eigen's Pade scaling
+// and squaring.
 Mat4 ExpmOfHat(const Vec6& xi) { return SE3Hat(xi).exp(); }
 
 double MaxAbs(const Mat4& A, const Mat4& B) { return (A - B).cwiseAbs().maxCoeff(); }
@@ -320,8 +320,8 @@ TEST_P(SE3AtPose, ScalarTransportHasTheVectorTransportsBits) {
 INSTANTIATE_TEST_SUITE_P(Poses, SE3AtPose, ::testing::ValuesIn(testing::StandardPoseCases()),
                          [](const auto& info) { return info.param.name; });
 
-// [PPOE eq. 10] by Monte Carlo: samples X = Xbar Exp(xi_local), xi_local ~ N(0, Sigma); their global
-// perturbations Log(X Xbar^-1) have covariance Ad Sigma Ad^T (to first order in Sigma: small
+// [PPOE eq. 10] by Monte Carlo: samples X = Xbar Exp(xi_local), xi_local ~ N(0, Sigma); their
+// global perturbations Log(X Xbar^-1) have covariance Ad Sigma Ad^T (to first order in Sigma: small
 // Sigma so the BCH residue is far below the sampling error).
 TEST(SE3MonteCarlo, GlobalCovarianceIsAdjointCongruence) {
   std::mt19937_64 rng(99);

@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <random>
 #include <tuple>
 #include <utility>
@@ -173,8 +173,7 @@ INSTANTIATE_TEST_SUITE_P(Proposals, ConvergenceTest,
 // seed, with and without the position readings.
 class SummaryDefinitionTest : public ::testing::TestWithParam<std::tuple<int, bool>> {};
 
-double SortedQuantile(const std::vector<std::pair<double, double>>& sorted, double kept,
-                      double p) {
+double SortedQuantile(const std::vector<std::pair<double, double>>& sorted, double kept, double p) {
   const double target = p * kept;
   double cum = 0.0, prev_mid = -1.0, prev_d = sorted.front().first;
   for (const auto& [d, wi] : sorted) {

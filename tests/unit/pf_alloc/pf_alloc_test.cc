@@ -166,7 +166,8 @@ TEST_P(NoAllocationTest, EstimatorInterfaceDoesNotAllocate) {
 TEST_P(NoAllocationTest, EstimatorsWithIdentifiedEffectsDoNotAllocate) {
   testing::JskLikeArm arm;
   kinematics::ModelEffects fx = kinematics::ModelEffects::None(arm.model);
-  for (int k = 0; k < arm.model.nq(); ++k) fx.masses[arm.model.joint_frame(k)] = {1.0, Vec3(0.1, 0, 0)};
+  for (int k = 0; k < arm.model.nq(); ++k)
+    fx.masses[arm.model.joint_frame(k)] = {1.0, Vec3(0.1, 0, 0)};
   fx.joints[0].offset = 0.01;
   fx.joints[1].compliance = -2e-3;
   fx.joints[1].harmonic[0] = 1e-3;

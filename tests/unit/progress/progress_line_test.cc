@@ -1,9 +1,9 @@
 // ProgressLine (issue 17): what a long run prints on a terminal and in a log, with a fake clock.
-#include "scenarios/runner/progress.h"
-
 #include <gtest/gtest.h>
 
 #include <vector>
+
+#include "scenarios/runner/progress.h"
 
 namespace flexbench::scenarios {
 namespace {

@@ -137,8 +137,8 @@ TEST(EncoderSensor, QuantisedNoisyReadingsStayOnTheGrid) {
   auto sim = Pendulum();
   sim->SetCommand("hinge", 0.2);
   sim->Settle();
-  auto enc = MakeSensor("encoder", "enc",
-                        "{side: link, counts_per_rev: 1024, noise_std_deg: 0.3}", *sim, 5);
+  auto enc = MakeSensor("encoder", "enc", "{side: link, counts_per_rev: 1024, noise_std_deg: 0.3}",
+                        *sim, 5);
   const double step = 2 * M_PI / 1024;
   std::vector<double> v;
   for (const auto& r : Take<EncoderReading>(SampleMany(*enc, *sim, kSamples))) {
@@ -224,9 +224,9 @@ TEST(ImuSensor, AtRestReadsGravityUpInTheSensorFrame) {
 TEST(ImuSensor, WhiteNoiseStatistics) {
   auto sim = Pendulum();
   sim->Settle();
-  auto imu = MakeSensor("imu", "imu",
-                        "{site: imu, gyro_noise_std_rad_s: 0.003, accel_noise_std_m_s2: 0.05}",
-                        *sim, 21);
+  auto imu =
+      MakeSensor("imu", "imu",
+                 "{site: imu, gyro_noise_std_rad_s: 0.003, accel_noise_std_m_s2: 0.05}", *sim, 21);
   const auto r = Take<ImuReading>(SampleMany(*imu, *sim, kSamples));
   for (int k = 0; k < 3; ++k) {
     std::vector<double> g, a;

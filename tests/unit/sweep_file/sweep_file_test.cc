@@ -1,9 +1,10 @@
 // Issue 16: sweep files. Expansion into points and runs, statistic expressions, and every bad
 // input of the file as one InputError naming file and line.
+#include "scenarios/sweep/sweep_file.h"
+
 #include <gtest/gtest.h>
 
 #include "estimators/error.h"
-#include "scenarios/sweep/sweep_file.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::scenarios::sweep {
