@@ -9,6 +9,7 @@
 //   simulate: {placements: N, configurations_per_socket: n, seed: k}
 //     the truth (`truth.effects`, the sim effect list) puts the end effector into sockets
 //     `truth.socket_distance_m` apart at random placements; rows are its encoder readings.
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -25,6 +26,7 @@
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/identify.h"
+#include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
@@ -38,6 +40,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using identify::DataSet;
+using Mat3x = Eigen::Matrix<double, 3, Eigen::Dynamic>;
 
 constexpr double kDeg = M_PI / 180.0;
 
@@ -234,8 +237,7 @@ class ClosedLoopKind : public ScenarioKind {
     CheckSets(cal, calibration_);
     ctx.log("identify: " + std::to_string(cal.rows.size()) + " calibration rows, " +
             std::to_string(candidates_.size()) + " candidate effects");
-    const identify::IdentifyResult res =
-        identify::Identify(*em_, cal, cal_loads, candidates_, opt_);
+    identify::IdentifyResult res = identify::Identify(*em_, cal, cal_loads, candidates_, opt_);
     for (const std::string& s : res.steps) ctx.log("  " + s);
 
     const auto errors = [&](const DataSet& d, const std::vector<identify::ConfigLoads>& L,
@@ -251,6 +253,7 @@ class ClosedLoopKind : public ScenarioKind {
         identify::ComputeLoads(*em_, cal, res.after.active, res.after.theta);
     const std::vector<identify::ConfigLoads> val_loads_after =
         identify::ComputeLoads(*em_, val, res.after.active, res.after.theta);
+    if (reading_std_rad_ > 0.0) UseReadingNoiseCovariance(ctx, cal, cal_loads_after, &res);
     const auto [cal_before, cal_p0] = errors(cal, cal_loads, false);
     const auto [cal_after, cal_p1] = errors(cal, cal_loads_after, true);
     const auto [val_before, val_p0] = errors(val, val_loads, false);
@@ -336,14 +339,21 @@ class ClosedLoopKind : public ScenarioKind {
     m["nees_after"] = nees_after;
     m["nees_bound_low"] = nb.lower;
     m["nees_bound_high"] = nb.upper;
-    source_scale_ = SourceScale(val, val_p1, noise_after);
+    // With the readings' noise stated, the rows' NEES has a consistent size of its own: the
+    // sources need only cover what exceeds its upper bound (ConsistentSourceScale).
+    double target = 3.0;
+    if (reading_std_rad_ > 0.0) {
+      target = SharedNeesUpperBound(val, val_loads_after, res, noise_after);
+      m["nees_bound_high_shared"] = target;
+    }
+    source_scale_ = SourceScale(val, val_p1, noise_after, target);
     m["source_covariance_scale"] = source_scale_;
     m["source_scale_from"] = reading_std_rad_ > 0.0 ? "readings' noise and fitted parameters"
                                                     : "point_std_m (floor 1e-6)";
     nees_scaled_ = MeanNees(val, val_p1, noise_after, source_scale_);
-    // At the largest scale and still above 3: what is left is not where the sources act.
-    m["sources_cover_residual"] = nees_scaled_ <= 3.0 + 1e-6;
-    if (nees_scaled_ > 3.0 + 1e-6) {
+    // At the largest scale and still above: what is left is not where the sources act.
+    m["sources_cover_residual"] = nees_scaled_ <= target + 1e-6;
+    if (nees_scaled_ > target + 1e-6) {
       ctx.log("the declared sources cannot cover what the effects leave: validation mean NEES " +
               Num(nees_scaled_) + " at the largest source scale");
     }
@@ -593,34 +603,118 @@ class ClosedLoopKind : public ScenarioKind {
   // residuals (so the group mean's share is exact).
   std::vector<Mat3> RowNoise(const DataSet& d, const std::vector<identify::ConfigLoads>& L,
                              const identify::IdentifyResult* res) const {
-    const size_t rows = d.rows.size();
-    std::vector<Mat3> out(rows, opt_.point_std_m * opt_.point_std_m * Mat3::Identity());
-    if (reading_std_rad_ > 0.0) ReadingNoise(d, &out);
+    std::vector<Mat3> out(d.rows.size(), opt_.point_std_m * opt_.point_std_m * Mat3::Identity());
+    if (reading_std_rad_ > 0.0) out = AgainstGroupMeans(d, ReadingNoise(d));
     if (res == nullptr || res->after.theta.size() == 0) return out;
-    const Eigen::VectorXd& theta = res->after.theta;
-    const int np = static_cast<int>(theta.size());
-    const auto residuals = [&](const Eigen::VectorXd& th) {
-      std::vector<Vec3> q = identify::PredictAll(*em_, d, L, res->after.active, th);
-      const std::vector<Vec3> mean = identify::GroupMeans(d, q);
-      for (size_t r = 0; r < rows; ++r) {
-        if (d.rows[r].type == identify::ObservationType::kGroup) q[r] -= mean[d.rows[r].group];
-      }
-      return q;
-    };
-    std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> J(rows, Eigen::MatrixXd::Zero(3, np));
-    for (int i = 0; i < np; ++i) {
-      const double h = std::max(std::sqrt(std::max(res->theta_cov(i, i), 0.0)), 1e-12);
-      Eigen::VectorXd up = theta, down = theta;
-      up[i] += h;
-      down[i] -= h;
-      const std::vector<Vec3> a = residuals(up), b = residuals(down);
-      for (size_t r = 0; r < rows; ++r) J[r].col(i) = (a[r] - b[r]) / (2.0 * h);
-    }
-    for (size_t r = 0; r < rows; ++r) out[r] += J[r] * res->theta_cov * J[r].transpose();
+    const std::vector<Mat3x> J = ResidualJacobians(d, L, *res);
+    for (size_t r = 0; r < out.size(); ++r) out[r] += J[r] * res->theta_cov * J[r].transpose();
     return out;
   }
 
-  void ReadingNoise(const DataSet& d, std::vector<Mat3>* out) const {
+  // The residuals of the augmented model (socket rows against their group's mean) at `theta`.
+  std::vector<Vec3> Residuals(const DataSet& d, const std::vector<identify::ConfigLoads>& L,
+                              const identify::IdentifyResult& res,
+                              const Eigen::VectorXd& theta) const {
+    std::vector<Vec3> q = identify::PredictAll(*em_, d, L, res.after.active, theta);
+    const std::vector<Vec3> mean = identify::GroupMeans(d, q);
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      if (d.rows[r].type == identify::ObservationType::kGroup) q[r] -= mean[d.rows[r].group];
+    }
+    return q;
+  }
+
+  // Per row, d residual / d theta by central differences (one standard deviation wide).
+  std::vector<Mat3x> ResidualJacobians(const DataSet& d,
+                                       const std::vector<identify::ConfigLoads>& L,
+                                       const identify::IdentifyResult& res) const {
+    const Eigen::VectorXd& theta = res.after.theta;
+    const int np = static_cast<int>(theta.size());
+    std::vector<Mat3x> J(d.rows.size(), Mat3x::Zero(3, np));
+    for (int i = 0; i < np; ++i) {
+      const double h = std::max(std::sqrt(std::max(res.theta_cov(i, i), 0.0)), 1e-12);
+      Eigen::VectorXd up = theta, down = theta;
+      up[i] += h;
+      down[i] -= h;
+      const std::vector<Vec3> a = Residuals(d, L, res, up), b = Residuals(d, L, res, down);
+      for (size_t r = 0; r < d.rows.size(); ++r) J[r].col(i) = (a[r] - b[r]) / (2.0 * h);
+    }
+    return J;
+  }
+
+  // The fitted parameters' covariance under the stated readings' noise, for the least-squares
+  // fit Identify makes: H^-1 (sum_r J_r^T S_r J_r) H^-1, H = sum_r J_r^T J_r, J_r the residuals'
+  // Jacobian with the group means projected out, S_r the readings' noise through the kinematics
+  // at row r (the projection's cross terms vanish, since J sums to zero over a group). The
+  // identification's rss/dof H^-1 assumes residuals of one size and independent; a socket's
+  // residuals are neither (their size follows the arm's reach, and they share the group's mean),
+  // and over seeds 101-140 its standard deviations were 1.27-1.42x below the fitted values'
+  // scatter about the truth. What the residual holds beyond that noise (something the model
+  // lacks) is left to the sources, which are sized on the validation rows (SourceScale): grown
+  // by rss / expected here as well, it covered the same misfit twice, and the shared-term bound
+  // then hid it from the sources. *rss_ratio reports it.
+  Eigen::MatrixXd ReadingNoiseCovariance(const DataSet& cal,
+                                         const std::vector<identify::ConfigLoads>& L,
+                                         const identify::IdentifyResult& res,
+                                         double* rss_ratio) const {
+    const std::vector<Mat3x> J = ResidualJacobians(cal, L, res);
+    const std::vector<Mat3> S = ReadingNoise(cal);
+    const std::vector<Mat3> S_projected = AgainstGroupMeans(cal, S);
+    const std::vector<Vec3> e = Residuals(cal, L, res, res.after.theta);
+    const int np = static_cast<int>(res.after.theta.size());
+    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(np, np), M = H;
+    double rss = 0.0, expected = 0.0;
+    for (size_t r = 0; r < cal.rows.size(); ++r) {
+      if (cal.rows[r].type == identify::ObservationType::kPixel) continue;  // metres only
+      H += J[r].transpose() * J[r];
+      M += J[r].transpose() * S[r] * J[r];
+      rss += e[r].squaredNorm();
+      expected += S_projected[r].trace();
+    }
+    const Eigen::MatrixXd H_inv = PseudoInverse(H);
+    const Eigen::MatrixXd cov = H_inv * M * H_inv;
+    expected -= (H_inv * M).trace();  // the share the fitted parameters absorb
+    *rss_ratio = expected > 0.0 ? rss / expected : 1.0;
+    return cov;
+  }
+
+  // With the readings' noise stated, the fitted effects' covariance and standard deviations
+  // become the fit's under that noise (ReadingNoiseCovariance).
+  void UseReadingNoiseCovariance(RunContext& ctx, const DataSet& cal,
+                                 const std::vector<identify::ConfigLoads>& L,
+                                 identify::IdentifyResult* res) const {
+    if (res->after.theta.size() == 0) return;
+    double rss_ratio = 1.0;
+    res->theta_cov = ReadingNoiseCovariance(cal, L, *res, &rss_ratio);
+    const Eigen::VectorXd sd = res->theta_cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+    for (int i = 0; i < sd.size(); ++i) {
+      for (int j = 0; j < sd.size(); ++j) {
+        res->theta_corr(i, j) = sd[i] * sd[j] > 0 ? res->theta_cov(i, j) / (sd[i] * sd[j]) : 0.0;
+      }
+    }
+    for (size_t e = 0, off = 0; e < res->effects.size(); ++e) {
+      for (double& s : res->effects[e].std) s = sd[off++];
+    }
+    Json& m = (*ctx.summary)["metrics"];
+    m["theta_cov_from"] = "readings' noise (least-squares sandwich)";
+    m["cal_rss_over_reading_noise"] = rss_ratio;
+    ctx.log("fitted parameters' covariance from the readings' noise; calibration residual " +
+            Num(rss_ratio) + "x what that noise explains");
+  }
+
+  static Eigen::MatrixXd PseudoInverse(const Eigen::MatrixXd& A) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(A);
+    const Eigen::VectorXd& lam = eig.eigenvalues();
+    Eigen::MatrixXd out = Eigen::MatrixXd::Zero(A.rows(), A.cols());
+    for (int i = 0; i < lam.size(); ++i) {
+      if (lam[i] > 1e-10 * lam.maxCoeff()) {
+        out += eig.eigenvectors().col(i) * eig.eigenvectors().col(i).transpose() / lam[i];
+      }
+    }
+    return out;
+  }
+
+  // Per row, the readings' noise through the declared kinematics at the end effector.
+  std::vector<Mat3> ReadingNoise(const DataSet& d) const {
     const kinematics::PpoeModel& model = chain_->model;
     kinematics::PpoeData pd(model);
     kinematics::Matrix6Xd J(6, model.nq());
@@ -632,6 +726,12 @@ class ClosedLoopKind : public ScenarioKind {
           pd.T_base_frame[chain_->end_effector].rotation() * J.topRows<3>();
       S[r] = reading_std_rad_ * reading_std_rad_ * Jp * Jp.transpose();
     }
+    return S;
+  }
+
+  // The covariance of each socket row's residual against its group's mean, from the rows' own
+  // covariances S (other rows keep theirs): (1 - 2/n) S_r + sum S_k / n^2.
+  static std::vector<Mat3> AgainstGroupMeans(const DataSet& d, const std::vector<Mat3>& S) {
     std::vector<Mat3> group_sum(d.groups.size(), Mat3::Zero());
     std::vector<int> group_n(d.groups.size(), 0);
     for (size_t r = 0; r < d.rows.size(); ++r) {
@@ -639,15 +739,14 @@ class ClosedLoopKind : public ScenarioKind {
       group_sum[d.rows[r].group] += S[r];
       ++group_n[d.rows[r].group];
     }
+    std::vector<Mat3> out = S;
     for (size_t r = 0; r < d.rows.size(); ++r) {
-      if (d.rows[r].type != identify::ObservationType::kGroup) {
-        (*out)[r] = S[r];
-        continue;
-      }
+      if (d.rows[r].type != identify::ObservationType::kGroup) continue;
       const int g = d.rows[r].group;
       const double n = group_n[g];
-      (*out)[r] = (1.0 - 2.0 / n) * S[r] + group_sum[g] / (n * n);
+      out[r] = (1.0 - 2.0 / n) * S[r] + group_sum[g] / (n * n);
     }
+    return out;
   }
 
   // Rows far off under the declared model are listed and left out (identify.h FindOutliers).
@@ -756,21 +855,49 @@ class ClosedLoopKind : public ScenarioKind {
     fig.SavePng(ctx.out->File("residual_structure.png").string());
   }
 
-  // The factor on the declared PPOE sources that makes the validation mean NEES 3 (it may grow
-  // as well as shrink), found by bisection on a log scale.
-  // With the readings' noise stated the data decide down to nothing (1e-12); with only a point
-  // noise the scale keeps a floor of 1e-6, since that noise usually hides what is left.
-  double SourceScale(const DataSet& d, const std::vector<Vec3>& p,
-                     const std::vector<Mat3>& noise) const {
+  // The factor on the declared PPOE sources that makes the validation mean NEES `target` (it
+  // may grow as well as shrink), found by bisection on a log scale.
+  // With the readings' noise stated the data decide down to nothing (1e-12), and the target is
+  // the upper 95% bound of that NEES (SharedNeesUpperBound): the sources cover only what the
+  // rows' noise and the fitted parameters cannot. A target of 3 inflated them whenever the
+  // run's parameter error happened to be large, about half the runs: over seeds 101-140 fk's
+  // tracking NEES then fell below its bounds in 6 of 40 runs, all of them at a scale above
+  // 1e-7. With only a point noise the target is 3 and the scale keeps a floor of 1e-6, since
+  // that noise usually hides what is left.
+  double SourceScale(const DataSet& d, const std::vector<Vec3>& p, const std::vector<Mat3>& noise,
+                     double target) const {
     double lo = reading_std_rad_ > 0.0 ? 1e-12 : 1e-6, hi = 1e6;
     if (!std::isfinite(MeanNees(d, p, noise, 1.0))) return 1.0;
-    if (MeanNees(d, p, noise, hi) > 3.0) return hi;
-    if (MeanNees(d, p, noise, lo) < 3.0) return lo;
+    if (MeanNees(d, p, noise, hi) > target) return hi;
+    if (MeanNees(d, p, noise, lo) < target) return lo;
     for (int it = 0; it < 60; ++it) {
       const double mid = std::sqrt(lo * hi);
-      (MeanNees(d, p, noise, mid) > 3.0 ? lo : hi) = mid;
+      (MeanNees(d, p, noise, mid) > target ? lo : hi) = mid;
     }
     return std::sqrt(lo * hi);
+  }
+
+  // The upper 95% bound of the rows' mean NEES without sources when their errors are the
+  // readings' noise and the fitted parameters' error, which every row shares (SharedNeesBounds;
+  // G_r = J_r Sigma^(1/2), J_r the residual's Jacobian in the parameters).
+  double SharedNeesUpperBound(const DataSet& d, const std::vector<identify::ConfigLoads>& L,
+                              const identify::IdentifyResult& res,
+                              const std::vector<Mat3>& noise) const {
+    std::vector<SharedNeesStep> steps;
+    const bool fitted = res.after.theta.size() > 0;
+    std::vector<Mat3x> J;
+    Eigen::MatrixXd sqrt_cov;
+    if (fitted) {
+      J = ResidualJacobians(d, L, res);
+      const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(res.theta_cov);
+      sqrt_cov = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).cwiseSqrt().asDiagonal();
+    }
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      if (d.rows[r].type == identify::ObservationType::kPixel) continue;  // metres only
+      steps.push_back(
+          MakeSharedNeesStep<3>(fitted ? Mat3x(J[r] * sqrt_cov) : Mat3x(3, 0), noise[r]));
+    }
+    return steps.empty() ? 3.0 : SharedNeesBounds(steps, 0.05).upper;
   }
 
   void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
