@@ -172,6 +172,7 @@ void ParticleFilter::Reset() {
   }
   std::fill(log_w_.begin(), log_w_.end(), 0.0);
   pending_move_ = false;
+  awaiting_first_reading_ = config_.initial_at_first_reading;
   moves_ = 0;
   log_norm_at_step_start_ = std::log(static_cast<double>(n_));
   shift_ = 0.0;
@@ -179,6 +180,23 @@ void ParticleFilter::Reset() {
   last_resampled_ = false;
   resample_count_ = 0;
   ComputeKinematics();
+}
+
+// vM(kappa_0, 0) turned by u is vM(kappa_0, u): each joint's particles rotate by its reading.
+void ParticleFilter::CentreOnReading(const double* u) {
+  awaiting_first_reading_ = false;
+  for (int j = 0; j < nq_; ++j) {
+    const double cu = std::cos(u[j]), su = std::sin(u[j]);
+    double* c = cos_.data() + static_cast<size_t>(j) * stride_;
+    double* s = sin_.data() + static_cast<size_t>(j) * stride_;
+    for (int i = 0; i < n_; ++i) {
+      const double ci = c[i];
+      c[i] = ci * cu - s[i] * su;
+      s[i] = s[i] * cu + ci * su;
+    }
+  }
+  // A pending move recomputes the kinematics after it.
+  if (!pending_move_) ComputeKinematics();
 }
 
 void ParticleFilter::ComputeKinematics() {
@@ -309,6 +327,7 @@ FLEXBENCH_PARTICLE_LOOP PfStatus ParticleFilter::UpdateReference(const double* u
   for (int j = 0; j < n; ++j) {
     if (!std::isfinite(u[j])) return PfStatus::kRejectedNonFinite;
   }
+  if (awaiting_first_reading_) CentreOnReading(u);
   if (pending_move_ && config_.proposal == Proposal::kEncoderConjugate) {
     pending_move_ = false;
     ResampleIfNeeded();

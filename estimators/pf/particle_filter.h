@@ -63,6 +63,10 @@ struct ParticleFilterConfig {
   double kappa_w = 15.0;  // reference angles, [PF eq. 28]
   double kappa_v = 5.0;   // system noise, [PF eq. 30]
   double kappa_0 = 0.1;   // initial particles, [PF eq. 29]
+  // The initial particles about the first joint reading, vM(kappa_0, u_0), instead of about 0:
+  // [PF eq. 29] assumes the arm starts at its zero pose; a tracker started on a moving arm
+  // would otherwise begin kappa_0-sure of a pose it is not in.
+  bool initial_at_first_reading = false;
   // F_P and its covariance R_w [PF eq. 26].
   std::vector<FrameId> position_frames;
   Mat3 position_cov = 0.01 * Mat3::Identity();
@@ -146,6 +150,7 @@ class ParticleFilter {
 
  private:
   void ComputeKinematics();
+  void CentreOnReading(const double* u);
   void ResampleIfNeeded();
   void PropagateBootstrap();
   void PropagateConjugate(const double* u);
@@ -186,6 +191,7 @@ class ParticleFilter {
   int ee_output_ = -1;
 
   bool pending_move_ = false;
+  bool awaiting_first_reading_ = false;  // initial_at_first_reading: centre on the next reading
   long moves_ = 0;  // bootstrap moves since Reset (for the periodic renormalisation)
   double log_norm_at_step_start_ = 0.0;  // logsumexp(log_w_) when the step's move happened
   double shift_ = 0.0;                   // maxima removed from log_w_ since then, + constants

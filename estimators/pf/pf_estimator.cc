@@ -84,6 +84,7 @@ pf::ParticleFilterConfig MakePfConfig(const EstimatorSetup& setup,
                                                                : pf::ResamplingScheme::kStratified;
   c.proposal = Flag(p, "conjugate_proposal", false, name) ? pf::Proposal::kEncoderConjugate
                                                           : pf::Proposal::kBootstrap;
+  c.initial_at_first_reading = Flag(p, "initial_at_first_reading", false, name);
   c.end_effector = setup.end_effector;
   if (Flag(p, "ee_position", variant.ee_position, name)) {
     if (setup.end_effector < 0) throw InputError(name + ": the setup has no end-effector frame");

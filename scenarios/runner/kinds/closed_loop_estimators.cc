@@ -111,15 +111,18 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
     ctx.log("(b) calibration routine and identification (identify/)");
     const fs::path augmented = Identify(ctx);
     std::unique_ptr<sim::DeclaredChain> aug_chain;
+    SharedError shared;
     if (fs::exists(augmented)) {
-      aug_chain = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(
-          sim_->nominal_model(), sim::LoadDeclaredModel(augmented.string())));
+      const sim::DeclaredModel aug = sim::LoadDeclaredModel(augmented.string());
+      aug_chain =
+          std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(sim_->nominal_model(), aug));
+      shared = PerturbedChains(aug);
     } else {
       ctx.log("no augmented model (see identify/summary.json): tracking again as declared");
     }
     ctx.log("(c) tracking a new trajectory with the augmented model");
-    const std::vector<Track> after =
-        Follow(ctx, renderer, detector, aug_chain ? *aug_chain : *chain_, 1, &after_trajectories);
+    const std::vector<Track> after = Follow(
+        ctx, renderer, detector, aug_chain ? *aug_chain : *chain_, 1, &after_trajectories, &shared);
     after_trajectories.Write(*ctx.out, "base", "after");
     (*ctx.summary)["metrics"]["augmented_model_used"] = aug_chain != nullptr;
     Report(ctx, before, after);
@@ -140,6 +143,58 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       }
     }
     return frames;
+  }
+
+  // The fitted parameters' error is the same at every step of a trajectory: the augmented
+  // model with each identified parameter one standard deviation up and down. The estimates'
+  // shared error G z (ErrorStats) takes G's columns from the difference of fk's poses.
+  struct SharedError {
+    std::vector<std::unique_ptr<sim::DeclaredChain>> up, down;
+  };
+
+  SharedError PerturbedChains(const sim::DeclaredModel& aug) const {
+    SharedError out;
+    for (size_t e = 0; e < aug.identified_effects.size(); ++e) {
+      const sim::IdentifiedEffect& effect = aug.identified_effects[e];
+      for (size_t k = 0; k < effect.value.size() && k < effect.std.size(); ++k) {
+        if (!(effect.std[k] > 0.0)) continue;
+        for (const double sign : {1.0, -1.0}) {
+          sim::DeclaredModel d = aug;
+          d.identified_effects[e].value[k] += sign * effect.std[k];
+          (sign > 0 ? out.up : out.down)
+              .push_back(std::make_unique<sim::DeclaredChain>(
+                  sim::BuildDeclaredChain(sim_->nominal_model(), d)));
+        }
+      }
+    }
+    return out;
+  }
+
+  // fk on `chain`: the pose the model predicts from the readings alone.
+  static std::unique_ptr<estimators::Estimator> Fk(const sim::DeclaredChain& chain) {
+    estimators::EstimatorSetup setup;
+    setup.model = &chain.model;
+    setup.effects = chain.effects_or_null();
+    setup.end_effector = chain.end_effector;
+    return estimators::MakeEstimator("fk", setup);
+  }
+
+  // G (6 x parameters): the change of fk's pose, in its tangent space, with one standard
+  // deviation of each parameter (central differences over the perturbed chains' fk).
+  static Mat6x SharedColumns(std::vector<std::unique_ptr<estimators::Estimator>>& fk,
+                             const estimators::JointReading& joints) {
+    for (auto& f : fk) {
+      f->Predict(joints.t);
+      f->Update(joints);
+    }
+    const int m = static_cast<int>(fk.size() - 1) / 2;
+    const lie::SE3 T_0 = fk[0]->Estimate().T_base_ee;
+    Mat6x G(6, m);
+    for (int i = 0; i < m; ++i) {
+      G.col(i) = 0.5 * (T_0.Between(fk[1 + i]->Estimate().T_base_ee).Log() -
+                        T_0.Between(fk[1 + m + i]->Estimate().T_base_ee).Log());
+    }
+    return G;
   }
 
   std::vector<std::unique_ptr<estimators::Estimator>> Instances(const sim::DeclaredChain& chain) {
@@ -186,9 +241,16 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
 
   std::vector<Track> Follow(RunContext& ctx, render::Renderer& renderer,
                             render::TagDetector& detector, const sim::DeclaredChain& chain,
-                            int index, TrajectoryRecorder* trajectories) {
+                            int index, TrajectoryRecorder* trajectories,
+                            const SharedError* shared = nullptr) {
     seed_ = ctx.seed;
     auto instances = Instances(chain);
+    std::vector<std::unique_ptr<estimators::Estimator>> fk;  // chain, then up, then down
+    if (shared != nullptr && !shared->up.empty()) {
+      fk.push_back(Fk(chain));
+      for (const auto& c : shared->up) fk.push_back(Fk(*c));
+      for (const auto& c : shared->down) fk.push_back(Fk(*c));
+    }
     const std::map<int, kinematics::FrameId> tag_frames = TagFrames(chain);
     std::vector<Track> tracks(instances.size());
     for (Track& tr : tracks) tr.stats = ErrorStats(window_);
@@ -218,6 +280,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
               : ToSE3(sim_->BodyPose(sim::ObjectName(sim_->model(), mjOBJ_BODY, chain.base_body)));
       const lie::SE3 T_base_ee = T_w_base.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
       trajectories->AddTruth(joints.t, T_base_ee);
+      const Mat6x G = fk.empty() ? Mat6x() : SharedColumns(fk, joints);
       for (size_t e = 0; e < instances.size(); ++e) {
         estimators::Estimator& est = *instances[e];
         est.Predict(joints.t);
@@ -225,7 +288,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
         for (const auto& m : measurements) est.Update(m);
         const estimators::Belief b = est.Estimate();
         Track& tr = tracks[e];
-        tr.stats.Add(b.T_base_ee, b.cov, T_base_ee);
+        tr.stats.Add(b.T_base_ee, b.cov, T_base_ee, G);
         trajectories->Add(specs_[e].name, joints.t, b.T_base_ee, b.cov);
         tr.pos_err.push_back(tr.stats.last_pos());
       }
@@ -267,7 +330,8 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
   void Report(RunContext& ctx, const std::vector<Track>& before, const std::vector<Track>& after) {
     std::ostringstream csv;
     csv << "estimator,pos_err_before_m,pos_err_after_m,ratio,nees_before,nees_after,"
-           "nees_bound_low,nees_bound_high,mismatch_first_step_before,mismatch_first_step_after\n";
+           "nees_bound_low,nees_bound_high,nees_after_bound_low,nees_after_bound_high,"
+           "mismatch_first_step_before,mismatch_first_step_after\n";
     bool all_halved = true, nees_fixed = true, flag_ok = true;
     std::vector<double> x, b_mm, a_mm;
     for (size_t e = 0; e < specs_.size(); ++e) {
@@ -293,10 +357,11 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       flag_ok = flag_ok &&
                 (!before[e].stats.mismatch().flagged() || !after[e].stats.mismatch().flagged());
       char line[320];
-      std::snprintf(line, sizeof(line), "%s,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d\n",
+      std::snprintf(line, sizeof(line), "%s,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d\n",
                     specs_[e].name.c_str(), pb, pa, pa / pb, bm.value("nees_mean", 0.0),
                     am.value("nees_mean", 0.0), bm.value("nees_bound_low", 0.0),
-                    bm.value("nees_bound_high", 0.0), before[e].stats.mismatch().first_step(),
+                    bm.value("nees_bound_high", 0.0), am.value("nees_bound_low", 0.0),
+                    am.value("nees_bound_high", 0.0), before[e].stats.mismatch().first_step(),
                     after[e].stats.mismatch().first_step());
       csv << line;
       x.push_back(static_cast<double>(e));

@@ -127,6 +127,49 @@ TEST_P(OneStepTest, ReferenceOnlyMatchesGridPosteriorAndEvidence) {
   EXPECT_NEAR(evidence, expected_evidence, 5.0 / std::sqrt(ess * seeds));
 }
 
+// initial_at_first_reading: the initial particles vM(kappa_0, u_0), so one step from them is
+// the grid posterior of a prior about u_0, which by symmetry is the u = 0 posterior turned by u_0
+// (mean u_0). About 0 instead, a tight kappa_0 pulls the mean far off the reading: the same
+// check then fails, so it tells the two apart.
+TEST_P(OneStepTest, InitialAtFirstReadingIsThePriorAboutTheReading) {
+  testing::JskLikeArm arm;
+  ParticleFilterConfig c;
+  c.num_particles = 50000;
+  c.kappa_0 = 400.0;  // 2.9 deg
+  c.kappa_v = 2000.0;
+  c.kappa_w = 400.0;
+  c.proposal = GetParam();
+  const double u[4] = {0.7, -0.3, 2.9, 0.1};
+  const GridPosterior grid = OneStepPosterior(c.kappa_0, c.kappa_v, c.kappa_w, 0.0);
+  for (const bool at_reading : {true, false}) {
+    c.initial_at_first_reading = at_reading;
+    ParticleFilter pf(arm.model, c, 7);
+    pf.Predict();
+    ASSERT_EQ(pf.UpdateReference(u, 4), PfStatus::kAccepted);
+    const ParticleSummary& s = pf.Summary();
+    const double tol = 5.0 * grid.std / std::sqrt(s.ess);
+    for (int j = 0; j < 4; ++j) {
+      if (at_reading) {
+        EXPECT_NEAR(AngleDiff(s.mean[j], u[j]), 0.0, tol) << j;
+        EXPECT_NEAR(s.circular_std[j], grid.std, 5.0 / std::sqrt(2.0 * s.ess) * grid.std) << j;
+      } else {
+        // The posterior of a prior about 0: half way between 0 and the reading here.
+        EXPECT_GT(std::abs(AngleDiff(s.mean[j], u[j])), 0.3 * std::abs(u[j])) << j;
+      }
+    }
+    // Reset starts over from the prior about the next reading.
+    pf.Reset();
+    pf.Predict();
+    const double v[4] = {-1.0, 1.0, 0.5, -2.5};
+    ASSERT_EQ(pf.UpdateReference(v, 4), PfStatus::kAccepted);
+    if (at_reading) {
+      for (int j = 0; j < 4; ++j) {
+        EXPECT_NEAR(AngleDiff(pf.Summary().mean[j], v[j]), 0.0, tol) << j;
+      }
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Proposals, OneStepTest,
                          ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate));
 
