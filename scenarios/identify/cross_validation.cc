@@ -49,6 +49,7 @@ Folds MakeFolds(const DataSet& data, const std::string& by) {
 DataSet Subset(const DataSet& data, const std::vector<int>& rows) {
   DataSet s;
   s.camera = data.camera;
+  s.frames = data.frames;
   std::vector<int> group_map(data.groups.size(), -1), set_map(data.sets.size(), -1);
   for (int r : rows) {
     Observation o = data.rows[r];
@@ -86,10 +87,14 @@ std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
 
 double HeldOutSquares(const EffectModel& em, const DataSet& data,
                       const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
-                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries) {
+                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries,
+                      const std::vector<lie::SE3>& T_base_frames) {
   const Problem pr(em, data, loads, active, {}, opt);
   Eigen::VectorXd x(pr.num_params());
   x.head(pr.num_alpha()) = theta;
+  Fit frames_only;
+  frames_only.T_base_frames = T_base_frames;
+  SetFrameStates(pr, frames_only, &x);
   if (!data.groups.empty()) {
     std::vector<lie::SE3> T;
     pr.Poses(theta, &T);
@@ -98,7 +103,9 @@ double HeldOutSquares(const EffectModel& em, const DataSet& data,
     const std::vector<Vec3> mean = GroupMeans(data, points);
     for (size_t g = 0; g < mean.size(); ++g) x.segment<3>(pr.num_alpha() + 3 * g) = mean[g];
   }
-  const Eigen::VectorXd r = pr.Residuals(x);
+  int priors = 0;
+  for (const MeasurementFrame& f : data.frames) priors += f.has_prior;
+  const Eigen::VectorXd r = pr.Residuals(x).head(pr.num_residuals() - 6 * priors);
   *entries = static_cast<int>(r.size());
   return r.squaredNorm();
 }
@@ -157,12 +164,15 @@ double CrossValidate(const EffectModel& em, const DataSet& data,
     }
     const FoldData& f = folds.cache.size() == folds.test_rows.size() ? folds.cache[k] : made;
     Eigen::VectorXd theta = fit.theta;
-    if (!fit.active.empty()) {
-      theta =
-          FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt).theta;
+    std::vector<lie::SE3> T_base_frames = fit.T_base_frames;
+    if (!fit.active.empty() || !data.frames.empty()) {
+      const Fit train =
+          FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt);
+      theta = train.theta;
+      T_base_frames = train.T_base_frames;
     }
     int n = 0;
-    ss += HeldOutSquares(em, f.test, f.test_loads, fit.active, theta, opt, &n);
+    ss += HeldOutSquares(em, f.test, f.test_loads, fit.active, theta, opt, &n, T_base_frames);
     entries += n;
   }
   return entries > 0 ? ss / entries : 0.0;
