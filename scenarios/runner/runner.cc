@@ -399,6 +399,12 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
       line("--outlier-iqr", std::string("outlier_iqr: ") + num);
     }
     if (o.no_cross_validation) line("--no-cross-validation", "cross_validation: false");
+    if (!o.frames.empty()) {
+      std::string f = "frames: {";
+      for (size_t i = 0; i < o.frames.size(); ++i)
+        f += (i ? ", " : "") + Quoted(o.frames[i]) + ": {}";
+      line("--frame", f + "}");
+    }
     if (!o.candidates.empty()) {
       std::string c = "candidates: [";
       for (size_t i = 0; i < o.candidates.size(); ++i) {

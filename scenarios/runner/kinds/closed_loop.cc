@@ -25,6 +25,7 @@
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/identify.h"
+#include "scenarios/identify/measurement_frames.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
@@ -167,6 +168,8 @@ class ClosedLoopKind : public ScenarioKind {
       if (std::abs(qt.norm() - 1.0) > 1e-6) t.Fail("quaternion is not of unit length");
       camera_.T_base_cam = lie::SE3(qt.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
     }
+    // External measurement frames (a tracker) the CSV's `frame` column may name.
+    if (const auto f = root.Optional("frames")) frames_ = identify::ParseMeasurementFrames(*f);
     calibration_ = ParseSource(root.Child("calibration"));
     validation_ = ParseSource(root.Child("validation"));
     if (const auto t = root.Optional("truth")) {
@@ -226,6 +229,7 @@ class ClosedLoopKind : public ScenarioKind {
     DataSet val = Load(validation_, ctx, "validation");
     std::vector<identify::ConfigLoads> cal_loads = identify::ComputeLoads(*em_, cal);
     std::vector<identify::ConfigLoads> val_loads = identify::ComputeLoads(*em_, val);
+    PrepareFrames(cal_loads, &cal, &val);
     Json rejected = Json::array();
     RejectOutliers(ctx, calibration_, "calibration", &cal, &cal_loads, &rejected);
     RejectOutliers(ctx, validation_, "validation", &val, &val_loads, &rejected);
@@ -242,9 +246,12 @@ class ClosedLoopKind : public ScenarioKind {
                             bool after) {
       const std::vector<int> act = after ? res.after.active : std::vector<int>{};
       const Eigen::VectorXd th = after ? res.after.theta : Eigen::VectorXd();
-      const auto p = identify::PredictAll(*em_, d, L, act, th);
-      const auto pix = identify::PredictPixels(*em_, d, L, act, th);
-      return std::make_pair(identify::RowErrors(d, p, pix), p);
+      // Rows in a measurement frame against it at the fit's pose (the same distance as in it).
+      const DataSet db =
+          identify::InBase(d, after ? res.after.T_base_frames : res.before.T_base_frames);
+      const auto p = identify::PredictAll(*em_, db, L, act, th);
+      const auto pix = identify::PredictPixels(*em_, db, L, act, th);
+      return std::make_pair(identify::RowErrors(db, p, pix), p);
     };
     // The augmented model predicts with the loads where its joint corrections put the arm.
     const std::vector<identify::ConfigLoads> cal_loads_after =
@@ -255,6 +262,8 @@ class ClosedLoopKind : public ScenarioKind {
     const auto [cal_after, cal_p1] = errors(cal, cal_loads_after, true);
     const auto [val_before, val_p0] = errors(val, val_loads, false);
     const auto [val_after, val_p1] = errors(val, val_loads_after, true);
+    cal = identify::InBase(cal, res.after.T_base_frames);
+    val = identify::InBase(val, res.after.T_base_frames);
 
     Json& m = (*ctx.summary)["metrics"];
     std::vector<std::string> found;
@@ -383,6 +392,7 @@ class ClosedLoopKind : public ScenarioKind {
     }
     id["alternatives"] = alts;
     id["simpler_equivalents"] = res.simpler;
+    if (!frames_.empty()) id["frames"] = FramesJson(res);
 
     // A model that does not lower the validation error is no fix: it is not shipped.
     if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
@@ -403,6 +413,7 @@ class ClosedLoopKind : public ScenarioKind {
   DataSet Load(const Source& s, RunContext& ctx, const std::string& what) {
     DataSet d;
     d.camera = camera_;
+    d.frames = frames_;
     switch (s.type) {
       case Source::Type::kMukca:
         for (const std::string& p : s.placements) {
@@ -678,6 +689,43 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   // Cross-validation by set needs every set to hold more than one row.
+  // Every declared measurement frame is used by calibration rows; those without a guess start
+  // at a registration of their points (identify/measurement_frames.h); validation rows share
+  // the calibration's frames.
+  void PrepareFrames(const std::vector<identify::ConfigLoads>& cal_loads, DataSet* cal,
+                     DataSet* val) const {
+    if (frames_.empty()) return;
+    identify::CheckFramesUsed(*cal, "calibration");
+    identify::RegisterFrames(*em_, cal_loads, cal);
+    val->frames = cal->frames;
+  }
+
+  // Each frame's fitted pose, its reference and prior, and the covariance of xi
+  // (T_base_frame = T_ref Exp(xi), [rho; theta] in m and rad).
+  Json FramesJson(const identify::IdentifyResult& res) const {
+    Json out = Json::array();
+    for (size_t f = 0; f < frames_.size(); ++f) {
+      const lie::SE3& T = res.after.T_base_frames[f];
+      const Eigen::Quaterniond q(T.rotation());
+      const Mat6& C = res.frame_cov[f];
+      std::vector<std::vector<double>> cov(6, std::vector<double>(6));
+      for (int i = 0; i < 6; ++i) {
+        for (int j = 0; j < 6; ++j) cov[i][j] = C(i, j);
+      }
+      out.push_back(
+          {{"name", frames_[f].name},
+           {"T_base_frame",
+            {T.translation().x(), T.translation().y(), T.translation().z(), q.w(), q.x(), q.y(),
+             q.z()}},
+           {"std_m", {std::sqrt(C(0, 0)), std::sqrt(C(1, 1)), std::sqrt(C(2, 2))}},
+           {"std_deg",
+            {std::sqrt(C(3, 3)) / kDeg, std::sqrt(C(4, 4)) / kDeg, std::sqrt(C(5, 5)) / kDeg}},
+           {"xi_covariance", cov},
+           {"prior", frames_[f].has_prior}});
+    }
+    return out;
+  }
+
   void CheckSets(const DataSet& d, const Source& src) const {
     if (!opt_.cross_validation || d.sets.size() < 2) return;
     std::vector<int> count(d.sets.size(), 0);
@@ -915,6 +963,7 @@ class ClosedLoopKind : public ScenarioKind {
   std::vector<int> candidates_;
   identify::IdentifyOptions opt_;
   identify::CameraModel camera_;
+  std::vector<identify::MeasurementFrame> frames_;
   Source calibration_, validation_;
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;
