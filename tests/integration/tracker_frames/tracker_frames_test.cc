@@ -242,6 +242,30 @@ TEST(TrackerFrame, PoseKnownWithinAPriorGivesTheSame) {
   EXPECT_GE(within, kSeeds - 1);
 }
 
+// A rough guess (5 cm and 5 deg off the truth) instead of the registration as the start.
+TEST(TrackerFrame, ARoughGuessStartsTheSameJointFit) {
+  auto rig = MakeRig();
+  const int kSeeds = 5;
+  int named = 0, within = 0, reduced = 0;
+  for (int seed = 0; seed < kSeeds; ++seed) {
+    std::mt19937_64 rng(500 + seed);
+    MeasurementFrame guess;
+    guess.T_ref = Perturbed(TruePose(seed), 0.05, 5.0, rng);
+    guess.has_guess = true;
+    const Outcome o = RunSeed(*rig, seed, guess, TruePose(seed));
+    named += o.named;
+    within += o.within_3_sigma;
+    reduced += o.val_reduced;
+  }
+  std::printf(
+      "rough guess: effect named %d/%d, pose within 3 sigma %d/%d, validation < 0.3x "
+      "%d/%d\n",
+      named, kSeeds, within, kSeeds, reduced, kSeeds);
+  EXPECT_EQ(named, kSeeds);
+  EXPECT_EQ(reduced, kSeeds);
+  EXPECT_GE(within, kSeeds - 1);
+}
+
 // The same data read as base-frame points (the format without frames; the tracker taken to sit
 // at the base, the user's rough guess): the registration error is reported as effects.
 TEST(TrackerFrame, WithoutTheFrameTheSameDataGivesAWrongAnswer) {
