@@ -306,7 +306,7 @@ std::vector<Vec3> PredictAll(const EffectModel& em, const DataSet& data,
   std::vector<Vec3> p(data.rows.size());
   EffectModel::Workspace ws = em.MakeWorkspace();
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    p[r] = em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws);
+    p[r] = em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws, data.rows[r].point);
   }
   return p;
 }
@@ -487,8 +487,9 @@ std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet&
   EffectModel::Workspace ws = em.MakeWorkspace();
   for (size_t r = 0; r < data.rows.size(); ++r) {
     if (data.rows[r].type != ObservationType::kPixel) continue;
-    uv[r] = Project(data.camera, T_base_cam,
-                    em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws));
+    uv[r] =
+        Project(data.camera, T_base_cam,
+                em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws, data.rows[r].point));
   }
   return uv;
 }

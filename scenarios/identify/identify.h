@@ -62,7 +62,8 @@ struct Observation {
   Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // kPixel: the point seen by DataSet::camera
   Eigen::VectorXd motion_sign;  // optional, per joint: +1/-1 last motion direction, 0 unknown
   int set = 0;                  // index into DataSet::sets (a placement, a session)
-  std::string where;            // "<file>:<line>" for messages
+  int point = 0;      // the measured frame: index into DataSet::points (EffectModel::points())
+  std::string where;  // "<file>:<line>" for messages
 };
 
 struct GroupDistance {
@@ -88,6 +89,9 @@ struct DataSet {
   std::vector<GroupDistance> distances;
   std::vector<std::string> sets;
   std::vector<MeasurementFrame> frames;  // external frames rows may be measured in
+  // Names of the frames of the declared model rows may measure (CSV `marker`), in the order of
+  // EffectModel::points(); the first is the end effector. Empty: the end effector only.
+  std::vector<std::string> points;
 };
 
 struct IdentifyOptions {

@@ -153,7 +153,8 @@ void Problem::Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) cons
   ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int r = begin; r < end; ++r) {
-      (*T)[r] = em_.PredictPose(data_.rows[r].q, loads_[r], active_, theta.data(), ws);
+      const Observation& o = data_.rows[r];
+      (*T)[r] = em_.PredictPose(o.q, loads_[r], active_, theta.data(), ws, o.point);
     }
   });
 }
@@ -169,7 +170,7 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int i = begin; i < end; ++i) {
       const Observation& o = data_.rows[i];
-      const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws);
+      const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws, o.point);
       const int k = offset_[i];
       const Vec3 p = T.translation();
       switch (o.type) {
@@ -266,7 +267,7 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
     for (int i = begin; i < end; ++i) {
       const Observation& o = data_.rows[i];
       const lie::SE3 T =
-          em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data());
+          em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data(), o.point);
       const Mat3 R_base_meas =
           o.type == ObservationType::kPose ? MeasuredRotation(o, T_base_frame) : Mat3::Identity();
       RowTangentMap(o, T, R_base_meas, data_.camera, T_base_cam, opt_, &G);
@@ -335,7 +336,7 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
     if (o.type != ObservationType::kPose) continue;
     // The measured orientation R R_frame turns to R_meas Exp(R_frame^T d_theta), and
     // Log(Exp(-a) Exp(r)) = r - Jl^-1(r) a to first order.
-    const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active_, theta.data(), ws);
+    const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active_, theta.data(), ws, o.point);
     const Vec3 r = lie::SO3Log(MeasuredRotation(o, T_base_frame).transpose() * T.rotation());
     J->block<3, 6>(offset_[i] + 3, col) = -lie::SO3LeftJacobianInverse(r) * o.R_frame.transpose() *
                                           J_tangent_xi[o.frame].bottomRows<3>() /

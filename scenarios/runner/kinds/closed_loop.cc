@@ -170,6 +170,9 @@ class ClosedLoopKind : public ScenarioKind {
     }
     // External measurement frames (a tracker) the CSV's `frame` column may name.
     if (const auto f = root.Optional("frames")) frames_ = identify::ParseMeasurementFrames(*f);
+    if (const auto mk = root.Optional("markers")) {
+      for (const ConfigNode& n : mk->Items()) marker_nodes_.push_back({n.AsString(), n.Where()});
+    }
     calibration_ = ParseSource(root.Child("calibration"));
     validation_ = ParseSource(root.Child("validation"));
     if (const auto t = root.Optional("truth")) {
@@ -201,7 +204,8 @@ class ClosedLoopKind : public ScenarioKind {
     mj_ = sim::LoadModel(declared_.model_path);
     chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(mj_.get(), declared_));
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
-                                                  camera_.present ? camera_.name : "");
+                                                  camera_.present ? camera_.name : "",
+                                                  MarkerFrames());
     if (candidate_specs_.empty()) {
       for (size_t i = 0; i < em_->candidates().size(); ++i) candidates_.push_back(i);
     }
@@ -414,6 +418,7 @@ class ClosedLoopKind : public ScenarioKind {
     DataSet d;
     d.camera = camera_;
     d.frames = frames_;
+    d.points = points_;
     switch (s.type) {
       case Source::Type::kMukca:
         for (const std::string& p : s.placements) {
@@ -689,6 +694,26 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   // Cross-validation by set needs every set to hold more than one row.
+  // The frames the `markers` key names besides the end effector (observed frames of the
+  // declared model); points_ their names, the end effector first.
+  std::vector<kinematics::FrameId> MarkerFrames() {
+    std::vector<kinematics::FrameId> out;
+    if (marker_nodes_.empty()) return out;
+    points_ = {declared_.end_effector};
+    for (const auto& [name, where] : marker_nodes_) {
+      if (name == declared_.end_effector) continue;
+      try {
+        out.push_back(chain_->ObservedFrame(name));
+      } catch (const InputError& e) {
+        throw InputError(where + ": markers: '" + name +
+                         "' is neither the end effector nor an observed frame of the declared "
+                         "model (observed_frames)");
+      }
+      points_.push_back(name);
+    }
+    return out;
+  }
+
   // Every declared measurement frame is used by calibration rows; those without a guess start
   // at a registration of their points (identify/measurement_frames.h); validation rows share
   // the calibration's frames.
@@ -964,6 +989,8 @@ class ClosedLoopKind : public ScenarioKind {
   identify::IdentifyOptions opt_;
   identify::CameraModel camera_;
   std::vector<identify::MeasurementFrame> frames_;
+  std::vector<std::pair<std::string, std::string>> marker_nodes_;  // name, where
+  std::vector<std::string> points_;  // measured frames: end effector, then the markers
   Source calibration_, validation_;
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;
