@@ -405,6 +405,11 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
         f += (i ? ", " : "") + Quoted(o.frames[i]) + ": {}";
       line("--frame", f + "}");
     }
+    if (!o.markers.empty()) {
+      std::string m = "markers: [";
+      for (size_t i = 0; i < o.markers.size(); ++i) m += (i ? ", " : "") + Quoted(o.markers[i]);
+      line("--marker", m + "]");
+    }
     if (!o.candidates.empty()) {
       std::string c = "candidates: [";
       for (size_t i = 0; i < o.candidates.size(); ++i) {

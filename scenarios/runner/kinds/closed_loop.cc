@@ -589,10 +589,10 @@ class ClosedLoopKind : public ScenarioKind {
       ++n;
       kinematics::ForwardKinematicsWithCovariance(chain_->model, pd, d.rows[r].q,
                                                   lie::CompoundOrder::kSecond);
-      const Mat3 R = pd.T_base_frame[chain_->end_effector].rotation();
-      const Mat3 S = source_scale * R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() *
-                         R.transpose() +
-                     noise[r];
+      const kinematics::FrameId f = em_->points()[d.rows[r].point];  // the row's marker
+      const Mat3 R = pd.T_base_frame[f].rotation();
+      const Mat3 S =
+          source_scale * R * pd.Sigma_frame[f].topLeftCorner<3, 3>() * R.transpose() + noise[r];
       const Vec3 e =
           p[r] - (d.rows[r].type == identify::ObservationType::kGroup ? mean[d.rows[r].group]
                                                                       : d.rows[r].p_base);
@@ -643,9 +643,10 @@ class ClosedLoopKind : public ScenarioKind {
     std::vector<Mat3> S(d.rows.size(), Mat3::Zero());
     for (size_t r = 0; r < d.rows.size(); ++r) {
       kinematics::ForwardKinematics(model, pd, d.rows[r].q);
-      kinematics::ComputeFrameJacobian(model, pd, chain_->end_effector, J);
+      const kinematics::FrameId f = em_->points()[d.rows[r].point];  // the row's marker
+      kinematics::ComputeFrameJacobian(model, pd, f, J);
       const Eigen::Matrix<double, 3, Eigen::Dynamic> Jp =
-          pd.T_base_frame[chain_->end_effector].rotation() * J.topRows<3>();
+          pd.T_base_frame[f].rotation() * J.topRows<3>();
       S[r] = reading_std_rad_ * reading_std_rad_ * Jp * Jp.transpose();
     }
     std::vector<Mat3> group_sum(d.groups.size(), Mat3::Zero());

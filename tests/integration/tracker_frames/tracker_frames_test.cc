@@ -369,6 +369,17 @@ TEST(TrackerFrame, BadInputIsOneLineNamingFileKeyAndLine) {
               std::string::npos)
         << e.what();
   }
+  DataSet m;
+  m.points = {"l_hand", "r_hand"};
+  testing::WriteFile(dir / "m.csv", "j1,x,y,z,marker\n0,1,2,3,r_hand\n0,1,2,3,l_foot\n");
+  try {
+    ReadCalibrationCsv((dir / "m.csv").string(), {"j1"}, &m);
+    ADD_FAILURE() << "accepted a marker the model lacks";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("m.csv:3: column 'marker': 'l_foot' is not a measured"),
+              std::string::npos)
+        << e.what();
+  }
   testing::WriteFile(dir / "c.csv", "j1,group,frame\n0,g,tracker\n");
   DataSet g;
   g.frames = {t};
