@@ -699,7 +699,6 @@ class ClosedLoopKind : public ScenarioKind {
   // declared model); points_ their names, the end effector first.
   std::vector<kinematics::FrameId> MarkerFrames() {
     std::vector<kinematics::FrameId> out;
-    if (marker_nodes_.empty()) return out;
     points_ = {declared_.end_effector};
     for (const auto& [name, where] : marker_nodes_) {
       if (name == declared_.end_effector) continue;

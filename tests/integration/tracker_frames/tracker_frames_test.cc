@@ -653,5 +653,59 @@ TEST(TrackerFrame, IdentifyCommandFitsTheFrameAndRefusesBadFrames) {
   fs::remove_all(dir);
 }
 
+// `flexbench identify --marker r_hand --frame tracker` on a two-hand CSV: the waist is found;
+// a marker the declared model does not observe is exit 2 with one line.
+TEST(TwoMarkers, IdentifyCommandReadsTheMarkerColumn) {
+  auto r = MakeTwoArms();
+  const fs::path dir = fs::temp_directory_path() / ("flexbench_tm_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  // The model file without the truth's elasticity (the declared side never simulates it).
+  testing::WriteFile(dir / "two_arms.xml", kTwoArms);
+  testing::WriteFile(dir / "two_arms.declared.yaml",
+                     "model: two_arms.xml\nactuated_joints: [waist, l_sh, l_el, r_sh, r_el]\n"
+                     "end_effector: l_hand\nobserved_frames: [r_hand]\n");
+  std::mt19937_64 rng(41);
+  const lie::SE3 T_true = Perturbed(lie::SE3(), 0.05, 5.0, rng);
+  for (const char* name : {"cal.csv", "val.csv"}) {
+    const DataSet d = TwoHandData(*r, T_true, std::string(name) == "cal.csv" ? 80 : 40, rng);
+    std::string csv = "waist,l_sh,l_el,r_sh,r_el,x,y,z,marker,frame\n";
+    char row[256];
+    for (const Observation& o : d.rows) {
+      std::snprintf(row, sizeof(row),
+                    "%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%s,tracker\n", o.q[0], o.q[1],
+                    o.q[2], o.q[3], o.q[4], o.p_frame.x(), o.p_frame.y(), o.p_frame.z(),
+                    o.point == 0 ? "l_hand" : "r_hand");
+      csv += row;
+    }
+    testing::WriteFile(dir / name, csv);
+  }
+  const std::string cmd = testing::BinDir() + "/flexbench identify --quiet --declared " +
+                          (dir / "two_arms.declared.yaml").string() + " --calibration " +
+                          (dir / "cal.csv").string() + " --validation " +
+                          (dir / "val.csv").string() + " --frame tracker --out " +
+                          (dir / "out").string();
+  const testing::CommandResult ok = testing::RunCommand(cmd + " --marker r_hand");
+  ASSERT_EQ(ok.exit_code, 0) << ok.err;
+  const nlohmann::json summary =
+      nlohmann::json::parse(testing::ReadFile(dir / "out" / "summary.json"));
+  ASSERT_EQ(summary["metrics"]["effects_found"].size(), 1u) << summary["metrics"];
+  EXPECT_NE(
+      summary["metrics"]["effects_found"][0].get<std::string>().find("joint_compliance@waist"),
+      std::string::npos);
+  EXPECT_LT(summary["metrics"]["val_err_after_m"].get<double>(),
+            0.3 * summary["metrics"]["val_err_before_m"].get<double>());
+  const testing::CommandResult bad = testing::RunCommand(cmd + "1 --marker pelvis");
+  EXPECT_EQ(bad.exit_code, 2) << bad.err;
+  EXPECT_NE(bad.err.find("markers: 'pelvis' is neither the end effector nor an observed frame"),
+            std::string::npos)
+      << bad.err;
+  const testing::CommandResult none = testing::RunCommand(cmd + "2");
+  EXPECT_EQ(none.exit_code, 2) << none.err;
+  EXPECT_NE(none.err.find("cal.csv:3: column 'marker': 'r_hand' is not a measured frame"),
+            std::string::npos)
+      << none.err;
+  fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace flexbench::identify
