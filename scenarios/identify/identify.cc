@@ -41,6 +41,10 @@ std::string AlphaName(const EffectModel& em, const Fit& fit, int k) {
     k -= m;
   }
   const int num_group_params = 3 * static_cast<int>(fit.group_points.size());
+  const int num_frame_params = 6 * static_cast<int>(fit.T_base_frames.size());
+  if (k >= num_group_params + num_frame_params) {
+    return "marker offset [" + std::to_string(k - num_group_params - num_frame_params) + "]";
+  }
   if (k >= num_group_params) {
     return "frame pose " + std::to_string((k - num_group_params) / 6) + "[" +
            std::to_string((k - num_group_params) % 6) + "]";
@@ -391,7 +395,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   }
   FindUnidentifiable(em, data, final_loads, cur, candidates, opt, &res);
   Report(em, data, final_loads, opt, &res);
-  res.frame_cov = FrameCovariances(em, data, final_loads, cur, opt);
+  res.frame_cov = FrameCovariances(em, data, final_loads, cur, opt, &res.marker_offset_cov);
   return res;
 }
 

@@ -92,6 +92,9 @@ struct DataSet {
   // Names of the frames of the declared model rows may measure (CSV `marker`), in the order of
   // EffectModel::points(); the first is the end effector. Empty: the end effector only.
   std::vector<std::string> points;
+  // Per points entry: 1 when the marker's offset on its link is unknown (3 nuisance parameters
+  // in the measured frame's coordinates, fitted with the effects); empty or 0: as declared.
+  std::vector<char> offset_unknown;
 };
 
 struct IdentifyOptions {
@@ -134,6 +137,7 @@ struct Fit {
   Eigen::VectorXd theta;               // full parameters of the active candidates
   std::vector<Vec3> group_points;
   std::vector<lie::SE3> T_base_frames;  // per DataSet::frames entry: its fitted pose
+  std::vector<Vec3> marker_offsets;     // per DataSet::points entry: fitted offset (0: declared)
   double rss = 0.0;                     // whitened
   int num_residuals = 0;
   int num_params = 0;  // fitted unknowns (effect directions + group points + frame poses)
@@ -204,7 +208,8 @@ struct IdentifyResult {
   std::string undetermined;    // the combination it does not determine
   Eigen::MatrixXd theta_cov;
   Eigen::MatrixXd theta_corr;
-  std::vector<Mat6> frame_cov;  // per DataSet::frames entry: of its xi at the final fit
+  std::vector<Mat6> frame_cov;          // per DataSet::frames entry: of its xi at the final fit
+  std::vector<Mat3> marker_offset_cov;  // per DataSet::points entry (zero where declared)
   double condition_number = 0.0;
 };
 

@@ -3,6 +3,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
 
 #include "estimators/error.h"
@@ -131,9 +132,10 @@ DataSet InBase(const DataSet& data, const std::vector<lie::SE3>& T_base_frames) 
 
 std::vector<Mat6> FrameCovariances(const EffectModel& em, const DataSet& data,
                                    const std::vector<ConfigLoads>& loads, const Fit& fit,
-                                   const IdentifyOptions& opt) {
+                                   const IdentifyOptions& opt, std::vector<Mat3>* offset_cov) {
   std::vector<Mat6> cov;
-  if (data.frames.empty()) return cov;
+  const bool offsets = std::count(data.offset_unknown.begin(), data.offset_unknown.end(), 1) > 0;
+  if (data.frames.empty() && !offsets) return cov;
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);
   const Eigen::MatrixXd J = pr.Jacobian(StateOf(pr, fit));
   const Eigen::MatrixXd info = J.transpose() * J;
@@ -154,7 +156,28 @@ std::vector<Mat6> FrameCovariances(const EffectModel& em, const DataSet& data,
     const int c = pr.frame_col(static_cast<int>(f));
     cov.push_back(cov_x.block<6, 6>(c, c));
   }
+  if (offset_cov) {
+    offset_cov->assign(data.offset_unknown.size(), Mat3::Zero());
+    for (size_t k = 0; k < offset_cov->size(); ++k) {
+      const int c = pr.offset_col(static_cast<int>(k));
+      if (c >= 0) (*offset_cov)[k] = cov_x.block<3, 3>(c, c);
+    }
+  }
   return cov;
+}
+
+std::vector<Vec3> PredictMarkers(const EffectModel& em, const DataSet& data,
+                                 const std::vector<ConfigLoads>& loads, const Fit& fit) {
+  std::vector<Vec3> p = PredictAll(em, data, loads, fit.active, fit.theta);
+  if (fit.marker_offsets.empty()) return p;
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const Observation& o = data.rows[r];
+    if (o.type == ObservationType::kPixel) continue;
+    p[r] = em.PredictPose(o.q, loads[r], fit.active, fit.theta.data(), ws, o.point) *
+           fit.marker_offsets[o.point];
+  }
+  return p;
 }
 
 }  // namespace flexbench::identify

@@ -44,8 +44,14 @@ DataSet InBase(const DataSet& data, const std::vector<lie::SE3>& T_base_frames);
 // Covariance of each frame's xi (T_base_frame = T_ref Exp(xi), [rho; theta], m and rad) at the
 // fit, jointly with the effects and group points: the block of (J^T J)^+ scaled by the
 // residual variance rss / (N - k), as the effects' covariance (identify.cc Report).
+// `offset_cov` (optional): likewise each marker's offset (zero where declared).
 std::vector<Mat6> FrameCovariances(const EffectModel& em, const DataSet& data,
                                    const std::vector<ConfigLoads>& loads, const Fit& fit,
-                                   const IdentifyOptions& opt);
+                                   const IdentifyOptions& opt,
+                                   std::vector<Mat3>* offset_cov = nullptr);
+
+// PredictAll of `fit`'s model with its marker offsets: each row's marker in the base frame.
+std::vector<Vec3> PredictMarkers(const EffectModel& em, const DataSet& data,
+                                 const std::vector<ConfigLoads>& loads, const Fit& fit);
 
 }  // namespace flexbench::identify

@@ -75,6 +75,11 @@ Mat3 MeasuredRotation(const Observation& o, const std::vector<lie::SE3>& T_base_
   return o.frame < 0 ? o.R_base : T_base_frame[o.frame].rotation() * o.R_frame;
 }
 
+// The marker's point: the predicted frame's origin moved by the marker's fitted offset, if any.
+Vec3 MarkerPoint(const lie::SE3& T, const std::vector<Vec3>& d_marker, int point) {
+  return d_marker.empty() ? T.translation() : T * d_marker[point];
+}
+
 // The prior's standard deviation of each entry of xi = [rho; theta].
 Vec6 PriorStd(const MeasurementFrame& f) {
   Vec6 s;
@@ -109,6 +114,22 @@ Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<C
     prior_row_[f] = rows_dim_ + static_cast<int>(data.distances.size()) + 6 * num_priors_;
     ++num_priors_;
   }
+  offset_col_.assign(data.offset_unknown.size(), -1);
+  for (size_t k = 0; k < data.offset_unknown.size(); ++k) {
+    if (!data.offset_unknown[k]) continue;
+    offset_col_[k] = frame_col(static_cast<int>(data.frames.size())) + 3 * num_offsets_;
+    ++num_offsets_;
+  }
+}
+
+std::vector<Vec3> Problem::MarkerOffsets(const Eigen::VectorXd& x) const {
+  std::vector<Vec3> d;
+  if (num_offsets_ == 0) return d;
+  d.assign(offset_col_.size(), Vec3::Zero());
+  for (size_t k = 0; k < d.size(); ++k) {
+    if (offset_col_[k] >= 0) d[k] = x.segment<3>(offset_col_[k]);
+  }
+  return d;
 }
 
 std::vector<lie::SE3> Problem::FramePoses(const Eigen::VectorXd& x) const {
@@ -166,13 +187,14 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
       data_.camera.present ? CameraPose(em_, data_, active, theta.data()) : lie::SE3();
   const auto group_point = [&](int g) -> Vec3 { return x.segment<3>(num_alpha_ + 3 * g); };
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
+  const std::vector<Vec3> d_marker = MarkerOffsets(x);
   ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int i = begin; i < end; ++i) {
       const Observation& o = data_.rows[i];
       const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws, o.point);
       const int k = offset_[i];
-      const Vec3 p = T.translation();
+      const Vec3 p = MarkerPoint(T, d_marker, o.point);
       switch (o.type) {
         case ObservationType::kGroup:
           r.segment<3>(k) = (p - group_point(o.group)) / opt_.point_std_m;
@@ -187,7 +209,9 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
               opt_.rotation_std_rad;
           break;
         case ObservationType::kPixel:
-          r.segment<2>(k) = (Project(data_.camera, T_base_cam, p) - o.uv) / opt_.pixel_std_px;
+          // The camera sees the declared point (a marker offset is for point and pose rows).
+          r.segment<2>(k) =
+              (Project(data_.camera, T_base_cam, T.translation()) - o.uv) / opt_.pixel_std_px;
           break;
       }
     }
@@ -258,6 +282,7 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
                                         const std::vector<int>& cs) const {
   Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), NumTheta(em_, cs));
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
+  const std::vector<Vec3> d_marker = MarkerOffsets(x);
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
   ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
@@ -268,6 +293,11 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
       const Observation& o = data_.rows[i];
       const lie::SE3 T =
           em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data(), o.point);
+      if (!d_marker.empty() && o.type != ObservationType::kPixel) {
+        // The marker turns with its frame: d p += w x (R d).
+        const Vec3 lever = T.rotation() * d_marker[o.point];
+        for (EffectModel::Tangent& t : tangent) t.dp += t.w.cross(lever);
+      }
       const Mat3 R_base_meas =
           o.type == ObservationType::kPose ? MeasuredRotation(o, T_base_frame) : Mat3::Identity();
       RowTangentMap(o, T, R_base_meas, data_.camera, T_base_cam, opt_, &G);
@@ -349,6 +379,19 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
   }
 }
 
+void Problem::OffsetColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
+  if (num_offsets_ == 0) return;
+  const Eigen::VectorXd theta = Theta(x);
+  std::vector<lie::SE3> T;
+  Poses(theta, &T);
+  for (size_t i = 0; i < data_.rows.size(); ++i) {
+    const int col = offset_col(data_.rows[i].point);
+    if (col < 0 || data_.rows[i].type == ObservationType::kPixel) continue;
+    // p = T d: d p / d d = R (a pose row's orientation does not depend on it).
+    J->block<3, 3>(offset_[i], col) = T[i].rotation() / opt_.point_std_m;
+  }
+}
+
 Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(num_residuals(), num_params());
   const Eigen::VectorXd theta = Theta(x);
@@ -372,6 +415,7 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   }
   PointColumns(x, &J);
   FrameColumns(x, &J);
+  OffsetColumns(x, &J);
   return J;
 }
 
@@ -386,6 +430,7 @@ Eigen::MatrixXd Problem::NumericJacobian(const Eigen::VectorXd& x) const {
   }
   PointColumns(x, &J);
   FrameColumns(x, &J);
+  OffsetColumns(x, &J);
   return J;
 }
 
@@ -444,6 +489,7 @@ Fit MakeFit(const Problem& pr, const std::vector<int>& active, const Eigen::Vect
   f.group_points.resize(G);
   for (int g = 0; g < G; ++g) f.group_points[g] = x.segment<3>(pr.num_alpha() + 3 * g);
   f.T_base_frames = pr.FramePoses(x);
+  f.marker_offsets = pr.MarkerOffsets(x);
   f.rss = rss;
   f.num_residuals = pr.num_residuals();
   f.num_params = pr.num_params();
@@ -458,6 +504,11 @@ void SetFrameStates(const Problem& pr, const Fit& fit, Eigen::VectorXd* x) {
     x->segment<6>(col) = f < fit.T_base_frames.size()
                              ? (frames[f].T_ref.Inverse() * fit.T_base_frames[f]).Log()
                              : Vec6::Zero();
+  }
+  for (size_t k = 0; k < pr.data().offset_unknown.size(); ++k) {
+    const int col = pr.offset_col(static_cast<int>(k));
+    if (col < 0) continue;
+    x->segment<3>(col) = k < fit.marker_offsets.size() ? fit.marker_offsets[k] : Vec3::Zero();
   }
 }
 

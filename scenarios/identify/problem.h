@@ -46,7 +46,9 @@ class Problem {
 
   int num_alpha() const { return num_alpha_; }
   int num_theta() const { return num_theta_; }
-  int num_params() const { return frame_col(static_cast<int>(data_.frames.size())); }
+  int num_params() const {
+    return frame_col(static_cast<int>(data_.frames.size())) + 3 * num_offsets_;
+  }
   int num_residuals() const {
     return rows_dim_ + static_cast<int>(data_.distances.size()) + 6 * num_priors_;
   }
@@ -56,6 +58,12 @@ class Problem {
   }
   // T_base_frame of every measurement frame at state x.
   std::vector<lie::SE3> FramePoses(const Eigen::VectorXd& x) const;
+  // Column of marker k's unknown offset in x (-1: declared, not fitted).
+  int offset_col(int k) const {
+    return k < static_cast<int>(offset_col_.size()) ? offset_col_[k] : -1;
+  }
+  // Each marker's offset at state x (zero where declared); empty when none is unknown.
+  std::vector<Vec3> MarkerOffsets(const Eigen::VectorXd& x) const;
   int row_offset(size_t r) const { return offset_[r]; }
   const Eigen::MatrixXd& basis(size_t e) const { return basis_[e]; }
   const DataSet& data() const { return data_; }
@@ -97,6 +105,8 @@ class Problem {
   void PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
   // The frame-pose columns of the rows measured in frames and of the priors (exact) into J.
   void FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
+  // The unknown marker offsets' columns (exact) into J.
+  void OffsetColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
 
   const EffectModel& em_;
   const DataSet& data_;
@@ -109,10 +119,12 @@ class Problem {
   std::vector<int> offset_;
   int rows_dim_ = 0;
   int num_priors_ = 0;
-  std::vector<int> prior_row_;  // per frame: its prior's first residual, -1 without one
+  std::vector<int> prior_row_;   // per frame: its prior's first residual, -1 without one
+  int num_offsets_ = 0;          // markers with an unknown offset
+  std::vector<int> offset_col_;  // per marker: its offset's column in x, -1 when declared
 };
 
-// The frame poses' xi of `fit` into x (zero for frames the fit does not have).
+// The frame poses' xi and marker offsets of `fit` into x (zero for those the fit lacks).
 void SetFrameStates(const Problem& pr, const Fit& fit, Eigen::VectorXd* x);
 
 // The state vector x of a fit (alpha, then group points, then frame poses' xi).

@@ -173,6 +173,10 @@ class ClosedLoopKind : public ScenarioKind {
     if (const auto mk = root.Optional("markers")) {
       for (const ConfigNode& n : mk->Items()) marker_nodes_.push_back({n.AsString(), n.Where()});
     }
+    if (const auto u = root.Optional("unknown_marker_offsets")) {
+      for (const ConfigNode& n : u->Items())
+        unknown_offset_nodes_.push_back({n.AsString(), n.Where()});
+    }
     calibration_ = ParseSource(root.Child("calibration"));
     validation_ = ParseSource(root.Child("validation"));
     if (const auto t = root.Optional("truth")) {
@@ -206,6 +210,7 @@ class ClosedLoopKind : public ScenarioKind {
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
                                                   camera_.present ? camera_.name : "",
                                                   MarkerFrames());
+    offset_unknown_ = UnknownOffsets();
     if (candidate_specs_.empty()) {
       for (size_t i = 0; i < em_->candidates().size(); ++i) candidates_.push_back(i);
     }
@@ -253,7 +258,7 @@ class ClosedLoopKind : public ScenarioKind {
       // Rows in a measurement frame against it at the fit's pose (the same distance as in it).
       const DataSet db =
           identify::InBase(d, after ? res.after.T_base_frames : res.before.T_base_frames);
-      const auto p = identify::PredictAll(*em_, db, L, act, th);
+      const auto p = identify::PredictMarkers(*em_, db, L, after ? res.after : res.before);
       const auto pix = identify::PredictPixels(*em_, db, L, act, th);
       return std::make_pair(identify::RowErrors(db, p, pix), p);
     };
@@ -397,6 +402,7 @@ class ClosedLoopKind : public ScenarioKind {
     id["alternatives"] = alts;
     id["simpler_equivalents"] = res.simpler;
     if (!frames_.empty()) id["frames"] = FramesJson(res);
+    if (!unknown_offset_nodes_.empty()) id["marker_offsets"] = OffsetsJson(res);
 
     // A model that does not lower the validation error is no fix: it is not shipped.
     if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
@@ -419,6 +425,7 @@ class ClosedLoopKind : public ScenarioKind {
     d.camera = camera_;
     d.frames = frames_;
     d.points = points_;
+    d.offset_unknown = offset_unknown_;
     switch (s.type) {
       case Source::Type::kMukca:
         for (const std::string& p : s.placements) {
@@ -714,6 +721,34 @@ class ClosedLoopKind : public ScenarioKind {
     return out;
   }
 
+  // Per marker (points_): whether its offset on its link is unknown (`unknown_marker_offsets`).
+  std::vector<char> UnknownOffsets() const {
+    std::vector<char> out(points_.size(), 0);
+    for (const auto& [name, where] : unknown_offset_nodes_) {
+      const auto it = std::find(points_.begin(), points_.end(), name);
+      if (it == points_.end()) {
+        throw InputError(where + ": unknown_marker_offsets: '" + name +
+                         "' is neither the end effector nor one of 'markers'");
+      }
+      out[it - points_.begin()] = 1;
+    }
+    return out;
+  }
+
+  // Each marker's fitted offset on its link (m, in its frame's coordinates) and its std.
+  Json OffsetsJson(const identify::IdentifyResult& res) const {
+    Json out = Json::array();
+    for (size_t k = 0; k < points_.size(); ++k) {
+      if (!offset_unknown_[k]) continue;
+      const Vec3& d = res.after.marker_offsets[k];
+      const Mat3& C = res.marker_offset_cov[k];
+      out.push_back({{"marker", points_[k]},
+                     {"offset_m", {d.x(), d.y(), d.z()}},
+                     {"std_m", {std::sqrt(C(0, 0)), std::sqrt(C(1, 1)), std::sqrt(C(2, 2))}}});
+    }
+    return out;
+  }
+
   // Every declared measurement frame is used by calibration rows; those without a guess start
   // at a registration of their points (identify/measurement_frames.h); validation rows share
   // the calibration's frames.
@@ -991,6 +1026,8 @@ class ClosedLoopKind : public ScenarioKind {
   std::vector<identify::MeasurementFrame> frames_;
   std::vector<std::pair<std::string, std::string>> marker_nodes_;  // name, where
   std::vector<std::string> points_;  // measured frames: end effector, then the markers
+  std::vector<std::pair<std::string, std::string>> unknown_offset_nodes_;  // name, where
+  std::vector<char> offset_unknown_;                                       // per points_ entry
   Source calibration_, validation_;
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;

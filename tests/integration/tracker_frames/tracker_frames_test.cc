@@ -63,7 +63,8 @@ lie::SE3 Perturbed(const lie::SE3& T, double metres, double degrees, std::mt1993
 
 // `rows` settled configurations of the truth, seen by a tracker at T_base_tracker (frame 0 of
 // the data set) with noise.
-DataSet TrackerData(Rig& rig, const lie::SE3& T_base_tracker, int rows, std::mt19937_64& rng) {
+DataSet TrackerData(Rig& rig, const lie::SE3& T_base_tracker, int rows, std::mt19937_64& rng,
+                    const Vec3& d_marker = Vec3::Zero()) {
   DataSet d;
   d.sets = {"s"};
   MeasurementFrame tracker;
@@ -84,7 +85,7 @@ DataSet TrackerData(Rig& rig, const lie::SE3& T_base_tracker, int rows, std::mt1
     }
     rig.sim->SetCommand(cmd);
     rig.sim->Settle();
-    const Vec3 p_base(rig.sim->Pose("ee").translation());
+    const Vec3 p_base(rig.sim->Pose("ee") * d_marker);  // the marker, d_marker off the site
     o.frame = 0;
     o.p_frame = T_tracker_base * p_base + Vec3(n(rng), n(rng), n(rng));
     d.rows.push_back(o);
@@ -242,6 +243,83 @@ TEST(TrackerFrame, PoseKnownWithinAPriorGivesTheSame) {
   EXPECT_GE(within, kSeeds - 1);
 }
 
+// A marker 2-3 cm off the declared end effector (where it was stuck on), its offset unknown:
+// 3 nuisance parameters beside the tracker's 6. The tool's link_offset candidate is then
+// absorbed (reported unidentifiable); the gear is still named, the offset and pose recovered.
+// Declared (offset_unknown off), the same data makes link_offset@ee an effect.
+TEST(MarkerOffset, UnknownOffsetIsFittedWithTheTrackerAndTheGear) {
+  auto rig = MakeRig();
+  const int kSeeds = 5;
+  int named = 0, within = 0, reduced = 0, absorbed = 0, declared_picks_tool = 0;
+  for (int seed = 0; seed < kSeeds; ++seed) {
+    std::mt19937_64 rng(700 + seed);
+    std::uniform_real_distribution<double> u(-0.03, 0.03);
+    const Vec3 d_true(u(rng), u(rng), u(rng));
+    const lie::SE3 T_true = TruePose(seed);
+    DataSet cal = TrackerData(*rig, T_true, 90, rng, d_true);
+    DataSet val = TrackerData(*rig, T_true, 40, rng, d_true);
+    cal.points = val.points = {"ee"};
+    cal.offset_unknown = val.offset_unknown = {1};
+    const auto loads = ComputeLoads(*rig->em, cal);
+    RegisterFrames(*rig->em, loads, &cal);
+    val.frames = cal.frames;
+    IdentifyOptions opt;
+    opt.point_std_m = kNoise;
+    const IdentifyResult res = Identify(*rig->em, cal, loads, NamedCandidates(*rig->em), opt);
+    const std::vector<std::string> found = Names(res);
+    const bool ok = found.size() == 1 && found[0].rfind("joint_compliance@j2", 0) == 0;
+    named += ok;
+    for (size_t k = 0; k < 4 && k < res.steps.size() && !ok; ++k) {
+      std::printf("  %s\n", res.steps[k].c_str());
+    }
+    absorbed += std::count(res.unidentifiable.begin(), res.unidentifiable.end(), "link_offset@ee");
+    double worst = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      worst = std::max(worst, std::abs(res.after.marker_offsets[0][k] - d_true[k]) /
+                                  std::sqrt(res.marker_offset_cov[0](k, k)));
+    }
+    const Vec6 e = (cal.frames[0].T_ref.Inverse() * res.after.T_base_frames[0]).Log() -
+                   (cal.frames[0].T_ref.Inverse() * T_true).Log();
+    for (int k = 0; k < 6; ++k)
+      worst = std::max(worst, std::abs(e[k]) / std::sqrt(res.frame_cov[0](k, k)));
+    within += worst < 3.0;
+    const auto val_error = [&](const Fit& fit) {
+      const DataSet vb = InBase(val, fit.T_base_frames);
+      const auto L = ComputeLoads(*rig->em, vb, fit.active, fit.theta);
+      const std::vector<double> err = RowErrors(vb, PredictMarkers(*rig->em, vb, L, fit));
+      double sum = 0.0;
+      for (double v : err) sum += v;
+      return sum / err.size();
+    };
+    const double before = val_error(res.before), after = val_error(res.after);
+    reduced += after < 0.3 * before;
+    // Declared offset: the same rows.
+    DataSet declared = cal;
+    declared.offset_unknown.clear();
+    const IdentifyResult res_d =
+        Identify(*rig->em, declared, loads, NamedCandidates(*rig->em), opt);
+    for (const std::string& n : Names(res_d))
+      declared_picks_tool += n.find("link_offset@ee") != std::string::npos;
+    std::printf(
+        "marker offset, seed %d: found %s, offset and pose within %.2f sigma, validation "
+        "%.3g -> %.3g mm; declared offset finds %zu effects\n",
+        seed, found.empty() ? "-" : found[0].c_str(), worst, before * 1e3, after * 1e3,
+        Names(res_d).size());
+  }
+  std::printf(
+      "unknown marker offset: gear named %d/%d, tool absorbed %d/%d, within 3 sigma "
+      "%d/%d, validation < 0.3x %d/%d; declared offset chose link_offset@ee %d/%d\n",
+      named, kSeeds, absorbed, kSeeds, within, kSeeds, reduced, kSeeds, declared_picks_tool,
+      kSeeds);
+  // Measured: 4/5; on seed 703 backlash@j2 joins the compliance (BIC -13, held-out 1.19 ->
+  // 1.11: MuJoCo's statics beyond the linear gear), the compliance still chosen first.
+  EXPECT_GE(named, kSeeds - 1);
+  EXPECT_EQ(absorbed, kSeeds);
+  EXPECT_EQ(reduced, kSeeds);
+  EXPECT_GE(within, kSeeds - 1);
+  EXPECT_EQ(declared_picks_tool, kSeeds);  // without the nuisance the offset is an "effect"
+}
+
 // A rough guess (5 cm and 5 deg off the truth) instead of the registration as the start.
 TEST(TrackerFrame, ARoughGuessStartsTheSameJointFit) {
   auto rig = MakeRig();
@@ -302,8 +380,8 @@ TEST(TrackerFrame, AnEffectTheRegistrationAbsorbsIsReportedNotChosen) {
             res.unidentifiable.end());
 }
 
-// The frame columns of the Jacobian (points and poses, with a prior) against central
-// differences of the residuals in x.
+// The frame and marker-offset columns of the Jacobian (points and poses, with a prior), and an
+// effect's analytic column with the offset's lever, against central differences in x.
 TEST(TrackerFrame, FrameJacobianMatchesDifferences) {
   auto rig = MakeRig();
   std::mt19937_64 rng(9);
@@ -312,6 +390,8 @@ TEST(TrackerFrame, FrameJacobianMatchesDifferences) {
     d.rows[r].type = ObservationType::kPose;
     d.rows[r].R_frame = lie::SO3Exp(Vec3(0.3, -0.2, 0.1 * r));
   }
+  d.points = {"ee"};
+  d.offset_unknown = {1};
   d.frames[0].T_ref = Perturbed(TruePose(1), 0.01, 1.0, rng);
   d.frames[0].has_prior = true;
   d.frames[0].prior_std_m = 0.005;
@@ -321,7 +401,7 @@ TEST(TrackerFrame, FrameJacobianMatchesDifferences) {
   IdentifyOptions opt;
   const Problem pr(*rig->em, d, loads, active, {}, opt);
   Eigen::VectorXd x(pr.num_params());
-  x << -1e-3, 0.02, -0.01, 0.03, 0.05, -0.04, 0.02;
+  x << -1e-3, 0.02, -0.01, 0.03, 0.05, -0.04, 0.02, 0.01, -0.02, 0.015;
   const Eigen::MatrixXd J = pr.Jacobian(x);
   for (int k = pr.frame_col(0); k < pr.num_params(); ++k) {
     Eigen::VectorXd xp = x, xm = x;
