@@ -779,6 +779,27 @@ TEST(TwoMarkers, IdentifyCommandReadsTheMarkerColumn) {
   EXPECT_NE(bad.err.find("markers: 'pelvis' is neither the end effector nor an observed frame"),
             std::string::npos)
       << bad.err;
+  // Both hands' offsets unknown (the truth's are zero): fitted near zero, the waist still found.
+  const testing::CommandResult both = testing::RunCommand(
+      cmd + "4 --marker r_hand --set 'unknown_marker_offsets=[l_hand, r_hand]'");
+  ASSERT_EQ(both.exit_code, 0) << both.err;
+  const nlohmann::json s4 = nlohmann::json::parse(testing::ReadFile(dir / "out4" / "summary.json"));
+  ASSERT_EQ(s4["identification"]["marker_offsets"].size(), 2u);
+  for (const nlohmann::json& m : s4["identification"]["marker_offsets"]) {
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_LT(std::abs(m["offset_m"][k].get<double>()), 4.0 * m["std_m"][k].get<double>() + 1e-6)
+          << m;
+    }
+  }
+  EXPECT_NE(s4["metrics"]["effects_found"][0].get<std::string>().find("joint_compliance@waist"),
+            std::string::npos)
+      << s4["metrics"]["effects_found"];
+  const testing::CommandResult offset =
+      testing::RunCommand(cmd + "3 --marker r_hand --set 'unknown_marker_offsets=[pelvis]'");
+  EXPECT_EQ(offset.exit_code, 2) << offset.err;
+  EXPECT_NE(offset.err.find("unknown_marker_offsets: 'pelvis' is neither the end effector nor"),
+            std::string::npos)
+      << offset.err;
   const testing::CommandResult none = testing::RunCommand(cmd + "2");
   EXPECT_EQ(none.exit_code, 2) << none.err;
   EXPECT_NE(none.err.find("cal.csv:3: column 'marker': 'r_hand' is not a measured frame"),
