@@ -144,6 +144,46 @@ class LabelIndexer {
   std::unordered_map<std::string, int> index_;
 };
 
+// The row's `frame` cell: `base`, or a measurement frame of the data set (DataSet::frames), in
+// which its point (and orientation) were measured.
+void SetRowFrame(const std::string& cell, const std::string& where, const DataSet& data,
+                 Observation* o) {
+  if (cell == "base") return;
+  int f = -1;
+  std::string names = "base";
+  for (size_t k = 0; k < data.frames.size(); ++k) {
+    if (data.frames[k].name == cell) f = static_cast<int>(k);
+    names += ", " + data.frames[k].name;
+  }
+  if (f < 0) {
+    throw InputError(where + ": column 'frame': '" + CapForMessage(cell) +
+                     "' is not a declared measurement frame (declared: " + names +
+                     "; the scenario's 'frames' key)");
+  }
+  if (o->type != ObservationType::kPoint && o->type != ObservationType::kPose) {
+    throw InputError(where + ": column 'frame': only point and pose rows (x, y, z) are measured " +
+                     "in a frame; this row's frame must be 'base'");
+  }
+  o->frame = f;
+  o->p_frame = o->p_base;
+  o->R_frame = o->R_base;
+  o->p_base.setZero();
+  o->R_base.setIdentity();
+}
+
+// The row's `marker` cell: the frame of the declared model it measures, one of DataSet::points.
+int MarkerIndex(const std::string& cell, const std::string& where, const DataSet& data) {
+  std::string names;
+  for (size_t k = 0; k < data.points.size(); ++k) {
+    if (data.points[k] == cell) return static_cast<int>(k);
+    names += (k ? ", " : "") + data.points[k];
+  }
+  throw InputError(where + ": column 'marker': '" + CapForMessage(cell) +
+                   "' is not a measured frame of the declared model (" +
+                   (names.empty() ? std::string("none declared") : "measured: " + names) +
+                   "; the scenario's 'markers' key names the end effector's companions)");
+}
+
 }  // namespace
 
 int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
@@ -164,6 +204,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   const std::string hdr = csv.Where();
   std::vector<int> joint_col(joints.size(), -1);
   std::vector<int> motion_col(joints.size(), -1);
+  int frame_col = -1, marker_col = -1;
   int group_col = -1, set_col = -1, xyz_col[3] = {-1, -1, -1}, quat_col[4] = {-1, -1, -1, -1},
       uv_col[2] = {-1, -1};
   for (size_t c = 0; c < header.size(); ++c) {
@@ -180,6 +221,8 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     }
     if (h == "group") group_col = static_cast<int>(c), known = true;
     if (h == "set") set_col = static_cast<int>(c), known = true;
+    if (h == "frame") frame_col = static_cast<int>(c), known = true;
+    if (h == "marker") marker_col = static_cast<int>(c), known = true;
     if (h == "x") xyz_col[0] = static_cast<int>(c), known = true;
     if (h == "y") xyz_col[1] = static_cast<int>(c), known = true;
     if (h == "z") xyz_col[2] = static_cast<int>(c), known = true;
@@ -199,7 +242,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     if (!known) {
       throw InputError(hdr + ": column '" + CapForMessage(h) +
                        "' is neither an actuated joint of the declared model nor one of group, "
-                       "set, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
+                       "set, frame, marker, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
     }
   }
   for (size_t j = 0; j < joints.size(); ++j) {
@@ -277,6 +320,8 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       o.type = ObservationType::kGroup;
       o.group = group_index(cells[group_col]);
     }
+    if (frame_col >= 0) SetRowFrame(cells[frame_col], where, *data, &o);
+    if (marker_col >= 0) o.point = MarkerIndex(cells[marker_col], where, *data);
     if (set_col >= 0 && cells[set_col].empty()) throw InputError(where + ": column 'set' is empty");
     o.set = set_index(set_col >= 0 ? cells[set_col] : path);
     data->rows.push_back(o);

@@ -13,7 +13,12 @@
 //   - optional `motion_<joint>`: -1, 0 or +1, the direction the joint last moved in before the
 //     reading (which flank of a backlash it rests on; 0 unknown);
 //   - optional `set`: a label for the placement or session the row belongs to (errors are
-//     averaged per set, then over sets).
+//     averaged per set, then over sets);
+//   - optional `frame`: `base`, or the name of a measurement frame (set DataSet::frames first;
+//     the scenario's `frames` key) in which the row's x, y, z (and quaternion) were measured,
+//     e.g. a laser tracker's own frame (measurement_frames.h);
+//   - optional `marker`: which frame of the declared model the row measures, one of
+//     DataSet::points (the end effector and the scenario's `markers`); default the end effector.
 // Rows must have the header's column count; empty cells, NaN and infinities are errors, as are
 // column names that are neither a joint of the model nor one of the above.
 #pragma once

@@ -49,6 +49,9 @@ Folds MakeFolds(const DataSet& data, const std::string& by) {
 DataSet Subset(const DataSet& data, const std::vector<int>& rows) {
   DataSet s;
   s.camera = data.camera;
+  s.frames = data.frames;
+  s.points = data.points;
+  s.offset_unknown = data.offset_unknown;
   std::vector<int> group_map(data.groups.size(), -1), set_map(data.sets.size(), -1);
   for (int r : rows) {
     Observation o = data.rows[r];
@@ -86,19 +89,27 @@ std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
 
 double HeldOutSquares(const EffectModel& em, const DataSet& data,
                       const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
-                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries) {
+                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries,
+                      const Fit* nuisance) {
   const Problem pr(em, data, loads, active, {}, opt);
   Eigen::VectorXd x(pr.num_params());
   x.head(pr.num_alpha()) = theta;
+  SetFrameStates(pr, nuisance ? *nuisance : Fit(), &x);
   if (!data.groups.empty()) {
     std::vector<lie::SE3> T;
     pr.Poses(theta, &T);
     std::vector<Vec3> points(T.size());
     for (size_t r = 0; r < T.size(); ++r) points[r] = T[r].translation();
+    const std::vector<Vec3> d_marker = pr.MarkerOffsets(x);
+    for (size_t r = 0; r < T.size() && !d_marker.empty(); ++r) {
+      points[r] = T[r] * d_marker[data.rows[r].point];
+    }
     const std::vector<Vec3> mean = GroupMeans(data, points);
     for (size_t g = 0; g < mean.size(); ++g) x.segment<3>(pr.num_alpha() + 3 * g) = mean[g];
   }
-  const Eigen::VectorXd r = pr.Residuals(x);
+  int priors = 0;
+  for (const MeasurementFrame& f : data.frames) priors += f.has_prior;
+  const Eigen::VectorXd r = pr.Residuals(x).head(pr.num_residuals() - 6 * priors);
   *entries = static_cast<int>(r.size());
   return r.squaredNorm();
 }
@@ -156,13 +167,14 @@ double CrossValidate(const EffectModel& em, const DataSet& data,
       made = MakeFoldData(data, loads, folds.test_rows[k]);
     }
     const FoldData& f = folds.cache.size() == folds.test_rows.size() ? folds.cache[k] : made;
-    Eigen::VectorXd theta = fit.theta;
-    if (!fit.active.empty()) {
-      theta =
-          FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt).theta;
+    Fit train = fit;
+    const bool nuisance = !data.frames.empty() ||
+                          std::count(data.offset_unknown.begin(), data.offset_unknown.end(), 1);
+    if (!fit.active.empty() || nuisance) {
+      train = FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt);
     }
     int n = 0;
-    ss += HeldOutSquares(em, f.test, f.test_loads, fit.active, theta, opt, &n);
+    ss += HeldOutSquares(em, f.test, f.test_loads, fit.active, train.theta, opt, &n, &train);
     entries += n;
   }
   return entries > 0 ? ss / entries : 0.0;

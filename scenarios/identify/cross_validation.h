@@ -42,10 +42,13 @@ std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
                                      const std::vector<int>& rows);
 
 // Sum of squared whitened residuals of `data` under (active, theta), group points at the mean
-// of their rows' predictions; `*entries` the number of residual entries.
+// of their rows' predictions, measurement frames and marker offsets at `nuisance`'s (fitted on
+// the other folds; null: at their references), priors left out; `*entries` the number of
+// residual entries.
 double HeldOutSquares(const EffectModel& em, const DataSet& data,
                       const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
-                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries);
+                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries,
+                      const Fit* nuisance = nullptr);
 
 // Mean squared whitened residual over the held-out folds of `fit`'s model, each fold's
 // parameters fitted on the other folds (starting from `fit`'s values, its bases kept).

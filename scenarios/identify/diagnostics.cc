@@ -72,8 +72,9 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
       Eigen::VectorXd qp = data.rows[r].q, qm = qp;
       qp[k] += h;
       qm[k] -= h;
-      const Vec3 s = (em.Predict(qp, loads[r], fit.active, fit.theta.data(), ws) -
-                      em.Predict(qm, loads[r], fit.active, fit.theta.data(), ws)) /
+      const int pt = data.rows[r].point;
+      const Vec3 s = (em.Predict(qp, loads[r], fit.active, fit.theta.data(), ws, pt) -
+                      em.Predict(qm, loads[r], fit.active, fit.theta.data(), ws, pt)) /
                      (2 * h * opt.point_std_m);
       const Vec3 e = res.segment<3>(pr.row_offset(r));
       const double s2 = s.squaredNorm();

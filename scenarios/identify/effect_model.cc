@@ -149,18 +149,24 @@ const char* ToString(EffectType type) {
 }
 
 EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame,
-                         const std::string& camera)
+                         const std::string& camera, const std::vector<FrameId>& more_points)
     : chain_(&chain), point_frame_(point_frame), m_(m) {
   const kinematics::PpoeModel& model = chain.model;
   const int n = model.num_frames();
-  if (point_frame < 0 || point_frame >= n) {
-    throw InputError("identify: point frame " + std::to_string(point_frame) + " not in '" +
-                     model.name() + "'");
+  points_ = {point_frame};
+  for (FrameId p : more_points) {
+    if (std::find(points_.begin(), points_.end(), p) == points_.end()) points_.push_back(p);
   }
   on_path_.assign(n, 0);
-  for (FrameId f = point_frame; f >= 0; f = model.frame(f).parent) {
-    on_path_[f] = 1;
-    if (f == kinematics::kBaseFrame) break;
+  for (FrameId point : points_) {
+    if (point < 0 || point >= n) {
+      throw InputError("identify: point frame " + std::to_string(point) + " not in '" +
+                       model.name() + "'");
+    }
+    for (FrameId f = point; f >= 0; f = model.frame(f).parent) {
+      on_path_[f] = 1;
+      if (f == kinematics::kBaseFrame) break;
+    }
   }
   frame_body_.assign(n, -1);
   for (FrameId f = 1; f < n; ++f) frame_body_[f] = BodyOfFrame(m, model.frame(f).name);
@@ -252,9 +258,10 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
   }
   // The tool: where the measured point sits on the last link (a probe, a ball, a fingertip),
   // unless the point frame is a joint frame, which has its link_offset already.
-  if (model.frame(point_frame).q_index < 0)
-    add(EffectType::kLinkOffset, Untyped(model.frame(point_frame).name), -1, point_frame, 3, 1e-6,
-        "m");
+  for (FrameId point : points_) {
+    if (model.frame(point).q_index < 0)
+      add(EffectType::kLinkOffset, Untyped(model.frame(point).name), -1, point, 3, 1e-6, "m");
+  }
   if (mount_ != kinematics::kBaseFrame) {
     add(EffectType::kBaseCompliance, Untyped(model.frame(mount_).name), -1, mount_, 2, 1e-7,
         "rad/Nm");
@@ -446,11 +453,11 @@ EffectModel::Workspace EffectModel::MakeWorkspace() const {
 
 lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L,
                                   const std::vector<int>& active, const double* theta,
-                                  Workspace& ws) const {
+                                  Workspace& ws, int point) const {
   AccumulateTerms(q, L, active, theta, ws);
   ChainPoses(q, L, ws);
   ClearTerms(active, ws);
-  return ws.T[point_frame_];
+  return ws.T[points_[point]];
 }
 
 void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L,
@@ -718,7 +725,7 @@ bool EffectModel::Touched(FrameId f, const Workspace& ws) const {
 void EffectModel::PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace& ws) const {
   const kinematics::PpoeModel& model = chain_->model;
   Vec3 y = Vec3::Zero();  // in the current frame's coordinates
-  for (FrameId g = point_frame_; g >= top && g > 0; g = model.frame(g).parent) {
+  for (FrameId g = ws.point; g >= top && g > 0; g = model.frame(g).parent) {
     const kinematics::PpoeFrame& fr = model.frame(g);
     const lie::SE3 motion =
         fr.q_index >= 0 ? fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]) : lie::SE3();
@@ -733,9 +740,19 @@ void EffectModel::PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace
   }
 }
 
+bool EffectModel::MovesFrame(FrameId a, FrameId f) const {
+  for (; f > a; f = chain_->model.frame(f).parent) {
+  }
+  return f == a;
+}
+
 void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q,
                                     const ConfigLoads& L, const Workspace& ws, Tangent* out) const {
   const FrameId f = c.frame;
+  if (!MovesFrame(f, ws.point)) {  // on another branch of the tree than the point
+    for (int k = 0; k < c.num_params; ++k) out[k] = Tangent();
+    return;
+  }
   const kinematics::PpoeFrame& fr = chain_->model.frame(f);
   // Most candidates sit at frames the active effects leave alone: there T2 = T4 = T5 = T_parent
   // T_parent_ip, and only their rotation matters below (a bend needs its pivot: all stages).
@@ -823,7 +840,7 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
       const Vec3 M = L.M_mid[f] + ws.payload * L.M_mid_unit[f] + L.R_mid_T[f] * ws.couple;
       const Vec3 dphi = ws.T[prev_joint_[f]].rotation() * Load(Vec3(M - M.dot(dir) * dir));
       out[0].w = lie::SO3LeftJacobian(st.phi) * dphi;
-      out[0].dp = out[0].w.cross(ws.T[point_frame_].translation() - st.mid);
+      out[0].dp = out[0].w.cross(ws.T[ws.point].translation() - st.mid);
       break;
     }
     case EffectType::kLinkLength:
@@ -853,19 +870,24 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
 
 lie::SE3 EffectModel::PoseTangents(const Eigen::VectorXd& q, const ConfigLoads& L,
                                    const std::vector<int>& active, const double* theta,
-                                   const std::vector<int>& cs, Workspace& ws, Tangent* out) const {
+                                   const std::vector<int>& cs, Workspace& ws, Tangent* out,
+                                   int point) const {
   AccumulateTerms(q, L, active, theta, ws);
   ChainPoses(q, L, ws);
-  // Frames ids grow away from the base: the point is needed from the highest candidate down.
-  FrameId top = point_frame_;
-  for (int c : cs) top = std::min(top, candidates_[c].frame);
+  ws.point = points_[point];
+  // Frames ids grow away from the base: the point is needed from the highest candidate down
+  // (candidates on other branches have zero tangents and need no coordinates).
+  FrameId top = ws.point;
+  for (int c : cs) {
+    if (MovesFrame(candidates_[c].frame, ws.point)) top = std::min(top, candidates_[c].frame);
+  }
   PointInFrames(q, top, ws);
   for (int c : cs) {
     CandidateTangents(candidates_[c], q, L, ws, out);
     out += candidates_[c].num_params;
   }
   ClearTerms(active, ws);
-  return ws.T[point_frame_];
+  return ws.T[ws.point];
 }
 
 }  // namespace flexbench::identify

@@ -145,13 +145,17 @@ class EffectModel {
  public:
   // `point_frame`: the chain frame whose origin is predicted (the end effector). `camera`: the
   // name of a camera that observes it in pixels ("" for none), for the camera_offset candidate.
+  // `more_points`: further measured frames (markers on other branches of a tree, issue 20); the
+  // candidates then cover every joint on the way to any of them, each point gets its tool
+  // link_offset, and a prediction names its point (index into points(), 0: point_frame).
   EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame,
-              const std::string& camera = "");
+              const std::string& camera = "", const std::vector<FrameId>& more_points = {});
 
   const kinematics::PpoeModel& chain() const { return chain_->model; }
   const std::vector<Candidate>& candidates() const { return candidates_; }
   int FindCandidate(const std::string& name) const;  // -1 when absent
   FrameId mount() const { return mount_; }
+  const std::vector<FrameId>& points() const { return points_; }
   bool has_masses() const { return has_masses_; }
 
   ConfigLoads Loads(const Eigen::VectorXd& q) const;
@@ -202,18 +206,20 @@ class EffectModel {
     // d mount_rot_xy / d (c_x, c_y) where a base compliance is active (kinematics::MountTilt).
     bool mount_active = false;
     Eigen::Matrix2d mount_J = Eigen::Matrix2d::Zero();
+    FrameId point = -1;  // the predicted point frame of the current call
   };
   Workspace MakeWorkspace() const;
 
   // Position of the point frame in the base frame, with effects `active` (indices into
   // candidates()) at parameters `theta` (concatenated in that order).
   Vec3 Predict(const Eigen::VectorXd& q, const ConfigLoads& loads, const std::vector<int>& active,
-               const double* theta, Workspace& ws) const {
-    return PredictPose(q, loads, active, theta, ws).translation();
+               const double* theta, Workspace& ws, int point = 0) const {
+    return PredictPose(q, loads, active, theta, ws, point).translation();
   }
-  // The point frame's pose (its orientation for pose observations).
+  // The point frame's pose (its orientation for pose observations); `point` indexes points().
   lie::SE3 PredictPose(const Eigen::VectorXd& q, const ConfigLoads& loads,
-                       const std::vector<int>& active, const double* theta, Workspace& ws) const;
+                       const std::vector<int>& active, const double* theta, Workspace& ws,
+                       int point = 0) const;
 
   // A first-order change of the point frame's pose (base frame): d R = [w]x R, and d p.
   struct Tangent {
@@ -232,7 +238,8 @@ class EffectModel {
   // HasTangent(cs[i], active). Allocates nothing.
   lie::SE3 PoseTangents(const Eigen::VectorXd& q, const ConfigLoads& loads,
                         const std::vector<int>& active, const double* theta,
-                        const std::vector<int>& cs, Workspace& ws, Tangent* out) const;
+                        const std::vector<int>& cs, Workspace& ws, Tangent* out,
+                        int point = 0) const;
 
  private:
   // PredictPose in three steps: the per-frame terms of `active` into ws, the chain's poses
@@ -252,12 +259,15 @@ class EffectModel {
   // ws.y: the point in each path frame's T5 coordinates, from the point frame up to frame `top`
   // (the steps below in their own coordinates: structural zeros stay exact); ws.touched.
   void PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace& ws) const;
+  // Whether frame a is f or one of f's ancestors (a candidate there moves f).
+  bool MovesFrame(FrameId a, FrameId f) const;
   // The tangents of candidate c's parameters at the terms in ws (PointInFrames done).
   void CandidateTangents(const Candidate& c, const Eigen::VectorXd& q, const ConfigLoads& L,
                          const Workspace& ws, Tangent* out) const;
 
   const sim::DeclaredChain* chain_;
   FrameId point_frame_;
+  std::vector<FrameId> points_;  // point_frame_, then the further measured frames
   FrameId mount_ = 0;
   bool has_masses_ = false;
   std::vector<Candidate> candidates_;

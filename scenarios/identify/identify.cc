@@ -11,6 +11,7 @@
 #include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/diagnostics.h"
 #include "scenarios/identify/equivalence.h"
+#include "scenarios/identify/measurement_frames.h"
 #include "scenarios/identify/problem.h"
 #include "scenarios/identify/selection.h"
 
@@ -38,6 +39,15 @@ std::string AlphaName(const EffectModel& em, const Fit& fit, int k) {
                                                                  : "");
     }
     k -= m;
+  }
+  const int num_group_params = 3 * static_cast<int>(fit.group_points.size());
+  const int num_frame_params = 6 * static_cast<int>(fit.T_base_frames.size());
+  if (k >= num_group_params + num_frame_params) {
+    return "marker offset [" + std::to_string(k - num_group_params - num_frame_params) + "]";
+  }
+  if (k >= num_group_params) {
+    return "frame pose " + std::to_string((k - num_group_params) / 6) + "[" +
+           std::to_string((k - num_group_params) % 6) + "]";
   }
   return "group point " + std::to_string(k / 3);
 }
@@ -300,7 +310,7 @@ std::vector<Vec3> PredictAll(const EffectModel& em, const DataSet& data,
   std::vector<Vec3> p(data.rows.size());
   EffectModel::Workspace ws = em.MakeWorkspace();
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    p[r] = em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws);
+    p[r] = em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws, data.rows[r].point);
   }
   return p;
 }
@@ -385,13 +395,16 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   }
   FindUnidentifiable(em, data, final_loads, cur, candidates, opt, &res);
   Report(em, data, final_loads, opt, &res);
+  res.frame_cov = FrameCovariances(em, data, final_loads, cur, opt, &res.marker_offset_cov);
   return res;
 }
 
-std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data,
+std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data_in,
                               const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt) {
   std::vector<int> out;
-  if (!(opt.outlier_iqr > 0) || data.rows.empty()) return out;
+  if (!(opt.outlier_iqr > 0) || data_in.rows.empty()) return out;
+  // Rows in measurement frames against the frames' reference poses (a registration).
+  const DataSet data = InBase(data_in, ReferencePoses(data_in));
   const std::vector<Vec3> p = PredictAll(em, data, loads, {}, Eigen::VectorXd());
   const std::vector<Eigen::Vector2d> uv = PredictPixels(em, data, loads, {}, Eigen::VectorXd());
   // Coordinate-wise median of each group: a far-off row cannot drag it.
@@ -478,8 +491,9 @@ std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet&
   EffectModel::Workspace ws = em.MakeWorkspace();
   for (size_t r = 0; r < data.rows.size(); ++r) {
     if (data.rows[r].type != ObservationType::kPixel) continue;
-    uv[r] = Project(data.camera, T_base_cam,
-                    em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws));
+    uv[r] =
+        Project(data.camera, T_base_cam,
+                em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws, data.rows[r].point));
   }
   return uv;
 }
@@ -512,8 +526,8 @@ std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& poin
       case ObservationType::kPixel:
         e[r] = pixels.empty() ? std::nan("") : (pixels[r] - o.uv).norm();
         break;
-      default:
-        e[r] = (points[r] - o.p_base).norm();
+      default:  // a row still in a measurement frame has no base-frame point: InBase first
+        e[r] = o.frame < 0 ? (points[r] - o.p_base).norm() : std::nan("");
         break;
     }
   }

@@ -6,7 +6,10 @@
 //   - a measured point position in the base frame (a tracker, a probe), or
 //   - a group: rows whose end-effector point sits at one unknown fixed point (a ball in a
 //     socket, a fingertip on a mark); pairs of groups may have a known distance.
-// The unknown group points are nuisance parameters fitted with the effects.
+// The unknown group points are nuisance parameters fitted with the effects. Point and pose rows
+// may be measured in an external frame (a tracker, DataSet::frames) whose pose in the base frame
+// is unknown or known with a prior: 6 more nuisance parameters per frame, fitted with the
+// effects (measurement_frames.h).
 //
 // Identify runs in stages, each in its own file:
 //   outliers (FindOutliers, below)  rows far from the rest under the declared model
@@ -31,16 +34,36 @@ namespace flexbench::identify {
 
 enum class ObservationType { kPoint, kGroup, kPose, kPixel };
 
+// An external measuring frame (a laser tracker, a motion-capture system) whose pose in the
+// declared base frame, T_base_frame = T_ref Exp(xi), is fitted with the effects (xi: 6 nuisance
+// parameters, [rho; theta]). T_ref is the user's guess, the prior's mean, or a registration of
+// the measured points against the declared model (RegisterFrames, measurement_frames.h).
+struct MeasurementFrame {
+  std::string name;
+  lie::SE3 T_ref;              // the reference xi is measured from
+  bool has_guess = false;      // T_ref given by the user (else RegisterFrames sets it)
+  bool has_prior = false;      // xi ~ N(0, diag(std_m^2 I3, std_rad^2 I3)): known within a prior
+  double prior_std_m = 0.0;    // of rho
+  double prior_std_rad = 0.0;  // of theta
+  std::string where;           // where it was declared ("<file>:<line>"), for messages
+};
+
 struct Observation {
   Eigen::VectorXd q;  // declared joint order
   ObservationType type = ObservationType::kPoint;
-  int group = -1;                                // kGroup: index into DataSet::groups
-  Vec3 p_base = Vec3::Zero();                    // kPoint, kPose: measured point, base frame
-  Mat3 R_base = Mat3::Identity();                // kPose: measured orientation of the point frame
+  int group = -1;                  // kGroup: index into DataSet::groups
+  Vec3 p_base = Vec3::Zero();      // kPoint, kPose: measured point, base frame
+  Mat3 R_base = Mat3::Identity();  // kPose: measured orientation of the point frame
+  // kPoint, kPose measured in DataSet::frames[frame] (>= 0; -1: in the base frame, p_base and
+  // R_base): the point and orientation in that frame. InBase maps them to p_base, R_base.
+  int frame = -1;
+  Vec3 p_frame = Vec3::Zero();
+  Mat3 R_frame = Mat3::Identity();
   Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // kPixel: the point seen by DataSet::camera
   Eigen::VectorXd motion_sign;  // optional, per joint: +1/-1 last motion direction, 0 unknown
   int set = 0;                  // index into DataSet::sets (a placement, a session)
-  std::string where;            // "<file>:<line>" for messages
+  int point = 0;      // the measured frame: index into DataSet::points (EffectModel::points())
+  std::string where;  // "<file>:<line>" for messages
 };
 
 struct GroupDistance {
@@ -65,6 +88,13 @@ struct DataSet {
   std::vector<std::string> groups;
   std::vector<GroupDistance> distances;
   std::vector<std::string> sets;
+  std::vector<MeasurementFrame> frames;  // external frames rows may be measured in
+  // Names of the frames of the declared model rows may measure (CSV `marker`), in the order of
+  // EffectModel::points(); the first is the end effector. Empty: the end effector only.
+  std::vector<std::string> points;
+  // Per points entry: 1 when the marker's offset on its link is unknown (3 nuisance parameters
+  // in the measured frame's coordinates, fitted with the effects); empty or 0: as declared.
+  std::vector<char> offset_unknown;
 };
 
 struct IdentifyOptions {
@@ -106,9 +136,11 @@ struct Fit {
   std::vector<Eigen::MatrixXd> basis;  // per active effect: fitted directions (empty: all)
   Eigen::VectorXd theta;               // full parameters of the active candidates
   std::vector<Vec3> group_points;
-  double rss = 0.0;  // whitened
+  std::vector<lie::SE3> T_base_frames;  // per DataSet::frames entry: its fitted pose
+  std::vector<Vec3> marker_offsets;     // per DataSet::points entry: fitted offset (0: declared)
+  double rss = 0.0;                     // whitened
   int num_residuals = 0;
-  int num_params = 0;  // fitted unknowns (effect directions + group points)
+  int num_params = 0;  // fitted unknowns (effect directions + group points + frame poses)
   double bic = 0.0;
 };
 
@@ -176,6 +208,8 @@ struct IdentifyResult {
   std::string undetermined;    // the combination it does not determine
   Eigen::MatrixXd theta_cov;
   Eigen::MatrixXd theta_corr;
+  std::vector<Mat6> frame_cov;          // per DataSet::frames entry: of its xi at the final fit
+  std::vector<Mat3> marker_offset_cov;  // per DataSet::points entry (zero where declared)
   double condition_number = 0.0;
 };
 

@@ -64,6 +64,31 @@ Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, cons
   return Eigen::Vector2d(k.fx * p.x() / z + k.cx, k.fy * p.y() / z + k.cy);
 }
 
+namespace {
+
+// The measured point and orientation of a point or pose row in the base frame, with the
+// measurement frames at T_base_frame.
+Vec3 MeasuredPoint(const Observation& o, const std::vector<lie::SE3>& T_base_frame) {
+  return o.frame < 0 ? o.p_base : T_base_frame[o.frame] * o.p_frame;
+}
+Mat3 MeasuredRotation(const Observation& o, const std::vector<lie::SE3>& T_base_frame) {
+  return o.frame < 0 ? o.R_base : T_base_frame[o.frame].rotation() * o.R_frame;
+}
+
+// The marker's point: the predicted frame's origin moved by the marker's fitted offset, if any.
+Vec3 MarkerPoint(const lie::SE3& T, const std::vector<Vec3>& d_marker, int point) {
+  return d_marker.empty() ? T.translation() : T * d_marker[point];
+}
+
+// The prior's standard deviation of each entry of xi = [rho; theta].
+Vec6 PriorStd(const MeasurementFrame& f) {
+  Vec6 s;
+  s << Vec3::Constant(f.prior_std_m), Vec3::Constant(f.prior_std_rad);
+  return s;
+}
+
+}  // namespace
+
 Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                  const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
                  const IdentifyOptions& opt)
@@ -83,6 +108,37 @@ Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<C
     o += RowDim(r);
   }
   rows_dim_ = o;
+  prior_row_.assign(data.frames.size(), -1);
+  for (size_t f = 0; f < data.frames.size(); ++f) {
+    if (!data.frames[f].has_prior) continue;
+    prior_row_[f] = rows_dim_ + static_cast<int>(data.distances.size()) + 6 * num_priors_;
+    ++num_priors_;
+  }
+  offset_col_.assign(data.offset_unknown.size(), -1);
+  for (size_t k = 0; k < data.offset_unknown.size(); ++k) {
+    if (!data.offset_unknown[k]) continue;
+    offset_col_[k] = frame_col(static_cast<int>(data.frames.size())) + 3 * num_offsets_;
+    ++num_offsets_;
+  }
+}
+
+std::vector<Vec3> Problem::MarkerOffsets(const Eigen::VectorXd& x) const {
+  std::vector<Vec3> d;
+  if (num_offsets_ == 0) return d;
+  d.assign(offset_col_.size(), Vec3::Zero());
+  for (size_t k = 0; k < d.size(); ++k) {
+    if (offset_col_[k] >= 0) d[k] = x.segment<3>(offset_col_[k]);
+  }
+  return d;
+}
+
+std::vector<lie::SE3> Problem::FramePoses(const Eigen::VectorXd& x) const {
+  std::vector<lie::SE3> T(data_.frames.size());
+  for (size_t f = 0; f < T.size(); ++f) {
+    const Vec6 xi = x.segment<6>(frame_col(static_cast<int>(f)));
+    T[f] = data_.frames[f].T_ref * lie::SE3::Exp(xi);
+  }
+  return T;
 }
 
 Eigen::VectorXd Problem::Theta(const Eigen::VectorXd& x) const {
@@ -118,7 +174,8 @@ void Problem::Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) cons
   ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int r = begin; r < end; ++r) {
-      (*T)[r] = em_.PredictPose(data_.rows[r].q, loads_[r], active_, theta.data(), ws);
+      const Observation& o = data_.rows[r];
+      (*T)[r] = em_.PredictPose(o.q, loads_[r], active_, theta.data(), ws, o.point);
     }
   });
 }
@@ -129,27 +186,32 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active, theta.data()) : lie::SE3();
   const auto group_point = [&](int g) -> Vec3 { return x.segment<3>(num_alpha_ + 3 * g); };
+  const std::vector<lie::SE3> T_base_frame = FramePoses(x);
+  const std::vector<Vec3> d_marker = MarkerOffsets(x);
   ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int i = begin; i < end; ++i) {
       const Observation& o = data_.rows[i];
-      const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws);
+      const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws, o.point);
       const int k = offset_[i];
-      const Vec3 p = T.translation();
+      const Vec3 p = MarkerPoint(T, d_marker, o.point);
       switch (o.type) {
         case ObservationType::kGroup:
           r.segment<3>(k) = (p - group_point(o.group)) / opt_.point_std_m;
           break;
         case ObservationType::kPoint:
-          r.segment<3>(k) = (p - o.p_base) / opt_.point_std_m;
+          r.segment<3>(k) = (p - MeasuredPoint(o, T_base_frame)) / opt_.point_std_m;
           break;
         case ObservationType::kPose:
-          r.segment<3>(k) = (p - o.p_base) / opt_.point_std_m;
+          r.segment<3>(k) = (p - MeasuredPoint(o, T_base_frame)) / opt_.point_std_m;
           r.segment<3>(k + 3) =
-              lie::SO3Log(o.R_base.transpose() * T.rotation()) / opt_.rotation_std_rad;
+              lie::SO3Log(MeasuredRotation(o, T_base_frame).transpose() * T.rotation()) /
+              opt_.rotation_std_rad;
           break;
         case ObservationType::kPixel:
-          r.segment<2>(k) = (Project(data_.camera, T_base_cam, p) - o.uv) / opt_.pixel_std_px;
+          // The camera sees the declared point (a marker offset is for point and pose rows).
+          r.segment<2>(k) =
+              (Project(data_.camera, T_base_cam, T.translation()) - o.uv) / opt_.pixel_std_px;
           break;
       }
     }
@@ -158,6 +220,11 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
     const GroupDistance& d = data_.distances[k];
     r[rows_dim_ + k] =
         ((group_point(d.a) - group_point(d.b)).norm() - d.distance_m) / opt_.distance_std_m;
+  }
+  for (size_t f = 0; f < data_.frames.size(); ++f) {
+    if (prior_row_[f] < 0) continue;
+    r.segment<6>(prior_row_[f]) =
+        x.segment<6>(frame_col(static_cast<int>(f))).cwiseQuotient(PriorStd(data_.frames[f]));
   }
   return r;
 }
@@ -173,8 +240,9 @@ namespace {
 // Log(R_obs^T R) moves by Jr^-1(r) R^T w (d Exp(r) = Exp(r) [Jr(r) dr]); a pixel by the
 // pinhole's derivative at the camera-frame point (z held at its floor, as Project).
 using RowMap = Eigen::Matrix<double, Eigen::Dynamic, 6, 0, 6, 6>;
-void RowTangentMap(const Observation& o, const lie::SE3& T, const CameraModel& cam,
-                   const lie::SE3& T_base_cam, const IdentifyOptions& opt, RowMap* G) {
+void RowTangentMap(const Observation& o, const lie::SE3& T, const Mat3& R_base_meas,
+                   const CameraModel& cam, const lie::SE3& T_base_cam, const IdentifyOptions& opt,
+                   RowMap* G) {
   switch (o.type) {
     case ObservationType::kGroup:
     case ObservationType::kPoint:
@@ -186,7 +254,7 @@ void RowTangentMap(const Observation& o, const lie::SE3& T, const CameraModel& c
       G->resize(6, 6);
       G->setZero();
       G->topRightCorner<3, 3>() = Mat3::Identity() / opt.point_std_m;
-      const Vec3 r = lie::SO3Log(o.R_base.transpose() * T.rotation());
+      const Vec3 r = lie::SO3Log(R_base_meas.transpose() * T.rotation());
       G->bottomLeftCorner<3, 3>() =
           lie::SO3RightJacobianInverse(r) * T.rotation().transpose() / opt.rotation_std_rad;
       break;
@@ -210,9 +278,11 @@ void RowTangentMap(const Observation& o, const lie::SE3& T, const CameraModel& c
 
 }  // namespace
 
-Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& theta,
+Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                                         const std::vector<int>& cs) const {
   Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), NumTheta(em_, cs));
+  const std::vector<lie::SE3> T_base_frame = FramePoses(x);
+  const std::vector<Vec3> d_marker = MarkerOffsets(x);
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
   ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
@@ -222,8 +292,15 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& theta,
     for (int i = begin; i < end; ++i) {
       const Observation& o = data_.rows[i];
       const lie::SE3 T =
-          em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data());
-      RowTangentMap(o, T, data_.camera, T_base_cam, opt_, &G);
+          em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data(), o.point);
+      if (!d_marker.empty() && o.type != ObservationType::kPixel) {
+        // The marker turns with its frame: d p += w x (R d).
+        const Vec3 lever = T.rotation() * d_marker[o.point];
+        for (EffectModel::Tangent& t : tangent) t.dp += t.w.cross(lever);
+      }
+      const Mat3 R_base_meas =
+          o.type == ObservationType::kPose ? MeasuredRotation(o, T_base_frame) : Mat3::Identity();
+      RowTangentMap(o, T, R_base_meas, data_.camera, T_base_cam, opt_, &G);
       for (Eigen::Index k = 0; k < D.cols(); ++k) {
         // Through a fixed-size vector: Eigen picks its summation order by the destination's
         // alignment, and a column must not depend on which others are computed with it.
@@ -267,6 +344,54 @@ void Problem::PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
   }
 }
 
+void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
+  if (data_.frames.empty()) return;
+  const std::vector<lie::SE3> T_base_frame = FramePoses(x);
+  std::vector<Mat6> J_tangent_xi(data_.frames.size());
+  for (size_t f = 0; f < data_.frames.size(); ++f) {
+    J_tangent_xi[f] = lie::SE3RightJacobian(x.segment<6>(frame_col(static_cast<int>(f))));
+  }
+  const Eigen::VectorXd theta = Theta(x);
+  EffectModel::Workspace ws = em_.MakeWorkspace();
+  for (size_t i = 0; i < data_.rows.size(); ++i) {
+    const Observation& o = data_.rows[i];
+    if (o.frame < 0) continue;
+    // The measured point T_base_frame Exp(d) p_frame moves by R (d_rho - [p_frame]x d_theta),
+    // d = Jr(xi) d_xi; the residual is prediction minus measurement.
+    const Mat3& R = T_base_frame[o.frame].rotation();
+    Eigen::Matrix<double, 3, 6> J_p_tangent;
+    J_p_tangent << R, -R * lie::Skew(o.p_frame);
+    const int col = frame_col(o.frame);
+    J->block<3, 6>(offset_[i], col) = -J_p_tangent * J_tangent_xi[o.frame] / opt_.point_std_m;
+    if (o.type != ObservationType::kPose) continue;
+    // The measured orientation R R_frame turns to R_meas Exp(R_frame^T d_theta), and
+    // Log(Exp(-a) Exp(r)) = r - Jl^-1(r) a to first order.
+    const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active_, theta.data(), ws, o.point);
+    const Vec3 r = lie::SO3Log(MeasuredRotation(o, T_base_frame).transpose() * T.rotation());
+    J->block<3, 6>(offset_[i] + 3, col) = -lie::SO3LeftJacobianInverse(r) * o.R_frame.transpose() *
+                                          J_tangent_xi[o.frame].bottomRows<3>() /
+                                          opt_.rotation_std_rad;
+  }
+  for (size_t f = 0; f < data_.frames.size(); ++f) {
+    if (prior_row_[f] < 0) continue;
+    J->block<6, 6>(prior_row_[f], frame_col(static_cast<int>(f))) =
+        PriorStd(data_.frames[f]).cwiseInverse().asDiagonal();
+  }
+}
+
+void Problem::OffsetColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
+  if (num_offsets_ == 0) return;
+  const Eigen::VectorXd theta = Theta(x);
+  std::vector<lie::SE3> T;
+  Poses(theta, &T);
+  for (size_t i = 0; i < data_.rows.size(); ++i) {
+    const int col = offset_col(data_.rows[i].point);
+    if (col < 0 || data_.rows[i].type == ObservationType::kPixel) continue;
+    // p = T d: d p / d d = R (a pose row's orientation does not depend on it).
+    J->block<3, 3>(offset_[i], col) = T[i].rotation() / opt_.point_std_m;
+  }
+}
+
 Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(num_residuals(), num_params());
   const Eigen::VectorXd theta = Theta(x);
@@ -274,7 +399,8 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   for (int c : active_) {
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
-  const Eigen::MatrixXd D = analytic.empty() ? Eigen::MatrixXd() : TangentColumns(theta, analytic);
+  const Eigen::MatrixXd D =
+      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(x, theta, analytic);
   int col = 0, t = 0, d = 0;
   for (size_t e = 0; e < active_.size(); ++e) {
     const Eigen::MatrixXd& B = basis_[e];
@@ -288,6 +414,8 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
     t += static_cast<int>(B.rows());
   }
   PointColumns(x, &J);
+  FrameColumns(x, &J);
+  OffsetColumns(x, &J);
   return J;
 }
 
@@ -301,13 +429,15 @@ Eigen::MatrixXd Problem::NumericJacobian(const Eigen::VectorXd& x) const {
     t += static_cast<int>(basis_[e].rows());
   }
   PointColumns(x, &J);
+  FrameColumns(x, &J);
+  OffsetColumns(x, &J);
   return J;
 }
 
 Eigen::MatrixXd Problem::CandidateColumns(const Eigen::VectorXd& x, int c) const {
   if (!em_.HasTangent(c, active_)) return NumericCandidateColumns(x, c);
   // Added at zero, c changes no prediction: its derivatives at the active effects' theta.
-  return TangentColumns(Theta(x), {c});
+  return TangentColumns(x, Theta(x), {c});
 }
 
 std::vector<Eigen::MatrixXd> Problem::CandidateColumns(const Eigen::VectorXd& x,
@@ -317,7 +447,7 @@ std::vector<Eigen::MatrixXd> Problem::CandidateColumns(const Eigen::VectorXd& x,
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
   const Eigen::MatrixXd D =
-      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(Theta(x), analytic);
+      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(x, Theta(x), analytic);
   std::vector<Eigen::MatrixXd> out;
   out.reserve(cs.size());
   int d = 0;
@@ -351,18 +481,35 @@ Eigen::MatrixXd Problem::NumericCandidateColumns(const Eigen::VectorXd& x, int c
 
 Fit MakeFit(const Problem& pr, const std::vector<int>& active, const Eigen::VectorXd& x,
             double rss) {
-  const int G = (pr.num_params() - pr.num_alpha()) / 3;
+  const int G = (pr.frame_col(0) - pr.num_alpha()) / 3;
   Fit f;
   f.active = active;
   for (size_t e = 0; e < active.size(); ++e) f.basis.push_back(pr.basis(e));
   f.theta = pr.Theta(x);
   f.group_points.resize(G);
   for (int g = 0; g < G; ++g) f.group_points[g] = x.segment<3>(pr.num_alpha() + 3 * g);
+  f.T_base_frames = pr.FramePoses(x);
+  f.marker_offsets = pr.MarkerOffsets(x);
   f.rss = rss;
   f.num_residuals = pr.num_residuals();
   f.num_params = pr.num_params();
   f.bic = Bic(rss, f.num_residuals, pr.num_params());
   return f;
+}
+
+void SetFrameStates(const Problem& pr, const Fit& fit, Eigen::VectorXd* x) {
+  const std::vector<MeasurementFrame>& frames = pr.data().frames;
+  for (size_t f = 0; f < frames.size(); ++f) {
+    const int col = pr.frame_col(static_cast<int>(f));
+    x->segment<6>(col) = f < fit.T_base_frames.size()
+                             ? (frames[f].T_ref.Inverse() * fit.T_base_frames[f]).Log()
+                             : Vec6::Zero();
+  }
+  for (size_t k = 0; k < pr.data().offset_unknown.size(); ++k) {
+    const int col = pr.offset_col(static_cast<int>(k));
+    if (col < 0) continue;
+    x->segment<3>(col) = k < fit.marker_offsets.size() ? fit.marker_offsets[k] : Vec3::Zero();
+  }
 }
 
 Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
@@ -371,6 +518,7 @@ Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
   for (size_t g = 0; g < fit.group_points.size(); ++g) {
     x.segment<3>(pr.num_alpha() + 3 * g) = fit.group_points[g];
   }
+  SetFrameStates(pr, fit, &x);
   return x;
 }
 
@@ -439,9 +587,9 @@ Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<Con
   basis.resize(fit.active.size());
   basis.push_back(basis_c);
   const Problem pr(em, data, loads, act, basis, opt);
-  const int na = static_cast<int>(J_fit.cols()) - 3 * static_cast<int>(data.groups.size());
   const int m = static_cast<int>(basis_c.cols());
   const int n = pr.num_params();
+  const int na = static_cast<int>(J_fit.cols()) - (n - pr.num_alpha());  // fit's alpha
   Eigen::VectorXd theta0 = Eigen::VectorXd::Zero(pr.num_theta());
   theta0.head(fit.theta.size()) = fit.theta;
   Eigen::VectorXd x(n);
@@ -449,6 +597,7 @@ Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<Con
   for (size_t g = 0; g < fit.group_points.size(); ++g) {
     x.segment<3>(pr.num_alpha() + 3 * g) = fit.group_points[g];
   }
+  SetFrameStates(pr, fit, &x);
   Eigen::MatrixXd J(J_fit.rows(), n);
   J << J_fit.leftCols(na), J_c * basis_c, J_fit.rightCols(n - na - m);
   // A Gauss-Newton step, undamped: a candidate nearly equivalent to a chosen effect (a link's

@@ -1,10 +1,14 @@
 // The least-squares problem behind identification: whitened residuals of a data set under a
 // declared chain augmented by a set of candidate effects, and its Levenberg-Marquardt fit.
 //
-// Unknowns x = [alpha; group points]. Each active effect e moves its candidate's parameters only
-// along the columns of a basis B_e (theta_e = B_e alpha_e): the identity when every direction of
-// the candidate is observable, fewer columns when some direction lies in the span of the other
-// unknowns (selection keeps only the observable directions instead of dropping the candidate).
+// Unknowns x = [alpha; group points; frame poses]. Each active effect e moves its candidate's
+// parameters only along the columns of a basis B_e (theta_e = B_e alpha_e): the identity when every
+// direction of the candidate is observable, fewer columns when some direction lies in the span of
+// the other unknowns (selection keeps only the observable directions instead of dropping the
+// candidate). A measurement frame f (DataSet::frames) contributes xi_f (6), T_base_frame = T_ref
+// Exp(xi_f); a row measured in it compares the prediction with the measurement mapped into the base
+// frame (a rigid map: the same distance as in the tracker frame), and a frame with a prior adds the
+// residual xi_f / std (6 entries after the distances).
 #pragma once
 #include <Eigen/Core>
 #include <string>
@@ -42,10 +46,27 @@ class Problem {
 
   int num_alpha() const { return num_alpha_; }
   int num_theta() const { return num_theta_; }
-  int num_params() const { return num_alpha_ + 3 * static_cast<int>(data_.groups.size()); }
-  int num_residuals() const { return rows_dim_ + static_cast<int>(data_.distances.size()); }
+  int num_params() const {
+    return frame_col(static_cast<int>(data_.frames.size())) + 3 * num_offsets_;
+  }
+  int num_residuals() const {
+    return rows_dim_ + static_cast<int>(data_.distances.size()) + 6 * num_priors_;
+  }
+  // Column of frame f's xi in x.
+  int frame_col(int f) const {
+    return num_alpha_ + 3 * static_cast<int>(data_.groups.size()) + 6 * f;
+  }
+  // T_base_frame of every measurement frame at state x.
+  std::vector<lie::SE3> FramePoses(const Eigen::VectorXd& x) const;
+  // Column of marker k's unknown offset in x (-1: declared, not fitted).
+  int offset_col(int k) const {
+    return k < static_cast<int>(offset_col_.size()) ? offset_col_[k] : -1;
+  }
+  // Each marker's offset at state x (zero where declared); empty when none is unknown.
+  std::vector<Vec3> MarkerOffsets(const Eigen::VectorXd& x) const;
   int row_offset(size_t r) const { return offset_[r]; }
   const Eigen::MatrixXd& basis(size_t e) const { return basis_[e]; }
+  const DataSet& data() const { return data_; }
 
   // theta (full candidate parameters) of x.
   Eigen::VectorXd Theta(const Eigen::VectorXd& x) const;
@@ -56,7 +77,7 @@ class Problem {
   Eigen::VectorXd Residuals(const Eigen::VectorXd& x) const;
   // d residuals / dx: analytic columns for the effects EffectModel::HasTangent covers (one
   // prediction a row for all of them), central differences for the others, exact columns for
-  // the group points and distances.
+  // the group points, distances and frame poses.
   Eigen::MatrixXd Jacobian(const Eigen::VectorXd& x) const;
   // Sensitivity (whitened) of the row residuals to the full parameters of candidate `c` added
   // to the model at zero, at state x: analytic where covered, else central differences.
@@ -78,9 +99,14 @@ class Problem {
                             int col, int t, Eigen::MatrixXd* J) const;
   // Analytic d residuals / d theta for the full parameters of candidates `cs` (concatenated),
   // at theta of the active effects; the distance rows are zero.
-  Eigen::MatrixXd TangentColumns(const Eigen::VectorXd& theta, const std::vector<int>& cs) const;
+  Eigen::MatrixXd TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                                 const std::vector<int>& cs) const;
   // The group-point and distance columns (exact) into J.
   void PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
+  // The frame-pose columns of the rows measured in frames and of the priors (exact) into J.
+  void FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
+  // The unknown marker offsets' columns (exact) into J.
+  void OffsetColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
 
   const EffectModel& em_;
   const DataSet& data_;
@@ -92,9 +118,16 @@ class Problem {
   int num_theta_ = 0;
   std::vector<int> offset_;
   int rows_dim_ = 0;
+  int num_priors_ = 0;
+  std::vector<int> prior_row_;   // per frame: its prior's first residual, -1 without one
+  int num_offsets_ = 0;          // markers with an unknown offset
+  std::vector<int> offset_col_;  // per marker: its offset's column in x, -1 when declared
 };
 
-// The state vector x of a fit (alpha, then group points).
+// The frame poses' xi and marker offsets of `fit` into x (zero for those the fit lacks).
+void SetFrameStates(const Problem& pr, const Fit& fit, Eigen::VectorXd* x);
+
+// The state vector x of a fit (alpha, then group points, then frame poses' xi).
 Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit);
 
 // The fit of `pr`'s effects `active` at state x with sum of squares rss.

@@ -62,6 +62,12 @@ int Main(int argc, char** argv) {
       ->required();
   identify_cmd->add_option("--candidates", id.candidates,
                            "effect types or type@location to test (default: all)");
+  identify_cmd->add_option("--frame", id.frames,
+                           "a measurement frame of unknown pose (a tracker) the CSVs' 'frame' "
+                           "column names (repeatable; priors: --set frames.NAME.prior_std_m=...)");
+  identify_cmd->add_option("--marker", id.markers,
+                           "an observed frame of the declared model the CSVs' 'marker' column "
+                           "names beside the end effector (repeatable)");
   identify_cmd->add_option("--point-std", id.point_std_m, "point noise [m] (default 1e-4)");
   identify_cmd->add_option("--reading-std-deg", id.reading_std_deg,
                            "the joint readings' noise [deg]: sizes the augmented model's sources "

@@ -399,6 +399,17 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
       line("--outlier-iqr", std::string("outlier_iqr: ") + num);
     }
     if (o.no_cross_validation) line("--no-cross-validation", "cross_validation: false");
+    if (!o.frames.empty()) {
+      std::string f = "frames: {";
+      for (size_t i = 0; i < o.frames.size(); ++i)
+        f += (i ? ", " : "") + Quoted(o.frames[i]) + ": {}";
+      line("--frame", f + "}");
+    }
+    if (!o.markers.empty()) {
+      std::string m = "markers: [";
+      for (size_t i = 0; i < o.markers.size(); ++i) m += (i ? ", " : "") + Quoted(o.markers[i]);
+      line("--marker", m + "]");
+    }
     if (!o.candidates.empty()) {
       std::string c = "candidates: [";
       for (size_t i = 0; i < o.candidates.size(); ++i) {

@@ -36,6 +36,10 @@ struct IdentifyCliOptions {
   std::string calibration_csv;
   std::string validation_csv;
   std::vector<std::string> candidates;
+  // Measurement frames (a tracker) of unknown pose the CSVs' `frame` column may name.
+  std::vector<std::string> frames;
+  // Observed frames of the declared model the CSVs' `marker` column may name.
+  std::vector<std::string> markers;
   double point_std_m = 1e-4;
   std::optional<double> reading_std_deg;  // the joint readings' noise, when stated
   // Selection options (closed_loop keys of the same names); unset: the kind's defaults.

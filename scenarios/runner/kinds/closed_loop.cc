@@ -26,6 +26,7 @@
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/identify.h"
+#include "scenarios/identify/measurement_frames.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -170,6 +171,15 @@ class ClosedLoopKind : public ScenarioKind {
       if (std::abs(qt.norm() - 1.0) > 1e-6) t.Fail("quaternion is not of unit length");
       camera_.T_base_cam = lie::SE3(qt.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
     }
+    // External measurement frames (a tracker) the CSV's `frame` column may name.
+    if (const auto f = root.Optional("frames")) frames_ = identify::ParseMeasurementFrames(*f);
+    if (const auto mk = root.Optional("markers")) {
+      for (const ConfigNode& n : mk->Items()) marker_nodes_.push_back({n.AsString(), n.Where()});
+    }
+    if (const auto u = root.Optional("unknown_marker_offsets")) {
+      for (const ConfigNode& n : u->Items())
+        unknown_offset_nodes_.push_back({n.AsString(), n.Where()});
+    }
     calibration_ = ParseSource(root.Child("calibration"));
     validation_ = ParseSource(root.Child("validation"));
     if (const auto t = root.Optional("truth")) {
@@ -201,7 +211,9 @@ class ClosedLoopKind : public ScenarioKind {
     mj_ = sim::LoadModel(declared_.model_path);
     chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(mj_.get(), declared_));
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
-                                                  camera_.present ? camera_.name : "");
+                                                  camera_.present ? camera_.name : "",
+                                                  MarkerFrames());
+    offset_unknown_ = UnknownOffsets();
     if (candidate_specs_.empty()) {
       for (size_t i = 0; i < em_->candidates().size(); ++i) candidates_.push_back(i);
     }
@@ -229,6 +241,7 @@ class ClosedLoopKind : public ScenarioKind {
     DataSet val = Load(validation_, ctx, "validation");
     std::vector<identify::ConfigLoads> cal_loads = identify::ComputeLoads(*em_, cal);
     std::vector<identify::ConfigLoads> val_loads = identify::ComputeLoads(*em_, val);
+    PrepareFrames(cal_loads, &cal, &val);
     Json rejected = Json::array();
     RejectOutliers(ctx, calibration_, "calibration", &cal, &cal_loads, &rejected);
     RejectOutliers(ctx, validation_, "validation", &val, &val_loads, &rejected);
@@ -244,9 +257,12 @@ class ClosedLoopKind : public ScenarioKind {
                             bool after) {
       const std::vector<int> act = after ? res.after.active : std::vector<int>{};
       const Eigen::VectorXd th = after ? res.after.theta : Eigen::VectorXd();
-      const auto p = identify::PredictAll(*em_, d, L, act, th);
-      const auto pix = identify::PredictPixels(*em_, d, L, act, th);
-      return std::make_pair(identify::RowErrors(d, p, pix), p);
+      // Rows in a measurement frame against it at the fit's pose (the same distance as in it).
+      const DataSet db =
+          identify::InBase(d, after ? res.after.T_base_frames : res.before.T_base_frames);
+      const auto p = identify::PredictMarkers(*em_, db, L, after ? res.after : res.before);
+      const auto pix = identify::PredictPixels(*em_, db, L, act, th);
+      return std::make_pair(identify::RowErrors(db, p, pix), p);
     };
     // The augmented model predicts with the loads where its joint corrections put the arm.
     const std::vector<identify::ConfigLoads> cal_loads_after =
@@ -258,6 +274,8 @@ class ClosedLoopKind : public ScenarioKind {
     const auto [cal_after, cal_p1] = errors(cal, cal_loads_after, true);
     const auto [val_before, val_p0] = errors(val, val_loads, false);
     const auto [val_after, val_p1] = errors(val, val_loads_after, true);
+    cal = identify::InBase(cal, res.after.T_base_frames);
+    val = identify::InBase(val, res.after.T_base_frames);
 
     Json& m = (*ctx.summary)["metrics"];
     std::vector<std::string> found;
@@ -393,6 +411,8 @@ class ClosedLoopKind : public ScenarioKind {
     }
     id["alternatives"] = alts;
     id["simpler_equivalents"] = res.simpler;
+    if (!frames_.empty()) id["frames"] = FramesJson(res);
+    if (!unknown_offset_nodes_.empty()) id["marker_offsets"] = OffsetsJson(res);
 
     // A model that does not lower the validation error is no fix: it is not shipped.
     if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
@@ -413,6 +433,9 @@ class ClosedLoopKind : public ScenarioKind {
   DataSet Load(const Source& s, RunContext& ctx, const std::string& what) {
     DataSet d;
     d.camera = camera_;
+    d.frames = frames_;
+    d.points = points_;
+    d.offset_unknown = offset_unknown_;
     switch (s.type) {
       case Source::Type::kMukca:
         for (const std::string& p : s.placements) {
@@ -583,10 +606,10 @@ class ClosedLoopKind : public ScenarioKind {
       ++n;
       kinematics::ForwardKinematicsWithCovariance(chain_->model, pd, d.rows[r].q,
                                                   lie::CompoundOrder::kSecond);
-      const Mat3 R = pd.T_base_frame[chain_->end_effector].rotation();
-      const Mat3 S = source_scale * R * pd.Sigma_frame[chain_->end_effector].topLeftCorner<3, 3>() *
-                         R.transpose() +
-                     noise[r];
+      const kinematics::FrameId f = em_->points()[d.rows[r].point];  // the row's marker
+      const Mat3 R = pd.T_base_frame[f].rotation();
+      const Mat3 S =
+          source_scale * R * pd.Sigma_frame[f].topLeftCorner<3, 3>() * R.transpose() + noise[r];
       const Vec3 e =
           p[r] - (d.rows[r].type == identify::ObservationType::kGroup ? mean[d.rows[r].group]
                                                                       : d.rows[r].p_base);
@@ -713,7 +736,7 @@ class ClosedLoopKind : public ScenarioKind {
     return out;
   }
 
-  // Per row, the readings' noise through the declared kinematics at the end effector.
+  // Per row, the readings' noise through the declared kinematics at the row's marker.
   std::vector<Mat3> ReadingNoise(const DataSet& d) const {
     const kinematics::PpoeModel& model = chain_->model;
     kinematics::PpoeData pd(model);
@@ -721,9 +744,10 @@ class ClosedLoopKind : public ScenarioKind {
     std::vector<Mat3> S(d.rows.size(), Mat3::Zero());
     for (size_t r = 0; r < d.rows.size(); ++r) {
       kinematics::ForwardKinematics(model, pd, d.rows[r].q);
-      kinematics::ComputeFrameJacobian(model, pd, chain_->end_effector, J);
+      const kinematics::FrameId f = em_->points()[d.rows[r].point];  // the row's marker
+      kinematics::ComputeFrameJacobian(model, pd, f, J);
       const Eigen::Matrix<double, 3, Eigen::Dynamic> Jp =
-          pd.T_base_frame[chain_->end_effector].rotation() * J.topRows<3>();
+          pd.T_base_frame[f].rotation() * J.topRows<3>();
       S[r] = reading_std_rad_ * reading_std_rad_ * Jp * Jp.transpose();
     }
     return S;
@@ -777,6 +801,90 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   // Cross-validation by set needs every set to hold more than one row.
+  // The frames the `markers` key names besides the end effector (observed frames of the
+  // declared model); points_ their names, the end effector first.
+  std::vector<kinematics::FrameId> MarkerFrames() {
+    std::vector<kinematics::FrameId> out;
+    points_ = {declared_.end_effector};
+    for (const auto& [name, where] : marker_nodes_) {
+      if (name == declared_.end_effector) continue;
+      try {
+        out.push_back(chain_->ObservedFrame(name));
+      } catch (const InputError& e) {
+        throw InputError(where + ": markers: '" + name +
+                         "' is neither the end effector nor an observed frame of the declared "
+                         "model (observed_frames)");
+      }
+      points_.push_back(name);
+    }
+    return out;
+  }
+
+  // Per marker (points_): whether its offset on its link is unknown (`unknown_marker_offsets`).
+  std::vector<char> UnknownOffsets() const {
+    std::vector<char> out(points_.size(), 0);
+    for (const auto& [name, where] : unknown_offset_nodes_) {
+      const auto it = std::find(points_.begin(), points_.end(), name);
+      if (it == points_.end()) {
+        throw InputError(where + ": unknown_marker_offsets: '" + name +
+                         "' is neither the end effector nor one of 'markers'");
+      }
+      out[it - points_.begin()] = 1;
+    }
+    return out;
+  }
+
+  // Each marker's fitted offset on its link (m, in its frame's coordinates) and its std.
+  Json OffsetsJson(const identify::IdentifyResult& res) const {
+    Json out = Json::array();
+    for (size_t k = 0; k < points_.size(); ++k) {
+      if (!offset_unknown_[k]) continue;
+      const Vec3& d = res.after.marker_offsets[k];
+      const Mat3& C = res.marker_offset_cov[k];
+      out.push_back({{"marker", points_[k]},
+                     {"offset_m", {d.x(), d.y(), d.z()}},
+                     {"std_m", {std::sqrt(C(0, 0)), std::sqrt(C(1, 1)), std::sqrt(C(2, 2))}}});
+    }
+    return out;
+  }
+
+  // Every declared measurement frame is used by calibration rows; those without a guess start
+  // at a registration of their points (identify/measurement_frames.h); validation rows share
+  // the calibration's frames.
+  void PrepareFrames(const std::vector<identify::ConfigLoads>& cal_loads, DataSet* cal,
+                     DataSet* val) const {
+    if (frames_.empty()) return;
+    identify::CheckFramesUsed(*cal, "calibration");
+    identify::RegisterFrames(*em_, cal_loads, cal);
+    val->frames = cal->frames;
+  }
+
+  // Each frame's fitted pose, its reference and prior, and the covariance of xi
+  // (T_base_frame = T_ref Exp(xi), [rho; theta] in m and rad).
+  Json FramesJson(const identify::IdentifyResult& res) const {
+    Json out = Json::array();
+    for (size_t f = 0; f < frames_.size(); ++f) {
+      const lie::SE3& T = res.after.T_base_frames[f];
+      const Eigen::Quaterniond q(T.rotation());
+      const Mat6& C = res.frame_cov[f];
+      std::vector<std::vector<double>> cov(6, std::vector<double>(6));
+      for (int i = 0; i < 6; ++i) {
+        for (int j = 0; j < 6; ++j) cov[i][j] = C(i, j);
+      }
+      out.push_back(
+          {{"name", frames_[f].name},
+           {"T_base_frame",
+            {T.translation().x(), T.translation().y(), T.translation().z(), q.w(), q.x(), q.y(),
+             q.z()}},
+           {"std_m", {std::sqrt(C(0, 0)), std::sqrt(C(1, 1)), std::sqrt(C(2, 2))}},
+           {"std_deg",
+            {std::sqrt(C(3, 3)) / kDeg, std::sqrt(C(4, 4)) / kDeg, std::sqrt(C(5, 5)) / kDeg}},
+           {"xi_covariance", cov},
+           {"prior", frames_[f].has_prior}});
+    }
+    return out;
+  }
+
   void CheckSets(const DataSet& d, const Source& src) const {
     if (!opt_.cross_validation || d.sets.size() < 2) return;
     std::vector<int> count(d.sets.size(), 0);
@@ -1042,6 +1150,11 @@ class ClosedLoopKind : public ScenarioKind {
   std::vector<int> candidates_;
   identify::IdentifyOptions opt_;
   identify::CameraModel camera_;
+  std::vector<identify::MeasurementFrame> frames_;
+  std::vector<std::pair<std::string, std::string>> marker_nodes_;  // name, where
+  std::vector<std::string> points_;  // measured frames: end effector, then the markers
+  std::vector<std::pair<std::string, std::string>> unknown_offset_nodes_;  // name, where
+  std::vector<char> offset_unknown_;                                       // per points_ entry
   Source calibration_, validation_;
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;
