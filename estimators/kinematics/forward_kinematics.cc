@@ -1,6 +1,9 @@
 #include "estimators/kinematics/forward_kinematics.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <sstream>
 
 #include "estimators/error.h"
@@ -44,7 +47,8 @@ void CheckInputs(const PpoeModel& model, const PpoeData& data,
   }
 }
 
-double JointValue(const PpoeFrame& f, const Eigen::Ref<const Eigen::VectorXd>& q) {
+EIGEN_ALWAYS_INLINE double JointValue(const PpoeFrame& f,
+                                      const Eigen::Ref<const Eigen::VectorXd>& q) {
   return f.q_index >= 0 ? q[f.q_index] : 0.0;
 }
 
@@ -69,8 +73,10 @@ JointTrig ComputeTrig(const PpoeFrame& f, double q) {
   return t;
 }
 
-// T_parent_i at the mean: T_parent_ip * Exp(zeta q) with the precomputed Rodrigues terms.
-SE3 RelativeMean(const PpoeFrame& f, const JointTrig& t) {
+// T_parent_i at the mean: T_parent_ip * Exp(zeta q) with the precomputed Rodrigues terms. Forced
+// inline, as RelativeMeans: a baseline-compiled call from the x86-64-v3 entry point (its upper
+// vector halves in use) ran ~3x slower.
+EIGEN_ALWAYS_INLINE SE3 RelativeMean(const PpoeFrame& f, const JointTrig& t) {
   if (f.joint.type == JointType::kFixed) return f.T_parent_ip;
   return SE3(f.T_parent_ip.rotation() + t.a * f.K1 + t.b * f.K2, f.u0 + t.a * f.u1 + t.b * f.u2);
 }
@@ -90,13 +96,32 @@ SE3 JointTransform(const PpoeFrame& f, const JointTrig& t) {
   return SE3();
 }
 
-// First pass: every T_parent_i(q). The frames are independent here, so the sincos calls and
-// the small matrix products overlap; the serial parent-to-child products come after.
-void RelativeMeans(const std::vector<PpoeFrame>& frames, const Eigen::Ref<const Eigen::VectorXd>& q,
-                   PpoeData& data) {
-  for (int i = 1; i < data.num_frames; ++i) {
-    const PpoeFrame& f = frames[i];
-    data.T_parent_frame[i] = RelativeMean(f, ComputeTrig(f, JointValue(f, q)));
+// First pass: every T_parent_i(q). The frames are independent here, so their trigonometry runs
+// four frames at a time (lie::internal::SinCos4, the same bits as ComputeTrig's SinCos) and the
+// small matrix products overlap; the serial parent-to-child products come after. Forced inline
+// so that each CPU's entry point gets its own vector width.
+EIGEN_ALWAYS_INLINE void RelativeMeans(const std::vector<PpoeFrame>& frames,
+                                       const Eigen::Ref<const Eigen::VectorXd>& q, PpoeData& data) {
+  using lie::internal::V4;
+  const int n = data.num_frames;
+  for (int i0 = 1; i0 < n; i0 += 4) {
+    const int m = std::min(4, n - i0);
+    V4 half = {0.0, 0.0, 0.0, 0.0};
+    for (int l = 0; l < m; ++l) half[l] = 0.5 * JointValue(frames[i0 + l], q);
+    V4 sh, ch;
+    lie::internal::SinCos4(half, &sh, &ch);
+    const V4 a = 2.0 * sh * ch, b = 2.0 * sh * sh;  // as ComputeTrig
+    for (int l = 0; l < m; ++l) {
+      const PpoeFrame& f = frames[i0 + l];
+      JointTrig t;
+      if (f.joint.type == JointType::kRevolute) {
+        t.a = a[l];
+        t.b = b[l];
+      } else if (f.joint.type == JointType::kPrismatic) {
+        t.a = JointValue(f, q);
+      }
+      data.T_parent_frame[i0 + l] = RelativeMean(f, t);
+    }
   }
 }
 
@@ -115,15 +140,27 @@ void ForwardKinematics(const PpoeModel& model, PpoeData& data,
 
 namespace {
 
-// The two implementations of the covariance transport (lie/se3.h), chosen per CPU below.
+// Whether every entry of S is +0.0.
+EIGEN_ALWAYS_INLINE bool IsAllZeroBits(const Mat6& S) {
+  std::uint64_t any = 0;
+  for (int k = 0; k < 36; ++k) {
+    std::uint64_t b;
+    std::memcpy(&b, S.data() + k, sizeof b);
+    any |= b;
+  }
+  return any == 0;
+}
+
+// The two implementations of the covariance transport (lie/se3.h), chosen per CPU below: four
+// lanes on x86-64-v3, two on the baseline.
 struct VectorTransport {
   EIGEN_ALWAYS_INLINE static void Run(const SE3& X, const Mat6& S1, const Mat6* S2, Mat6* out) {
     lie::internal::TransportBlocks(X.rotation(), X.translation(), S1, S2, out);
   }
 };
-struct ScalarTransport {
+struct Sse2Transport {
   EIGEN_ALWAYS_INLINE static void Run(const SE3& X, const Mat6& S1, const Mat6* S2, Mat6* out) {
-    lie::internal::TransportBlocksScalar(X.rotation(), X.translation(), S1, S2, out);
+    lie::internal::TransportBlocksSse2(X.rotation(), X.translation(), S1, S2, out);
   }
 };
 
@@ -136,7 +173,10 @@ EIGEN_ALWAYS_INLINE void CovarianceRecursion(const PpoeModel& model, PpoeData& d
   const bool fourth = order == lie::CompoundOrder::kFourth;
   const std::vector<PpoeFrame>& frames = model.frames();
   data.T_base_frame[kBaseFrame] = SE3::Identity();
-  data.Sigma_frame[kBaseFrame].setZero();
+  // The base's covariance is zero from PpoeData's construction and never written here, so it is
+  // only checked (18 loads): the unconditional setZero was a memset (rep stos, ~30 cycles of
+  // start-up), 2.5% of the 7-DoF baseline path.
+  if (!IsAllZeroBits(data.Sigma_frame[kBaseFrame])) data.Sigma_frame[kBaseFrame].setZero();
   data.sigma_is_zero[kBaseFrame] = 1;
   RelativeMeans(frames, q, data);
   for (int i = 1; i < data.num_frames; ++i) {
@@ -194,16 +234,21 @@ __attribute__((target("arch=x86-64-v3"))) void CovarianceRecursionV3(
 
 namespace internal {
 
-// The baseline: scalar transports. The 4-wide vector code compiled for plain x86-64 ran ~840 ns
-// (GCC splits every operation in two and lowers the lane shuffles through memory), slower than
-// the scalar code it replaced (~550 ns); the scalar transport does each element's operations
-// in the vector lane's order, so both paths give the same bits (tests/unit/kinematics). Measured
-// in one run of bench_kinematics (7 DoF, 2026-11-26): scalar 598 ns, vector 509 ns, 1.17x; the
-// split vector code was 2.1-2.4x the vector path.
+// The baseline: two-lane (SSE2) transports. The 4-wide vector code compiled for plain x86-64 ran
+// ~840 ns (GCC splits every operation in two and lowers the lane shuffles through memory), the
+// scalar transports ~600 ns; the two-lane transport does each element's operations in the
+// vector lane's order, so both paths give the same bits (tests/unit/kinematics, lie). Issue 18
+// (baseline <= 550 ns on 7 DoF, bits kept): bench_kinematics, CPU time, medians of 5
+// repetitions in 3 runs interleaved with the previous binary (2026-11-27, load average 2.8-4.9
+// from other work on the 2 cores): this path 519-524 ns against 601-604, 0.86x, and 1.10x the
+// x86-64-v3 path of the same runs (470-492; previously 505-511); the scalar transports with this
+// file's other changes measured 582-607 in an earlier such run. Besides the transports: the
+// joints' sincos four frames at a time
+// (lie::internal::SinCos4) and no memset of the base frame's covariance per call.
 void ForwardKinematicsWithCovarianceBaseline(const PpoeModel& model, PpoeData& data,
                                              const Eigen::Ref<const Eigen::VectorXd>& q,
                                              lie::CompoundOrder order) {
-  CovarianceRecursion<ScalarTransport>(model, data, q, order);
+  CovarianceRecursion<Sse2Transport>(model, data, q, order);
 }
 
 }  // namespace internal

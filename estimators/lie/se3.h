@@ -15,6 +15,7 @@
 #include <cstring>
 
 #include "estimators/conventions.h"
+#include "estimators/lie/sincos.h"
 #include "estimators/lie/so3.h"
 
 namespace flexbench::lie {
@@ -143,11 +144,7 @@ inline Mat6 TransformCovariance(const SE3& X, const Mat6& Sigma) {
 
 namespace internal {
 
-// Four doubles in one GCC vector; a 3x3 block is three such columns with lane 3 unused. Plain
-// vector-extension arithmetic is lane-wise IEEE, so a 4-wide (AVX2) and a 2x2-wide (SSE2) build
-// of the same source give the same bits (-ffp-contract=off keeps multiplies and adds apart).
-typedef double V4 __attribute__((vector_size(32)));
-typedef long long V4i __attribute__((vector_size(32)));
+// V4 and V4i (lie/sincos.h): a 3x3 block is three V4 columns with lane 3 unused.
 
 // The helpers below return 32-byte vectors; they are always inlined, so no call passes one
 // (hence -Wno-psabi in CMakeLists.txt).
@@ -250,82 +247,110 @@ EIGEN_ALWAYS_INLINE void TransportBlocks(const Mat3& R_in, const Vec3& t, const 
   o[29] = o[34];
 }
 
-// TransportBlocks in scalar code, every element by the same operations in the same order as
-// its lane in the vector code, so the bits agree (tested): for CPUs without AVX2, where GCC
-// splits each 4-wide operation and lowers the lane shuffles through memory, this is faster.
-EIGEN_ALWAYS_INLINE void TransportBlocksScalar(const Mat3& R_in, const Vec3& t, const Mat6& Sigma1,
-                                               const Mat6* Sigma2, Mat6* out) {
-  double A[3][3], B[3][3], Bt[3][3], C[3][3];  // [column][row] of each 3x3 block
+// TransportBlocks for CPUs without AVX2, in two-double (SSE2) vectors, every element by the same
+// operations in the same order as its lane in the 4-wide code, so the bits agree (tested): a
+// column of a 3x3 block is rows 0-1 in a V2 and row 2 alone, the lane shuffles are explicit
+// unpacks. GCC's own split of the 4-wide code lowers those shuffles through memory (7-DoF FK
+// with covariance ~840 ns); the scalar twin this replaces ran ~590 ns, this ~520 ns (see
+// ForwardKinematicsWithCovarianceBaseline). `out` may alias either input.
+typedef double V2 __attribute__((vector_size(16)));
+
+struct Col3 {
+  V2 lo;      // rows 0, 1
+  double hi;  // row 2
+};
+
+EIGEN_ALWAYS_INLINE Col3 LoadCol3(const double* p) {
+  Col3 c;
+  std::memcpy(&c.lo, p, sizeof c.lo);
+  c.hi = p[2];
+  return c;
+}
+EIGEN_ALWAYS_INLINE Col3 operator+(const Col3& a, const Col3& b) {
+  return {a.lo + b.lo, a.hi + b.hi};
+}
+EIGEN_ALWAYS_INLINE Col3 operator-(const Col3& a, const Col3& b) {
+  return {a.lo - b.lo, a.hi - b.hi};
+}
+EIGEN_ALWAYS_INLINE Col3 operator*(const Col3& a, double k) { return {a.lo * k, a.hi * k}; }
+EIGEN_ALWAYS_INLINE double Row(const Col3& c, int i) { return i < 2 ? c.lo[i] : c.hi; }
+
+// s x v, lane by lane as CrossV4: (s1 v2 - s2 v1, s2 v0 - s0 v2, s0 v1 - s1 v0).
+EIGEN_ALWAYS_INLINE Col3 CrossCol3(V2 s_yz, V2 s_zx, double s0, double s1, const Col3& v) {
+  const V2 v_zx = {v.hi, v.lo[0]};
+  const V2 v_yz = {v.lo[1], v.hi};
+  return {s_yz * v_zx - s_zx * v_yz, s0 * v.lo[1] - s1 * v.lo[0]};
+}
+
+// R^T M R as RotateBlockV4: P_j = M r_j by rows, then out_j = R^T P_j. Columns 0 and 1 of the
+// second product are formed side by side ({out_0, out_1} row by row, R's entries broadcast as
+// in the first), which needs 3 shuffles for the pair instead of 3 broadcasts per column.
+// Returns out_0 and out_1 by rows (rows01[i] = {out_0[i], out_1[i]}) and out_2 as a column.
+EIGEN_ALWAYS_INLINE void RotateBlockCol3(const double* R, const Col3* M, V2* rows01, Col3* out2) {
+  Col3 P[3];
   for (int j = 0; j < 3; ++j) {
-    for (int i = 0; i < 3; ++i) {
-      A[j][i] = Sigma1(i, j);
-      B[j][i] = Sigma1(i, 3 + j);
-      Bt[j][i] = Sigma1(3 + i, j);
-      C[j][i] = Sigma1(3 + i, 3 + j);
-    }
+    const double r0 = R[3 * j], r1 = R[3 * j + 1], r2 = R[3 * j + 2];
+    P[j] = {M[0].lo * r0 + M[1].lo * r1 + M[2].lo * r2, M[0].hi * r0 + M[1].hi * r1 + M[2].hi * r2};
+  }
+  // {P_0[k], P_1[k]} for k = 0, 1, 2.
+  const V2 q0 = {P[0].lo[0], P[1].lo[0]};
+  const V2 q1 = {P[0].lo[1], P[1].lo[1]};
+  const V2 q2 = {P[0].hi, P[1].hi};
+  for (int i = 0; i < 3; ++i) rows01[i] = q0 * R[3 * i] + q1 * R[3 * i + 1] + q2 * R[3 * i + 2];
+  const V2 Rr0 = {R[0], R[3]}, Rr1 = {R[1], R[4]}, Rr2 = {R[2], R[5]};
+  const double p0 = P[2].lo[0], p1 = P[2].lo[1], p2 = P[2].hi;
+  *out2 = {Rr0 * p0 + Rr1 * p1 + Rr2 * p2, R[6] * p0 + R[7] * p1 + R[8] * p2};
+}
+
+EIGEN_ALWAYS_INLINE void TransportBlocksSse2(const Mat3& R_in, const Vec3& t, const Mat6& Sigma1,
+                                             const Mat6* Sigma2, Mat6* out) {
+  const double* S1 = Sigma1.data();
+  Col3 A[3], B[3], Bt[3], C[3];
+  for (int j = 0; j < 3; ++j) {
+    A[j] = LoadCol3(S1 + 6 * j);
+    B[j] = LoadCol3(S1 + 6 * (3 + j));
+    Bt[j] = LoadCol3(S1 + 6 * j + 3);
+    C[j] = LoadCol3(S1 + 6 * (3 + j) + 3);
   }
   if (Sigma2 != nullptr) {
-    const Mat6& S2 = *Sigma2;
+    const double* S2 = Sigma2->data();
     for (int j = 0; j < 3; ++j) {
-      for (int i = 0; i < 3; ++i) {
-        A[j][i] += S2(i, j);
-        B[j][i] += S2(i, 3 + j);
-        Bt[j][i] += S2(3 + i, j);
-        C[j][i] += S2(3 + i, 3 + j);
-      }
+      A[j] = A[j] + LoadCol3(S2 + 6 * j);
+      B[j] = B[j] + LoadCol3(S2 + 6 * (3 + j));
+      Bt[j] = Bt[j] + LoadCol3(S2 + 6 * j + 3);
+      C[j] = C[j] + LoadCol3(S2 + 6 * (3 + j) + 3);
     }
   }
-  const double s[3] = {-t[0], -t[1], -t[2]};
-  // s x v, lane by lane as CrossV4.
-  const auto cross = [&s](const double* v, double* o) {
-    o[0] = s[1] * v[2] - s[2] * v[1];
-    o[1] = s[2] * v[0] - s[0] * v[2];
-    o[2] = s[0] * v[1] - s[1] * v[0];
-  };
-  double D[3][3], G[3][3], x[3];
-  for (int j = 0; j < 3; ++j) {
-    cross(C[j], x);
-    for (int i = 0; i < 3; ++i) D[j][i] = B[j][i] + x[i];
-  }
-  // G_j = A_j + s x Bt_j - (D_{j+1} s_{j+2} - D_{j+2} s_{j+1}).
-  for (int j = 0; j < 3; ++j) {
-    cross(Bt[j], x);
-    const int a = (j + 1) % 3, b = (j + 2) % 3;
-    for (int i = 0; i < 3; ++i) G[j][i] = A[j][i] + x[i] - (D[a][i] * s[b] - D[b][i] * s[a]);
-  }
+  const double s0 = -t[0], s1 = -t[1], s2 = -t[2];
+  const V2 s_yz = {s1, s2}, s_zx = {s2, s0};
+  Col3 D[3], G[3];
+  for (int j = 0; j < 3; ++j) D[j] = B[j] + CrossCol3(s_yz, s_zx, s0, s1, C[j]);
+  G[0] = A[0] + CrossCol3(s_yz, s_zx, s0, s1, Bt[0]) - (D[1] * s2 - D[2] * s1);
+  G[1] = A[1] + CrossCol3(s_yz, s_zx, s0, s1, Bt[1]) - (D[2] * s0 - D[0] * s2);
+  G[2] = A[2] + CrossCol3(s_yz, s_zx, s0, s1, Bt[2]) - (D[0] * s1 - D[1] * s0);
   const double* R = R_in.data();
-  // R^T M R by columns, as RotateBlockV4.
-  const auto rotate = [R](const double(*M)[3], double(*o)[3]) {
-    for (int j = 0; j < 3; ++j) {
-      double P[3];
-      for (int i = 0; i < 3; ++i) {
-        P[i] = M[0][i] * R[3 * j] + M[1][i] * R[3 * j + 1] + M[2][i] * R[3 * j + 2];
-      }
-      for (int i = 0; i < 3; ++i) {
-        o[j][i] = R[3 * i] * P[0] + R[3 * i + 1] * P[1] + R[3 * i + 2] * P[2];
-      }
-    }
-  };
-  double TL[3][3], TR[3][3], BR[3][3];
-  rotate(G, TL);
-  rotate(D, TR);
-  rotate(C, BR);
+  V2 TL01[3], TR01[3], BR01[3];
+  Col3 TL2, TR2, BR2;
+  RotateBlockCol3(R, G, TL01, &TL2);
+  RotateBlockCol3(R, D, TR01, &TR2);
+  RotateBlockCol3(R, C, BR01, &BR2);
+  // The upper triangles of the symmetric blocks, mirrored, as the vector code does; the
+  // top-right block's rows 0-1 pairs are its transpose's contiguous (row 3 + j, columns i..).
   Mat6& o = *out;
-  for (int j = 0; j < 3; ++j) {
-    for (int i = 0; i < 3; ++i) {
-      o(i, j) = TL[j][i];
-      o(3 + i, j) = TR[i][j];
-      o(i, 3 + j) = TR[j][i];
-      o(3 + i, 3 + j) = BR[j][i];
-    }
+  o(0, 0) = TL01[0][0];
+  o(0, 1) = o(1, 0) = TL01[0][1];
+  o(1, 1) = TL01[1][1];
+  o(3, 3) = BR01[0][0];
+  o(3, 4) = o(4, 3) = BR01[0][1];
+  o(4, 4) = BR01[1][1];
+  for (int i = 0; i < 3; ++i) {
+    o(i, 2) = o(2, i) = Row(TL2, i);
+    o(3 + i, 5) = o(5, 3 + i) = Row(BR2, i);
+    // TR_j[i] -> o(i, 3 + j) and o(3 + j, i).
+    o(i, 3) = o(3, i) = TR01[i][0];
+    o(i, 4) = o(4, i) = TR01[i][1];
+    o(i, 5) = o(5, i) = Row(TR2, i);
   }
-  // Mirror the upper triangles of the two symmetric blocks, as the vector code does.
-  o(1, 0) = o(0, 1);
-  o(2, 0) = o(0, 2);
-  o(2, 1) = o(1, 2);
-  o(4, 3) = o(3, 4);
-  o(5, 3) = o(3, 5);
-  o(5, 4) = o(4, 5);
 }
 
 }  // namespace internal

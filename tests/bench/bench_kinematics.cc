@@ -53,9 +53,11 @@ void BM_ForwardKinematicsCov2(benchmark::State& state) {
   }
 }
 
-// The path a CPU without AVX2 runs (scalar transports), timed on this CPU; issue 18's target is
-// <= 550 ns on 7 DoF. Its ratio to BM_ForwardKinematicsCov2 in the same run is the cost of
-// having no AVX2.
+// The path a CPU without AVX2 runs (two-lane SSE2 transports, same bits), timed on this CPU;
+// issue 18's target is <= 550 ns on 7 DoF. Its ratio to BM_ForwardKinematicsCov2 in the same run
+// is the cost of having no AVX2. 2026-11-27, medians of 5 repetitions, 3 runs interleaved with
+// the previous binary, load average 2.8-4.9: 7 DoF 519-524 ns (previous 601-604, 0.86x), 1.10x
+// BM_ForwardKinematicsCov2/7 (470-492); 27 DoF 1826-1841 (previous 2121-2161).
 void BM_ForwardKinematicsCov2Baseline(benchmark::State& state) {
   Fixture f(static_cast<int>(state.range(0)));
   for (auto _ : state) {

@@ -290,8 +290,8 @@ TEST_P(SE3AtPose, CongruenceIsSymmetricAndMayAlias) {
   EXPECT_TRUE(in2 == sum);
 }
 
-TEST_P(SE3AtPose, ScalarTransportHasTheVectorTransportsBits) {
-  // The baseline-CPU path of the covariance recursion uses the scalar twin; "same seed, same
+TEST_P(SE3AtPose, Sse2TransportHasTheVectorTransportsBits) {
+  // The baseline-CPU path of the covariance recursion uses the two-lane twin; "same seed, same
   // bytes" across machines needs every bit equal, with and without the summed source, in place.
   std::mt19937_64 rng(8);
   std::normal_distribution<double> n(0.0, 1.0);
@@ -305,14 +305,14 @@ TEST_P(SE3AtPose, ScalarTransportHasTheVectorTransportsBits) {
     const Vec3 t = X().translation();
     Mat6 vec, scal;
     internal::TransportBlocks(R, t, S1, nullptr, &vec);
-    internal::TransportBlocksScalar(R, t, S1, nullptr, &scal);
+    internal::TransportBlocksSse2(R, t, S1, nullptr, &scal);
     EXPECT_TRUE(vec == scal) << "trial " << trial;
     internal::TransportBlocks(R, t, S1, &S2, &vec);
-    internal::TransportBlocksScalar(R, t, S1, &S2, &scal);
+    internal::TransportBlocksSse2(R, t, S1, &S2, &scal);
     EXPECT_TRUE(vec == scal) << "sum, trial " << trial;
     Mat6 in1 = S1, in2 = S2;
-    internal::TransportBlocksScalar(R, t, in1, &S2, &in1);
-    internal::TransportBlocksScalar(R, t, S1, &in2, &in2);
+    internal::TransportBlocksSse2(R, t, in1, &S2, &in1);
+    internal::TransportBlocksSse2(R, t, S1, &in2, &in2);
     EXPECT_TRUE(in1 == vec && in2 == vec) << "in place, trial " << trial;
   }
 }

@@ -7,8 +7,11 @@
 
 #include <cfloat>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
+#include <vector>
 
 namespace flexbench::lie {
 namespace {
@@ -83,6 +86,51 @@ TEST(SinCos, FallsBackToLibmOutsideTheReductionRange) {
   EXPECT_TRUE(std::isnan(s) && std::isnan(c));
   SinCos(std::numeric_limits<double>::infinity(), &s, &c);
   EXPECT_TRUE(std::isnan(s) && std::isnan(c));
+}
+
+TEST(SinCos4, SameBitsAsSinCosInEveryLane) {
+  // The kinematics takes its joints' trigonometry four at a time: every lane must be SinCos's
+  // result bit for bit (quadrant selects, signed zeros, the libm fallback), or the FK would
+  // change with the frames' grouping.
+  std::mt19937_64 rng(12);
+  std::uniform_real_distribution<double> u(-40.0, 40.0);
+  std::uniform_real_distribution<double> e(-30.0, 5.0);
+  std::vector<double> xs = {0.0,
+                            -0.0,
+                            M_PI / 4,
+                            -M_PI / 4,
+                            M_PI / 2,
+                            -M_PI / 2,
+                            M_PI,
+                            -M_PI,
+                            3e4,
+                            -3e4,
+                            kSinCosMaxArg,
+                            -kSinCosMaxArg * 2.0,
+                            1e300,
+                            std::numeric_limits<double>::infinity(),
+                            std::numeric_limits<double>::quiet_NaN()};
+  for (int k = -9; k <= 9; ++k) xs.push_back(0.3 + k * M_PI / 2);
+  for (int i = 0; i < 100000; ++i) {
+    xs.push_back(i % 2 == 0 ? u(rng) : std::copysign(std::pow(10.0, e(rng)), u(rng)));
+  }
+  while (xs.size() % 4 != 0) xs.push_back(1.0);
+  const auto bits = [](double v) {
+    std::uint64_t b;
+    std::memcpy(&b, &v, sizeof b);
+    return b;
+  };
+  for (size_t i = 0; i < xs.size(); i += 4) {
+    const internal::V4 x = {xs[i], xs[i + 1], xs[i + 2], xs[i + 3]};
+    internal::V4 s4, c4;
+    internal::SinCos4(x, &s4, &c4);
+    for (int l = 0; l < 4; ++l) {
+      double s, c;
+      SinCos(x[l], &s, &c);
+      EXPECT_EQ(bits(s4[l]), bits(s)) << "sin " << x[l];
+      EXPECT_EQ(bits(c4[l]), bits(c)) << "cos " << x[l];
+    }
+  }
 }
 
 }  // namespace
