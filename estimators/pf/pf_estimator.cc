@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
 
 namespace flexbench::estimators {
 namespace {
@@ -116,10 +117,25 @@ PfEstimator::PfEstimator(const EstimatorSetup& setup, const Variant& variant)
   setup.params.CheckAllUsed(name_);
   kin_ = std::make_unique<kinematics::EffectiveChain>(*setup.model, setup.effects);
   filter_ = std::make_unique<pf::ParticleFilter>(kin_->model(), config, setup.seed);
+  if (setup.effects != nullptr && !setup.effects->uncertainty.empty() && setup.end_effector >= 0) {
+    bare_ = std::make_unique<kinematics::PpoeModel>(*setup.model);
+    for (FrameId f = 1; f < bare_->num_frames(); ++f) bare_->SetSourceCovariance(f, Mat6::Zero());
+    param_kin_ = std::make_unique<kinematics::EffectiveChain>(*bare_, setup.effects);
+    param_data_ = std::make_unique<kinematics::PpoeData>(*bare_);
+  }
+}
+
+// The identified parameters' covariance at the end effector, at reading q (no allocation).
+void PfEstimator::ParameterCovariance(const Eigen::VectorXd& q) {
+  param_kin_->Update(q);
+  kinematics::ForwardKinematicsWithCovariance(param_kin_->model(), *param_data_, param_kin_->q(),
+                                              lie::CompoundOrder::kSecond);
+  param_cov_ = param_data_->Sigma_frame[filter_->config().end_effector];
 }
 
 void PfEstimator::Reset() {
   filter_->Reset();
+  param_cov_.setZero();
   has_t_ = false;
   t_ = 0.0;
 }
@@ -139,6 +155,7 @@ UpdateStatus PfEstimator::Update(const Measurement& z) {
     }
     kin_->Update(j->q);
     if (kin_->varies()) filter_->SetModel(kin_->model());
+    if (param_kin_) ParameterCovariance(j->q);
     return ToUpdateStatus(filter_->UpdateReference(kin_->q().data(), n));
   }
   if (const auto* o = std::get_if<OrientationReading>(&z)) {
@@ -156,7 +173,7 @@ Belief PfEstimator::Estimate() const {
   b.t = t_;
   if (s.has_end_effector) {
     b.T_base_ee = s.T_base_ee;
-    b.cov = s.cov_ee;
+    b.cov = s.cov_ee + param_cov_;
   }
   b.has_joints = true;
   b.q.resize(s.nq);

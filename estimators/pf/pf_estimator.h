@@ -31,6 +31,13 @@
 //   initial_at_first_reading (0): 1 = initial particles vM(kappa_0, first reading), not about 0
 //
 // Predict(t) makes one system-model step [PF eq. 30] when t is later than the last step.
+//
+// On an augmented model whose identified effects carry standard deviations, the estimate's
+// covariance is the particles' plus those parameters' through the kinematics at the last reading
+// (as the PPOE estimators carry them in their sources): the particles describe the joint angles
+// only, and the fitted parameters' error moves the end effector where no joint can (a tilted
+// plate near a singular posture). The declared PPOE sources are not added: the PF paper's filter
+// has none.
 #pragma once
 
 #include <memory>
@@ -59,6 +66,8 @@ class PfEstimator : public Estimator {
   const pf::ParticleFilterConfig& config() const { return filter_->config(); }
 
  private:
+  void ParameterCovariance(const Eigen::VectorXd& q);
+
   std::string name_;
   // The declared model with its identified effects at the last joint reading; the particles
   // live in its joint angles (the readings are mapped before they weigh them).
@@ -66,6 +75,13 @@ class PfEstimator : public Estimator {
   std::unique_ptr<pf::ParticleFilter> filter_;
   bool has_t_ = false;
   double t_ = 0.0;
+  // The identified effects' uncertainty (their stds), which the particles, living in joint
+  // angles, cannot carry: the declared model without its PPOE sources, with the effects, at the
+  // last reading; its end-effector covariance is added to the particles' (ParameterCovariance).
+  std::unique_ptr<kinematics::PpoeModel> bare_;
+  std::unique_ptr<kinematics::EffectiveChain> param_kin_;
+  std::unique_ptr<kinematics::PpoeData> param_data_;
+  Mat6 param_cov_ = Mat6::Zero();
 };
 
 // Builds the filter configuration of `variant` from the setup and its Params (InputError with

@@ -137,5 +137,59 @@ TEST(PfEstimator, MeasurementsReachTheFilter) {
   EXPECT_EQ(est->Estimate().q(0), again.q(0));
 }
 
+// On an augmented model whose identified offset of joint 1 has a standard deviation, the belief's
+// covariance is the particles' plus that offset's through the kinematics. The particles are the
+// same bits with and without the std (it changes no kinematics), so the difference is the
+// parameter's part alone; the oracle is plain FK with joint 1 turned one std either way.
+TEST(PfEstimator, IdentifiedParametersStdWidensTheBelief) {
+  Rig rig;
+  const double sigma = 2e-3;
+  kinematics::ModelEffects exact = kinematics::ModelEffects::None(rig.arm.model);
+  exact.joints[1].offset = 0.01;
+  kinematics::ModelEffects uncertain = exact;
+  uncertain.uncertainty.joints[1].offset = sigma * sigma;
+  Eigen::VectorXd q(4);
+  q << 0.2, 0.7, 0.4, 0.1;
+  Mat6 cov[2];
+  lie::SE3 T[2];
+  for (int k = 0; k < 2; ++k) {
+    EstimatorSetup setup = rig.Setup({{"particles", {256}},
+                                      {"conjugate_proposal", {1}},
+                                      {"kappa_w", {1e6}},
+                                      {"kappa_v", {1e4}},
+                                      {"kappa_0", {1e6}},
+                                      {"initial_at_first_reading", {1}}});
+    setup.effects = k == 0 ? &exact : &uncertain;
+    auto est = MakeEstimator("pf_encoders", setup);
+    for (int step = 0; step < 5; ++step) {
+      est->Predict(step);
+      JointReading j;
+      j.q = q;
+      ASSERT_EQ(est->Update(j), UpdateStatus::kAccepted);
+    }
+    cov[k] = est->Estimate().cov;
+    T[k] = est->Estimate().T_base_ee;
+  }
+  EXPECT_EQ(T[0].translation(), T[1].translation());
+  // The corrected joint 1 one std either way, through the plain kinematics.
+  kinematics::PpoeData data(rig.arm.model);
+  Eigen::VectorXd qc = q;
+  qc[1] += 0.01;
+  kinematics::ForwardKinematics(rig.arm.model, data, qc);
+  const lie::SE3 T_0 = data.T_base_frame[rig.arm.grasp];
+  Vec6 g = Vec6::Zero();
+  for (const double sign : {1.0, -1.0}) {
+    Eigen::VectorXd qs = qc;
+    qs[1] += sign * sigma;
+    kinematics::ForwardKinematics(rig.arm.model, data, qs);
+    g += 0.5 * sign * T_0.Between(data.T_base_frame[rig.arm.grasp]).Log();
+  }
+  const Mat6 expected = g * g.transpose();
+  EXPECT_LT((cov[1] - cov[0] - expected).norm(), 1e-3 * expected.norm())
+      << (cov[1] - cov[0]) << "\n\n"
+      << expected;
+  EXPECT_GT(expected.norm(), 1e-2 * cov[0].norm());  // the std changes the belief measurably
+}
+
 }  // namespace
 }  // namespace flexbench::estimators
