@@ -131,6 +131,26 @@ struct Outcome {
   double nees = 0.0;  // e^T C^-1 e of the pose error e in xi, C the reported covariance
 };
 
+// How often each claim held over the seeds of one test.
+struct Tally {
+  int seeds = 0, named = 0, within = 0, reduced = 0;
+  double nees_sum = 0.0;
+  void Add(const Outcome& o) {
+    ++seeds;
+    named += o.named;
+    within += o.within_3_sigma;
+    reduced += o.val_reduced;
+    nees_sum += o.nees;
+  }
+  double MeanNees() const { return nees_sum / seeds; }
+  void Print(const char* what) const {
+    std::printf(
+        "%s: effect named %d/%d, pose within 3 sigma %d/%d, validation < 0.3x %d/%d, mean pose "
+        "NEES %.2f (of 6)\n",
+        what, named, seeds, within, seeds, reduced, seeds, MeanNees());
+  }
+};
+
 // Identification of one seed's data with the tracker declared as `frame` (its T_ref, guess and
 // prior); the recovered pose is compared with the truth in the fit's own parametrisation
 // (xi = Log(T_ref^-1 T)).
@@ -189,34 +209,24 @@ lie::SE3 TruePose(int seed) {
 
 TEST(TrackerFrame, UnknownPoseIsFittedWithTheGearElasticityOverSeeds) {
   auto rig = MakeRig();
-  const int kSeeds = 20;
-  int named = 0, within = 0, reduced = 0;
-  double nees = 0.0;
-  for (int seed = 0; seed < kSeeds; ++seed) {
-    const Outcome o = RunSeed(*rig, seed, MeasurementFrame{}, TruePose(seed));
-    named += o.named;
-    within += o.within_3_sigma;
-    reduced += o.val_reduced;
-    nees += o.nees / kSeeds;
+  Tally t;
+  for (int seed = 0; seed < 20; ++seed) {
+    t.Add(RunSeed(*rig, seed, MeasurementFrame{}, TruePose(seed)));
   }
-  std::printf(
-      "unknown tracker: effect named %d/%d, pose within 3 sigma %d/%d, validation < 0.3x "
-      "%d/%d, mean pose NEES %.2f (of 6)\n",
-      named, kSeeds, within, kSeeds, reduced, kSeeds, nees);
+  t.Print("unknown tracker");
   // The reported covariance is neither optimistic nor pessimistic: 20 runs' mean of a 6-dof
   // chi-square lies in [4.05, 8.41] with 99.5% probability (Wilson-Hilferty).
-  EXPECT_GT(nees, 4.05);
-  EXPECT_LT(nees, 8.41);
-  EXPECT_EQ(named, kSeeds);
-  EXPECT_EQ(reduced, kSeeds);
-  EXPECT_GE(within, kSeeds - 2);  // 6 components at 3 sigma: ~1.6% of runs have one beyond
+  EXPECT_GT(t.MeanNees(), 4.05);
+  EXPECT_LT(t.MeanNees(), 8.41);
+  EXPECT_EQ(t.named, t.seeds);
+  EXPECT_EQ(t.reduced, t.seeds);
+  EXPECT_GE(t.within, t.seeds - 2);  // 6 components at 3 sigma: ~1.6% of runs have one beyond
 }
 
 TEST(TrackerFrame, PoseKnownWithinAPriorGivesTheSame) {
   auto rig = MakeRig();
-  const int kSeeds = 10;
-  int named = 0, within = 0, reduced = 0;
-  for (int seed = 0; seed < kSeeds; ++seed) {
+  Tally t;
+  for (int seed = 0; seed < 10; ++seed) {
     const lie::SE3 T_true = TruePose(seed);
     // The stated pose is off the truth by about its stated uncertainty, 5 mm and 0.5 deg.
     std::mt19937_64 rng(77 + seed);
@@ -229,18 +239,12 @@ TEST(TrackerFrame, PoseKnownWithinAPriorGivesTheSame) {
     prior.has_guess = prior.has_prior = true;
     prior.prior_std_m = 0.005;
     prior.prior_std_rad = 0.5 * M_PI / 180.0;
-    const Outcome o = RunSeed(*rig, seed, prior, T_true);
-    named += o.named;
-    within += o.within_3_sigma;
-    reduced += o.val_reduced;
+    t.Add(RunSeed(*rig, seed, prior, T_true));
   }
-  std::printf(
-      "tracker with prior: effect named %d/%d, pose within 3 sigma %d/%d, validation < "
-      "0.3x %d/%d\n",
-      named, kSeeds, within, kSeeds, reduced, kSeeds);
-  EXPECT_EQ(named, kSeeds);
-  EXPECT_EQ(reduced, kSeeds);
-  EXPECT_GE(within, kSeeds - 1);
+  t.Print("tracker with prior");
+  EXPECT_EQ(t.named, t.seeds);
+  EXPECT_EQ(t.reduced, t.seeds);
+  EXPECT_GE(t.within, t.seeds - 1);
 }
 
 // A marker 2-3 cm off the declared end effector (where it was stuck on), its offset unknown:
@@ -323,25 +327,18 @@ TEST(MarkerOffset, UnknownOffsetIsFittedWithTheTrackerAndTheGear) {
 // A rough guess (5 cm and 5 deg off the truth) instead of the registration as the start.
 TEST(TrackerFrame, ARoughGuessStartsTheSameJointFit) {
   auto rig = MakeRig();
-  const int kSeeds = 5;
-  int named = 0, within = 0, reduced = 0;
-  for (int seed = 0; seed < kSeeds; ++seed) {
+  Tally t;
+  for (int seed = 0; seed < 5; ++seed) {
     std::mt19937_64 rng(500 + seed);
     MeasurementFrame guess;
     guess.T_ref = Perturbed(TruePose(seed), 0.05, 5.0, rng);
     guess.has_guess = true;
-    const Outcome o = RunSeed(*rig, seed, guess, TruePose(seed));
-    named += o.named;
-    within += o.within_3_sigma;
-    reduced += o.val_reduced;
+    t.Add(RunSeed(*rig, seed, guess, TruePose(seed)));
   }
-  std::printf(
-      "rough guess: effect named %d/%d, pose within 3 sigma %d/%d, validation < 0.3x "
-      "%d/%d\n",
-      named, kSeeds, within, kSeeds, reduced, kSeeds);
-  EXPECT_EQ(named, kSeeds);
-  EXPECT_EQ(reduced, kSeeds);
-  EXPECT_GE(within, kSeeds - 1);
+  t.Print("rough guess");
+  EXPECT_EQ(t.named, t.seeds);
+  EXPECT_EQ(t.reduced, t.seeds);
+  EXPECT_GE(t.within, t.seeds - 1);
 }
 
 // The same data read as base-frame points (the format without frames; the tracker taken to sit
@@ -660,8 +657,12 @@ TEST(TwoMarkers, EachPointIsItsOwnBranch) {
   // r_el's offset moves no left-hand row, l_hand's tool no right-hand row.
   for (size_t i = 0; i < d.rows.size(); ++i) {
     const int o = pr.row_offset(i);
-    if (d.rows[i].point == 0) EXPECT_EQ(J.block(o, 1, 3, 1).norm(), 0.0);
-    if (d.rows[i].point == 1) EXPECT_EQ(J.block(o, 2, 3, 3).norm(), 0.0);
+    if (d.rows[i].point == 0) {
+      EXPECT_EQ(J.block(o, 1, 3, 1).norm(), 0.0);
+    }
+    if (d.rows[i].point == 1) {
+      EXPECT_EQ(J.block(o, 2, 3, 3).norm(), 0.0);
+    }
   }
 }
 
