@@ -234,6 +234,16 @@ void MismatchTest::Add(double nees, const SharedNeesStep& step) {
   if (dof_mean > 0 && above) first_ = n - 1;
 }
 
+namespace {
+// A step that shares nothing, whose covariance has rank `dof` (known from its NEES already).
+SharedNeesStep IndependentNeesStep(int dof) {
+  SharedNeesStep step;
+  step.dof = dof;
+  step.t1 = step.t2 = dof;
+  return step;
+}
+}  // namespace
+
 void ErrorStats::Add(const lie::SE3& T_est, const Mat6& cov, const lie::SE3& T_true,
                      const Mat6x& G_shared) {
   const Vec3 d = T_est.translation() - T_true.translation();
@@ -245,13 +255,16 @@ void ErrorStats::Add(const lie::SE3& T_est, const Mat6& cov, const lie::SE3& T_t
   int dof = 0;
   nees_.push_back(Nees(e, cov, &dof));
   dof_.push_back(dof);
-  steps_.push_back(MakeSharedNeesStep<6>(G_shared, cov));
+  steps_.push_back(G_shared.cols() > 0 ? MakeSharedNeesStep<6>(G_shared, cov)
+                                       : IndependentNeesStep(dof));
   mismatch_.Add(nees_.back(), steps_.back());
   pos_nees_.push_back(PositionNees(e, cov, &dof));
   pos_dof_.push_back(dof);
-  pos_steps_.push_back(MakeSharedNeesStep<3>(
-      Eigen::Matrix<double, 3, Eigen::Dynamic>(G_shared.middleRows(kTransIdx, 3)),
-      Mat3(cov.block<3, 3>(kTransIdx, kTransIdx))));
+  pos_steps_.push_back(G_shared.cols() > 0
+                           ? MakeSharedNeesStep<3>(Eigen::Matrix<double, 3, Eigen::Dynamic>(
+                                                       G_shared.middleRows(kTransIdx, 3)),
+                                                   Mat3(cov.block<3, 3>(kTransIdx, kTransIdx)))
+                           : IndependentNeesStep(dof));
 }
 
 namespace {

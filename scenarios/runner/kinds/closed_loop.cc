@@ -269,13 +269,14 @@ class ClosedLoopKind : public ScenarioKind {
         identify::ComputeLoads(*em_, cal, res.after.active, res.after.theta);
     const std::vector<identify::ConfigLoads> val_loads_after =
         identify::ComputeLoads(*em_, val, res.after.active, res.after.theta);
-    if (reading_std_rad_ > 0.0) UseReadingNoiseCovariance(ctx, cal, cal_loads_after, &res);
     const auto [cal_before, cal_p0] = errors(cal, cal_loads, false);
     const auto [cal_after, cal_p1] = errors(cal, cal_loads_after, true);
     const auto [val_before, val_p0] = errors(val, val_loads, false);
     const auto [val_after, val_p1] = errors(val, val_loads_after, true);
     cal = identify::InBase(cal, res.after.T_base_frames);
     val = identify::InBase(val, res.after.T_base_frames);
+    // In the base frame: a point row's residual is against its measured point (Residuals).
+    if (reading_std_rad_ > 0.0) UseReadingNoiseCovariance(ctx, cal, cal_loads_after, &res);
 
     Json& m = (*ctx.summary)["metrics"];
     std::vector<std::string> found;
@@ -634,14 +635,19 @@ class ClosedLoopKind : public ScenarioKind {
     return out;
   }
 
-  // The residuals of the augmented model (socket rows against their group's mean) at `theta`.
+  // The residuals of the augmented model at `theta` (socket rows against their group's mean,
+  // point rows against their measured point in the base frame; pixel rows: the point alone).
   std::vector<Vec3> Residuals(const DataSet& d, const std::vector<identify::ConfigLoads>& L,
                               const identify::IdentifyResult& res,
                               const Eigen::VectorXd& theta) const {
     std::vector<Vec3> q = identify::PredictAll(*em_, d, L, res.after.active, theta);
     const std::vector<Vec3> mean = identify::GroupMeans(d, q);
     for (size_t r = 0; r < d.rows.size(); ++r) {
-      if (d.rows[r].type == identify::ObservationType::kGroup) q[r] -= mean[d.rows[r].group];
+      const identify::ObservationType type = d.rows[r].type;
+      if (type == identify::ObservationType::kGroup) q[r] -= mean[d.rows[r].group];
+      if (type == identify::ObservationType::kPoint || type == identify::ObservationType::kPose) {
+        q[r] -= d.rows[r].p_base;  // a constant: the Jacobians do not change
+      }
     }
     return q;
   }
