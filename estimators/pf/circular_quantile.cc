@@ -304,20 +304,25 @@ void SortBand(const double* c, const double* s, const double* w, const int* idx,
       raw[j] = {DiamondKey(s[i] * cm - c[i] * sm, c[i] * cm + s[i] * sm), w[i], i, 0};
     }
   }
-  double kmin = HUGE_VAL, kmax = -HUGE_VAL;
-  for (const BandEntry& e : raw) {
-    kmin = std::min(kmin, e.key);
-    kmax = std::max(kmax, e.key);
+  // Two chains each: a min's latency, not its throughput, bounds a single chain.
+  double kmin2[2] = {HUGE_VAL, HUGE_VAL}, kmax2[2] = {-HUGE_VAL, -HUGE_VAL};
+  for (int j = 0; j < count; ++j) {
+    kmin2[j & 1] = std::min(kmin2[j & 1], raw[j].key);
+    kmax2[j & 1] = std::max(kmax2[j & 1], raw[j].key);
   }
-  // Monotone in the key: the buckets' order is the keys' order.
-  const double scale = kmax > kmin ? count / (kmax - kmin) : 0.0;
+  const double kmin = std::min(kmin2[0], kmin2[1]), kmax = std::max(kmax2[0], kmax2[1]);
+  // Monotone in the key: the buckets' order is the keys' order. Four buckets per particle: the
+  // band's particles crowd towards its inner edge, and each pair that lands in one bucket out of
+  // order costs the insertion sort a move.
+  const int buckets = std::min(4 * count, static_cast<int>(scratch->bucket_start_.size()) - 1);
+  const double scale = kmax > kmin ? buckets / (kmax - kmin) : 0.0;
   int* start = scratch->bucket_start_.data();
-  std::fill(start, start + count + 1, 0);
+  std::fill(start, start + buckets + 1, 0);
   for (BandEntry& e : raw) {
-    e.bucket = std::min(count - 1, static_cast<int>((e.key - kmin) * scale));
+    e.bucket = std::min(buckets - 1, static_cast<int>((e.key - kmin) * scale));
     ++start[e.bucket + 1];
   }
-  for (int b = 0; b < count; ++b) start[b + 1] += start[b];
+  for (int b = 0; b < buckets; ++b) start[b + 1] += start[b];
   for (const BandEntry& e : raw) band[start[e.bucket]++] = e;
   for (int j = 1; j < count; ++j) {
     const BandEntry e = band[j];

@@ -152,8 +152,11 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
   for (FrameId f : config_.position_frames) position_outputs_.push_back(fk_.OutputIndex(f));
   for (FrameId f : config_.orientation_frames) orientation_outputs_.push_back(fk_.OutputIndex(f));
   ee_output_ = config_.end_effector >= 0 ? fk_.OutputIndex(config_.end_effector) : -1;
-  quantiles_ = CircularQuantileScratch(n_);
+  quantiles_ = CircularQuantileScratch(n_ + 4);
   scratch_w_.assign(n_, 0.0);
+  kept_ = KeptParticles(n_);
+  kept_c_.assign(n_ + 4, 0.0);
+  kept_s_.assign(n_ + 4, 0.0);
   q_mean_ = Eigen::VectorXd::Zero(nq_);
   Reset();
 }
@@ -471,6 +474,7 @@ const ParticleSummary& ParticleFilter::Summary() const {
   const double* w = scratch_w_.data();
   // Particles below this normalised weight do not move a quantile or a covariance.
   const double negligible = 1e-14;
+  kept_.Select(w, n_, negligible);
   for (int j = 0; j < nq_; ++j) {
     const double* c = cos_.data() + static_cast<size_t>(j) * stride_;
     const double* s = sin_.data() + static_cast<size_t>(j) * stride_;
@@ -487,8 +491,10 @@ const ParticleSummary& ParticleFilter::Summary() const {
     static constexpr double kProbs[2] = {0.025, 0.975};
     const double sigma = out.circular_std[j];
     double dev[2];
-    WeightedCircularTailQuantiles(c, s, w, n_, cm, sm, negligible, kTailInner * sigma,
-                                  kTailOuter * sigma, kProbs, 2, dev, &quantiles_);
+    kept_.Gather(c, s, kept_c_.data(), kept_s_.data());
+    WeightedCircularTailQuantiles(kept_c_.data(), kept_s_.data(), kept_.weight(), kept_.size(), cm,
+                                  sm, negligible, kTailInner * sigma, kTailOuter * sigma, kProbs, 2,
+                                  dev, &quantiles_);
     out.lower95[j] = out.mean[j] + dev[0];
     out.upper95[j] = out.mean[j] + dev[1];
   }
@@ -502,7 +508,7 @@ const ParticleSummary& ParticleFilter::Summary() const {
     kinematics::ForwardKinematics(*model_, fk_data_, q_mean_);
     const lie::SE3 mean = fk_data_.T_base_frame[config_.end_effector];
     // The particles' spread about it, in its local tangent space.
-    PoseSpread(fk_, k, mean, w, n_, negligible, &out.cov_ee);
+    PoseSpread(fk_, k, mean, kept_, &out.cov_ee);
     out.T_base_ee = mean;
   }
   summary_valid_ = true;

@@ -48,6 +48,7 @@
 #include "estimators/pf/batch_kinematics.h"
 #include "estimators/pf/bingham.h"
 #include "estimators/pf/circular_quantile.h"
+#include "estimators/pf/particle_moments.h"
 #include "estimators/pf/resampling.h"
 #include "estimators/pf/von_mises.h"
 
@@ -203,7 +204,9 @@ class ParticleFilter {
   mutable ParticleSummary summary_;
   mutable CircularQuantileScratch quantiles_;
   mutable std::vector<double> scratch_w_;
-  mutable kinematics::PpoeData fk_data_;  // the end effector at the mean angles
+  mutable KeptParticles kept_;                   // the summary's non-negligible particles
+  mutable std::vector<double> kept_c_, kept_s_;  // one joint's cos and sin at kept_'s positions
+  mutable kinematics::PpoeData fk_data_;         // the end effector at the mean angles
   mutable Eigen::VectorXd q_mean_;
 };
 

@@ -1,5 +1,6 @@
 #include "estimators/pf/particle_moments.h"
 
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
 
@@ -119,6 +120,55 @@ FLEXBENCH_PARTICLE_LOOP void WeightedResultant(const double* __restrict c,
   }
   *sc = LaneSum(c4);
   *ss = LaneSum(s4);
+}
+
+KeptParticles::KeptParticles(int capacity) : idx_(capacity + 4, 0), w_(capacity + 4, 0.0) {}
+
+void KeptParticles::Select(const double* w, int n, double negligible) {
+  int* idx = idx_.data();
+  double* wk = w_.data();
+  // Branch-free (which particles are kept is unpredictable): each particle is written at its
+  // lane's next position, which only a kept one advances; an unkept one is overwritten by the
+  // next kept one of its lane or by the padding. The counts stay in registers.
+  int count[4] = {0, 0, 0, 0};
+  const auto put = [&](int i, int l, int& c) {
+    const int at = 4 * c + l;
+    idx[at] = i;
+    wk[at] = w[i];
+    c += w[i] >= negligible;
+  };
+  int c0 = 0, c1 = 0, c2 = 0, c3 = 0;
+  int i = 0;
+  for (; i + 4 <= n; i += 4) {
+    put(i, 0, c0);
+    put(i + 1, 1, c1);
+    put(i + 2, 2, c2);
+    put(i + 3, 3, c3);
+  }
+  if (i < n) put(i, 0, c0);
+  if (i + 1 < n) put(i + 1, 1, c1);
+  if (i + 2 < n) put(i + 2, 2, c2);
+  count[0] = c0;
+  count[1] = c1;
+  count[2] = c2;
+  count[3] = c3;
+  const int rows = std::max(std::max(count[0], count[1]), std::max(count[2], count[3]));
+  for (int l = 0; l < 4; ++l) {
+    for (int r = count[l]; r < rows; ++r) {
+      idx[4 * r + l] = 0;
+      wk[4 * r + l] = 0.0;
+    }
+  }
+  size_ = 4 * rows;
+}
+
+void KeptParticles::Gather(const double* __restrict a, const double* __restrict b,
+                           double* __restrict out_a, double* __restrict out_b) const {
+  const int* __restrict idx = idx_.data();
+  for (int p = 0; p < size_; ++p) {
+    out_a[p] = a[idx[p]];
+    out_b[p] = b[idx[p]];
+  }
 }
 
 namespace internal {

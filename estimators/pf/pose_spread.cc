@@ -8,7 +8,8 @@
 namespace flexbench::pf {
 namespace {
 
-constexpr int kBlock = BatchKinematics::kBlock;
+// Kept positions per pass (their logs stay in L1 cache).
+constexpr int kChunk = 256;
 // Past this cosine the skew part no longer carries the axis accurately (as lie::SO3Log).
 constexpr double kNearPiCos = -0.7;
 constexpr double kTinyAngle = 1e-4;  // lie/so3.cc: theta / sin(theta) by its series below
@@ -43,34 +44,35 @@ inline double Atan2Upper(double y, double x) {
   return steep ? complement : a;
 }
 
-// xi = Log(T_mean^-1 T_i) of the block's particles [b, b + m) into xi[6][kBlock] (0 for a
-// particle with w_i < negligible, never 0 * inf), their weights or 0 into wb, and the cosine of
-// each kept particle's rotation angle into cos_angle (1 for the others; those at or below
-// kNearPiCos are the caller's to fix). Every alternative is computed and selected, no branch and
-// no call: the loop vectorises.
-FLEXBENCH_PARTICLE_LOOP void LogBlock(const BatchKinematics& fk, int k, const Mat3& Rm,
-                                      const Vec3& tm, const double* __restrict w, double negligible,
-                                      int b, int m, double (*__restrict xi)[kBlock],
-                                      double* __restrict wb, double* __restrict cos_angle) {
+// xi = Log(T_mean^-1 T_i) of the particles idx[0, m) into xi[6][] (0 for padding, weight 0:
+// never 0 * inf), and the cosine of each
+// one's rotation angle into cos_angle (1 for padding; those at or below kNearPiCos are the
+// caller's to fix). Every alternative is computed and selected, no branch and no call: the loop
+// vectorises.
+FLEXBENCH_PARTICLE_LOOP void LogBlock(const BatchKinematics& fk, int k, const int* __restrict idx,
+                                      const Mat3& Rm, const Vec3& tm, const double* __restrict w,
+                                      int m, double (*__restrict xi)[kChunk],
+                                      double* __restrict cos_angle) {
   // Plain locals, not arrays of pointers: the vectoriser needs to see every load's address.
-  const double* __restrict R00 = fk.R(k, 0, 0) + b;
-  const double* __restrict R01 = fk.R(k, 0, 1) + b;
-  const double* __restrict R02 = fk.R(k, 0, 2) + b;
-  const double* __restrict R10 = fk.R(k, 1, 0) + b;
-  const double* __restrict R11 = fk.R(k, 1, 1) + b;
-  const double* __restrict R12 = fk.R(k, 1, 2) + b;
-  const double* __restrict R20 = fk.R(k, 2, 0) + b;
-  const double* __restrict R21 = fk.R(k, 2, 1) + b;
-  const double* __restrict R22 = fk.R(k, 2, 2) + b;
-  const double* __restrict t0 = fk.t(k, 0) + b;
-  const double* __restrict t1 = fk.t(k, 1) + b;
-  const double* __restrict t2 = fk.t(k, 2) + b;
+  const double* __restrict R00 = fk.R(k, 0, 0);
+  const double* __restrict R01 = fk.R(k, 0, 1);
+  const double* __restrict R02 = fk.R(k, 0, 2);
+  const double* __restrict R10 = fk.R(k, 1, 0);
+  const double* __restrict R11 = fk.R(k, 1, 1);
+  const double* __restrict R12 = fk.R(k, 1, 2);
+  const double* __restrict R20 = fk.R(k, 2, 0);
+  const double* __restrict R21 = fk.R(k, 2, 1);
+  const double* __restrict R22 = fk.R(k, 2, 2);
+  const double* __restrict t0 = fk.t(k, 0);
+  const double* __restrict t1 = fk.t(k, 1);
+  const double* __restrict t2 = fk.t(k, 2);
   // M = Rm^T.
   const double M00 = Rm(0, 0), M01 = Rm(1, 0), M02 = Rm(2, 0);
   const double M10 = Rm(0, 1), M11 = Rm(1, 1), M12 = Rm(2, 1);
   const double M20 = Rm(0, 2), M21 = Rm(1, 2), M22 = Rm(2, 2);
   const double tm0 = tm[0], tm1 = tm[1], tm2 = tm[2];
-  for (int i = 0; i < m; ++i) {
+  for (int p = 0; p < m; ++p) {
+    const int i = idx[p];
     // dR = Rm^T R_i (only the entries the log needs), dt = Rm^T (t_i - tm).
     const double d00 = M00 * R00[i] + M01 * R10[i] + M02 * R20[i];
     const double d11 = M10 * R01[i] + M11 * R11[i] + M12 * R21[i];
@@ -111,22 +113,21 @@ FLEXBENCH_PARTICLE_LOOP void LogBlock(const BatchKinematics& fk, int k, const Ma
     const double dcoef = x < kSmallAngle ? small_series : closed;
     const double a0 = o1 * v2 - o2 * v1, a1 = o2 * v0 - o0 * v2, a2 = o0 * v1 - o1 * v0;
     const double b0 = o1 * a2 - o2 * a1, b1 = o2 * a0 - o0 * a2, b2 = o0 * a1 - o1 * a0;
-    const bool keep = w[b + i] >= negligible;
-    wb[i] = keep ? w[b + i] : 0.0;
-    cos_angle[i] = keep ? c : 1.0;
-    xi[kTransIdx][i] = keep ? v0 - 0.5 * a0 + dcoef * b0 : 0.0;
-    xi[kTransIdx + 1][i] = keep ? v1 - 0.5 * a1 + dcoef * b1 : 0.0;
-    xi[kTransIdx + 2][i] = keep ? v2 - 0.5 * a2 + dcoef * b2 : 0.0;
-    xi[kRotIdx][i] = keep ? o0 : 0.0;
-    xi[kRotIdx + 1][i] = keep ? o1 : 0.0;
-    xi[kRotIdx + 2][i] = keep ? o2 : 0.0;
+    const bool keep = w[p] > 0.0;  // not a lane's padding
+    cos_angle[p] = keep ? c : 1.0;
+    xi[kTransIdx][p] = keep ? v0 - 0.5 * a0 + dcoef * b0 : 0.0;
+    xi[kTransIdx + 1][p] = keep ? v1 - 0.5 * a1 + dcoef * b1 : 0.0;
+    xi[kTransIdx + 2][p] = keep ? v2 - 0.5 * a2 + dcoef * b2 : 0.0;
+    xi[kRotIdx][p] = keep ? o0 : 0.0;
+    xi[kRotIdx + 1][p] = keep ? o1 : 0.0;
+    xi[kRotIdx + 2][p] = keep ? o2 : 0.0;
   }
 }
 
 // acc[e][l] += w_i xi_a xi_b over the block, entry e = (a, b) of the upper triangle, particle i
 // in lane l = i % 4: four fixed partial sums, so the vector and the scalar clone add in the same
-// order. m is a multiple of 4 (the caller pads with zero weights).
-FLEXBENCH_PARTICLE_LOOP void AccumulateBlock(const double (*__restrict xi)[kBlock],
+// order. m is a multiple of 4 (KeptParticles pads with zero weights).
+FLEXBENCH_PARTICLE_LOOP void AccumulateBlock(const double (*__restrict xi)[kChunk],
                                              const double* __restrict w, int m,
                                              double (*__restrict acc)[4]) {
   for (int i = 0; i < m; i += 4) {
@@ -151,30 +152,26 @@ double Atan2UpperHalf(double y, double x) { return Atan2Upper(y, x); }
 
 }  // namespace internal
 
-void PoseSpread(const BatchKinematics& fk, int k, const lie::SE3& T_mean, const double* w, int n,
-                double negligible, Mat6* cov) {
+void PoseSpread(const BatchKinematics& fk, int k, const lie::SE3& T_mean, const KeptParticles& kept,
+                Mat6* cov) {
   const Mat3& Rm = T_mean.rotation();
   const Vec3& tm = T_mean.translation();
   const lie::SE3 T_mean_inv = T_mean.Inverse();
-  alignas(64) double xi[6][kBlock];
-  alignas(64) double wb[kBlock];
-  alignas(64) double cos_angle[kBlock];
+  alignas(64) double xi[6][kChunk];
+  alignas(64) double cos_angle[kChunk];
   double acc[21][4] = {};
-  for (int b = 0; b < n; b += kBlock) {
-    const int m = std::min(kBlock, n - b);
-    LogBlock(fk, k, Rm, tm, w, negligible, b, m, xi, wb, cos_angle);
-    const int padded = (m + 3) & ~3;
-    for (int i = m; i < padded; ++i) {
-      wb[i] = 0.0;
-      for (int r = 0; r < 6; ++r) xi[r][i] = 0.0;
-    }
-    for (int i = 0; i < m; ++i) {
-      if (cos_angle[i] <= kNearPiCos) {
-        const Vec6 x = (T_mean_inv * fk.Pose(k, b + i)).Log();
-        for (int r = 0; r < 6; ++r) xi[r][i] = x[r];
+  for (int b = 0; b < kept.size(); b += kChunk) {
+    const int m = std::min(kChunk, kept.size() - b);  // a multiple of 4
+    const int* idx = kept.index() + b;
+    const double* w = kept.weight() + b;
+    LogBlock(fk, k, idx, Rm, tm, w, m, xi, cos_angle);
+    for (int p = 0; p < m; ++p) {
+      if (cos_angle[p] <= kNearPiCos) {
+        const Vec6 x = (T_mean_inv * fk.Pose(k, idx[p])).Log();
+        for (int r = 0; r < 6; ++r) xi[r][p] = x[r];
       }
     }
-    AccumulateBlock(xi, wb, padded, acc);
+    AccumulateBlock(xi, w, m, acc);
   }
   int e = 0;
   for (int a = 0; a < 6; ++a) {

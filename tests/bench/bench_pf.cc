@@ -7,15 +7,16 @@
 // kinematics alone.
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true.
 //
-// Issue 18 (the estimate at most 0.25x of a step), medians of 3 repetitions in one run, CPU time,
-// this 2-core machine shared with other work (load average 3-5, wall time 1.5-2x CPU):
-//   BM_PfStep/2048 256 us, BM_Summary/2048 78.1 us: 0.31x (was 137 us, 0.55x; target not met).
-//   BM_PfStepWithEstimate (us) N = 256 53.6, 512 94.0, 1024 175, 2048 334, 4096 663, 8192 1356
-//   (BM_PfStep 31.2, 64.7, 130, 256, 514, 1057).
-// Where BM_Summary/2048 goes (timers around each part): the end-effector spread about 39 us
-// (the per-particle SE3 log, about 210 4-wide operations per 4 particles, and the 21 products;
-// compute-bound), the four joints' 95% intervals about 29 us (per joint: the band pass 2.5, the
-// gathers 2, the band's sort 2.8), the weights and the resultants about 7 us.
+// Issue 18 (the estimate at most 0.25x of a step), medians of 5 repetitions in one run, CPU time,
+// this 2-core machine shared with other work (load average 3.5-4):
+//   BM_PfStep/2048 255-257 us, BM_Summary/2048 59.0-61.1 us: 0.231-0.238 in 5 runs of 5 (was 78
+//   us, 0.31; 137 us, 0.55 before that). One longer run of every size gave 64.2 / 247 = 0.26.
+//   BM_PfStepWithEstimate (us) N = 256 40.5, 512 76.8, 1024 146, 2048 288, 4096 568, 8192 1160
+//   (BM_PfStep 29.9, 63.2, 125, 247, 506, 1015).
+// Where BM_Summary/2048 goes (perf): about half the particles are negligible (w < 1e-14) after
+// a reading, and the summary now skips them (KeptParticles): the end-effector logs about a
+// quarter, the four joints' band passes, gathers and band sorts about half, the weights and
+// resultants (over all particles) about a tenth.
 #include <benchmark/benchmark.h>
 
 #include <memory>

@@ -68,5 +68,59 @@ TEST_P(MomentsTest, EqualThePlainSums) {
 
 INSTANTIATE_TEST_SUITE_P(Sizes, MomentsTest, ::testing::Values(1, 2, 3, 4, 5, 7, 64, 2049));
 
+// Every kept particle once, in its own lane, in order; padding weighs 0; and so a four-lane sum
+// over the positions has the bits of the same sum over all particles (what the summary's pose
+// spread and band masses rely on to give the same bits as before the particles were gathered).
+class KeptParticlesTest : public ::testing::TestWithParam<int> {};
+
+TEST_P(KeptParticlesTest, KeepLanesAndOrderSoLaneSumsKeepTheirBits) {
+  const int n = GetParam();
+  const double negligible = 1e-14;
+  std::mt19937_64 rng(n);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<double> w(n);
+  for (int i = 0; i < n; ++i) {  // lanes kept unevenly: lane 1 mostly negligible
+    const double p_negligible = i % 4 == 1 ? 0.8 : 0.4;
+    w[i] = u(rng) < p_negligible ? 1e-15 * u(rng) : u(rng) / n;
+  }
+  if (n > 6) w[6] = std::numeric_limits<double>::quiet_NaN();  // never kept
+  KeptParticles kept(n);
+  kept.Select(w.data(), n, negligible);
+  ASSERT_EQ(kept.size() % 4, 0);
+  ASSERT_LE(kept.size(), n + 3);
+  std::vector<int> seen(n, 0);
+  int last[4] = {-1, -1, -1, -1};
+  double lanes[4] = {0.0, 0.0, 0.0, 0.0}, lanes_all[4] = {0.0, 0.0, 0.0, 0.0};
+  for (int p = 0; p < kept.size(); ++p) {
+    const double wp = kept.weight()[p];
+    lanes[p & 3] += wp * wp;
+    if (wp == 0.0) continue;  // padding
+    const int i = kept.index()[p];
+    ASSERT_EQ(wp, w[i]);
+    EXPECT_EQ(i % 4, p % 4) << "position " << p;
+    EXPECT_GT(i, last[p & 3]) << "position " << p;
+    last[p & 3] = i;
+    ++seen[i];
+  }
+  for (int i = 0; i < n; ++i) {
+    const bool keep = w[i] >= negligible;
+    EXPECT_EQ(seen[i], keep ? 1 : 0) << "particle " << i;
+    lanes_all[i & 3] += keep ? w[i] * w[i] : 0.0;
+  }
+  for (int l = 0; l < 4; ++l) EXPECT_EQ(lanes[l], lanes_all[l]) << "lane " << l;
+  std::vector<double> x(n), y(n), gx(n + 4), gy(n + 4);
+  for (int i = 0; i < n; ++i) {
+    x[i] = i;
+    y[i] = -i;
+  }
+  kept.Gather(x.data(), y.data(), gx.data(), gy.data());
+  for (int p = 0; p < kept.size(); ++p) {
+    EXPECT_EQ(gx[p], kept.index()[p]);
+    EXPECT_EQ(gy[p], -kept.index()[p]);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Sizes, KeptParticlesTest, ::testing::Values(1, 3, 4, 7, 64, 301, 2049));
+
 }  // namespace
 }  // namespace flexbench::pf

@@ -43,7 +43,7 @@ class PoseSpreadVsDefinition : public ::testing::TestWithParam<double> {};
 TEST_P(PoseSpreadVsDefinition, EqualsTheSecondMomentOfTheLogs) {
   const double spread = GetParam();
   testing::JskLikeArm arm;
-  const int n = 300;  // four full blocks and a partial one
+  const int n = 301;  // two passes of kept positions, the second partial; a partial lane row
   const int nq = arm.model.nq();
   BatchKinematics fk(arm.model, {arm.imu2, arm.grasp}, n);
   std::mt19937_64 rng(11);
@@ -71,8 +71,10 @@ TEST_P(PoseSpreadVsDefinition, EqualsTheSecondMomentOfTheLogs) {
       near_pi += xi.segment<3>(kRotIdx).norm() > 2.3;
       expected += w[i] * xi * xi.transpose();
     }
+    KeptParticles kept(n);
+    kept.Select(w.data(), n, negligible);
     Mat6 got;
-    PoseSpread(fk, k, T_mean, w.data(), n, negligible, &got);
+    PoseSpread(fk, k, T_mean, kept, &got);
     EXPECT_LT((got - expected).cwiseAbs().maxCoeff(), 1e-13 * expected.cwiseAbs().maxCoeff())
         << "spread " << spread << " output " << k << " (" << near_pi << " near pi)\n"
         << got << "\n\n"
