@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <random>
@@ -49,6 +50,70 @@ class TagFusionKind : public ScenarioKind {
     if (!(pixel_std_ > 0.0)) root.Child("pixel_noise_std_px").Fail("must be > 0");
     mode_ = ParseRenderMode(root, render::RenderMode::kFast);
     detector_ = ParseDetectorSettings(root);
+    ParseConfigurations(root);
+    // Point a pan-tilt camera at a frame of the nominal arm (the rover looks at its hand).
+    if (const auto aim = root.Optional("aim_camera")) {
+      aim_pan_ = aim->GetString("pan");
+      aim_tilt_ = aim->GetString("tilt");
+      aim_at_ = aim->GetString("at");
+    }
+    save_frames_ = root.GetBool("save_frames", true);
+    // The paper's Table I for the chart: {estimator: [mean_cm, std_cm]}.
+    if (root.Has("paper_lateral_cm")) {
+      const ConfigNode paper = root.Child("paper_lateral_cm");
+      for (const std::string& name : paper.Keys()) {
+        const ConfigNode v = paper.Child(name);
+        const std::vector<double> ms = v.AsDoubleList();
+        if (ms.size() != 2 || !(ms[0] >= 0.0) || !(ms[1] >= 0.0)) {
+          v.Fail("expected [mean_cm, std_cm], both >= 0");
+        }
+        paper_lateral_cm_.emplace_back(name, ms);
+      }
+    }
+    estimators_ = ParseEstimators(root.Child("estimators"));
+
+    // Everything that can be wrong is checked now, before any output exists.
+    LoadTruth();
+    MakeEstimators(root);
+  }
+
+  // collect (settle, render, detect) -> estimate -> score, per configuration; then report.
+  void Run(RunContext& ctx) override {
+    render::Renderer renderer(sim_->model(), mode_);
+    ctx.log("GL_RENDERER: " + renderer.gl_renderer());
+    if (random_count_ > 0) SampleConfigurations(renderer, ctx);
+    RunState state(instances_.size(), ctx.out->File("configurations.csv"));
+    for (size_t c = 0; c < configurations_.size(); ++c) {
+      const Frame frame = Collect(c, renderer, &state);
+      render::Image overlay = TruthOverlay(frame);
+      for (size_t e = 0; e < instances_.size(); ++e) {
+        const estimators::Belief b = Estimate(e, frame, &state);
+        Score(c, e, frame, b, &state);
+        DrawEstimate(e, frame, b, &overlay);
+      }
+      if (save_frames_) {
+        char name[64];
+        std::snprintf(name, sizeof(name), "config_%02zu.png", c);
+        render::WritePng(overlay, (ctx.out->FramesDir() / name).string());
+      }
+      ctx.progress("configurations", static_cast<int>(c + 1),
+                   static_cast<int>(configurations_.size()));
+    }
+    state.timer.Write(ctx.timing, "frame", static_cast<int>(configurations_.size()));
+    WriteMetrics(state, ctx);
+    PlotLateralError(ctx);
+    // The paper's exp. II finding is that PPOE and naive end up alike: |ppoe - naive|.
+    const Json& est = (*ctx.summary)["estimators"];
+    if (est.contains("ppoe_ekf") && est.contains("naive_ekf")) {
+      (*ctx.summary)["metrics"]["ppoe_naive_lateral_abs_diff_m"] =
+          std::abs(est["ppoe_ekf"]["metrics"]["lateral_err_mean_m"].get<double>() -
+                   est["naive_ekf"]["metrics"]["lateral_err_mean_m"].get<double>());
+    }
+  }
+
+ private:
+  // fixed_joints_deg, configurations_deg, random_configurations.
+  void ParseConfigurations(const ConfigNode& root) {
     if (const auto fixed = root.Optional("fixed_joints_deg")) {
       for (const std::string& j : fixed->Keys()) fixed_.emplace_back(j, fixed->GetDouble(j));
     }
@@ -83,28 +148,10 @@ class TagFusionKind : public ScenarioKind {
     if (configurations_.empty() && random_count_ == 0) {
       root.Fail("needs configurations_deg or random_configurations");
     }
-    // Point a pan-tilt camera at a frame of the nominal arm (the rover looks at its hand).
-    if (const auto aim = root.Optional("aim_camera")) {
-      aim_pan_ = aim->GetString("pan");
-      aim_tilt_ = aim->GetString("tilt");
-      aim_at_ = aim->GetString("at");
-    }
-    save_frames_ = root.GetBool("save_frames", true);
-    // The paper's Table I for the chart: {estimator: [mean_cm, std_cm]}.
-    if (root.Has("paper_lateral_cm")) {
-      const ConfigNode paper = root.Child("paper_lateral_cm");
-      for (const std::string& name : paper.Keys()) {
-        const ConfigNode v = paper.Child(name);
-        const std::vector<double> ms = v.AsDoubleList();
-        if (ms.size() != 2 || !(ms[0] >= 0.0) || !(ms[1] >= 0.0)) {
-          v.Fail("expected [mean_cm, std_cm], both >= 0");
-        }
-        paper_lateral_cm_.emplace_back(name, ms);
-      }
-    }
-    estimators_ = ParseEstimators(root.Child("estimators"));
+  }
 
-    // Everything that can be wrong is checked now, before any output exists.
+  // The truth simulation, its camera and tags, and the declared chain the estimators see.
+  void LoadTruth() {
     sim_ = sim::Simulation::Load(model_path_, effects_);
     for (const auto& cfg : configurations_) {
       for (const auto& [j, v] : cfg) sim_->SetCommand(j, 0.0);
@@ -131,6 +178,9 @@ class TagFusionKind : public ScenarioKind {
       throw InputError(declared_.file + ": no tag geom of " + model_path_ +
                        " is among the observed frames");
     }
+  }
+
+  void MakeEstimators(const ConfigNode& root) {
     setup_.model = &chain_->model;
     setup_.effects = chain_->effects_or_null();
     setup_.end_effector = chain_->end_effector;
@@ -150,189 +200,202 @@ class TagFusionKind : public ScenarioKind {
     detector_instance_ = std::make_unique<render::TagDetector>(detector_);
   }
 
-  void Run(RunContext& ctx) override {
-    render::Renderer renderer(sim_->model(), mode_);
-    ctx.log("GL_RENDERER: " + renderer.gl_renderer());
-    if (random_count_ > 0) SampleConfigurations(renderer, ctx);
-    const PinholeCamera& cam = setup_.cameras[0].intrinsics;
-    std::vector<ErrorStats> stats(instances_.size());
+  // What the run accumulates over its configurations.
+  struct RunState {
+    RunState(size_t estimators, const std::filesystem::path& csv_path)
+        : stats(estimators), status_counts(estimators), csv(csv_path) {
+      csv << "config,estimator,tags_used,view_angle_deg,ee_axis_to_sight_deg,pos_err_m,"
+             "lateral_err_m,rot_err_deg,nees\n";
+    }
+    std::vector<ErrorStats> stats;
     TrajectoryRecorder trajectories;
-    std::vector<std::map<std::string, int>> status_counts(instances_.size());
-    std::ofstream csv(ctx.out->File("configurations.csv"));
-    csv << "config,estimator,tags_used,view_angle_deg,ee_axis_to_sight_deg,pos_err_m,lateral_err_m,"
-           "rot_err_deg,nees\n";
+    std::vector<std::map<std::string, int>> status_counts;
+    std::ofstream csv;
     int total_tags = 0;
     int configs_without_tags = 0;
     StageTimer timer;  // the pipeline's throughput: timing.pipeline_frames_per_s
-    for (size_t c = 0; c < configurations_.size(); ++c) {
-      {
-        const auto t = timer.Time("simulate");
-        Command(configurations_[c]);
-      }
-      const render::Image frame = [&] {
-        const auto t = timer.Time("render");
-        return renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
-      }();
-      const render::DetectionResult det = [&] {
-        const auto t = timer.Time("detect");
-        return detector_instance_->Detect(frame);
-      }();
-      render::Image overlay = frame;
+  };
 
-      const estimators::JointReading joints =
-          EncoderReading(*sim_, *chain_, static_cast<double>(c));
-      const std::vector<estimators::Measurement> measurements =
-          TagMeasurements(det, tags_, tag_frames_, use_corners_, pixel_std_, joints.t);
-      total_tags += static_cast<int>(measurements.size());
-      configs_without_tags += measurements.empty();
-      const double view_angle_deg = LargestViewAngleDeg(det);
-      const double ee_axis_deg = EeAxisToSightDeg();
+  // One configuration as the estimators and the scoring see it.
+  struct Frame {
+    render::Image image;
+    render::DetectionResult det;
+    estimators::JointReading joints;
+    std::vector<estimators::Measurement> measurements;
+    double view_angle_deg = -1.0, ee_axis_deg = 0.0;
+    lie::SE3 T_w_ref;           // the frame estimates are made in (true pose)
+    lie::SE3 T_base_ee;         // the truth, seen from it
+    Eigen::Isometry3d T_cam_w;  // the camera's true pose
+  };
 
-      // The truth in the declared model's base frame.
-      const lie::SE3 T_w_base = chain_->base_body == 0
-                                    ? lie::SE3()
-                                    : ToSE3(sim_->BodyPose(sim::ObjectName(
-                                          sim_->model(), mjOBJ_BODY, chain_->base_body)));
-      // Estimates made in a reference frame are scored against the truth seen from that
-      // frame's true pose (a sagging camera mount moves the frame, not the truth).
-      const lie::SE3 T_w_ref = estimate_in_.empty() ? T_w_base : ToSE3(sim_->Pose(estimate_in_));
-      const lie::SE3 T_base_ee = T_w_ref.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
-      const Eigen::Isometry3d T_cam_w = sim_->Pose(camera_).inverse();
-      const auto to_cam = [&](const lie::SE3& T_base_x) {
-        Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-        const lie::SE3 T_w_x = T_w_ref * T_base_x;
-        T.linear() = T_w_x.rotation();
-        T.translation() = T_w_x.translation();
-        return Eigen::Isometry3d(T_cam_w * T);
-      };
-      // Evaluation overlay: truth axes, then each estimate's axes and its 95% position ellipse.
-      render::DrawFrameAxes(&overlay, cam, to_cam(T_base_ee), 0.06, 2);
-      render::DrawText(&overlay, "truth: axes   estimates: + and 95% ellipse", {8, 18},
-                       render::kWhite);
-      for (const render::TagDetection& d : det.detections) {
-        render::DrawPolyline(&overlay, {d.corners.begin(), d.corners.end()}, true, render::kYellow,
-                             1);
-      }
-      trajectories.AddTruth(joints.t, T_base_ee);
-      for (size_t e = 0; e < instances_.size(); ++e) {
-        const estimators::Belief b = [&] {
-          const auto t = timer.Time("estimate");
-          estimators::Estimator& est = *instances_[e];
-          est.Reset();
-          est.Predict(joints.t);
-          ++status_counts[e][estimators::ToString(est.Update(joints))];
-          for (const auto& m : measurements) {
-            ++status_counts[e][estimators::ToString(est.Update(m))];
-          }
-          return est.Estimate();
-        }();
-        stats[e].Add(b.T_base_ee, b.cov, T_base_ee);
-        trajectories.Add(estimators_[e].name, joints.t, b.T_base_ee, b.cov);
-        {
-          const render::Color colors[] = {render::kMagenta, render::kCyan, render::kYellow,
-                                          render::kGreen, render::kRed};
-          const render::Color color = colors[e % 5];
-          const Eigen::Isometry3d T_cam_est = to_cam(b.T_base_ee);
-          // Right perturbation: the position part of the local covariance turns with R.
-          const Mat3 R_cam_est = T_cam_est.linear();
-          const Mat3 cov_cam = R_cam_est * b.cov.topLeftCorner<3, 3>() * R_cam_est.transpose();
-          Eigen::Vector2d uv;
-          if (cam.Project(T_cam_est.translation(), &uv)) {
-            render::DrawMarker(&overlay, uv, color, 5, 1);
-            render::DrawPositionCovariance(&overlay, cam, T_cam_est.translation(), cov_cam, 0.95,
-                                           color, 1);
-            render::DrawText(&overlay, estimators_[e].name, {8, 38.0 + 18.0 * e}, color);
-          }
-        }
-        char line[256];
-        std::snprintf(line, sizeof(line), "%zu,%s,%zu,%.4f,%.4f,%.9g,%.9g,%.9g,%.9g\n", c,
-                      estimators_[e].name.c_str(), measurements.size(), view_angle_deg, ee_axis_deg,
-                      stats[e].last_pos(), stats[e].last_lateral(), stats[e].last_rot_deg(),
-                      stats[e].last_nees());
-        csv << line;
-      }
-      if (save_frames_) {
-        char name[64];
-        std::snprintf(name, sizeof(name), "config_%02zu.png", c);
-        render::WritePng(overlay, (ctx.out->FramesDir() / name).string());
-      }
-      ctx.progress("configurations", static_cast<int>(c + 1),
-                   static_cast<int>(configurations_.size()));
+  // Settles configuration c, renders and detects, reads the encoders; the truth.
+  Frame Collect(size_t c, render::Renderer& renderer, RunState* state) {
+    Frame f;
+    {
+      const auto t = state->timer.Time("simulate");
+      Command(configurations_[c]);
     }
-    timer.Write(ctx.timing, "frame", static_cast<int>(configurations_.size()));
+    {
+      const auto t = state->timer.Time("render");
+      f.image = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
+    }
+    {
+      const auto t = state->timer.Time("detect");
+      f.det = detector_instance_->Detect(f.image);
+    }
+    f.joints = EncoderReading(*sim_, *chain_, static_cast<double>(c));
+    f.measurements =
+        TagMeasurements(f.det, tags_, tag_frames_, use_corners_, pixel_std_, f.joints.t);
+    state->total_tags += static_cast<int>(f.measurements.size());
+    state->configs_without_tags += f.measurements.empty();
+    f.view_angle_deg = LargestViewAngleDeg(f.det);
+    f.ee_axis_deg = EeAxisToSightDeg();
+    // The truth in the declared model's base frame.
+    const lie::SE3 T_w_base =
+        chain_->base_body == 0
+            ? lie::SE3()
+            : ToSE3(sim_->BodyPose(sim::ObjectName(sim_->model(), mjOBJ_BODY, chain_->base_body)));
+    // Estimates made in a reference frame are scored against the truth seen from that frame's
+    // true pose (a sagging camera mount moves the frame, not the truth).
+    f.T_w_ref = estimate_in_.empty() ? T_w_base : ToSE3(sim_->Pose(estimate_in_));
+    f.T_base_ee = f.T_w_ref.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
+    f.T_cam_w = sim_->Pose(camera_).inverse();
+    state->trajectories.AddTruth(f.joints.t, f.T_base_ee);
+    return f;
+  }
+
+  // A pose in the reference frame, seen from the camera.
+  static Eigen::Isometry3d ToCamera(const Frame& f, const lie::SE3& T_base_x) {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    const lie::SE3 T_w_x = f.T_w_ref * T_base_x;
+    T.linear() = T_w_x.rotation();
+    T.translation() = T_w_x.translation();
+    return Eigen::Isometry3d(f.T_cam_w * T);
+  }
+
+  // The evaluation overlay's truth: its axes and the detected tags' outlines.
+  render::Image TruthOverlay(const Frame& f) const {
+    render::Image overlay = f.image;
+    render::DrawFrameAxes(&overlay, setup_.cameras[0].intrinsics, ToCamera(f, f.T_base_ee), 0.06,
+                          2);
+    render::DrawText(&overlay, "truth: axes   estimates: + and 95% ellipse", {8, 18},
+                     render::kWhite);
+    for (const render::TagDetection& d : f.det.detections) {
+      render::DrawPolyline(&overlay, {d.corners.begin(), d.corners.end()}, true, render::kYellow,
+                           1);
+    }
+    return overlay;
+  }
+
+  // Estimator e from scratch on this configuration's readings.
+  estimators::Belief Estimate(size_t e, const Frame& f, RunState* state) {
+    const auto t = state->timer.Time("estimate");
+    estimators::Estimator& est = *instances_[e];
+    std::map<std::string, int>& counts = state->status_counts[e];
+    est.Reset();
+    est.Predict(f.joints.t);
+    ++counts[estimators::ToString(est.Update(f.joints))];
+    for (const auto& m : f.measurements) ++counts[estimators::ToString(est.Update(m))];
+    return est.Estimate();
+  }
+
+  void Score(size_t c, size_t e, const Frame& f, const estimators::Belief& b, RunState* state) {
+    ErrorStats& stats = state->stats[e];
+    stats.Add(b.T_base_ee, b.cov, f.T_base_ee);
+    state->trajectories.Add(estimators_[e].name, f.joints.t, b.T_base_ee, b.cov);
+    char line[256];
+    std::snprintf(line, sizeof(line), "%zu,%s,%zu,%.4f,%.4f,%.9g,%.9g,%.9g,%.9g\n", c,
+                  estimators_[e].name.c_str(), f.measurements.size(), f.view_angle_deg,
+                  f.ee_axis_deg, stats.last_pos(), stats.last_lateral(), stats.last_rot_deg(),
+                  stats.last_nees());
+    state->csv << line;
+  }
+
+  // Estimate e's position and its 95% ellipse on the overlay.
+  void DrawEstimate(size_t e, const Frame& f, const estimators::Belief& b,
+                    render::Image* overlay) const {
+    const render::Color colors[] = {render::kMagenta, render::kCyan, render::kYellow,
+                                    render::kGreen, render::kRed};
+    const render::Color color = colors[e % 5];
+    const PinholeCamera& cam = setup_.cameras[0].intrinsics;
+    const Eigen::Isometry3d T_cam_est = ToCamera(f, b.T_base_ee);
+    // Right perturbation: the position part of the local covariance turns with R.
+    const Mat3 R_cam_est = T_cam_est.linear();
+    const Mat3 cov_cam = R_cam_est * b.cov.topLeftCorner<3, 3>() * R_cam_est.transpose();
+    Eigen::Vector2d uv;
+    if (cam.Project(T_cam_est.translation(), &uv)) {
+      render::DrawMarker(overlay, uv, color, 5, 1);
+      render::DrawPositionCovariance(overlay, cam, T_cam_est.translation(), cov_cam, 0.95, color,
+                                     1);
+      render::DrawText(overlay, estimators_[e].name, {8, 38.0 + 18.0 * e}, color);
+    }
+  }
+
+  void WriteMetrics(const RunState& state, RunContext& ctx) const {
     Json& metrics = (*ctx.summary)["metrics"];
     metrics["configurations"] = static_cast<int>(configurations_.size());
     metrics["estimated_in"] = estimate_in_.empty() ? "base" : estimate_in_;
     // One "pose" per configuration (the timestamp is its index): evo_ape reads them as is.
-    trajectories.Write(*ctx.out, estimate_in_.empty() ? "base" : estimate_in_);
+    state.trajectories.Write(*ctx.out, estimate_in_.empty() ? "base" : estimate_in_);
     if (random_count_ > 0) metrics["configuration_attempts"] = attempts_;
-    metrics["tags_detected_total"] = total_tags;
-    metrics["configurations_without_tags"] = configs_without_tags;
+    metrics["tags_detected_total"] = state.total_tags;
+    metrics["configurations_without_tags"] = state.configs_without_tags;
     for (size_t e = 0; e < instances_.size(); ++e) {
       Json& em = (*ctx.summary)["estimators"][estimators_[e].name]["metrics"];
-      stats[e].WriteMetrics(&em);
+      state.stats[e].WriteMetrics(&em);
       Json& counts = (*ctx.summary)["estimators"][estimators_[e].name]["updates"];
-      for (const auto& [status, n] : status_counts[e]) counts[status] = n;
+      for (const auto& [status, n] : state.status_counts[e]) counts[status] = n;
       counts["covariance_repairs"] = instances_[e]->covariance_repairs();
-    }
-    // Table I as a chart: one bar per estimator (mean lateral error, +- std), and the paper's
-    // value beside it when the scenario gives it.
-    {
-      render::Figure fig(760, 480);
-      render::Axes& ax = fig.axes();
-      ax.title = "Lateral end-effector error (mean +- std), " +
-                 std::to_string(configurations_.size()) + " configurations";
-      ax.x_label = "estimator (" + [&] {
-        std::string names;
-        for (size_t e = 0; e < estimators_.size(); ++e) {
-          names += (e ? ", " : "") + std::to_string(e) + ": " + estimators_[e].name;
-        }
-        return names;
-      }() + ")";
-      ax.y_label = "lateral error [cm]";
-      ax.x_min = -0.6;
-      ax.x_max = estimators_.size() - 0.4;
-      ax.y_min = 0.0;
-      ax.legend_position = render::LegendPosition::kTopRight;
-      double top = 0.0;
-      const bool with_paper = !paper_lateral_cm_.empty();
-      bool paper_labelled = false;
-      for (size_t e = 0; e < estimators_.size(); ++e) {
-        const Json& em = (*ctx.summary)["estimators"][estimators_[e].name]["metrics"];
-        if (!em.contains("lateral_err_mean_m")) continue;
-        const double mean = 100.0 * em["lateral_err_mean_m"].get<double>();
-        const double sd = 100.0 * em["lateral_err_std_m"].get<double>();
-        render::Series& bar =
-            ax.AddBars(estimators_[e].name + " (simulated)", {e - (with_paper ? 0.17 : 0.0)},
-                       {mean}, with_paper ? 0.3 : 0.5);
-        bar.y_err = {sd};
-        bar.color = render::PaletteColor(static_cast<int>(e));
-        top = std::max(top, mean + sd);
-        for (const auto& [name, ms] : paper_lateral_cm_) {
-          if (name != estimators_[e].name) continue;
-          render::Series& p =
-              ax.AddScatter(paper_labelled ? "" : "paper, Table I", {e + 0.17}, {ms[0]});
-          paper_labelled = true;
-          p.y_err = {ms[1]};
-          p.marker = render::Marker::kDiamond;
-          p.marker_size = 6;
-          p.color = render::Rgb{60, 60, 60};
-          top = std::max(top, ms[0] + ms[1]);
-        }
-      }
-      ax.y_max = 1.45 * top;  // room for the legend above the highest bar
-      fig.SavePng((ctx.out->FramesDir() / "lateral_error.png").string());
-    }
-    // The paper's exp. II finding is that PPOE and naive end up alike: |ppoe - naive|.
-    const Json& est = (*ctx.summary)["estimators"];
-    if (est.contains("ppoe_ekf") && est.contains("naive_ekf")) {
-      metrics["ppoe_naive_lateral_abs_diff_m"] =
-          std::abs(est["ppoe_ekf"]["metrics"]["lateral_err_mean_m"].get<double>() -
-                   est["naive_ekf"]["metrics"]["lateral_err_mean_m"].get<double>());
     }
   }
 
- private:
+  // Table I as a chart: one bar per estimator (mean lateral error, +- std), and the paper's
+  // value beside it when the scenario gives it.
+  void PlotLateralError(RunContext& ctx) const {
+    render::Figure fig(760, 480);
+    render::Axes& ax = fig.axes();
+    ax.title = "Lateral end-effector error (mean +- std), " +
+               std::to_string(configurations_.size()) + " configurations";
+    std::string names;
+    for (size_t e = 0; e < estimators_.size(); ++e) {
+      names += (e ? ", " : "") + std::to_string(e) + ": " + estimators_[e].name;
+    }
+    ax.x_label = "estimator (" + names + ")";
+    ax.y_label = "lateral error [cm]";
+    ax.x_min = -0.6;
+    ax.x_max = estimators_.size() - 0.4;
+    ax.y_min = 0.0;
+    ax.legend_position = render::LegendPosition::kTopRight;
+    double top = 0.0;
+    const bool with_paper = !paper_lateral_cm_.empty();
+    bool paper_labelled = false;
+    for (size_t e = 0; e < estimators_.size(); ++e) {
+      const Json& em = (*ctx.summary)["estimators"][estimators_[e].name]["metrics"];
+      if (!em.contains("lateral_err_mean_m")) continue;
+      const double mean = 100.0 * em["lateral_err_mean_m"].get<double>();
+      const double sd = 100.0 * em["lateral_err_std_m"].get<double>();
+      render::Series& bar =
+          ax.AddBars(estimators_[e].name + " (simulated)", {e - (with_paper ? 0.17 : 0.0)}, {mean},
+                     with_paper ? 0.3 : 0.5);
+      bar.y_err = {sd};
+      bar.color = render::PaletteColor(static_cast<int>(e));
+      top = std::max(top, mean + sd);
+      for (const auto& [name, ms] : paper_lateral_cm_) {
+        if (name != estimators_[e].name) continue;
+        render::Series& p =
+            ax.AddScatter(paper_labelled ? "" : "paper, Table I", {e + 0.17}, {ms[0]});
+        paper_labelled = true;
+        p.y_err = {ms[1]};
+        p.marker = render::Marker::kDiamond;
+        p.marker_size = 6;
+        p.color = render::Rgb{60, 60, 60};
+        top = std::max(top, ms[0] + ms[1]);
+      }
+    }
+    ax.y_max = 1.45 * top;  // room for the legend above the highest bar
+    fig.SavePng((ctx.out->FramesDir() / "lateral_error.png").string());
+  }
+
   // How obliquely the camera sees the tags it uses: the largest angle between a detected tag's
   // normal and its line of sight (truth poses; 0 = face on, -1 = no tag). The paper's exp. II
   // "ensured that the fiducial markers ... face towards the camera"; this column shows whether a
