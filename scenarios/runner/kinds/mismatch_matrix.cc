@@ -7,7 +7,9 @@
 // no-effect column while the mean NEES stayed inside its bound -- the mismatch went unnoticed.
 // Per cell, the running-NEES test (common/estimator_config.h, window 10) over the configurations
 // in order gives the detection delay: the configuration at which it first fires (-1: never).
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <random>
 #include <sstream>
@@ -77,139 +79,175 @@ class MismatchMatrixKind : public ScenarioKind {
     }
   }
 
+  // Per column (one effect in the truth): configurations settled -> readings at rest ->
+  // estimates -> scores; then the matrix (CSV, heat maps, metrics).
   void Run(RunContext& ctx) override {
-    const int nq = chain_->model.nq();
-    std::mt19937_64 rng(ctx.seed);
+    const std::vector<Eigen::VectorXd> configs = DrawConfigurations(ctx.seed);
+    // Detection delay: the running-NEES test over the configurations in their order.
+    std::vector<std::vector<ErrorStats>> stats(
+        instances_.size(),
+        std::vector<ErrorStats>(columns_.size(), ErrorStats(std::min(10, count_))));
+    for (size_t col = 0; col < columns_.size(); ++col) RunColumn(col, configs, &stats, ctx);
+    Report(stats, ctx);
+  }
+
+ private:
+  std::vector<Eigen::VectorXd> DrawConfigurations(std::uint64_t seed) const {
+    std::mt19937_64 rng(seed);
     std::uniform_real_distribution<double> u(0.0, 1.0);
     std::vector<Eigen::VectorXd> configs;
     for (int c = 0; c < count_; ++c) {
-      Eigen::VectorXd q = Eigen::VectorXd::Zero(nq);
+      Eigen::VectorXd q = Eigen::VectorXd::Zero(chain_->model.nq());
       for (const auto& [j, r] : ranges_)
         q[chain_->QIndex(j)] = r.first + (r.second - r.first) * u(rng);
       configs.push_back(q);
     }
-    const size_t E = instances_.size(), C = columns_.size();
-    std::vector<std::vector<ErrorStats>> stats(
-        E, std::vector<ErrorStats>(C, ErrorStats(std::min(10, count_))));
-    // Detection delay: the running-NEES test over the configurations in their order.
+    return configs;
+  }
 
+  // The same noise draws in every column: differences come from the effects alone.
+  struct Noise {
+    explicit Noise(std::uint64_t seed) : rng(seed + 7) {}
+    std::mt19937_64 rng;
+    std::normal_distribution<double> n{0.0, 1.0};
+    double operator()() { return n(rng); }
+  };
+
+  void RunColumn(size_t col, const std::vector<Eigen::VectorXd>& configs,
+                 std::vector<std::vector<ErrorStats>>* stats, RunContext& ctx) {
+    sim::Simulation& sim = *sims_[col];
     const sim::FrameRef ee = sims_[0]->Frame(declared_.end_effector);
-    for (size_t col = 0; col < C; ++col) {
-      sim::Simulation& sim = *sims_[col];
-      TrajectoryRecorder trajectories;  // one pose per configuration (timestamp: its index)
-      std::vector<int> act(nq);
-      for (int k = 0; k < nq; ++k) {
-        const auto& names = sim.actuated_joints();
-        act[k] = static_cast<int>(std::find(names.begin(), names.end(), chain_->q_joints[k]) -
-                                  names.begin());
+    TrajectoryRecorder trajectories;  // one pose per configuration (timestamp: its index)
+    const std::vector<int> act = ActuatorIndices(sim);
+    Noise noise(ctx.seed);
+    for (int c = 0; c < count_; ++c) {
+      ctx.progress("mismatch " + columns_[col], c, count_);
+      Eigen::VectorXd cmd = Eigen::VectorXd::Zero(sim.num_actuated());
+      for (int k = 0; k < chain_->model.nq(); ++k) cmd[act[k]] = configs[c][k];
+      sim.SetCommand(cmd);
+      sim.Settle();
+      const lie::SE3 T_true = ToSE3(sim.Pose(ee));
+      // The arm rests while readings stream in (fresh noise each step); filters that need
+      // several steps to converge get them, EKFs restart from each step's prior.
+      for (auto& est : instances_) est->Reset();
+      for (int step = 0; step < steps_; ++step) {
+        FeedStep(sim, T_true, c * steps_ + step, &noise);
       }
-      // The same noise draws in every column: differences come from the effects alone.
-      std::mt19937_64 noise_rng(ctx.seed + 7);
-      std::normal_distribution<double> n(0.0, 1.0);
-      for (int c = 0; c < count_; ++c) {
-        ctx.progress("mismatch " + columns_[col], c, count_);
-        Eigen::VectorXd cmd = Eigen::VectorXd::Zero(sim.num_actuated());
-        for (int k = 0; k < nq; ++k) cmd[act[k]] = configs[c][k];
-        sim.SetCommand(cmd);
-        sim.Settle();
-        const lie::SE3 T_true = ToSE3(sim.Pose(ee));
-        std::vector<int> jid(nq);
-        for (int k = 0; k < nq; ++k) {
-          jid[k] = mj_name2id(sim.model(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
-        }
-        // The arm rests while readings stream in (fresh noise each step); filters that need
-        // several steps to converge get them, EKFs restart from each step's prior.
-        for (size_t e = 0; e < E; ++e) instances_[e]->Reset();
-        for (int step = 0; step < steps_; ++step) {
-          const double t = c * steps_ + step;
-          estimators::JointReading joints;
-          joints.t = t;
-          joints.q.resize(nq);
-          joints.std = estimators::JointVector::Constant(nq, encoder_std_);
-          for (int k = 0; k < nq; ++k) {
-            joints.q[k] =
-                sim.MotorPosition(jid[k]) + sim.EncoderOffset(jid[k]) + encoder_std_ * n(noise_rng);
-          }
-          estimators::PositionReading point;
-          point.t = t;
-          point.frame = chain_->end_effector;
-          point.p_base =
-              T_true.translation() + point_std_ * Vec3(n(noise_rng), n(noise_rng), n(noise_rng));
-          point.cov = point_std_ * point_std_ * Mat3::Identity();
-          for (size_t e = 0; e < E; ++e) {
-            estimators::Estimator& est = *instances_[e];
-            est.Predict(t);
-            est.Update(joints);
-            est.Update(point);
-          }
-        }
-        trajectories.AddTruth(c, T_true);
-        for (size_t e = 0; e < E; ++e) {
-          const estimators::Belief b = instances_[e]->Estimate();
-          stats[e][col].Add(b.T_base_ee, b.cov, T_true);
-          trajectories.Add(specs_[e].name, c, b.T_base_ee, b.cov);
-        }
+      trajectories.AddTruth(c, T_true);
+      for (size_t e = 0; e < instances_.size(); ++e) {
+        const estimators::Belief b = instances_[e]->Estimate();
+        (*stats)[e][col].Add(b.T_base_ee, b.cov, T_true);
+        trajectories.Add(specs_[e].name, c, b.T_base_ee, b.cov);
       }
-      trajectories.Write(*ctx.out, "base", columns_[col]);
     }
-    // Metrics, CSV, heat maps.
+    trajectories.Write(*ctx.out, "base", columns_[col]);
+  }
+
+  // Where each declared joint sits among the simulation's actuated joints.
+  std::vector<int> ActuatorIndices(const sim::Simulation& sim) const {
+    const auto& names = sim.actuated_joints();
+    std::vector<int> act(chain_->model.nq());
+    for (int k = 0; k < chain_->model.nq(); ++k) {
+      act[k] = static_cast<int>(std::find(names.begin(), names.end(), chain_->q_joints[k]) -
+                                names.begin());
+    }
+    return act;
+  }
+
+  // One step's readings (the encoders and the tracked point, with noise) into every estimator.
+  void FeedStep(const sim::Simulation& sim, const lie::SE3& T_true, double t, Noise* noise) {
+    const int nq = chain_->model.nq();
+    estimators::JointReading joints;
+    joints.t = t;
+    joints.q.resize(nq);
+    joints.std = estimators::JointVector::Constant(nq, encoder_std_);
+    for (int k = 0; k < nq; ++k) {
+      const int jid = mj_name2id(sim.model(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
+      joints.q[k] = sim.MotorPosition(jid) + sim.EncoderOffset(jid) + encoder_std_ * (*noise)();
+    }
+    estimators::PositionReading point;
+    point.t = t;
+    point.frame = chain_->end_effector;
+    // z, y, x: the order GCC evaluated the arguments of the Vec3(n(), n(), n()) this was, so the
+    // draws (and every output) stay what they were.
+    const double n2 = (*noise)(), n1 = (*noise)(), n0 = (*noise)();
+    point.p_base = T_true.translation() + point_std_ * Vec3(n0, n1, n2);
+    point.cov = point_std_ * point_std_ * Mat3::Identity();
+    for (auto& est : instances_) {
+      est->Predict(t);
+      est->Update(joints);
+      est->Update(point);
+    }
+  }
+
+  // The matrix: one CSV row and one heat-map cell per estimator and effect.
+  struct Matrix {
     std::ostringstream csv;
-    csv << "estimator,effect,pos_err_mean_m,rot_err_mean_deg,nees_mean,nees_dof,nees_bound_high,"
-           "flagged,error_grew,detection_delay_configurations\n";
-    int unflagged = 0, grown = 0;
     render::Heatmap err_map, nees_map;
-    err_map.title = "end-effector position error [mm]";
-    nees_map.title = "mean NEES / its 97.5% bound";
-    err_map.col_labels = nees_map.col_labels = columns_;
-    for (size_t e = 0; e < E; ++e) {
-      err_map.row_labels.push_back(specs_[e].name);
-      nees_map.row_labels.push_back(specs_[e].name);
-      err_map.value.emplace_back();
-      err_map.text.emplace_back();
-      nees_map.value.emplace_back();
-      nees_map.text.emplace_back();
-      nees_map.marked.emplace_back();
-      err_map.marked.emplace_back();
+    int unflagged = 0, grown = 0;
+  };
+
+  void Report(const std::vector<std::vector<ErrorStats>>& stats, RunContext& ctx) const {
+    Matrix mx;
+    mx.csv << "estimator,effect,pos_err_mean_m,rot_err_mean_deg,nees_mean,nees_dof,"
+              "nees_bound_high,flagged,error_grew,detection_delay_configurations\n";
+    mx.err_map.title = "end-effector position error [mm]";
+    mx.nees_map.title = "mean NEES / its 97.5% bound";
+    mx.err_map.col_labels = mx.nees_map.col_labels = columns_;
+    for (size_t e = 0; e < instances_.size(); ++e) {
+      for (render::Heatmap* map : {&mx.err_map, &mx.nees_map}) {
+        map->row_labels.push_back(specs_[e].name);
+        map->value.emplace_back();
+        map->text.emplace_back();
+        map->marked.emplace_back();
+      }
       Json ref;
       stats[e][0].WriteMetrics(&ref);
-      for (size_t col = 0; col < C; ++col) {
-        Json m;
-        stats[e][col].WriteMetrics(&m);
-        m["detection_delay_configurations"] = stats[e][col].mismatch().first_step();
-        (*ctx.summary)["estimators"][specs_[e].name]["metrics"][columns_[col]] = m;
-        const double pos = m["pos_err_mean_m"].get<double>();
-        const double nees = m["nees_mean"].get<double>();
-        const double high =
-            m.contains("nees_bound_high") ? m["nees_bound_high"].get<double>() : std::nan("");
-        const bool flagged = nees > high;
-        const bool grew = col > 0 && pos > growth_ * ref["pos_err_mean_m"].get<double>();
-        grown += grew;
-        unflagged += grew && !flagged;
-        csv << specs_[e].name << "," << columns_[col] << "," << Fmt("%.6g", pos) << ","
-            << Fmt("%.6g", m["rot_err_mean_deg"].get<double>()) << "," << Fmt("%.6g", nees) << ","
-            << m.value("nees_dof", 0.0) << "," << Fmt("%.6g", high) << "," << flagged << "," << grew
-            << "," << stats[e][col].mismatch().first_step() << "\n";
-        err_map.value.back().push_back(1e3 * pos);
-        err_map.text.back().push_back(Fmt("%.2f", 1e3 * pos));
-        err_map.marked.back().push_back(grew);
-        nees_map.value.back().push_back(nees / high);
-        nees_map.text.back().push_back(Fmt("%.3g", nees / high));
-        nees_map.marked.back().push_back(flagged);
+      for (size_t col = 0; col < columns_.size(); ++col) {
+        AddCell(e, col, stats[e][col], ref["pos_err_mean_m"].get<double>(), &mx, ctx);
       }
     }
-    err_map.note = "outlined: error grew > " + Fmt("%.3g", growth_) + "x the 'none' column";
-    nees_map.note = "outlined: NEES above its bound (mismatch flagged)";
-    WriteFileAtomic(ctx.out->File("matrix.csv"), csv.str());
-    render::SaveHeatmapsPng({err_map, nees_map}, 1400, 160 + 60 * static_cast<int>(E),
+    mx.err_map.note = "outlined: error grew > " + Fmt("%.3g", growth_) + "x the 'none' column";
+    mx.nees_map.note = "outlined: NEES above its bound (mismatch flagged)";
+    WriteFileAtomic(ctx.out->File("matrix.csv"), mx.csv.str());
+    render::SaveHeatmapsPng({mx.err_map, mx.nees_map}, 1400,
+                            160 + 60 * static_cast<int>(instances_.size()),
                             ctx.out->File("matrix.png").string());
     Json& m = (*ctx.summary)["metrics"];
     m["effects"] = columns_;
     m["configurations"] = count_;
-    m["cells_with_error_growth"] = grown;
-    m["unflagged_growth_cells"] = unflagged;
+    m["cells_with_error_growth"] = mx.grown;
+    m["unflagged_growth_cells"] = mx.unflagged;
   }
 
- private:
+  // Estimator e under effect col: its metrics, CSV row and cells; `ref_pos` is its error with
+  // no effect.
+  void AddCell(size_t e, size_t col, const ErrorStats& stats, double ref_pos, Matrix* mx,
+               RunContext& ctx) const {
+    Json m;
+    stats.WriteMetrics(&m);
+    m["detection_delay_configurations"] = stats.mismatch().first_step();
+    (*ctx.summary)["estimators"][specs_[e].name]["metrics"][columns_[col]] = m;
+    const double pos = m["pos_err_mean_m"].get<double>();
+    const double nees = m["nees_mean"].get<double>();
+    const double high =
+        m.contains("nees_bound_high") ? m["nees_bound_high"].get<double>() : std::nan("");
+    const bool flagged = nees > high;
+    const bool grew = col > 0 && pos > growth_ * ref_pos;
+    mx->grown += grew;
+    mx->unflagged += grew && !flagged;
+    mx->csv << specs_[e].name << "," << columns_[col] << "," << Fmt("%.6g", pos) << ","
+            << Fmt("%.6g", m["rot_err_mean_deg"].get<double>()) << "," << Fmt("%.6g", nees) << ","
+            << m.value("nees_dof", 0.0) << "," << Fmt("%.6g", high) << "," << flagged << "," << grew
+            << "," << stats.mismatch().first_step() << "\n";
+    mx->err_map.value.back().push_back(1e3 * pos);
+    mx->err_map.text.back().push_back(Fmt("%.2f", 1e3 * pos));
+    mx->err_map.marked.back().push_back(grew);
+    mx->nees_map.value.back().push_back(nees / high);
+    mx->nees_map.text.back().push_back(Fmt("%.3g", nees / high));
+    mx->nees_map.marked.back().push_back(flagged);
+  }
+
   std::string model_path_;
   sim::DeclaredModel declared_;
   std::vector<std::string> columns_;
