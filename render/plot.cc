@@ -163,14 +163,28 @@ std::vector<double> ResolveLimits(Range r, std::optional<double> fixed_lo,
   return ticks;
 }
 
-void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
-  // Plot area inside the cell: room for the title, tick labels and axis labels.
+// The plot area of one axes in its cell and the data-to-pixel map.
+struct PlotArea {
+  cv::Rect area;
+  double x0 = 0.0, x1 = 1.0, y0 = 0.0, y1 = 1.0;
+  std::vector<double> xt, yt;  // ticks
+  int px(double x) const {
+    return static_cast<int>(std::lround(area.x + (x - x0) / (x1 - x0) * area.width));
+  }
+  int py(double y) const {
+    return static_cast<int>(std::lround(area.y + area.height - (y - y0) / (y1 - y0) * area.height));
+  }
+};
+
+// Room for the title, tick labels and axis labels; limits from the data, bars, error bars and
+// reference lines unless the axes fix them.
+PlotArea Layout(const Axes& ax, const cv::Rect& cell) {
   const int left = cell.x + 74;
   const int right = cell.x + cell.width - 18;
   const int top = cell.y + (ax.title.empty() ? 14 : 36);
   const int bottom = cell.y + cell.height - (ax.x_label.empty() ? 30 : 52);
-  const cv::Rect area(left, top, std::max(10, right - left), std::max(10, bottom - top));
-
+  PlotArea pa;
+  pa.area = cv::Rect(left, top, std::max(10, right - left), std::max(10, bottom - top));
   Range xr, yr;
   for (const Series& s : ax.series) {
     for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
@@ -187,45 +201,43 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
     }
   }
   for (const RefLine& l : ax.ref_lines) (l.vertical ? xr : yr).Add(l.value);
-  double x0, x1, y0, y1;
-  const std::vector<double> xt = ResolveLimits(xr, ax.x_min, ax.x_max, &x0, &x1);
-  const std::vector<double> yt = ResolveLimits(yr, ax.y_min, ax.y_max, &y0, &y1);
-  const double xstep = xt.size() > 1 ? xt[1] - xt[0] : 1.0;
-  const double ystep = yt.size() > 1 ? yt[1] - yt[0] : 1.0;
-  const auto px = [&](double x) {
-    return static_cast<int>(std::lround(area.x + (x - x0) / (x1 - x0) * area.width));
-  };
-  const auto py = [&](double y) {
-    return static_cast<int>(std::lround(area.y + area.height - (y - y0) / (y1 - y0) * area.height));
-  };
+  pa.xt = ResolveLimits(xr, ax.x_min, ax.x_max, &pa.x0, &pa.x1);
+  pa.yt = ResolveLimits(yr, ax.y_min, ax.y_max, &pa.y0, &pa.y1);
+  return pa;
+}
 
-  // Grid and ticks.
-  for (double t : xt) {
-    const int x = px(t);
+void DrawGrid(cv::Mat& img, const Axes& ax, const PlotArea& pa) {
+  const cv::Rect& area = pa.area;
+  const double xstep = pa.xt.size() > 1 ? pa.xt[1] - pa.xt[0] : 1.0;
+  const double ystep = pa.yt.size() > 1 ? pa.yt[1] - pa.yt[0] : 1.0;
+  for (double t : pa.xt) {
+    const int x = pa.px(t);
     if (ax.grid) cv::line(img, {x, area.y}, {x, area.y + area.height}, kGridGray, 1);
     cv::line(img, {x, area.y + area.height}, {x, area.y + area.height + 5}, kAxisGray, 1);
     const std::string label = TickLabel(t, xstep);
     const cv::Size s = TextSize(label, kTickFont);
     PutText(img, label, {x - s.width / 2, area.y + area.height + 8 + s.height}, kTickFont);
   }
-  for (double t : yt) {
-    const int y = py(t);
+  for (double t : pa.yt) {
+    const int y = pa.py(t);
     if (ax.grid) cv::line(img, {area.x, y}, {area.x + area.width, y}, kGridGray, 1);
     cv::line(img, {area.x - 5, y}, {area.x, y}, kAxisGray, 1);
     const std::string label = TickLabel(t, ystep);
     const cv::Size s = TextSize(label, kTickFont);
     PutText(img, label, {area.x - 8 - s.width, y + s.height / 2}, kTickFont);
   }
+}
 
-  // Reference lines.
+void DrawRefLines(cv::Mat& img, const Axes& ax, const PlotArea& pa) {
+  const cv::Rect& area = pa.area;
   for (const RefLine& l : ax.ref_lines) {
     const cv::Scalar c = ToScalar(l.color);
     if (l.vertical) {
-      const int x = px(l.value);
+      const int x = pa.px(l.value);
       DrawSegment(img, {x, area.y}, {x, area.y + area.height}, c, 1, l.line, area);
       if (!l.label.empty()) PutText(img, l.label, {x + 4, area.y + 14}, kTickFont, c);
     } else {
-      const int y = py(l.value);
+      const int y = pa.py(l.value);
       DrawSegment(img, {area.x, y}, {area.x + area.width, y}, c, 1, l.line, area);
       if (!l.label.empty()) {
         const cv::Size s = TextSize(l.label, kTickFont);
@@ -233,46 +245,44 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
       }
     }
   }
+}
 
-  // Series: bars, error bars, lines, markers.
-  for (const Series& s : ax.series) {
-    const cv::Scalar c = ToScalar(s.color);
-    const size_t n = std::min(s.x.size(), s.y.size());
-    for (size_t i = 0; s.bar_width > 0.0 && i < n; ++i) {
-      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
-      const cv::Rect bar = cv::Rect(cv::Point(px(s.x[i] - 0.5 * s.bar_width), py(0.0)),
-                                    cv::Point(px(s.x[i] + 0.5 * s.bar_width), py(s.y[i]))) &
-                           area;
-      if (bar.area() == 0) continue;
-      cv::rectangle(img, bar, Tint(s.color), cv::FILLED);
-      cv::rectangle(img, bar, c, 1);
-    }
-    for (size_t i = 0; i < n && i < s.y_err.size(); ++i) {
-      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i]) || !std::isfinite(s.y_err[i])) continue;
-      const int x = px(s.x[i]);
-      const cv::Point a(x, py(s.y[i] - s.y_err[i])), b(x, py(s.y[i] + s.y_err[i]));
-      DrawSegment(img, a, b, c, 1, LineStyle::kSolid, area);
-      DrawSegment(img, {x - 3, a.y}, {x + 3, a.y}, c, 1, LineStyle::kSolid, area);
-      DrawSegment(img, {x - 3, b.y}, {x + 3, b.y}, c, 1, LineStyle::kSolid, area);
-    }
-    for (size_t i = 1; s.bar_width <= 0.0 && i < n; ++i) {
-      if (!std::isfinite(s.x[i - 1]) || !std::isfinite(s.y[i - 1]) || !std::isfinite(s.x[i]) ||
-          !std::isfinite(s.y[i])) {
-        continue;
-      }
-      DrawSegment(img, {px(s.x[i - 1]), py(s.y[i - 1])}, {px(s.x[i]), py(s.y[i])}, c, s.line_width,
-                  s.line, area);
-    }
-    for (size_t i = 0; i < n; ++i) {
-      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
-      const cv::Point p(px(s.x[i]), py(s.y[i]));
-      if (area.contains(p)) DrawMarker(img, p, s.marker, s.marker_size, c);
-    }
+// Bars, error bars, lines, markers (non-finite points skipped).
+void DrawSeries(cv::Mat& img, const Series& s, const PlotArea& pa) {
+  const cv::Rect& area = pa.area;
+  const cv::Scalar c = ToScalar(s.color);
+  const size_t n = std::min(s.x.size(), s.y.size());
+  const auto finite = [&](size_t i) { return std::isfinite(s.x[i]) && std::isfinite(s.y[i]); };
+  for (size_t i = 0; s.bar_width > 0.0 && i < n; ++i) {
+    if (!finite(i)) continue;
+    const cv::Rect bar = cv::Rect(cv::Point(pa.px(s.x[i] - 0.5 * s.bar_width), pa.py(0.0)),
+                                  cv::Point(pa.px(s.x[i] + 0.5 * s.bar_width), pa.py(s.y[i]))) &
+                         area;
+    if (bar.area() == 0) continue;
+    cv::rectangle(img, bar, Tint(s.color), cv::FILLED);
+    cv::rectangle(img, bar, c, 1);
   }
+  for (size_t i = 0; i < n && i < s.y_err.size(); ++i) {
+    if (!finite(i) || !std::isfinite(s.y_err[i])) continue;
+    const int x = pa.px(s.x[i]);
+    const cv::Point a(x, pa.py(s.y[i] - s.y_err[i])), b(x, pa.py(s.y[i] + s.y_err[i]));
+    DrawSegment(img, a, b, c, 1, LineStyle::kSolid, area);
+    DrawSegment(img, {x - 3, a.y}, {x + 3, a.y}, c, 1, LineStyle::kSolid, area);
+    DrawSegment(img, {x - 3, b.y}, {x + 3, b.y}, c, 1, LineStyle::kSolid, area);
+  }
+  for (size_t i = 1; s.bar_width <= 0.0 && i < n; ++i) {
+    if (!finite(i - 1) || !finite(i)) continue;
+    DrawSegment(img, {pa.px(s.x[i - 1]), pa.py(s.y[i - 1])}, {pa.px(s.x[i]), pa.py(s.y[i])}, c,
+                s.line_width, s.line, area);
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (!finite(i)) continue;
+    const cv::Point p(pa.px(s.x[i]), pa.py(s.y[i]));
+    if (area.contains(p)) DrawMarker(img, p, s.marker, s.marker_size, c);
+  }
+}
 
-  cv::rectangle(img, area, kAxisGray, 1);
-
-  // Labels and title.
+void DrawLabels(cv::Mat& img, const Axes& ax, const cv::Rect& cell, const cv::Rect& area) {
   if (!ax.title.empty()) {
     const cv::Size s = TextSize(ax.title, kTitleFont);
     PutText(img, ax.title, {area.x + (area.width - s.width) / 2, cell.y + 24}, kTitleFont);
@@ -283,8 +293,10 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
             kLabelFont);
   }
   PutTextVertical(img, ax.y_label, {cell.x + 14, area.y + area.height / 2}, kLabelFont);
+}
 
-  // Legend.
+// A box in the chosen corner: one row per labelled series (its swatch or line, its marker).
+void DrawLegend(cv::Mat& img, const Axes& ax, const cv::Rect& area) {
   std::vector<const Series*> entries;
   for (const Series& s : ax.series) {
     if (!s.label.empty()) entries.push_back(&s);
@@ -319,6 +331,16 @@ void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
     DrawMarker(img, {bx + 19, y}, s.marker, s.marker_size, c);
     PutText(img, s.label, {bx + 38, y + 5}, kTickFont);
   }
+}
+
+void DrawAxes(cv::Mat& img, const Axes& ax, const cv::Rect& cell) {
+  const PlotArea pa = Layout(ax, cell);
+  DrawGrid(img, ax, pa);
+  DrawRefLines(img, ax, pa);
+  for (const Series& s : ax.series) DrawSeries(img, s, pa);
+  cv::rectangle(img, pa.area, kAxisGray, 1);
+  DrawLabels(img, ax, cell, pa.area);
+  DrawLegend(img, ax, pa.area);
 }
 
 }  // namespace
