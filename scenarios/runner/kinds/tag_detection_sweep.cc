@@ -127,29 +127,18 @@ class TagDetectionSweepKind : public ScenarioKind {
     detector_instance_ = std::make_unique<render::TagDetector>(detector_);
   }
 
+  // Per frame: place the board -> project the true corners -> capture and detect -> score.
   void Run(RunContext& ctx) override {
-    mjModel* m = model_.get();
-    sim::MjDataPtr data = sim::MakeData(m);
-    mjData* d = data.get();
-    mj_forward(m, d);
-    const Eigen::Isometry3d T_w_cam = sim::WorldFromOptical(d, camera_id_);
-    const Eigen::Isometry3d T_cam_w = T_w_cam.inverse();
-    const PinholeCamera cam = sim::CameraIntrinsics(m, camera_id_);
-
-    render::Renderer renderer(m, mode_);
+    sim::MjDataPtr data = sim::MakeData(model_.get());
+    mj_forward(model_.get(), data.get());
+    const View v = MakeView(data.get());
+    render::Renderer renderer(model_.get(), mode_);
     ctx.log("GL_RENDERER: " + renderer.gl_renderer());
     // The sweep is not a dynamic simulation: frame k is taken at t = k / rate, so the stream's
     // clock stamps frames as a camera at `kRate` would.
     constexpr double kRate = 30.0;
     render::CameraStream stream(&renderer, camera_id_, kRate, degradation_, ctx.seed);
     std::mt19937_64 jitter_rng(ctx.seed ^ 0x9e3779b97f4a7c15ULL);
-
-    // The board frame in the optical frame at view 0, rotation 0: the tag faces the camera,
-    // printed x to the right and printed y down in the image (body +z towards the camera).
-    const Mat3 R_cam_board0 = Eigen::Vector3d(1.0, -1.0, -1.0).asDiagonal();
-    const Eigen::Vector3d tag_center_geom = 0.25 * (tag_.corners_geom[0] + tag_.corners_geom[1] +
-                                                    tag_.corners_geom[2] + tag_.corners_geom[3]);
-
     const int total =
         static_cast<int>(distances_.size() * views_.size() * rotations_.size()) * frames_per_pose_;
     std::vector<FrameRow> rows;
@@ -160,102 +149,21 @@ class TagDetectionSweepKind : public ScenarioKind {
       for (double view : views_) {
         for (double rotation : rotations_) {
           for (int rep = 0; rep < frames_per_pose_; ++rep, ++frame) {
-            const double jx = jitter_pos_m_ * (2 * render::Uniform01(jitter_rng) - 1);
-            const double jy = jitter_pos_m_ * (2 * render::Uniform01(jitter_rng) - 1);
-            const double jv = jitter_angle_deg_ * (2 * render::Uniform01(jitter_rng) - 1);
-            const double jr = jitter_angle_deg_ * (2 * render::Uniform01(jitter_rng) - 1);
-            const Mat3 R_cam_board =
-                R_cam_board0 *
-                Eigen::AngleAxisd((view + jv) * M_PI / 180, Eigen::Vector3d::UnitY()).matrix() *
-                Eigen::AngleAxisd((rotation + jr) * M_PI / 180, Eigen::Vector3d::UnitZ()).matrix();
-            // Place the tag's centre (not the board origin) on the optical axis.
-            const Mat3 R_board_geom = GeomInBody(m);
-            const Eigen::Vector3d p_center_board =
-                R_board_geom * tag_center_geom + GeomPosInBody(m);
-            const Eigen::Vector3d p_cam_board =
-                Eigen::Vector3d(jx, jy, distance) - R_cam_board * p_center_board;
-            const Eigen::Vector3d p_w = T_w_cam * p_cam_board;
-            const Quat q_w(T_w_cam.linear() * R_cam_board);
-            for (int i = 0; i < 3; ++i) d->mocap_pos[3 * mocap_id_ + i] = p_w[i];
-            QuatToWxyz(q_w.normalized(), d->mocap_quat + 4 * mocap_id_);
-            mj_forward(m, d);
-
+            PlaceBoard(v, distance, view, rotation, &jitter_rng, data.get());
             FrameRow row;
             row.frame = frame;
             row.distance_m = distance;
             row.view_deg = view;
             row.rotation_deg = rotation;
-            const auto corners_w = render::TagCornersWorld(d, tag_);
-            std::array<Eigen::Vector2d, 4> truth;
-            std::array<Eigen::Vector3d, 4> corners_cam;
-            bool visible = true;
-            for (int k = 0; k < 4; ++k) {
-              corners_cam[k] = T_cam_w * corners_w[k];
-              visible = cam.Project(corners_cam[k], &truth[k]) && visible;
-            }
-            double edge_sum = 0.0;
-            for (int k = 0; k < 4; ++k) edge_sum += (truth[(k + 1) % 4] - truth[k]).norm();
-            row.width_px = edge_sum / 4;
-            const double area =
-                0.5 * std::abs((truth[2] - truth[0]).x() * (truth[3] - truth[1]).y() -
-                               (truth[2] - truth[0]).y() * (truth[3] - truth[1]).x());
-            row.px_per_cell = std::sqrt(area) / tag_.border_cells;
-
-            const render::PixelRect roi = BoundingBox(truth, cam);
+            const TagTruth truth = ProjectTruth(v, data.get(), &row);
+            const render::PixelRect roi = BoundingBox(truth.px, v.cam);
             const render::CameraFrame shot =
-                stream.Capture(d, static_cast<double>(frame) / kRate, &roi);
+                stream.Capture(data.get(), static_cast<double>(frame) / kRate, &roi);
             const render::DetectionResult result = Detect(shot);
-            const render::TagDetection* det = nullptr;
-            int wrong = 0;
-            for (const auto& dd : result.detections) {
-              if (dd.id == tag_.id) {
-                det = &dd;
-              } else {
-                ++wrong;  // a decode that is not the tag in view
-              }
-            }
-            if (det && visible) {
-              double sq = 0.0;
-              double nees = 0.0;
-              for (int k = 0; k < 4; ++k) {
-                const Eigen::Vector2d e = det->corners[k] - truth[k];
-                sq += e.squaredNorm();
-                nees += render::Mahalanobis2(e, det->CornerCov(k));
-              }
-              row.corner_rmse_px = std::sqrt(sq / 4);
-              row.corner_nees = nees / 4;
-              Eigen::Vector2d c_true;
-              cam.Project(
-                  T_cam_w * (0.25 * (corners_w[0] + corners_w[1] + corners_w[2] + corners_w[3])),
-                  &c_true);
-              row.center_err_px = (det->center - c_true).norm();
-              row.est_view_deg = det->view_angle_deg;
-              row.decision_margin = det->decision_margin;
-              if (const auto pose = render::EstimateTagPose(*det, cam, tag_.size_m)) {
-                const Eigen::Isometry3d T_true = TrueTagPose(corners_cam);
-                const Eigen::AngleAxisd dR(T_true.linear().transpose() * pose->T_cam_tag.linear());
-                row.pose_rot_err_deg = std::abs(dR.angle()) * 180 / M_PI;
-                row.pose_pos_err_mm =
-                    1000 * (pose->T_cam_tag.translation() - T_true.translation()).norm();
-                row.pose_det = pose->T_cam_tag.linear().determinant();
-              }
-              row.detected = row.corner_rmse_px <= wrong_corner_px_;
-              row.status = row.detected ? "detected" : "wrong";
-            } else {
-              row.status = result.dropped_small > 0     ? "small"
-                           : result.dropped_grazing > 0 ? "grazing"
-                           : result.dropped_border > 0  ? "border"
-                                                        : "missing";
-            }
-            if (wrong > 0) row.status = "wrong";
-            wrong_ids_ += wrong;
-            dropped_small_ += result.dropped_small;
-            dropped_grazing_ += result.dropped_grazing;
-            dropped_border_ += result.dropped_border;
+            const render::TagDetection* det = Score(result, truth, v, &row);
             rows.push_back(row);
-
             if (std::find(save_at.begin(), save_at.end(), frame) != save_at.end()) {
-              SaveOverlay(ctx, shot.rgb, row, truth, det, cam);
+              SaveOverlay(ctx, shot.rgb, row, truth.px, det, v.cam);
             }
             ctx.progress("frames", frame + 1, total);
           }
@@ -268,6 +176,132 @@ class TagDetectionSweepKind : public ScenarioKind {
   }
 
  private:
+  // The fixed camera, and the board's pose at view 0, rotation 0.
+  struct View {
+    Eigen::Isometry3d T_w_cam, T_cam_w;
+    PinholeCamera cam;
+    // The board frame in the optical frame at view 0, rotation 0: the tag faces the camera,
+    // printed x to the right and printed y down in the image (body +z towards the camera).
+    Mat3 R_cam_board0 = Eigen::Vector3d(1.0, -1.0, -1.0).asDiagonal();
+    Eigen::Vector3d tag_center_geom;
+  };
+
+  View MakeView(const mjData* d) const {
+    View v;
+    v.T_w_cam = sim::WorldFromOptical(d, camera_id_);
+    v.T_cam_w = v.T_w_cam.inverse();
+    v.cam = sim::CameraIntrinsics(model_.get(), camera_id_);
+    v.tag_center_geom = 0.25 * (tag_.corners_geom[0] + tag_.corners_geom[1] + tag_.corners_geom[2] +
+                                tag_.corners_geom[3]);
+    return v;
+  }
+
+  // The board at this pose plus jitter, the tag's centre (not the board origin) on the optical
+  // axis; the mocap body moved and the model forwarded.
+  void PlaceBoard(const View& v, double distance, double view, double rotation,
+                  std::mt19937_64* rng, mjData* d) const {
+    const mjModel* m = model_.get();
+    const double jx = jitter_pos_m_ * (2 * render::Uniform01(*rng) - 1);
+    const double jy = jitter_pos_m_ * (2 * render::Uniform01(*rng) - 1);
+    const double jv = jitter_angle_deg_ * (2 * render::Uniform01(*rng) - 1);
+    const double jr = jitter_angle_deg_ * (2 * render::Uniform01(*rng) - 1);
+    const Mat3 R_cam_board =
+        v.R_cam_board0 *
+        Eigen::AngleAxisd((view + jv) * M_PI / 180, Eigen::Vector3d::UnitY()).matrix() *
+        Eigen::AngleAxisd((rotation + jr) * M_PI / 180, Eigen::Vector3d::UnitZ()).matrix();
+    const Mat3 R_board_geom = GeomInBody(m);
+    const Eigen::Vector3d p_center_board = R_board_geom * v.tag_center_geom + GeomPosInBody(m);
+    const Eigen::Vector3d p_cam_board =
+        Eigen::Vector3d(jx, jy, distance) - R_cam_board * p_center_board;
+    const Eigen::Vector3d p_w = v.T_w_cam * p_cam_board;
+    const Quat q_w(v.T_w_cam.linear() * R_cam_board);
+    for (int i = 0; i < 3; ++i) d->mocap_pos[3 * mocap_id_ + i] = p_w[i];
+    QuatToWxyz(q_w.normalized(), d->mocap_quat + 4 * mocap_id_);
+    mj_forward(m, d);
+  }
+
+  // The tag's true corners: in the world, the camera and the image.
+  struct TagTruth {
+    std::array<Eigen::Vector3d, 4> corners_w, corners_cam;
+    std::array<Eigen::Vector2d, 4> px;
+    bool visible = true;
+  };
+
+  // The true corners, and the row's apparent size (mean edge, pixels per cell).
+  TagTruth ProjectTruth(const View& v, const mjData* d, FrameRow* row) const {
+    TagTruth t;
+    t.corners_w = render::TagCornersWorld(d, tag_);
+    for (int k = 0; k < 4; ++k) {
+      t.corners_cam[k] = v.T_cam_w * t.corners_w[k];
+      t.visible = v.cam.Project(t.corners_cam[k], &t.px[k]) && t.visible;
+    }
+    double edge_sum = 0.0;
+    for (int k = 0; k < 4; ++k) edge_sum += (t.px[(k + 1) % 4] - t.px[k]).norm();
+    row->width_px = edge_sum / 4;
+    const double area = 0.5 * std::abs((t.px[2] - t.px[0]).x() * (t.px[3] - t.px[1]).y() -
+                                       (t.px[2] - t.px[0]).y() * (t.px[3] - t.px[1]).x());
+    row->px_per_cell = std::sqrt(area) / tag_.border_cells;
+    return t;
+  }
+
+  // The row's status and errors from what the detector returned; the tag's detection or null.
+  const render::TagDetection* Score(const render::DetectionResult& result, const TagTruth& t,
+                                    const View& v, FrameRow* row) {
+    const render::TagDetection* det = nullptr;
+    int wrong = 0;
+    for (const auto& dd : result.detections) {
+      if (dd.id == tag_.id) {
+        det = &dd;
+      } else {
+        ++wrong;  // a decode that is not the tag in view
+      }
+    }
+    if (det && t.visible) {
+      ScoreDetection(*det, t, v, row);
+    } else {
+      row->status = result.dropped_small > 0     ? "small"
+                    : result.dropped_grazing > 0 ? "grazing"
+                    : result.dropped_border > 0  ? "border"
+                                                 : "missing";
+    }
+    if (wrong > 0) row->status = "wrong";
+    wrong_ids_ += wrong;
+    dropped_small_ += result.dropped_small;
+    dropped_grazing_ += result.dropped_grazing;
+    dropped_border_ += result.dropped_border;
+    return det;
+  }
+
+  // Corner error and NEES, centre error, and the tag pose's error from the detection.
+  void ScoreDetection(const render::TagDetection& det, const TagTruth& t, const View& v,
+                      FrameRow* row) const {
+    double sq = 0.0;
+    double nees = 0.0;
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::Vector2d e = det.corners[k] - t.px[k];
+      sq += e.squaredNorm();
+      nees += render::Mahalanobis2(e, det.CornerCov(k));
+    }
+    row->corner_rmse_px = std::sqrt(sq / 4);
+    row->corner_nees = nees / 4;
+    Eigen::Vector2d c_true;
+    v.cam.Project(
+        v.T_cam_w * (0.25 * (t.corners_w[0] + t.corners_w[1] + t.corners_w[2] + t.corners_w[3])),
+        &c_true);
+    row->center_err_px = (det.center - c_true).norm();
+    row->est_view_deg = det.view_angle_deg;
+    row->decision_margin = det.decision_margin;
+    if (const auto pose = render::EstimateTagPose(det, v.cam, tag_.size_m)) {
+      const Eigen::Isometry3d T_true = TrueTagPose(t.corners_cam);
+      const Eigen::AngleAxisd dR(T_true.linear().transpose() * pose->T_cam_tag.linear());
+      row->pose_rot_err_deg = std::abs(dR.angle()) * 180 / M_PI;
+      row->pose_pos_err_mm = 1000 * (pose->T_cam_tag.translation() - T_true.translation()).norm();
+      row->pose_det = pose->T_cam_tag.linear().determinant();
+    }
+    row->detected = row->corner_rmse_px <= wrong_corner_px_;
+    row->status = row->detected ? "detected" : "wrong";
+  }
+
   render::DetectionResult Detect(const render::CameraFrame& shot) {
     render::DetectorSettings s = detector_;
     s.pixel_noise_std = shot.gray_noise_std;
