@@ -173,6 +173,15 @@ class ClosedLoopKind : public ScenarioKind {
     }
     // External measurement frames (a tracker) the CSV's `frame` column may name.
     if (const auto f = root.Optional("frames")) frames_ = identify::ParseMeasurementFrames(*f);
+    // The gravity direction (a base mounted tilted) as a candidate: by default with data in an
+    // external frame, whose fitted pose leaves the base's tilt to be seen through the loads
+    // alone; else when asked for, by this key or by name in `candidates`.
+    gravity_tilt_ = root.GetBool("gravity_tilt", !frames_.empty());
+    for (const auto& spec : candidate_specs_) {
+      if (spec.first.rfind("gravity_tilt", 0) == 0 && !root.Has("gravity_tilt")) {
+        gravity_tilt_ = true;
+      }
+    }
     if (const auto mk = root.Optional("markers")) {
       for (const ConfigNode& n : mk->Items()) marker_nodes_.push_back({n.AsString(), n.Where()});
     }
@@ -212,7 +221,7 @@ class ClosedLoopKind : public ScenarioKind {
     chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(mj_.get(), declared_));
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
                                                   camera_.present ? camera_.name : "",
-                                                  MarkerFrames());
+                                                  MarkerFrames(), gravity_tilt_);
     offset_unknown_ = UnknownOffsets();
     if (candidate_specs_.empty()) {
       for (size_t i = 0; i < em_->candidates().size(); ++i) candidates_.push_back(i);
@@ -1154,6 +1163,7 @@ class ClosedLoopKind : public ScenarioKind {
   sim::DeclaredModel declared_;
   std::vector<std::pair<std::string, std::string>> candidate_specs_;
   std::vector<int> candidates_;
+  bool gravity_tilt_ = false;
   identify::IdentifyOptions opt_;
   identify::CameraModel camera_;
   std::vector<identify::MeasurementFrame> frames_;
