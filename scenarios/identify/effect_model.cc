@@ -293,6 +293,19 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
     add(EffectType::kJointOrigin, chain.q_joints[k], k, f, 6, 1e-6, "m, rad");
     candidates_.back().generic_geometry = true;
   }
+  // Joint variables that drive a coupled joint, directly or through another.
+  drives_coupled_.assign(model.nq(), 0);
+  for (bool grew = true; grew;) {
+    grew = false;
+    for (const sim::DeclaredChain::Coupling& cp : chain.couplings) {
+      std::vector<int> drivers;
+      for (const auto& [k, coef] : cp.linear) drivers.push_back(k);
+      if (cp.poly_driver >= 0) drivers.push_back(cp.poly_driver);
+      for (int k : drivers) {
+        if (!drives_coupled_[k]) drives_coupled_[k] = 1, grew = true;
+      }
+    }
+  }
   if (gravity_tilt) {
     add(EffectType::kGravityTilt, "base", -1, -1, 2, 1e-6, "rad");
     gravity_tilt_ = static_cast<int>(candidates_.size()) - 1;
@@ -320,6 +333,7 @@ Eigen::VectorXd EffectModel::ReadingShift(const Eigen::VectorXd& q, const std::v
     }
     t += c.num_params;
   }
+  if (!chain_->couplings.empty()) chain_->PropagateShift(q, &dq);
   return dq;
 }
 
@@ -623,6 +637,8 @@ void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L
     }
     t += c.num_params;
   }
+  // A driver's true angle drives its coupled joints (sim::DeclaredChain::couplings).
+  if (!chain_->couplings.empty()) chain_->PropagateShift(q, &ws.dq);
   if (ws.mount_active) {
     const Vec3 M = L.M_mount + payload * L.M_mount_unit + L.R_mount_T * couple;
     const Vec3 s = L.s_mount + payload * L.s_mount_unit + L.R_mount_point * payload_first;
@@ -755,6 +771,14 @@ bool EffectModel::HasTangent(int c, const std::vector<int>& active) const {
       return !OnBentLink(cand.frame, active, true);
     case EffectType::kBaseCompliance:
       return !OnBentLink(cand.frame, active, false);
+    case EffectType::kJointOffset:
+    case EffectType::kJointCompliance:
+    case EffectType::kBacklash:
+    case EffectType::kTransmissionError:
+    case EffectType::kJointErrorCurve:
+    case EffectType::kStiffeningSpring:
+      // At a driver the correction moves its coupled joints too: not in the tangents.
+      return !drives_coupled_[cand.q_index];
     default:
       return true;
   }

@@ -54,6 +54,10 @@
 // so a gear spring of stiffness k fits as c = -1/k and a play resting on the loaded flank as
 // b = -play/2; moments M are those of the weight itself, so plates and links that sag fit with
 // c > 0. The fit leaves every sign free.
+// Coupled joints (sim::DeclaredChain::couplings) are joint variables like the actuated ones, with
+// their own candidates (their own offset is the linkage's assembly offset: a parameter of its
+// own); a joint-level correction of a driver (offset, compliance, backlash, periodic errors)
+// moves the joints it drives as well, as the driver's true angle drives the linkage.
 // tau_J is the gravity torque the joint carries (MuJoCo masses, nominal configuration), M the
 // moment of the weight beyond a point, in the local frame. Loads are computed once per
 // configuration; a model without masses gives zero loads, and the load-driven candidates are
@@ -298,6 +302,7 @@ class EffectModel {
   bool has_masses_ = false;
   std::vector<Candidate> candidates_;
   int gravity_tilt_ = -1;              // the gravity_tilt candidate, -1 without one
+  std::vector<char> drives_coupled_;   // per joint variable: it drives a coupled joint
   std::vector<char> on_path_;          // frames between the base and the point frame
   std::vector<Vec3> tilt_a_, tilt_b_;  // per joint frame: unit normals of its axis
   std::vector<FrameId> prev_joint_;    // per joint frame: the joint at its link's start, or -1

@@ -218,7 +218,8 @@ class ClosedLoopKind : public ScenarioKind {
     }
     // Model, chain and candidates now: bad names fail before any work.
     mj_ = sim::LoadModel(declared_.model_path);
-    chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(mj_.get(), declared_));
+    chain_ = std::make_unique<sim::DeclaredChain>(
+        sim::BuildDeclaredChain(mj_.get(), declared_, /*with_couplings=*/true));
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
                                                   camera_.present ? camera_.name : "",
                                                   MarkerFrames(), gravity_tilt_);
@@ -446,6 +447,9 @@ class ClosedLoopKind : public ScenarioKind {
     d.frames = frames_;
     d.points = points_;
     d.offset_unknown = offset_unknown_;
+    if (!chain_->couplings.empty() && s.type != Source::Type::kCsv) {
+      throw InputError(s.where + ": coupled joints (the declared model's coupled:) need csv data");
+    }
     switch (s.type) {
       case Source::Type::kMukca:
         for (const std::string& p : s.placements) {
@@ -454,7 +458,11 @@ class ClosedLoopKind : public ScenarioKind {
         }
         break;
       case Source::Type::kCsv: {
-        identify::ReadCalibrationCsv(s.path, chain_->q_joints, &d);
+        std::vector<std::string> coupled;
+        for (const auto& c : chain_->couplings) coupled.push_back(chain_->q_joints[c.q_index]);
+        identify::ReadCalibrationCsv(s.path, chain_->q_joints, &d, coupled);
+        // Coupled joints are never read: their angles follow from the readings of their drivers.
+        for (identify::Observation& o : d.rows) chain_->ApplyCouplings(&o.q);
         for (const auto& [a, b, dist] : s.distances) {
           const auto ia = std::find(d.groups.begin(), d.groups.end(), a);
           const auto ib = std::find(d.groups.begin(), d.groups.end(), b);
@@ -1053,6 +1061,23 @@ class ClosedLoopKind : public ScenarioKind {
         y << (i ? ", " : "") << declared_.observed_frames[i];
       }
       y << "]\n";
+    }
+    if (!declared_.coupled.empty()) {
+      y << "coupled:\n";
+      for (const sim::DeclaredCoupling& c : declared_.coupled) {
+        y << "  " << c.joint << ": ";
+        if (c.from_mjcf) {
+          y << "mjcf\n";
+          continue;
+        }
+        y << "{";
+        for (size_t i = 0; i < c.drivers.size(); ++i) {
+          char v[32];  // every digit: the coupling is geometry, not a fitted value
+          std::snprintf(v, sizeof(v), "%.17g", c.drivers[i].second);
+          y << (i ? ", " : "") << c.drivers[i].first << ": " << v;
+        }
+        y << "}\n";
+      }
     }
     if (!declared_.sources.empty()) {
       y << "sources:\n";
