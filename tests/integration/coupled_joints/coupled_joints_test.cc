@@ -16,6 +16,7 @@
 #include <cmath>
 #include <random>
 
+#include "estimators/kinematics/forward_kinematics.h"
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/identify.h"
 #include "sim/declared_chain.h"
@@ -228,6 +229,57 @@ TEST(CoupledJoints, ChainFollowsTheDeclaredAndMjcfCouplings) {
     worst = std::max(worst, (p - p_mj).norm());
   }
   EXPECT_LT(worst, 1e-12);
+}
+
+// The humanoid's nonlinear wrist (models/humanoid_upper.xml: its linkage as two polynomial
+// <equality><joint> constraints, which a declared model without couplings freezes at their
+// reference) declared `mjcf`: the chain follows the polynomials, checked against MuJoCo's
+// kinematics with the coupled angles evaluated here from the XML's coefficients.
+TEST(CoupledJoints, TheHumanoidsWristPolynomialsFromTheMjcf) {
+  sim::DeclaredModel d =
+      sim::LoadDeclaredModel(testing::SourceDir() + "/models/humanoid_upper.declared.yaml");
+  for (const char* j : {"wrist_coupling_roll", "wrist_coupling_pitch"}) {
+    sim::DeclaredCoupling c;
+    c.joint = j;
+    c.from_mjcf = true;
+    c.where = "test.yaml:1";
+    d.coupled.push_back(c);
+  }
+  const sim::MjModelPtr m = sim::LoadModel(d.model_path);
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), d, true);
+  sim::MjDataPtr data = sim::MakeData(m.get());
+  kinematics::PpoeData pd(chain.model);
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  double worst = 0.0, frozen = 0.0;
+  for (int t = 0; t < 20; ++t) {
+    Eigen::VectorXd q = Eigen::VectorXd::Zero(chain.model.nq());
+    for (int k = 0; k < q.size(); ++k) q[k] = chain.IsCoupled(k) ? 0.0 : u(rng);
+    chain.ApplyCouplings(&q);
+    kinematics::ForwardKinematics(chain.model, pd, q);
+    mju_copy(data->qpos, m->qpos0, m->nq);
+    chain.WriteQpos(q, data->qpos);
+    const auto qpos = [&](const char* j) -> double& {
+      return data->qpos[m->jnt_qposadr[mj_name2id(m.get(), mjOBJ_JOINT, j)]];
+    };
+    const double x = qpos("wrist_pitch"), y = qpos("wrist_yaw");
+    qpos("wrist_coupling_roll") = 0.12 * x * x + 0.02 * x * x * x;  // polycoef="0 0 0.12 0.02 0"
+    qpos("wrist_coupling_pitch") = -0.10 * y * y;                   // polycoef="0 0 -0.10 0 0"
+    mj_kinematics(m.get(), data.get());
+    const int s = mj_name2id(m.get(), mjOBJ_SITE, "index_tip");
+    const Vec3 p_mj(data->site_xpos[3 * s], data->site_xpos[3 * s + 1], data->site_xpos[3 * s + 2]);
+    worst = std::max(worst, (pd.T_base_frame[chain.end_effector].translation() - p_mj).norm());
+    qpos("wrist_coupling_roll") = qpos("wrist_coupling_pitch") = 0.0;
+    mj_kinematics(m.get(), data.get());
+    frozen = std::max(frozen, (Vec3(data->site_xpos[3 * s], data->site_xpos[3 * s + 1],
+                                    data->site_xpos[3 * s + 2]) -
+                               p_mj)
+                                  .norm());
+  }
+  std::printf("humanoid wrist: coupled chain vs MuJoCo %.3g m (frozen linkage: %.3g m)\n", worst,
+              frozen);
+  EXPECT_LT(worst, 1e-12);
+  EXPECT_GT(frozen, 1e-3);
 }
 
 // A driver's offset moves its coupled joint in the identification's model as it does in MuJoCo
