@@ -9,6 +9,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <filesystem>
 #include <random>
 
 #include "estimators/kinematics/forward_kinematics.h"
@@ -26,6 +27,8 @@
 
 namespace flexbench::identify {
 namespace {
+
+namespace fs = std::filesystem;
 
 constexpr double kNoise = 1e-4;  // tracker noise per axis, m
 constexpr double kDeg = M_PI / 180.0;
@@ -400,6 +403,62 @@ TEST(GravityTilt, AnUnknownLoadPathIsNotPassedOffAsATilt) {
       tilt_named, kSeeds, explained, 2 * kSeeds);
   EXPECT_EQ(tilt_named, 0);
   EXPECT_EQ(explained, 0);
+}
+
+// The closed_loop kind end to end: tracker rows in CSV files (every declared joint, x, y, z,
+// frame) of the tilted truth; with `frames:` the tilt is a candidate by default, is named, goes
+// into declared_augmented.yaml, and that file loads as an estimator's model; `gravity_tilt:
+// false` leaves it out of the library.
+TEST(GravityTilt, ClosedLoopScenarioNamesItAndWritesItOut) {
+  auto rig = MakeRig(2.5 * kDeg, 0.6);
+  std::mt19937_64 rng(11);
+  const lie::SE3 T_tracker = TrackerPose(rng);
+  testing::TempDir dir;
+  const auto write = [&](const DataSet& d, const std::string& name) {
+    std::string csv;
+    for (const std::string& j : rig->chain.q_joints) csv += j + ",";
+    csv += "x,y,z,frame\n";
+    char b[64];
+    for (const Observation& o : d.rows) {
+      for (int k = 0; k < o.q.size(); ++k) {
+        std::snprintf(b, sizeof(b), "%.17g,", o.q[k]);
+        csv += b;
+      }
+      for (int k = 0; k < 3; ++k) {
+        std::snprintf(b, sizeof(b), "%.17g,", o.p_frame[k]);
+        csv += b;
+      }
+      csv += "tracker\n";
+    }
+    testing::WriteFile(dir.path() / name, csv);
+  };
+  write(TrackerData(*rig, T_tracker, 90, rng), "cal.csv");
+  write(TrackerData(*rig, T_tracker, 40, rng), "val.csv");
+  const std::string models = testing::SourceDir() + "/models/";
+  testing::WriteFile(dir.path() / "s.yaml", "scenario: tilt\nkind: closed_loop\nseed: 1\nmodel: " +
+                                                models + "rover_arm.xml\ndeclared: " + models +
+                                                "rover_arm.declared.yaml\nframes:\n  tracker: "
+                                                "{}\ncalibration: {csv: cal.csv}\nvalidation: "
+                                                "{csv: val.csv}\npoint_std_m: 1.0e-4\n");
+  const auto run = [&](const std::string& extra, const std::string& out) {
+    return testing::RunCommand(testing::BinDir() + "/flexbench run " +
+                               (dir.path() / "s.yaml").string() + " --out " +
+                               (dir.path() / out).string() + " --quiet " + extra);
+  };
+  const testing::CommandResult r = run("", "out");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string summary = testing::ReadFile(dir.path() / "out" / "summary.json");
+  EXPECT_NE(summary.find("\"effect\": \"gravity_tilt@base\""), std::string::npos);
+  const fs::path aug = dir.path() / "out" / "declared_augmented.yaml";
+  EXPECT_NE(testing::ReadFile(aug).find("- effect: gravity_tilt@base"), std::string::npos);
+  const sim::DeclaredModel d = sim::LoadDeclaredModel(aug.string());
+  const sim::MjModelPtr m = sim::LoadModel(d.model_path);
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), d);
+  EXPECT_GT(std::hypot(chain.effects.g_base.x(), chain.effects.g_base.y()), 0.2);  // ~2.5 deg
+  const testing::CommandResult off = run("--set gravity_tilt=false", "out_off");
+  ASSERT_EQ(off.exit_code, 0) << off.err;
+  EXPECT_EQ(testing::ReadFile(dir.path() / "out_off" / "summary.json").find("gravity_tilt@base"),
+            std::string::npos);
 }
 
 }  // namespace
