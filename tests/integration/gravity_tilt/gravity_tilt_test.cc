@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <random>
 
 #include "estimators/kinematics/forward_kinematics.h"
@@ -455,6 +456,15 @@ TEST(GravityTilt, ClosedLoopScenarioNamesItAndWritesItOut) {
   const sim::MjModelPtr m = sim::LoadModel(d.model_path);
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), d);
   EXPECT_GT(std::hypot(chain.effects.g_base.x(), chain.effects.g_base.y()), 0.2);  // ~2.5 deg
+  // Same seed, same bytes, whatever the number of threads.
+  const testing::CommandResult one = run("--set threads=1", "out_1");
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  nlohmann::json a = nlohmann::json::parse(summary), b = nlohmann::json::parse(testing::ReadFile(
+                                                         dir.path() / "out_1" / "summary.json"));
+  EXPECT_EQ(a["metrics"], b["metrics"]);
+  EXPECT_EQ(a["identification"], b["identification"]);
+  EXPECT_EQ(testing::ReadFile(aug),
+            testing::ReadFile(dir.path() / "out_1" / "declared_augmented.yaml"));
   const testing::CommandResult off = run("--set gravity_tilt=false", "out_off");
   ASSERT_EQ(off.exit_code, 0) << off.err;
   EXPECT_EQ(testing::ReadFile(dir.path() / "out_off" / "summary.json").find("gravity_tilt@base"),
