@@ -759,6 +759,24 @@ class ClosedLoopKind : public ScenarioKind {
     return out;
   }
 
+  // d q / d readings at q: the identity on the read joints, the couplings' derivatives (central
+  // differences: exact for the linear ones) on the coupled ones, zero columns for those.
+  Eigen::MatrixXd ReadingToJoints(const Eigen::VectorXd& q) const {
+    const int nq = static_cast<int>(q.size());
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(nq, nq);
+    constexpr double kStep = 1e-6;
+    for (int k = 0; k < nq; ++k) {
+      if (chain_->IsCoupled(k)) continue;
+      Eigen::VectorXd up = Eigen::VectorXd::Zero(nq), down = up;
+      up[k] = kStep;
+      down[k] = -kStep;
+      chain_->PropagateShift(q, &up);
+      chain_->PropagateShift(q, &down);
+      A.col(k) = (up - down) / (2.0 * kStep);
+    }
+    return A;
+  }
+
   // Per row, the readings' noise through the declared kinematics at the row's marker.
   std::vector<Mat3> ReadingNoise(const DataSet& d) const {
     const kinematics::PpoeModel& model = chain_->model;
@@ -769,8 +787,9 @@ class ClosedLoopKind : public ScenarioKind {
       kinematics::ForwardKinematics(model, pd, d.rows[r].q);
       const kinematics::FrameId f = em_->points()[d.rows[r].point];  // the row's marker
       kinematics::ComputeFrameJacobian(model, pd, f, J);
-      const Eigen::Matrix<double, 3, Eigen::Dynamic> Jp =
-          pd.T_base_frame[f].rotation() * J.topRows<3>();
+      Eigen::Matrix<double, 3, Eigen::Dynamic> Jp = pd.T_base_frame[f].rotation() * J.topRows<3>();
+      // Coupled joints have no reading: their noise is their drivers', through the couplings.
+      if (!chain_->couplings.empty()) Jp = Jp * ReadingToJoints(d.rows[r].q);
       S[r] = reading_std_rad_ * reading_std_rad_ * Jp * Jp.transpose();
     }
     return S;

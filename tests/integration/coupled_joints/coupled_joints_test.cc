@@ -458,6 +458,15 @@ TEST(CoupledJoints, IdentifyCliReadsCsvWithoutCoupledColumns) {
   const std::string aug = testing::ReadFile(dir / "out" / "declared_augmented.yaml");
   EXPECT_NE(aug.find("coupled:\n  j4: {j2: -1, j3: -1}\n  j5: mjcf\n"), std::string::npos) << aug;
   EXPECT_NE(aug.find("joint_offset@j4"), std::string::npos) << aug;
+  // The readings' noise (reading_std_deg) reaches the coupled joints through their drivers.
+  const testing::CommandResult n = testing::RunCommand(
+      testing::BinDir() + "/flexbench identify --declared " + (dir / "arm.declared.yaml").string() +
+      " --calibration " + (dir / "cal.csv").string() + " --validation " +
+      (dir / "val.csv").string() + " --point-std 5e-5 --set reading_std_deg=0.001 --out " +
+      (dir / "out_n").string() + " --quiet");
+  ASSERT_EQ(n.exit_code, 0) << n.err;
+  EXPECT_NE(testing::ReadFile(dir / "out_n" / "summary.json").find("cal_rss_over_reading_noise"),
+            std::string::npos);
   testing::WriteFile(dir / "bad.yaml", std::string(kCoupled) + "  j7: {j1: 1}\n");
   const testing::CommandResult b = testing::RunCommand(
       testing::BinDir() + "/flexbench identify --declared " + (dir / "bad.yaml").string() +
