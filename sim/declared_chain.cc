@@ -1,5 +1,6 @@
 #include "sim/declared_chain.h"
 
+#include <functional>
 #include <map>
 #include <set>
 
@@ -36,6 +37,21 @@ class ChainBuilder {
       }
       if (!actuated_.insert(id).second) Fail("actuated_joints: '" + j + "' is listed twice");
     }
+    for (const DeclaredCoupling& c : d_.coupled) {
+      const int id = mj_name2id(m_, mjOBJ_JOINT, c.joint.c_str());
+      if (id < 0) {
+        throw InputError(c.where + ": no joint named '" + CapForMessage(c.joint) + "' in " +
+                         d_.model_path);
+      }
+      if (m_->jnt_type[id] != mjJNT_HINGE && m_->jnt_type[id] != mjJNT_SLIDE) {
+        throw InputError(c.where + ": joint '" + c.joint + "' is not a hinge or slide joint");
+      }
+      if (actuated_.count(id)) {
+        throw InputError(c.where + ": joint '" + c.joint +
+                         "' is in actuated_joints (read); a coupled joint follows its drivers");
+      }
+      coupled_.insert(id);
+    }
     for (const DeclaredSource& s : d_.sources) {
       const int j = mj_name2id(m_, mjOBJ_JOINT, s.at.c_str());
       const int b = mj_name2id(m_, mjOBJ_BODY, s.at.c_str());
@@ -63,6 +79,10 @@ class ChainBuilder {
     for (const int j : actuated_) {
       if (!used_joints_.count(j)) EnsureBody(m_->jnt_bodyid[j]);
     }
+    for (const int j : coupled_) {
+      if (!used_joints_.count(j)) EnsureBody(m_->jnt_bodyid[j]);
+    }
+    ResolveCouplings();
     for (const auto& [j, sources] : joint_sources_) {
       if (!used_joints_.count(j)) {
         throw InputError(sources.front()->where + ": source at '" + sources.front()->at +
@@ -79,6 +99,67 @@ class ChainBuilder {
 
  private:
   [[noreturn]] void Fail(const std::string& msg) const { throw InputError(d_.file + ": " + msg); }
+
+  // The couplings' drivers as joint variables, in evaluation order (drivers first).
+  void ResolveCouplings() {
+    const auto index = [&](const std::string& name, const std::string& where) {
+      for (size_t k = 0; k < out_->q_joints.size(); ++k) {
+        if (out_->q_joints[k] == name) return static_cast<int>(k);
+      }
+      throw InputError(where + ": driver '" + CapForMessage(name) +
+                       "' is not an actuated or coupled joint of the declared model");
+    };
+    std::vector<DeclaredChain::Coupling> all;
+    for (const DeclaredCoupling& c : d_.coupled) {
+      DeclaredChain::Coupling k;
+      k.q_index = index(c.joint, c.where);
+      k.where = c.where;
+      for (size_t i = 0; i < c.drivers.size(); ++i) {
+        k.linear.emplace_back(index(c.drivers[i].first, c.driver_where[i]), c.drivers[i].second);
+      }
+      if (c.from_mjcf) {
+        const int id = mj_name2id(m_, mjOBJ_JOINT, c.joint.c_str());
+        int eq = -1;
+        for (int e = 0; e < m_->neq && eq < 0; ++e) {
+          if (m_->eq_type[e] == mjEQ_JOINT && m_->eq_obj1id[e] == id && m_->eq_obj2id[e] >= 0) {
+            eq = e;
+          }
+        }
+        if (eq < 0) {
+          throw InputError(c.where + ": mjcf: the model has no <equality><joint> with joint1 '" +
+                           c.joint + "' and a joint2");
+        }
+        k.poly_driver = index(ObjectName(m_, mjOBJ_JOINT, m_->eq_obj2id[eq]), c.where);
+        for (int i = 0; i < 5; ++i) k.poly[i] = m_->eq_data[eq * mjNEQDATA + i];
+      }
+      all.push_back(std::move(k));
+    }
+    // Depth-first, drivers before what they drive; a driver met again on the way is a cycle.
+    std::vector<int> state(all.size(), 0);  // 0 new, 1 on the path, 2 done
+    std::vector<std::string> path;
+    const std::function<void(size_t)> visit = [&](size_t i) {
+      if (state[i] == 2) return;
+      path.push_back(out_->q_joints[all[i].q_index]);
+      if (state[i] == 1) {
+        std::string cycle;
+        for (const std::string& n : path) cycle += (cycle.empty() ? "" : " -> ") + n;
+        throw InputError(all[i].where + ": coupled joints form a cycle: " + cycle);
+      }
+      state[i] = 1;
+      std::vector<int> drivers;
+      for (const auto& [k, coef] : all[i].linear) drivers.push_back(k);
+      if (all[i].poly_driver >= 0) drivers.push_back(all[i].poly_driver);
+      for (int k : drivers) {
+        for (size_t o = 0; o < all.size(); ++o) {
+          if (all[o].q_index == k) visit(o);
+        }
+      }
+      state[i] = 2;
+      path.pop_back();
+      out_->couplings.push_back(all[i]);
+    };
+    for (size_t i = 0; i < all.size(); ++i) visit(i);
+  }
 
   FrameId AddTarget(const std::string& name, const std::string& key) {
     const std::string typed = TypedFrameName(m_, name);
@@ -135,7 +216,8 @@ class ChainBuilder {
       }
       const Vec3 anchor = Eigen::Map<const Vec3>(m_->jnt_pos + 3 * j);
       const Vec3 axis = Eigen::Map<const Vec3>(m_->jnt_axis + 3 * j).normalized();
-      const bool actuated = actuated_.count(j) > 0;
+      // A coupled joint moves like an actuated one; its angle comes from its drivers.
+      const bool actuated = actuated_.count(j) > 0 || coupled_.count(j) > 0;
       Joint joint = Joint::Fixed();
       if (actuated) joint = type == mjJNT_HINGE ? Joint::Revolute(axis) : Joint::Prismatic(axis);
       const auto src = joint_sources_.find(j);
@@ -164,6 +246,7 @@ class ChainBuilder {
   const DeclaredModel& d_;
   DeclaredChain* out_;
   std::set<int> actuated_;
+  std::set<int> coupled_;
   std::set<int> used_joints_;
   std::map<int, std::vector<const DeclaredSource*>> joint_sources_;
   std::map<int, std::vector<const DeclaredSource*>> body_sources_;
@@ -180,11 +263,53 @@ std::string TypedFrameName(const mjModel* m, const std::string& name) {
   return "";
 }
 
-DeclaredChain BuildDeclaredChain(const mjModel* m, const DeclaredModel& declared) {
-  DeclaredChain chain{kinematics::PpoeModel(declared.file), {}, {}, {}, 0, -1, {}, {}};
+DeclaredChain BuildDeclaredChain(const mjModel* m, const DeclaredModel& declared,
+                                 bool with_couplings) {
+  if (!with_couplings && !declared.coupled.empty()) {
+    throw InputError(declared.coupled.front().where +
+                     ": coupled joints are read by identification only (closed_loop, identify); "
+                     "the estimators need a reading of every joint of their chain");
+  }
+  DeclaredChain chain{kinematics::PpoeModel(declared.file), {}, {}, {}, 0, -1, {}, {}, {}};
   ChainBuilder(m, declared, &chain).Build();
   ApplyIdentifiedEffects(m, declared, &chain);
   return chain;
+}
+
+bool DeclaredChain::IsCoupled(int k) const {
+  for (const Coupling& c : couplings) {
+    if (c.q_index == k) return true;
+  }
+  return false;
+}
+
+namespace {
+
+double Polynomial(const std::array<double, 5>& a, double x) {
+  return a[0] + x * (a[1] + x * (a[2] + x * (a[3] + x * a[4])));
+}
+
+}  // namespace
+
+void DeclaredChain::ApplyCouplings(Eigen::VectorXd* q) const {
+  for (const Coupling& c : couplings) {
+    double v = 0.0;
+    for (const auto& [k, coef] : c.linear) v += coef * (*q)[k];
+    if (c.poly_driver >= 0) v += Polynomial(c.poly, (*q)[c.poly_driver]);
+    (*q)[c.q_index] = v;
+  }
+}
+
+void DeclaredChain::PropagateShift(const Eigen::VectorXd& q, Eigen::VectorXd* dq) const {
+  for (const Coupling& c : couplings) {
+    double v = 0.0;
+    for (const auto& [k, coef] : c.linear) v += coef * (*dq)[k];
+    if (c.poly_driver >= 0) {
+      const double x = q[c.poly_driver];
+      v += Polynomial(c.poly, x + (*dq)[c.poly_driver]) - Polynomial(c.poly, x);
+    }
+    (*dq)[c.q_index] += v;
+  }
 }
 
 Eigen::VectorXd DeclaredChain::QFromQpos(const double* qpos) const {

@@ -12,6 +12,7 @@
 #include <mujoco/mujoco.h>
 
 #include <Eigen/Core>
+#include <array>
 #include <string>
 #include <utility>
 #include <vector>
@@ -42,9 +43,28 @@ struct DeclaredChain {
     return effects.empty() ? nullptr : &effects;
   }
 
+  // Coupled joints (DeclaredModel::coupled): PPOE joint variables like the actuated ones, whose
+  // angle follows from their drivers' instead of a reading. In evaluation order: a driver that
+  // is coupled itself comes first.
+  struct Coupling {
+    int q_index = -1;
+    std::vector<std::pair<int, double>> linear;  // (driver variable, coefficient)
+    int poly_driver = -1;  // the MJCF's polynomial: q = sum_k poly[k] x^k, x that driver
+    std::array<double, 5> poly{};
+    std::string where;  // the declared entry, for messages
+  };
+  std::vector<Coupling> couplings;
+  bool IsCoupled(int k) const;
+  // The coupled variables of q from their drivers (the readings' entries are left alone).
+  void ApplyCouplings(Eigen::VectorXd* q) const;
+  // Adds to dq's coupled entries what dq's driver entries move them by at q (a driver's true
+  // angle drives the linkage): with q coupled (ApplyCouplings), q + dq is coupled again, plus
+  // the coupled joints' own entries of dq.
+  void PropagateShift(const Eigen::VectorXd& q, Eigen::VectorXd* dq) const;
+
   // PPOE joint vector from a MuJoCo qpos.
   Eigen::VectorXd QFromQpos(const double* qpos) const;
-  // Writes q into qpos (actuated joints only).
+  // Writes q into qpos (actuated and coupled joints).
   void WriteQpos(const Eigen::VectorXd& q, double* qpos) const;
   // Index of MJCF joint `name` in q; throws InputError when it is not actuated.
   int QIndex(const std::string& joint) const;
@@ -54,8 +74,14 @@ struct DeclaredChain {
 
 // Builds the chain and applies the declared file's identified effects (sim/declared_effects.h).
 // Throws InputError naming the declared file (and line) for a joint, body, site or frame the
-// model lacks, a source off the chain, an unsupported joint type, or a bad identified effect.
-DeclaredChain BuildDeclaredChain(const mjModel* m, const DeclaredModel& declared);
+// model lacks, a source off the chain, an unsupported joint type, a bad identified effect, or a
+// coupling naming a joint the model lacks, an actuated joint as coupled, a driver that is not
+// declared, `mjcf` without a two-joint <equality><joint> on the joint, or a cycle.
+// `with_couplings`: the caller maps readings to joint variables with ApplyCouplings (the
+// identification does); without it a declared file with `coupled:` is refused, since the
+// estimators need a reading of every joint variable of their chain.
+DeclaredChain BuildDeclaredChain(const mjModel* m, const DeclaredModel& declared,
+                                 bool with_couplings = false);
 
 // Resolves a frame name of the model the way declared files do: a site, then a geom, a camera,
 // then a body. Returns the typed PPOE frame name ("site/ee"), or "" when none matches.

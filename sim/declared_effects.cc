@@ -37,6 +37,7 @@ const std::map<std::string, TypeInfo>& Types() {
       {"transmission_error", {4, false}},
       {"joint_error_curve", {6, false}},
       {"stiffening_spring", {2, true}},
+      {"gravity_tilt", {2, true}},
   };
   return types;
 }
@@ -123,6 +124,12 @@ class EffectsBuilder {
       e.payload_frame = f;
       e.payload.mass += v[0];
       e.payload.first_moment += Vec3(v[1], v[2], v[3]);
+    } else if (type == "gravity_tilt") {
+      // The base mounted tilted: gravity turns in the base frame, and every load with it.
+      if (loc != "base") Fail(ie, "turns gravity in the base frame: its location is 'base'");
+      if (gravity_tilted_) Fail(ie, "is given twice");
+      gravity_tilted_ = true;
+      e.g_base = kinematics::TiltedGravity(e.g_base, v[0], v[1]);
     } else if (type == "base_compliance") {
       const FrameId f = AnyFrame(ie, loc);
       if (f != e.mount) {
@@ -138,8 +145,8 @@ class EffectsBuilder {
 
   // The effect's parameter stds (if given) as ModelEffects::Uncertainty: variances per term;
   // the geometric terms as a twist covariance at the frame's source, whose axes are the fixed
-  // part's (a translation d in parent axes is R^T d there). A payload's uncertainty is not
-  // carried (it would act through every load-driven term at once).
+  // part's (a translation d in parent axes is R^T d there). A payload's or a gravity tilt's
+  // uncertainty is not carried (it would act through every load-driven term at once).
   void AddVariance(const IdentifiedEffect& ie) {
     if (ie.std.empty()) return;
     const size_t at = ie.effect.find('@');
@@ -166,7 +173,7 @@ class EffectsBuilder {
       for (int k = 0; k < 3; ++k) translation(f, Vec3::Unit(k), v2[k]);
     } else if (type == "base_compliance") {
       u.mount_compliance += Eigen::Vector2d(v2[0], v2[1]);
-    } else if (type != "payload") {
+    } else if (type != "payload" && type != "gravity_tilt") {
       AddJointVariance(ie, type, JointIndex(ie, loc), v2);
     }
   }
@@ -328,6 +335,7 @@ class EffectsBuilder {
   DeclaredChain* chain_;
   const kinematics::PpoeModel& model_;
   kinematics::PpoeData pd_;
+  bool gravity_tilted_ = false;
 };
 
 }  // namespace

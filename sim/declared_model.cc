@@ -32,6 +32,38 @@ std::vector<std::string> ReadNames(const ConfigNode& node) {
   return names;
 }
 
+// `coupled:`, a map joint -> {driver: coefficient, ...} or `mjcf`. Only the format here: the
+// names and cycles need the model (BuildDeclaredChain).
+std::vector<DeclaredCoupling> ReadCouplings(const ConfigNode& node) {
+  if (!node.IsMap()) node.Fail("expected a map: coupled joint -> {driver: coefficient} or mjcf");
+  std::vector<DeclaredCoupling> out;
+  for (const std::string& joint : node.Keys()) {
+    const ConfigNode entry = node.Child(joint);
+    DeclaredCoupling c;
+    c.joint = joint;
+    c.where = entry.WhereKey();
+    if (entry.IsScalar()) {
+      if (entry.AsString() != "mjcf") {
+        entry.Fail("expected mjcf (the model's <equality><joint>) or {driver: coefficient}");
+      }
+      c.from_mjcf = true;
+    } else if (entry.IsMap()) {
+      for (const std::string& driver : entry.Keys()) {
+        const ConfigNode coef = entry.Child(driver);
+        const double v = coef.AsDouble();
+        if (!std::isfinite(v)) coef.Fail("a coefficient must be a finite number");
+        c.drivers.emplace_back(driver, v);
+        c.driver_where.push_back(coef.WhereKey());
+      }
+      if (c.drivers.empty()) entry.Fail("a coupled joint needs at least one driver");
+    } else {
+      entry.Fail("expected mjcf (the model's <equality><joint>) or {driver: coefficient}");
+    }
+    out.push_back(std::move(c));
+  }
+  return out;
+}
+
 }  // namespace
 
 DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
@@ -114,6 +146,7 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
       d.identified_effects.push_back(ie);
     }
   }
+  if (const auto coupled = node.Optional("coupled")) d.coupled = ReadCouplings(*coupled);
   // Checked last, so format errors come first. (In a scenario's inline `declared:` block the
   // scenario's own `model` is what is loaded; a path here that names nothing is still an error.)
   std::error_code ec;

@@ -13,6 +13,10 @@
 //       covariance: [36 numbers]    # or a full 6x6, [rho; theta] order, SI units
 //   identified_effects:             # written by closed_loop / `flexbench identify`
 //     - {effect: joint_offset@j3, value: [-0.0052], std: [1e-5], unit: rad}
+//   coupled:                        # joints driven by others, never read (issue 20)
+//     torso_pitch_3: {torso_pitch_1: -1, torso_pitch_2: -1}   # q = sum_j c_j q_j
+//     wrist_follower: mjcf          # the MJCF's <equality><joint> on it (a polynomial of one
+//                                   # driver: q = a0 + a1 x + ... + a4 x^4, angles from qpos0)
 //
 // Identified effects are applied by BuildDeclaredChain (sim/declared_effects.h): every estimator
 // given the chain's effects predicts with the corrected model.
@@ -22,6 +26,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "estimators/conventions.h"
@@ -45,6 +50,16 @@ struct IdentifiedEffect {
   std::string where;
 };
 
+// A coupled joint (`coupled:`): a hinge or slide of the model driven by other declared joints
+// (actuated or coupled themselves, without cycles). Names are checked by BuildDeclaredChain.
+struct DeclaredCoupling {
+  std::string joint;
+  std::vector<std::pair<std::string, double>> drivers;  // q = sum c_j q_j; empty with from_mjcf
+  std::vector<std::string> driver_where;                // "<file>:<line>" of each driver's key
+  bool from_mjcf = false;  // the model's <equality><joint> with this joint as joint1
+  std::string where;       // "<file>:<line>: key 'coupled.<joint>'"
+};
+
 struct DeclaredModel {
   std::string file;        // the declared-model file
   std::string model_path;  // resolved MJCF/URDF path
@@ -54,6 +69,7 @@ struct DeclaredModel {
   std::vector<std::string> observed_frames;
   std::vector<DeclaredSource> sources;
   std::vector<IdentifiedEffect> identified_effects;
+  std::vector<DeclaredCoupling> coupled;
 };
 
 // Reads and checks the format (not the names: see BuildDeclaredChain). Throws InputError

@@ -265,6 +265,27 @@ Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& fi
 
 Mat3 MountRotation(const Vec3& theta) { return RotationFrom(TrigAt(theta)); }
 
+void GravityTiltAxes(const Vec3& g, Vec3* a1, Vec3* a2) {
+  const Vec3 up = -g.normalized();
+  const Vec3 any = std::abs(up.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+  *a1 = (any - any.dot(up) * up).normalized();
+  *a2 = up.cross(*a1);
+}
+
+Vec3 GravityTiltWeights(double phi1, double phi2) {
+  const double t = std::hypot(phi1, phi2);
+  // sin(t) / t, by its series where the quotient would lose digits.
+  const double sinc = t < 1e-4 ? 1.0 - t * t / 6.0 : std::sin(t) / t;
+  return Vec3(std::cos(t), sinc * phi1, sinc * phi2);
+}
+
+Vec3 TiltedGravity(const Vec3& g, double phi1, double phi2) {
+  Vec3 a1, a2;
+  GravityTiltAxes(g, &a1, &a2);
+  const Vec3 w = GravityTiltWeights(phi1, phi2);
+  return w[0] * g + w[1] * a1.cross(g) + w[2] * a2.cross(g);
+}
+
 EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* effects)
     : declared_(&declared),
       effects_(effects && !effects->empty() ? effects : nullptr),

@@ -130,6 +130,17 @@ Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& fi
 // which a fit of the linear model pushed into a 2% error of the roll compliance.
 Mat3 MountRotation(const Vec3& theta);
 
+// Gravity turned by a tilted mounting of the base (the identified gravity_tilt@base): phi_1
+// about a_1 and phi_2 about a_2, the base's horizontal axes (normal to g: a_1 the base's x made
+// normal to g, or its y where x lies along g; a_2 = (-g / |g|) x a_1; x and y for g along -z).
+// The rotation is exact: Exp(phi_1 a_1 + phi_2 a_2) g = w_0 g + w_1 (a_1 x g) + w_2 (a_2 x g)
+// with (w_0, w_1, w_2) = GravityTiltWeights (Rodrigues' formula, the axis normal to g). Loads
+// are linear in g, so the identification combines loads computed once for g, a_1 x g and
+// a_2 x g with these weights instead of recomputing them per parameter value.
+void GravityTiltAxes(const Vec3& g, Vec3* a1, Vec3* a2);
+Vec3 GravityTiltWeights(double phi1, double phi2);
+Vec3 TiltedGravity(const Vec3& g, double phi1, double phi2);
+
 // The declared model at one joint reading with the effects applied: model() and q() are what an
 // estimator's kinematics use instead of the declared model and the reading. Without effects
 // (nullptr or empty) they are the declared model and the reading themselves.

@@ -195,7 +195,10 @@ int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
 }
 
 void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
-                        DataSet* data) {
+                        DataSet* data, const std::vector<std::string>& coupled) {
+  const auto is_coupled = [&](const std::string& j) {
+    return std::find(coupled.begin(), coupled.end(), j) != coupled.end();
+  };
   CsvLines csv(path);
   const size_t first_row = data->rows.size();
   LabelIndexer group_index(&data->groups), set_index(&data->sets);
@@ -215,6 +218,11 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     bool known = false;
     for (size_t j = 0; j < joints.size(); ++j) {
       if (joints[j] == h) {
+        if (is_coupled(h)) {
+          throw InputError(hdr + ": column '" + h +
+                           "' is a coupled joint (the declared model's coupled:): its angle "
+                           "follows from its drivers, give no column for it");
+        }
         joint_col[j] = static_cast<int>(c);
         known = true;
       }
@@ -246,7 +254,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     }
   }
   for (size_t j = 0; j < joints.size(); ++j) {
-    if (joint_col[j] < 0) {
+    if (joint_col[j] < 0 && !is_coupled(joints[j])) {
       throw InputError(hdr + ": no column for joint '" + joints[j] + "'");
     }
   }
@@ -281,7 +289,9 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
     o.where = where;
     o.q.resize(joints.size());
     for (size_t j = 0; j < joints.size(); ++j) {
-      o.q[j] = ParseNumber(cells[joint_col[j]], where, joints[j], kMaxJoint);
+      // A coupled joint's entry is set from its drivers by the caller (ApplyCouplings).
+      o.q[j] =
+          joint_col[j] < 0 ? 0.0 : ParseNumber(cells[joint_col[j]], where, joints[j], kMaxJoint);
     }
     if (std::any_of(motion_col.begin(), motion_col.end(), [](int c) { return c >= 0; })) {
       o.motion_sign = Eigen::VectorXd::Zero(joints.size());

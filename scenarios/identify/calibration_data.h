@@ -34,10 +34,11 @@ namespace flexbench::identify {
 constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 
 // Appends the file's rows to `data` (groups and sets are matched by label; pixel rows need
-// data->camera). Throws InputError
-// "<file>:<line>: ..." on malformed input.
+// data->camera). `coupled`: joints of `joints` driven by others (sim::DeclaredChain::couplings):
+// they have no column (one is bad input), their entries of q are left 0 for the caller to set.
+// Throws InputError "<file>:<line>: ..." on malformed input.
 void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
-                        DataSet* data);
+                        DataSet* data, const std::vector<std::string>& coupled = {});
 
 // One MUKCa tool placement: `dir`/hole_0.csv and hole_1.csv (7 joint angles per row, no
 // header) become groups "<set>/hole_0" and "<set>/hole_1", 0.050 m apart.

@@ -133,10 +133,15 @@ FoldData MakeFoldData(const DataSet& data, const std::vector<ConfigLoads>& loads
 }
 
 size_t HeapBytes(const ConfigLoads& L) {
+  size_t gravity = 0;  // the gravity_tilt candidate's loads
+  for (const GravityTerms& h : L.horizontal) {
+    gravity += sizeof(GravityTerms) + sizeof(double) * (h.tau.size() + h.tau_unit.size()) +
+               sizeof(Vec3) * (h.M_mid.size() + h.M_mid_unit.size());
+  }
   return sizeof(double) * (L.tau.size() + L.tau_unit.size() + L.axis_base.size() +
                            L.motion_sign.size() + L.q_nominal.size()) +
          sizeof(Vec3) * (L.M_mid.size() + L.M_mid_unit.size()) + sizeof(Mat3) * L.R_mid_T.size() +
-         sizeof(lie::SE3) * L.T_nominal.size();
+         sizeof(lie::SE3) * L.T_nominal.size() + gravity;
 }
 
 }  // namespace

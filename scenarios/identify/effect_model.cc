@@ -59,6 +59,7 @@ void SetBounds(Candidate* c, bool prismatic) {
       prismatic ? all(-0.1, 0.1) : all(-10 * kDeg, 10 * kDeg);
       break;
     case EffectType::kAxisTilt:
+    case EffectType::kGravityTilt:
       all(-10 * kDeg, 10 * kDeg);
       break;
     case EffectType::kBacklash:
@@ -144,12 +145,15 @@ const char* ToString(EffectType type) {
       return "joint_error_curve";
     case EffectType::kStiffeningSpring:
       return "stiffening_spring";
+    case EffectType::kGravityTilt:
+      return "gravity_tilt";
   }
   return "?";
 }
 
 EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame,
-                         const std::string& camera, const std::vector<FrameId>& more_points)
+                         const std::string& camera, const std::vector<FrameId>& more_points,
+                         bool gravity_tilt)
     : chain_(&chain), point_frame_(point_frame), m_(m) {
   const kinematics::PpoeModel& model = chain.model;
   const int n = model.num_frames();
@@ -289,6 +293,23 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
     add(EffectType::kJointOrigin, chain.q_joints[k], k, f, 6, 1e-6, "m, rad");
     candidates_.back().generic_geometry = true;
   }
+  // Joint variables that drive a coupled joint, directly or through another.
+  drives_coupled_.assign(model.nq(), 0);
+  for (bool grew = true; grew;) {
+    grew = false;
+    for (const sim::DeclaredChain::Coupling& cp : chain.couplings) {
+      std::vector<int> drivers;
+      for (const auto& [k, coef] : cp.linear) drivers.push_back(k);
+      if (cp.poly_driver >= 0) drivers.push_back(cp.poly_driver);
+      for (int k : drivers) {
+        if (!drives_coupled_[k]) drives_coupled_[k] = 1, grew = true;
+      }
+    }
+  }
+  if (gravity_tilt) {
+    add(EffectType::kGravityTilt, "base", -1, -1, 2, 1e-6, "rad");
+    gravity_tilt_ = static_cast<int>(candidates_.size()) - 1;
+  }
 }
 
 int EffectModel::FindCandidate(const std::string& name) const {
@@ -312,6 +333,7 @@ Eigen::VectorXd EffectModel::ReadingShift(const Eigen::VectorXd& q, const std::v
     }
     t += c.num_params;
   }
+  if (!chain_->couplings.empty()) chain_->PropagateShift(q, &dq);
   return dq;
 }
 
@@ -383,56 +405,120 @@ ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& 
   const Vec3 g_base =
       R_w_base.transpose() * Vec3(m_->opt.gravity[0], m_->opt.gravity[1], m_->opt.gravity[2]);
   const Vec3 p_ee = pd.T_base_frame[point_frame_].translation();
-  // Moment about `a` (base coordinates) of the weight of body b's subtree, and of 1 kg at p_ee.
-  const auto moment = [&](int b, const Vec3& a) {
-    const Vec3 c = R_w_base.transpose() * (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1],
-                                                d->subtree_com[3 * b + 2]) -
-                                           p_w_base);
-    return Vec3((c - a).cross(m_->body_subtreemass[b] * g_base));
+  // The gravity-linear loads under gravity g (base coordinates) into t, the geometry into L.
+  const auto terms = [&](const Vec3& g, GravityTerms* t) {
+    t->tau = Eigen::VectorXd::Zero(model.nq());
+    t->tau_unit = Eigen::VectorXd::Zero(model.nq());
+    t->M_mid.assign(n, Vec3::Zero());
+    t->M_mid_unit.assign(n, Vec3::Zero());
+    // Moment about `a` (base coordinates) of the weight of body b's subtree, and of 1 kg at p_ee.
+    const auto moment = [&](int b, const Vec3& a) {
+      const Vec3 c = R_w_base.transpose() * (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1],
+                                                  d->subtree_com[3 * b + 2]) -
+                                             p_w_base);
+      return Vec3((c - a).cross(m_->body_subtreemass[b] * g));
+    };
+    const auto unit_moment = [&](const Vec3& a) { return Vec3((p_ee - a).cross(g)); };
+    for (int k = 0; k < model.nq(); ++k) {
+      const FrameId f = model.joint_frame(k);
+      if (!on_path_[f] || frame_body_[f] < 0) continue;
+      const kinematics::PpoeFrame& fr = model.frame(f);
+      const lie::SE3& T = pd.T_base_frame[f];
+      const Vec3 axis = T.rotation() * fr.joint.axis;
+      const Vec3 a = T * fr.joint.point;
+      // The torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest).
+      t->tau[k] = -axis.dot(moment(frame_body_[f], a));
+      L.axis_base.col(k) = axis;
+      t->tau_unit[k] = -axis.dot(unit_moment(a));
+    }
+    for (FrameId f = 1; f < n; ++f) {
+      const FrameId p = prev_joint_[f];
+      if (p < 0 || frame_body_[p] < 0) continue;
+      const kinematics::PpoeFrame& fr = model.frame(f);
+      const lie::SE3 T_pre = pd.T_base_frame[fr.parent] * fr.T_parent_ip;
+      const lie::SE3& Tp = pd.T_base_frame[p];
+      const Vec3 mid = 0.5 * (Tp.translation() + T_pre.translation());
+      // The whole link's subtree about its middle (the near half's own weight barely counts).
+      t->M_mid[f] = Tp.rotation().transpose() * moment(frame_body_[p], mid);
+      t->M_mid_unit[f] = Tp.rotation().transpose() * unit_moment(mid);
+      L.R_mid_T[f] = Tp.rotation().transpose();
+    }
+    if (mount_ != kinematics::kBaseFrame && frame_body_[mount_] >= 0) {
+      const kinematics::PpoeFrame& fr = model.frame(mount_);
+      const lie::SE3 T_pre = pd.T_base_frame[fr.parent] * fr.T_parent_ip;
+      t->M_mount = T_pre.rotation().transpose() * moment(frame_body_[mount_], T_pre.translation());
+      t->M_mount_unit = T_pre.rotation().transpose() * unit_moment(T_pre.translation());
+      L.R_mount_T = T_pre.rotation().transpose();
+      const int b = frame_body_[mount_];
+      const Vec3 c = R_w_base.transpose() * (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1],
+                                                  d->subtree_com[3 * b + 2]) -
+                                             p_w_base);
+      L.s_mount = L.R_mount_T * (m_->body_subtreemass[b] * (c - T_pre.translation()));
+      L.s_mount_unit = L.R_mount_T * (p_ee - T_pre.translation());
+      L.R_mount_point = L.R_mount_T * pd.T_base_frame[point_frame_].rotation();
+      t->g_mount = L.R_mount_T * g;
+    }
+    // (R_ee s) x g = -[g]x R_ee s.
+    t->M_first = -lie::Skew(g) * pd.T_base_frame[point_frame_].rotation();
   };
-  const auto unit_moment = [&](const Vec3& a) { return Vec3((p_ee - a).cross(g_base)); };
-  for (int k = 0; k < model.nq(); ++k) {
-    const FrameId f = model.joint_frame(k);
-    if (!on_path_[f] || frame_body_[f] < 0) continue;
-    const kinematics::PpoeFrame& fr = model.frame(f);
-    const lie::SE3& T = pd.T_base_frame[f];
-    const Vec3 axis = T.rotation() * fr.joint.axis;
-    const Vec3 a = T * fr.joint.point;
-    // The torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest).
-    L.tau[k] = -axis.dot(moment(frame_body_[f], a));
-    L.axis_base.col(k) = axis;
-    L.tau_unit[k] = -axis.dot(unit_moment(a));
+  GravityTerms t;
+  terms(g_base, &t);
+  L.tau = std::move(t.tau);
+  L.tau_unit = std::move(t.tau_unit);
+  L.M_mid = std::move(t.M_mid);
+  L.M_mid_unit = std::move(t.M_mid_unit);
+  L.M_mount = t.M_mount;
+  L.M_mount_unit = t.M_mount_unit;
+  L.g_mount = t.g_mount;
+  L.M_first = t.M_first;
+  if (gravity_tilt_ >= 0) {
+    Vec3 a1, a2;
+    kinematics::GravityTiltAxes(g_base, &a1, &a2);
+    L.horizontal.resize(2);
+    terms(a1.cross(g_base), &L.horizontal[0]);
+    terms(a2.cross(g_base), &L.horizontal[1]);
   }
-  for (FrameId f = 1; f < n; ++f) {
-    const FrameId p = prev_joint_[f];
-    if (p < 0 || frame_body_[p] < 0) continue;
-    const kinematics::PpoeFrame& fr = model.frame(f);
-    const lie::SE3 T_pre = pd.T_base_frame[fr.parent] * fr.T_parent_ip;
-    const lie::SE3& Tp = pd.T_base_frame[p];
-    const Vec3 mid = 0.5 * (Tp.translation() + T_pre.translation());
-    // The whole link's subtree about its middle (the near half's own weight barely counts).
-    L.M_mid[f] = Tp.rotation().transpose() * moment(frame_body_[p], mid);
-    L.M_mid_unit[f] = Tp.rotation().transpose() * unit_moment(mid);
-    L.R_mid_T[f] = Tp.rotation().transpose();
-  }
-  if (mount_ != kinematics::kBaseFrame && frame_body_[mount_] >= 0) {
-    const kinematics::PpoeFrame& fr = model.frame(mount_);
-    const lie::SE3 T_pre = pd.T_base_frame[fr.parent] * fr.T_parent_ip;
-    L.M_mount = T_pre.rotation().transpose() * moment(frame_body_[mount_], T_pre.translation());
-    L.M_mount_unit = T_pre.rotation().transpose() * unit_moment(T_pre.translation());
-    L.R_mount_T = T_pre.rotation().transpose();
-    const int b = frame_body_[mount_];
-    const Vec3 c = R_w_base.transpose() * (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1],
-                                                d->subtree_com[3 * b + 2]) -
-                                           p_w_base);
-    L.s_mount = L.R_mount_T * (m_->body_subtreemass[b] * (c - T_pre.translation()));
-    L.s_mount_unit = L.R_mount_T * (p_ee - T_pre.translation());
-    L.R_mount_point = L.R_mount_T * pd.T_base_frame[point_frame_].rotation();
-    L.g_mount = L.R_mount_T * g_base;
-  }
-  // (R_ee s) x g = -[g]x R_ee s.
-  L.M_first = -lie::Skew(g_base) * pd.T_base_frame[point_frame_].rotation();
   return L;
+}
+
+const ConfigLoads& EffectModel::TiltedLoads(const ConfigLoads& L, const std::vector<int>& active,
+                                            const double* theta, Workspace& ws) const {
+  if (L.horizontal.size() != 2) return L;
+  const double* t = theta;
+  bool tilted = false;
+  Vec3 w = Vec3::Zero();
+  for (int i : active) {
+    if (i == gravity_tilt_) {
+      w = kinematics::GravityTiltWeights(t[0], t[1]);
+      tilted = true;
+    }
+    t += candidates_[i].num_params;
+  }
+  if (!tilted) return L;
+  const GravityTerms& h1 = L.horizontal[0];
+  const GravityTerms& h2 = L.horizontal[1];
+  ConfigLoads& T = ws.tilted;
+  T.tau = w[0] * L.tau + w[1] * h1.tau + w[2] * h2.tau;
+  T.tau_unit = w[0] * L.tau_unit + w[1] * h1.tau_unit + w[2] * h2.tau_unit;
+  T.M_mid.resize(L.M_mid.size());
+  T.M_mid_unit.resize(L.M_mid_unit.size());
+  for (size_t f = 0; f < L.M_mid.size(); ++f) {
+    T.M_mid[f] = w[0] * L.M_mid[f] + w[1] * h1.M_mid[f] + w[2] * h2.M_mid[f];
+    T.M_mid_unit[f] = w[0] * L.M_mid_unit[f] + w[1] * h1.M_mid_unit[f] + w[2] * h2.M_mid_unit[f];
+  }
+  T.M_mount = w[0] * L.M_mount + w[1] * h1.M_mount + w[2] * h2.M_mount;
+  T.M_mount_unit = w[0] * L.M_mount_unit + w[1] * h1.M_mount_unit + w[2] * h2.M_mount_unit;
+  T.g_mount = w[0] * L.g_mount + w[1] * h1.g_mount + w[2] * h2.g_mount;
+  T.M_first = w[0] * L.M_first + w[1] * h1.M_first + w[2] * h2.M_first;
+  // The geometry stays.
+  T.axis_base = L.axis_base;
+  T.R_mid_T = L.R_mid_T;
+  T.R_mount_T = L.R_mount_T;
+  T.s_mount = L.s_mount;
+  T.s_mount_unit = L.s_mount_unit;
+  T.R_mount_point = L.R_mount_point;
+  T.motion_sign = L.motion_sign;
+  return T;
 }
 
 EffectModel::Workspace EffectModel::MakeWorkspace() const {
@@ -454,7 +540,7 @@ EffectModel::Workspace EffectModel::MakeWorkspace() const {
 lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L,
                                   const std::vector<int>& active, const double* theta,
                                   Workspace& ws, int point) const {
-  AccumulateTerms(q, L, active, theta, ws);
+  AccumulateTerms(q, TiltedLoads(L, active, theta, ws), active, theta, ws);
   ChainPoses(q, L, ws);
   ClearTerms(active, ws);
   return ws.T[points_[point]];
@@ -546,10 +632,13 @@ void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L
       }
       case EffectType::kPayload:
       case EffectType::kCameraOffset:  // acts on the camera, not on the chain
+      case EffectType::kGravityTilt:   // acts on the loads (TiltedLoads)
         break;
     }
     t += c.num_params;
   }
+  // A driver's true angle drives its coupled joints (sim::DeclaredChain::couplings).
+  if (!chain_->couplings.empty()) chain_->PropagateShift(q, &ws.dq);
   if (ws.mount_active) {
     const Vec3 M = L.M_mount + payload * L.M_mount_unit + L.R_mount_T * couple;
     const Vec3 s = L.s_mount + payload * L.s_mount_unit + L.R_mount_point * payload_first;
@@ -673,6 +762,7 @@ bool EffectModel::HasTangent(int c, const std::vector<int>& active) const {
     case EffectType::kThermalExpansion:
     case EffectType::kPayload:
     case EffectType::kCameraOffset:
+    case EffectType::kGravityTilt:  // through every load-driven term at once, as the payload
       return false;
     case EffectType::kLinkLength:
     case EffectType::kLinkOffset:
@@ -681,6 +771,14 @@ bool EffectModel::HasTangent(int c, const std::vector<int>& active) const {
       return !OnBentLink(cand.frame, active, true);
     case EffectType::kBaseCompliance:
       return !OnBentLink(cand.frame, active, false);
+    case EffectType::kJointOffset:
+    case EffectType::kJointCompliance:
+    case EffectType::kBacklash:
+    case EffectType::kTransmissionError:
+    case EffectType::kJointErrorCurve:
+    case EffectType::kStiffeningSpring:
+      // At a driver the correction moves its coupled joints too: not in the tangents.
+      return !drives_coupled_[cand.q_index];
     default:
       return true;
   }
@@ -864,6 +962,7 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
     case EffectType::kThermalExpansion:
     case EffectType::kPayload:
     case EffectType::kCameraOffset:
+    case EffectType::kGravityTilt:
       break;  // HasTangent is false
   }
 }
@@ -872,7 +971,8 @@ lie::SE3 EffectModel::PoseTangents(const Eigen::VectorXd& q, const ConfigLoads& 
                                    const std::vector<int>& active, const double* theta,
                                    const std::vector<int>& cs, Workspace& ws, Tangent* out,
                                    int point) const {
-  AccumulateTerms(q, L, active, theta, ws);
+  const ConfigLoads& Lt = TiltedLoads(L, active, theta, ws);
+  AccumulateTerms(q, Lt, active, theta, ws);
   ChainPoses(q, L, ws);
   ws.point = points_[point];
   // Frames ids grow away from the base: the point is needed from the highest candidate down
@@ -883,7 +983,7 @@ lie::SE3 EffectModel::PoseTangents(const Eigen::VectorXd& q, const ConfigLoads& 
   }
   PointInFrames(q, top, ws);
   for (int c : cs) {
-    CandidateTangents(candidates_[c], q, L, ws, out);
+    CandidateTangents(candidates_[c], q, Lt, ws, out);
     out += candidates_[c].num_params;
   }
   ClearTerms(active, ws);

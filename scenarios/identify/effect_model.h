@@ -37,17 +37,27 @@
 //                         [rho; theta] [m, rad], before the joint moves: any geometric error of
 //                         the joint's placement (complete geometry, as the MUKCa authors
 //                         calibrate; generic_geometry: chosen after the named effects)
+//   gravity_tilt@base     gravity turned by phi_1, phi_2 about the base's horizontal axes (a
+//                         base mounted tilted; kinematics::TiltedGravity)   [rad]. It acts
+//                         only through the loads of the load-driven effects, so it is
+//                         unidentifiable until one of them is in the model. A candidate only
+//                         when asked for (EffectModel's `gravity_tilt`); its columns are central
+//                         differences (HasTangent)
 // Physical bounds (Candidate::lower/upper; a fit outside them is not accepted): angles within
 // 10 deg (offsets, tilts, joint origins) and 5 deg (backlash half play, either sign: the flank
 // convention decides it), lengths within 0.1 m, a gear compliance c <= 0 (stiffness k = -1/c
 // > 0), plate and link compliances c >= 0 (they sag under their weight), |thermal strain| <=
 // 1e-3 (about 80 K of steel), a payload mass in [-1 g, 100 kg] (a gram below zero is zero
 // within the fit's precision; the MUKCa-like data cannot separate it), its first moment within
-// 50 kg m, a camera within 0.5 m and 0.5 rad of its stated pose.
+// 50 kg m, a camera within 0.5 m and 0.5 rad of its stated pose, gravity within 10 deg.
 // Signs: tau_J is the torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest),
 // so a gear spring of stiffness k fits as c = -1/k and a play resting on the loaded flank as
 // b = -play/2; moments M are those of the weight itself, so plates and links that sag fit with
 // c > 0. The fit leaves every sign free.
+// Coupled joints (sim::DeclaredChain::couplings) are joint variables like the actuated ones, with
+// their own candidates (their own offset is the linkage's assembly offset: a parameter of its
+// own); a joint-level correction of a driver (offset, compliance, backlash, periodic errors)
+// moves the joints it drives as well, as the driver's true angle drives the linkage.
 // tau_J is the gravity torque the joint carries (MuJoCo masses, nominal configuration), M the
 // moment of the weight beyond a point, in the local frame. Loads are computed once per
 // configuration; a model without masses gives zero loads, and the load-driven candidates are
@@ -84,6 +94,7 @@ enum class EffectType {
   kTransmissionError,
   kJointErrorCurve,
   kStiffeningSpring,
+  kGravityTilt,
 };
 
 const char* ToString(EffectType type);
@@ -107,6 +118,14 @@ struct Candidate {
     return std::string(ToString(type)) +
            (type == EffectType::kAxisTilt ? (axis ? "_b" : "_a") : "") + "@" + location;
   }
+};
+
+// The parts of ConfigLoads that are linear in gravity, for one gravity vector.
+struct GravityTerms {
+  Eigen::VectorXd tau, tau_unit;
+  std::vector<Vec3> M_mid, M_mid_unit;
+  Vec3 M_mount = Vec3::Zero(), M_mount_unit = Vec3::Zero(), g_mount = Vec3::Zero();
+  Mat3 M_first = Mat3::Zero();
 };
 
 // Gravity loads of one configuration (nominal model), in the frames the effects act in.
@@ -138,6 +157,10 @@ struct ConfigLoads {
   // touch instead of recomputing them (the same operations, the same bits). Empty: not cached.
   Eigen::VectorXd q_nominal;
   std::vector<lie::SE3> T_nominal;
+  // Where the gravity_tilt candidate exists (and the model has masses): the gravity-linear
+  // loads for gravity along a_1 x g and a_2 x g (kinematics::GravityTiltAxes), which the
+  // tilt's weights combine with the loads above (EffectModel::TiltedLoads). Else empty.
+  std::vector<GravityTerms> horizontal;
 };
 
 // The augmented kinematics. Constant after construction; Predict needs a Workspace.
@@ -148,8 +171,10 @@ class EffectModel {
   // `more_points`: further measured frames (markers on other branches of a tree, issue 20); the
   // candidates then cover every joint on the way to any of them, each point gets its tool
   // link_offset, and a prediction names its point (index into points(), 0: point_frame).
+  // `gravity_tilt`: add the gravity_tilt candidate (last, so the others keep their indices).
   EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame,
-              const std::string& camera = "", const std::vector<FrameId>& more_points = {});
+              const std::string& camera = "", const std::vector<FrameId>& more_points = {},
+              bool gravity_tilt = false);
 
   const kinematics::PpoeModel& chain() const { return chain_->model; }
   const std::vector<Candidate>& candidates() const { return candidates_; }
@@ -207,6 +232,7 @@ class EffectModel {
     bool mount_active = false;
     Eigen::Matrix2d mount_J = Eigen::Matrix2d::Zero();
     FrameId point = -1;  // the predicted point frame of the current call
+    ConfigLoads tilted;  // TiltedLoads' result where a gravity tilt is active
   };
   Workspace MakeWorkspace() const;
 
@@ -228,9 +254,9 @@ class EffectModel {
   };
   // Whether PoseTangents' analytic derivatives cover every parameter of candidate c with the
   // effects `active` in the model (c itself may be active or not). Not covered (the caller
-  // differentiates numerically): thermal expansion and payload (they act on every frame or
-  // load), the camera offset (not on the chain), and a translation or joint origin on a link
-  // that an active link_bending turns (the bend's pivot moves with it).
+  // differentiates numerically): thermal expansion, payload and gravity tilt (they act on every
+  // frame or load), the camera offset (not on the chain), and a translation or joint origin on a
+  // link that an active link_bending turns (the bend's pivot moves with it).
   bool HasTangent(int c, const std::vector<int>& active) const;
   // PredictPose, and the derivative of the point frame's pose with respect to each parameter
   // k of candidate cs[i] (its value adds to any active one's; derivatives at theta) in
@@ -242,6 +268,10 @@ class EffectModel {
                         int point = 0) const;
 
  private:
+  // L's loads under the active gravity tilt (in ws.tilted, without the cached poses), or L
+  // itself when none is active.
+  const ConfigLoads& TiltedLoads(const ConfigLoads& L, const std::vector<int>& active,
+                                 const double* theta, Workspace& ws) const;
   // PredictPose in three steps: the per-frame terms of `active` into ws, the chain's poses
   // ws.T under them, and the terms back to zero.
   void AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L,
@@ -271,6 +301,8 @@ class EffectModel {
   FrameId mount_ = 0;
   bool has_masses_ = false;
   std::vector<Candidate> candidates_;
+  int gravity_tilt_ = -1;              // the gravity_tilt candidate, -1 without one
+  std::vector<char> drives_coupled_;   // per joint variable: it drives a coupled joint
   std::vector<char> on_path_;          // frames between the base and the point frame
   std::vector<Vec3> tilt_a_, tilt_b_;  // per joint frame: unit normals of its axis
   std::vector<FrameId> prev_joint_;    // per joint frame: the joint at its link's start, or -1

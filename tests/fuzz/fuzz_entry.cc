@@ -106,7 +106,9 @@ std::optional<std::string> DeclaredModel(const std::uint8_t* data, std::size_t s
   const std::string path = WriteFile(Work("declared/fuzz.declared.yaml"), data, size);
   return Guard([&] {
     const sim::DeclaredModel declared = sim::LoadDeclaredModel(path);
-    sim::BuildDeclaredChain(FixedModel(declared.model_path).get(), declared);
+    // With the couplings resolved (what identification builds), so `coupled:` is covered too.
+    sim::BuildDeclaredChain(FixedModel(declared.model_path).get(), declared,
+                            /*with_couplings=*/true);
   });
 }
 

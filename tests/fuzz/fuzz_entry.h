@@ -34,9 +34,9 @@ const std::string& WorkDir();
 // reachable; nothing is simulated), unknown keys.
 std::optional<std::string> Scenario(const std::uint8_t* data, std::size_t size);
 // A declared-model file (<work>/declared/fuzz.declared.yaml) through LoadDeclaredModel, then
-// BuildDeclaredChain on a fixed MJCF: the models/ model its `model` key names by file name
-// (planar3, jsk_arm, rover_arm, humanoid_upper; loaded once), planar3 otherwise. The folder
-// holds links to the files of models/, so the reader's existence check passes.
+// BuildDeclaredChain (couplings resolved) on a fixed MJCF: the models/ model its `model` key names
+// by file name (planar3, jsk_arm, rover_arm, humanoid_upper; loaded once), planar3 otherwise. The
+// folder holds links to the files of models/, so the reader's existence check passes.
 std::optional<std::string> DeclaredModel(const std::uint8_t* data, std::size_t size);
 // A calibration CSV (<work>/calibration/data.csv) through ReadCalibrationCsv for joints j1,
 // j2 with a camera present (pixel rows allowed).

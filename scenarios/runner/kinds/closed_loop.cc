@@ -173,6 +173,15 @@ class ClosedLoopKind : public ScenarioKind {
     }
     // External measurement frames (a tracker) the CSV's `frame` column may name.
     if (const auto f = root.Optional("frames")) frames_ = identify::ParseMeasurementFrames(*f);
+    // The gravity direction (a base mounted tilted) as a candidate: by default with data in an
+    // external frame, whose fitted pose leaves the base's tilt to be seen through the loads
+    // alone; else when asked for, by this key or by name in `candidates`.
+    gravity_tilt_ = root.GetBool("gravity_tilt", !frames_.empty());
+    for (const auto& spec : candidate_specs_) {
+      if (spec.first.rfind("gravity_tilt", 0) == 0 && !root.Has("gravity_tilt")) {
+        gravity_tilt_ = true;
+      }
+    }
     if (const auto mk = root.Optional("markers")) {
       for (const ConfigNode& n : mk->Items()) marker_nodes_.push_back({n.AsString(), n.Where()});
     }
@@ -209,10 +218,11 @@ class ClosedLoopKind : public ScenarioKind {
     }
     // Model, chain and candidates now: bad names fail before any work.
     mj_ = sim::LoadModel(declared_.model_path);
-    chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(mj_.get(), declared_));
+    chain_ = std::make_unique<sim::DeclaredChain>(
+        sim::BuildDeclaredChain(mj_.get(), declared_, /*with_couplings=*/true));
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
                                                   camera_.present ? camera_.name : "",
-                                                  MarkerFrames());
+                                                  MarkerFrames(), gravity_tilt_);
     offset_unknown_ = UnknownOffsets();
     if (candidate_specs_.empty()) {
       for (size_t i = 0; i < em_->candidates().size(); ++i) candidates_.push_back(i);
@@ -437,6 +447,9 @@ class ClosedLoopKind : public ScenarioKind {
     d.frames = frames_;
     d.points = points_;
     d.offset_unknown = offset_unknown_;
+    if (!chain_->couplings.empty() && s.type != Source::Type::kCsv) {
+      throw InputError(s.where + ": coupled joints (the declared model's coupled:) need csv data");
+    }
     switch (s.type) {
       case Source::Type::kMukca:
         for (const std::string& p : s.placements) {
@@ -445,7 +458,11 @@ class ClosedLoopKind : public ScenarioKind {
         }
         break;
       case Source::Type::kCsv: {
-        identify::ReadCalibrationCsv(s.path, chain_->q_joints, &d);
+        std::vector<std::string> coupled;
+        for (const auto& c : chain_->couplings) coupled.push_back(chain_->q_joints[c.q_index]);
+        identify::ReadCalibrationCsv(s.path, chain_->q_joints, &d, coupled);
+        // Coupled joints are never read: their angles follow from the readings of their drivers.
+        for (identify::Observation& o : d.rows) chain_->ApplyCouplings(&o.q);
         for (const auto& [a, b, dist] : s.distances) {
           const auto ia = std::find(d.groups.begin(), d.groups.end(), a);
           const auto ib = std::find(d.groups.begin(), d.groups.end(), b);
@@ -742,6 +759,24 @@ class ClosedLoopKind : public ScenarioKind {
     return out;
   }
 
+  // d q / d readings at q: the identity on the read joints, the couplings' derivatives (central
+  // differences: exact for the linear ones) on the coupled ones, zero columns for those.
+  Eigen::MatrixXd ReadingToJoints(const Eigen::VectorXd& q) const {
+    const int nq = static_cast<int>(q.size());
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(nq, nq);
+    constexpr double kStep = 1e-6;
+    for (int k = 0; k < nq; ++k) {
+      if (chain_->IsCoupled(k)) continue;
+      Eigen::VectorXd up = Eigen::VectorXd::Zero(nq), down = up;
+      up[k] = kStep;
+      down[k] = -kStep;
+      chain_->PropagateShift(q, &up);
+      chain_->PropagateShift(q, &down);
+      A.col(k) = (up - down) / (2.0 * kStep);
+    }
+    return A;
+  }
+
   // Per row, the readings' noise through the declared kinematics at the row's marker.
   std::vector<Mat3> ReadingNoise(const DataSet& d) const {
     const kinematics::PpoeModel& model = chain_->model;
@@ -752,8 +787,9 @@ class ClosedLoopKind : public ScenarioKind {
       kinematics::ForwardKinematics(model, pd, d.rows[r].q);
       const kinematics::FrameId f = em_->points()[d.rows[r].point];  // the row's marker
       kinematics::ComputeFrameJacobian(model, pd, f, J);
-      const Eigen::Matrix<double, 3, Eigen::Dynamic> Jp =
-          pd.T_base_frame[f].rotation() * J.topRows<3>();
+      Eigen::Matrix<double, 3, Eigen::Dynamic> Jp = pd.T_base_frame[f].rotation() * J.topRows<3>();
+      // Coupled joints have no reading: their noise is their drivers', through the couplings.
+      if (!chain_->couplings.empty()) Jp = Jp * ReadingToJoints(d.rows[r].q);
       S[r] = reading_std_rad_ * reading_std_rad_ * Jp * Jp.transpose();
     }
     return S;
@@ -1045,6 +1081,23 @@ class ClosedLoopKind : public ScenarioKind {
       }
       y << "]\n";
     }
+    if (!declared_.coupled.empty()) {
+      y << "coupled:\n";
+      for (const sim::DeclaredCoupling& c : declared_.coupled) {
+        y << "  " << c.joint << ": ";
+        if (c.from_mjcf) {
+          y << "mjcf\n";
+          continue;
+        }
+        y << "{";
+        for (size_t i = 0; i < c.drivers.size(); ++i) {
+          char v[32];  // every digit: the coupling is geometry, not a fitted value
+          std::snprintf(v, sizeof(v), "%.17g", c.drivers[i].second);
+          y << (i ? ", " : "") << c.drivers[i].first << ": " << v;
+        }
+        y << "}\n";
+      }
+    }
     if (!declared_.sources.empty()) {
       y << "sources:\n";
       for (const sim::DeclaredSource& s : declared_.sources) {
@@ -1154,6 +1207,7 @@ class ClosedLoopKind : public ScenarioKind {
   sim::DeclaredModel declared_;
   std::vector<std::pair<std::string, std::string>> candidate_specs_;
   std::vector<int> candidates_;
+  bool gravity_tilt_ = false;
   identify::IdentifyOptions opt_;
   identify::CameraModel camera_;
   std::vector<identify::MeasurementFrame> frames_;
