@@ -66,7 +66,10 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
   EffectModel::Workspace ws = em.MakeWorkspace();
   const double h = 1e-6;
   for (int k = 0; k < nq; ++k) {
-    Eigen::VectorXd z(n), w(n), q(n), tau(n);
+    // Only the rows whose marker the joint moves: a marker on another branch of a tree (issue
+    // 20) says nothing about this joint, and counted with zero weight it shrank the residual
+    // variance and inflated the statistic.
+    std::vector<double> zs, ws2, qs, taus;
     for (int i = 0; i < n; ++i) {
       const int r = rows[i];
       Eigen::VectorXd qp = data.rows[r].q, qm = qp;
@@ -78,15 +81,19 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
                      (2 * h * opt.point_std_m);
       const Vec3 e = res.segment<3>(pr.row_offset(r));
       const double s2 = s.squaredNorm();
-      z[i] = s2 > 1e-12 ? s.dot(e) / s2 : 0.0;
-      w[i] = s2 > 1e-12 ? s2 : 0.0;
-      q[i] = data.rows[r].q[k];
-      tau[i] = loads[r].tau.size() > k ? loads[r].tau[k] : 0.0;
+      if (!(s2 > 1e-12)) continue;
+      zs.push_back(s.dot(e) / s2);
+      ws2.push_back(s2);
+      qs.push_back(data.rows[r].q[k]);
+      taus.push_back(loads[r].tau.size() > k ? loads[r].tau[k] : 0.0);
     }
-    if (!(w.maxCoeff() > 0)) continue;
+    const int m = static_cast<int>(zs.size());
+    if (m < 10) continue;
+    const Eigen::Map<const Eigen::VectorXd> z(zs.data(), m), w(ws2.data(), m), q(qs.data(), m),
+        tau(taus.data(), m);
     const std::string joint = em.chain().frame(em.chain().joint_frame(k)).name;
     {
-      Eigen::MatrixXd X(n, 6);
+      Eigen::MatrixXd X(m, 6);
       for (int c = 1; c <= 3; ++c) {
         X.col(2 * c - 2) = (c * q.array()).cos();
         X.col(2 * c - 1) = (c * q.array()).sin();
@@ -106,14 +113,14 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
         f.p_value = g.p_value;
         f.statistic = g.stat;
         f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
-        f.x.assign(q.data(), q.data() + n);
-        f.z.assign(z.data(), z.data() + n);
+        f.x.assign(q.data(), q.data() + m);
+        f.z.assign(z.data(), z.data() + m);
         Keep(std::move(f), &best);
       }
     }
     if (em.has_masses() && tau.cwiseAbs().maxCoeff() > 1e-6) {
       const double scale = tau.cwiseAbs().maxCoeff();
-      Eigen::MatrixXd X(n, 2);
+      Eigen::MatrixXd X(m, 2);
       X.col(0) = tau;
       X.col(1) = (tau / scale).array().cube() * scale;
       const Regression g = Regress(X, z, w);
@@ -127,8 +134,8 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
         f.p_value = g.p_value;
         f.statistic = g.stat;
         f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
-        f.x.assign(tau.data(), tau.data() + n);
-        f.z.assign(z.data(), z.data() + n);
+        f.x.assign(tau.data(), tau.data() + m);
+        f.z.assign(z.data(), z.data() + m);
         Keep(std::move(f), &best);
       }
     }

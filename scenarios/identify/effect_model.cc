@@ -184,10 +184,27 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
   }
   // The arm's mount, where a compliant base tilts: the first frame with a declared source ahead
   // of the first joint (the declared model says the base is uncertain there), else the first
-  // joint's anchor (frame axes before the joint turns).
-  mount_ = first_joint > 0 ? first_joint : kinematics::kBaseFrame;
-  for (FrameId f = 1; f < first_joint; ++f) {
-    if (on_path_[f] && model.frame(f).has_source) {
+  // joint's anchor (frame axes before the joint turns). On a tree with several measured points
+  // the mount carries them all: a frame above every point (issue 20: one hand's shoulder is no
+  // mount of the other hand; two arms on a fixed torso have none).
+  const auto above_every_point = [&](FrameId f) {
+    for (FrameId p : points_) {
+      FrameId a = p;
+      while (a > 0 && a != f) a = model.frame(a).parent;
+      if (a != f) return false;
+    }
+    return true;
+  };
+  FrameId mount_joint = -1;
+  for (FrameId f = 1; f < n; ++f) {
+    if (on_path_[f] && model.frame(f).q_index >= 0 && above_every_point(f)) {
+      mount_joint = f;
+      break;
+    }
+  }
+  mount_ = mount_joint > 0 ? mount_joint : kinematics::kBaseFrame;
+  for (FrameId f = 1; f < (mount_joint > 0 ? mount_joint : n); ++f) {
+    if (on_path_[f] && model.frame(f).has_source && above_every_point(f)) {
       mount_ = f;
       break;
     }

@@ -22,17 +22,6 @@ bool IsIdentifier(const std::string& s) {
   return true;
 }
 
-lie::SE3 ParsePose(const ConfigNode& n) {
-  const std::vector<double> v = n.AsDoubleList();
-  if (v.size() != 7) n.Fail("expected [x, y, z, qw, qx, qy, qz] (m)");
-  for (double e : v) {
-    if (!std::isfinite(e) || std::abs(e) > 1e3) n.Fail("values must be finite, |value| <= 1000");
-  }
-  const Eigen::Quaterniond q(v[3], v[4], v[5], v[6]);
-  if (std::abs(q.norm() - 1.0) > 1e-6) n.Fail("quaternion is not of unit length");
-  return lie::SE3(q.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
-}
-
 double PositiveStd(const ConfigNode& parent, const char* key) {
   const double s = parent.GetDouble(key);
   if (!(std::isfinite(s) && s > 0.0)) parent.Child(key).Fail("must be > 0 (a standard deviation)");
@@ -51,7 +40,7 @@ MeasurementFrame ParseFrame(const std::string& name, const ConfigNode& n) {
   }
   if (!n.IsMap()) return f;
   if (const auto t = n.Optional("T_base_frame")) {
-    f.T_ref = ParsePose(*t);
+    f.T_ref = ParseFramePose(*t);
     f.has_guess = true;
   }
   const bool m = n.Has("prior_std_m"), d = n.Has("prior_std_deg");
@@ -66,6 +55,17 @@ MeasurementFrame ParseFrame(const std::string& name, const ConfigNode& n) {
 }
 
 }  // namespace
+
+lie::SE3 ParseFramePose(const ConfigNode& n) {
+  const std::vector<double> v = n.AsDoubleList();
+  if (v.size() != 7) n.Fail("expected [x, y, z, qw, qx, qy, qz] (m)");
+  for (double e : v) {
+    if (!std::isfinite(e) || std::abs(e) > 1e3) n.Fail("values must be finite, |value| <= 1000");
+  }
+  const Eigen::Quaterniond q(v[3], v[4], v[5], v[6]);
+  if (std::abs(q.norm() - 1.0) > 1e-6) n.Fail("quaternion is not of unit length");
+  return lie::SE3(q.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
+}
 
 std::vector<MeasurementFrame> ParseMeasurementFrames(const ConfigNode& node) {
   if (!node.IsMap()) node.Fail("expected a map of frame name -> {T_base_frame, prior_std_*}");

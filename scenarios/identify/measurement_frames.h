@@ -18,6 +18,10 @@
 
 namespace flexbench::identify {
 
+// A pose [x, y, z, qw, qx, qy, qz] (m; a unit quaternion, finite values within 1000). Throws
+// InputError naming the key and line.
+lie::SE3 ParseFramePose(const ConfigNode& n);
+
 // The `frames` map of a scenario. Throws InputError (file, key, line) on a name that is not an
 // identifier or is `base`, a prior without a pose or with a non-positive or non-finite
 // standard deviation, a pose that is not [x, y, z, qw, qx, qy, qz] with a unit quaternion.

@@ -1,7 +1,7 @@
 // flexbench against the reference implementations a user already has, in one binary and one
 // run, on the same models and configurations (issue 18):
 //  - FK (mean) vs MuJoCo's mj_kinematics + reading the end-effector pose: rover_arm (the 8
-//    joints of its declared chain: arm and mast) and humanoid_upper (12).
+//    joints of its declared chain: arm and mast) and humanoid_upper (19: both arms, neck, finger).
 //  - FrameJacobian vs mj_jacSite (after mj_kinematics + mj_comPos, as MuJoCo needs).
 //  - FK with 2nd-order covariance vs a plain Eigen baseline written here: a Matrix4d chain and
 //    one 6x6 adjoint sandwich per frame (what one writes from [PPOE eq. 18] without PPOE's

@@ -9,12 +9,16 @@
 //   simulate: {placements: N, configurations_per_socket: n, seed: k}
 //     the truth (`truth.effects`, the sim effect list) puts the end effector into sockets
 //     `truth.socket_distance_m` apart at random placements; rows are its encoder readings.
+//   simulate: {postures: N, seed: k}   (with `truth.tracker`, runner/common/simulated_tracker.h)
+//     a tracker at a pose drawn about its nominal one sees the truth's markers over N random
+//     settled postures; rows are the encoder readings and the markers in the tracker's frame.
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <set>
 #include <sstream>
@@ -29,6 +33,7 @@
 #include "scenarios/identify/measurement_frames.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/model_config.h"
+#include "scenarios/runner/common/simulated_tracker.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -53,11 +58,13 @@ struct Source {
   std::vector<std::tuple<std::string, std::string, double>> distances;
   int sim_placements = 3;
   int per_socket = 20;
+  int postures = 0;  // tracker rows: settled postures
   int seed = 0;
   std::string where;
 };
 
-Source ParseSource(const ConfigNode& n) {
+// `tracker`: simulated data are tracker rows (truth.tracker), not sockets.
+Source ParseSource(const ConfigNode& n, bool tracker) {
   Source s;
   s.where = n.Where();
   if (const auto m = n.Optional("mukca")) {
@@ -83,9 +90,14 @@ Source ParseSource(const ConfigNode& n) {
     }
   } else if (const auto sim = n.Optional("simulate")) {
     s.type = Source::Type::kSimulate;
+    s.seed = sim->GetInt("seed", 0);
+    if (tracker) {
+      s.postures = sim->GetInt("postures");
+      if (s.postures < 3 || s.postures > 100000) sim->Child("postures").Fail("need 3 to 100000");
+      return s;
+    }
     s.sim_placements = sim->GetInt("placements", 3);
     s.per_socket = sim->GetInt("configurations_per_socket", 20);
-    s.seed = sim->GetInt("seed", 0);
     if (s.sim_placements < 1 || s.per_socket < 2) sim->Fail("need placements >= 1 and >= 2 rows");
   } else {
     n.Fail("expected one of mukca, csv, simulate");
@@ -189,26 +201,17 @@ class ClosedLoopKind : public ScenarioKind {
       for (const ConfigNode& n : u->Items())
         unknown_offset_nodes_.push_back({n.AsString(), n.Where()});
     }
-    calibration_ = ParseSource(root.Child("calibration"));
-    validation_ = ParseSource(root.Child("validation"));
-    if (const auto t = root.Optional("truth")) {
-      effects_ = sim::ParseEffects(t->Child("effects"));
-      for (const ConfigNode& n : t->Child("expected").Items()) truth_names_.push_back(n.AsString());
-      socket_distance_m_ = t->GetDouble("socket_distance_m", 0.05);
-      encoder_noise_rad_ = t->GetDouble("encoder_noise_deg", 0.0) * kDeg;
-      const auto ws = t->Child("workspace");
-      for (const auto& [key, out] :
-           {std::pair{"center", &ws_center_}, std::pair{"half_extent", &ws_half_}}) {
-        const std::vector<double> v = ws.Child(key).AsDoubleList();
-        if (v.size() != 3) ws.Child(key).Fail("expected [x, y, z] in metres");
-        *out = Vec3(v[0], v[1], v[2]);
-      }
-      has_truth_ = true;
-    }
+    if (const auto t = root.Optional("truth")) ReadTruth(*t);
+    calibration_ = ParseSource(root.Child("calibration"), tracker_.has_value());
+    validation_ = ParseSource(root.Child("validation"), tracker_.has_value());
     if ((calibration_.type == Source::Type::kSimulate ||
          validation_.type == Source::Type::kSimulate) &&
         !has_truth_) {
       root.Fail("simulated data needs a 'truth' block (effects, expected, workspace)");
+    }
+    if (tracker_ && calibration_.type != Source::Type::kSimulate) {
+      root.Child("truth").Child("tracker").Fail(
+          "simulates tracker rows: needs simulated calibration");
     }
     for (const Source* s : {&calibration_, &validation_}) {
       if (s->type == Source::Type::kMukca && !fs::exists(s->path)) {
@@ -244,6 +247,7 @@ class ClosedLoopKind : public ScenarioKind {
     if (has_truth_) {
       sim_ = sim::Simulation::Load(model_path_, effects_);
     }
+    if (tracker_) CheckTrackerTruth();
   }
 
   void Run(RunContext& ctx) override {
@@ -288,6 +292,7 @@ class ClosedLoopKind : public ScenarioKind {
     // In the base frame: a point row's residual is against its measured point (Residuals).
     if (reading_std_rad_ > 0.0) UseReadingNoiseCovariance(ctx, cal, cal_loads_after, &res);
 
+    if (tracker_) ScoreTrackerPose(ctx, cal, res);
     Json& m = (*ctx.summary)["metrics"];
     std::vector<std::string> found;
     for (const auto& e : res.effects) found.push_back(e.name);
@@ -296,6 +301,7 @@ class ClosedLoopKind : public ScenarioKind {
       std::set<std::string> a(found.begin(), found.end()),
           b(truth_names_.begin(), truth_names_.end());
       m["effect_found_correct"] = a == b;
+      if (tracker_) ScoreNamesUpToEquivalence(found, &m);
     }
     m["effects_found"] = found;
     if (camera_.present) {
@@ -476,6 +482,10 @@ class ClosedLoopKind : public ScenarioKind {
         break;
       }
       case Source::Type::kSimulate: {
+        if (tracker_) {
+          SimulateTracker(s, ctx, what, &d);
+          break;
+        }
         Simulate(s, ctx, what, &d);
         // A socket reached once fixes only its own point: left out, and counted.
         std::vector<int> count(d.groups.size(), 0), keep;
@@ -496,6 +506,129 @@ class ClosedLoopKind : public ScenarioKind {
     }
     if (d.rows.empty()) throw InputError(s.where + ": no " + what + " rows");
     return d;
+  }
+
+  // The `truth` block: effects, the expected names, and where simulated data come from (sockets
+  // in a workspace, or a tracker).
+  void ReadTruth(const ConfigNode& t) {
+    effects_ = sim::ParseEffects(t.Child("effects"));
+    for (const ConfigNode& n : t.Child("expected").Items()) truth_names_.push_back(n.AsString());
+    encoder_noise_rad_ = t.GetDouble("encoder_noise_deg", 0.0) * kDeg;
+    has_truth_ = true;
+    if (const auto tr = t.Optional("tracker")) {
+      tracker_ = ParseTrackerTruth(*tr);
+      return;
+    }
+    socket_distance_m_ = t.GetDouble("socket_distance_m", 0.05);
+    const auto ws = t.Child("workspace");
+    for (const auto& [key, out] :
+         {std::pair{"center", &ws_center_}, std::pair{"half_extent", &ws_half_}}) {
+      const std::vector<double> v = ws.Child(key).AsDoubleList();
+      if (v.size() != 3) ws.Child(key).Fail("expected [x, y, z] in metres");
+      *out = Vec3(v[0], v[1], v[2]);
+    }
+  }
+
+  // The tracker's frame is a declared measurement frame and its markers are measured points.
+  void CheckTrackerTruth() {
+    const auto f = std::find_if(frames_.begin(), frames_.end(),
+                                [&](const auto& fr) { return fr.name == tracker_->frame; });
+    if (f == frames_.end()) {
+      throw InputError(tracker_->frame_where + ": '" + tracker_->frame +
+                       "' is not declared in the scenario's 'frames'");
+    }
+    tracker_frame_ = static_cast<int>(f - frames_.begin());
+    for (const std::string& m : tracker_->markers) {
+      const auto it = std::find(points_.begin(), points_.end(), m);
+      if (it == points_.end()) {
+        throw InputError(tracker_->markers_where + ": '" + m +
+                         "' is neither the end effector nor one of 'markers'");
+      }
+      tracker_points_.push_back(static_cast<int>(it - points_.begin()));
+      sim_->Frame(m);  // the truth has it (InputError naming the model otherwise)
+    }
+    ResolvePostures(*tracker_, *sim_, *chain_);  // before any work
+  }
+
+  // Tracker rows from the truth settled at random postures; the tracker's true pose is drawn
+  // once per run (the same for calibration and validation).
+  void SimulateTracker(const Source& s, RunContext& ctx, const std::string& what, DataSet* d) {
+    T_true_tracker_ = DrawTrackerPose(*tracker_, ctx.seed);
+    TrackerRowsSetup setup;
+    setup.sim = sim_.get();
+    setup.chain = chain_.get();
+    setup.base_body = declared_.base;
+    setup.marker_points = tracker_points_;
+    setup.frame_index = tracker_frame_;
+    setup.T_base_tracker = T_true_tracker_;
+    setup.encoder_noise_rad = encoder_noise_rad_;
+    SimulateTrackerRows(*tracker_, setup, s.postures, ctx.seed,
+                        "closed_loop/" + what + "/" + std::to_string(s.seed), what, d);
+  }
+
+  // The truth's effects against the found ones, where the data cannot single out every cause (a
+  // joint offset and the next axis's tilt about the same line; a play whose load never changes
+  // sign and an offset): `effects_named_up_to_equivalence`, each found entry (an equivalence set
+  // "a | b" counts by its members) holds exactly one truth effect and each truth effect is in
+  // one entry; `load_effects_named`, every load-driven truth effect is found by its own name,
+  // alone.
+  void ScoreNamesUpToEquivalence(const std::vector<std::string>& found, Json* m) const {
+    const auto members = [](const std::string& name) {
+      std::vector<std::string> out;
+      for (size_t start = 0;;) {
+        const size_t bar = name.find(" | ", start);
+        out.push_back(name.substr(start, bar == std::string::npos ? bar : bar - start));
+        if (bar == std::string::npos) return out;
+        start = bar + 3;
+      }
+    };
+    std::vector<int> hits(truth_names_.size(), 0);
+    bool one_each = true;
+    for (const std::string& f : found) {
+      int in_entry = 0;
+      for (const std::string& member : members(f)) {
+        const auto it = std::find(truth_names_.begin(), truth_names_.end(), member);
+        if (it != truth_names_.end()) ++in_entry, ++hits[it - truth_names_.begin()];
+      }
+      one_each &= in_entry == 1;
+    }
+    for (int h : hits) one_each &= h == 1;
+    (*m)["effects_named_up_to_equivalence"] = one_each;
+    bool load_named = true;
+    for (const std::string& t : truth_names_) {
+      const int c = em_->FindCandidate(t);
+      if (c < 0 || !IsLoadDriven(em_->candidates()[c].type)) continue;
+      load_named &= std::find(found.begin(), found.end(), t) != found.end();
+    }
+    (*m)["load_effects_named"] = load_named;
+  }
+
+  static bool IsLoadDriven(identify::EffectType t) {
+    using T = identify::EffectType;
+    return t == T::kJointCompliance || t == T::kBacklash || t == T::kLinkBending ||
+           t == T::kBaseCompliance || t == T::kPayload || t == T::kStiffeningSpring;
+  }
+
+  // The fitted tracker pose against the truth's: the error of xi (T = T_ref Exp(xi)) under the
+  // fit's reported covariance, its 99% bound (chi-square, 6 dof) and the largest per-axis z.
+  void ScoreTrackerPose(RunContext& ctx, const DataSet& cal, const identify::IdentifyResult& res) {
+    const lie::SE3& T_ref = cal.frames[tracker_frame_].T_ref;
+    const Vec6 e = (T_ref.Inverse() * res.after.T_base_frames[tracker_frame_]).Log() -
+                   (T_ref.Inverse() * T_true_tracker_).Log();
+    const Mat6& C = res.frame_cov[tracker_frame_];
+    double max_z = 0.0;
+    for (int k = 0; k < 6; ++k) max_z = std::max(max_z, std::abs(e[k]) / std::sqrt(C(k, k)));
+    const Eigen::Quaterniond q(T_true_tracker_.rotation());
+    const Vec3& t = T_true_tracker_.translation();
+    const lie::SE3 dT = T_true_tracker_.Inverse() * res.after.T_base_frames[tracker_frame_];
+    (*ctx.summary)["metrics"]["tracker_pose"] = {
+        {"frame", tracker_->frame},
+        {"T_base_frame_true", {t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z()}},
+        {"err_m", dT.translation().norm()},
+        {"err_deg", Eigen::AngleAxisd(dT.rotation()).angle() / kDeg},
+        {"nees", e.dot(C.ldlt().solve(e))},
+        {"nees_bound_99", stats::ChiSquareQuantile(0.99, 6.0)},
+        {"max_abs_z", max_z}};
   }
 
   // The truth guides its end effector into two sockets per placement, from random starting
@@ -1195,7 +1328,11 @@ class ClosedLoopKind : public ScenarioKind {
     fig.title = "Validation residual before and after identification";
     render::Axes& ax = fig.axes();
     ax.x_label = xl;
-    ax.y_label = "distance from the socket's mean [mm]";
+    const bool sockets = std::any_of(d.rows.begin(), d.rows.end(), [](const auto& o) {
+      return o.type == identify::ObservationType::kGroup;
+    });
+    ax.y_label =
+        sockets ? "distance from the socket's mean [mm]" : "distance from the measured point [mm]";
     ax.AddScatter("declared model", x, b_mm).marker = render::Marker::kCircle;
     ax.AddScatter("with identified effects", x, a_mm).marker = render::Marker::kSquare;
     ax.legend_position = render::LegendPosition::kTopRight;
@@ -1219,6 +1356,10 @@ class ClosedLoopKind : public ScenarioKind {
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;
   bool has_truth_ = false;
+  std::optional<TrackerTruth> tracker_;  // simulated tracker rows instead of sockets
+  int tracker_frame_ = -1;               // its index in frames_
+  std::vector<int> tracker_points_;      // its markers' indices in points_
+  lie::SE3 T_true_tracker_;              // drawn per run
   double socket_distance_m_ = 0.05;
   double encoder_noise_rad_ = 0.0;
   double reading_std_rad_ = 0.0;

@@ -77,7 +77,7 @@ TEST(Models, LoadWithoutWarningsWithTheExpectedJoints) {
     int passive;
     int coupled;
   };
-  for (const Expect& e : {Expect{"rover_arm", 8, 7, 0}, Expect{"humanoid_upper", 12, 6, 2},
+  for (const Expect& e : {Expect{"rover_arm", 8, 7, 0}, Expect{"humanoid_upper", 19, 6, 2},
                           Expect{"jsk_arm", 4, 4, 0}}) {
     std::vector<std::string> warnings;
     MjModelPtr m = LoadModel(ModelPath(e.name), &warnings);

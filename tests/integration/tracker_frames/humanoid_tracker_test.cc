@@ -1,0 +1,163 @@
+// Issue 20 item 3: tracker rows simulated from the truth (runner/common/simulated_tracker.h) and
+// the closed_loop_humanoid_tracker scenario's bad input.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "estimators/error.h"
+#include "estimators/kinematics/forward_kinematics.h"
+#include "scenarios/identify/effect_model.h"
+#include "scenarios/runner/common/simulated_tracker.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "tests/common/test_util.h"
+
+namespace flexbench::scenarios {
+namespace {
+
+namespace fs = std::filesystem;
+
+TrackerTruth HumanoidTracker() {
+  const ConfigNode n = ConfigNode::LoadString(
+      "tracker:\n  frame: tracker\n  T_base_tracker: [2.5, 0, 1.6, 0, 0, 0, 1]\n"
+      "  pose_std_m: 0.05\n  pose_std_deg: 5\n  noise_std_m: 1.0e-12\n"
+      "  markers: [right_marker, left_marker]\n"
+      "  postures_deg: {default: [-30, 30], shoulder_pitch: [-110, 0], l_elbow: [-100, 0]}\n",
+      "t.yaml");
+  return ParseTrackerTruth(n.Child("tracker"));
+}
+
+// Without effects the truth is the declared chain: each row's marker, mapped back from the
+// tracker frame with the true pose, is the declared forward kinematics of its readings (an
+// oracle that shares neither MuJoCo's statics nor the row generator's frame bookkeeping).
+TEST(SimulatedTracker, RigidTruthRowsAreTheDeclaredMarkersInTheTrackerFrame) {
+  const std::string models = testing::SourceDir() + "/models/";
+  auto sim = sim::Simulation::Load(models + "humanoid_upper.xml");
+  const sim::DeclaredModel declared =
+      sim::LoadDeclaredModel(models + "humanoid_upper.declared.yaml");
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(sim->nominal_model(), declared);
+  const TrackerTruth t = HumanoidTracker();
+  TrackerRowsSetup s;
+  s.sim = sim.get();
+  s.chain = &chain;
+  s.base_body = declared.base;
+  s.marker_points = {1, 2};
+  s.T_base_tracker = DrawTrackerPose(t, 7);
+  identify::DataSet d;
+  SimulateTrackerRows(t, s, 12, 7, "test", "cal", &d);
+  ASSERT_EQ(d.rows.size(), 24u);
+  const kinematics::FrameId frames[2] = {chain.ObservedFrame("right_marker"),
+                                         chain.ObservedFrame("left_marker")};
+  kinematics::PpoeData pd(chain.model);
+  for (const identify::Observation& o : d.rows) {
+    kinematics::ForwardKinematics(chain.model, pd, o.q);
+    const Vec3 p_fk = pd.T_base_frame[frames[o.point - 1]].translation();
+    EXPECT_LT((s.T_base_tracker * o.p_frame - p_fk).norm(), 1e-9) << o.where;
+    EXPECT_EQ(o.frame, 0);
+  }
+  // Same seed, same rows; the tracker's pose is drawn about its nominal one.
+  identify::DataSet again;
+  SimulateTrackerRows(t, s, 12, 7, "test", "cal", &again);
+  EXPECT_EQ(again.rows[5].p_frame, d.rows[5].p_frame);
+  EXPECT_EQ(again.rows[5].q, d.rows[5].q);
+  EXPECT_LT((s.T_base_tracker.translation() - t.T_nominal.translation()).norm(), 0.5);
+}
+
+// With the shoulders' gears elastic (1000 N m/rad), the hands sit below where their readings put
+// them, by millimetres (not centimetres: the sag stays well under 5 deg).
+TEST(SimulatedTracker, ElasticShouldersLowerTheHandsByMillimetres) {
+  const std::string models = testing::SourceDir() + "/models/";
+  sim::EffectList effects;
+  effects.push_back(
+      sim::MakeEffect("joint_elasticity",
+                      "{stiffness_Nm_per_rad: {shoulder_pitch: 1000, l_shoulder_pitch: 1000}}"));
+  auto sim = sim::Simulation::Load(models + "humanoid_upper.xml", effects);
+  const sim::DeclaredModel declared =
+      sim::LoadDeclaredModel(models + "humanoid_upper.declared.yaml");
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(sim->nominal_model(), declared);
+  const TrackerTruth t = HumanoidTracker();
+  TrackerRowsSetup s;
+  s.sim = sim.get();
+  s.chain = &chain;
+  s.base_body = declared.base;
+  s.marker_points = {1, 2};
+  identify::DataSet d;
+  SimulateTrackerRows(t, s, 20, 3, "test", "cal", &d);
+  kinematics::PpoeData pd(chain.model);
+  double largest = 0.0, mean_z = 0.0;
+  for (const identify::Observation& o : d.rows) {
+    kinematics::ForwardKinematics(chain.model, pd, o.q);
+    const kinematics::FrameId f =
+        chain.ObservedFrame(o.point == 1 ? "right_marker" : "left_marker");
+    const Vec3 sag = s.T_base_tracker * o.p_frame - pd.T_base_frame[f].translation();
+    mean_z += sag.z() / d.rows.size();
+    largest = std::max(largest, sag.norm());
+  }
+  EXPECT_LT(mean_z, -5e-4);  // the weight pulls the hands down (one may rise: a bent elbow)
+  EXPECT_GT(largest, 2e-3);
+  EXPECT_LT(largest, 2e-2);
+  // The largest load: the arm stretched out forward. The gear gives a little over half a degree.
+  sim->SetCommand("shoulder_pitch", -M_PI / 2);
+  sim->Settle();
+  const int j = mj_name2id(sim->model(), mjOBJ_JOINT, "shoulder_pitch");
+  const double sag_deg = std::abs(sim->JointPosition(j) - sim->MotorPosition(j)) * 180.0 / M_PI;
+  std::printf(
+      "hand off its readings by up to %.2f mm over 20 postures; %.2f deg of sag with the "
+      "arm stretched out\n",
+      largest * 1e3, sag_deg);
+  EXPECT_GT(sag_deg, 0.3);
+  EXPECT_LT(sag_deg, 1.0);
+}
+
+// A compliant mount carries every measured point: one hand's shoulder is no mount of the other
+// hand (with both measured, the humanoid's fixed torso leaves no mount candidate at all), while
+// one arm alone keeps its first joint's anchor as before.
+TEST(SimulatedTracker, TheMountOfSeveralMarkersIsAboveThemAll) {
+  const std::string models = testing::SourceDir() + "/models/";
+  auto sim = sim::Simulation::Load(models + "humanoid_upper.xml");
+  const sim::DeclaredModel declared =
+      sim::LoadDeclaredModel(models + "humanoid_upper.declared.yaml");
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(sim->nominal_model(), declared);
+  const identify::EffectModel one(sim->nominal_model(), chain, chain.end_effector);
+  EXPECT_GE(one.FindCandidate("base_compliance@shoulder_pitch"), 0);
+  const identify::EffectModel both(
+      sim->nominal_model(), chain, chain.end_effector, "",
+      {chain.ObservedFrame("right_marker"), chain.ObservedFrame("left_marker")});
+  for (const identify::Candidate& c : both.candidates()) {
+    EXPECT_NE(c.type, identify::EffectType::kBaseCompliance) << c.Name();
+  }
+  EXPECT_GE(both.FindCandidate("joint_compliance@l_shoulder_pitch"), 0);
+  EXPECT_TRUE(both.has_masses());
+}
+
+// Bad input in the scenario's tracker block: exit 2, one line naming the file or option and key.
+TEST(SimulatedTracker, BadTrackerBlockIsOneLineAndExit2) {
+  const std::string scenario =
+      testing::SourceDir() + "/scenarios/closed_loop_humanoid_tracker.yaml";
+  const fs::path out = fs::temp_directory_path() / ("flexbench_ht_" + std::to_string(::getpid()));
+  const struct {
+    const char* set;
+    const char* expect;
+  } cases[] = {
+      {"truth.tracker.frame=laser", "truth.tracker.frame': 'laser' is not declared"},
+      {"truth.tracker.noise_std_m=0", "noise_std_m"},
+      {"truth.tracker.markers=[index_tip, l_foot]", "'l_foot' is neither the end effector"},
+      {"truth.tracker.postures_deg.l_elbow=[10, -10]", "postures_deg.l_elbow"},
+      {"truth.tracker.postures_deg.l_knee=[0, 10]", "'l_knee' is not an actuated joint"},
+      {"calibration.simulate.postures=2", "postures"},
+      {"calibration.simulate.placements=3", "placements"},
+  };
+  for (const auto& c : cases) {
+    const testing::CommandResult r =
+        testing::RunCommand(testing::BinDir() + "/flexbench run " + scenario + " --out " +
+                            out.string() + " --quiet --set '" + c.set + "'");
+    EXPECT_EQ(r.exit_code, 2) << c.set << ": " << r.err;
+    EXPECT_EQ(testing::CountLines(r.err), 1) << c.set << ": " << r.err;
+    EXPECT_NE(r.err.find(c.expect), std::string::npos) << c.set << ": " << r.err;
+  }
+  fs::remove_all(out);
+}
+
+}  // namespace
+}  // namespace flexbench::scenarios
