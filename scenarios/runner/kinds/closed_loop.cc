@@ -22,6 +22,7 @@
 #include <random>
 #include <set>
 #include <sstream>
+#include <tuple>
 
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
@@ -250,154 +251,208 @@ class ClosedLoopKind : public ScenarioKind {
     if (tracker_) CheckTrackerTruth();
   }
 
+  // collect (load, loads, outliers) -> identify -> score (errors before and after, names,
+  // NEES) -> report (identification, augmented model, residuals, plots).
   void Run(RunContext& ctx) override {
-    DataSet cal = Load(calibration_, ctx, "calibration");
-    DataSet val = Load(validation_, ctx, "validation");
-    std::vector<identify::ConfigLoads> cal_loads = identify::ComputeLoads(*em_, cal);
-    std::vector<identify::ConfigLoads> val_loads = identify::ComputeLoads(*em_, val);
-    PrepareFrames(cal_loads, &cal, &val);
+    Sets sets = Collect(ctx);
+    ctx.log("identify: " + std::to_string(sets.cal.rows.size()) + " calibration rows, " +
+            std::to_string(candidates_.size()) + " candidate effects");
+    identify::IdentifyResult res =
+        identify::Identify(*em_, sets.cal, sets.cal_loads, candidates_, opt_);
+    for (const std::string& s : res.steps) ctx.log("  " + s);
+    const Scored sc = Score(ctx, &sets, &res);
+    Json& m = (*ctx.summary)["metrics"];
+    ScoreNames(res, &m);
+    WriteErrorMetrics(sets, sc, &m);
+    WriteDiagnostics(ctx, sets, res, &m);
+    ScoreNees(ctx, sets, sc, res, &m);
+    WriteIdentification(res, &(*ctx.summary)["identification"]);
+    Report(ctx, sets, sc, res);
+  }
+
+ private:
+  // The calibration and validation sets and their loads (nominal model), as identified.
+  struct Sets {
+    DataSet cal, val;
+    std::vector<identify::ConfigLoads> cal_loads, val_loads;
+  };
+
+  // Row errors and marker predictions before (declared model) and after (augmented), with the
+  // loads after.
+  struct Scored {
+    std::vector<identify::ConfigLoads> cal_loads_after, val_loads_after;
+    std::vector<double> cal_before, cal_after, val_before, val_after;
+    std::vector<Vec3> cal_p0, cal_p1, val_p0, val_p1;
+  };
+
+  Sets Collect(RunContext& ctx) {
+    Sets s;
+    s.cal = Load(calibration_, ctx, "calibration");
+    s.val = Load(validation_, ctx, "validation");
+    s.cal_loads = identify::ComputeLoads(*em_, s.cal);
+    s.val_loads = identify::ComputeLoads(*em_, s.val);
+    PrepareFrames(s.cal_loads, &s.cal, &s.val);
     Json rejected = Json::array();
-    RejectOutliers(ctx, calibration_, "calibration", &cal, &cal_loads, &rejected);
-    RejectOutliers(ctx, validation_, "validation", &val, &val_loads, &rejected);
+    RejectOutliers(ctx, calibration_, "calibration", &s.cal, &s.cal_loads, &rejected);
+    RejectOutliers(ctx, validation_, "validation", &s.val, &s.val_loads, &rejected);
     (*ctx.summary)["metrics"]["rejected_rows"] = rejected.size();
     (*ctx.summary)["identification"]["rejected_rows"] = rejected;
-    CheckSets(cal, calibration_);
-    ctx.log("identify: " + std::to_string(cal.rows.size()) + " calibration rows, " +
-            std::to_string(candidates_.size()) + " candidate effects");
-    identify::IdentifyResult res = identify::Identify(*em_, cal, cal_loads, candidates_, opt_);
-    for (const std::string& s : res.steps) ctx.log("  " + s);
+    CheckSets(s.cal, calibration_);
+    return s;
+  }
 
-    const auto errors = [&](const DataSet& d, const std::vector<identify::ConfigLoads>& L,
-                            bool after) {
-      const std::vector<int> act = after ? res.after.active : std::vector<int>{};
-      const Eigen::VectorXd th = after ? res.after.theta : Eigen::VectorXd();
-      // Rows in a measurement frame against it at the fit's pose (the same distance as in it).
-      const DataSet db =
-          identify::InBase(d, after ? res.after.T_base_frames : res.before.T_base_frames);
-      const auto p = identify::PredictMarkers(*em_, db, L, after ? res.after : res.before);
-      const auto pix = identify::PredictPixels(*em_, db, L, act, th);
-      return std::make_pair(identify::RowErrors(db, p, pix), p);
-    };
+  // Row errors of d before or after the fit, and the marker predictions.
+  std::pair<std::vector<double>, std::vector<Vec3>> Errors(
+      const DataSet& d, const std::vector<identify::ConfigLoads>& L,
+      const identify::IdentifyResult& res, bool after) const {
+    const std::vector<int> act = after ? res.after.active : std::vector<int>{};
+    const Eigen::VectorXd th = after ? res.after.theta : Eigen::VectorXd();
+    // Rows in a measurement frame against it at the fit's pose (the same distance as in it).
+    const DataSet db =
+        identify::InBase(d, after ? res.after.T_base_frames : res.before.T_base_frames);
+    const auto p = identify::PredictMarkers(*em_, db, L, after ? res.after : res.before);
+    const auto pix = identify::PredictPixels(*em_, db, L, act, th);
+    return std::make_pair(identify::RowErrors(db, p, pix), p);
+  }
+
+  // The errors before and after; the sets then in the base frame at the fit's frame poses, and
+  // (with the readings' noise stated) the fitted parameters' covariance from it.
+  Scored Score(RunContext& ctx, Sets* sets, identify::IdentifyResult* res) {
+    Scored sc;
     // The augmented model predicts with the loads where its joint corrections put the arm.
-    const std::vector<identify::ConfigLoads> cal_loads_after =
-        identify::ComputeLoads(*em_, cal, res.after.active, res.after.theta);
-    const std::vector<identify::ConfigLoads> val_loads_after =
-        identify::ComputeLoads(*em_, val, res.after.active, res.after.theta);
-    const auto [cal_before, cal_p0] = errors(cal, cal_loads, false);
-    const auto [cal_after, cal_p1] = errors(cal, cal_loads_after, true);
-    const auto [val_before, val_p0] = errors(val, val_loads, false);
-    const auto [val_after, val_p1] = errors(val, val_loads_after, true);
-    cal = identify::InBase(cal, res.after.T_base_frames);
-    val = identify::InBase(val, res.after.T_base_frames);
+    sc.cal_loads_after =
+        identify::ComputeLoads(*em_, sets->cal, res->after.active, res->after.theta);
+    sc.val_loads_after =
+        identify::ComputeLoads(*em_, sets->val, res->after.active, res->after.theta);
+    std::tie(sc.cal_before, sc.cal_p0) = Errors(sets->cal, sets->cal_loads, *res, false);
+    std::tie(sc.cal_after, sc.cal_p1) = Errors(sets->cal, sc.cal_loads_after, *res, true);
+    std::tie(sc.val_before, sc.val_p0) = Errors(sets->val, sets->val_loads, *res, false);
+    std::tie(sc.val_after, sc.val_p1) = Errors(sets->val, sc.val_loads_after, *res, true);
+    sets->cal = identify::InBase(sets->cal, res->after.T_base_frames);
+    sets->val = identify::InBase(sets->val, res->after.T_base_frames);
     // In the base frame: a point row's residual is against its measured point (Residuals).
-    if (reading_std_rad_ > 0.0) UseReadingNoiseCovariance(ctx, cal, cal_loads_after, &res);
+    if (reading_std_rad_ > 0.0) UseReadingNoiseCovariance(ctx, sets->cal, sc.cal_loads_after, res);
+    if (tracker_) ScoreTrackerPose(ctx, sets->cal, *res);
+    return sc;
+  }
 
-    if (tracker_) ScoreTrackerPose(ctx, cal, res);
-    Json& m = (*ctx.summary)["metrics"];
+  void ScoreNames(const identify::IdentifyResult& res, Json* m) const {
     std::vector<std::string> found;
     for (const auto& e : res.effects) found.push_back(e.name);
     if (has_truth_) {
-      m["truth_effects"] = truth_names_;
+      (*m)["truth_effects"] = truth_names_;
       std::set<std::string> a(found.begin(), found.end()),
           b(truth_names_.begin(), truth_names_.end());
-      m["effect_found_correct"] = a == b;
-      if (tracker_) ScoreNamesUpToEquivalence(found, &m);
+      (*m)["effect_found_correct"] = a == b;
+      if (tracker_) ScoreNamesUpToEquivalence(found, m);
     }
-    m["effects_found"] = found;
+    (*m)["effects_found"] = found;
+  }
+
+  void WriteErrorMetrics(const Sets& sets, const Scored& sc, Json* m) const {
+    const DataSet& cal = sets.cal;
+    const DataSet& val = sets.val;
     if (camera_.present) {
-      m["val_err_before_px"] = identify::PixelError(val, val_before);
-      m["val_err_after_px"] = identify::PixelError(val, val_after);
-      m["cal_err_before_px"] = identify::PixelError(cal, cal_before);
-      m["cal_err_after_px"] = identify::PixelError(cal, cal_after);
+      (*m)["val_err_before_px"] = identify::PixelError(val, sc.val_before);
+      (*m)["val_err_after_px"] = identify::PixelError(val, sc.val_after);
+      (*m)["cal_err_before_px"] = identify::PixelError(cal, sc.cal_before);
+      (*m)["cal_err_after_px"] = identify::PixelError(cal, sc.cal_after);
     }
-    m["val_err_before_m"] = identify::ConsistencyError(val, val_before);
-    m["val_err_after_m"] = identify::ConsistencyError(val, val_after);
-    m["cal_err_before_m"] = identify::ConsistencyError(cal, cal_before);
-    m["cal_err_after_m"] = identify::ConsistencyError(cal, cal_after);
+    (*m)["val_err_before_m"] = identify::ConsistencyError(val, sc.val_before);
+    (*m)["val_err_after_m"] = identify::ConsistencyError(val, sc.val_after);
+    (*m)["cal_err_before_m"] = identify::ConsistencyError(cal, sc.cal_before);
+    (*m)["cal_err_after_m"] = identify::ConsistencyError(cal, sc.cal_after);
     for (const auto& [name, e] :
-         {std::pair{"cal_before", &cal_before}, std::pair{"cal_after", &cal_after},
-          std::pair{"val_before", &val_before}, std::pair{"val_after", &val_after}}) {
+         {std::pair{"cal_before", &sc.cal_before}, std::pair{"cal_after", &sc.cal_after},
+          std::pair{"val_before", &sc.val_before}, std::pair{"val_after", &sc.val_after}}) {
       const DataSet& d = std::string(name).rfind("cal", 0) == 0 ? cal : val;
       std::vector<double> metres, pixels;
       for (size_t r = 0; r < d.rows.size(); ++r) {
         (d.rows[r].type == identify::ObservationType::kPixel ? pixels : metres).push_back((*e)[r]);
       }
-      if (!metres.empty()) {
-        const Stats s = Summarise(metres);
-        m[std::string(name) + "_row_err_mean_m"] = s.mean;
-        m[std::string(name) + "_row_err_std_m"] = s.std;
-        m[std::string(name) + "_row_err_max_m"] = s.max;
-      }
-      if (!pixels.empty()) {
-        const Stats s = Summarise(pixels);
-        m[std::string(name) + "_row_err_mean_px"] = s.mean;
-        m[std::string(name) + "_row_err_std_px"] = s.std;
-        m[std::string(name) + "_row_err_max_px"] = s.max;
-      }
+      WriteRowErrorStats(std::string(name) + "_row_err", "_m", metres, m);
+      WriteRowErrorStats(std::string(name) + "_row_err", "_px", pixels, m);
     }
-    m["calibration_rows"] = cal.rows.size();
-    m["validation_rows"] = val.rows.size();
-    m["condition_number"] = res.condition_number;
+    (*m)["calibration_rows"] = cal.rows.size();
+    (*m)["validation_rows"] = val.rows.size();
+  }
+
+  static void WriteRowErrorStats(const std::string& prefix, const std::string& unit,
+                                 const std::vector<double>& errors, Json* m) {
+    if (errors.empty()) return;
+    const Stats s = Summarise(errors);
+    (*m)[prefix + "_mean" + unit] = s.mean;
+    (*m)[prefix + "_std" + unit] = s.std;
+    (*m)[prefix + "_max" + unit] = s.max;
+  }
+
+  // Conditioning, the fitted scale, what the data leave undetermined, and the verdict.
+  void WriteDiagnostics(RunContext& ctx, const Sets& sets, const identify::IdentifyResult& res,
+                        Json* m) {
+    (*m)["condition_number"] = res.condition_number;
     // The fitted distance of each constrained group pair (a check on the scale: the
     // consistency metric alone would reward shrinking the robot).
     std::vector<double> fitted_distances;
-    for (const identify::GroupDistance& gd : cal.distances) {
+    for (const identify::GroupDistance& gd : sets.cal.distances) {
       fitted_distances.push_back(
           (res.after.group_points[gd.a] - res.after.group_points[gd.b]).norm());
     }
-    m["cal_group_distances_fitted_m"] = fitted_distances;
-    m["unidentifiable"] = res.unidentifiable;
-    m["indistinguishable"] = res.indistinguishable;
-    verdict_ = identify::Verdict(res, m["val_err_before_m"].get<double>(),
-                                 m["val_err_after_m"].get<double>());
-    m["verdict"] = verdict_;
-    m["near_singular"] = res.near_singular;
-    m["effect_overlap"] = res.overlap;
-    m["attribution_unique"] = res.attribution_unique;
-    m["cv_err_before"] = res.cv_before;
-    m["cv_err_after"] = res.cv_after;
-    m["residual_finding"] = FindingJson(res.finding);
+    (*m)["cal_group_distances_fitted_m"] = fitted_distances;
+    (*m)["unidentifiable"] = res.unidentifiable;
+    (*m)["indistinguishable"] = res.indistinguishable;
+    verdict_ = identify::Verdict(res, (*m)["val_err_before_m"].get<double>(),
+                                 (*m)["val_err_after_m"].get<double>());
+    (*m)["verdict"] = verdict_;
+    (*m)["near_singular"] = res.near_singular;
+    (*m)["effect_overlap"] = res.overlap;
+    (*m)["attribution_unique"] = res.attribution_unique;
+    (*m)["cv_err_before"] = res.cv_before;
+    (*m)["cv_err_after"] = res.cv_after;
+    (*m)["residual_finding"] = FindingJson(res.finding);
     ctx.log("verdict: " + verdict_ + "; " + res.finding.message +
             (res.finding.significant
                  ? (res.unlocked.empty() ? " - not in the candidate library" : " - left over")
                  : " (not significant)"));
+  }
 
-    // NEES of the declared PPOE covariance (plus the point noise) before and after; the
-    // augmented model's sources are scaled to what the remaining residual supports.
-    const std::vector<Mat3> noise_before = RowNoise(val, val_loads, nullptr);
-    const std::vector<Mat3> noise_after = RowNoise(val, val_loads_after, &res);
-    const double nees_before = MeanNees(val, val_p0, noise_before);
-    const double nees_after = MeanNees(val, val_p1, noise_after);
+  // NEES of the declared PPOE covariance (plus the point noise) before and after; the
+  // augmented model's sources are scaled to what the remaining residual supports.
+  void ScoreNees(RunContext& ctx, const Sets& sets, const Scored& sc,
+                 const identify::IdentifyResult& res, Json* m) {
+    const DataSet& val = sets.val;
+    const std::vector<Mat3> noise_before = RowNoise(val, sets.val_loads, nullptr);
+    const std::vector<Mat3> noise_after = RowNoise(val, sc.val_loads_after, &res);
     const stats::ChiSquareBounds nb =
         stats::MeanChiSquareBounds(3.0, static_cast<int>(val.rows.size()));
-    m["nees_before"] = nees_before;
-    m["nees_after"] = nees_after;
-    m["nees_bound_low"] = nb.lower;
-    m["nees_bound_high"] = nb.upper;
+    (*m)["nees_before"] = MeanNees(val, sc.val_p0, noise_before);
+    (*m)["nees_after"] = MeanNees(val, sc.val_p1, noise_after);
+    (*m)["nees_bound_low"] = nb.lower;
+    (*m)["nees_bound_high"] = nb.upper;
     // With the readings' noise stated, the rows' NEES has a consistent size of its own: the
     // sources need only cover what exceeds its upper bound (ConsistentSourceScale).
     double target = 3.0;
     if (reading_std_rad_ > 0.0) {
-      target = SharedNeesUpperBound(val, val_loads_after, res, noise_after);
-      m["nees_bound_high_shared"] = target;
+      target = SharedNeesUpperBound(val, sc.val_loads_after, res, noise_after);
+      (*m)["nees_bound_high_shared"] = target;
     }
-    source_scale_ = SourceScale(val, val_p1, noise_after, target);
-    m["source_covariance_scale"] = source_scale_;
-    m["source_scale_from"] = reading_std_rad_ > 0.0 ? "readings' noise and fitted parameters"
-                                                    : "point_std_m (floor 1e-6)";
-    nees_scaled_ = MeanNees(val, val_p1, noise_after, source_scale_);
+    source_scale_ = SourceScale(val, sc.val_p1, noise_after, target);
+    (*m)["source_covariance_scale"] = source_scale_;
+    (*m)["source_scale_from"] = reading_std_rad_ > 0.0 ? "readings' noise and fitted parameters"
+                                                       : "point_std_m (floor 1e-6)";
+    nees_scaled_ = MeanNees(val, sc.val_p1, noise_after, source_scale_);
     // At the largest scale and still above: what is left is not where the sources act.
-    m["sources_cover_residual"] = nees_scaled_ <= target + 1e-6;
+    (*m)["sources_cover_residual"] = nees_scaled_ <= target + 1e-6;
     if (nees_scaled_ > target + 1e-6) {
       ctx.log("the declared sources cannot cover what the effects leave: validation mean NEES " +
               Num(nees_scaled_) + " at the largest source scale");
     }
-    m["nees_after_scaled"] = nees_scaled_;
+    (*m)["nees_after_scaled"] = nees_scaled_;
+  }
 
-    Json& id = (*ctx.summary)["identification"];
-    id["selection_rule"] = "forward stepwise, BIC = N ln(RSS/N) + k ln N, add while dBIC < -" +
-                           Num(opt_.bic_threshold);
-    id["steps"] = res.steps;
+  void WriteIdentification(const identify::IdentifyResult& res, Json* id) const {
+    (*id)["selection_rule"] = "forward stepwise, BIC = N ln(RSS/N) + k ln N, add while dBIC < -" +
+                              Num(opt_.bic_threshold);
+    (*id)["steps"] = res.steps;
     Json effects = Json::array();
     for (const auto& e : res.effects) {
       const identify::Candidate& c = em_->candidates()[e.candidate];
@@ -407,30 +462,33 @@ class ClosedLoopKind : public ScenarioKind {
                          {"unit", c.unit},
                          {"share", e.share}});
     }
-    id["effects"] = effects;
+    (*id)["effects"] = effects;
     Json corr = Json::array();
     for (int i = 0; i < res.theta_corr.rows(); ++i) {
       std::vector<double> row(res.theta_corr.cols());
       for (int j = 0; j < res.theta_corr.cols(); ++j) row[j] = res.theta_corr(i, j);
       corr.push_back(row);
     }
-    id["correlation"] = corr;
-    id["rss_before"] = res.before.rss;
-    id["rss_after"] = res.after.rss;
-    id["cross_validation"] = {{"folds_by", res.folds_by}, {"folds", res.num_folds}};
-    id["equivalence_sets"] = EquivalenceJson(res);
-    id["undetermined"] = res.undetermined;
-    id["first_finding"] = FindingJson(res.first_finding);
-    id["unlocked"] = res.unlocked;
+    (*id)["correlation"] = corr;
+    (*id)["rss_before"] = res.before.rss;
+    (*id)["rss_after"] = res.after.rss;
+    (*id)["cross_validation"] = {{"folds_by", res.folds_by}, {"folds", res.num_folds}};
+    (*id)["equivalence_sets"] = EquivalenceJson(res);
+    (*id)["undetermined"] = res.undetermined;
+    (*id)["first_finding"] = FindingJson(res.first_finding);
+    (*id)["unlocked"] = res.unlocked;
     Json alts = Json::array();
     for (const identify::Alternative& a : res.alternatives) {
       alts.push_back({{"banned", a.banned}, {"effects", a.effects}, {"cv_err", a.cv}});
     }
-    id["alternatives"] = alts;
-    id["simpler_equivalents"] = res.simpler;
-    if (!frames_.empty()) id["frames"] = FramesJson(res);
-    if (!unknown_offset_nodes_.empty()) id["marker_offsets"] = OffsetsJson(res);
+    (*id)["alternatives"] = alts;
+    (*id)["simpler_equivalents"] = res.simpler;
+    if (!frames_.empty()) (*id)["frames"] = FramesJson(res);
+    if (!unknown_offset_nodes_.empty()) (*id)["marker_offsets"] = OffsetsJson(res);
+  }
 
+  void Report(RunContext& ctx, const Sets& sets, const Scored& sc,
+              const identify::IdentifyResult& res) {
     // A model that does not lower the validation error is no fix: it is not shipped.
     if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
       WriteAugmented(ctx, res);
@@ -441,12 +499,13 @@ class ClosedLoopKind : public ScenarioKind {
           verdict_ + ")");
     }
     PlotFinding(ctx, res.finding.significant ? res.finding : res.first_finding);
-    WriteResiduals(ctx, cal, cal_before, cal_after, cal_loads, cal_p0, "calibration");
-    WriteResiduals(ctx, val, val_before, val_after, val_loads, val_p0, "validation");
-    Plot(ctx, res, val, val_before, val_after, val_loads);
+    WriteResiduals(ctx, sets.cal, sc.cal_before, sc.cal_after, sets.cal_loads, sc.cal_p0,
+                   "calibration");
+    WriteResiduals(ctx, sets.val, sc.val_before, sc.val_after, sets.val_loads, sc.val_p0,
+                   "validation");
+    Plot(ctx, res, sets.val, sc.val_before, sc.val_after, sets.val_loads);
   }
 
- private:
   DataSet Load(const Source& s, RunContext& ctx, const std::string& what) {
     DataSet d;
     d.camera = camera_;

@@ -105,109 +105,153 @@ class PpoeCovarianceKind : public ScenarioKind {
       chains_.push_back(sim::BuildDeclaredChain(model_.get(), Declared(c)));
   }
 
+  // Per case: the PPOE covariances (2nd and 4th order) -> the Monte Carlo oracle and the
+  // region samples -> scores -> the covariance CSV and the figure.
   void Run(RunContext& ctx) override {
-    Json& metrics = (*ctx.summary)["metrics"];
     std::ofstream cov_csv(ctx.out->File("covariances.csv"));
     cov_csv << "case,method,row,c0,c1,c2,c3,c4,c5\n";
     for (size_t i = 0; i < cases_.size(); ++i) {
       const Case& c = cases_[i];
-      const sim::DeclaredChain& chain = chains_[i];
-      const kinematics::PpoeModel& model = chain.model;
-      const FrameId ee = chain.end_effector;
-      kinematics::PpoeData data(model);
-      kinematics::ForwardKinematicsWithCovariance(model, data, c.q, lie::CompoundOrder::kSecond);
-      const Mat6 cov2 = data.Sigma_frame[ee];
-      kinematics::ForwardKinematicsWithCovariance(model, data, c.q, lie::CompoundOrder::kFourth);
-      const Mat6 cov4 = data.Sigma_frame[ee];
-      const lie::SE3 mean = data.T_base_frame[ee];
-
-      // Monte Carlo of the exact chain, one stream per case.
-      std::mt19937_64 rng(ctx.seed * 1000003ULL + i);
-      kinematics::ChainSampler sampler(model);
-      std::vector<lie::SE3> poses(model.num_frames());
-      const RangeSpace range2 = Range(cov2);
-      const RangeSpace range4 = Range(cov4);
-      const double q2 = stats::ChiSquareQuantile(confidence_, range2.rank());
-      const double q4 = stats::ChiSquareQuantile(confidence_, range4.rank());
-      // The covariance oracle: control-variate Monte Carlo of the exact chain (chain_sampler.h).
-      std::mt19937_64 rng_cov(ctx.seed * 1000003ULL + 500 + i);
-      const Mat6 cov_mc =
-          sampler.SampleCovarianceControlVariate(c.q, ee, covariance_samples_, rng_cov);
-      Mat6 cov_raw = Mat6::Zero();
-      int inside2 = 0, inside4 = 0;
-      std::ofstream samples_csv(ctx.out->File("samples_" + c.name + ".csv"));
-      samples_csv << "sample,x_m,y_m,z_m,rho_x,rho_y,rho_z,theta_x,theta_y,theta_z,maha2_2nd\n";
+      const Propagated p = Propagate(i);
       PpoeFigure figure;
       figure.title = "case " + c.name;
-      for (int s = 0; s < samples_; ++s) {
-        sampler.Sample(c.q, rng, &poses);
-        const Vec6 xi = mean.Between(poses[ee]).Log();
-        cov_raw += xi * xi.transpose();
-        const double d2 = range2.Mahalanobis2(xi);
-        inside2 += d2 <= q2;
-        inside4 += range4.Mahalanobis2(xi) <= q4;
-        if (s < plot_samples_) {
-          const Vec3& p = poses[ee].translation();
-          char line[320];
-          std::snprintf(line, sizeof(line),
-                        "%d,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s, p.x(), p.y(),
-                        p.z(), xi[0], xi[1], xi[2], xi[3], xi[4], xi[5], d2);
-          samples_csv << line;
-          figure.samples.push_back(p);
-        }
-      }
-      cov_raw /= samples_;
-      const std::pair<const char*, const Mat6*> covs[] = {
-          {"ppoe_2nd", &cov2}, {"ppoe_4th", &cov4}, {"monte_carlo", &cov_mc}};
-      for (const auto& [method, cov] : covs) {
-        for (int r = 0; r < 6; ++r) {
-          cov_csv << c.name << "," << method << "," << r;
-          for (int k = 0; k < 6; ++k) {
-            char v[32];
-            std::snprintf(v, sizeof(v), ",%.9g", (*cov)(r, k));
-            cov_csv << v;
-          }
-          cov_csv << "\n";
-        }
-      }
-      Json& m = metrics[c.name];
-      m["inside80_frac"] = static_cast<double>(inside2) / samples_;
-      m["inside80_frac_4th"] = static_cast<double>(inside4) / samples_;
-      m["cov_rank"] = range2.rank();
-      m["cov_relerr_2nd"] = RelativeFrobenius(cov2, cov_mc);
-      m["cov_relerr_4th"] = RelativeFrobenius(cov4, cov_mc);
-      // The plain second moment of the region samples, as a check on the oracle.
-      m["cov_relerr_raw_mc"] = RelativeFrobenius(cov_raw, cov_mc);
-      m["ee_pos_std_mc_m"] = std::sqrt(cov_mc.topLeftCorner<3, 3>().trace());
-
-      // The 80% region's boundary: for every pair of principal directions, the ellipse of the
-      // scaled covariance in the tangent space mapped through Exp (the paper's construction).
-      for (int a = 0; a < range2.rank(); ++a) {
-        for (int b = a; b < range2.rank(); ++b) {
-          for (int k = 0; k < 180; ++k) {
-            const double phi = 2.0 * M_PI * k / 180.0;
-            const Vec6 xi =
-                std::sqrt(q2 * range2.lambda[a]) * std::cos(phi) * range2.V.col(a) +
-                (b == a ? Vec6::Zero()
-                        : Vec6(std::sqrt(q2 * range2.lambda[b]) * std::sin(phi) * range2.V.col(b)));
-            figure.boundary.push_back(mean.Plus(xi).translation());
-          }
-        }
-      }
-      // The arm: the nominal positions of the joint frames and the end effector.
-      kinematics::ForwardKinematics(model, data, c.q);
-      figure.arm.push_back(Vec3::Zero());
-      for (const auto& f : model.frames()) {
-        if (f.name.rfind("joint/", 0) == 0)
-          figure.arm.push_back(data.T_base_frame[model.FindFrame(f.name)].translation());
-      }
-      figure.arm.push_back(mean.translation());
-      DrawPpoeFigure(figure, (ctx.out->FramesDir() / ("planar3_" + c.name + ".png")).string());
+      const Sampled mc = Sample(i, p, ctx, &figure);
+      WriteCovariances(c.name, p, mc.cov_mc, &cov_csv);
+      Score(c.name, p, mc, (*ctx.summary)["metrics"][c.name]);
+      DrawCase(i, p, &figure, ctx);
       ctx.progress("cases", static_cast<int>(i + 1), static_cast<int>(cases_.size()));
     }
   }
 
  private:
+  // A case's end-effector pose and its PPOE covariances, with their ranges and 80% quantiles.
+  struct Propagated {
+    lie::SE3 mean;
+    Mat6 cov2, cov4;
+    RangeSpace range2, range4;
+    double q2 = 0.0, q4 = 0.0;
+  };
+
+  // What the Monte Carlo gives: the oracle's covariance, the plain second moment of the
+  // region samples, and how many of those fall inside each order's 80% region.
+  struct Sampled {
+    Mat6 cov_mc, cov_raw;
+    int inside2 = 0, inside4 = 0;
+  };
+
+  Propagated Propagate(size_t i) const {
+    const kinematics::PpoeModel& model = chains_[i].model;
+    const FrameId ee = chains_[i].end_effector;
+    kinematics::PpoeData data(model);
+    Propagated p;
+    kinematics::ForwardKinematicsWithCovariance(model, data, cases_[i].q,
+                                                lie::CompoundOrder::kSecond);
+    p.cov2 = data.Sigma_frame[ee];
+    kinematics::ForwardKinematicsWithCovariance(model, data, cases_[i].q,
+                                                lie::CompoundOrder::kFourth);
+    p.cov4 = data.Sigma_frame[ee];
+    p.mean = data.T_base_frame[ee];
+    p.range2 = Range(p.cov2);
+    p.range4 = Range(p.cov4);
+    p.q2 = stats::ChiSquareQuantile(confidence_, p.range2.rank());
+    p.q4 = stats::ChiSquareQuantile(confidence_, p.range4.rank());
+    return p;
+  }
+
+  // Monte Carlo of the exact chain, one stream per case: the covariance oracle
+  // (control-variate, chain_sampler.h) and the region samples (the first plot_samples_ into
+  // samples_<case>.csv and the figure).
+  Sampled Sample(size_t i, const Propagated& p, RunContext& ctx, PpoeFigure* figure) const {
+    const Case& c = cases_[i];
+    const kinematics::PpoeModel& model = chains_[i].model;
+    const FrameId ee = chains_[i].end_effector;
+    std::mt19937_64 rng(ctx.seed * 1000003ULL + i);
+    kinematics::ChainSampler sampler(model);
+    std::vector<lie::SE3> poses(model.num_frames());
+    std::mt19937_64 rng_cov(ctx.seed * 1000003ULL + 500 + i);
+    Sampled out;
+    out.cov_mc = sampler.SampleCovarianceControlVariate(c.q, ee, covariance_samples_, rng_cov);
+    out.cov_raw = Mat6::Zero();
+    std::ofstream samples_csv(ctx.out->File("samples_" + c.name + ".csv"));
+    samples_csv << "sample,x_m,y_m,z_m,rho_x,rho_y,rho_z,theta_x,theta_y,theta_z,maha2_2nd\n";
+    for (int s = 0; s < samples_; ++s) {
+      sampler.Sample(c.q, rng, &poses);
+      const Vec6 xi = p.mean.Between(poses[ee]).Log();
+      out.cov_raw += xi * xi.transpose();
+      const double d2 = p.range2.Mahalanobis2(xi);
+      out.inside2 += d2 <= p.q2;
+      out.inside4 += p.range4.Mahalanobis2(xi) <= p.q4;
+      if (s < plot_samples_) {
+        const Vec3& pos = poses[ee].translation();
+        char line[320];
+        std::snprintf(line, sizeof(line), "%d,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n",
+                      s, pos.x(), pos.y(), pos.z(), xi[0], xi[1], xi[2], xi[3], xi[4], xi[5], d2);
+        samples_csv << line;
+        figure->samples.push_back(pos);
+      }
+    }
+    out.cov_raw /= samples_;
+    return out;
+  }
+
+  static void WriteCovariances(const std::string& name, const Propagated& p, const Mat6& cov_mc,
+                               std::ofstream* csv) {
+    const std::pair<const char*, const Mat6*> covs[] = {
+        {"ppoe_2nd", &p.cov2}, {"ppoe_4th", &p.cov4}, {"monte_carlo", &cov_mc}};
+    for (const auto& [method, cov] : covs) {
+      for (int r = 0; r < 6; ++r) {
+        *csv << name << "," << method << "," << r;
+        for (int k = 0; k < 6; ++k) {
+          char v[32];
+          std::snprintf(v, sizeof(v), ",%.9g", (*cov)(r, k));
+          *csv << v;
+        }
+        *csv << "\n";
+      }
+    }
+  }
+
+  void Score(const std::string& name, const Propagated& p, const Sampled& mc, Json& m) const {
+    m["inside80_frac"] = static_cast<double>(mc.inside2) / samples_;
+    m["inside80_frac_4th"] = static_cast<double>(mc.inside4) / samples_;
+    m["cov_rank"] = p.range2.rank();
+    m["cov_relerr_2nd"] = RelativeFrobenius(p.cov2, mc.cov_mc);
+    m["cov_relerr_4th"] = RelativeFrobenius(p.cov4, mc.cov_mc);
+    // The plain second moment of the region samples, as a check on the oracle.
+    m["cov_relerr_raw_mc"] = RelativeFrobenius(mc.cov_raw, mc.cov_mc);
+    m["ee_pos_std_mc_m"] = std::sqrt(mc.cov_mc.topLeftCorner<3, 3>().trace());
+  }
+
+  // The 80% region's boundary: for every pair of principal directions, the ellipse of the
+  // scaled covariance in the tangent space mapped through Exp (the paper's construction); the
+  // arm at its nominal joint frames; planar3_<case>.png.
+  void DrawCase(size_t i, const Propagated& p, PpoeFigure* figure, RunContext& ctx) const {
+    const RangeSpace& r = p.range2;
+    for (int a = 0; a < r.rank(); ++a) {
+      for (int b = a; b < r.rank(); ++b) {
+        for (int k = 0; k < 180; ++k) {
+          const double phi = 2.0 * M_PI * k / 180.0;
+          const Vec6 xi =
+              std::sqrt(p.q2 * r.lambda[a]) * std::cos(phi) * r.V.col(a) +
+              (b == a ? Vec6::Zero()
+                      : Vec6(std::sqrt(p.q2 * r.lambda[b]) * std::sin(phi) * r.V.col(b)));
+          figure->boundary.push_back(p.mean.Plus(xi).translation());
+        }
+      }
+    }
+    const kinematics::PpoeModel& model = chains_[i].model;
+    kinematics::PpoeData data(model);
+    kinematics::ForwardKinematics(model, data, cases_[i].q);
+    figure->arm.push_back(Vec3::Zero());
+    for (const auto& f : model.frames()) {
+      if (f.name.rfind("joint/", 0) == 0)
+        figure->arm.push_back(data.T_base_frame[model.FindFrame(f.name)].translation());
+    }
+    figure->arm.push_back(p.mean.translation());
+    DrawPpoeFigure(*figure,
+                   (ctx.out->FramesDir() / ("planar3_" + cases_[i].name + ".png")).string());
+  }
+
   sim::DeclaredModel Declared(const Case& c) const {
     sim::DeclaredModel d = declared_;
     if (!c.sources.empty()) {
