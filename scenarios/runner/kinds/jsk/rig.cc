@@ -1,4 +1,4 @@
-#include "scenarios/runner/kinds/jsk_common.h"
+#include "scenarios/runner/kinds/jsk/rig.h"
 
 #include <algorithm>
 #include <cmath>

@@ -15,7 +15,7 @@
 #include "estimators/kinematics/forward_kinematics.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/stage_timer.h"
-#include "scenarios/runner/kinds/jsk_common.h"
+#include "scenarios/runner/kinds/jsk/rig.h"
 #include "scenarios/runner/kinds/kinds.h"
 
 namespace flexbench::scenarios {

@@ -24,7 +24,7 @@
 
 #include "render/plot.h"
 #include "scenarios/runner/common/trajectories.h"
-#include "scenarios/runner/kinds/jsk_common.h"
+#include "scenarios/runner/kinds/jsk/rig.h"
 #include "scenarios/runner/kinds/kinds.h"
 
 namespace flexbench::scenarios {

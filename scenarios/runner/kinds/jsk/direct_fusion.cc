@@ -15,7 +15,7 @@
 #include <cmath>
 
 #include "render/plot.h"
-#include "scenarios/runner/kinds/jsk_common.h"
+#include "scenarios/runner/kinds/jsk/rig.h"
 #include "scenarios/runner/kinds/kinds.h"
 
 namespace flexbench::scenarios {

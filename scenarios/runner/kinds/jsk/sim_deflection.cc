@@ -17,7 +17,7 @@
 #include <cmath>
 #include <cstdio>
 
-#include "scenarios/runner/kinds/jsk_common.h"
+#include "scenarios/runner/kinds/jsk/rig.h"
 #include "scenarios/runner/kinds/kinds.h"
 
 namespace flexbench::scenarios {
