@@ -17,7 +17,8 @@
 #include <cmath>
 #include <cstdio>
 
-#include "scenarios/runner/kinds/jsk/rig.h"
+#include "scenarios/runner/kinds/jsk/jsk_kind.h"
+#include "scenarios/runner/kinds/jsk/plots.h"
 #include "scenarios/runner/kinds/kinds.h"
 
 namespace flexbench::scenarios {
@@ -25,67 +26,23 @@ namespace {
 
 using jsk::Deg;
 
-class JskSimDeflectionKind : public ScenarioKind {
+class JskSimDeflectionKind : public jsk::SyntheticKind {
  public:
   void Configure(const ConfigNode& root) override {
-    rig_ = jsk::LoadRig(root, /*with_effects=*/false);
-    options_ = jsk::ParseSyntheticOptions(root);
-    trajectory_ = jsk::ParseTrajectory(root.Child("trajectory"), rig_.nq(), /*dynamic=*/false);
-    burn_in_ = root.GetInt("burn_in_steps", 5);
-    if (burn_in_ < 0 || burn_in_ >= trajectory_.Steps()) {
-      jsk::FailAt(root, "burn_in_steps", "must be in [0, number of steps)");
-    }
-    estimators_ = jsk::ParseLabelledEstimators(root.Child("estimators"));
-    // Build every estimator once now: bad parameters fail before any work.
-    for (const auto& e : estimators_) jsk::MakeLabelled(rig_, e, 0);
+    ConfigureSynthetic(root);
+    estimators_ = jsk::ParseAndCheckEstimators(root, rig_);
   }
 
   void Run(RunContext& ctx) override {
     const jsk::SyntheticRun run = jsk::MakeSyntheticRun(rig_, trajectory_, options_, ctx.seed);
-    const int steps = run.steps();
-    const int nq = rig_.nq();
-    std::vector<jsk::Trace> traces;
+    std::vector<int> rejected;
+    const std::vector<jsk::Trace> traces = Estimate(run, ctx, &rejected);
     Json& all = (*ctx.summary)["estimators"];
-    for (size_t e = 0; e < estimators_.size(); ++e) {
-      const jsk::LabelledEstimator& spec = estimators_[e];
-      int rejected = 0;
-      const auto t0 = std::chrono::steady_clock::now();
-      jsk::Trace tr = jsk::RunSynthetic(rig_, spec, run, ctx.seed, &rejected);
-      (*ctx.timing)[spec.label + "_ms_per_step"] =
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() /
-          steps;
-      ctx.progress("estimators", static_cast<int>(e + 1), static_cast<int>(estimators_.size()));
-      // Metrics over the steps after the burn-in.
-      double sq = 0.0, err_max = 0.0, pos_sum = 0.0, pos_max = 0.0, ess_sum = 0.0;
-      std::vector<double> sq_joint(nq, 0.0);
-      const int n = steps - burn_in_;
-      for (int s = burn_in_; s < steps; ++s) {
-        for (int j = 0; j < nq; ++j) {
-          const double err = Deg(jsk::AngleError(tr.mean[j][s], run.truth[j][s]));
-          sq += err * err;
-          sq_joint[j] += err * err;
-          err_max = std::max(err_max, std::abs(err));
-        }
-        pos_sum += tr.ee_err_m[s];
-        pos_max = std::max(pos_max, tr.ee_err_m[s]);
-        ess_sum += tr.ess[s];
-      }
-      Json& m = all[spec.label]["metrics"];
-      m["estimator"] = spec.name;
-      m["joint_rmse_deg"] = std::sqrt(sq / (n * nq));
-      Json per_joint = Json::array();
-      for (int j = 0; j < nq; ++j) per_joint.push_back(std::sqrt(sq_joint[j] / n));
-      m["joint_rmse_deg_per_joint"] = per_joint;
-      m["joint_err_max_deg"] = err_max;
-      m["pos_err_mean_m"] = pos_sum / n;
-      m["pos_err_max_m"] = pos_max;
-      if (jsk::IsParticleFilter(spec)) m["ess_mean"] = ess_sum / n;
-      m["rejected_readings"] = rejected;
-      traces.push_back(std::move(tr));
+    for (size_t e = 0; e < traces.size(); ++e) {
+      Score(estimators_[e], traces[e], run, rejected[e], &all[estimators_[e].label]["metrics"]);
     }
-
     Json& metrics = (*ctx.summary)["metrics"];
-    metrics["steps"] = steps;
+    metrics["steps"] = run.steps();
     metrics["burn_in_steps"] = burn_in_;
     metrics["deflection_k"] = options_.k;
     metrics["deflection_max_deg"] = Deg(run.deflection_max);
@@ -101,11 +58,55 @@ class JskSimDeflectionKind : public ScenarioKind {
   }
 
  private:
-  jsk::Rig rig_;
-  jsk::SyntheticOptions options_;
-  jsk::Trajectory trajectory_;
-  int burn_in_ = 5;
-  std::vector<jsk::LabelledEstimator> estimators_;
+  // Every estimator over the same run, timed per step.
+  std::vector<jsk::Trace> Estimate(const jsk::SyntheticRun& run, const RunContext& ctx,
+                                   std::vector<int>* rejected) const {
+    std::vector<jsk::Trace> traces;
+    rejected->assign(estimators_.size(), 0);
+    for (size_t e = 0; e < estimators_.size(); ++e) {
+      const EstimatorSpec& spec = estimators_[e];
+      const auto t0 = std::chrono::steady_clock::now();
+      traces.push_back(jsk::RunSynthetic(rig_, spec, run, ctx.seed, &(*rejected)[e]));
+      (*ctx.timing)[spec.label + "_ms_per_step"] =
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() /
+          run.steps();
+      ctx.progress("estimators", static_cast<int>(e + 1), static_cast<int>(estimators_.size()));
+    }
+    return traces;
+  }
+
+  // Metrics over the steps after the burn-in.
+  void Score(const EstimatorSpec& spec, const jsk::Trace& tr, const jsk::SyntheticRun& run,
+             int rejected, Json* metrics) const {
+    const int nq = rig_.nq();
+    double sq = 0.0, err_max = 0.0, pos_sum = 0.0, pos_max = 0.0, ess_sum = 0.0;
+    std::vector<double> sq_joint(nq, 0.0);
+    const int n = run.steps() - burn_in_;
+    for (int s = burn_in_; s < run.steps(); ++s) {
+      for (int j = 0; j < nq; ++j) {
+        const double err = Deg(jsk::AngleError(tr.mean[j][s], run.truth[j][s]));
+        sq += err * err;
+        sq_joint[j] += err * err;
+        err_max = std::max(err_max, std::abs(err));
+      }
+      pos_sum += tr.ee_err_m[s];
+      pos_max = std::max(pos_max, tr.ee_err_m[s]);
+      ess_sum += tr.ess[s];
+    }
+    Json& m = *metrics;
+    m["estimator"] = spec.name;
+    m["joint_rmse_deg"] = std::sqrt(sq / (n * nq));
+    Json per_joint = Json::array();
+    for (int j = 0; j < nq; ++j) per_joint.push_back(std::sqrt(sq_joint[j] / n));
+    m["joint_rmse_deg_per_joint"] = per_joint;
+    m["joint_err_max_deg"] = err_max;
+    m["pos_err_mean_m"] = pos_sum / n;
+    m["pos_err_max_m"] = pos_max;
+    if (jsk::IsParticleFilter(spec)) m["ess_mean"] = ess_sum / n;
+    m["rejected_readings"] = rejected;
+  }
+
+  std::vector<EstimatorSpec> estimators_;
 };
 
 }  // namespace
