@@ -3,6 +3,13 @@
 //   estimators:
 //     fk: {}
 //     naive_ekf: {std_trans_m: [0.07, 0.07, 0.03], std_rot_deg: [5, 5, 15]}
+//
+// A labelled block (the jsk kinds) names its entries freely: the label is the registry name
+// unless the entry's `estimator` key names another, so one estimator can run twice:
+//
+//   estimators:
+//     pf_all: {conjugate_proposal: 1}
+//     pf_all_bootstrap: {estimator: pf_all}
 #pragma once
 
 #include <string>
@@ -18,13 +25,20 @@ namespace flexbench::scenarios {
 using Mat6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
 
 struct EstimatorSpec {
-  std::string name;
+  std::string name;  // registry name
   estimators::Params params;
+  std::string label;  // the entry's key (the name, unless a labelled entry names another)
+  std::string where;  // "<file>:<line>: key '<path>'" of the entry, for messages
 };
 
+// Whether an `estimators:` block may label its entries (see above).
+enum class EstimatorLabels { kNone, kAllowed };
+
 // Reads the `estimators:` mapping; every value is a number or a list of numbers. Checks the
-// names against the registry (InputError naming file, line and estimator).
-std::vector<EstimatorSpec> ParseEstimators(const ConfigNode& node);
+// names against the registry (InputError naming file, line and estimator). A labelled block
+// must list at least one estimator.
+std::vector<EstimatorSpec> ParseEstimators(const ConfigNode& node,
+                                           EstimatorLabels labels = EstimatorLabels::kNone);
 
 // One estimate's part in a mean NEES whose estimates share part of their error: e = G z + w,
 // z ~ N(0, I) the same at every step (a fitted model parameter's error through the model), w

@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/gates.h"
 #include "tests/common/test_util.h"
 
@@ -72,6 +73,40 @@ TEST(ConfigOverrides, ErrorsNameTheOverride) {
       ConfigNode::LoadString(text + "b: zz\n", "f.yaml", {ParseOverride("sub.x=3")});
   e = ErrorOf([&] { other.GetDouble("b"); });
   EXPECT_NE(e.find("f.yaml:4: key 'b'"), std::string::npos) << e;
+}
+
+// One parser for every `estimators:` block: a plain one names registry entries, a labelled one
+// (the jsk kinds) may name the entry under another label; both keep the entry's file and line.
+TEST(ConfigEstimators, PlainAndLabelledBlocksParseOneWay) {
+  const ConfigNode root = ConfigNode::LoadString(
+      "plain: {fk: {}, pf_all: {particles: 64}}\n"
+      "labelled: {pf_all: {}, bootstrap: {estimator: pf_all, particles: 64}}\n"
+      "unknown: {mine: {particles: 64}}\n"
+      "aliased: {fk: {estimator: fk}}\n"
+      "empty: {}\n",
+      "f.yaml");
+  const std::vector<EstimatorSpec> plain = ParseEstimators(root.Child("plain"));
+  ASSERT_EQ(plain.size(), 2u);
+  EXPECT_EQ(plain[1].name, "pf_all");
+  EXPECT_EQ(plain[1].label, "pf_all");
+  EXPECT_NE(plain[1].where.find("f.yaml:1"), std::string::npos) << plain[1].where;
+  const std::vector<EstimatorSpec> labelled =
+      ParseEstimators(root.Child("labelled"), EstimatorLabels::kAllowed);
+  ASSERT_EQ(labelled.size(), 2u);
+  EXPECT_EQ(labelled[1].label, "bootstrap");
+  EXPECT_EQ(labelled[1].name, "pf_all");
+  // Unknown names fail in both; `estimator` is a parameter (a number) in a plain block; a
+  // labelled block must list one.
+  for (const EstimatorLabels mode : {EstimatorLabels::kNone, EstimatorLabels::kAllowed}) {
+    const std::string e = ErrorOf([&] { ParseEstimators(root.Child("unknown"), mode); });
+    EXPECT_NE(e.find("f.yaml:3: key 'unknown.mine': unknown estimator 'mine'"), std::string::npos)
+        << e;
+  }
+  std::string e = ErrorOf([&] { ParseEstimators(root.Child("aliased")); });
+  EXPECT_NE(e.find("key 'aliased.fk.estimator': expected a number"), std::string::npos) << e;
+  EXPECT_NO_THROW(ParseEstimators(root.Child("empty")));
+  e = ErrorOf([&] { ParseEstimators(root.Child("empty"), EstimatorLabels::kAllowed); });
+  EXPECT_NE(e.find("key 'empty': no estimators"), std::string::npos) << e;
 }
 
 TEST(ConfigNode, SyntaxErrorNamesFileAndLine) {

@@ -1,0 +1,146 @@
+#include "scenarios/runner/kinds/jsk/dynamic.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "estimators/error.h"
+#include "scenarios/runner/common/pose.h"
+
+namespace flexbench::scenarios::jsk {
+
+ImuPipeline::ImuPipeline(const std::vector<std::string>& sites, double beta)
+    : sites_(sites), last_t_(sites.size(), 0.0), started_(sites.size(), false) {
+  for (size_t k = 0; k < sites.size(); ++k) filters_.emplace_back(beta);
+}
+
+void ImuPipeline::Feed(const sim::ImuReading& r, const Rig& rig, bool init_truth) {
+  const auto it = std::find(sites_.begin(), sites_.end(), r.site);
+  if (it == sites_.end()) return;
+  const size_t k = it - sites_.begin();
+  if (!started_[k]) {
+    if (init_truth) {
+      filters_[k].Reset(Quat(rig.sim->SitePose(r.site).linear()));
+    } else {
+      filters_[k].InitFromAccel(r.accel);
+    }
+    started_[k] = true;
+    last_t_[k] = r.t;
+    return;
+  }
+  filters_[k].Update(r.gyro, r.accel, r.t - last_t_[k]);
+  last_t_[k] = r.t;
+}
+
+bool ImuPipeline::Ready() const {
+  return std::all_of(started_.begin(), started_.end(), [](bool b) { return b; });
+}
+
+DynamicOptions ParseDynamicOptions(const ConfigNode& root) {
+  DynamicOptions o;
+  o.filter_rate_hz = root.GetDouble("filter_rate_hz", o.filter_rate_hz);
+  if (!(o.filter_rate_hz > 0.0)) root.Child("filter_rate_hz").Fail("must be > 0");
+  if (const auto m = root.Optional("madgwick")) {
+    o.madgwick_beta = m->GetDouble("beta", o.madgwick_beta);
+    if (!(o.madgwick_beta > 0.0)) m->Child("beta").Fail("must be > 0");
+    const std::string init = m->GetString("init", "accel");
+    if (init != "accel" && init != "truth") m->Child("init").Fail("expected 'accel' or 'truth'");
+    o.madgwick_init_truth = init == "truth";
+  }
+  return o;
+}
+
+std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
+                                      sim::SensorSuite& sensors, const DynamicOptions& options,
+                                      const RunContext& ctx) {
+  sim::Simulation& sim = *rig.sim;
+  const int nq = rig.nq();
+  ImuPipeline imus(rig.imu_sites, options.madgwick_beta);
+  sim.SetCommand(rig.ToActuators(trajectory.AtTime(0.0)));
+  sim.Settle();
+  const double t0 = sim.time();
+  const double dt = sim.timestep();
+  const double period = 1.0 / options.filter_rate_hz;
+  const double duration = trajectory.Duration();
+  Eigen::VectorXd encoders = Eigen::VectorXd::Constant(nq, std::nan(""));
+  std::vector<Snapshot> snaps;
+  std::vector<sim::SensorReading> readings;
+  int next_tick = 1;  // the first snapshot after one filter period
+  const int total_ticks = static_cast<int>(std::floor(duration / period + 1e-9));
+  while (sim.time() - t0 < duration - 1e-9) {
+    const double t_next = sim.time() - t0 + dt;
+    sim.SetCommand(rig.ToActuators(trajectory.AtTime(t_next)));
+    sim.Step(1);
+    readings.clear();
+    sensors.Poll(sim, &readings);
+    for (const sim::SensorReading& r : readings) {
+      if (const auto* imu = std::get_if<sim::ImuReading>(&r)) {
+        imus.Feed(*imu, rig, options.madgwick_init_truth);
+      } else if (const auto* enc = std::get_if<sim::EncoderReading>(&r)) {
+        for (int k = 0; k < nq; ++k) {
+          if (rig.chain->q_joints[k] == enc->joint)
+            encoders[k] = enc->position - rig.chain->q_qpos0[k];
+        }
+      }
+    }
+    const double t = sim.time() - t0;
+    if (t + 1e-9 < next_tick * period) continue;
+    ++next_tick;
+    if (!encoders.allFinite() || !imus.Ready()) {
+      throw InputError(
+          "jsk scenario: the sensors must include an encoder for every declared "
+          "joint and every IMU, sampled at least at the filter rate");
+    }
+    Snapshot s;
+    s.t = t;
+    s.reference = trajectory.AtTime(t, &s.segment);
+    s.link = rig.LinkAngles();
+    s.joints.t = t;
+    s.joints.q = encoders;
+    s.joints.std = estimators::JointVector::Zero(nq);
+    for (size_t k = 0; k < rig.imu_frames.size(); ++k) {
+      estimators::OrientationReading o;
+      o.t = t;
+      o.frame = rig.imu_frames[k];
+      o.q_base_frame = imus.Orientation(static_cast<int>(k));
+      s.imus.push_back(o);
+      s.imu_true.push_back(Quat(sim.SitePose(rig.imu_sites[k]).linear()));
+    }
+    const std::string ee = rig.declared.end_effector;
+    s.T_true = ToSE3(sim.Pose(ee));
+    snaps.push_back(std::move(s));
+    ctx.progress("simulation", static_cast<int>(snaps.size()), total_ticks);
+  }
+  return snaps;
+}
+
+Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vector<Snapshot>& snaps,
+                     std::uint64_t seed, bool with_position, const RunContext& ctx, int* rejected) {
+  auto est = MakeLabelled(rig, spec, seed);
+  est->Reset();
+  Trace tr;
+  tr.label = spec.label;
+  tr.Resize(rig.nq());
+  *rejected = 0;
+  const auto count = [&](estimators::UpdateStatus st) {
+    *rejected +=
+        st != estimators::UpdateStatus::kAccepted && st != estimators::UpdateStatus::kIgnored;
+  };
+  for (size_t i = 0; i < snaps.size(); ++i) {
+    const Snapshot& s = snaps[i];
+    est->Predict(s.t);
+    count(est->Update(s.joints));
+    for (const auto& o : s.imus) count(est->Update(o));
+    if (with_position) {
+      estimators::PositionReading p;
+      p.t = s.t;
+      p.frame = rig.chain->end_effector;
+      p.p_base = s.T_true.translation();
+      count(est->Update(p));
+    }
+    tr.Add(s.t, est->Estimate(), PfSummary(*est), s.T_true);
+    ctx.progress(spec.label, static_cast<int>(i + 1), static_cast<int>(snaps.size()));
+  }
+  return tr;
+}
+
+}  // namespace flexbench::scenarios::jsk

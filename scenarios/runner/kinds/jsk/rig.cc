@@ -1,0 +1,76 @@
+#include "scenarios/runner/kinds/jsk/rig.h"
+
+#include <algorithm>
+
+#include "estimators/error.h"
+#include "scenarios/runner/common/model_config.h"
+
+namespace flexbench::scenarios::jsk {
+
+Rig LoadRig(const ConfigNode& root, bool with_effects) {
+  Rig rig;
+  std::string model_path;
+  rig.declared = ReadModelAndDeclared(root, &model_path);
+  sim::EffectList effects;
+  if (with_effects) {
+    if (const auto e = root.Optional("effects")) effects = sim::ParseEffects(*e);
+  }
+  rig.sim = sim::Simulation::Load(model_path, effects);
+  rig.chain = std::make_unique<sim::DeclaredChain>(
+      sim::BuildDeclaredChain(rig.sim->nominal_model(), rig.declared));
+  const ConfigNode imus = root.Child("imus");
+  for (const ConfigNode& item : imus.Items()) {
+    const std::string site = item.AsString();
+    const auto& sites = rig.sim->catalog().imu_sites;
+    if (std::find(sites.begin(), sites.end(), site) == sites.end()) {
+      item.Fail("'" + site + "' is not an IMU site of " + model_path +
+                " (a site with an MJCF gyro and accelerometer)");
+    }
+    rig.imu_sites.push_back(site);
+    rig.imu_frames.push_back(rig.chain->ObservedFrame(site));
+  }
+  rig.setup.model = &rig.chain->model;
+  rig.setup.effects = rig.chain->effects_or_null();
+  rig.setup.end_effector = rig.chain->end_effector;
+  for (kinematics::FrameId f : rig.imu_frames) rig.setup.imus.push_back(estimators::ImuSetup{f});
+  const std::vector<std::string>& act = rig.sim->actuated_joints();
+  for (const std::string& j : rig.chain->q_joints) {
+    const auto it = std::find(act.begin(), act.end(), j);
+    if (it == act.end()) {
+      root.Child("declared").Fail("declared joint '" + j + "' has no actuator in " + model_path);
+    }
+    rig.act_of_q.push_back(static_cast<int>(it - act.begin()));
+  }
+  if (rig.nq() != rig.sim->num_actuated()) {
+    root.Child("declared").Fail("the declared model must list every actuated joint");
+  }
+  return rig;
+}
+
+Eigen::VectorXd Rig::ToActuators(const Eigen::VectorXd& q) const {
+  Eigen::VectorXd a(sim->num_actuated());
+  for (int k = 0; k < nq(); ++k) a[act_of_q[k]] = q[k] + chain->q_qpos0[k];
+  return a;
+}
+
+Eigen::VectorXd Rig::LinkAngles() const {
+  Eigen::VectorXd q(nq());
+  for (int k = 0; k < nq(); ++k) q[k] = sim->JointPosition(chain->q_joints[k]) - chain->q_qpos0[k];
+  return q;
+}
+
+std::unique_ptr<estimators::Estimator> MakeLabelled(const Rig& rig, const EstimatorSpec& e,
+                                                    std::uint64_t seed) {
+  estimators::EstimatorSetup s = rig.setup;
+  s.params = e.params;
+  s.seed = seed;
+  try {
+    return estimators::MakeEstimator(e.name, s);
+  } catch (const InputError& err) {
+    const std::string what = err.what();
+    if (e.where.empty() || what.rfind(e.where, 0) == 0) throw;
+    throw InputError(e.where + ": " + what);
+  }
+}
+
+}  // namespace flexbench::scenarios::jsk

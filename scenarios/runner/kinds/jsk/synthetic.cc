@@ -1,0 +1,101 @@
+#include "scenarios/runner/kinds/jsk/synthetic.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/lie/so3.h"
+#include "sim/rng.h"
+
+namespace flexbench::scenarios::jsk {
+
+SyntheticOptions ParseSyntheticOptions(const ConfigNode& root) {
+  SyntheticOptions o;
+  o.k = root.GetDouble("deflection_k");
+  if (!std::isfinite(o.k)) root.Child("deflection_k").Fail("must be finite");
+  if (const auto n = root.Optional("noise")) {
+    o.reference_std = n->GetDouble("reference_deg", 0.0) * M_PI / 180.0;
+    o.orientation_std = n->GetDouble("orientation_deg", 0.0) * M_PI / 180.0;
+    o.position_std = n->GetDouble("position_m", 0.0);
+    if (!(o.reference_std >= 0 && o.orientation_std >= 0 && o.position_std >= 0)) {
+      n->Fail("noise standard deviations must be >= 0");
+    }
+  }
+  return o;
+}
+
+SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,
+                              const SyntheticOptions& options, std::uint64_t seed) {
+  const int steps = trajectory.Steps();
+  const int nq = rig.nq();
+  const kinematics::PpoeModel& model = rig.chain->model;
+  kinematics::PpoeData data(model);
+  sim::NoiseStream ref_noise(seed, "jsk_synthetic/reference");
+  sim::NoiseStream ori_noise(seed, "jsk_synthetic/orientation");
+  sim::NoiseStream pos_noise(seed, "jsk_synthetic/position");
+  SyntheticRun run;
+  run.truth.resize(nq);
+  run.reference.resize(nq);
+  run.joints.resize(steps);
+  run.orientations.resize(steps);
+  run.positions.resize(steps);
+  run.T_true.resize(steps);
+  for (int s = 0; s < steps; ++s) {
+    const Eigen::VectorXd ref = trajectory.AtStep(s);
+    const Eigen::VectorXd g_act = rig.sim->GravityTorque(rig.ToActuators(ref));
+    Eigen::VectorXd eff(nq);
+    for (int j = 0; j < nq; ++j) {
+      eff[j] = ref[j] + options.k * g_act[rig.act_of_q[j]];  // [PF eq. 31]
+      run.deflection_max = std::max(run.deflection_max, std::abs(eff[j] - ref[j]));
+      run.truth[j].push_back(eff[j]);
+      run.reference[j].push_back(ref[j]);
+    }
+    kinematics::ForwardKinematics(model, data, eff);
+    estimators::JointReading& jr = run.joints[s];
+    jr.t = s;
+    jr.q.resize(nq);
+    jr.std = estimators::JointVector::Constant(nq, options.reference_std);
+    for (int j = 0; j < nq; ++j) jr.q[j] = ref[j] + ref_noise.Normal(options.reference_std);
+    for (kinematics::FrameId f : rig.imu_frames) {
+      estimators::OrientationReading o;
+      o.t = s;
+      o.frame = f;
+      Vec3 d;
+      for (int a = 0; a < 3; ++a) d[a] = ori_noise.Normal(options.orientation_std);
+      o.q_base_frame = Quat(data.T_base_frame[f].rotation() * lie::SO3Exp(d)).normalized();
+      run.orientations[s].push_back(o);
+    }
+    run.T_true[s] = data.T_base_frame[rig.chain->end_effector];
+    estimators::PositionReading& p = run.positions[s];
+    p.t = s;
+    p.frame = rig.chain->end_effector;
+    for (int a = 0; a < 3; ++a)
+      p.p_base[a] = run.T_true[s].translation()[a] + pos_noise.Normal(options.position_std);
+    p.cov = Mat3::Identity() * std::max(options.position_std * options.position_std, 1e-12);
+  }
+  return run;
+}
+
+Trace RunSynthetic(const Rig& rig, const EstimatorSpec& spec, const SyntheticRun& run,
+                   std::uint64_t seed, int* rejected) {
+  auto est = MakeLabelled(rig, spec, seed);
+  est->Reset();
+  Trace tr;
+  tr.label = spec.label;
+  tr.Resize(rig.nq());
+  *rejected = 0;
+  const auto count = [&](estimators::UpdateStatus st) {
+    *rejected +=
+        st != estimators::UpdateStatus::kAccepted && st != estimators::UpdateStatus::kIgnored;
+  };
+  for (int s = 0; s < run.steps(); ++s) {
+    est->Predict(s);
+    count(est->Update(run.joints[s]));
+    for (const auto& o : run.orientations[s]) count(est->Update(o));
+    count(est->Update(run.positions[s]));
+    tr.Add(s, est->Estimate(), PfSummary(*est), run.T_true[s]);
+  }
+  return tr;
+}
+
+}  // namespace flexbench::scenarios::jsk
