@@ -21,6 +21,7 @@
 
 #include "estimators/camera/pinhole.h"
 #include "estimators/conventions.h"
+#include "estimators/measurement.h"
 #include "sim/config.h"
 #include "sim/params.h"
 #include "sim/rng.h"
@@ -41,13 +42,12 @@ struct EncoderReading {
 };
 
 // 6-axis IMU in the site frame: angular velocity (rad/s) and specific force (m/s^2; at rest
-// +9.81 along the site's up direction). No magnetometer.
-struct ImuReading {
-  double t = 0.0;
+// +9.81 along the site's up direction). No magnetometer. The estimators' reading (t, gyro,
+// accel; one definition of what an IMU measures and in which units) named by the sensor and its
+// site; an estimator takes it as is once `imu` says which of its IMUs it is.
+struct ImuReading : estimators::ImuReading {
   std::string sensor;
   std::string site;
-  Vec3 gyro = Vec3::Zero();
-  Vec3 accel = Vec3::Zero();
 };
 
 // Touch flag and, in contact, the 1-D distance (m) of the site to the touched surface along the
