@@ -305,119 +305,161 @@ constexpr const char* kIdentifyName = "flexbench identify";
 
 }  // namespace
 
+namespace {
+
+// The input files exist and are regular files; --point-std is a length.
+void CheckIdentifyInputs(const IdentifyCliOptions& o) {
+  for (const auto& [option, path] :
+       {std::pair{"--declared", o.declared}, std::pair{"--calibration", o.calibration_csv},
+        std::pair{"--validation", o.validation_csv}}) {
+    std::error_code ec;
+    const fs::file_status st = fs::status(path, ec);
+    if (ec || !fs::exists(st)) {
+      OptionError(option, path,
+                  "not found" + (ec && ec != std::errc::no_such_file_or_directory
+                                     ? " (" + ec.message() + ")"
+                                     : std::string()));
+    }
+    if (!fs::is_regular_file(st)) OptionError(option, path, "not a regular file");
+  }
+  if (!(std::isfinite(o.point_std_m) && o.point_std_m >= 1e-7 && o.point_std_m <= 1.0)) {
+    char v[32];
+    std::snprintf(v, sizeof(v), "%g", o.point_std_m);  // to_string: 1e-300 -> "0.000000"
+    OptionError("--point-std", v, "must be between 1e-7 and 1 (metres)");
+  }
+}
+
+// The declared model (--declared), and --model, when given, is the file it names.
+sim::DeclaredModel IdentifyDeclared(const IdentifyCliOptions& o, const std::string& declared_abs) {
+  sim::DeclaredModel declared;
+  try {
+    declared = sim::LoadDeclaredModel(declared_abs);
+  } catch (const InputError& e) {
+    throw InputError(std::string("--declared: ") + e.what());
+  }
+  if (!o.model.empty()) {
+    std::error_code ec;
+    if (!fs::exists(o.model, ec)) OptionError("--model", o.model, "not found");
+    if (!fs::equivalent(o.model, declared.model_path, ec)) {
+      OptionError("--model", o.model,
+                  "is not the model the declared file names (" +
+                      CapForMessage(declared.model_path) + "); omit --model or name the same file");
+    }
+  }
+  return declared;
+}
+
+// Size caps before the same-rows comparison reads both files whole.
+void CheckIdentifyRows(const IdentifyCliOptions& o) {
+  for (const auto& [option, path] : {std::pair{"--calibration", o.calibration_csv},
+                                     std::pair{"--validation", o.validation_csv}}) {
+    try {
+      CheckInputFile(path, identify::kMaxCalibrationCsvBytes);
+    } catch (const InputError& e) {
+      throw InputError(std::string(option) + ": " + e.what());
+    }
+  }
+  std::error_code ec;
+  if (fs::equivalent(o.calibration_csv, o.validation_csv, ec) ||
+      ReadWhole(o.calibration_csv) == ReadWhole(o.validation_csv)) {
+    OptionError("--validation", o.validation_csv,
+                "holds the same rows as --calibration; validate on other data");
+  }
+}
+
+// The command line as a closed_loop scenario, configured in memory, one option a line:
+// option_of_line[k] names the option line k (1-based) came from.
+std::string IdentifyScenario(const IdentifyCliOptions& o, const sim::DeclaredModel& declared,
+                             const std::string& declared_abs,
+                             std::vector<std::string>* option_of_line_out) {
+  std::vector<std::string>& option_of_line = *option_of_line_out;
+  option_of_line = {""};  // 1-based lines
+  std::ostringstream y;
+  const auto line = [&](const std::string& option, const std::string& text) {
+    y << text << "\n";
+    option_of_line.push_back(option);
+  };
+  line("", "scenario: identify");
+  line("", "kind: closed_loop");
+  line("", "seed: 0");
+  line("--declared", "model: " + Quoted(declared.model_path));
+  line("--declared", "declared: " + Quoted(declared_abs));
+  // CSV paths as given (relative ones resolve against the working folder): rows are named
+  // "<path>:<line>" as the user wrote the path, whatever the working folder's location.
+  line("--calibration", "calibration: {csv: " + Quoted(o.calibration_csv) + "}");
+  line("--validation", "validation: {csv: " + Quoted(o.validation_csv) + "}");
+  char num[64];
+  std::snprintf(num, sizeof(num), "%.17g", o.point_std_m);
+  line("--point-std", std::string("point_std_m: ") + num);
+  if (o.reading_std_deg) {
+    if (!(std::isfinite(*o.reading_std_deg) && *o.reading_std_deg > 0.0 &&
+          *o.reading_std_deg <= 10.0)) {
+      OptionError("--reading-std-deg", std::to_string(*o.reading_std_deg),
+                  "must be in (0, 10] (degrees)");
+    }
+    std::snprintf(num, sizeof(num), "%.17g", *o.reading_std_deg);
+    line("--reading-std-deg", std::string("reading_std_deg: ") + num);
+  }
+  if (o.max_effects) line("--max-effects", "max_effects: " + std::to_string(*o.max_effects));
+  if (o.bic_threshold) {
+    std::snprintf(num, sizeof(num), "%.17g", *o.bic_threshold);
+    line("--bic-threshold", std::string("bic_threshold: ") + num);
+  }
+  if (o.folds_by) line("--folds-by", "folds_by: " + Quoted(*o.folds_by));
+  if (o.outlier_iqr) {
+    std::snprintf(num, sizeof(num), "%.17g", *o.outlier_iqr);
+    line("--outlier-iqr", std::string("outlier_iqr: ") + num);
+  }
+  if (o.no_cross_validation) line("--no-cross-validation", "cross_validation: false");
+  if (!o.frames.empty()) {
+    std::string f = "frames: {";
+    for (size_t i = 0; i < o.frames.size(); ++i)
+      f += (i ? ", " : "") + Quoted(o.frames[i]) + ": {}";
+    line("--frame", f + "}");
+  }
+  if (!o.markers.empty()) {
+    std::string m = "markers: [";
+    for (size_t i = 0; i < o.markers.size(); ++i) m += (i ? ", " : "") + Quoted(o.markers[i]);
+    line("--marker", m + "]");
+  }
+  if (!o.candidates.empty()) {
+    std::string c = "candidates: [";
+    for (size_t i = 0; i < o.candidates.size(); ++i) {
+      c += (i ? ", " : "") + Quoted(o.candidates[i]);
+    }
+    line("--candidates", c + "]");
+  }
+  return y.str();
+}
+
+// "flexbench identify:<line>: ..." names the option that line came from instead.
+InputError WithOptionName(const InputError& e, const std::vector<std::string>& option_of_line) {
+  std::string m = e.what();
+  const std::string prefix = std::string(kIdentifyName) + ":";
+  if (m.compare(0, prefix.size(), prefix) == 0) {
+    size_t end = prefix.size();
+    while (end < m.size() && std::isdigit(static_cast<unsigned char>(m[end]))) ++end;
+    const int ln = std::atoi(m.substr(prefix.size(), end - prefix.size()).c_str());
+    const std::string option =
+        ln > 0 && ln < static_cast<int>(option_of_line.size()) ? option_of_line[ln] : "";
+    m = (option.empty() ? std::string("identify") : option) + m.substr(end);
+  }
+  return InputError(m);
+}
+
+}  // namespace
+
+// The command line is checked, written as a closed_loop scenario in memory and run by the
+// closed_loop kind: the CLI and the scenario files share one identification path.
 int IdentifyCommand(const IdentifyCliOptions& o) {
   try {
-    for (const auto& [option, path] :
-         {std::pair{"--declared", o.declared}, std::pair{"--calibration", o.calibration_csv},
-          std::pair{"--validation", o.validation_csv}}) {
-      std::error_code ec;
-      const fs::file_status st = fs::status(path, ec);
-      if (ec || !fs::exists(st)) {
-        OptionError(option, path,
-                    "not found" + (ec && ec != std::errc::no_such_file_or_directory
-                                       ? " (" + ec.message() + ")"
-                                       : std::string()));
-      }
-      if (!fs::is_regular_file(st)) OptionError(option, path, "not a regular file");
-    }
-    if (!(std::isfinite(o.point_std_m) && o.point_std_m >= 1e-7 && o.point_std_m <= 1.0)) {
-      char v[32];
-      std::snprintf(v, sizeof(v), "%g", o.point_std_m);  // to_string: 1e-300 -> "0.000000"
-      OptionError("--point-std", v, "must be between 1e-7 and 1 (metres)");
-    }
-    // The model is the declared file's; --model, when given, must be that file.
+    CheckIdentifyInputs(o);
     const std::string declared_abs = fs::absolute(o.declared).lexically_normal().string();
-    sim::DeclaredModel declared;
-    try {
-      declared = sim::LoadDeclaredModel(declared_abs);
-    } catch (const InputError& e) {
-      throw InputError(std::string("--declared: ") + e.what());
-    }
-    if (!o.model.empty()) {
-      std::error_code ec;
-      if (!fs::exists(o.model, ec)) OptionError("--model", o.model, "not found");
-      if (!fs::equivalent(o.model, declared.model_path, ec)) {
-        OptionError("--model", o.model,
-                    "is not the model the declared file names (" +
-                        CapForMessage(declared.model_path) +
-                        "); omit --model or name the same file");
-      }
-    }
-    // Size caps before the same-rows comparison reads both files whole.
-    for (const auto& [option, path] : {std::pair{"--calibration", o.calibration_csv},
-                                       std::pair{"--validation", o.validation_csv}}) {
-      try {
-        CheckInputFile(path, identify::kMaxCalibrationCsvBytes);
-      } catch (const InputError& e) {
-        throw InputError(std::string(option) + ": " + e.what());
-      }
-    }
-    {
-      std::error_code ec;
-      if (fs::equivalent(o.calibration_csv, o.validation_csv, ec) ||
-          ReadWhole(o.calibration_csv) == ReadWhole(o.validation_csv)) {
-        OptionError("--validation", o.validation_csv,
-                    "holds the same rows as --calibration; validate on other data");
-      }
-    }
-    // The command line as a closed_loop scenario, configured in memory; one option a line.
-    std::vector<std::string> option_of_line{""};  // 1-based lines
-    std::ostringstream y;
-    const auto line = [&](const std::string& option, const std::string& text) {
-      y << text << "\n";
-      option_of_line.push_back(option);
-    };
-    line("", "scenario: identify");
-    line("", "kind: closed_loop");
-    line("", "seed: 0");
-    line("--declared", "model: " + Quoted(declared.model_path));
-    line("--declared", "declared: " + Quoted(declared_abs));
-    // CSV paths as given (relative ones resolve against the working folder): rows are named
-    // "<path>:<line>" as the user wrote the path, whatever the working folder's location.
-    line("--calibration", "calibration: {csv: " + Quoted(o.calibration_csv) + "}");
-    line("--validation", "validation: {csv: " + Quoted(o.validation_csv) + "}");
-    char num[64];
-    std::snprintf(num, sizeof(num), "%.17g", o.point_std_m);
-    line("--point-std", std::string("point_std_m: ") + num);
-    if (o.reading_std_deg) {
-      if (!(std::isfinite(*o.reading_std_deg) && *o.reading_std_deg > 0.0 &&
-            *o.reading_std_deg <= 10.0)) {
-        OptionError("--reading-std-deg", std::to_string(*o.reading_std_deg),
-                    "must be in (0, 10] (degrees)");
-      }
-      std::snprintf(num, sizeof(num), "%.17g", *o.reading_std_deg);
-      line("--reading-std-deg", std::string("reading_std_deg: ") + num);
-    }
-    if (o.max_effects) line("--max-effects", "max_effects: " + std::to_string(*o.max_effects));
-    if (o.bic_threshold) {
-      std::snprintf(num, sizeof(num), "%.17g", *o.bic_threshold);
-      line("--bic-threshold", std::string("bic_threshold: ") + num);
-    }
-    if (o.folds_by) line("--folds-by", "folds_by: " + Quoted(*o.folds_by));
-    if (o.outlier_iqr) {
-      std::snprintf(num, sizeof(num), "%.17g", *o.outlier_iqr);
-      line("--outlier-iqr", std::string("outlier_iqr: ") + num);
-    }
-    if (o.no_cross_validation) line("--no-cross-validation", "cross_validation: false");
-    if (!o.frames.empty()) {
-      std::string f = "frames: {";
-      for (size_t i = 0; i < o.frames.size(); ++i)
-        f += (i ? ", " : "") + Quoted(o.frames[i]) + ": {}";
-      line("--frame", f + "}");
-    }
-    if (!o.markers.empty()) {
-      std::string m = "markers: [";
-      for (size_t i = 0; i < o.markers.size(); ++i) m += (i ? ", " : "") + Quoted(o.markers[i]);
-      line("--marker", m + "]");
-    }
-    if (!o.candidates.empty()) {
-      std::string c = "candidates: [";
-      for (size_t i = 0; i < o.candidates.size(); ++i) {
-        c += (i ? ", " : "") + Quoted(o.candidates[i]);
-      }
-      line("--candidates", c + "]");
-    }
-    const ConfigNode root = ConfigNode::LoadString(y.str(), kIdentifyName, ParseOverrides(o.set));
+    const sim::DeclaredModel declared = IdentifyDeclared(o, declared_abs);
+    CheckIdentifyRows(o);
+    std::vector<std::string> option_of_line;
+    const std::string yaml = IdentifyScenario(o, declared, declared_abs, &option_of_line);
+    const ConfigNode root = ConfigNode::LoadString(yaml, kIdentifyName, ParseOverrides(o.set));
     RunOptions run;
     run.out_dir = o.out_dir;
     run.force = o.force;
@@ -429,18 +471,7 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
                        {fs::path(o.declared), fs::path(declared.model_path),
                         fs::path(o.calibration_csv), fs::path(o.validation_csv)});
     } catch (const InputError& e) {
-      // "flexbench identify:<line>: ..." names the option instead.
-      std::string m = e.what();
-      const std::string prefix = std::string(kIdentifyName) + ":";
-      if (m.compare(0, prefix.size(), prefix) == 0) {
-        size_t end = prefix.size();
-        while (end < m.size() && std::isdigit(static_cast<unsigned char>(m[end]))) ++end;
-        const int ln = std::atoi(m.substr(prefix.size(), end - prefix.size()).c_str());
-        const std::string option =
-            ln > 0 && ln < static_cast<int>(option_of_line.size()) ? option_of_line[ln] : "";
-        m = (option.empty() ? std::string("identify") : option) + m.substr(end);
-      }
-      throw InputError(m);
+      throw WithOptionName(e, option_of_line);
     }
   } catch (const std::exception& e) {
     return ReportError(e);
