@@ -22,6 +22,7 @@
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
+#include "tests/common/identify_test_util.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::identify {
@@ -152,15 +153,7 @@ DataSet Rows(const Arm& arm, const Truth& t, int n, std::mt19937_64& rng, bool f
   return data;
 }
 
-std::vector<int> NamedCandidates(const EffectModel& em) {
-  std::vector<int> c;
-  for (size_t i = 0; i < em.candidates().size(); ++i) {
-    if (!em.candidates()[i].needs_evidence && !em.candidates()[i].generic_geometry) {
-      c.push_back(static_cast<int>(i));
-    }
-  }
-  return c;
-}
+using testing::NamedCandidates;
 
 // The value and std of one-parameter candidate `name` where a chosen effect's equivalence set
 // holds it (false when none does): the chosen member's own, or the member's correction, its std

@@ -24,6 +24,7 @@
 #include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
 #include "sim/simulation.h"
+#include "tests/common/identify_test_util.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::identify {
@@ -66,31 +67,7 @@ std::unique_ptr<Rig> MakeRig(double tilt, double heading, double stiffness = 800
 
 // `rows` settled configurations seen by a tracker at T_base_tracker with noise.
 DataSet TrackerData(Rig& rig, const lie::SE3& T_base_tracker, int rows, std::mt19937_64& rng) {
-  DataSet d;
-  d.sets = {"s"};
-  MeasurementFrame tracker;
-  tracker.name = "tracker";
-  tracker.where = "test.yaml:1";
-  d.frames = {tracker};
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  std::normal_distribution<double> n(0.0, kNoise);
-  const auto& names = rig.sim->actuated_joints();
-  const lie::SE3 T_tracker_base = T_base_tracker.Inverse();
-  for (int r = 0; r < rows; ++r) {
-    Eigen::VectorXd cmd = Eigen::VectorXd::Zero(rig.sim->num_actuated());
-    Observation o;
-    o.q.resize(rig.chain.model.nq());
-    for (int k = 0; k < o.q.size(); ++k) {
-      const int a = std::find(names.begin(), names.end(), rig.chain.q_joints[k]) - names.begin();
-      cmd[a] = o.q[k] = 1.0 * u(rng);
-    }
-    rig.sim->SetCommand(cmd);
-    rig.sim->Settle();
-    o.frame = 0;
-    o.p_frame = T_tracker_base * rig.sim->Pose("ee").translation() + Vec3(n(rng), n(rng), n(rng));
-    d.rows.push_back(o);
-  }
-  return d;
+  return testing::TrackerData(rig, T_base_tracker, rows, kNoise, rng);
 }
 
 lie::SE3 TrackerPose(std::mt19937_64& rng) {
@@ -101,17 +78,7 @@ lie::SE3 TrackerPose(std::mt19937_64& rng) {
   return lie::SE3::Exp(xi);
 }
 
-// The library's first stage (named families), minus the families in `banned`.
-std::vector<int> NamedCandidates(const EffectModel& em, const std::vector<std::string>& banned) {
-  std::vector<int> c;
-  for (size_t i = 0; i < em.candidates().size(); ++i) {
-    const Candidate& cand = em.candidates()[i];
-    if (cand.needs_evidence || cand.generic_geometry) continue;
-    if (std::find(banned.begin(), banned.end(), ToString(cand.type)) != banned.end()) continue;
-    c.push_back(static_cast<int>(i));
-  }
-  return c;
-}
+using testing::NamedCandidates;
 
 bool Named(const IdentifyResult& r, const std::string& prefix) {
   for (const FittedEffect& e : r.effects) {

@@ -22,6 +22,7 @@
 #include "sim/declared_model.h"
 #include "sim/effects/effect.h"
 #include "sim/simulation.h"
+#include "tests/common/identify_test_util.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::identify {
@@ -61,48 +62,13 @@ lie::SE3 Perturbed(const lie::SE3& T, double metres, double degrees, std::mt1993
   return T * lie::SE3::Exp(xi);
 }
 
-// `rows` settled configurations of the truth, seen by a tracker at T_base_tracker (frame 0 of
-// the data set) with noise.
+// The helpers' tracker data at this suite's noise.
 DataSet TrackerData(Rig& rig, const lie::SE3& T_base_tracker, int rows, std::mt19937_64& rng,
                     const Vec3& d_marker = Vec3::Zero()) {
-  DataSet d;
-  d.sets = {"s"};
-  MeasurementFrame tracker;
-  tracker.name = "tracker";
-  tracker.where = "test.yaml:1";
-  d.frames = {tracker};
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  std::normal_distribution<double> n(0.0, kNoise);
-  const auto& names = rig.sim->actuated_joints();
-  const lie::SE3 T_tracker_base = T_base_tracker.Inverse();
-  for (int r = 0; r < rows; ++r) {
-    Eigen::VectorXd cmd = Eigen::VectorXd::Zero(rig.sim->num_actuated());
-    Observation o;
-    o.q.resize(rig.chain.model.nq());
-    for (int k = 0; k < o.q.size(); ++k) {
-      const int a = std::find(names.begin(), names.end(), rig.chain.q_joints[k]) - names.begin();
-      cmd[a] = o.q[k] = 1.0 * u(rng);
-    }
-    rig.sim->SetCommand(cmd);
-    rig.sim->Settle();
-    const Vec3 p_base(rig.sim->Pose("ee") * d_marker);  // the marker, d_marker off the site
-    o.frame = 0;
-    o.p_frame = T_tracker_base * p_base + Vec3(n(rng), n(rng), n(rng));
-    d.rows.push_back(o);
-  }
-  return d;
+  return testing::TrackerData(rig, T_base_tracker, rows, kNoise, rng, d_marker);
 }
 
-// Named, not needs-evidence, not complete geometry: the library's first stage.
-std::vector<int> NamedCandidates(const EffectModel& em) {
-  std::vector<int> c;
-  for (size_t i = 0; i < em.candidates().size(); ++i) {
-    if (!em.candidates()[i].needs_evidence && !em.candidates()[i].generic_geometry) {
-      c.push_back(static_cast<int>(i));
-    }
-  }
-  return c;
-}
+using testing::NamedCandidates;
 
 std::vector<std::string> Names(const IdentifyResult& r) {
   std::vector<std::string> found;
