@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <limits>
 #include <map>
@@ -194,22 +195,25 @@ int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
   return static_cast<int>(labels->size()) - 1;
 }
 
-void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
-                        DataSet* data, const std::vector<std::string>& coupled) {
-  const auto is_coupled = [&](const std::string& j) {
-    return std::find(coupled.begin(), coupled.end(), j) != coupled.end();
-  };
-  CsvLines csv(path);
-  const size_t first_row = data->rows.size();
-  LabelIndexer group_index(&data->groups), set_index(&data->sets);
-  std::vector<std::string> header;
-  if (!csv.Next(&header)) throw InputError(path + ": no header row");
-  const std::string hdr = csv.Where();
-  std::vector<int> joint_col(joints.size(), -1);
-  std::vector<int> motion_col(joints.size(), -1);
+namespace {
+
+// Where each column of a calibration CSV is (-1: absent), and what kind of rows it holds.
+struct CsvColumns {
+  std::vector<int> joint_col, motion_col;
   int frame_col = -1, marker_col = -1;
   int group_col = -1, set_col = -1, xyz_col[3] = {-1, -1, -1}, quat_col[4] = {-1, -1, -1, -1},
       uv_col[2] = {-1, -1};
+  bool has_xyz = false, has_uv = false;
+  int num_quat = 0;
+};
+
+// The header: every column known, none twice, no column for a coupled joint.
+CsvColumns ParseHeader(const std::vector<std::string>& header, const std::string& hdr,
+                       const std::vector<std::string>& joints,
+                       const std::function<bool(const std::string&)>& is_coupled) {
+  CsvColumns cols;
+  cols.joint_col.assign(joints.size(), -1);
+  cols.motion_col.assign(joints.size(), -1);
   for (size_t c = 0; c < header.size(); ++c) {
     const std::string& h = header[c];
     for (size_t k = 0; k < c; ++k) {
@@ -223,60 +227,146 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
                            "' is a coupled joint (the declared model's coupled:): its angle "
                            "follows from its drivers, give no column for it");
         }
-        joint_col[j] = static_cast<int>(c);
+        cols.joint_col[j] = static_cast<int>(c);
         known = true;
       }
     }
-    if (h == "group") group_col = static_cast<int>(c), known = true;
-    if (h == "set") set_col = static_cast<int>(c), known = true;
-    if (h == "frame") frame_col = static_cast<int>(c), known = true;
-    if (h == "marker") marker_col = static_cast<int>(c), known = true;
-    if (h == "x") xyz_col[0] = static_cast<int>(c), known = true;
-    if (h == "y") xyz_col[1] = static_cast<int>(c), known = true;
-    if (h == "z") xyz_col[2] = static_cast<int>(c), known = true;
+    if (h == "group") cols.group_col = static_cast<int>(c), known = true;
+    if (h == "set") cols.set_col = static_cast<int>(c), known = true;
+    if (h == "frame") cols.frame_col = static_cast<int>(c), known = true;
+    if (h == "marker") cols.marker_col = static_cast<int>(c), known = true;
+    if (h == "x") cols.xyz_col[0] = static_cast<int>(c), known = true;
+    if (h == "y") cols.xyz_col[1] = static_cast<int>(c), known = true;
+    if (h == "z") cols.xyz_col[2] = static_cast<int>(c), known = true;
     const char* quat[4] = {"qw", "qx", "qy", "qz"};
     for (int k = 0; k < 4; ++k) {
-      if (h == quat[k]) quat_col[k] = static_cast<int>(c), known = true;
+      if (h == quat[k]) cols.quat_col[k] = static_cast<int>(c), known = true;
     }
-    if (h == "u") uv_col[0] = static_cast<int>(c), known = true;
+    if (h == "u") cols.uv_col[0] = static_cast<int>(c), known = true;
     if (h.rfind("motion_", 0) == 0) {
       for (size_t j = 0; j < joints.size(); ++j) {
-        if (joints[j] == h.substr(7)) motion_col[j] = static_cast<int>(c), known = true;
+        if (joints[j] == h.substr(7)) cols.motion_col[j] = static_cast<int>(c), known = true;
       }
       if (!known)
         throw InputError(hdr + ": column '" + CapForMessage(h) + "' names no actuated joint");
     }
-    if (h == "v") uv_col[1] = static_cast<int>(c), known = true;
+    if (h == "v") cols.uv_col[1] = static_cast<int>(c), known = true;
     if (!known) {
       throw InputError(hdr + ": column '" + CapForMessage(h) +
                        "' is neither an actuated joint of the declared model nor one of group, "
                        "set, frame, marker, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
     }
   }
+  return cols;
+}
+
+// The columns together: every joint, x/y/z and the quaternion complete, one kind of row.
+void CheckColumns(const std::string& hdr, const std::vector<std::string>& joints,
+                  const std::function<bool(const std::string&)>& is_coupled, const DataSet& data,
+                  CsvColumns& cols) {
   for (size_t j = 0; j < joints.size(); ++j) {
-    if (joint_col[j] < 0 && !is_coupled(joints[j])) {
+    if (cols.joint_col[j] < 0 && !is_coupled(joints[j])) {
       throw InputError(hdr + ": no column for joint '" + joints[j] + "'");
     }
   }
-  const bool has_xyz = xyz_col[0] >= 0 && xyz_col[1] >= 0 && xyz_col[2] >= 0;
-  if ((xyz_col[0] >= 0 || xyz_col[1] >= 0 || xyz_col[2] >= 0) && !has_xyz) {
+  cols.has_xyz = cols.xyz_col[0] >= 0 && cols.xyz_col[1] >= 0 && cols.xyz_col[2] >= 0;
+  if ((cols.xyz_col[0] >= 0 || cols.xyz_col[1] >= 0 || cols.xyz_col[2] >= 0) && !cols.has_xyz) {
     throw InputError(hdr + ": x, y and z go together");
   }
-  const int num_quat =
-      (quat_col[0] >= 0) + (quat_col[1] >= 0) + (quat_col[2] >= 0) + (quat_col[3] >= 0);
-  if (num_quat != 0 && (num_quat != 4 || !has_xyz)) {
+  cols.num_quat = (cols.quat_col[0] >= 0) + (cols.quat_col[1] >= 0) + (cols.quat_col[2] >= 0) +
+                  (cols.quat_col[3] >= 0);
+  if (cols.num_quat != 0 && (cols.num_quat != 4 || !cols.has_xyz)) {
     throw InputError(hdr + ": a pose needs x, y, z and all of qw, qx, qy, qz");
   }
-  const bool has_uv = uv_col[0] >= 0 && uv_col[1] >= 0;
-  if ((uv_col[0] >= 0) != (uv_col[1] >= 0)) throw InputError(hdr + ": u and v go together");
-  if (has_xyz + (group_col >= 0) + has_uv != 1) {
+  cols.has_uv = cols.uv_col[0] >= 0 && cols.uv_col[1] >= 0;
+  if ((cols.uv_col[0] >= 0) != (cols.uv_col[1] >= 0)) {
+    throw InputError(hdr + ": u and v go together");
+  }
+  if (cols.has_xyz + (cols.group_col >= 0) + cols.has_uv != 1) {
     throw InputError(hdr +
                      ": need exactly one of a 'group' column, 'x','y','z' columns or "
                      "'u','v' columns");
   }
-  if (has_uv && !data->camera.present) {
+  if (cols.has_uv && !data.camera.present) {
     throw InputError(hdr + ": pixel columns need a camera (the scenario's 'camera' key)");
   }
+}
+
+// One data row (its cells already counted against the header).
+Observation ParseRow(const std::vector<std::string>& cells, const std::string& where,
+                     const std::string& path, const std::vector<std::string>& joints,
+                     const CsvColumns& cols, const DataSet& data, LabelIndexer& group_index,
+                     LabelIndexer& set_index) {
+  Observation o;
+  o.where = where;
+  o.q.resize(joints.size());
+  for (size_t j = 0; j < joints.size(); ++j) {
+    // A coupled joint's entry is set from its drivers by the caller (ApplyCouplings).
+    o.q[j] = cols.joint_col[j] < 0
+                 ? 0.0
+                 : ParseNumber(cells[cols.joint_col[j]], where, joints[j], kMaxJoint);
+  }
+  if (std::any_of(cols.motion_col.begin(), cols.motion_col.end(), [](int c) { return c >= 0; })) {
+    o.motion_sign = Eigen::VectorXd::Zero(joints.size());
+    for (size_t j = 0; j < joints.size(); ++j) {
+      if (cols.motion_col[j] < 0) continue;
+      const double v = ParseNumber(cells[cols.motion_col[j]], where, "motion_" + joints[j]);
+      if (v != -1.0 && v != 0.0 && v != 1.0) {
+        throw InputError(where + ": column 'motion_" + joints[j] + "' must be -1, 0 or 1");
+      }
+      o.motion_sign[j] = v;
+    }
+  }
+  if (cols.has_xyz) {
+    o.type = ObservationType::kPoint;
+    const char* names[3] = {"x", "y", "z"};
+    for (int k = 0; k < 3; ++k) {
+      o.p_base[k] = ParseNumber(cells[cols.xyz_col[k]], where, names[k], kMaxCoordinate);
+    }
+    if (cols.num_quat == 4) {
+      o.type = ObservationType::kPose;
+      const Eigen::Quaterniond qt(ParseNumber(cells[cols.quat_col[0]], where, "qw"),
+                                  ParseNumber(cells[cols.quat_col[1]], where, "qx"),
+                                  ParseNumber(cells[cols.quat_col[2]], where, "qy"),
+                                  ParseNumber(cells[cols.quat_col[3]], where, "qz"));
+      if (std::abs(qt.norm() - 1.0) > 1e-3) {
+        throw InputError(where + ": quaternion (qw, qx, qy, qz) is not of unit length");
+      }
+      o.R_base = qt.normalized().toRotationMatrix();
+    }
+  } else if (cols.has_uv) {
+    o.type = ObservationType::kPixel;
+    o.uv = Eigen::Vector2d(ParseNumber(cells[cols.uv_col[0]], where, "u", kMaxPixel),
+                           ParseNumber(cells[cols.uv_col[1]], where, "v", kMaxPixel));
+  } else {
+    if (cells[cols.group_col].empty()) throw InputError(where + ": column 'group' is empty");
+    o.type = ObservationType::kGroup;
+    o.group = group_index(cells[cols.group_col]);
+  }
+  if (cols.frame_col >= 0) SetRowFrame(cells[cols.frame_col], where, data, &o);
+  if (cols.marker_col >= 0) o.point = MarkerIndex(cells[cols.marker_col], where, data);
+  if (cols.set_col >= 0 && cells[cols.set_col].empty()) {
+    throw InputError(where + ": column 'set' is empty");
+  }
+  o.set = set_index(cols.set_col >= 0 ? cells[cols.set_col] : path);
+  return o;
+}
+
+}  // namespace
+
+void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
+                        DataSet* data, const std::vector<std::string>& coupled) {
+  const std::function<bool(const std::string&)> is_coupled = [&](const std::string& j) {
+    return std::find(coupled.begin(), coupled.end(), j) != coupled.end();
+  };
+  CsvLines csv(path);
+  const size_t first_row = data->rows.size();
+  LabelIndexer group_index(&data->groups), set_index(&data->sets);
+  std::vector<std::string> header;
+  if (!csv.Next(&header)) throw InputError(path + ": no header row");
+  const std::string hdr = csv.Where();
+  CsvColumns cols = ParseHeader(header, hdr, joints, is_coupled);
+  CheckColumns(hdr, joints, is_coupled, *data, cols);
   int rows = 0;
   std::vector<std::string> cells;
   while (csv.Next(&cells)) {
@@ -285,56 +375,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
                        std::to_string(header.size()));
     }
-    Observation o;
-    o.where = where;
-    o.q.resize(joints.size());
-    for (size_t j = 0; j < joints.size(); ++j) {
-      // A coupled joint's entry is set from its drivers by the caller (ApplyCouplings).
-      o.q[j] =
-          joint_col[j] < 0 ? 0.0 : ParseNumber(cells[joint_col[j]], where, joints[j], kMaxJoint);
-    }
-    if (std::any_of(motion_col.begin(), motion_col.end(), [](int c) { return c >= 0; })) {
-      o.motion_sign = Eigen::VectorXd::Zero(joints.size());
-      for (size_t j = 0; j < joints.size(); ++j) {
-        if (motion_col[j] < 0) continue;
-        const double v = ParseNumber(cells[motion_col[j]], where, "motion_" + joints[j]);
-        if (v != -1.0 && v != 0.0 && v != 1.0) {
-          throw InputError(where + ": column 'motion_" + joints[j] + "' must be -1, 0 or 1");
-        }
-        o.motion_sign[j] = v;
-      }
-    }
-    if (has_xyz) {
-      o.type = ObservationType::kPoint;
-      const char* names[3] = {"x", "y", "z"};
-      for (int k = 0; k < 3; ++k) {
-        o.p_base[k] = ParseNumber(cells[xyz_col[k]], where, names[k], kMaxCoordinate);
-      }
-      if (num_quat == 4) {
-        o.type = ObservationType::kPose;
-        const Eigen::Quaterniond qt(ParseNumber(cells[quat_col[0]], where, "qw"),
-                                    ParseNumber(cells[quat_col[1]], where, "qx"),
-                                    ParseNumber(cells[quat_col[2]], where, "qy"),
-                                    ParseNumber(cells[quat_col[3]], where, "qz"));
-        if (std::abs(qt.norm() - 1.0) > 1e-3) {
-          throw InputError(where + ": quaternion (qw, qx, qy, qz) is not of unit length");
-        }
-        o.R_base = qt.normalized().toRotationMatrix();
-      }
-    } else if (has_uv) {
-      o.type = ObservationType::kPixel;
-      o.uv = Eigen::Vector2d(ParseNumber(cells[uv_col[0]], where, "u", kMaxPixel),
-                             ParseNumber(cells[uv_col[1]], where, "v", kMaxPixel));
-    } else {
-      if (cells[group_col].empty()) throw InputError(where + ": column 'group' is empty");
-      o.type = ObservationType::kGroup;
-      o.group = group_index(cells[group_col]);
-    }
-    if (frame_col >= 0) SetRowFrame(cells[frame_col], where, *data, &o);
-    if (marker_col >= 0) o.point = MarkerIndex(cells[marker_col], where, *data);
-    if (set_col >= 0 && cells[set_col].empty()) throw InputError(where + ": column 'set' is empty");
-    o.set = set_index(set_col >= 0 ? cells[set_col] : path);
-    data->rows.push_back(o);
+    data->rows.push_back(ParseRow(cells, where, path, joints, cols, *data, group_index, set_index));
     ++rows;
   }
   if (rows == 0) throw InputError(CapForMessage(path) + ": no data rows");

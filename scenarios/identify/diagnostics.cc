@@ -48,103 +48,111 @@ void Keep(ResidualFinding candidate, ResidualFinding* best) {
   }
 }
 
-}  // namespace
+// One joint's residual along its own direction, row by row: z (the residual's projection on the
+// direction a small turn of the joint moves the marker, in radians), its weight, the joint's
+// angle and its gravity torque. Only the rows whose marker the joint moves: a marker on another
+// branch of a tree (issue 20) says nothing about this joint, and counted with zero weight it
+// shrank the residual variance and inflated the statistic.
+struct JointSamples {
+  std::vector<double> z, w, q, tau;
+};
 
-ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data,
-                                      const std::vector<ConfigLoads>& loads, const Fit& fit,
-                                      const IdentifyOptions& opt) {
-  ResidualFinding best;
-  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
-  const Eigen::VectorXd res = pr.Residuals(StateOf(pr, fit));
-  std::vector<int> rows;  // rows with a position residual
-  for (size_t r = 0; r < data.rows.size(); ++r) {
-    if (data.rows[r].type != ObservationType::kPixel) rows.push_back(static_cast<int>(r));
-  }
-  const int n = static_cast<int>(rows.size());
-  if (n < 10) return best;
-  const int nq = em.chain().nq();
-  EffectModel::Workspace ws = em.MakeWorkspace();
+// What the tests share: the position rows' residuals under the fit.
+struct ResidualContext {
+  const EffectModel& em;
+  const DataSet& data;
+  const std::vector<ConfigLoads>& loads;
+  const Fit& fit;
+  const IdentifyOptions& opt;
+  const Problem& pr;
+  const Eigen::VectorXd& res;
+  const std::vector<int>& rows;  // rows with a position residual
+};
+
+JointSamples SampleJoint(const ResidualContext& c, int k, EffectModel::Workspace& ws) {
+  JointSamples out;
   const double h = 1e-6;
-  for (int k = 0; k < nq; ++k) {
-    // Only the rows whose marker the joint moves: a marker on another branch of a tree (issue
-    // 20) says nothing about this joint, and counted with zero weight it shrank the residual
-    // variance and inflated the statistic.
-    std::vector<double> zs, ws2, qs, taus;
-    for (int i = 0; i < n; ++i) {
-      const int r = rows[i];
-      Eigen::VectorXd qp = data.rows[r].q, qm = qp;
-      qp[k] += h;
-      qm[k] -= h;
-      const int pt = data.rows[r].point;
-      const Vec3 s = (em.Predict(qp, loads[r], fit.active, fit.theta.data(), ws, pt) -
-                      em.Predict(qm, loads[r], fit.active, fit.theta.data(), ws, pt)) /
-                     (2 * h * opt.point_std_m);
-      const Vec3 e = res.segment<3>(pr.row_offset(r));
-      const double s2 = s.squaredNorm();
-      if (!(s2 > 1e-12)) continue;
-      zs.push_back(s.dot(e) / s2);
-      ws2.push_back(s2);
-      qs.push_back(data.rows[r].q[k]);
-      taus.push_back(loads[r].tau.size() > k ? loads[r].tau[k] : 0.0);
-    }
-    const int m = static_cast<int>(zs.size());
-    if (m < 10) continue;
-    const Eigen::Map<const Eigen::VectorXd> z(zs.data(), m), w(ws2.data(), m), q(qs.data(), m),
-        tau(taus.data(), m);
-    const std::string joint = em.chain().frame(em.chain().joint_frame(k)).name;
-    {
-      Eigen::MatrixXd X(m, 6);
-      for (int c = 1; c <= 3; ++c) {
-        X.col(2 * c - 2) = (c * q.array()).cos();
-        X.col(2 * c - 1) = (c * q.array()).sin();
-      }
-      const Regression g = Regress(X, z, w);
-      if (g.beta.size() > 0) {
-        ResidualFinding f;
-        f.kind = "periodic";
-        f.q_index = k;
-        double amp = 0.0;
-        for (int c = 1; c <= 3; ++c) {
-          const double a = std::hypot(g.beta[2 * c - 1], g.beta[2 * c]);
-          if (a > amp) amp = a, f.cycles = c;
-        }
-        f.size = amp / kDeg;
-        f.unit = "deg";
-        f.p_value = g.p_value;
-        f.statistic = g.stat;
-        f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
-        f.x.assign(q.data(), q.data() + m);
-        f.z.assign(z.data(), z.data() + m);
-        Keep(std::move(f), &best);
-      }
-    }
-    if (em.has_masses() && tau.cwiseAbs().maxCoeff() > 1e-6) {
-      const double scale = tau.cwiseAbs().maxCoeff();
-      Eigen::MatrixXd X(m, 2);
-      X.col(0) = tau;
-      X.col(1) = (tau / scale).array().cube() * scale;
-      const Regression g = Regress(X, z, w);
-      if (g.beta.size() > 0) {
-        ResidualFinding f;
-        f.kind = "load";
-        f.q_index = k;
-        // The angle error at the largest load the data holds.
-        f.size = std::abs(g.beta[1] * scale + g.beta[2] * scale) / kDeg;
-        f.unit = "deg at the largest gravity torque";
-        f.p_value = g.p_value;
-        f.statistic = g.stat;
-        f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
-        f.x.assign(tau.data(), tau.data() + m);
-        f.z.assign(z.data(), z.data() + m);
-        Keep(std::move(f), &best);
-      }
-    }
+  for (const int r : c.rows) {
+    Eigen::VectorXd qp = c.data.rows[r].q, qm = qp;
+    qp[k] += h;
+    qm[k] -= h;
+    const int pt = c.data.rows[r].point;
+    const Vec3 s = (c.em.Predict(qp, c.loads[r], c.fit.active, c.fit.theta.data(), ws, pt) -
+                    c.em.Predict(qm, c.loads[r], c.fit.active, c.fit.theta.data(), ws, pt)) /
+                   (2 * h * c.opt.point_std_m);
+    const Vec3 e = c.res.segment<3>(c.pr.row_offset(r));
+    const double s2 = s.squaredNorm();
+    if (!(s2 > 1e-12)) continue;
+    out.z.push_back(s.dot(e) / s2);
+    out.w.push_back(s2);
+    out.q.push_back(c.data.rows[r].q[k]);
+    out.tau.push_back(c.loads[r].tau.size() > k ? c.loads[r].tau[k] : 0.0);
   }
-  // Drift: each coordinate of the residual against the row order.
+  return out;
+}
+
+// The residual of joint k against its angle: a periodic error of 1 to 3 cycles a turn.
+void TestPeriodic(int k, const JointSamples& js, ResidualFinding* best) {
+  const int m = static_cast<int>(js.z.size());
+  const Eigen::Map<const Eigen::VectorXd> z(js.z.data(), m), w(js.w.data(), m), q(js.q.data(), m);
+  Eigen::MatrixXd X(m, 6);
+  for (int c = 1; c <= 3; ++c) {
+    X.col(2 * c - 2) = (c * q.array()).cos();
+    X.col(2 * c - 1) = (c * q.array()).sin();
+  }
+  const Regression g = Regress(X, z, w);
+  if (g.beta.size() == 0) return;
+  ResidualFinding f;
+  f.kind = "periodic";
+  f.q_index = k;
+  double amp = 0.0;
+  for (int c = 1; c <= 3; ++c) {
+    const double a = std::hypot(g.beta[2 * c - 1], g.beta[2 * c]);
+    if (a > amp) amp = a, f.cycles = c;
+  }
+  f.size = amp / kDeg;
+  f.unit = "deg";
+  f.p_value = g.p_value;
+  f.statistic = g.stat;
+  f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
+  f.x.assign(q.data(), q.data() + m);
+  f.z.assign(z.data(), z.data() + m);
+  Keep(std::move(f), best);
+}
+
+// The residual of joint k against its gravity torque (linear and cubic: a spring, stiffening).
+void TestLoad(int k, const JointSamples& js, ResidualFinding* best) {
+  const int m = static_cast<int>(js.z.size());
+  const Eigen::Map<const Eigen::VectorXd> z(js.z.data(), m), w(js.w.data(), m),
+      tau(js.tau.data(), m);
+  if (!(tau.cwiseAbs().maxCoeff() > 1e-6)) return;
+  const double scale = tau.cwiseAbs().maxCoeff();
+  Eigen::MatrixXd X(m, 2);
+  X.col(0) = tau;
+  X.col(1) = (tau / scale).array().cube() * scale;
+  const Regression g = Regress(X, z, w);
+  if (g.beta.size() == 0) return;
+  ResidualFinding f;
+  f.kind = "load";
+  f.q_index = k;
+  // The angle error at the largest load the data holds.
+  f.size = std::abs(g.beta[1] * scale + g.beta[2] * scale) / kDeg;
+  f.unit = "deg at the largest gravity torque";
+  f.p_value = g.p_value;
+  f.statistic = g.stat;
+  f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
+  f.x.assign(tau.data(), tau.data() + m);
+  f.z.assign(z.data(), z.data() + m);
+  Keep(std::move(f), best);
+}
+
+// Drift: each coordinate of the residual against the row order.
+void TestDrift(const ResidualContext& c, ResidualFinding* best) {
+  const int n = static_cast<int>(c.rows.size());
   for (int axis = 0; axis < 3; ++axis) {
     Eigen::VectorXd z(n), t(n);
     for (int i = 0; i < n; ++i) {
-      z[i] = res[pr.row_offset(rows[i]) + axis] * opt.point_std_m;
+      z[i] = c.res[c.pr.row_offset(c.rows[i]) + axis] * c.opt.point_std_m;
       t[i] = static_cast<double>(i) / std::max(1, n - 1);
     }
     const Regression g = Regress(t, z, Eigen::VectorXd::Ones(n));
@@ -159,32 +167,85 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
     f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
     f.x.assign(t.data(), t.data() + n);
     f.z.assign(z.data(), z.data() + n);
-    Keep(std::move(f), &best);
+    Keep(std::move(f), best);
   }
-  // Per set: each coordinate of the residual against the set it belongs to (a placement or a
-  // session that errs as a whole; with socket groups the fitted points absorb most of it).
-  if (data.sets.size() >= 2) {
-    const int S = static_cast<int>(data.sets.size());
-    for (int axis = 0; axis < 3; ++axis) {
-      Eigen::VectorXd z(n);
-      Eigen::MatrixXd X = Eigen::MatrixXd::Zero(n, S - 1);
-      for (int i = 0; i < n; ++i) {
-        z[i] = res[pr.row_offset(rows[i]) + axis] * opt.point_std_m;
-        const int set = data.rows[rows[i]].set;
-        if (set > 0) X(i, set - 1) = 1.0;
-      }
-      const Regression g = Regress(X, z, Eigen::VectorXd::Ones(n));
-      if (g.beta.size() == 0) continue;
-      ResidualFinding f;
-      f.kind = "set";
-      f.variable = std::string("set, ") + "xyz"[axis];
-      f.size = g.beta.tail(S - 1).cwiseAbs().maxCoeff() * 1e3;
-      f.unit = "mm between sets";
-      f.p_value = g.p_value;
-      f.statistic = g.stat;
-      Keep(std::move(f), &best);
+}
+
+// Per set: each coordinate of the residual against the set it belongs to (a placement or a
+// session that errs as a whole; with socket groups the fitted points absorb most of it).
+void TestSets(const ResidualContext& c, ResidualFinding* best) {
+  if (c.data.sets.size() < 2) return;
+  const int n = static_cast<int>(c.rows.size());
+  const int S = static_cast<int>(c.data.sets.size());
+  for (int axis = 0; axis < 3; ++axis) {
+    Eigen::VectorXd z(n);
+    Eigen::MatrixXd X = Eigen::MatrixXd::Zero(n, S - 1);
+    for (int i = 0; i < n; ++i) {
+      z[i] = c.res[c.pr.row_offset(c.rows[i]) + axis] * c.opt.point_std_m;
+      const int set = c.data.rows[c.rows[i]].set;
+      if (set > 0) X(i, set - 1) = 1.0;
     }
+    const Regression g = Regress(X, z, Eigen::VectorXd::Ones(n));
+    if (g.beta.size() == 0) continue;
+    ResidualFinding f;
+    f.kind = "set";
+    f.variable = std::string("set, ") + "xyz"[axis];
+    f.size = g.beta.tail(S - 1).cwiseAbs().maxCoeff() * 1e3;
+    f.unit = "mm between sets";
+    f.p_value = g.p_value;
+    f.statistic = g.stat;
+    Keep(std::move(f), best);
   }
+}
+
+// The finding in one line.
+std::string FindingMessage(const ResidualFinding& best) {
+  char line[256];
+  const char* rel = best.p_value <= 1e-16 ? "<" : "=";
+  if (best.kind == "periodic") {
+    std::snprintf(line, sizeof(line), "residual periodic in %s, %d cycles/rev, %.3g deg, p %s %.2g",
+                  best.variable.c_str(), best.cycles, best.size, rel, best.p_value);
+  } else if (best.kind == "load") {
+    std::snprintf(line, sizeof(line),
+                  "residual follows the gravity torque of %s, %.3g %s, p %s %.2g",
+                  best.variable.c_str(), best.size, best.unit.c_str(), rel, best.p_value);
+  } else if (best.kind == "set") {
+    std::snprintf(line, sizeof(line), "residual differs between sets (%s), %.3g %s, p %s %.2g",
+                  best.variable.c_str(), best.size, best.unit.c_str(), rel, best.p_value);
+  } else if (best.kind == "drift") {
+    std::snprintf(line, sizeof(line), "residual drifts with the %s, %.3g %s, p %s %.2g",
+                  best.variable.c_str(), best.size, best.unit.c_str(), rel, best.p_value);
+  } else {
+    std::snprintf(line, sizeof(line), "no residual structure tested");
+  }
+  return line;
+}
+
+}  // namespace
+
+// Per joint: the residual against its angle (periodic) and its load; then against the row
+// order (drift) and the set; the most significant structure is the finding.
+ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data,
+                                      const std::vector<ConfigLoads>& loads, const Fit& fit,
+                                      const IdentifyOptions& opt) {
+  ResidualFinding best;
+  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
+  const Eigen::VectorXd res = pr.Residuals(StateOf(pr, fit));
+  std::vector<int> rows;  // rows with a position residual
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    if (data.rows[r].type != ObservationType::kPixel) rows.push_back(static_cast<int>(r));
+  }
+  if (rows.size() < 10) return best;
+  const ResidualContext c{em, data, loads, fit, opt, pr, res, rows};
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  for (int k = 0; k < em.chain().nq(); ++k) {
+    const JointSamples js = SampleJoint(c, k, ws);
+    if (js.z.size() < 10) continue;
+    TestPeriodic(k, js, &best);
+    if (em.has_masses()) TestLoad(k, js, &best);
+  }
+  TestDrift(c, &best);
+  TestSets(c, &best);
   if (best.q_index >= 0) {
     best.variable = em.chain().frame(em.chain().joint_frame(best.q_index)).name;
     const size_t slash = best.variable.find('/');
@@ -192,28 +253,7 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
   }
   best.significant = best.p_value < opt.diagnostic_p;
   best.notable = best.p_value < opt.explained_p;
-  char line[256];
-  if (best.kind == "periodic") {
-    std::snprintf(line, sizeof(line), "residual periodic in %s, %d cycles/rev, %.3g deg, p %s %.2g",
-                  best.variable.c_str(), best.cycles, best.size, best.p_value <= 1e-16 ? "<" : "=",
-                  best.p_value);
-  } else if (best.kind == "load") {
-    std::snprintf(line, sizeof(line),
-                  "residual follows the gravity torque of %s, %.3g %s, p %s %.2g",
-                  best.variable.c_str(), best.size, best.unit.c_str(),
-                  best.p_value <= 1e-16 ? "<" : "=", best.p_value);
-  } else if (best.kind == "set") {
-    std::snprintf(line, sizeof(line), "residual differs between sets (%s), %.3g %s, p %s %.2g",
-                  best.variable.c_str(), best.size, best.unit.c_str(),
-                  best.p_value <= 1e-16 ? "<" : "=", best.p_value);
-  } else if (best.kind == "drift") {
-    std::snprintf(line, sizeof(line), "residual drifts with the %s, %.3g %s, p %s %.2g",
-                  best.variable.c_str(), best.size, best.unit.c_str(),
-                  best.p_value <= 1e-16 ? "<" : "=", best.p_value);
-  } else {
-    std::snprintf(line, sizeof(line), "no residual structure tested");
-  }
-  best.message = line;
+  best.message = FindingMessage(best);
   return best;
 }
 

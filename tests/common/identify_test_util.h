@@ -36,9 +36,8 @@ inline std::vector<int> NamedCandidates(const identify::EffectModel& em,
 // off the site seen by a tracker at T_base_tracker (frame 0 of the data set) with noise_std per
 // axis.
 template <class Rig>
-identify::DataSet TrackerData(Rig& rig, const lie::SE3& T_base_tracker, int rows,
-                              double noise_std, std::mt19937_64& rng,
-                              const Vec3& d_marker = Vec3::Zero()) {
+identify::DataSet TrackerData(Rig& rig, const lie::SE3& T_base_tracker, int rows, double noise_std,
+                              std::mt19937_64& rng, const Vec3& d_marker = Vec3::Zero()) {
   identify::DataSet d;
   d.sets = {"s"};
   identify::MeasurementFrame tracker;
