@@ -13,43 +13,39 @@
 
 namespace {
 
-int Main(int argc, char** argv) {
-  using flexbench::scenarios::RunOptions;
-  // MuJoCo's fatal errors and warnings: one line on stderr, never a prompt on stdin or a log
-  // file in the working folder.
-  flexbench::sim::InstallMujocoHandlers();
-  CLI::App app{"flexbench: pose estimation of flexible robot arms, scored against MuJoCo"};
-  app.set_version_flag("--version", std::string("flexbench ") + FLEXBENCH_VERSION);
-  app.require_subcommand(1);
-
-  RunOptions run;
+// The options of each subcommand, filled by CLI11.
+struct Options {
+  flexbench::scenarios::RunOptions run;
   std::uint64_t seed = 0;
+  CLI::Option* seed_opt = nullptr;
+  std::string list_dir;
+  std::string inspect_path;
+  flexbench::scenarios::IdentifyCliOptions id;
+  flexbench::scenarios::sweep::SweepCliOptions sw;
+  bool no_wait = false;
+  std::string report_dir;
+};
+
+CLI::App* AddRun(CLI::App& app, Options& o) {
   CLI::App* run_cmd = app.add_subcommand("run", "run a scenario file");
-  run_cmd->add_option("scenario", run.scenario_path, "scenario YAML file")->required();
-  run_cmd->add_option("--out", run.out_dir, "output folder (default: out/<scenario>)");
-  CLI::Option* seed_opt = run_cmd->add_option("--seed", seed, "override the scenario's seed");
-  run_cmd->add_flag("--check-gates", run.check_gates, "exit 3 when a gate fails");
-  run_cmd->add_flag("--quiet", run.quiet,
+  run_cmd->add_option("scenario", o.run.scenario_path, "scenario YAML file")->required();
+  run_cmd->add_option("--out", o.run.out_dir, "output folder (default: out/<scenario>)");
+  o.seed_opt = run_cmd->add_option("--seed", o.seed, "override the scenario's seed");
+  run_cmd->add_flag("--check-gates", o.run.check_gates, "exit 3 when a gate fails");
+  run_cmd->add_flag("--quiet", o.run.quiet,
                     "no progress and no informational lines (errors and failed gates remain)");
   run_cmd
-      ->add_option("--set", run.set,
+      ->add_option("--set", o.run.set,
                    "override a scenario key: KEY=VALUE, KEY a dotted path, VALUE YAML "
                    "(repeatable; recorded in summary.json)")
       ->allow_extra_args(false);  // one KEY=VALUE per --set: never the scenario path after it
-  run_cmd->add_flag("--force", run.force,
+  run_cmd->add_flag("--force", o.run.force,
                     "let --out replace an existing folder that is not a flexbench result");
+  return run_cmd;
+}
 
-  std::string list_dir;
-  CLI::App* list_cmd = app.add_subcommand("list", "list scenario kinds and scenario files");
-  list_cmd->add_option("--dir", list_dir, "folder with scenario files (default: scenarios)");
-
-  std::string inspect_path;
-  CLI::App* inspect_cmd = app.add_subcommand(
-      "inspect", "print a model's joints, sensors, cameras, tags and effects as JSON");
-  inspect_cmd->add_option("model", inspect_path, "MJCF model or declared-model YAML")->required();
-
-  // identify: the closed_loop kind on a user's own model, declared model and CSV files.
-  flexbench::scenarios::IdentifyCliOptions id;
+// identify: the closed_loop kind on a user's own model, declared model and CSV files.
+CLI::App* AddIdentify(CLI::App& app, flexbench::scenarios::IdentifyCliOptions& id) {
   CLI::App* identify_cmd = app.add_subcommand(
       "identify", "find the effects a declared model lacks from measured data (closed_loop)");
   identify_cmd->add_option("--model", id.model,
@@ -90,7 +86,11 @@ int Main(int argc, char** argv) {
   identify_cmd->add_flag("--quiet", id.quiet, "no progress and no informational lines");
   identify_cmd->add_flag("--force", id.force,
                          "let --out replace an existing folder that is not a flexbench result");
-  flexbench::scenarios::sweep::SweepCliOptions sw;
+  return identify_cmd;
+}
+
+CLI::App* AddSweep(CLI::App& app, Options& o) {
+  flexbench::scenarios::sweep::SweepCliOptions& sw = o.sw;
   CLI::App* sweep_cmd = app.add_subcommand(
       "sweep", "run a scenario over seeds and a grid of overrides; statistics and gates");
   sweep_cmd->add_option("sweep", sw.sweep_path, "sweep YAML file")->required();
@@ -107,13 +107,41 @@ int Main(int argc, char** argv) {
   sweep_cmd->add_option("--mem", sw.slurm.mem, "slurm: sbatch --mem");
   sweep_cmd->add_option("--array", sw.slurm.array,
                         "slurm: submit only these task indices (resubmit failed ones: 3,5)");
-  bool no_wait = false;
-  sweep_cmd->add_flag("--no-wait", no_wait, "slurm: submit and return; --collect later");
+  sweep_cmd->add_flag("--no-wait", o.no_wait, "slurm: submit and return; --collect later");
+  return sweep_cmd;
+}
 
-  std::string report_dir;
+// `list` without --dir: ./scenarios, else the source tree's.
+std::string DefaultListDir() {
+  std::error_code ec;
+  std::string dir = "scenarios";
+  if (!std::filesystem::is_directory(dir, ec) &&
+      std::filesystem::is_directory(std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios", ec)) {
+    dir = std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios";
+  }
+  return dir;
+}
+
+int Main(int argc, char** argv) {
+  // MuJoCo's fatal errors and warnings: one line on stderr, never a prompt on stdin or a log
+  // file in the working folder.
+  flexbench::sim::InstallMujocoHandlers();
+  CLI::App app{"flexbench: pose estimation of flexible robot arms, scored against MuJoCo"};
+  app.set_version_flag("--version", std::string("flexbench ") + FLEXBENCH_VERSION);
+  app.require_subcommand(1);
+  Options o;
+  CLI::App* run_cmd = AddRun(app, o);
+  CLI::App* list_cmd = app.add_subcommand("list", "list scenario kinds and scenario files");
+  list_cmd->add_option("--dir", o.list_dir, "folder with scenario files (default: scenarios)");
+  CLI::App* inspect_cmd = app.add_subcommand(
+      "inspect", "print a model's joints, sensors, cameras, tags and effects as JSON");
+  inspect_cmd->add_option("model", o.inspect_path, "MJCF model or declared-model YAML")->required();
+  CLI::App* identify_cmd = AddIdentify(app, o.id);
+  CLI::App* sweep_cmd = AddSweep(app, o);
   CLI::App* report_cmd = app.add_subcommand(
       "report", "write report.html in a run's or a sweep's result folder (again)");
-  report_cmd->add_option("dir", report_dir, "result folder (holds summary.json or aggregate.json)")
+  report_cmd
+      ->add_option("dir", o.report_dir, "result folder (holds summary.json or aggregate.json)")
       ->required();
   try {
     app.parse(argc, argv);
@@ -121,35 +149,26 @@ int Main(int argc, char** argv) {
     const int code = app.exit(e);
     return code == 0 ? 0 : flexbench::scenarios::kExitBadInput;
   }
-  if (*seed_opt) run.seed = seed;
+  if (*o.seed_opt) o.run.seed = o.seed;
   // The command line as typed, recorded with the results.
   const std::string command =
       flexbench::scenarios::CommandLine(std::vector<std::string>(argv, argv + argc));
-  run.command = command;
-  id.command = command;
-  sw.command = command;
-  if (*report_cmd) return flexbench::scenarios::ReportCommand(report_dir);
-  if (*run_cmd) return flexbench::scenarios::RunScenario(run);
+  o.run.command = command;
+  o.id.command = command;
+  o.sw.command = command;
+  if (*report_cmd) return flexbench::scenarios::ReportCommand(o.report_dir);
+  if (*run_cmd) return flexbench::scenarios::RunScenario(o.run);
   if (*sweep_cmd) {
-    sw.slurm.wait = !no_wait;
-    return flexbench::scenarios::sweep::SweepCommand(sw);
+    o.sw.slurm.wait = !o.no_wait;
+    return flexbench::scenarios::sweep::SweepCommand(o.sw);
   }
-  if (*inspect_cmd) return flexbench::scenarios::InspectCommand(inspect_path);
+  if (*inspect_cmd) return flexbench::scenarios::InspectCommand(o.inspect_path);
   if (*identify_cmd) {
-    if (id.out_dir.empty()) id.out_dir = "out/identify";
-    return flexbench::scenarios::IdentifyCommand(id);
+    if (o.id.out_dir.empty()) o.id.out_dir = "out/identify";
+    return flexbench::scenarios::IdentifyCommand(o.id);
   }
   if (*list_cmd) {
-    if (list_dir.empty()) {
-      // Default: ./scenarios, else the source tree's.
-      std::error_code ec;
-      list_dir = "scenarios";
-      if (!std::filesystem::is_directory(list_dir, ec) &&
-          std::filesystem::is_directory(std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios", ec)) {
-        list_dir = std::string(FLEXBENCH_SOURCE_DIR) + "/scenarios";
-      }
-    }
-    return flexbench::scenarios::ListScenarios(list_dir);
+    return flexbench::scenarios::ListScenarios(o.list_dir.empty() ? DefaultListDir() : o.list_dir);
   }
   return 0;
 }
