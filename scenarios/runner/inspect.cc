@@ -45,25 +45,8 @@ const char* SensorTypeName(int type) {
   }
 }
 
-}  // namespace
-
-Json InspectModel(const std::string& mjcf_path) {
-  std::vector<std::string> warnings;
-  sim::MjModelPtr model = sim::LoadModel(mjcf_path, &warnings);
-  mjModel* m = model.get();
-  const sim::ModelCatalog catalog = sim::ModelCatalog::Build(m, mjcf_path);
-
-  Json out;
-  out["model"] = mjcf_path;
-  out["name"] = std::string(m->names);
-  out["timestep_s"] = m->opt.timestep;
-  out["integrator"] = m->opt.integrator == mjINT_EULER ? "Euler"
-                      : m->opt.integrator == mjINT_RK4 ? "RK4"
-                                                       : "implicit";
-  out["nq"] = m->nq;
-  out["nbody"] = m->nbody;
-  if (!warnings.empty()) out["mujoco_warnings"] = warnings;
-
+// The actuated joints: type, axis, body, actuator gain, damping, armature, range.
+Json ActuatedJoints(const mjModel* m, const sim::ModelCatalog& catalog) {
   Json actuated = Json::array();
   for (int j : catalog.actuated) {
     const JointEntry& e = catalog.Joint(j);
@@ -79,8 +62,11 @@ Json InspectModel(const std::string& mjcf_path) {
     if (m->jnt_limited[j]) a["range"] = Vec(m->jnt_range + 2 * j, 2);
     actuated.push_back(a);
   }
-  out["actuated_joints"] = actuated;
+  return actuated;
+}
 
+// The passive joints (with their stiffness and the effect they belong to) and the coupled ones.
+void PassiveAndCoupled(const mjModel* m, const sim::ModelCatalog& catalog, Json* out) {
   Json passive = Json::array();
   Json coupled = Json::array();
   for (const JointEntry& e : catalog.joints) {
@@ -105,9 +91,12 @@ Json InspectModel(const std::string& mjcf_path) {
       coupled.push_back(c);
     }
   }
-  out["passive_joints"] = passive;
-  out["coupled_joints"] = coupled;
+  (*out)["passive_joints"] = passive;
+  (*out)["coupled_joints"] = coupled;
+}
 
+// Encoders, IMU sites, the MJCF's own sensors and the sensor kinds a scenario can ask for.
+Json Sensors(const mjModel* m, const sim::ModelCatalog& catalog) {
   Json sensors;
   sensors["encoders"] = catalog.ActuatedNames();
   sensors["imu_sites"] = catalog.imu_sites;
@@ -127,8 +116,10 @@ Json InspectModel(const std::string& mjcf_path) {
     kinds.push_back({{"kind", e.kind}, {"description", e.description}});
   }
   sensors["kinds"] = kinds;
-  out["sensors"] = sensors;
+  return sensors;
+}
 
+Json Cameras(const mjModel* m) {
   Json cameras = Json::array();
   for (int c = 0; c < m->ncam; ++c) {
     const PinholeCamera k = sim::CameraIntrinsics(m, c);
@@ -144,8 +135,10 @@ Json InspectModel(const std::string& mjcf_path) {
     cam["cy_px"] = k.cy;
     cameras.push_back(cam);
   }
-  out["cameras"] = cameras;
+  return cameras;
+}
 
+Json Tags(mjModel* m) {
   Json tags = Json::array();
   for (const render::TagInModel& t : render::ApplyTagTextures(m)) {
     Json tag;
@@ -156,8 +149,11 @@ Json InspectModel(const std::string& mjcf_path) {
     tag["size_m"] = t.size_m;
     tags.push_back(tag);
   }
-  out["tags"] = tags;
+  return tags;
+}
 
+// Every truth effect: whether this model supports it, and what it would act on.
+Json Effects(const mjModel* m, const sim::ModelCatalog& catalog) {
   Json effects = Json::array();
   for (const sim::EffectEntry& e : sim::EffectRegistry()) {
     const std::unique_ptr<sim::Effect> effect = e.make();
@@ -171,7 +167,32 @@ Json InspectModel(const std::string& mjcf_path) {
     if (!why.empty()) entry["missing"] = why;
     effects.push_back(entry);
   }
-  out["effects"] = effects;
+  return effects;
+}
+
+}  // namespace
+
+Json InspectModel(const std::string& mjcf_path) {
+  std::vector<std::string> warnings;
+  sim::MjModelPtr model = sim::LoadModel(mjcf_path, &warnings);
+  mjModel* m = model.get();
+  const sim::ModelCatalog catalog = sim::ModelCatalog::Build(m, mjcf_path);
+  Json out;
+  out["model"] = mjcf_path;
+  out["name"] = std::string(m->names);
+  out["timestep_s"] = m->opt.timestep;
+  out["integrator"] = m->opt.integrator == mjINT_EULER ? "Euler"
+                      : m->opt.integrator == mjINT_RK4 ? "RK4"
+                                                       : "implicit";
+  out["nq"] = m->nq;
+  out["nbody"] = m->nbody;
+  if (!warnings.empty()) out["mujoco_warnings"] = warnings;
+  out["actuated_joints"] = ActuatedJoints(m, catalog);
+  PassiveAndCoupled(m, catalog, &out);
+  out["sensors"] = Sensors(m, catalog);
+  out["cameras"] = Cameras(m);
+  out["tags"] = Tags(m);
+  out["effects"] = Effects(m, catalog);
   return out;
 }
 

@@ -198,38 +198,47 @@ std::vector<RunOutcome> ReadOutcomes(const fs::path& out, const std::vector<Swee
   return outcomes;
 }
 
-Collected Collect(const SweepSpec& spec, const std::vector<SweepPoint>& points,
-                  const std::vector<SweepRun>& runs, const std::vector<RunOutcome>& outcomes) {
-  std::vector<PointData> data(points.size());
-  std::vector<MetricRow> rows(runs.size());
-  std::vector<std::map<std::string, bool>> gate_rows(runs.size());
-  std::set<std::string> columns;
-  std::set<std::string> gate_names;
-  Collected c;
+namespace {
+
+// What the runs gave, by run and by point; the metric and scenario-gate columns over all runs.
+struct Gathered {
+  std::vector<PointData> data;
+  std::vector<MetricRow> rows;
+  std::vector<std::map<std::string, bool>> gate_rows;
+  std::set<std::string> columns, gate_names;
+};
+
+Gathered Gather(const std::vector<SweepPoint>& points, const std::vector<SweepRun>& runs,
+                const std::vector<RunOutcome>& outcomes, Collected* c) {
+  Gathered g;
+  g.data.resize(points.size());
+  g.rows.resize(runs.size());
+  g.gate_rows.resize(runs.size());
   for (size_t i = 0; i < runs.size(); ++i) {
     if (!outcomes[i].ok) continue;
-    rows[i] = Metrics(outcomes[i].summary);
-    gate_rows[i] = ScenarioGates(outcomes[i].summary);
-    for (const auto& [k, v] : rows[i]) columns.insert(k);
-    for (const auto& [k, v] : gate_rows[i]) gate_names.insert(k);
-    data[runs[i].point].metrics.push_back(rows[i]);
-    if (runs[i].point == 0) c.first_point.emplace_back(runs[i].seed, rows[i]);
-    data[runs[i].point].gates.push_back(gate_rows[i]);
+    g.rows[i] = Metrics(outcomes[i].summary);
+    g.gate_rows[i] = ScenarioGates(outcomes[i].summary);
+    for (const auto& [k, v] : g.rows[i]) g.columns.insert(k);
+    for (const auto& [k, v] : g.gate_rows[i]) g.gate_names.insert(k);
+    g.data[runs[i].point].metrics.push_back(g.rows[i]);
+    if (runs[i].point == 0) c->first_point.emplace_back(runs[i].seed, g.rows[i]);
+    g.data[runs[i].point].gates.push_back(g.gate_rows[i]);
   }
-  for (const SweepGate& g : spec.gates) {
-    CheckStatisticExists(g, g.metric, columns, gate_names);
-    if (g.threshold_is_statistic) CheckStatisticExists(g, g.threshold_metric, columns, gate_names);
-  }
+  return g;
+}
 
-  // sweep.csv: a row per run in the sweep's order.
+// sweep.csv: a row per run in the sweep's order; the failed runs, and how many succeeded.
+std::string SweepCsv(const SweepSpec& spec, const std::vector<SweepPoint>& points,
+                     const std::vector<SweepRun>& runs, const std::vector<RunOutcome>& outcomes,
+                     const Gathered& gd, Json* failed, int* succeeded) {
+  const std::set<std::string>& columns = gd.columns;
+  const std::set<std::string>& gate_names = gd.gate_names;
   std::ostringstream csv;
   csv << "point,seed,status,exit_code";
   for (const SweepAxis& a : spec.grid) csv << "," << CsvField(a.key);
   for (const std::string& col : columns) csv << "," << CsvField(col);
   for (const std::string& g : gate_names) csv << "," << CsvField("gate." + g);
   csv << "\n";
-  Json failed = Json::array();
-  int succeeded = 0;
   for (size_t i = 0; i < runs.size(); ++i) {
     const RunOutcome& o = outcomes[i];
     const SweepPoint& p = points[runs[i].point];
@@ -237,36 +246,34 @@ Collected Collect(const SweepSpec& spec, const std::vector<SweepPoint>& points,
     csv << p.name << "," << runs[i].seed << "," << status << ",";
     if (o.ok) {
       csv << 0;
-      ++succeeded;
+      ++*succeeded;
     } else if (o.present && o.failure.contains("exit_code") && o.failure["exit_code"].is_number()) {
       csv << o.failure["exit_code"].get<int>();
     }
     for (const std::string& v : p.values) csv << "," << CsvField(v);
     for (const std::string& col : columns) {
-      const auto it = rows[i].find(col);
-      csv << "," << (it == rows[i].end() ? "" : Num(it->second));
+      const auto it = gd.rows[i].find(col);
+      csv << "," << (it == gd.rows[i].end() ? "" : Num(it->second));
     }
     for (const std::string& g : gate_names) {
-      const auto it = gate_rows[i].find(g);
-      csv << "," << (it == gate_rows[i].end() ? "" : it->second ? "1" : "0");
+      const auto it = gd.gate_rows[i].find(g);
+      csv << "," << (it == gd.gate_rows[i].end() ? "" : it->second ? "1" : "0");
     }
     csv << "\n";
     if (!o.ok) {
       Json f{{"point", p.name}, {"seed", runs[i].seed}, {"status", status}};
       if (o.present) f.update(o.failure);
-      failed.push_back(f);
+      failed->push_back(f);
     }
   }
-  c.csv = csv.str();
+  return csv.str();
+}
 
-  // aggregate.json: every metric and scenario gate per point, then the sweep's gates.
-  Json agg;
-  agg["sweep"] = spec.name;
-  agg["seeds"] = spec.seeds;
-  agg["runs"] = runs.size();
-  agg["succeeded"] = succeeded;
-  agg["failed"] = failed;
-  agg["bootstrap_resamples"] = spec.bootstrap_resamples;
+// Per point: its overrides, every metric's statistics and every scenario gate's pass fraction.
+Json PointsJson(const SweepSpec& spec, const std::vector<SweepPoint>& points, const Gathered& gd) {
+  const std::vector<PointData>& data = gd.data;
+  const std::set<std::string>& columns = gd.columns;
+  const std::set<std::string>& gate_names = gd.gate_names;
   Json point_list = Json::array();
   for (size_t p = 0; p < points.size(); ++p) {
     Json pj;
@@ -293,6 +300,14 @@ Collected Collect(const SweepSpec& spec, const std::vector<SweepPoint>& points,
     }
     point_list.push_back(pj);
   }
+  return point_list;
+}
+
+// The sweep's own gates, point by point (their statistics land in point_list too).
+Json SweepGatesJson(const SweepSpec& spec, const std::vector<SweepPoint>& points,
+                    const Gathered& gd, Json& point_list, Collected* c) {
+  const std::vector<PointData>& data = gd.data;
+  const std::set<std::string>& columns = gd.columns;
   Json gates = Json::array();
   for (const SweepGate& g : spec.gates) {
     for (size_t p = 0; p < points.size(); ++p) {
@@ -313,10 +328,38 @@ Collected Collect(const SweepSpec& spec, const std::vector<SweepPoint>& points,
       row["value"] = v;
       const bool passed = Compare(v, g.op, t);
       row["passed"] = passed;
-      c.gates_passed = c.gates_passed && passed;
+      c->gates_passed = c->gates_passed && passed;
       gates.push_back(row);
     }
   }
+  return gates;
+}
+
+}  // namespace
+
+Collected Collect(const SweepSpec& spec, const std::vector<SweepPoint>& points,
+                  const std::vector<SweepRun>& runs, const std::vector<RunOutcome>& outcomes) {
+  Collected c;
+  const Gathered gd = Gather(points, runs, outcomes, &c);
+  for (const SweepGate& g : spec.gates) {
+    CheckStatisticExists(g, g.metric, gd.columns, gd.gate_names);
+    if (g.threshold_is_statistic) {
+      CheckStatisticExists(g, g.threshold_metric, gd.columns, gd.gate_names);
+    }
+  }
+  Json failed = Json::array();
+  int succeeded = 0;
+  c.csv = SweepCsv(spec, points, runs, outcomes, gd, &failed, &succeeded);
+  // aggregate.json: every metric and scenario gate per point, then the sweep's gates.
+  Json agg;
+  agg["sweep"] = spec.name;
+  agg["seeds"] = spec.seeds;
+  agg["runs"] = runs.size();
+  agg["succeeded"] = succeeded;
+  agg["failed"] = failed;
+  agg["bootstrap_resamples"] = spec.bootstrap_resamples;
+  Json point_list = PointsJson(spec, points, gd);
+  const Json gates = SweepGatesJson(spec, points, gd, point_list, &c);
   agg["points"] = point_list;
   agg["gates"] = gates;
   agg["gates_passed"] = c.gates_passed;

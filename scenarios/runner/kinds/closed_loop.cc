@@ -132,6 +132,48 @@ class ClosedLoopKind : public ScenarioKind {
     if (const auto c = root.Optional("candidates")) {
       for (const ConfigNode& n : c->Items()) candidate_specs_.push_back({n.AsString(), n.Where()});
     }
+    ParseOptions(root);
+    ParseCamera(root);
+    ParseFramesAndMarkers(root);
+    if (const auto t = root.Optional("truth")) ReadTruth(*t);
+    ParseSources(root);
+    // Model, chain and candidates now: bad names fail before any work.
+    mj_ = sim::LoadModel(declared_.model_path);
+    chain_ = std::make_unique<sim::DeclaredChain>(
+        sim::BuildDeclaredChain(mj_.get(), declared_, /*with_couplings=*/true));
+    em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
+                                                  camera_.present ? camera_.name : "",
+                                                  MarkerFrames(), gravity_tilt_);
+    offset_unknown_ = UnknownOffsets();
+    SelectCandidates();
+    if (has_truth_) {
+      sim_ = sim::Simulation::Load(model_path_, effects_);
+    }
+    if (tracker_) CheckTrackerTruth();
+  }
+
+  // collect (load, loads, outliers) -> identify -> score (errors before and after, names,
+  // NEES) -> report (identification, augmented model, residuals, plots).
+  void Run(RunContext& ctx) override {
+    Sets sets = Collect(ctx);
+    ctx.log("identify: " + std::to_string(sets.cal.rows.size()) + " calibration rows, " +
+            std::to_string(candidates_.size()) + " candidate effects");
+    identify::IdentifyResult res =
+        identify::Identify(*em_, sets.cal, sets.cal_loads, candidates_, opt_);
+    for (const std::string& s : res.steps) ctx.log("  " + s);
+    const Scored sc = Score(ctx, &sets, &res);
+    Json& m = (*ctx.summary)["metrics"];
+    ScoreNames(res, &m);
+    WriteErrorMetrics(sets, sc, &m);
+    WriteDiagnostics(ctx, sets, res, &m);
+    ScoreNees(ctx, sets, sc, res, &m);
+    WriteIdentification(res, &(*ctx.summary)["identification"]);
+    Report(ctx, sets, sc, res);
+  }
+
+ private:
+  // The identification's settings (noise levels, selection, cross-validation, outliers).
+  void ParseOptions(const ConfigNode& root) {
     opt_.point_std_m = root.GetDouble("point_std_m", opt_.point_std_m);
     opt_.distance_std_m = root.GetDouble("distance_std_m", opt_.distance_std_m);
     opt_.rotation_std_rad = root.GetDouble("rotation_std_rad", opt_.rotation_std_rad);
@@ -169,21 +211,28 @@ class ClosedLoopKind : public ScenarioKind {
     if (!(opt_.diagnostic_p > 0.0 && opt_.diagnostic_p < 1.0)) {
       root.Child("diagnostic_p").Fail("must be in (0, 1)");
     }
-    if (const auto c = root.Optional("camera")) {
-      // A fixed camera seeing the end-effector point (pixel rows in CSV data).
-      camera_.present = true;
-      camera_.name = c->GetString("name", "camera");
-      camera_.intrinsics.fx = c->GetDouble("fx");
-      camera_.intrinsics.fy = c->GetDouble("fy");
-      camera_.intrinsics.cx = c->GetDouble("cx");
-      camera_.intrinsics.cy = c->GetDouble("cy");
-      const ConfigNode t = c->Child("T_base_cam");
-      const std::vector<double> v = t.AsDoubleList();
-      if (v.size() != 7) t.Fail("expected [x, y, z, qw, qx, qy, qz]");
-      const Eigen::Quaterniond qt(v[3], v[4], v[5], v[6]);
-      if (std::abs(qt.norm() - 1.0) > 1e-6) t.Fail("quaternion is not of unit length");
-      camera_.T_base_cam = lie::SE3(qt.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
-    }
+  }
+
+  // A fixed camera seeing the end-effector point (pixel rows in CSV data).
+  void ParseCamera(const ConfigNode& root) {
+    const auto c = root.Optional("camera");
+    if (!c) return;
+    camera_.present = true;
+    camera_.name = c->GetString("name", "camera");
+    camera_.intrinsics.fx = c->GetDouble("fx");
+    camera_.intrinsics.fy = c->GetDouble("fy");
+    camera_.intrinsics.cx = c->GetDouble("cx");
+    camera_.intrinsics.cy = c->GetDouble("cy");
+    const ConfigNode t = c->Child("T_base_cam");
+    const std::vector<double> v = t.AsDoubleList();
+    if (v.size() != 7) t.Fail("expected [x, y, z, qw, qx, qy, qz]");
+    const Eigen::Quaterniond qt(v[3], v[4], v[5], v[6]);
+    if (std::abs(qt.norm() - 1.0) > 1e-6) t.Fail("quaternion is not of unit length");
+    camera_.T_base_cam = lie::SE3(qt.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
+  }
+
+  // External measurement frames, the gravity-tilt candidate, markers and their offsets.
+  void ParseFramesAndMarkers(const ConfigNode& root) {
     // External measurement frames (a tracker) the CSV's `frame` column may name.
     if (const auto f = root.Optional("frames")) frames_ = identify::ParseMeasurementFrames(*f);
     // The gravity direction (a base mounted tilted) as a candidate: by default with data in an
@@ -202,7 +251,10 @@ class ClosedLoopKind : public ScenarioKind {
       for (const ConfigNode& n : u->Items())
         unknown_offset_nodes_.push_back({n.AsString(), n.Where()});
     }
-    if (const auto t = root.Optional("truth")) ReadTruth(*t);
+  }
+
+  // calibration and validation data sources, checked against the truth block.
+  void ParseSources(const ConfigNode& root) {
     calibration_ = ParseSource(root.Child("calibration"), tracker_.has_value());
     validation_ = ParseSource(root.Child("validation"), tracker_.has_value());
     if ((calibration_.type == Source::Type::kSimulate ||
@@ -220,14 +272,10 @@ class ClosedLoopKind : public ScenarioKind {
                          " (read from ../shared/data/mukca; see its SOURCE.md)");
       }
     }
-    // Model, chain and candidates now: bad names fail before any work.
-    mj_ = sim::LoadModel(declared_.model_path);
-    chain_ = std::make_unique<sim::DeclaredChain>(
-        sim::BuildDeclaredChain(mj_.get(), declared_, /*with_couplings=*/true));
-    em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
-                                                  camera_.present ? camera_.name : "",
-                                                  MarkerFrames(), gravity_tilt_);
-    offset_unknown_ = UnknownOffsets();
+  }
+
+  // The candidates named in `candidates` (all when none is named): each must exist.
+  void SelectCandidates() {
     if (candidate_specs_.empty()) {
       for (size_t i = 0; i < em_->candidates().size(); ++i) candidates_.push_back(i);
     }
@@ -245,32 +293,8 @@ class ClosedLoopKind : public ScenarioKind {
       }
       if (!any) throw InputError(where + ": no candidate effect '" + spec + "' on this chain");
     }
-    if (has_truth_) {
-      sim_ = sim::Simulation::Load(model_path_, effects_);
-    }
-    if (tracker_) CheckTrackerTruth();
   }
 
-  // collect (load, loads, outliers) -> identify -> score (errors before and after, names,
-  // NEES) -> report (identification, augmented model, residuals, plots).
-  void Run(RunContext& ctx) override {
-    Sets sets = Collect(ctx);
-    ctx.log("identify: " + std::to_string(sets.cal.rows.size()) + " calibration rows, " +
-            std::to_string(candidates_.size()) + " candidate effects");
-    identify::IdentifyResult res =
-        identify::Identify(*em_, sets.cal, sets.cal_loads, candidates_, opt_);
-    for (const std::string& s : res.steps) ctx.log("  " + s);
-    const Scored sc = Score(ctx, &sets, &res);
-    Json& m = (*ctx.summary)["metrics"];
-    ScoreNames(res, &m);
-    WriteErrorMetrics(sets, sc, &m);
-    WriteDiagnostics(ctx, sets, res, &m);
-    ScoreNees(ctx, sets, sc, res, &m);
-    WriteIdentification(res, &(*ctx.summary)["identification"]);
-    Report(ctx, sets, sc, res);
-  }
-
- private:
   // The calibration and validation sets and their loads (nominal model), as identified.
   struct Sets {
     DataSet cal, val;
@@ -1244,7 +1268,8 @@ class ClosedLoopKind : public ScenarioKind {
 
   void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
     std::ostringstream y;
-    y << "# Declared model augmented by flexbench closed_loop: the identified effects with their\n"
+    y << "# Declared model augmented by flexbench closed_loop: the identified effects with "
+         "their\n"
          "# fitted parameters, and the PPOE sources scaled by "
       << Num(source_scale_)
       << " (what the\n# remaining validation residual supports; mean NEES there "
