@@ -52,50 +52,56 @@ std::string AlphaName(const EffectModel& em, const Fit& fit, int k) {
   return "group point " + std::to_string(k / 3);
 }
 
-// Covariance of the fitted parameters (pseudo-inverse of the normalised information; a near
-// singular direction is reported, never hidden behind a clamped variance), correlations,
-// condition number and each effect's share of the removed sum of squares.
-void Report(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-            const IdentifyOptions& opt, IdentifyResult* res) {
-  const Fit& cur = res->after;
-  const int nt = static_cast<int>(cur.theta.size());
-  if (nt == 0) return;
-  const Problem pr(em, data, loads, cur.active, cur.basis, opt);
-  const Eigen::MatrixXd J = pr.Jacobian(StateOf(pr, cur));
+// The normalised information's pseudo-inverse (directions below singular_tol dropped), the
+// fit's condition number, and what the data leave undetermined when it is near singular.
+struct Information {
+  Eigen::VectorXd d;     // column scaling: info = diag(1/d) In diag(1/d)
+  Eigen::MatrixXd pinv;  // of In
+};
+
+Information InvertInformation(const EffectModel& em, const Fit& cur, const Eigen::MatrixXd& J,
+                              const IdentifyOptions& opt, IdentifyResult* res) {
   const Eigen::MatrixXd info = J.transpose() * J;
-  Eigen::VectorXd d = info.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
-  const Eigen::MatrixXd In = d.asDiagonal() * info * d.asDiagonal();
+  Information out;
+  out.d = info.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+  const Eigen::MatrixXd In = out.d.asDiagonal() * info * out.d.asDiagonal();
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(In);
   const Eigen::VectorXd& lam = eig.eigenvalues();
   const double lmax = lam.maxCoeff();
   res->condition_number = lam[0] > 0 ? std::sqrt(lmax / lam[0]) : HUGE_VAL;
-  Eigen::MatrixXd pinv = Eigen::MatrixXd::Zero(In.rows(), In.cols());
+  out.pinv = Eigen::MatrixXd::Zero(In.rows(), In.cols());
   for (int i = 0; i < lam.size(); ++i) {
     if (lam[i] > opt.singular_tol * lmax) {
-      pinv += eig.eigenvectors().col(i) * eig.eigenvectors().col(i).transpose() / lam[i];
+      out.pinv += eig.eigenvectors().col(i) * eig.eigenvectors().col(i).transpose() / lam[i];
     }
   }
-  if (!(lam[0] > opt.singular_tol * lmax)) {
-    res->near_singular = true;
-    const Eigen::VectorXd v = eig.eigenvectors().col(0);
-    std::vector<int> idx(v.size());
-    for (int i = 0; i < v.size(); ++i) idx[i] = i;
-    std::sort(idx.begin(), idx.end(),
-              [&](int a, int b) { return std::abs(v[a]) > std::abs(v[b]); });
-    std::string combo;
-    for (int i = 0; i < std::min<int>(3, v.size()); ++i) {
-      if (std::abs(v[idx[i]]) < 0.1) break;
-      combo += Fmt("%s%+.2f %s", combo.empty() ? "" : " ", v[idx[i]],
-                   AlphaName(em, cur, idx[i]).c_str());
-    }
-    res->undetermined = combo;
-    res->steps.push_back(
-        Fmt("near singular: the data does not determine %s (eigenvalue ratio "
-            "%.2g); its standard deviations cover only the determined part",
-            combo.c_str(), lam[0] / lmax));
+  if (lam[0] > opt.singular_tol * lmax) return out;
+  res->near_singular = true;
+  const Eigen::VectorXd v = eig.eigenvectors().col(0);
+  std::vector<int> idx(v.size());
+  for (int i = 0; i < v.size(); ++i) idx[i] = i;
+  std::sort(idx.begin(), idx.end(), [&](int a, int b) { return std::abs(v[a]) > std::abs(v[b]); });
+  std::string combo;
+  for (int i = 0; i < std::min<int>(3, v.size()); ++i) {
+    if (std::abs(v[idx[i]]) < 0.1) break;
+    combo +=
+        Fmt("%s%+.2f %s", combo.empty() ? "" : " ", v[idx[i]], AlphaName(em, cur, idx[i]).c_str());
   }
+  res->undetermined = combo;
+  res->steps.push_back(
+      Fmt("near singular: the data does not determine %s (eigenvalue ratio "
+          "%.2g); its standard deviations cover only the determined part",
+          combo.c_str(), lam[0] / lmax));
+  return out;
+}
+
+// The fitted parameters' covariance and correlation (theta through the effects' bases).
+void ThetaCovariance(const Problem& pr, const Fit& cur, const Information& inf,
+                     IdentifyResult* res) {
+  const int nt = static_cast<int>(cur.theta.size());
   const int dof = std::max(1, pr.num_residuals() - pr.num_params());
-  const Eigen::MatrixXd cov_x = (cur.rss / dof) * d.asDiagonal() * pinv * d.asDiagonal();
+  const Eigen::MatrixXd cov_x =
+      (cur.rss / dof) * inf.d.asDiagonal() * inf.pinv * inf.d.asDiagonal();
   // Alpha -> theta through the bases.
   Eigen::MatrixXd B = Eigen::MatrixXd::Zero(nt, pr.num_alpha());
   for (size_t e = 0, r = 0, c = 0; e < cur.active.size(); ++e) {
@@ -112,24 +118,35 @@ void Report(const EffectModel& em, const DataSet& data, const std::vector<Config
       res->theta_corr(i, j) = sd[i] * sd[j] > 0 ? res->theta_cov(i, j) / (sd[i] * sd[j]) : 0.0;
     }
   }
-  {
-    // Each effect's correction with the group points projected out.
-    Fit groups_only = cur;
-    groups_only.active.clear();
-    groups_only.basis.clear();
-    groups_only.theta.resize(0);
-    const Projector proj(FitJacobian(em, data, loads, groups_only, opt));
-    Eigen::VectorXd sum = Eigen::VectorXd::Zero(J.rows());
-    double parts = 0.0;
-    for (size_t e = 0, a = 0; e < cur.active.size(); ++e) {
-      const int m = static_cast<int>(cur.basis[e].cols());
-      const Eigen::VectorXd d = proj.Apply(J.middleCols(a, m) * StateOf(pr, cur).segment(a, m));
-      sum += d;
-      parts += d.squaredNorm();
-      a += m;
-    }
-    res->overlap = parts > 0 ? sum.squaredNorm() / parts : 1.0;
+}
+
+// How much the effects' corrections overlap once the group points are projected out: |sum|^2
+// over the sum of |each|^2 (1: independent).
+double EffectOverlap(const EffectModel& em, const DataSet& data,
+                     const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt,
+                     const Problem& pr, const Fit& cur, const Eigen::MatrixXd& J) {
+  Fit groups_only = cur;
+  groups_only.active.clear();
+  groups_only.basis.clear();
+  groups_only.theta.resize(0);
+  const Projector proj(FitJacobian(em, data, loads, groups_only, opt));
+  Eigen::VectorXd sum = Eigen::VectorXd::Zero(J.rows());
+  double parts = 0.0;
+  for (size_t e = 0, a = 0; e < cur.active.size(); ++e) {
+    const int m = static_cast<int>(cur.basis[e].cols());
+    const Eigen::VectorXd d = proj.Apply(J.middleCols(a, m) * StateOf(pr, cur).segment(a, m));
+    sum += d;
+    parts += d.squaredNorm();
+    a += m;
   }
+  return parts > 0 ? sum.squaredNorm() / parts : 1.0;
+}
+
+// Each effect's values, stds (or its equivalence set's) and share of the RSS gain.
+void FittedEffects(const EffectModel& em, const DataSet& data,
+                   const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt,
+                   const Fit& cur, IdentifyResult* res) {
+  const Eigen::VectorXd sd = res->theta_cov.diagonal().cwiseMax(0).cwiseSqrt();
   std::vector<double> gain;
   double total = 0.0;
   int off = 0;
@@ -157,6 +174,21 @@ void Report(const EffectModel& em, const DataSet& data, const std::vector<Config
   for (size_t e = 0; e < res->effects.size(); ++e) {
     res->effects[e].share = total > 0 ? gain[e] / total : 0.0;
   }
+}
+
+// Covariance of the fitted parameters (pseudo-inverse of the normalised information; a near
+// singular direction is reported, never hidden behind a clamped variance), correlations,
+// condition number and each effect's share of the removed sum of squares.
+void Report(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+            const IdentifyOptions& opt, IdentifyResult* res) {
+  const Fit& cur = res->after;
+  if (cur.theta.size() == 0) return;
+  const Problem pr(em, data, loads, cur.active, cur.basis, opt);
+  const Eigen::MatrixXd J = pr.Jacobian(StateOf(pr, cur));
+  const Information inf = InvertInformation(em, cur, J, opt, res);
+  ThetaCovariance(pr, cur, inf, res);
+  res->overlap = EffectOverlap(em, data, loads, opt, pr, cur, J);
+  FittedEffects(em, data, loads, opt, cur, res);
 }
 
 // Diagnostics of `cur`'s residual; when they point at candidates that need evidence, those join
