@@ -87,104 +87,136 @@ double Mahalanobis2(const Eigen::Vector2d& error, const Eigen::Matrix2d& covaria
   return error.dot(covariance.ldlt().solve(error));
 }
 
-TagCovariance EstimateTagCovariance(const Image& gray, const TagDetection& det,
-                                    double pixel_noise_std, const CornerNoiseModel& model) {
-  TagCovariance out;
-  const auto& p = det.corners;
-  // Per edge k (corner k -> corner k+1): unit direction, normal, length, and the 2x2
-  // covariance of (offset at the centroid, angle).
-  std::array<Eigen::Vector2d, 4> normal;
-  std::array<double, 4> length;
-  std::array<Eigen::Matrix2d, 4> line_cov;
-  for (int k = 0; k < 4; ++k) {
-    const Eigen::Vector2d a = p[k];
-    const Eigen::Vector2d b = p[(k + 1) % 4];
-    const double L = (b - a).norm();
-    const Eigen::Vector2d t = (b - a) / L;
-    const Eigen::Vector2d n(-t.y(), t.x());
-    normal[k] = n;
-    length[k] = L;
-    // apriltag.c: nsamples = imax(16, mag / 8) (the double is truncated to int).
-    const int N = std::max(16, static_cast<int>(L / 8.0));
+namespace {
 
-    // Local contrast: mean absolute difference across the edge at the sample points, read
-    // about a third of a border cell (L / 8 for an 8-cell border; clamped) either side, where
-    // the profile has reached its plateaus but the data bits have not started.
-    const double reach = std::clamp(L / 24.0, 1.0, 3.0);
-    double inside_sum = 0.0;
-    double outside_sum = 0.0;
-    Eigen::VectorXd s(N);
-    for (int j = 0; j < N; ++j) {
-      const double alpha = (1.0 + j) / (N + 1.0);
-      s[j] = (alpha - 0.5) * L;
-      const Eigen::Vector2d x = a + alpha * (b - a);
-      outside_sum += Sample(gray, x.x() + reach * n.x(), x.y() + reach * n.y());
-      inside_sum += Sample(gray, x.x() - reach * n.x(), x.y() - reach * n.y());
-    }
-    const double level_out = outside_sum / N;
-    const double level_in = inside_sum / N;
-    const double contrast = std::max(std::abs(level_out - level_in), 1.0);
-    // The noise the sampler sees on the two sides of the edge, after 8-bit clipping (a black
-    // border at gray level 0 keeps only half of its noise).
-    const double noise_var = 0.5 * (ClippedNoiseVariance(level_in, pixel_noise_std) +
-                                    ClippedNoiseVariance(level_out, pixel_noise_std));
+// One edge's least-squares line (offset at its centroid, angle) and what sized its covariance.
+struct EdgeLine {
+  Eigen::Vector2d normal;
+  double length = 0.0;
+  Eigen::Matrix2d cov;
+  EdgeUncertainty uncertainty;
+};
 
-    // Sub-pixel phase error: a 2-D periodic function of where the sample crosses the pixel
-    // grid, expanded in harmonics m = 1, 2 of each axis. Along the edge the x phase advances
-    // by m |t_x| cycles per pixel of arc and the y phase by m |t_y|; a truncation error along
-    // an axis moves the normal offset by the normal's component on that axis, |n_x| or |n_y|.
-    // An axis-aligned edge thus has a locked (constant) phase on the axis across it, and a
-    // sample spacing that is a multiple of a period aliases in the same way.
-    const double lock_std[2] = {model.sigma_lock_px, model.sigma_lock2_px};
-    Eigen::Matrix2d lock_cov = Eigen::Matrix2d::Zero();
-    Eigen::Matrix<double, 2, Eigen::Dynamic> A(2, N);
-    A.row(0).setConstant(1.0 / N);
-    A.row(1) = s.transpose() / s.squaredNorm();
-    for (int harmonic = 1; harmonic <= 2; ++harmonic) {
-      for (int axis = 0; axis < 2; ++axis) {
-        const double rate = harmonic * std::abs(t[axis]);
-        const double weight = std::abs(n[axis]) * lock_std[harmonic - 1];
-        const Eigen::VectorXd arg = 2 * M_PI * rate * s;
-        const Eigen::Vector2d Ac = A * Eigen::VectorXd(arg.array().cos());
-        const Eigen::Vector2d As = A * Eigen::VectorXd(arg.array().sin());
-        lock_cov += weight * weight * (Ac * Ac.transpose() + As * As.transpose());
-      }
-    }
-    const double var_sample = model.sigma_sample_px * model.sigma_sample_px +
-                              model.kappa * noise_var / (contrast * contrast);
-    // Least-squares line through the samples: offset = mean(e), angle = s.e / s.s.
-    line_cov[k] = lock_cov + var_sample * A * A.transpose();
-
-    EdgeUncertainty& e = out.edges[k];
-    e.length_px = L;
-    e.samples = N;
-    e.contrast = contrast;
-    e.sample_std_px = std::sqrt(var_sample);
-    e.offset_std_px = std::sqrt(line_cov[k](0, 0));
-    e.angle_std_rad = std::sqrt(line_cov[k](1, 1));
+// Local contrast: mean absolute difference across the edge a -> b at the sample points, read
+// about a third of a border cell (L / 8 for an 8-cell border; clamped) either side, where the
+// profile has reached its plateaus but the data bits have not started; and the noise variance
+// the sampler sees on the two sides after 8-bit clipping (a black border at gray level 0 keeps
+// only half of its noise). s gets the samples' arc positions about the edge's middle.
+void EdgeProfile(const Image& gray, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                 const Eigen::Vector2d& n, double L, int N, double pixel_noise_std,
+                 Eigen::VectorXd* s, double* contrast, double* noise_var) {
+  const double reach = std::clamp(L / 24.0, 1.0, 3.0);
+  double inside_sum = 0.0;
+  double outside_sum = 0.0;
+  for (int j = 0; j < N; ++j) {
+    const double alpha = (1.0 + j) / (N + 1.0);
+    (*s)[j] = (alpha - 0.5) * L;
+    const Eigen::Vector2d x = a + alpha * (b - a);
+    outside_sum += Sample(gray, x.x() + reach * n.x(), x.y() + reach * n.y());
+    inside_sum += Sample(gray, x.x() - reach * n.x(), x.y() - reach * n.y());
   }
+  const double level_out = outside_sum / N;
+  const double level_in = inside_sum / N;
+  *contrast = std::max(std::abs(level_out - level_in), 1.0);
+  *noise_var = 0.5 * (ClippedNoiseVariance(level_in, pixel_noise_std) +
+                      ClippedNoiseVariance(level_out, pixel_noise_std));
+}
 
-  // Corner k is the intersection of line k-1 (it is that line's end, s = +L/2) and line k (its
-  // start, s = -L/2). Moving line i by h_i along its normal moves the corner by dp with
-  // n_{k-1} . dp = h_{k-1}, n_k . dp = h_k; h_i(s) = d_i + s theta_i.
+// Sub-pixel phase error: a 2-D periodic function of where the sample crosses the pixel grid,
+// expanded in harmonics m = 1, 2 of each axis. Along the edge the x phase advances by m |t_x|
+// cycles per pixel of arc and the y phase by m |t_y|; a truncation error along an axis moves
+// the normal offset by the normal's component on that axis, |n_x| or |n_y|. An axis-aligned
+// edge thus has a locked (constant) phase on the axis across it, and a sample spacing that is a
+// multiple of a period aliases in the same way. A maps the samples' errors to the line.
+Eigen::Matrix2d PhaseLockCovariance(const Eigen::Vector2d& t, const Eigen::Vector2d& n,
+                                    const Eigen::VectorXd& s,
+                                    const Eigen::Matrix<double, 2, Eigen::Dynamic>& A,
+                                    const CornerNoiseModel& model) {
+  const double lock_std[2] = {model.sigma_lock_px, model.sigma_lock2_px};
+  Eigen::Matrix2d lock_cov = Eigen::Matrix2d::Zero();
+  for (int harmonic = 1; harmonic <= 2; ++harmonic) {
+    for (int axis = 0; axis < 2; ++axis) {
+      const double rate = harmonic * std::abs(t[axis]);
+      const double weight = std::abs(n[axis]) * lock_std[harmonic - 1];
+      const Eigen::VectorXd arg = 2 * M_PI * rate * s;
+      const Eigen::Vector2d Ac = A * Eigen::VectorXd(arg.array().cos());
+      const Eigen::Vector2d As = A * Eigen::VectorXd(arg.array().sin());
+      lock_cov += weight * weight * (Ac * Ac.transpose() + As * As.transpose());
+    }
+  }
+  return lock_cov;
+}
+
+// Edge a -> b: libapriltag's samples along it, their noise and phase lock, the fitted line's
+// covariance.
+EdgeLine FitEdge(const Image& gray, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                 double pixel_noise_std, const CornerNoiseModel& model) {
+  EdgeLine out;
+  const double L = (b - a).norm();
+  const Eigen::Vector2d t = (b - a) / L;
+  const Eigen::Vector2d n(-t.y(), t.x());
+  out.normal = n;
+  out.length = L;
+  // apriltag.c: nsamples = imax(16, mag / 8) (the double is truncated to int).
+  const int N = std::max(16, static_cast<int>(L / 8.0));
+  Eigen::VectorXd s(N);
+  double contrast = 0.0, noise_var = 0.0;
+  EdgeProfile(gray, a, b, n, L, N, pixel_noise_std, &s, &contrast, &noise_var);
+  Eigen::Matrix<double, 2, Eigen::Dynamic> A(2, N);
+  A.row(0).setConstant(1.0 / N);
+  A.row(1) = s.transpose() / s.squaredNorm();
+  const Eigen::Matrix2d lock_cov = PhaseLockCovariance(t, n, s, A, model);
+  const double var_sample = model.sigma_sample_px * model.sigma_sample_px +
+                            model.kappa * noise_var / (contrast * contrast);
+  // Least-squares line through the samples: offset = mean(e), angle = s.e / s.s.
+  out.cov = lock_cov + var_sample * A * A.transpose();
+  EdgeUncertainty& e = out.uncertainty;
+  e.length_px = L;
+  e.samples = N;
+  e.contrast = contrast;
+  e.sample_std_px = std::sqrt(var_sample);
+  e.offset_std_px = std::sqrt(out.cov(0, 0));
+  e.angle_std_rad = std::sqrt(out.cov(1, 1));
+  return out;
+}
+
+// Corner k is the intersection of line k-1 (it is that line's end, s = +L/2) and line k (its
+// start, s = -L/2). Moving line i by h_i along its normal moves the corner by dp with
+// n_{k-1} . dp = h_{k-1}, n_k . dp = h_k; h_i(s) = d_i + s theta_i.
+Eigen::Matrix<double, 8, 8> CornerCovariance(const std::array<EdgeLine, 4>& edges) {
   Eigen::Matrix<double, 8, 8> J = Eigen::Matrix<double, 8, 8>::Zero();  // d corners / d xi
   for (int k = 0; k < 4; ++k) {
     const int prev = (k + 3) % 4;
     Eigen::Matrix2d M;
-    M.row(0) = normal[prev].transpose();
-    M.row(1) = normal[k].transpose();
+    M.row(0) = edges[prev].normal.transpose();
+    M.row(1) = edges[k].normal.transpose();
     const Eigen::Matrix2d Minv = M.inverse();
     // h_prev = [1, +L_prev/2] xi_prev; h_k = [1, -L_k/2] xi_k.
     J.block<2, 1>(2 * k, 2 * prev) = Minv.col(0);
-    J.block<2, 1>(2 * k, 2 * prev + 1) = Minv.col(0) * (0.5 * length[prev]);
+    J.block<2, 1>(2 * k, 2 * prev + 1) = Minv.col(0) * (0.5 * edges[prev].length);
     J.block<2, 1>(2 * k, 2 * k) = Minv.col(1);
-    J.block<2, 1>(2 * k, 2 * k + 1) = Minv.col(1) * (-0.5 * length[k]);
+    J.block<2, 1>(2 * k, 2 * k + 1) = Minv.col(1) * (-0.5 * edges[k].length);
   }
   Eigen::Matrix<double, 8, 8> xi_cov = Eigen::Matrix<double, 8, 8>::Zero();
-  for (int k = 0; k < 4; ++k) xi_cov.block<2, 2>(2 * k, 2 * k) = line_cov[k];
-  out.corners = J * xi_cov * J.transpose();
-  out.corners = 0.5 * (out.corners + out.corners.transpose()).eval();
+  for (int k = 0; k < 4; ++k) xi_cov.block<2, 2>(2 * k, 2 * k) = edges[k].cov;
+  Eigen::Matrix<double, 8, 8> corners = J * xi_cov * J.transpose();
+  corners = 0.5 * (corners + corners.transpose()).eval();
+  return corners;
+}
 
+}  // namespace
+
+TagCovariance EstimateTagCovariance(const Image& gray, const TagDetection& det,
+                                    double pixel_noise_std, const CornerNoiseModel& model) {
+  TagCovariance out;
+  const auto& p = det.corners;
+  // Per edge k (corner k -> corner k+1).
+  std::array<EdgeLine, 4> edges;
+  for (int k = 0; k < 4; ++k) {
+    edges[k] = FitEdge(gray, p[k], p[(k + 1) % 4], pixel_noise_std, model);
+    out.edges[k] = edges[k].uncertainty;
+  }
+  out.corners = CornerCovariance(edges);
   Eigen::Matrix<double, 2, 8> Jc;
   DiagonalIntersection(p, &Jc);
   out.center = Jc * out.corners * Jc.transpose();
