@@ -719,25 +719,10 @@ class ClosedLoopKind : public ScenarioKind {
   void Simulate(const Source& s, RunContext& ctx, const std::string& what, DataSet* d) {
     std::mt19937_64 rng(ctx.seed * 1000003ULL + static_cast<std::uint64_t>(s.seed));
     std::uniform_real_distribution<double> u(-1.0, 1.0);
-    const kinematics::PpoeModel& model = chain_->model;
-    const int nq = model.nq();
-    const sim::FrameRef ee = sim_->Frame(declared_.end_effector);
-    std::vector<int> act_index(nq);
-    for (int k = 0; k < nq; ++k) {
-      const auto& names = sim_->actuated_joints();
-      const auto it = std::find(names.begin(), names.end(), chain_->q_joints[k]);
-      if (it == names.end()) throw InputError(chain_->q_joints[k] + " is not actuated in truth");
-      act_index[k] = static_cast<int>(it - names.begin());
-    }
-    Eigen::VectorXd cmd = Eigen::VectorXd::Zero(sim_->num_actuated());
-    kinematics::PpoeData pd(model);
-    const auto true_point = [&](const Eigen::VectorXd& q) {
-      for (int k = 0; k < nq; ++k) cmd[act_index[k]] = q[k];
-      sim_->SetCommand(cmd);
-      sim_->Settle();
-      return Vec3(sim_->Pose(ee).translation());
-    };
     std::normal_distribution<double> noise(0.0, 1.0);
+    SocketTruth truth{sim_->Frame(declared_.end_effector), ActuatorIndex(),
+                      Eigen::VectorXd::Zero(sim_->num_actuated()),
+                      kinematics::PpoeData(chain_->model)};
     int failed = 0;
     for (int p = 0; p < s.sim_placements; ++p) {
       const std::string set = what + "_" + std::to_string(p);
@@ -750,42 +735,11 @@ class ClosedLoopKind : public ScenarioKind {
       for (int h = 0; h < 2; ++h) {
         const Vec3 target = c0 + (h - 0.5) * socket_distance_m_ * dir;
         for (int r = 0; r < s.per_socket; ++r) {
-          Eigen::VectorXd q(nq);
-          bool ok = false;
-          for (int attempt = 0; attempt < 5 && !ok; ++attempt) {
-            for (int k = 0; k < nq; ++k) q[k] = 1.2 * u(rng) + MidRange(k);
-            // Newton on the truth with the declared position Jacobian (close enough to
-            // converge), damped; the null space keeps the random start's posture.
-            for (int it = 0; it < 40; ++it) {
-              const Vec3 err = target - true_point(q);
-              if (err.norm() < 1e-7) {
-                ok = true;
-                break;
-              }
-              kinematics::ForwardKinematics(model, pd, q);
-              Eigen::Matrix<double, 6, Eigen::Dynamic> J(6, nq);
-              kinematics::ComputeFrameJacobian(model, pd, chain_->end_effector, J);
-              const Eigen::Matrix<double, 3, Eigen::Dynamic> Jp =
-                  pd.T_base_frame[chain_->end_effector].rotation() * J.topRows<3>();
-              const Eigen::MatrixXd JJt = Jp * Jp.transpose() + 1e-6 * Eigen::Matrix3d::Identity();
-              Eigen::VectorXd dq = Jp.transpose() * JJt.ldlt().solve(err);
-              const double n = dq.norm();
-              if (n > 0.3) dq *= 0.3 / n;
-              q += dq;
-            }
-            if (ok && !InLimits(q)) ok = false;
-          }
-          if (!ok) {
+          if (!ReachSocket(target, rng, u, &truth)) {
             ++failed;
             continue;
           }
-          identify::Observation o;
-          o.q.resize(nq);
-          for (int k = 0; k < nq; ++k) {
-            const int jid = mj_name2id(sim_->model(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
-            o.q[k] = sim_->MotorPosition(jid) + sim_->EncoderOffset(jid) +
-                     encoder_noise_rad_ * noise(rng);
-          }
+          identify::Observation o = EncoderRow(rng, noise);
           o.type = identify::ObservationType::kGroup;
           if (g[h] < 0) {
             g[h] = identify::LabelIndex(&d->groups, set + "/socket_" + std::to_string(h));
@@ -807,6 +761,80 @@ class ClosedLoopKind : public ScenarioKind {
               "limits)");
     }
     (*ctx.summary)["metrics"][what + "_skipped_configurations"] = failed;
+  }
+
+  // The truth's end effector and the command vector that moves it.
+  struct SocketTruth {
+    sim::FrameRef ee;
+    std::vector<int> act_index;  // per declared joint: its index among the truth's actuators
+    Eigen::VectorXd cmd;
+    kinematics::PpoeData pd;  // the declared chain's scratch
+  };
+
+  std::vector<int> ActuatorIndex() const {
+    const int nq = chain_->model.nq();
+    std::vector<int> act_index(nq);
+    for (int k = 0; k < nq; ++k) {
+      const auto& names = sim_->actuated_joints();
+      const auto it = std::find(names.begin(), names.end(), chain_->q_joints[k]);
+      if (it == names.end()) throw InputError(chain_->q_joints[k] + " is not actuated in truth");
+      act_index[k] = static_cast<int>(it - names.begin());
+    }
+    return act_index;
+  }
+
+  // The truth settled at q: its end effector's position.
+  Vec3 TruePoint(const Eigen::VectorXd& q, SocketTruth* t) {
+    for (int k = 0; k < q.size(); ++k) t->cmd[t->act_index[k]] = q[k];
+    sim_->SetCommand(t->cmd);
+    sim_->Settle();
+    return Vec3(sim_->Pose(t->ee).translation());
+  }
+
+  // Up to 5 random starts, each a damped Newton on the truth with the declared position
+  // Jacobian (close enough to converge); the null space keeps the random start's posture.
+  // True when the truth rests at the target within joint limits.
+  bool ReachSocket(const Vec3& target, std::mt19937_64& rng,
+                   std::uniform_real_distribution<double>& u, SocketTruth* t) {
+    const kinematics::PpoeModel& model = chain_->model;
+    const int nq = model.nq();
+    Eigen::VectorXd q(nq);
+    bool ok = false;
+    for (int attempt = 0; attempt < 5 && !ok; ++attempt) {
+      for (int k = 0; k < nq; ++k) q[k] = 1.2 * u(rng) + MidRange(k);
+      for (int it = 0; it < 40; ++it) {
+        const Vec3 err = target - TruePoint(q, t);
+        if (err.norm() < 1e-7) {
+          ok = true;
+          break;
+        }
+        kinematics::ForwardKinematics(model, t->pd, q);
+        Eigen::Matrix<double, 6, Eigen::Dynamic> J(6, nq);
+        kinematics::ComputeFrameJacobian(model, t->pd, chain_->end_effector, J);
+        const Eigen::Matrix<double, 3, Eigen::Dynamic> Jp =
+            t->pd.T_base_frame[chain_->end_effector].rotation() * J.topRows<3>();
+        const Eigen::MatrixXd JJt = Jp * Jp.transpose() + 1e-6 * Eigen::Matrix3d::Identity();
+        Eigen::VectorXd dq = Jp.transpose() * JJt.ldlt().solve(err);
+        const double n = dq.norm();
+        if (n > 0.3) dq *= 0.3 / n;
+        q += dq;
+      }
+      if (ok && !InLimits(q)) ok = false;
+    }
+    return ok;
+  }
+
+  // The encoders' reading of the settled truth, with their noise.
+  identify::Observation EncoderRow(std::mt19937_64& rng, std::normal_distribution<double>& noise) {
+    const int nq = chain_->model.nq();
+    identify::Observation o;
+    o.q.resize(nq);
+    for (int k = 0; k < nq; ++k) {
+      const int jid = mj_name2id(sim_->model(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
+      o.q[k] =
+          sim_->MotorPosition(jid) + sim_->EncoderOffset(jid) + encoder_noise_rad_ * noise(rng);
+    }
+    return o;
   }
 
   // Middle of joint k's range (0 when unlimited): where random starting postures centre.
