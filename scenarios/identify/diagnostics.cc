@@ -146,15 +146,22 @@ void TestLoad(int k, const JointSamples& js, ResidualFinding* best) {
   Keep(std::move(f), best);
 }
 
+// One coordinate of the position rows' residuals, in metres.
+Eigen::VectorXd AxisResiduals(const ResidualContext& c, int axis) {
+  Eigen::VectorXd z(c.rows.size());
+  for (size_t i = 0; i < c.rows.size(); ++i) {
+    z[i] = c.res[c.pr.row_offset(c.rows[i]) + axis] * c.opt.point_std_m;
+  }
+  return z;
+}
+
 // Drift: each coordinate of the residual against the row order.
 void TestDrift(const ResidualContext& c, ResidualFinding* best) {
   const int n = static_cast<int>(c.rows.size());
+  Eigen::VectorXd t(n);
+  for (int i = 0; i < n; ++i) t[i] = static_cast<double>(i) / std::max(1, n - 1);
   for (int axis = 0; axis < 3; ++axis) {
-    Eigen::VectorXd z(n), t(n);
-    for (int i = 0; i < n; ++i) {
-      z[i] = c.res[c.pr.row_offset(c.rows[i]) + axis] * c.opt.point_std_m;
-      t[i] = static_cast<double>(i) / std::max(1, n - 1);
-    }
+    const Eigen::VectorXd z = AxisResiduals(c, axis);
     const Regression g = Regress(t, z, Eigen::VectorXd::Ones(n));
     if (g.beta.size() == 0) continue;
     ResidualFinding f;
@@ -177,14 +184,13 @@ void TestSets(const ResidualContext& c, ResidualFinding* best) {
   if (c.data.sets.size() < 2) return;
   const int n = static_cast<int>(c.rows.size());
   const int S = static_cast<int>(c.data.sets.size());
+  Eigen::MatrixXd X = Eigen::MatrixXd::Zero(n, S - 1);
+  for (int i = 0; i < n; ++i) {
+    const int set = c.data.rows[c.rows[i]].set;
+    if (set > 0) X(i, set - 1) = 1.0;
+  }
   for (int axis = 0; axis < 3; ++axis) {
-    Eigen::VectorXd z(n);
-    Eigen::MatrixXd X = Eigen::MatrixXd::Zero(n, S - 1);
-    for (int i = 0; i < n; ++i) {
-      z[i] = c.res[c.pr.row_offset(c.rows[i]) + axis] * c.opt.point_std_m;
-      const int set = c.data.rows[c.rows[i]].set;
-      if (set > 0) X(i, set - 1) = 1.0;
-    }
+    const Eigen::VectorXd z = AxisResiduals(c, axis);
     const Regression g = Regress(X, z, Eigen::VectorXd::Ones(n));
     if (g.beta.size() == 0) continue;
     ResidualFinding f;

@@ -1,5 +1,7 @@
 #include "scenarios/runner/common/sim_readings.h"
 
+#include <algorithm>
+
 #include "sim/mujoco_model.h"
 
 namespace flexbench::scenarios {
@@ -15,6 +17,16 @@ estimators::JointReading EncoderReading(const sim::Simulation& sim, const sim::D
     r.q[k] = sim.MotorPosition(jid) + sim.EncoderOffset(jid) - chain.q_qpos0[k];
   }
   return r;
+}
+
+std::vector<int> ActuatorIndices(const sim::Simulation& sim, const sim::DeclaredChain& chain) {
+  const std::vector<std::string>& names = sim.actuated_joints();
+  std::vector<int> out;
+  for (const std::string& j : chain.q_joints) {
+    const auto it = std::find(names.begin(), names.end(), j);
+    out.push_back(it == names.end() ? -1 : static_cast<int>(it - names.begin()));
+  }
+  return out;
 }
 
 }  // namespace flexbench::scenarios

@@ -6,6 +6,7 @@
 #include "estimators/error.h"
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/measurement_frames.h"
+#include "scenarios/runner/common/sim_readings.h"
 #include "sim/rng.h"
 
 namespace flexbench::scenarios {
@@ -85,14 +86,12 @@ lie::SE3 DrawTrackerPose(const TrackerTruth& t, std::uint64_t seed) {
 PostureSpace ResolvePostures(const TrackerTruth& t, const sim::Simulation& sim,
                              const sim::DeclaredChain& chain) {
   PostureSpace out;
-  const auto& names = sim.actuated_joints();
-  for (const std::string& j : chain.q_joints) {
-    const auto it = std::find(names.begin(), names.end(), j);
-    if (it == names.end()) {
-      throw InputError(t.postures_where + ": joint '" + j +
+  out.actuator = ActuatorIndices(sim, chain);
+  for (size_t k = 0; k < out.actuator.size(); ++k) {
+    if (out.actuator[k] < 0) {
+      throw InputError(t.postures_where + ": joint '" + chain.q_joints[k] +
                        "' of the declared model is not actuated in the truth");
     }
-    out.actuator.push_back(static_cast<int>(it - names.begin()));
   }
   out.range.assign(chain.q_joints.size(), t.default_range);
   for (const auto& [joint, r] : t.ranges) {

@@ -34,6 +34,7 @@
 #include "scenarios/identify/measurement_frames.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/model_config.h"
+#include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/simulated_tracker.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
@@ -772,15 +773,11 @@ class ClosedLoopKind : public ScenarioKind {
   };
 
   std::vector<int> ActuatorIndex() const {
-    const int nq = chain_->model.nq();
-    std::vector<int> act_index(nq);
-    for (int k = 0; k < nq; ++k) {
-      const auto& names = sim_->actuated_joints();
-      const auto it = std::find(names.begin(), names.end(), chain_->q_joints[k]);
-      if (it == names.end()) throw InputError(chain_->q_joints[k] + " is not actuated in truth");
-      act_index[k] = static_cast<int>(it - names.begin());
+    const std::vector<int> act = ActuatorIndices(*sim_, *chain_);
+    for (size_t k = 0; k < act.size(); ++k) {
+      if (act[k] < 0) throw InputError(chain_->q_joints[k] + " is not actuated in truth");
     }
-    return act_index;
+    return act;
   }
 
   // The truth settled at q: its end effector's position.

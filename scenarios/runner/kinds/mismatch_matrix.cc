@@ -20,6 +20,7 @@
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/pose.h"
+#include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
@@ -145,11 +146,12 @@ class MismatchMatrixKind : public ScenarioKind {
 
   // Where each declared joint sits among the simulation's actuated joints.
   std::vector<int> ActuatorIndices(const sim::Simulation& sim) const {
-    const auto& names = sim.actuated_joints();
-    std::vector<int> act(chain_->model.nq());
-    for (int k = 0; k < chain_->model.nq(); ++k) {
-      act[k] = static_cast<int>(std::find(names.begin(), names.end(), chain_->q_joints[k]) -
-                                names.begin());
+    const std::vector<int> act = scenarios::ActuatorIndices(sim, *chain_);
+    for (size_t k = 0; k < act.size(); ++k) {
+      if (act[k] < 0) {
+        throw InputError(model_path_ + ": declared joint '" + chain_->q_joints[k] +
+                         "' is not actuated in the truth");
+      }
     }
     return act;
   }
