@@ -1,5 +1,7 @@
 #include "sim/declared_model.h"
 
+#include <yaml-cpp/yaml.h>
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -64,6 +66,80 @@ std::vector<DeclaredCoupling> ReadCouplings(const ConfigNode& node) {
   return out;
 }
 
+// `covariance: [36 numbers]`, row-major, [rho; theta] order.
+Mat6 ReadCovariance(const ConfigNode& cov) {
+  const std::vector<double> v = cov.AsDoubleList();
+  if (v.size() != 36) cov.Fail("expected 36 numbers (a 6x6 matrix, row-major)");
+  Mat6 m;
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) m(r, c) = v[6 * r + c];
+  }
+  const double max_rot = std::pow(kMaxStdDeg * M_PI / 180.0, 2);
+  for (int k = 0; k < 6; ++k) {
+    const double max = k < 3 ? kMaxStdM * kMaxStdM : max_rot;  // [rho; theta]
+    if (!(m(k, k) >= 0.0) || m(k, k) > max) {
+      cov.Fail("diagonal entry " + std::to_string(k) +
+               " must be >= 0 and at most (10 m)^2 (translation) or (90 deg)^2 (rotation)");
+    }
+  }
+  if (!m.isApprox(m.transpose(), 1e-9) && !m.isZero()) cov.Fail("covariance must be symmetric");
+  return m;
+}
+
+// One `sources:` entry [PPOE eq. 16]. The rotation std about a joint's own axis is a separate
+// quantity (applied once the axis is known), so it may come with a full covariance; the
+// per-axis standard deviations may not (they would say the same thing twice).
+DeclaredSource ReadSource(const ConfigNode& s) {
+  DeclaredSource src;
+  src.where = s.Where();
+  src.at = s.GetString("at");
+  const auto cov = s.Optional("covariance");
+  if (cov) src.cov = ReadCovariance(*cov);
+  const auto rot = s.Optional("std_rot_deg");
+  const auto trans = s.Optional("std_trans_m");
+  const auto axis = s.Optional("about_axis_deg");
+  if (cov && (rot || trans)) cov->Fail("give either 'covariance' or standard deviations, not both");
+  if (!cov && !rot && !trans && !axis) {
+    s.Fail("a source needs std_rot_deg, std_trans_m, about_axis_deg or covariance");
+  }
+  if (trans) {
+    const Vec3 sd = ReadVec3(*trans, kMaxStdM);
+    src.cov.block<3, 3>(kTransIdx, kTransIdx) = sd.cwiseAbs2().asDiagonal();
+  }
+  if (rot) {
+    const Vec3 sd = ReadVec3(*rot, kMaxStdDeg) * (M_PI / 180.0);
+    src.cov.block<3, 3>(kRotIdx, kRotIdx) = sd.cwiseAbs2().asDiagonal();
+  }
+  if (axis) {
+    const double deg = axis->AsDouble();
+    if (deg < 0.0) axis->Fail("a standard deviation must be >= 0");
+    if (deg > kMaxStdDeg) axis->Fail("a standard deviation must be at most 90 deg");
+    src.about_axis_rad = deg * M_PI / 180.0;
+  }
+  return src;
+}
+
+IdentifiedEffect ReadIdentifiedEffect(const ConfigNode& e) {
+  IdentifiedEffect ie;
+  ie.where = e.Where();
+  ie.effect = e.GetString("effect");
+  if (const auto eq = e.Optional("equivalent")) ie.equivalent = ReadNames(*eq);
+  ie.value = e.Child("value").AsDoubleList();
+  if (const auto sd = e.Optional("std")) ie.std = sd->AsDoubleList();
+  ie.unit = e.GetString("unit", "");
+  if (ie.value.empty()) e.Child("value").Fail("needs at least one number");
+  for (const char* key : {"value", "std"}) {
+    const std::vector<double>& v = key[0] == 'v' ? ie.value : ie.std;
+    for (double x : v) {
+      if (!std::isfinite(x)) e.Child(key).Fail("must hold finite numbers (no NaN or inf)");
+    }
+  }
+  if (!ie.std.empty() && ie.std.size() != ie.value.size()) {
+    e.Child("std").Fail("needs as many numbers as 'value'");
+  }
+  return ie;
+}
+
 }  // namespace
 
 DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
@@ -76,75 +152,10 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
   d.end_effector = node.GetString("end_effector");
   if (const auto obs = node.Optional("observed_frames")) d.observed_frames = ReadNames(*obs);
   if (const auto sources = node.Optional("sources")) {
-    for (const ConfigNode& s : sources->Items()) {
-      DeclaredSource src;
-      src.where = s.Where();
-      src.at = s.GetString("at");
-      const auto cov = s.Optional("covariance");
-      if (cov) {
-        const std::vector<double> v = cov->AsDoubleList();
-        if (v.size() != 36) cov->Fail("expected 36 numbers (a 6x6 matrix, row-major)");
-        for (int r = 0; r < 6; ++r) {
-          for (int c = 0; c < 6; ++c) src.cov(r, c) = v[6 * r + c];
-        }
-        const double max_rot = std::pow(kMaxStdDeg * M_PI / 180.0, 2);
-        for (int k = 0; k < 6; ++k) {
-          const double max = k < 3 ? kMaxStdM * kMaxStdM : max_rot;  // [rho; theta]
-          if (!(src.cov(k, k) >= 0.0) || src.cov(k, k) > max) {
-            cov->Fail("diagonal entry " + std::to_string(k) +
-                      " must be >= 0 and at most (10 m)^2 (translation) or (90 deg)^2 (rotation)");
-          }
-        }
-        if (!src.cov.isApprox(src.cov.transpose(), 1e-9) && !src.cov.isZero()) {
-          cov->Fail("covariance must be symmetric");
-        }
-      }
-      const auto rot = s.Optional("std_rot_deg");
-      const auto trans = s.Optional("std_trans_m");
-      const auto axis = s.Optional("about_axis_deg");
-      if (cov && (rot || trans || axis)) {
-        cov->Fail("give either 'covariance' or standard deviations, not both");
-      }
-      if (!cov && !rot && !trans && !axis) {
-        s.Fail("a source needs std_rot_deg, std_trans_m, about_axis_deg or covariance");
-      }
-      if (trans) {
-        const Vec3 sd = ReadVec3(*trans, kMaxStdM);
-        src.cov.block<3, 3>(kTransIdx, kTransIdx) = sd.cwiseAbs2().asDiagonal();
-      }
-      if (rot) {
-        const Vec3 sd = ReadVec3(*rot, kMaxStdDeg) * (M_PI / 180.0);
-        src.cov.block<3, 3>(kRotIdx, kRotIdx) = sd.cwiseAbs2().asDiagonal();
-      }
-      if (axis) {
-        const double deg = axis->AsDouble();
-        if (deg < 0.0) axis->Fail("a standard deviation must be >= 0");
-        if (deg > kMaxStdDeg) axis->Fail("a standard deviation must be at most 90 deg");
-        src.about_axis_rad = deg * M_PI / 180.0;
-      }
-      d.sources.push_back(src);
-    }
+    for (const ConfigNode& s : sources->Items()) d.sources.push_back(ReadSource(s));
   }
   if (const auto fx = node.Optional("identified_effects")) {
-    for (const ConfigNode& e : fx->Items()) {
-      IdentifiedEffect ie;
-      ie.where = e.Where();
-      ie.effect = e.GetString("effect");
-      ie.value = e.Child("value").AsDoubleList();
-      if (const auto sd = e.Optional("std")) ie.std = sd->AsDoubleList();
-      ie.unit = e.GetString("unit", "");
-      if (ie.value.empty()) e.Child("value").Fail("needs at least one number");
-      for (const char* key : {"value", "std"}) {
-        const std::vector<double>& v = key[0] == 'v' ? ie.value : ie.std;
-        for (double x : v) {
-          if (!std::isfinite(x)) e.Child(key).Fail("must hold finite numbers (no NaN or inf)");
-        }
-      }
-      if (!ie.std.empty() && ie.std.size() != ie.value.size()) {
-        e.Child("std").Fail("needs as many numbers as 'value'");
-      }
-      d.identified_effects.push_back(ie);
-    }
+    for (const ConfigNode& e : fx->Items()) d.identified_effects.push_back(ReadIdentifiedEffect(e));
   }
   if (const auto coupled = node.Optional("coupled")) d.coupled = ReadCouplings(*coupled);
   // Checked last, so format errors come first. (In a scenario's inline `declared:` block the
@@ -161,6 +172,78 @@ DeclaredModel LoadDeclaredModel(const std::string& path) {
   DeclaredModel d = ParseDeclaredModel(root);
   root.CheckNoUnknownKeys();
   return d;
+}
+
+namespace {
+
+void EmitNames(YAML::Emitter& y, const char* key, const std::vector<std::string>& names) {
+  y << YAML::Key << key << YAML::Value << YAML::Flow << names;
+}
+
+void EmitCouplings(YAML::Emitter& y, const std::vector<DeclaredCoupling>& coupled) {
+  y << YAML::Key << "coupled" << YAML::Value << YAML::BeginMap;
+  for (const DeclaredCoupling& c : coupled) {
+    y << YAML::Key << c.joint << YAML::Value;
+    if (c.from_mjcf) {
+      y << "mjcf";
+      continue;
+    }
+    y << YAML::Flow << YAML::BeginMap;
+    for (const auto& [driver, coef] : c.drivers) {
+      y << YAML::Key << driver << YAML::Value << YAML::DoublePrecision(17) << coef;
+    }
+    y << YAML::EndMap;
+  }
+  y << YAML::EndMap;
+}
+
+void EmitSources(YAML::Emitter& y, const std::vector<DeclaredSource>& sources) {
+  y << YAML::Key << "sources" << YAML::Value << YAML::BeginSeq;
+  for (const DeclaredSource& s : sources) {
+    y << YAML::BeginMap << YAML::Key << "at" << YAML::Value << s.at;
+    if (s.about_axis_rad > 0) {
+      y << YAML::Key << "about_axis_deg" << YAML::Value << s.about_axis_rad / (M_PI / 180.0);
+    }
+    // Exactly zero, not Eigen's isZero: a source scaled down to 1e-13 still says something.
+    if ((s.cov.array() != 0.0).any()) {
+      std::vector<double> rows(36);
+      for (int k = 0; k < 36; ++k) rows[k] = s.cov(k / 6, k % 6);
+      y << YAML::Key << "covariance" << YAML::Value << YAML::Flow << rows;
+    }
+    y << YAML::EndMap;
+  }
+  y << YAML::EndSeq;
+}
+
+void EmitIdentifiedEffects(YAML::Emitter& y, const std::vector<IdentifiedEffect>& effects) {
+  y << YAML::Key << "identified_effects" << YAML::Value << YAML::BeginSeq;
+  for (const IdentifiedEffect& e : effects) {
+    y << YAML::BeginMap << YAML::Key << "effect" << YAML::Value << e.effect;
+    if (!e.equivalent.empty()) EmitNames(y, "equivalent", e.equivalent);
+    y << YAML::Key << "value" << YAML::Value << YAML::Flow << e.value;
+    y << YAML::Key << "std" << YAML::Value << YAML::Flow << e.std;
+    y << YAML::Key << "unit" << YAML::Value << e.unit << YAML::EndMap;
+  }
+  y << YAML::EndSeq;
+}
+
+}  // namespace
+
+std::string EmitDeclaredModel(const DeclaredModel& d, const std::string& header, int digits) {
+  YAML::Emitter y;
+  y.SetDoublePrecision(digits);
+  if (!header.empty()) y << YAML::Comment(header);
+  y << YAML::BeginMap;
+  y << YAML::Key << "model" << YAML::Value << d.model_path;
+  y << YAML::Key << "base" << YAML::Value << d.base;
+  EmitNames(y, "actuated_joints", d.actuated_joints);
+  y << YAML::Key << "end_effector" << YAML::Value << d.end_effector;
+  if (!d.observed_frames.empty()) EmitNames(y, "observed_frames", d.observed_frames);
+  if (!d.coupled.empty()) EmitCouplings(y, d.coupled);
+  if (!d.sources.empty()) EmitSources(y, d.sources);
+  if (!d.identified_effects.empty()) EmitIdentifiedEffects(y, d.identified_effects);
+  y << YAML::EndMap;
+  return std::string(y.c_str()) + "\n";
 }
 
 }  // namespace flexbench::sim

@@ -13,6 +13,9 @@
 //       covariance: [36 numbers]    # or a full 6x6, [rho; theta] order, SI units
 //   identified_effects:             # written by closed_loop / `flexbench identify`
 //     - {effect: joint_offset@j3, value: [-0.0052], std: [1e-5], unit: rad}
+//     - effect: joint_offset@j2     # the fitted member of an equivalence set:
+//       equivalent: [joint_offset@j2, joint_axis_tilt_a@j1]   # every member (the data
+//       value: [0.003]              # could not tell them apart); informative only
 //   coupled:                        # joints driven by others, never read (issue 20)
 //     torso_pitch_3: {torso_pitch_1: -1, torso_pitch_2: -1}   # q = sum_j c_j q_j
 //     wrist_follower: mjcf          # the MJCF's <equality><joint> on it (a polynomial of one
@@ -48,6 +51,8 @@ struct IdentifiedEffect {
   std::vector<double> std;
   std::string unit;
   std::string where;
+  // The members of the equivalence set `effect` was fitted for (empty: singled out).
+  std::vector<std::string> equivalent;
 };
 
 // A coupled joint (`coupled:`): a hinge or slide of the model driven by other declared joints
@@ -77,5 +82,13 @@ struct DeclaredModel {
 DeclaredModel LoadDeclaredModel(const std::string& path);
 // Reads a declared model from a `declared:` block inside another file (e.g. a scenario).
 DeclaredModel ParseDeclaredModel(const ConfigNode& node);
+
+// Writes `d` in the format LoadDeclaredModel reads (yaml-cpp's emitter), with `header` as
+// leading comment lines. `d.model_path` is written as given: a caller writing the file
+// elsewhere makes it relative to that folder. Sources come out as `about_axis_deg` and a full
+// `covariance` (the per-axis stds they may have been given as are folded in by then).
+// Numbers carry `digits` significant digits (fitted values and stds are not known better);
+// coupling coefficients carry every digit, since they are geometry.
+std::string EmitDeclaredModel(const DeclaredModel& d, const std::string& header, int digits = 6);
 
 }  // namespace flexbench::sim

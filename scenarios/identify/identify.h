@@ -124,9 +124,10 @@ struct IdentifyOptions {
 
 struct FittedEffect {
   int candidate = -1;
-  std::string name;           // all members of its equivalence set, "a | b"
-  std::vector<double> value;  // the observable part (minimum norm over unseen directions)
-  std::vector<double> std;    // of the observable part; 0 along unseen directions
+  std::string name;                  // all members of its equivalence set, "a | b"
+  std::vector<std::string> members;  // the same names, one by one
+  std::vector<double> value;         // the observable part (minimum norm over unseen directions)
+  std::vector<double> std;           // of the observable part; 0 along unseen directions
   std::vector<std::vector<double>> unobservable;  // parameter directions the data does not see
   double share = 0.0;  // fraction of the removed sum of squares it accounts for
 };

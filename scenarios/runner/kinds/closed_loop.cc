@@ -1292,81 +1292,35 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
-    std::ostringstream y;
-    y << "# Declared model augmented by flexbench closed_loop: the identified effects with "
-         "their\n"
-         "# fitted parameters, and the PPOE sources scaled by "
-      << Num(source_scale_)
-      << " (what the\n# remaining validation residual supports; mean NEES there "
-      << Num(nees_scaled_) << ", 3 is consistent). Verdict: " << verdict_
-      << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the data "
-                                    "about as well, so no cause is singled out)"
-                                  : "")
-      << ".\n";
+    std::ostringstream header;
+    header << "Declared model augmented by flexbench closed_loop: the identified effects with "
+              "their\nfitted parameters, and the PPOE sources scaled by "
+           << Num(source_scale_) << " (what the\nremaining validation residual supports; mean "
+           << "NEES there " << Num(nees_scaled_) << ", 3 is consistent). Verdict: " << verdict_
+           << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the "
+                                         "data about as well, so no cause is singled out)"
+                                       : "")
+           << ".";
+    sim::DeclaredModel out = declared_;
     // Relative to the result folder, so the file loads from where it is written.
-    y << "model: "
-      << fs::absolute(declared_.model_path)
-             .lexically_normal()
-             .lexically_relative(fs::absolute(ctx.out->final_dir()).lexically_normal())
-             .generic_string()
-      << "\n";
-    y << "base: " << declared_.base << "\n";
-    y << "actuated_joints: [";
-    for (size_t i = 0; i < declared_.actuated_joints.size(); ++i) {
-      y << (i ? ", " : "") << declared_.actuated_joints[i];
+    out.model_path = fs::absolute(declared_.model_path)
+                         .lexically_normal()
+                         .lexically_relative(fs::absolute(ctx.out->final_dir()).lexically_normal())
+                         .generic_string();
+    for (sim::DeclaredSource& s : out.sources) {
+      s.about_axis_rad = std::sqrt(source_scale_) * s.about_axis_rad;
+      s.cov = source_scale_ * s.cov;
     }
-    y << "]\nend_effector: " << declared_.end_effector << "\n";
-    if (!declared_.observed_frames.empty()) {
-      y << "observed_frames: [";
-      for (size_t i = 0; i < declared_.observed_frames.size(); ++i) {
-        y << (i ? ", " : "") << declared_.observed_frames[i];
-      }
-      y << "]\n";
-    }
-    if (!declared_.coupled.empty()) {
-      y << "coupled:\n";
-      for (const sim::DeclaredCoupling& c : declared_.coupled) {
-        y << "  " << c.joint << ": ";
-        if (c.from_mjcf) {
-          y << "mjcf\n";
-          continue;
-        }
-        y << "{";
-        for (size_t i = 0; i < c.drivers.size(); ++i) {
-          char v[32];  // every digit: the coupling is geometry, not a fitted value
-          std::snprintf(v, sizeof(v), "%.17g", c.drivers[i].second);
-          y << (i ? ", " : "") << c.drivers[i].first << ": " << v;
-        }
-        y << "}\n";
-      }
-    }
-    if (!declared_.sources.empty()) {
-      y << "sources:\n";
-      for (const sim::DeclaredSource& s : declared_.sources) {
-        y << "  - at: " << s.at << "\n";
-        if (s.about_axis_rad > 0) {
-          y << "    about_axis_deg: " << Num(std::sqrt(source_scale_) * s.about_axis_rad / kDeg)
-            << "\n";
-        }
-        if (!s.cov.isZero()) {
-          y << "    covariance: [";
-          for (int i = 0; i < 36; ++i) y << (i ? ", " : "") << Num(source_scale_ * s.cov(i));
-          y << "]\n";
-        }
-      }
-    }
-    y << "identified_effects:\n";
+    out.identified_effects.clear();
     for (const auto& e : res.effects) {
+      const identify::Candidate& fitted = em_->candidates()[e.candidate];
+      sim::IdentifiedEffect ie{fitted.Name(), e.value, e.std, fitted.unit, ""};
       // An equivalence set's name lists every member; the values are the fitted member's.
-      const std::string fitted = em_->candidates()[e.candidate].Name();
-      if (e.name != fitted) y << "  # equivalent in these data: " << e.name << "\n";
-      y << "  - effect: " << fitted << "\n    value: [";
-      for (size_t k = 0; k < e.value.size(); ++k) y << (k ? ", " : "") << Num(e.value[k]);
-      y << "]\n    std: [";
-      for (size_t k = 0; k < e.std.size(); ++k) y << (k ? ", " : "") << Num(e.std[k]);
-      y << "]\n    unit: " << em_->candidates()[e.candidate].unit << "\n";
+      if (e.name != ie.effect) ie.equivalent = e.members;
+      out.identified_effects.push_back(std::move(ie));
     }
-    WriteFileAtomic(ctx.out->File("declared_augmented.yaml"), y.str());
+    WriteFileAtomic(ctx.out->File("declared_augmented.yaml"),
+                    sim::EmitDeclaredModel(out, header.str()));
   }
 
   void WriteResiduals(RunContext& ctx, const DataSet& d, const std::vector<double>& before,

@@ -242,6 +242,76 @@ TEST(DeclaredModelFile, RangesAndTheModelPathAreChecked) {
       << e;
 }
 
+// The writer next to the reader (issue 22): every model's declared file, with what closed_loop
+// adds (identified effects, an equivalence set, a source with both an axis std and a full
+// covariance) and a coupling, comes back from EmitDeclaredModel through LoadDeclaredModel: bit
+// for bit with every digit, to the digits asked for otherwise.
+TEST(DeclaredModelFile, WhatTheWriterWritesTheReaderReads) {
+  testing::TempDir tmp;
+  int models = 0;
+  for (const auto& f : fs::directory_iterator(testing::SourceDir() + "/models")) {
+    const std::string name = f.path().filename().string();
+    if (name.size() < 14 || name.substr(name.size() - 14) != ".declared.yaml") continue;
+    ++models;
+    DeclaredModel d = LoadDeclaredModel(f.path().string());
+    d.identified_effects.push_back(
+        {"joint_offset@" + d.actuated_joints[0], {-0.00524114, 1.0 / 3.0}, {1e-5, 2e-7}, "rad"});
+    d.identified_effects.push_back(
+        {"payload@ee", {0.5}, {}, "kg", "", {"payload@ee", "link_length@j1"}});
+    d.coupled.push_back({"follower", {{d.actuated_joints[0], -1.0 / 3.0}}, {}, false, ""});
+    d.coupled.push_back({"wrist", {}, {}, true, ""});
+    DeclaredSource both;
+    both.at = d.actuated_joints[0];
+    both.about_axis_rad = 0.0123;
+    both.cov.diagonal() << 1e-6, 2e-6, 3e-6, 1e-4, 2e-4, M_PI / 1e4;
+    both.cov(3, 4) = both.cov(4, 3) = 1e-5;
+    d.sources.push_back(both);
+    const fs::path out = tmp.path() / name;
+    const std::string model = d.model_path;
+    d.model_path = fs::relative(model, tmp.path()).generic_string();
+    for (int digits : {17, 6}) {
+      const std::string text = EmitDeclaredModel(d, "a header\nof two lines", digits);
+      EXPECT_EQ(text, EmitDeclaredModel(d, "a header\nof two lines", digits));
+      EXPECT_EQ(text.rfind("# a header\n# of two lines\n", 0), 0u) << text;
+      testing::WriteFile(out, text);
+      const DeclaredModel r = LoadDeclaredModel(out.string());
+      const double tol = digits == 17 ? 0.0 : 5e-6;  // relative
+      const auto near = [&](double a, double b) { return std::abs(a - b) <= tol * std::abs(b); };
+      EXPECT_EQ(fs::path(r.model_path).lexically_normal(), fs::path(model).lexically_normal());
+      EXPECT_EQ(r.base, d.base);
+      EXPECT_EQ(r.actuated_joints, d.actuated_joints);
+      EXPECT_EQ(r.end_effector, d.end_effector);
+      EXPECT_EQ(r.observed_frames, d.observed_frames);
+      ASSERT_EQ(r.sources.size(), d.sources.size()) << name;
+      for (size_t i = 0; i < d.sources.size(); ++i) {
+        EXPECT_EQ(r.sources[i].at, d.sources[i].at);
+        EXPECT_TRUE(near(r.sources[i].about_axis_rad, d.sources[i].about_axis_rad)) << name << i;
+        for (int k = 0; k < 36; ++k) {
+          EXPECT_TRUE(near(r.sources[i].cov(k), d.sources[i].cov(k))) << name << " source " << i;
+        }
+      }
+      ASSERT_EQ(r.identified_effects.size(), d.identified_effects.size());
+      for (size_t i = 0; i < d.identified_effects.size(); ++i) {
+        const IdentifiedEffect &a = r.identified_effects[i], &b = d.identified_effects[i];
+        EXPECT_EQ(a.effect, b.effect);
+        EXPECT_EQ(a.equivalent, b.equivalent);
+        EXPECT_EQ(a.unit, b.unit);
+        ASSERT_EQ(a.value.size(), b.value.size());
+        ASSERT_EQ(a.std.size(), b.std.size());
+        for (size_t k = 0; k < b.value.size(); ++k) EXPECT_TRUE(near(a.value[k], b.value[k]));
+        for (size_t k = 0; k < b.std.size(); ++k) EXPECT_TRUE(near(a.std[k], b.std[k]));
+      }
+      ASSERT_EQ(r.coupled.size(), d.coupled.size());
+      for (size_t i = 0; i < d.coupled.size(); ++i) {
+        EXPECT_EQ(r.coupled[i].joint, d.coupled[i].joint);
+        EXPECT_EQ(r.coupled[i].from_mjcf, d.coupled[i].from_mjcf);
+        EXPECT_EQ(r.coupled[i].drivers, d.coupled[i].drivers);  // geometry: every digit
+      }
+    }
+  }
+  EXPECT_GE(models, 4);
+}
+
 }  // namespace
 }  // namespace flexbench::sim
 
