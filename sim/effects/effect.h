@@ -3,8 +3,12 @@
 // (passive joints locked at their reference, zero extra mass, no offset...).
 //
 //   effects:
-//     base_plate_compliance: {}
+//     base_compliance: {}
 //     payload: {mass_kg: 0.5, offset_m: [0, 0, 0.05]}
+//
+// Names are the ones identification reports (scenarios/identify/effect_model.h): the truth's
+// `joint_offset@j3` is what `flexbench identify` names `joint_offset@j3`, with the same sign.
+// docs/design.md ("Effect vocabulary") has the table; each row's former name is still read.
 #pragma once
 
 #include <memory>
@@ -48,6 +52,10 @@ struct EffectEntry {
   const char* name;
   const char* description;
   std::unique_ptr<Effect> (*make)();
+  // The name scenario files used before truth and identification shared one vocabulary
+  // (nullptr: none). Still read; the effect's name() is then the former name, which
+  // joint_offset needs (encoder_offset took the encoder's error, the opposite sign).
+  const char* former_name = nullptr;
 };
 
 // The explicit list of effects (EffectRegistry in sim/effects/effects.cc).

@@ -256,6 +256,9 @@ class PayloadEffect : public Effect {
 class EncoderOffsetEffect : public Effect {
  public:
   void Configure(const Params& p) override {
+    // joint_offset says what identification reports, link = reading + offset; the former name
+    // said what the encoder adds. Negation is exact, so both give the same bits.
+    sign_ = name() == "encoder_offset" ? 1.0 : -1.0;
     const ConfigNode c = p.Require("offset_deg");
     if (c.IsMap()) {
       for (const std::string& j : c.Keys()) per_joint_[j] = c.GetDouble(j);
@@ -271,11 +274,11 @@ class EncoderOffsetEffect : public Effect {
   }
   void Apply(TruthSetup& s) const override {
     if (has_all_) {
-      for (int j : s.catalog->actuated) s.encoder_offset[j] += all_ * kDeg;
+      for (int j : s.catalog->actuated) s.encoder_offset[j] += sign_ * (all_ * kDeg);
     }
     for (const auto& [joint, deg] : per_joint_) {
       const int j = ActuatedJointOrFail(s, *this, joint);
-      s.encoder_offset[j] += deg * kDeg;
+      s.encoder_offset[j] += sign_ * (deg * kDeg);
     }
   }
   std::string Describe() const override {
@@ -285,6 +288,7 @@ class EncoderOffsetEffect : public Effect {
   }
 
  private:
+  double sign_ = -1.0;  // of offset_deg in the encoder's error, reading - link
   bool has_all_ = false;
   double all_ = 0.0;
   std::map<std::string, double> per_joint_;
@@ -345,7 +349,7 @@ class TransmissionErrorEffect : public Effect {
 };
 
 // ---- A gear spring that stiffens with deflection: torque = k d + k3 d^3.
-//   stiffening_joint: {stiffness_Nm_per_rad: {j2: 800}, cubic_Nm_per_rad3: {j2: 4e7}}
+//   stiffening_spring: {stiffness_Nm_per_rad: {j2: 800}, cubic_Nm_per_rad3: {j2: 4e7}}
 class StiffeningJointEffect : public Effect {
  public:
   void Configure(const Params& p) override {
@@ -509,34 +513,39 @@ std::unique_ptr<Effect> Make() {
 const std::vector<EffectEntry>& EffectRegistry() {
   // One line per effect.
   static const std::vector<EffectEntry> effects = {
-      {kBasePlate, "base plate bends under load: passive tilt joints (stiffness_scale)",
-       MakeGroup<kBasePlate>},
-      {kLinks, "elastic links: passive bending hinges between link segments (stiffness_scale)",
-       MakeGroup<kLinks>},
+      {"base_compliance", "base plate bends under load: passive tilt joints (stiffness_scale)",
+       MakeGroup<kBasePlate>, "base_plate_compliance"},
+      {"link_bending",
+       "elastic links: passive bending hinges between link segments (stiffness_scale)",
+       MakeGroup<kLinks>, "link_elasticity"},
       {kNeck, "continuum-elastic neck: chain of passive spring joints (stiffness_scale)",
        MakeGroup<kNeck>},
       {kCameraSag, "camera mount sags under the camera's weight: passive joint (stiffness_scale)",
        MakeGroup<kCameraSag>},
       {kWrist, "wrist is a nonlinear linkage: coupled joints follow the actuated ones (scale)",
        MakeGroup<kWrist>},
-      {"joint_elasticity", "gear elasticity between motor encoder and link (stiffness_Nm_per_rad)",
-       Make<JointElasticityEffect>},
+      {"joint_compliance",
+       "gear elasticity between motor encoder and link (stiffness_Nm_per_rad; identification "
+       "reports its inverse, rad/Nm)",
+       Make<JointElasticityEffect>, "joint_elasticity"},
       {"backlash", "play between motor and link, load holds the link on one flank (width_deg)",
        Make<BacklashEffect>},
       {"payload", "extra mass at the end effector (mass_kg, offset_m, radius_m, body)",
        Make<PayloadEffect>},
-      {"encoder_offset", "calibration offset of the joint encoders (offset_deg)",
-       Make<EncoderOffsetEffect>},
+      {"joint_offset",
+       "encoder calibration offset: link angle = reading + offset_deg (encoder_offset, its former "
+       "name, takes the encoder's error: reading = link + offset_deg)",
+       Make<EncoderOffsetEffect>, "encoder_offset"},
       {"thermal_expansion", "links grow by alpha * delta_T (delta_T_K, alpha_per_K, bodies)",
        Make<ThermalExpansionEffect>},
       {"transmission_error",
        "strain-wave gear: link ahead of the motor by a periodic error "
        "(harmonics_deg: {joint: [A1, phase1, A2, phase2]})",
        Make<TransmissionErrorEffect>},
-      {"stiffening_joint",
+      {"stiffening_spring",
        "gear spring stiffening with deflection, k d + k3 d^3 "
        "(stiffness_Nm_per_rad, cubic_Nm_per_rad3)",
-       Make<StiffeningJointEffect>},
+       Make<StiffeningJointEffect>, "stiffening_joint"},
       {"imu_bias", "IMU constant bias and bias random walk, hence yaw drift (gyro_bias_rad_s, ...)",
        Make<ImuBiasEffect>},
   };
@@ -547,7 +556,7 @@ namespace {
 
 const EffectEntry* FindEffect(const std::string& name, std::string* known) {
   for (const EffectEntry& e : EffectRegistry()) {
-    if (name == e.name) return &e;
+    if (name == e.name || (e.former_name && name == e.former_name)) return &e;
     *known += std::string(known->empty() ? "" : ", ") + e.name;
   }
   return nullptr;

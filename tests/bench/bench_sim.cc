@@ -20,8 +20,8 @@ std::string RoverPath() { return std::string(FLEXBENCH_SOURCE_DIR) + "/models/ro
 
 std::unique_ptr<Simulation> CompliantRover() {
   EffectList fx;
-  fx.push_back(MakeEffect("base_plate_compliance"));
-  fx.push_back(MakeEffect("link_elasticity"));
+  fx.push_back(MakeEffect("base_compliance"));
+  fx.push_back(MakeEffect("link_bending"));
   fx.push_back(MakeEffect("camera_mount_sag"));
   return Simulation::Load(RoverPath(), fx);
 }

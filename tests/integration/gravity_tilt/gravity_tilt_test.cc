@@ -49,7 +49,7 @@ std::unique_ptr<Rig> MakeRig(double tilt, double heading, double stiffness = 800
   sim::EffectList effects;
   if (stiffness > 0.0) {
     effects.push_back(sim::MakeEffect(
-        "joint_elasticity", "{stiffness_Nm_per_rad: {j2: " + std::to_string(stiffness) + "}}"));
+        "joint_compliance", "{stiffness_Nm_per_rad: {j2: " + std::to_string(stiffness) + "}}"));
   }
   rig->sim = sim::Simulation::Load(dir + "rover_arm.xml", effects);
   const Vec3 axis(std::cos(heading), std::sin(heading), 0.0);

@@ -70,7 +70,7 @@ TEST(SimulatedTracker, ElasticShouldersLowerTheHandsByMillimetres) {
   const std::string models = testing::SourceDir() + "/models/";
   sim::EffectList effects;
   effects.push_back(
-      sim::MakeEffect("joint_elasticity",
+      sim::MakeEffect("joint_compliance",
                       "{stiffness_Nm_per_rad: {shoulder_pitch: 1000, l_shoulder_pitch: 1000}}"));
   auto sim = sim::Simulation::Load(models + "humanoid_upper.xml", effects);
   const sim::DeclaredModel declared =

@@ -27,7 +27,7 @@ void ExpectBadInput(const std::string& command, const std::string& must_contain)
 // A short rover_deflection scenario (no rendering) with `extra` appended.
 std::string Scenario(const std::string& model, const std::string& extra) {
   return "scenario: rd\nkind: rover_deflection\nseed: 5\nmodel: " + model +
-         "\neffects:\n  base_plate_compliance: {}\n"
+         "\neffects:\n  base_compliance: {}\n"
          "sweep:\n  directions_deg: [0, 90]\n  steps: 3\n"
          "  folded_deg: {j2: 0, j3: 150, j5: -90}\n  outstretched_deg: {j2: 90, j3: 0, j5: -30}\n"
          "sensors:\n  - {name: enc, kind: encoder, side: link, noise_std_deg: 0.01}\n" +
@@ -60,12 +60,12 @@ TEST(Inspect, RoverModelAsJson) {
   EXPECT_TRUE(mast);
   std::map<std::string, bool> supported;
   for (const Json& e : j["effects"]) supported[e["name"]] = e["supported"];
-  EXPECT_TRUE(supported["base_plate_compliance"]);
-  EXPECT_TRUE(supported["link_elasticity"]);
+  EXPECT_TRUE(supported["base_compliance"]);
+  EXPECT_TRUE(supported["link_bending"]);
   EXPECT_TRUE(supported["payload"]);
   EXPECT_FALSE(supported["neck_elasticity"]);
   EXPECT_TRUE(supported["transmission_error"]);
-  EXPECT_TRUE(supported["stiffening_joint"]);
+  EXPECT_TRUE(supported["stiffening_spring"]);
   EXPECT_EQ(supported.size(), 13u);
   EXPECT_EQ(j["sensors"]["encoders"].size(), 8u);
 }
@@ -111,7 +111,7 @@ TEST(BadInput, UnknownEffectOrSensorInAScenario) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
   std::string text = Scenario(Model("rover_arm.xml"), "");
-  text.replace(text.find("base_plate_compliance"), 21, "base_plate_wobble");
+  text.replace(text.find("base_compliance"), 15, "base_plate_wobble");
   WriteFile(s, text);
   ExpectBadInput(Flexbench() + " run " + s.string() + " --out " + (tmp.path() / "o").string(),
                  s.string() + ":6: unknown effect 'base_plate_wobble'");
@@ -122,7 +122,7 @@ TEST(BadInput, UnknownEffectOrSensorInAScenario) {
                  "unknown sensor kind 'odometer'");
   // An effect the model cannot carry, and a joint the model lacks.
   text = Scenario(Model("rover_arm.xml"), "");
-  text.replace(text.find("base_plate_compliance: {}"), 25, "neck_elasticity: {}");
+  text.replace(text.find("base_compliance: {}"), 19, "neck_elasticity: {}");
   WriteFile(s, text);
   ExpectBadInput(Flexbench() + " run " + s.string() + " --out " + (tmp.path() / "o").string(),
                  "no passive joints for effect 'neck_elasticity'");

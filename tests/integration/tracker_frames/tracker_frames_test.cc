@@ -44,7 +44,7 @@ std::unique_ptr<Rig> MakeRig() {
   auto rig = std::make_unique<Rig>();
   const std::string dir = testing::SourceDir() + "/models/";
   sim::EffectList effects;
-  effects.push_back(sim::MakeEffect("joint_elasticity", "{stiffness_Nm_per_rad: {j2: 800}}"));
+  effects.push_back(sim::MakeEffect("joint_compliance", "{stiffness_Nm_per_rad: {j2: 800}}"));
   rig->sim = sim::Simulation::Load(dir + "rover_arm.xml", effects);
   rig->declared = sim::LoadDeclaredModel(dir + "rover_arm.declared.yaml");
   rig->chain = sim::BuildDeclaredChain(rig->sim->nominal_model(), rig->declared);
@@ -500,7 +500,7 @@ struct TwoArms {
 std::unique_ptr<TwoArms> MakeTwoArms() {
   auto r = std::make_unique<TwoArms>();
   sim::EffectList effects;
-  effects.push_back(sim::MakeEffect("joint_elasticity", "{}"));
+  effects.push_back(sim::MakeEffect("joint_compliance", "{}"));
   r->sim = sim::Simulation::FromString(kTwoArms, "two_arms.xml", effects);
   sim::DeclaredModel d;
   d.file = "two_arms.declared";

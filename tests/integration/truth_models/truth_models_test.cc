@@ -63,8 +63,8 @@ TEST(RoverTags, DistinctIdsAndDetectableSize) {
 
 TEST(RoverTags, VisibleAndDetectedFromTheMastCameraInTypicalPoses) {
   sim::EffectList fx;
-  fx.push_back(sim::MakeEffect("base_plate_compliance"));
-  fx.push_back(sim::MakeEffect("link_elasticity"));
+  fx.push_back(sim::MakeEffect("base_compliance"));
+  fx.push_back(sim::MakeEffect("link_bending"));
   auto sim = sim::Simulation::Load(Models() + "rover_arm.xml", fx);
   const auto tags = render::ApplyTagTextures(sim->mutable_model());
   render::Renderer renderer(sim->model(), render::RenderMode::kQuality);

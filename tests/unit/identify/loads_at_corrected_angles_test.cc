@@ -28,8 +28,9 @@ constexpr double kDeg = M_PI / 180.0;
 
 TEST(LoadsAtCorrectedAngles, IdentificationModelEqualsMuJoCoStatics) {
   sim::EffectList fx;
-  fx.push_back(sim::MakeEffect("encoder_offset", "{offset_deg: {j2: 0.4}}"));
-  fx.push_back(sim::MakeEffect("base_plate_compliance", "{}"));
+  // joint_offset is link - reading, the value identification reports: -0.4 deg on both sides.
+  fx.push_back(sim::MakeEffect("joint_offset", "{offset_deg: {j2: -0.4}}"));
+  fx.push_back(sim::MakeEffect("base_compliance", "{}"));
   const std::string dir = testing::SourceDir() + "/models/";
   auto sim = sim::Simulation::Load(dir + "rover_arm.xml", fx);
   const sim::DeclaredModel declared = sim::LoadDeclaredModel(dir + "rover_arm.declared.yaml");

@@ -172,7 +172,7 @@ TEST(EncoderSensor, OffsetComesFromTheEncoderOffsetEffect) {
 }
 
 TEST(EncoderSensor, MotorSideSeesTheCommandLinkSideTheElasticJoint) {
-  auto sim = Pendulum(Effects({{"joint_elasticity", "{}"}}));
+  auto sim = Pendulum(Effects({{"joint_compliance", "{}"}}));
   sim->SetCommand("hinge", 0.0);
   sim->Settle();
   auto motor = MakeSensor("encoder", "m", "{side: motor}", *sim, 1);
@@ -276,7 +276,7 @@ TEST(ImuSensor, IntegratedYawDriftsWithoutMagnetometer) {
 }
 
 TEST(ImuSensor, TruthInMotionMatchesMujocoGyroAndAccelerometer) {
-  auto sim = Pendulum(Effects({{"link_elasticity", "{}"}}));
+  auto sim = Pendulum(Effects({{"link_bending", "{}"}}));
   auto imu = MakeSensor("imu", "imu", "{site: imu}", *sim, 1);
   const int gyro = mj_name2id(sim->model(), mjOBJ_SENSOR, "imu_gyro");
   const int accel = mj_name2id(sim->model(), mjOBJ_SENSOR, "imu_accel");
@@ -301,8 +301,8 @@ TEST(ImuSensor, TruthInMotionMatchesMujocoGyroAndAccelerometer) {
 }
 
 TEST(ImuSensor, SamplingDoesNotChangeTheTrajectory) {
-  auto a = Pendulum(Effects({{"link_elasticity", "{}"}}));
-  auto b = Pendulum(Effects({{"link_elasticity", "{}"}}));
+  auto a = Pendulum(Effects({{"link_bending", "{}"}}));
+  auto b = Pendulum(Effects({{"link_bending", "{}"}}));
   auto imu = MakeSensor("imu", "imu", "{site: imu}", *a, 1);
   for (Simulation* s : {a.get(), b.get()}) s->SetCommand("hinge", 0.8);
   for (int i = 0; i < 300; ++i) {
