@@ -22,94 +22,140 @@ void CheckStds(const ConfigNode& node) {
   }
 }
 
+// The model a declared file names, for "<model> has no <kind> named '<name>'" messages.
+struct CheckedModel {
+  const mjModel* m;
+  std::string file_name;
+
+  bool Has(mjtObj type, const std::string& name) const {
+    return mj_name2id(m, type, name.c_str()) >= 0;
+  }
+  [[noreturn]] void Missing(const ConfigNode& n, const std::string& what,
+                            const std::string& name) const {
+    n.Fail(file_name + " has no " + what + " named '" + name + "'");
+  }
+};
+
+std::string ModelPath(const ConfigNode& root) {
+  const ConfigNode model_node = root.Child("model");
+  const std::string path = model_node.ResolvePath(model_node.AsString());
+  if (!std::filesystem::is_regular_file(path)) {
+    model_node.Fail("model file '" + path + "' not found");
+  }
+  return path;
+}
+
+std::string CheckBase(const ConfigNode& root, const CheckedModel& model) {
+  std::string base = "world";
+  if (const auto node = root.Optional("base")) {
+    base = node->AsString();
+    if (!model.Has(mjOBJ_BODY, base)) model.Missing(*node, "body", base);
+  }
+  return base;
+}
+
+std::vector<std::string> CheckActuatedJoints(const ConfigNode& list, const CheckedModel& model) {
+  const mjModel* m = model.m;
+  std::vector<std::string> names;
+  std::set<std::string> seen;
+  for (const ConfigNode& item : StringItems(list)) {
+    const std::string name = item.AsString();
+    const int j = mj_name2id(m, mjOBJ_JOINT, name.c_str());
+    if (j < 0 || (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)) {
+      model.Missing(item, "hinge or slide joint", name);
+    }
+    if (!seen.insert(name).second) item.Fail("joint '" + name + "' listed twice");
+    names.push_back(name);
+  }
+  return names;
+}
+
+std::string CheckEndEffector(const ConfigNode& ee, const CheckedModel& model) {
+  const std::string name = ee.AsString();
+  if (!model.Has(mjOBJ_SITE, name) && !model.Has(mjOBJ_BODY, name)) {
+    model.Missing(ee, "site or body", name);
+  }
+  return name;
+}
+
+std::vector<std::string> CheckObservedFrames(const ConfigNode& frames, const CheckedModel& model) {
+  std::vector<std::string> names;
+  for (const ConfigNode& item : StringItems(frames)) {
+    const std::string name = item.AsString();
+    if (!model.Has(mjOBJ_SITE, name) && !model.Has(mjOBJ_CAMERA, name) &&
+        !model.Has(mjOBJ_GEOM, name) && !model.Has(mjOBJ_BODY, name)) {
+      model.Missing(item, "site, camera, geom or body", name);
+    }
+    names.push_back(name);
+  }
+  return names;
+}
+
+// Returns whether the source gives any uncertainty.
+bool CheckSourceUncertainty(const ConfigNode& src, const DeclaredCheckSource& d) {
+  bool any = false;
+  if (const auto r = src.Optional("std_rot_deg")) {
+    CheckStds(*r);
+    any = true;
+  }
+  if (const auto t = src.Optional("std_trans_m")) {
+    CheckStds(*t);
+    any = true;
+  }
+  if (const auto a = src.Optional("about_axis_deg")) {
+    if (d.at_kind != "joint") a->Fail("about_axis_deg needs a joint ('" + d.at + "' is a body)");
+    if (a->AsDouble() < 0) a->Fail("standard deviations must be >= 0");
+    any = true;
+  }
+  if (const auto c = src.Optional("covariance")) {
+    if (c->AsDoubleList().size() != 36) c->Fail("expected 36 numbers (a 6x6 covariance)");
+    any = true;
+  }
+  return any;
+}
+
+DeclaredCheckSource CheckSource(const ConfigNode& src, const CheckedModel& model) {
+  const ConfigNode at = src.Child("at");
+  DeclaredCheckSource d;
+  d.at = at.AsString();
+  if (model.Has(mjOBJ_JOINT, d.at)) {
+    d.at_kind = "joint";
+  } else if (model.Has(mjOBJ_BODY, d.at)) {
+    d.at_kind = "body";
+  } else {
+    model.Missing(at, "joint or body", d.at);
+  }
+  if (!CheckSourceUncertainty(src, d)) {
+    src.Fail("a source needs std_rot_deg, std_trans_m, about_axis_deg or covariance");
+  }
+  return d;
+}
+
+std::vector<DeclaredCheckSource> CheckSources(const ConfigNode& sources,
+                                              const CheckedModel& model) {
+  if (!sources.IsSequence()) sources.Fail("expected a list of {at, std_rot_deg, ...}");
+  std::vector<DeclaredCheckSource> out;
+  for (const ConfigNode& src : sources.Items()) out.push_back(CheckSource(src, model));
+  return out;
+}
+
 }  // namespace
 
 DeclaredCheckSummary CheckDeclaredFile(const std::string& path) {
   const ConfigNode root = ConfigNode::LoadFile(path);
   DeclaredCheckSummary s;
   s.file = path;
-  const ConfigNode model_node = root.Child("model");
-  s.model_path = model_node.ResolvePath(model_node.AsString());
-  if (!std::filesystem::is_regular_file(s.model_path)) {
-    model_node.Fail("model file '" + s.model_path + "' not found");
-  }
+  s.model_path = ModelPath(root);
   const MjModelPtr model = LoadModel(s.model_path);
-  const mjModel* m = model.get();
-  const std::string mname = std::filesystem::path(s.model_path).filename().string();
-  const auto missing = [&](const ConfigNode& n, const std::string& what, const std::string& name) {
-    n.Fail(mname + " has no " + what + " named '" + name + "'");
-  };
-
-  s.base = "world";
-  if (const auto base = root.Optional("base")) {
-    s.base = base->AsString();
-    if (mj_name2id(m, mjOBJ_BODY, s.base.c_str()) < 0) missing(*base, "body", s.base);
-  }
-  std::set<std::string> seen;
-  for (const ConfigNode& item : StringItems(root.Child("actuated_joints"))) {
-    const std::string name = item.AsString();
-    const int j = mj_name2id(m, mjOBJ_JOINT, name.c_str());
-    if (j < 0 || (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)) {
-      missing(item, "hinge or slide joint", name);
-    }
-    if (!seen.insert(name).second) item.Fail("joint '" + name + "' listed twice");
-    s.actuated_joints.push_back(name);
-  }
-  const ConfigNode ee = root.Child("end_effector");
-  s.end_effector = ee.AsString();
-  if (mj_name2id(m, mjOBJ_SITE, s.end_effector.c_str()) < 0 &&
-      mj_name2id(m, mjOBJ_BODY, s.end_effector.c_str()) < 0) {
-    missing(ee, "site or body", s.end_effector);
-  }
+  const CheckedModel checked{model.get(), std::filesystem::path(s.model_path).filename().string()};
+  s.base = CheckBase(root, checked);
+  s.actuated_joints = CheckActuatedJoints(root.Child("actuated_joints"), checked);
+  s.end_effector = CheckEndEffector(root.Child("end_effector"), checked);
   if (const auto frames = root.Optional("observed_frames")) {
-    for (const ConfigNode& item : StringItems(*frames)) {
-      const std::string name = item.AsString();
-      if (mj_name2id(m, mjOBJ_SITE, name.c_str()) < 0 &&
-          mj_name2id(m, mjOBJ_CAMERA, name.c_str()) < 0 &&
-          mj_name2id(m, mjOBJ_GEOM, name.c_str()) < 0 &&
-          mj_name2id(m, mjOBJ_BODY, name.c_str()) < 0) {
-        missing(item, "site, camera, geom or body", name);
-      }
-      s.observed_frames.push_back(name);
-    }
+    s.observed_frames = CheckObservedFrames(*frames, checked);
   }
   if (const auto sources = root.Optional("sources")) {
-    if (!sources->IsSequence()) sources->Fail("expected a list of {at, std_rot_deg, ...}");
-    for (const ConfigNode& src : sources->Items()) {
-      const ConfigNode at = src.Child("at");
-      DeclaredCheckSource d;
-      d.at = at.AsString();
-      if (mj_name2id(m, mjOBJ_JOINT, d.at.c_str()) >= 0) {
-        d.at_kind = "joint";
-      } else if (mj_name2id(m, mjOBJ_BODY, d.at.c_str()) >= 0) {
-        d.at_kind = "body";
-      } else {
-        missing(at, "joint or body", d.at);
-      }
-      bool any = false;
-      if (const auto r = src.Optional("std_rot_deg")) {
-        CheckStds(*r);
-        any = true;
-      }
-      if (const auto t = src.Optional("std_trans_m")) {
-        CheckStds(*t);
-        any = true;
-      }
-      if (const auto a = src.Optional("about_axis_deg")) {
-        if (d.at_kind != "joint")
-          a->Fail("about_axis_deg needs a joint ('" + d.at + "' is a body)");
-        if (a->AsDouble() < 0) a->Fail("standard deviations must be >= 0");
-        any = true;
-      }
-      if (const auto c = src.Optional("covariance")) {
-        if (c->AsDoubleList().size() != 36) c->Fail("expected 36 numbers (a 6x6 covariance)");
-        any = true;
-      }
-      if (!any) {
-        src.Fail("a source needs std_rot_deg, std_trans_m, about_axis_deg or covariance");
-      }
-      s.sources.push_back(d);
-    }
+    s.sources = CheckSources(*sources, checked);
   }
   root.CheckNoUnknownKeys();
   return s;

@@ -18,86 +18,100 @@ std::vector<std::string> SplitWords(const std::string& text) {
   return out;
 }
 
-}  // namespace
-
-ModelCatalog ModelCatalog::Build(const mjModel* m, const std::string& model_name) {
-  ModelCatalog c;
-  c.model_name = model_name;
-  c.joints.resize(m->njnt);
+void ReadJoints(const mjModel* m, ModelCatalog* c) {
+  c->joints.resize(m->njnt);
   for (int j = 0; j < m->njnt; ++j) {
-    JointEntry& e = c.joints[j];
+    JointEntry& e = c->joints[j];
     e.id = j;
     e.name = ObjectName(m, mjOBJ_JOINT, j);
     e.type = m->jnt_type[j];
     e.qpos_adr = m->jnt_qposadr[j];
     e.dof_adr = m->jnt_dofadr[j];
     if (e.type != mjJNT_HINGE && e.type != mjJNT_SLIDE) {
-      throw InputError(model_name + ": joint '" + e.name +
+      throw InputError(c->model_name + ": joint '" + e.name +
                        "' is a ball or free joint; truth models use hinge and slide joints only");
     }
     if (e.name.empty()) {
-      throw InputError(model_name + ": every joint needs a name (joint " + std::to_string(j) +
+      throw InputError(c->model_name + ": every joint needs a name (joint " + std::to_string(j) +
                        " has none)");
     }
   }
+}
+
+// MuJoCo's <position>: fixed gain kp, bias -kp * q, no velocity term, on a joint.
+bool IsPositionServo(const mjModel* m, int a) {
+  return m->actuator_trntype[a] == mjTRN_JOINT && m->actuator_dyntype[a] == mjDYN_NONE &&
+         m->actuator_gaintype[a] == mjGAIN_FIXED && m->actuator_biastype[a] == mjBIAS_AFFINE &&
+         m->actuator_gainprm[a * mjNGAIN] > 0 &&
+         m->actuator_biasprm[a * mjNBIAS + 1] == -m->actuator_gainprm[a * mjNGAIN] &&
+         m->actuator_biasprm[a * mjNBIAS + 2] == 0;
+}
+
+void ReadActuators(const mjModel* m, ModelCatalog* c) {
   for (int a = 0; a < m->nu; ++a) {
     const std::string an = ObjectName(m, mjOBJ_ACTUATOR, a);
-    const bool position_servo =
-        m->actuator_trntype[a] == mjTRN_JOINT && m->actuator_dyntype[a] == mjDYN_NONE &&
-        m->actuator_gaintype[a] == mjGAIN_FIXED && m->actuator_biastype[a] == mjBIAS_AFFINE &&
-        m->actuator_gainprm[a * mjNGAIN] > 0 &&
-        m->actuator_biasprm[a * mjNBIAS + 1] == -m->actuator_gainprm[a * mjNGAIN] &&
-        m->actuator_biasprm[a * mjNBIAS + 2] == 0;
-    if (!position_servo) {
-      throw InputError(model_name + ": actuator '" + an +
+    if (!IsPositionServo(m, a)) {
+      throw InputError(c->model_name + ": actuator '" + an +
                        "' is not a <position> servo on a joint (the truth commands joint angles)");
     }
     const int j = m->actuator_trnid[2 * a];
-    if (c.joints[j].actuator >= 0) {
-      throw InputError(model_name + ": joint '" + c.joints[j].name + "' has two actuators");
+    if (c->joints[j].actuator >= 0) {
+      throw InputError(c->model_name + ": joint '" + c->joints[j].name + "' has two actuators");
     }
-    c.joints[j].actuator = a;
-    c.joints[j].role = JointRole::kActuated;
-    c.actuated.push_back(j);
+    c->joints[j].actuator = a;
+    c->joints[j].role = JointRole::kActuated;
+    c->actuated.push_back(j);
   }
+}
+
+void ReadCouplings(const mjModel* m, ModelCatalog* c) {
   for (int e = 0; e < m->neq; ++e) {
     if (m->eq_type[e] != mjEQ_JOINT || m->eq_obj2id[e] < 0) continue;
-    JointEntry& j1 = c.joints[m->eq_obj1id[e]];
+    JointEntry& j1 = c->joints[m->eq_obj1id[e]];
     if (j1.role == JointRole::kActuated) {
-      throw InputError(model_name + ": joint '" + j1.name +
+      throw InputError(c->model_name + ": joint '" + j1.name +
                        "' is actuated and also coupled by an equality constraint");
     }
     j1.role = JointRole::kCoupled;
     j1.coupling_eq = e;
     j1.coupled_to = m->eq_obj2id[e];
   }
+}
+
+void ReadEffectFields(const mjModel* m, ModelCatalog* c) {
   for (int t = 0; t < m->ntext; ++t) {
     const std::string name = ObjectName(m, mjOBJ_TEXT, t);
     if (name.rfind(kEffectPrefix, 0) != 0) continue;
     const std::string effect = name.substr(sizeof(kEffectPrefix) - 1);
-    c.effect_parts[effect] = SplitWords(m->text_data + m->text_adr[t]);
+    c->effect_parts[effect] = SplitWords(m->text_data + m->text_adr[t]);
   }
   for (int n = 0; n < m->nnumeric; ++n) {
     const std::string name = ObjectName(m, mjOBJ_NUMERIC, n);
     if (name.rfind(kEffectPrefix, 0) != 0) continue;
     const double* data = m->numeric_data + m->numeric_adr[n];
-    c.effect_numbers[name.substr(sizeof(kEffectPrefix) - 1)] =
+    c->effect_numbers[name.substr(sizeof(kEffectPrefix) - 1)] =
         std::vector<double>(data, data + m->numeric_size[n]);
   }
-  // Joint-listing effects: every name must be a joint, and each joint belongs to one effect.
-  for (const auto& [effect, parts] : c.effect_parts) {
+}
+
+// Joint-listing effects: every name must be a joint, and each joint belongs to one effect.
+void AssignEffectJoints(const mjModel* m, ModelCatalog* c) {
+  for (const auto& [effect, parts] : c->effect_parts) {
     for (const std::string& part : parts) {
       const int j = mj_name2id(m, mjOBJ_JOINT, part.c_str());
       if (j < 0) continue;  // bodies (payload, thermal expansion) are checked by their effect
-      JointEntry& e = c.joints[j];
+      JointEntry& e = c->joints[j];
       if (e.role == JointRole::kActuated) continue;  // joint_elasticity, backlash
       if (!e.effect.empty() && e.effect != effect) {
-        throw InputError(model_name + ": joint '" + part + "' is listed by effect:" + e.effect +
+        throw InputError(c->model_name + ": joint '" + part + "' is listed by effect:" + e.effect +
                          " and effect:" + effect);
       }
       e.effect = effect;
     }
   }
+}
+
+void FindImuSites(const mjModel* m, ModelCatalog* c) {
   for (int s = 0; s < m->nsite; ++s) {
     bool gyro = false;
     bool accel = false;
@@ -106,8 +120,21 @@ ModelCatalog ModelCatalog::Build(const mjModel* m, const std::string& model_name
       gyro |= m->sensor_type[k] == mjSENS_GYRO;
       accel |= m->sensor_type[k] == mjSENS_ACCELEROMETER;
     }
-    if (gyro && accel) c.imu_sites.push_back(ObjectName(m, mjOBJ_SITE, s));
+    if (gyro && accel) c->imu_sites.push_back(ObjectName(m, mjOBJ_SITE, s));
   }
+}
+
+}  // namespace
+
+ModelCatalog ModelCatalog::Build(const mjModel* m, const std::string& model_name) {
+  ModelCatalog c;
+  c.model_name = model_name;
+  ReadJoints(m, &c);
+  ReadActuators(m, &c);
+  ReadCouplings(m, &c);
+  ReadEffectFields(m, &c);
+  AssignEffectJoints(m, &c);
+  FindImuSites(m, &c);
   return c;
 }
 

@@ -239,93 +239,111 @@ void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const 
   }
 }
 
-SettleReport Simulation::Settle(const SettleOptions& options) {
+// The unloaded gear-spring position of each actuated joint for the flanks in `backlash_sign`.
+void Simulation::SetGearReferences(const std::vector<int>& backlash_sign) {
+  for (int i = 0; i < num_actuated(); ++i) {
+    const int j = catalog_.actuated[i];
+    const GearSpec& g = setup_.gear[j];
+    gear_reference_[i] =
+        command_[i] + g.TransmissionError(command_[i]) - backlash_sign[j] * 0.5 * g.backlash;
+  }
+}
+
+// Start from the nominal state: the result does not depend on the previous configuration.
+void Simulation::NominalStart(Eigen::VectorXd* x) const {
+  const mjModel* m = truth_.get();
+  const mjData* d = data_.get();
+  for (int k = 0; k < static_cast<int>(free_joints_.size()); ++k) {
+    const int j = free_joints_[k];
+    (*x)[k] = catalog_.Joint(j).role == JointRole::kActuated ? d->qpos[m->jnt_qposadr[j]]
+                                                             : m->qpos0[m->jnt_qposadr[j]];
+  }
+}
+
+// Forward differences of the residual r at x.
+Eigen::MatrixXd Simulation::StaticJacobian(const Eigen::VectorXd& x, const Eigen::VectorXd& r,
+                                           Eigen::VectorXd* x_try, Eigen::VectorXd* r_try) const {
+  const int n = static_cast<int>(x.size());
+  Eigen::MatrixXd J(n, n);
+  for (int k = 0; k < n; ++k) {
+    *x_try = x;
+    (*x_try)[k] += kJacobianStep;
+    ComputeStaticForces(free_joints_, *x_try, r_try);
+    J.col(k) = (*r_try - r) / kJacobianStep;
+  }
+  return J;
+}
+
+// One Newton step from x (residual r, largest |r| err); `iteration` counts all passes.
+void Simulation::DampedNewtonStep(double err, int iteration, Eigen::VectorXd* x, Eigen::VectorXd* r,
+                                  Eigen::VectorXd* x_try, Eigen::VectorXd* r_try) const {
+  Eigen::FullPivLU<Eigen::MatrixXd> lu(StaticJacobian(*x, *r, x_try, r_try));
+  if (!lu.isInvertible()) {
+    throw SimulationError(model_name_ +
+                          ": quasi-static settle has a singular stiffness at iteration " +
+                          std::to_string(iteration) + " (a free joint without stiffness?)");
+  }
+  const Eigen::VectorXd dx = lu.solve(-*r);
+  // Damped Newton: halve the step until the residual decreases.
+  double alpha = 1.0;
+  for (int ls = 0; ls < 30; ++ls, alpha *= 0.5) {
+    *x_try = *x + alpha * dx;
+    ComputeStaticForces(free_joints_, *x_try, r_try);
+    if (r_try->allFinite() && r_try->cwiseAbs().maxCoeff() < err) break;
+  }
+  *x = *x_try;
+  *r = *r_try;
+}
+
+// Iterates from x (residual r) to |r| <= tolerance; counts its iterations into `report`.
+void Simulation::SolveFreeJoints(const SettleOptions& options, Eigen::VectorXd* x,
+                                 Eigen::VectorXd* r, Eigen::VectorXd* x_try, Eigen::VectorXd* r_try,
+                                 SettleReport* report) const {
+  const int n = static_cast<int>(r->size());
+  int it = 0;
+  for (;; ++it) {
+    const double err = n ? r->cwiseAbs().maxCoeff() : 0.0;
+    if (!std::isfinite(err)) {
+      throw SimulationError(model_name_ + ": quasi-static settle diverged at iteration " +
+                            std::to_string(report->iterations + it) +
+                            ": non-finite residual torque");
+    }
+    report->residual = err;
+    if (err <= options.tolerance) break;
+    if (it >= options.max_iterations) {
+      int worst = 0;
+      r->cwiseAbs().maxCoeff(&worst);
+      throw SimulationError(model_name_ + ": quasi-static settle did not converge in " +
+                            std::to_string(options.max_iterations) + " iterations (residual " +
+                            Fmt(err) + " Nm at joint '" + catalog_.Joint(free_joints_[worst]).name +
+                            "', iteration " + std::to_string(report->iterations + it) + ")");
+    }
+    DampedNewtonStep(err, report->iterations + it, x, r, x_try, r_try);
+  }
+  report->iterations += it;
+}
+
+// The load each backlashed gear carries (in data_ after the solve) picks its flank. Returns
+// whether a flank changed.
+bool Simulation::PickBacklashFlanks(std::vector<int>* backlash_sign) const {
+  const mjModel* m = truth_.get();
+  const mjData* d = data_.get();
+  bool changed = false;
+  for (int j : catalog_.actuated) {
+    if (setup_.gear[j].backlash <= 0) continue;
+    const int dof = m->jnt_dofadr[j];
+    const double load = d->qfrc_bias[dof] - d->qfrc_passive[dof];
+    const int s = load > kBacklashLoadEps ? 1 : (load < -kBacklashLoadEps ? -1 : 0);
+    changed |= s != (*backlash_sign)[j];
+    (*backlash_sign)[j] = s;
+  }
+  return changed;
+}
+
+// Leaves the solved state at rest, with the servo forces and accelerations of that state.
+void Simulation::ComeToRest() {
   const mjModel* m = truth_.get();
   mjData* d = data_.get();
-  SettleReport report;
-  report.free_dofs = static_cast<int>(free_joints_.size());
-  std::vector<int> sign(m->njnt, 0);
-  bool has_backlash = false;
-  for (int j : catalog_.actuated) has_backlash |= setup_.gear[j].backlash > 0;
-  gear_reference_.resize(num_actuated());
-
-  const int n = static_cast<int>(free_joints_.size());
-  Eigen::VectorXd x(n), r(n), r_try(n), x_try(n);
-  for (int pass = 0; pass < kMaxBacklashPasses; ++pass) {
-    SetHeldPositions(sign);
-    for (int i = 0; i < num_actuated(); ++i) {
-      const int j = catalog_.actuated[i];
-      const GearSpec& g = setup_.gear[j];
-      gear_reference_[i] =
-          command_[i] + g.TransmissionError(command_[i]) - sign[j] * 0.5 * g.backlash;
-    }
-    // Start from the nominal state: the result does not depend on the previous configuration.
-    for (int k = 0; k < n; ++k) {
-      const int j = free_joints_[k];
-      x[k] = catalog_.Joint(j).role == JointRole::kActuated ? d->qpos[m->jnt_qposadr[j]]
-                                                            : m->qpos0[m->jnt_qposadr[j]];
-    }
-    ComputeStaticForces(free_joints_, x, &r);
-    int it = 0;
-    for (;; ++it) {
-      const double err = n ? r.cwiseAbs().maxCoeff() : 0.0;
-      if (!std::isfinite(err)) {
-        throw SimulationError(model_name_ + ": quasi-static settle diverged at iteration " +
-                              std::to_string(report.iterations + it) +
-                              ": non-finite residual torque");
-      }
-      report.residual = err;
-      if (err <= options.tolerance) break;
-      if (it >= options.max_iterations) {
-        int worst = 0;
-        r.cwiseAbs().maxCoeff(&worst);
-        throw SimulationError(model_name_ + ": quasi-static settle did not converge in " +
-                              std::to_string(options.max_iterations) + " iterations (residual " +
-                              Fmt(err) + " Nm at joint '" +
-                              catalog_.Joint(free_joints_[worst]).name + "', iteration " +
-                              std::to_string(report.iterations + it) + ")");
-      }
-      Eigen::MatrixXd J(n, n);
-      for (int k = 0; k < n; ++k) {
-        x_try = x;
-        x_try[k] += kJacobianStep;
-        ComputeStaticForces(free_joints_, x_try, &r_try);
-        J.col(k) = (r_try - r) / kJacobianStep;
-      }
-      Eigen::FullPivLU<Eigen::MatrixXd> lu(J);
-      if (!lu.isInvertible()) {
-        throw SimulationError(model_name_ +
-                              ": quasi-static settle has a singular stiffness at "
-                              "iteration " +
-                              std::to_string(report.iterations + it) +
-                              " (a free joint without stiffness?)");
-      }
-      const Eigen::VectorXd dx = lu.solve(-r);
-      // Damped Newton: halve the step until the residual decreases.
-      double alpha = 1.0;
-      for (int ls = 0; ls < 30; ++ls, alpha *= 0.5) {
-        x_try = x + alpha * dx;
-        ComputeStaticForces(free_joints_, x_try, &r_try);
-        if (r_try.allFinite() && r_try.cwiseAbs().maxCoeff() < err) break;
-      }
-      x = x_try;
-      r = r_try;
-    }
-    report.iterations += it;
-    ComputeStaticForces(free_joints_, x, &r);
-    if (!has_backlash) break;
-    // The load each backlashed gear carries picks its flank; repeat until the flanks agree.
-    bool changed = false;
-    for (int j : catalog_.actuated) {
-      if (setup_.gear[j].backlash <= 0) continue;
-      const int dof = m->jnt_dofadr[j];
-      const double load = d->qfrc_bias[dof] - d->qfrc_passive[dof];
-      const int s = load > kBacklashLoadEps ? 1 : (load < -kBacklashLoadEps ? -1 : 0);
-      changed |= s != sign[j];
-      sign[j] = s;
-    }
-    if (!changed) break;
-  }
   mju_zero(d->qvel, m->nv);
   mju_zero(d->qacc_warmstart, m->nv);
   mj_forward(m, d);
@@ -334,6 +352,29 @@ SettleReport Simulation::Settle(const SettleOptions& options) {
   at_rest_ = true;
   kinematics_current_ = true;
   accelerations_current_ = true;
+}
+
+SettleReport Simulation::Settle(const SettleOptions& options) {
+  SettleReport report;
+  report.free_dofs = static_cast<int>(free_joints_.size());
+  std::vector<int> sign(truth_->njnt, 0);
+  bool has_backlash = false;
+  for (int j : catalog_.actuated) has_backlash |= setup_.gear[j].backlash > 0;
+  gear_reference_.resize(num_actuated());
+
+  const int n = static_cast<int>(free_joints_.size());
+  Eigen::VectorXd x(n), r(n), r_try(n), x_try(n);
+  for (int pass = 0; pass < kMaxBacklashPasses; ++pass) {
+    SetHeldPositions(sign);
+    SetGearReferences(sign);
+    NominalStart(&x);
+    ComputeStaticForces(free_joints_, x, &r);
+    SolveFreeJoints(options, &x, &r, &x_try, &r_try, &report);
+    ComputeStaticForces(free_joints_, x, &r);
+    // Repeat until the flanks agree with the loads they carry.
+    if (!has_backlash || !PickBacklashFlanks(&sign)) break;
+  }
+  ComeToRest();
   return report;
 }
 

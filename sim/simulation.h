@@ -134,6 +134,17 @@ class Simulation {
   void ComputeStaticForces(const std::vector<int>& free_dofs, const Eigen::VectorXd& x,
                            Eigen::VectorXd* residual) const;
   void SetHeldPositions(const std::vector<int>& backlash_sign) const;
+  // Steps of Settle, in call order; x_try and r_try are scratch vectors kept across passes.
+  void SetGearReferences(const std::vector<int>& backlash_sign);
+  void NominalStart(Eigen::VectorXd* x) const;
+  Eigen::MatrixXd StaticJacobian(const Eigen::VectorXd& x, const Eigen::VectorXd& r,
+                                 Eigen::VectorXd* x_try, Eigen::VectorXd* r_try) const;
+  void DampedNewtonStep(double err, int iteration, Eigen::VectorXd* x, Eigen::VectorXd* r,
+                        Eigen::VectorXd* x_try, Eigen::VectorXd* r_try) const;
+  void SolveFreeJoints(const SettleOptions& options, Eigen::VectorXd* x, Eigen::VectorXd* r,
+                       Eigen::VectorXd* x_try, Eigen::VectorXd* r_try, SettleReport* report) const;
+  bool PickBacklashFlanks(std::vector<int>* backlash_sign) const;
+  void ComeToRest();
   void ApplyServo() const;
   void ProjectLocked() const;
   void EnsureKinematics() const;

@@ -60,15 +60,6 @@ std::string CsvField(const std::string& s) {
   return q + "\"";
 }
 
-std::string LastLine(const fs::path& log) {
-  std::ifstream in(log);
-  std::string line, last;
-  while (std::getline(in, line)) {
-    if (!line.empty()) last = line;
-  }
-  return CapForMessage(last, 500);
-}
-
 // The column name a gate path names: "metrics.x" is "x".
 std::string Column(const std::string& path, const std::set<std::string>& columns) {
   if (columns.count(path) || path.rfind("metrics.", 0) != 0) return path;

@@ -76,6 +76,108 @@ std::string KeyValue(const std::string& key, const ConfigNode& value) {
   return key + "=" + value.AsYamlText();
 }
 
+std::string ParseSweepName(const ConfigNode& name) {
+  const std::string text = name.AsString();
+  if (text.empty() || FolderSafe(text) != text || text.size() > 200) {
+    name.Fail("must be a plain name of letters, digits, '.', '_' and '-'");
+  }
+  return text;
+}
+
+std::vector<std::string> ParseFixedSet(const ConfigNode& set) {
+  std::vector<std::string> out;
+  for (const std::string& key : set.Keys()) out.push_back(KeyValue(key, set.Child(key)));
+  return out;
+}
+
+SweepAxis ParseAxis(const std::string& key, const ConfigNode& values) {
+  if (!IsPath(key)) values.Fail("a grid key must be a dotted scenario key");
+  SweepAxis axis{key, {}};
+  for (const ConfigNode& v : values.Items()) axis.values.push_back(v.AsYamlText());
+  if (axis.values.empty()) values.Fail("empty list of values");
+  std::set<std::string> unique(axis.values.begin(), axis.values.end());
+  if (unique.size() != axis.values.size()) values.Fail("a value is listed twice");
+  return axis;
+}
+
+std::vector<SweepAxis> ParseGrid(const ConfigNode& grid) {
+  const std::vector<std::string> keys = grid.Keys();
+  if (keys.empty()) grid.Fail("empty grid: name at least one key with a list of values");
+  std::vector<SweepAxis> axes;
+  for (const std::string& key : keys) axes.push_back(ParseAxis(key, grid.Child(key)));
+  return axes;
+}
+
+// A number, or {metric: STAT(ARG), scale: S} compared with the gate's metric.
+void ParseThreshold(const ConfigNode& t, SweepGate* gate) {
+  if (t.IsMap()) {
+    gate->threshold_is_statistic = true;
+    gate->threshold_metric = ParseStatistic(t.GetString("metric"), t.Child("metric").Where());
+    gate->scale = t.GetDouble("scale", 1.0);
+  } else {
+    gate->threshold = t.AsDouble();
+  }
+}
+
+// `names` holds the names of the gates before this one.
+SweepGate ParseGate(const ConfigNode& g, std::set<std::string>* names) {
+  SweepGate gate;
+  gate.where = g.Where();
+  gate.name = g.GetString("name");
+  if (!names->insert(gate.name).second) g.Child("name").Fail("gate name used twice");
+  gate.metric = ParseStatistic(g.GetString("metric"), g.Child("metric").Where());
+  const ConfigNode op = g.Child("op");
+  gate.op = op.AsString();
+  static const std::set<std::string> ops{"<", "<=", ">", ">=", "==", "!="};
+  if (!ops.count(gate.op)) op.Fail("unknown operator '" + gate.op + "'");
+  ParseThreshold(g.Child("threshold"), &gate);
+  gate.point = g.GetString("point", "");
+  return gate;
+}
+
+std::vector<SweepGate> ParseGates(const ConfigNode& gates) {
+  std::vector<SweepGate> out;
+  std::set<std::string> names;
+  for (const ConfigNode& g : gates.Items()) out.push_back(ParseGate(g, &names));
+  return out;
+}
+
+// The plot's x must be a key of the already parsed grid.
+void ParsePlot(const ConfigNode& plot, SweepSpec* spec) {
+  for (const ConfigNode& m : plot.Child("metrics").Items()) {
+    if (!IsPath(m.AsString())) m.Fail("not a metric path");
+    spec->plot_metrics.push_back(m.AsString());
+  }
+  spec->plot_x = plot.GetString("x", "");
+  if (!spec->plot_x.empty() &&
+      std::none_of(spec->grid.begin(), spec->grid.end(),
+                   [&](const SweepAxis& a) { return a.key == spec->plot_x; })) {
+    plot.Child("x").Fail("not a grid key");
+  }
+}
+
+int ParseBootstrapResamples(const ConfigNode& b) {
+  const int resamples = b.AsInt();
+  if (resamples < 100 || resamples > 100000) b.Fail("must be between 100 and 100000");
+  return resamples;
+}
+
+// Checks that need the whole file: the run count, and that a gate's point is one of the grid's.
+void CheckSweepSize(const ConfigNode& root, const SweepSpec& spec) {
+  size_t points = 1;
+  for (const SweepAxis& a : spec.grid) points *= a.values.size();
+  if (points * spec.seeds.size() > kMaxRuns) root.Fail("more than 1000000 runs");
+  const std::vector<SweepPoint> expanded = ExpandPoints(spec);
+  for (const SweepGate& g : spec.gates) {
+    if (g.point.empty()) continue;
+    if (std::none_of(expanded.begin(), expanded.end(),
+                     [&](const SweepPoint& p) { return p.name == g.point; })) {
+      throw InputError(g.where + ": gate '" + g.name + "': point '" + CapForMessage(g.point) +
+                       "' is not a point of this sweep");
+    }
+  }
+}
+
 }  // namespace
 
 Statistic ParseStatistic(const std::string& text, const std::string& where) {
@@ -113,87 +215,19 @@ SweepSpec LoadSweep(const std::string& path) {
   const ConfigNode root = ConfigNode::LoadFile(path);
   SweepSpec spec;
   spec.file = path;
-  const ConfigNode name = root.Child("sweep");
-  spec.name = name.AsString();
-  if (spec.name.empty() || FolderSafe(spec.name) != spec.name || spec.name.size() > 200) {
-    name.Fail("must be a plain name of letters, digits, '.', '_' and '-'");
-  }
+  spec.name = ParseSweepName(root.Child("sweep"));
   spec.description = root.GetString("description", "");
   spec.scenario = root.ResolvePath(root.GetString("scenario"));
   spec.seeds = ParseSeeds(root.Child("seeds"));
-  if (const auto set = root.Optional("set")) {
-    for (const std::string& key : set->Keys()) spec.set.push_back(KeyValue(key, set->Child(key)));
-  }
-  if (const auto grid = root.Optional("grid")) {
-    const std::vector<std::string> keys = grid->Keys();
-    if (keys.empty()) grid->Fail("empty grid: name at least one key with a list of values");
-    for (const std::string& key : keys) {
-      const ConfigNode values = grid->Child(key);
-      if (!IsPath(key)) values.Fail("a grid key must be a dotted scenario key");
-      SweepAxis axis{key, {}};
-      for (const ConfigNode& v : values.Items()) axis.values.push_back(v.AsYamlText());
-      if (axis.values.empty()) values.Fail("empty list of values");
-      std::set<std::string> unique(axis.values.begin(), axis.values.end());
-      if (unique.size() != axis.values.size()) values.Fail("a value is listed twice");
-      spec.grid.push_back(axis);
-    }
-  }
-  if (const auto gates = root.Optional("gates")) {
-    std::set<std::string> names;
-    for (const ConfigNode& g : gates->Items()) {
-      SweepGate gate;
-      gate.where = g.Where();
-      gate.name = g.GetString("name");
-      if (!names.insert(gate.name).second) g.Child("name").Fail("gate name used twice");
-      gate.metric = ParseStatistic(g.GetString("metric"), g.Child("metric").Where());
-      const ConfigNode op = g.Child("op");
-      gate.op = op.AsString();
-      static const std::set<std::string> ops{"<", "<=", ">", ">=", "==", "!="};
-      if (!ops.count(gate.op)) op.Fail("unknown operator '" + gate.op + "'");
-      const ConfigNode t = g.Child("threshold");
-      if (t.IsMap()) {
-        gate.threshold_is_statistic = true;
-        gate.threshold_metric = ParseStatistic(t.GetString("metric"), t.Child("metric").Where());
-        gate.scale = t.GetDouble("scale", 1.0);
-      } else {
-        gate.threshold = t.AsDouble();
-      }
-      gate.point = g.GetString("point", "");
-      spec.gates.push_back(gate);
-    }
-  }
-  if (const auto plot = root.Optional("plot")) {
-    for (const ConfigNode& m : plot->Child("metrics").Items()) {
-      if (!IsPath(m.AsString())) m.Fail("not a metric path");
-      spec.plot_metrics.push_back(m.AsString());
-    }
-    spec.plot_x = plot->GetString("x", "");
-    if (!spec.plot_x.empty() &&
-        std::none_of(spec.grid.begin(), spec.grid.end(),
-                     [&](const SweepAxis& a) { return a.key == spec.plot_x; })) {
-      plot->Child("x").Fail("not a grid key");
-    }
-  }
+  if (const auto set = root.Optional("set")) spec.set = ParseFixedSet(*set);
+  if (const auto grid = root.Optional("grid")) spec.grid = ParseGrid(*grid);
+  if (const auto gates = root.Optional("gates")) spec.gates = ParseGates(*gates);
+  if (const auto plot = root.Optional("plot")) ParsePlot(*plot, &spec);
   if (const auto b = root.Optional("bootstrap_resamples")) {
-    spec.bootstrap_resamples = b->AsInt();
-    if (spec.bootstrap_resamples < 100 || spec.bootstrap_resamples > 100000) {
-      b->Fail("must be between 100 and 100000");
-    }
+    spec.bootstrap_resamples = ParseBootstrapResamples(*b);
   }
   root.CheckNoUnknownKeys();
-  size_t points = 1;
-  for (const SweepAxis& a : spec.grid) points *= a.values.size();
-  if (points * spec.seeds.size() > kMaxRuns) root.Fail("more than 1000000 runs");
-  // A gate's point must be one of the grid's.
-  const std::vector<SweepPoint> expanded = ExpandPoints(spec);
-  for (const SweepGate& g : spec.gates) {
-    if (g.point.empty()) continue;
-    if (std::none_of(expanded.begin(), expanded.end(),
-                     [&](const SweepPoint& p) { return p.name == g.point; })) {
-      throw InputError(g.where + ": gate '" + g.name + "': point '" + CapForMessage(g.point) +
-                       "' is not a point of this sweep");
-    }
-  }
+  CheckSweepSize(root, spec);
   return spec;
 }
 
