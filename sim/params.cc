@@ -4,36 +4,39 @@
 
 namespace flexbench::sim {
 
-Params::Params(std::optional<ConfigNode> node, std::string where)
+ComponentParams::ComponentParams(std::optional<ConfigNode> node, std::string where)
     : node_(std::move(node)), where_(std::move(where)) {
   if (node_ && !node_->IsMap()) node_->Fail("expected a mapping of parameters");
 }
 
-Params Params::FromYaml(const std::string& yaml, const std::string& where) {
+ComponentParams ComponentParams::FromYaml(const std::string& yaml, const std::string& where) {
   const std::string text = yaml.empty() ? std::string("{}") : yaml;
-  return Params(ConfigNode::LoadString(text, where), where);
+  return ComponentParams(ConfigNode::LoadString(text, where), where);
 }
 
-bool Params::Has(const std::string& key) const { return node_ && node_->Has(key); }
+bool ComponentParams::Has(const std::string& key) const { return node_ && node_->Has(key); }
 
-std::optional<ConfigNode> Params::Optional(const std::string& key) const {
+std::optional<ConfigNode> ComponentParams::Optional(const std::string& key) const {
   if (!node_) return std::nullopt;
   return node_->Optional(key);
 }
 
-ConfigNode Params::Require(const std::string& key) const {
+ConfigNode ComponentParams::Require(const std::string& key) const {
   if (!node_ || !node_->Has(key)) Fail("missing parameter '" + key + "'");
   return node_->Child(key);
 }
 
-double Params::GetDouble(const std::string& key, double fallback) const {
+double ComponentParams::GetDouble(const std::string& key, double fallback) const {
   const auto c = Optional(key);
   return c ? c->AsDouble() : fallback;
 }
 
-double Params::RequireDouble(const std::string& key) const { return Require(key).AsDouble(); }
+double ComponentParams::RequireDouble(const std::string& key) const {
+  return Require(key).AsDouble();
+}
 
-double Params::GetPositive(const std::string& key, double fallback, bool allow_zero) const {
+double ComponentParams::GetPositive(const std::string& key, double fallback,
+                                    bool allow_zero) const {
   const auto c = Optional(key);
   if (!c) return fallback;
   const double v = c->AsDouble();
@@ -41,19 +44,21 @@ double Params::GetPositive(const std::string& key, double fallback, bool allow_z
   return v;
 }
 
-int Params::GetInt(const std::string& key, int fallback) const {
+int ComponentParams::GetInt(const std::string& key, int fallback) const {
   const auto c = Optional(key);
   return c ? c->AsInt() : fallback;
 }
 
-std::string Params::GetString(const std::string& key, const std::string& fallback) const {
+std::string ComponentParams::GetString(const std::string& key, const std::string& fallback) const {
   const auto c = Optional(key);
   return c ? c->AsString() : fallback;
 }
 
-std::string Params::RequireString(const std::string& key) const { return Require(key).AsString(); }
+std::string ComponentParams::RequireString(const std::string& key) const {
+  return Require(key).AsString();
+}
 
-Vec3 Params::GetVec3(const std::string& key, const Vec3& fallback) const {
+Vec3 ComponentParams::GetVec3(const std::string& key, const Vec3& fallback) const {
   const auto c = Optional(key);
   if (!c) return fallback;
   const std::vector<double> v = c->AsDoubleList();
@@ -61,8 +66,8 @@ Vec3 Params::GetVec3(const std::string& key, const Vec3& fallback) const {
   return Vec3(v[0], v[1], v[2]);
 }
 
-std::vector<std::string> Params::GetStringList(const std::string& key,
-                                               const std::vector<std::string>& fallback) const {
+std::vector<std::string> ComponentParams::GetStringList(
+    const std::string& key, const std::vector<std::string>& fallback) const {
   const auto c = Optional(key);
   if (!c) return fallback;
   std::vector<std::string> out;
@@ -74,9 +79,11 @@ std::vector<std::string> Params::GetStringList(const std::string& key,
   return out;
 }
 
-void Params::Fail(const std::string& message) const { throw InputError(where_ + ": " + message); }
+void ComponentParams::Fail(const std::string& message) const {
+  throw InputError(where_ + ": " + message);
+}
 
-void Params::FailKey(const std::string& key, const std::string& message) const {
+void ComponentParams::FailKey(const std::string& key, const std::string& message) const {
   if (const auto c = Optional(key)) c->Fail(message);
   Fail(message);
 }

@@ -1,5 +1,10 @@
 // Parameters of one effect or one sensor in a scenario file. The block may be absent
 // (`payload:` with no value); errors then name the entry that lacks the key.
+//
+// Not estimators::Params: that one is a plain map of numbers, so the estimators read their
+// parameters without YAML (estimators/ sees no file formats); this one keeps the YAML node,
+// since effects and sensors take maps of joint names, lists and strings, and their errors name
+// the file line.
 #pragma once
 
 #include <map>
@@ -12,13 +17,13 @@
 
 namespace flexbench::sim {
 
-class Params {
+class ComponentParams {
  public:
   // `node` is the parameter map (nullopt when the entry has no value); `where` names the entry
   // in messages, e.g. "rover.yaml:12: effect 'payload'".
-  Params(std::optional<ConfigNode> node, std::string where);
+  ComponentParams(std::optional<ConfigNode> node, std::string where);
   // Parameters given as text (tests, programmatic set-ups): `yaml` is a flow or block map.
-  static Params FromYaml(const std::string& yaml, const std::string& where);
+  static ComponentParams FromYaml(const std::string& yaml, const std::string& where);
 
   bool Has(const std::string& key) const;
   std::optional<ConfigNode> Optional(const std::string& key) const;

@@ -26,7 +26,7 @@ class Effect {
   virtual ~Effect() = default;
   const std::string& name() const { return name_; }
   // Reads and validates the parameters (model-independent checks).
-  virtual void Configure(const Params& params) = 0;
+  virtual void Configure(const ComponentParams& params) = 0;
   // Whether the model has what the effect acts on; `why` says what is missing.
   virtual bool SupportedBy(const ModelCatalog& catalog, const mjModel* m,
                            std::string* why) const = 0;
@@ -62,7 +62,7 @@ struct EffectEntry {
 const std::vector<EffectEntry>& EffectRegistry();
 
 // A configured effect by name; throws InputError "<where>: unknown effect '<name>' (known: ...)".
-std::unique_ptr<Effect> MakeEffect(const std::string& name, const Params& params);
+std::unique_ptr<Effect> MakeEffect(const std::string& name, const ComponentParams& params);
 // Same from YAML text for the parameters (tests and programmatic set-ups).
 std::unique_ptr<Effect> MakeEffect(const std::string& name, const std::string& params_yaml = "{}");
 

@@ -45,7 +45,9 @@ int BodyOrFail(const TruthSetup& setup, const Effect& effect, const std::string&
 class JointGroupEffect : public Effect {
  public:
   explicit JointGroupEffect(std::string group) : group_(std::move(group)) {}
-  void Configure(const Params& p) override { scale_ = p.GetPositive("stiffness_scale", 1.0); }
+  void Configure(const ComponentParams& p) override {
+    scale_ = p.GetPositive("stiffness_scale", 1.0);
+  }
   bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
     if (!c.JointsOfEffect(group_).empty()) return true;
     *why = "no <custom><text name=\"effect:" + group_ + "\"> listing passive joints";
@@ -83,7 +85,7 @@ std::unique_ptr<Effect> MakeGroup() {
 // ---- Gear elasticity between motor (encoder) and link: a torsional spring per actuated joint.
 class JointElasticityEffect : public Effect {
  public:
-  void Configure(const Params& p) override {
+  void Configure(const ComponentParams& p) override {
     scale_ = p.GetPositive("stiffness_scale", 1.0);
     if (const auto c = p.Optional("stiffness_Nm_per_rad")) {
       if (c->IsMap()) {
@@ -143,7 +145,7 @@ class JointElasticityEffect : public Effect {
 // ---- Backlash: play between motor and link; the load holds the link against one flank.
 class BacklashEffect : public Effect {
  public:
-  void Configure(const Params& p) override {
+  void Configure(const ComponentParams& p) override {
     const ConfigNode c = p.Require("width_deg");
     if (c.IsMap()) {
       for (const std::string& j : c.Keys()) {
@@ -193,7 +195,7 @@ class BacklashEffect : public Effect {
 // ---- Payload: a solid sphere of mass_kg at offset_m in the end-effector body's frame.
 class PayloadEffect : public Effect {
  public:
-  void Configure(const Params& p) override {
+  void Configure(const ComponentParams& p) override {
     mass_ = p.RequireDouble("mass_kg");
     if (mass_ < 0) p.FailKey("mass_kg", "must be >= 0");
     offset_ = p.GetVec3("offset_m", Vec3::Zero());
@@ -255,7 +257,7 @@ class PayloadEffect : public Effect {
 // ---- Encoder offset: a calibration error added to both encoders of a joint.
 class EncoderOffsetEffect : public Effect {
  public:
-  void Configure(const Params& p) override {
+  void Configure(const ComponentParams& p) override {
     // joint_offset says what identification reports, link = reading + offset; the former name
     // said what the encoder adds. Negation is exact, so both give the same bits.
     sign_ = name() == "encoder_offset" ? 1.0 : -1.0;
@@ -300,7 +302,7 @@ class EncoderOffsetEffect : public Effect {
 //   transmission_error: {harmonics_deg: {j3: [A1, phase1, A2, phase2(, A3, phase3)]}}  (deg)
 class TransmissionErrorEffect : public Effect {
  public:
-  void Configure(const Params& p) override {
+  void Configure(const ComponentParams& p) override {
     const ConfigNode c = p.Require("harmonics_deg");
     if (!c.IsMap()) c.Fail("expected {joint: [A1, phase1, A2, phase2]} in degrees");
     for (const std::string& j : c.Keys()) {
@@ -352,7 +354,7 @@ class TransmissionErrorEffect : public Effect {
 //   stiffening_spring: {stiffness_Nm_per_rad: {j2: 800}, cubic_Nm_per_rad3: {j2: 4e7}}
 class StiffeningJointEffect : public Effect {
  public:
-  void Configure(const Params& p) override {
+  void Configure(const ComponentParams& p) override {
     for (const auto& [key, out] :
          {std::pair{"stiffness_Nm_per_rad", &k1_}, std::pair{"cubic_Nm_per_rad3", &k3_}}) {
       const ConfigNode c = p.Require(key);
@@ -396,7 +398,7 @@ class StiffeningJointEffect : public Effect {
 // ---- Thermal expansion: the listed link bodies grow by alpha * delta_T along every offset.
 class ThermalExpansionEffect : public Effect {
  public:
-  void Configure(const Params& p) override {
+  void Configure(const ComponentParams& p) override {
     delta_t_ = p.RequireDouble("delta_T_K");
     alpha_ = p.GetPositive("alpha_per_K", 2.3e-5);  // aluminium
     bodies_ = p.GetStringList("bodies", {});
@@ -463,7 +465,7 @@ class ThermalExpansionEffect : public Effect {
 // integrated yaw drifts with the gyro bias about the vertical.
 class ImuBiasEffect : public Effect {
  public:
-  void Configure(const Params& p) override {
+  void Configure(const ComponentParams& p) override {
     spec_.gyro_bias = p.GetVec3("gyro_bias_rad_s", Vec3::Zero());
     spec_.accel_bias = p.GetVec3("accel_bias_m_s2", Vec3::Zero());
     spec_.gyro_walk = p.GetPositive("gyro_walk_rad_s_sqrt_s", 0.0, true);
@@ -564,7 +566,7 @@ const EffectEntry* FindEffect(const std::string& name, std::string* known) {
 
 }  // namespace
 
-std::unique_ptr<Effect> MakeEffect(const std::string& name, const Params& params) {
+std::unique_ptr<Effect> MakeEffect(const std::string& name, const ComponentParams& params) {
   std::string known;
   const EffectEntry* entry = FindEffect(name, &known);
   if (!entry) {
@@ -577,7 +579,7 @@ std::unique_ptr<Effect> MakeEffect(const std::string& name, const Params& params
 }
 
 std::unique_ptr<Effect> MakeEffect(const std::string& name, const std::string& params_yaml) {
-  return MakeEffect(name, Params::FromYaml(params_yaml, "effect '" + name + "'"));
+  return MakeEffect(name, ComponentParams::FromYaml(params_yaml, "effect '" + name + "'"));
 }
 
 std::vector<std::unique_ptr<Effect>> ParseEffects(const ConfigNode& effects) {
@@ -592,7 +594,7 @@ std::vector<std::unique_ptr<Effect>> ParseEffects(const ConfigNode& effects) {
     }
     const std::string where =
         (params ? params->Where() : effects.Where()) + ": effect '" + name + "'";
-    out.push_back(MakeEffect(name, Params(params, where)));
+    out.push_back(MakeEffect(name, ComponentParams(params, where)));
   }
   return out;
 }

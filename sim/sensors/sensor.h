@@ -82,7 +82,8 @@ class Sensor {
   double rate_hz() const { return rate_hz_; }
   // Reads parameters and checks the model objects they name. `seed` is the scenario seed; each
   // noise stream mixes it with a stable name ("<kind>/<sensor>/<channel>").
-  virtual void Configure(const Params& params, const Simulation& sim, std::uint64_t seed) = 0;
+  virtual void Configure(const ComponentParams& params, const Simulation& sim,
+                         std::uint64_t seed) = 0;
   // Appends the reading(s) of the current state, stamped `t` seconds.
   virtual void Sample(const Simulation& sim, double t, std::vector<SensorReading>* out) = 0;
 
@@ -92,7 +93,7 @@ class Sensor {
   }
 
  protected:
-  void ReadRate(const Params& params, double fallback_hz);
+  void ReadRate(const ComponentParams& params, double fallback_hz);
 
  private:
   std::string kind_;
@@ -112,7 +113,8 @@ const std::vector<SensorEntry>& SensorRegistry();
 // A configured sensor; throws InputError "<where>: unknown sensor kind '<kind>' (known: ...)"
 // or naming the parameter / model object at fault.
 std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& name,
-                                   const Params& params, const Simulation& sim, std::uint64_t seed);
+                                   const ComponentParams& params, const Simulation& sim,
+                                   std::uint64_t seed);
 // Same with parameters as YAML text (tests, programmatic set-ups).
 std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& name,
                                    const std::string& params_yaml, const Simulation& sim,

@@ -22,7 +22,7 @@ double Quantize(double x, double step) { return step > 0 ? step * std::round(x /
 // elastic or has play) or link side (after it). Reading = Q(true + offset + white noise).
 class EncoderSensor : public Sensor {
  public:
-  void Configure(const Params& p, const Simulation& sim, std::uint64_t seed) override {
+  void Configure(const ComponentParams& p, const Simulation& sim, std::uint64_t seed) override {
     const ConfigNode side = p.Require("side");
     if (side.AsString() == "motor") {
       side_ = EncoderSide::kMotor;
@@ -84,7 +84,7 @@ class EncoderSensor : public Sensor {
 // ---- 6-axis IMU: truth + constant bias + bias random walk + white noise, per axis.
 class ImuSensor : public Sensor {
  public:
-  void Configure(const Params& p, const Simulation& sim, std::uint64_t seed) override {
+  void Configure(const ComponentParams& p, const Simulation& sim, std::uint64_t seed) override {
     site_ = p.RequireString("site");
     site_id_ = mj_name2id(sim.model(), mjOBJ_SITE, site_.c_str());
     if (site_id_ < 0) p.FailKey("site", sim.model_name() + " has no site named '" + site_ + "'");
@@ -138,7 +138,7 @@ class ImuSensor : public Sensor {
 // ---- Contact: a site (fingertip) against the top face (+z) of a box or plane geom.
 class ContactSensor : public Sensor {
  public:
-  void Configure(const Params& p, const Simulation& sim, std::uint64_t seed) override {
+  void Configure(const ComponentParams& p, const Simulation& sim, std::uint64_t seed) override {
     site_ = p.RequireString("site");
     surface_ = p.RequireString("surface");
     site_id_ = mj_name2id(sim.model(), mjOBJ_SITE, site_.c_str());
@@ -190,7 +190,7 @@ class ContactSensor : public Sensor {
 // ---- Camera: intrinsics (fovy, offscreen resolution) and extrinsics from the model.
 class CameraSensor : public Sensor {
  public:
-  void Configure(const Params& p, const Simulation& sim, std::uint64_t) override {
+  void Configure(const ComponentParams& p, const Simulation& sim, std::uint64_t) override {
     camera_ = p.RequireString("camera");
     camera_id_ = mj_name2id(sim.model(), mjOBJ_CAMERA, camera_.c_str());
     if (camera_id_ < 0) {
@@ -236,12 +236,12 @@ const std::vector<SensorEntry>& SensorRegistry() {
   return kinds;
 }
 
-void Sensor::ReadRate(const Params& params, double fallback_hz) {
+void Sensor::ReadRate(const ComponentParams& params, double fallback_hz) {
   rate_hz_ = params.GetPositive("rate_hz", fallback_hz);
 }
 
 std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& name,
-                                   const Params& params, const Simulation& sim,
+                                   const ComponentParams& params, const Simulation& sim,
                                    std::uint64_t seed) {
   std::string known;
   for (const SensorEntry& e : SensorRegistry()) {
@@ -259,7 +259,8 @@ std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& n
 std::unique_ptr<Sensor> MakeSensor(const std::string& kind, const std::string& name,
                                    const std::string& params_yaml, const Simulation& sim,
                                    std::uint64_t seed) {
-  return MakeSensor(kind, name, Params::FromYaml(params_yaml, "sensor '" + name + "'"), sim, seed);
+  return MakeSensor(kind, name, ComponentParams::FromYaml(params_yaml, "sensor '" + name + "'"),
+                    sim, seed);
 }
 
 SensorSuite SensorSuite::Parse(const ConfigNode& list, const Simulation& sim, std::uint64_t seed) {
@@ -279,8 +280,8 @@ SensorSuite SensorSuite::Parse(const ConfigNode& list, const Simulation& sim, st
       known += std::string(known.empty() ? "" : ", ") + e.kind;
     }
     if (!found) kind_node.Fail("unknown sensor kind '" + kind + "' (known: " + known + ")");
-    suite.Add(
-        MakeSensor(kind, name, Params(item, item.Where() + ": sensor '" + name + "'"), sim, seed));
+    suite.Add(MakeSensor(
+        kind, name, ComponentParams(item, item.Where() + ": sensor '" + name + "'"), sim, seed));
   }
   return suite;
 }
