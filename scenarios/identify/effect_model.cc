@@ -385,101 +385,150 @@ ConfigLoads EffectModel::LoadsFor(const Eigen::VectorXd& q, const std::vector<in
   return Loads(q, q + ReadingShift(q, active, theta));
 }
 
-ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load) const {
+// The arm standing at q_load: its PPOE poses and MuJoCo's (d_), the base's pose in MuJoCo's
+// world, gravity in base coordinates and the end effector's position.
+struct EffectModel::LoadPose {
+  explicit LoadPose(const kinematics::PpoeModel& model) : pd(model) {}
+  kinematics::PpoeData pd;
+  const mjData* d = nullptr;
+  Mat3 R_w_base;
+  Vec3 p_w_base, g_base, p_ee;
+};
+
+void EffectModel::InitLoads(const Eigen::VectorXd& q, ConfigLoads* L) const {
   const kinematics::PpoeModel& model = chain_->model;
   const int n = model.num_frames();
-  ConfigLoads L;
-  L.tau = Eigen::VectorXd::Zero(model.nq());
-  L.tau_unit = Eigen::VectorXd::Zero(model.nq());
-  L.M_mid.assign(n, Vec3::Zero());
-  L.M_mid_unit.assign(n, Vec3::Zero());
-  L.axis_base = Eigen::Matrix3Xd::Zero(3, model.nq());
-  L.R_mid_T.assign(n, Mat3::Identity());
+  L->tau = Eigen::VectorXd::Zero(model.nq());
+  L->tau_unit = Eigen::VectorXd::Zero(model.nq());
+  L->M_mid.assign(n, Vec3::Zero());
+  L->M_mid_unit.assign(n, Vec3::Zero());
+  L->axis_base = Eigen::Matrix3Xd::Zero(3, model.nq());
+  L->R_mid_T.assign(n, Mat3::Identity());
   // PredictPose's untouched-frame form with every dq zero (q + 0.0 as there, same bits).
-  L.q_nominal = q;
-  L.T_nominal.assign(n, lie::SE3());
+  L->q_nominal = q;
+  L->T_nominal.assign(n, lie::SE3());
   for (FrameId f = 1; f < n; ++f) {
     if (!on_path_[f]) continue;
     const kinematics::PpoeFrame& fr = model.frame(f);
     const double qf = fr.q_index >= 0 ? q[fr.q_index] + 0.0 : 0.0;
-    L.T_nominal[f] = L.T_nominal[fr.parent] * fr.FixedTimesMotion(qf);
+    L->T_nominal[f] = L->T_nominal[fr.parent] * fr.FixedTimesMotion(qf);
   }
-  if (!has_masses_) return L;
-  kinematics::PpoeData pd(model);
-  kinematics::ForwardKinematics(model, pd, q_load);
+}
+
+void EffectModel::StandAt(const Eigen::VectorXd& q_load, LoadPose* P) const {
+  kinematics::ForwardKinematics(chain_->model, P->pd, q_load);
   if (!d_) d_ = sim::MakeData(m_);
   mjData* d = d_.get();
   mju_copy(d->qpos, m_->qpos0, m_->nq);
   chain_->WriteQpos(q_load, d->qpos);
   mj_kinematics(m_, d);
   mj_comPos(m_, d);
+  P->d = d;
   const int base = chain_->base_body;
-  Mat3 R_w_base;
   for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) R_w_base(r, c) = d->xmat[9 * base + 3 * r + c];
+    for (int c = 0; c < 3; ++c) P->R_w_base(r, c) = d->xmat[9 * base + 3 * r + c];
   }
-  const Vec3 p_w_base(d->xpos[3 * base], d->xpos[3 * base + 1], d->xpos[3 * base + 2]);
-  const Vec3 g_base =
-      R_w_base.transpose() * Vec3(m_->opt.gravity[0], m_->opt.gravity[1], m_->opt.gravity[2]);
-  const Vec3 p_ee = pd.T_base_frame[point_frame_].translation();
-  // The gravity-linear loads under gravity g (base coordinates) into t, the geometry into L.
-  const auto terms = [&](const Vec3& g, GravityTerms* t) {
-    t->tau = Eigen::VectorXd::Zero(model.nq());
-    t->tau_unit = Eigen::VectorXd::Zero(model.nq());
-    t->M_mid.assign(n, Vec3::Zero());
-    t->M_mid_unit.assign(n, Vec3::Zero());
-    // Moment about `a` (base coordinates) of the weight of body b's subtree, and of 1 kg at p_ee.
-    const auto moment = [&](int b, const Vec3& a) {
-      const Vec3 c = R_w_base.transpose() * (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1],
-                                                  d->subtree_com[3 * b + 2]) -
-                                             p_w_base);
-      return Vec3((c - a).cross(m_->body_subtreemass[b] * g));
-    };
-    const auto unit_moment = [&](const Vec3& a) { return Vec3((p_ee - a).cross(g)); };
-    for (int k = 0; k < model.nq(); ++k) {
-      const FrameId f = model.joint_frame(k);
-      if (!on_path_[f] || frame_body_[f] < 0) continue;
-      const kinematics::PpoeFrame& fr = model.frame(f);
-      const lie::SE3& T = pd.T_base_frame[f];
-      const Vec3 axis = T.rotation() * fr.joint.axis;
-      const Vec3 a = T * fr.joint.point;
-      // The torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest).
-      t->tau[k] = -axis.dot(moment(frame_body_[f], a));
-      L.axis_base.col(k) = axis;
-      t->tau_unit[k] = -axis.dot(unit_moment(a));
-    }
-    for (FrameId f = 1; f < n; ++f) {
-      const FrameId p = prev_joint_[f];
-      if (p < 0 || frame_body_[p] < 0) continue;
-      const kinematics::PpoeFrame& fr = model.frame(f);
-      const lie::SE3 T_pre = pd.T_base_frame[fr.parent] * fr.T_parent_ip;
-      const lie::SE3& Tp = pd.T_base_frame[p];
-      const Vec3 mid = 0.5 * (Tp.translation() + T_pre.translation());
-      // The whole link's subtree about its middle (the near half's own weight barely counts).
-      t->M_mid[f] = Tp.rotation().transpose() * moment(frame_body_[p], mid);
-      t->M_mid_unit[f] = Tp.rotation().transpose() * unit_moment(mid);
-      L.R_mid_T[f] = Tp.rotation().transpose();
-    }
-    if (mount_ != kinematics::kBaseFrame && frame_body_[mount_] >= 0) {
-      const kinematics::PpoeFrame& fr = model.frame(mount_);
-      const lie::SE3 T_pre = pd.T_base_frame[fr.parent] * fr.T_parent_ip;
-      t->M_mount = T_pre.rotation().transpose() * moment(frame_body_[mount_], T_pre.translation());
-      t->M_mount_unit = T_pre.rotation().transpose() * unit_moment(T_pre.translation());
-      L.R_mount_T = T_pre.rotation().transpose();
-      const int b = frame_body_[mount_];
-      const Vec3 c = R_w_base.transpose() * (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1],
-                                                  d->subtree_com[3 * b + 2]) -
-                                             p_w_base);
-      L.s_mount = L.R_mount_T * (m_->body_subtreemass[b] * (c - T_pre.translation()));
-      L.s_mount_unit = L.R_mount_T * (p_ee - T_pre.translation());
-      L.R_mount_point = L.R_mount_T * pd.T_base_frame[point_frame_].rotation();
-      t->g_mount = L.R_mount_T * g;
-    }
-    // (R_ee s) x g = -[g]x R_ee s.
-    t->M_first = -lie::Skew(g) * pd.T_base_frame[point_frame_].rotation();
-  };
+  P->p_w_base = Vec3(d->xpos[3 * base], d->xpos[3 * base + 1], d->xpos[3 * base + 2]);
+  P->g_base =
+      P->R_w_base.transpose() * Vec3(m_->opt.gravity[0], m_->opt.gravity[1], m_->opt.gravity[2]);
+  P->p_ee = P->pd.T_base_frame[point_frame_].translation();
+}
+
+Vec3 EffectModel::SubtreeCom(const LoadPose& P, int b) const {
+  const mjData* d = P.d;
+  return P.R_w_base.transpose() *
+         (Vec3(d->subtree_com[3 * b], d->subtree_com[3 * b + 1], d->subtree_com[3 * b + 2]) -
+          P.p_w_base);
+}
+
+Vec3 EffectModel::SubtreeMoment(const LoadPose& P, int b, const Vec3& a, const Vec3& g) const {
+  const Vec3 c = SubtreeCom(P, b);
+  return Vec3((c - a).cross(m_->body_subtreemass[b] * g));
+}
+
+namespace {
+
+// The moment about `a` (base coordinates) of 1 kg at p_ee under gravity g.
+inline Vec3 UnitMoment(const Vec3& p_ee, const Vec3& a, const Vec3& g) {
+  return Vec3((p_ee - a).cross(g));
+}
+
+}  // namespace
+
+void EffectModel::JointTorques(const LoadPose& P, const Vec3& g, GravityTerms* t,
+                               ConfigLoads* L) const {
+  const kinematics::PpoeModel& model = chain_->model;
+  for (int k = 0; k < model.nq(); ++k) {
+    const FrameId f = model.joint_frame(k);
+    if (!on_path_[f] || frame_body_[f] < 0) continue;
+    const kinematics::PpoeFrame& fr = model.frame(f);
+    const lie::SE3& T = P.pd.T_base_frame[f];
+    const Vec3 axis = T.rotation() * fr.joint.axis;
+    const Vec3 a = T * fr.joint.point;
+    // The torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest).
+    t->tau[k] = -axis.dot(SubtreeMoment(P, frame_body_[f], a, g));
+    L->axis_base.col(k) = axis;
+    t->tau_unit[k] = -axis.dot(UnitMoment(P.p_ee, a, g));
+  }
+}
+
+void EffectModel::MidMoments(const LoadPose& P, const Vec3& g, GravityTerms* t,
+                             ConfigLoads* L) const {
+  const kinematics::PpoeModel& model = chain_->model;
+  for (FrameId f = 1; f < model.num_frames(); ++f) {
+    const FrameId p = prev_joint_[f];
+    if (p < 0 || frame_body_[p] < 0) continue;
+    const kinematics::PpoeFrame& fr = model.frame(f);
+    const lie::SE3 T_pre = P.pd.T_base_frame[fr.parent] * fr.T_parent_ip;
+    const lie::SE3& Tp = P.pd.T_base_frame[p];
+    const Vec3 mid = 0.5 * (Tp.translation() + T_pre.translation());
+    // The whole link's subtree about its middle (the near half's own weight barely counts).
+    t->M_mid[f] = Tp.rotation().transpose() * SubtreeMoment(P, frame_body_[p], mid, g);
+    t->M_mid_unit[f] = Tp.rotation().transpose() * UnitMoment(P.p_ee, mid, g);
+    L->R_mid_T[f] = Tp.rotation().transpose();
+  }
+}
+
+void EffectModel::MountLoads(const LoadPose& P, const Vec3& g, GravityTerms* t,
+                             ConfigLoads* L) const {
+  if (mount_ == kinematics::kBaseFrame || frame_body_[mount_] < 0) return;
+  const kinematics::PpoeFrame& fr = chain_->model.frame(mount_);
+  const lie::SE3 T_pre = P.pd.T_base_frame[fr.parent] * fr.T_parent_ip;
+  t->M_mount =
+      T_pre.rotation().transpose() * SubtreeMoment(P, frame_body_[mount_], T_pre.translation(), g);
+  t->M_mount_unit = T_pre.rotation().transpose() * UnitMoment(P.p_ee, T_pre.translation(), g);
+  L->R_mount_T = T_pre.rotation().transpose();
+  const int b = frame_body_[mount_];
+  const Vec3 c = SubtreeCom(P, b);
+  L->s_mount = L->R_mount_T * (m_->body_subtreemass[b] * (c - T_pre.translation()));
+  L->s_mount_unit = L->R_mount_T * (P.p_ee - T_pre.translation());
+  L->R_mount_point = L->R_mount_T * P.pd.T_base_frame[point_frame_].rotation();
+  t->g_mount = L->R_mount_T * g;
+}
+
+void EffectModel::GravityLoads(const LoadPose& P, const Vec3& g, GravityTerms* t,
+                               ConfigLoads* L) const {
+  const int nq = chain_->model.nq();
+  const int n = chain_->model.num_frames();
+  t->tau = Eigen::VectorXd::Zero(nq);
+  t->tau_unit = Eigen::VectorXd::Zero(nq);
+  t->M_mid.assign(n, Vec3::Zero());
+  t->M_mid_unit.assign(n, Vec3::Zero());
+  JointTorques(P, g, t, L);
+  MidMoments(P, g, t, L);
+  MountLoads(P, g, t, L);
+  // (R_ee s) x g = -[g]x R_ee s.
+  t->M_first = -lie::Skew(g) * P.pd.T_base_frame[point_frame_].rotation();
+}
+
+ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load) const {
+  ConfigLoads L;
+  InitLoads(q, &L);
+  if (!has_masses_) return L;
+  LoadPose P(chain_->model);
+  StandAt(q_load, &P);
   GravityTerms t;
-  terms(g_base, &t);
+  GravityLoads(P, P.g_base, &t, &L);
   L.tau = std::move(t.tau);
   L.tau_unit = std::move(t.tau_unit);
   L.M_mid = std::move(t.M_mid);
@@ -490,10 +539,10 @@ ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& 
   L.M_first = t.M_first;
   if (gravity_tilt_ >= 0) {
     Vec3 a1, a2;
-    kinematics::GravityTiltAxes(g_base, &a1, &a2);
+    kinematics::GravityTiltAxes(P.g_base, &a1, &a2);
     L.horizontal.resize(2);
-    terms(a1.cross(g_base), &L.horizontal[0]);
-    terms(a2.cross(g_base), &L.horizontal[1]);
+    GravityLoads(P, a1.cross(P.g_base), &L.horizontal[0], &L);
+    GravityLoads(P, a2.cross(P.g_base), &L.horizontal[1], &L);
   }
   return L;
 }
@@ -563,107 +612,151 @@ lie::SE3 EffectModel::PredictPose(const Eigen::VectorXd& q, const ConfigLoads& L
   return ws.T[points_[point]];
 }
 
-void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L,
-                                  const std::vector<int>& active, const double* theta,
-                                  Workspace& ws) const {
+namespace {
+
+// The load a load-driven effect at joint k answers to: tau_J with the payload's share (its mass
+// `payload`, its couple in base axes).
+inline double JointLoadOf(const ConfigLoads& L, int k, double payload, const Vec3& couple) {
+  return L.tau[k] + payload * L.tau_unit[k] - L.axis_base.col(k).dot(couple);
+}
+
+// The backlash's flank: the last motion's direction where the data records it, else the one the
+// gravity load `tau` presses on (below a millinewton-metre it picks none).
+inline double Flank(const ConfigLoads& L, int k, double tau) {
+  const double motion = L.motion_sign.size() ? L.motion_sign[k] : 0.0;
+  return motion != 0.0 ? motion : tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0;
+}
+
+// The stiffening spring's reference torque tau0 [N m].
+constexpr double kSpringTau0 = 10.0;
+
+// The moment at link f's middle (start joint axes) with the payload's share.
+inline Vec3 MidMoment(const ConfigLoads& L, FrameId f, double payload, const Vec3& couple) {
+  return L.M_mid[f] + payload * L.M_mid_unit[f] + L.R_mid_T[f] * couple;
+}
+
+// The part of moment M across the link direction `dir` (the part that bends it).
+inline Vec3 Across(const Vec3& M, const Vec3& dir) { return M - M.dot(dir) * dir; }
+
+// The joint-level correction of a load-driven joint effect (compliance, backlash, stiffening
+// spring) at load tau, onto the joint's dq.
+inline void AddLoadDriven(const Candidate& c, const ConfigLoads& L, double tau, const double* t,
+                          double* dq) {
+  switch (c.type) {
+    case EffectType::kJointCompliance:
+      *dq += t[0] * tau;
+      break;
+    case EffectType::kBacklash:
+      *dq += t[0] * Flank(L, c.q_index, tau);
+      break;
+    case EffectType::kStiffeningSpring:
+      *dq += t[0] * tau + t[1] * tau * tau * tau / (kSpringTau0 * kSpringTau0);
+      break;
+    default:
+      break;
+  }
+}
+
+}  // namespace
+
+// The chain-wide terms of AccumulateTerms while the effects add up.
+struct EffectModel::ChainTerms {
   double payload = 0.0;
   Vec3 couple = Vec3::Zero();         // base axes
   Vec3 payload_first = Vec3::Zero();  // end-effector axes
-  {
-    const double* t = theta;
-    for (int i : active) {
-      if (candidates_[i].type == EffectType::kPayload) {
-        payload = t[0];
-        payload_first = Vec3(t[1], t[2], t[3]);
-        couple = L.M_first * payload_first;
-      }
-      t += candidates_[i].num_params;
+  double scale = 0.0;
+  Eigen::Vector2d mount_c = Eigen::Vector2d::Zero();
+};
+
+// The payload's parameters among `active` (mass, first moment) and its couple, into *ct.
+inline void EffectModel::PayloadTerms(const ConfigLoads& L, const std::vector<int>& active,
+                                      const double* theta, ChainTerms* ct) const {
+  const double* t = theta;
+  for (int i : active) {
+    if (candidates_[i].type == EffectType::kPayload) {
+      ct->payload = t[0];
+      ct->payload_first = Vec3(t[1], t[2], t[3]);
+      ct->couple = L.M_first * ct->payload_first;
     }
+    t += candidates_[i].num_params;
   }
+}
+
+// One active effect's terms (parameters t) onto ws and *ct.
+inline void EffectModel::AddTerms(const Candidate& c, const Eigen::VectorXd& q,
+                                  const ConfigLoads& L, const double* t, ChainTerms* ct,
+                                  Workspace& ws) const {
+  switch (c.type) {
+    case EffectType::kJointOffset:
+      ws.dq[c.q_index] += t[0];
+      break;
+    case EffectType::kJointCompliance:
+    case EffectType::kBacklash:
+    case EffectType::kStiffeningSpring:
+      AddLoadDriven(c, L, JointLoadOf(L, c.q_index, ct->payload, ct->couple), t, &ws.dq[c.q_index]);
+      break;
+    case EffectType::kLinkLength:
+      ws.dlen[c.frame] += t[0];
+      break;
+    case EffectType::kLinkOffset:
+      ws.offset[c.frame] += Vec3(t[0], t[1], t[2]);
+      break;
+    case EffectType::kAxisTilt:
+      ws.tilt[c.frame] += t[0] * (c.axis ? tilt_b_[c.frame] : tilt_a_[c.frame]);
+      break;
+    case EffectType::kLinkBending:
+      ws.bend[c.frame] +=
+          t[0] * Across(MidMoment(L, c.frame, ct->payload, ct->couple), link_dir_[c.frame]);
+      break;
+    case EffectType::kBaseCompliance:
+      // Copies add their compliances (a screened candidate on top of itself): one mount.
+      ct->mount_c += Eigen::Vector2d(t[0], t[1]);
+      ws.mount_active = true;
+      break;
+    case EffectType::kThermalExpansion:
+      ct->scale += t[0];
+      break;
+    case EffectType::kJointOrigin:
+      for (int k = 0; k < 6; ++k) ws.origin[c.frame][k] += t[k];
+      break;
+    case EffectType::kTransmissionError:
+    case EffectType::kJointErrorCurve:
+      AddPeriodicError(c, q[c.q_index], t, &ws.dq[c.q_index]);
+      break;
+    case EffectType::kPayload:
+    case EffectType::kCameraOffset:  // acts on the camera, not on the chain
+    case EffectType::kGravityTilt:   // acts on the loads (TiltedLoads)
+      break;
+  }
+}
+
+void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L,
+                                  const std::vector<int>& active, const double* theta,
+                                  Workspace& ws) const {
+  ChainTerms ct;
+  PayloadTerms(L, active, theta, &ct);
   // The per-frame terms are zero between calls (MakeWorkspace, and the reset below): only the
   // active effects' frames are touched, so a call costs what its effects cost, not the model's
   // frame count (the rover's chain has dozens of frames; a fill of all was ~1/3 of a call).
   ws.dq.setZero();
-  double scale = 0.0;
   Vec3 mount_rot = Vec3::Zero();
-  Eigen::Vector2d mount_c = Eigen::Vector2d::Zero();
   ws.mount_active = false;
   const double* t = theta;
   for (int i : active) {
     const Candidate& c = candidates_[i];
-    switch (c.type) {
-      case EffectType::kJointOffset:
-        ws.dq[c.q_index] += t[0];
-        break;
-      case EffectType::kJointCompliance:
-        ws.dq[c.q_index] += t[0] * (L.tau[c.q_index] + payload * L.tau_unit[c.q_index] -
-                                    L.axis_base.col(c.q_index).dot(couple));
-        break;
-      case EffectType::kBacklash: {
-        const double tau = L.tau[c.q_index] + payload * L.tau_unit[c.q_index] -
-                           L.axis_base.col(c.q_index).dot(couple);
-        // The flank: the last motion's direction where the data records it, else the one the
-        // gravity load presses on (below a millinewton-metre it picks none).
-        const double motion = L.motion_sign.size() ? L.motion_sign[c.q_index] : 0.0;
-        const double flank = motion != 0.0 ? motion : tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0;
-        ws.dq[c.q_index] += t[0] * flank;
-        break;
-      }
-      case EffectType::kLinkLength:
-        ws.dlen[c.frame] += t[0];
-        break;
-      case EffectType::kLinkOffset:
-        ws.offset[c.frame] += Vec3(t[0], t[1], t[2]);
-        break;
-      case EffectType::kAxisTilt:
-        ws.tilt[c.frame] += t[0] * (c.axis ? tilt_b_[c.frame] : tilt_a_[c.frame]);
-        break;
-      case EffectType::kLinkBending: {
-        const Vec3& dir = link_dir_[c.frame];
-        const Vec3 M =
-            L.M_mid[c.frame] + payload * L.M_mid_unit[c.frame] + L.R_mid_T[c.frame] * couple;
-        ws.bend[c.frame] += t[0] * (M - M.dot(dir) * dir);
-        break;
-      }
-      case EffectType::kBaseCompliance:
-        // Copies add their compliances (a screened candidate on top of itself): one mount.
-        mount_c += Eigen::Vector2d(t[0], t[1]);
-        ws.mount_active = true;
-        break;
-      case EffectType::kThermalExpansion:
-        scale += t[0];
-        break;
-      case EffectType::kJointOrigin:
-        for (int k = 0; k < 6; ++k) ws.origin[c.frame][k] += t[k];
-        break;
-      case EffectType::kTransmissionError:
-      case EffectType::kJointErrorCurve:
-        AddPeriodicError(c, q[c.q_index], t, &ws.dq[c.q_index]);
-        break;
-      case EffectType::kStiffeningSpring: {
-        constexpr double kTau0 = 10.0;
-        const double tau = L.tau[c.q_index] + payload * L.tau_unit[c.q_index] -
-                           L.axis_base.col(c.q_index).dot(couple);
-        ws.dq[c.q_index] += t[0] * tau + t[1] * tau * tau * tau / (kTau0 * kTau0);
-        break;
-      }
-      case EffectType::kPayload:
-      case EffectType::kCameraOffset:  // acts on the camera, not on the chain
-      case EffectType::kGravityTilt:   // acts on the loads (TiltedLoads)
-        break;
-    }
+    AddTerms(c, q, L, t, &ct, ws);
     t += c.num_params;
   }
   // A driver's true angle drives its coupled joints (sim::DeclaredChain::couplings).
   if (!chain_->couplings.empty()) chain_->PropagateShift(q, &ws.dq);
   if (ws.mount_active) {
-    const Vec3 M = L.M_mount + payload * L.M_mount_unit + L.R_mount_T * couple;
-    const Vec3 s = L.s_mount + payload * L.s_mount_unit + L.R_mount_point * payload_first;
-    mount_rot = kinematics::MountTilt(mount_c, M, s, L.g_mount, &ws.mount_J);
+    const Vec3 M = L.M_mount + ct.payload * L.M_mount_unit + L.R_mount_T * ct.couple;
+    const Vec3 s = L.s_mount + ct.payload * L.s_mount_unit + L.R_mount_point * ct.payload_first;
+    mount_rot = kinematics::MountTilt(ct.mount_c, M, s, L.g_mount, &ws.mount_J);
   }
-  ws.payload = payload;
-  ws.couple = couple;
-  ws.scale = scale;
+  ws.payload = ct.payload;
+  ws.couple = ct.couple;
+  ws.scale = ct.scale;
   ws.mount_rot = mount_rot;
 }
 
@@ -745,7 +838,7 @@ void EffectModel::ClearTerms(const std::vector<int>& active, Workspace& ws) cons
 // selection tells an unobservable candidate by its zero column.
 
 double EffectModel::JointLoad(const ConfigLoads& L, int k, const Workspace& ws) const {
-  return L.tau[k] + ws.payload * L.tau_unit[k] - L.axis_base.col(k).dot(ws.couple);
+  return JointLoadOf(L, k, ws.payload, ws.couple);
 }
 
 namespace {
@@ -861,44 +954,53 @@ bool EffectModel::MovesFrame(FrameId a, FrameId f) const {
   return f == a;
 }
 
-void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q,
-                                    const ConfigLoads& L, const Workspace& ws, Tangent* out) const {
-  const FrameId f = c.frame;
-  if (!MovesFrame(f, ws.point)) {  // on another branch of the tree than the point
-    for (int k = 0; k < c.num_params; ++k) out[k] = Tangent();
-    return;
+namespace {
+
+using Tangent = EffectModel::Tangent;
+
+// A body twist (v, w) of the stage pose T with the point at y there.
+inline Tangent BodyTangent(const lie::SE3& T, const Vec3& y, const Vec3& v, const Vec3& w) {
+  Tangent d;
+  d.w = T.rotation() * w;
+  d.dp = T.rotation() * (w.cross(y) + v);
+  return d;
+}
+
+// The joint of frame fr moving by dq' (d/dq Exp(zeta q) = Exp(zeta q) zeta), T5 the frame's
+// pose before it moves and y5 the point there.
+inline Tangent JointTangent(const kinematics::PpoeFrame& fr, const lie::SE3& T5, const Vec3& y5,
+                            double dq_ds) {
+  const Vec3 w = dq_ds * fr.joint.axis;
+  if (fr.joint.type == kinematics::JointType::kPrismatic) {
+    return BodyTangent(T5, y5, w, Vec3::Zero());
   }
-  const kinematics::PpoeFrame& fr = chain_->model.frame(f);
+  return BodyTangent(T5, y5 - fr.joint.point, Vec3::Zero(), w);
+}
+
+}  // namespace
+
+inline const EffectModel::Stages& EffectModel::TangentStages(const Candidate& c,
+                                                             const Workspace& ws,
+                                                             Stages* local) const {
+  const FrameId f = c.frame;
   // Most candidates sit at frames the active effects leave alone: there T2 = T4 = T5 = T_parent
   // T_parent_ip, and only their rotation matters below (a bend needs its pivot: all stages).
-  Stages st;
-  if (ws.touched[f]) {
-    st = ws.stages[f];  // PointInFrames'
-  } else if (c.type == EffectType::kLinkBending) {
-    st = FrameStages(f, ws);
-  } else {
-    st.T2 = lie::SE3(ws.T[fr.parent].rotation() * fr.T_parent_ip.rotation(), Vec3::Zero());
-    st.T4 = st.T5 = st.T2;
+  if (ws.touched[f]) return ws.stages[f];  // PointInFrames'
+  if (c.type == EffectType::kLinkBending) {
+    *local = FrameStages(f, ws);
+    return *local;
   }
-  // The point in the coordinates of T5 (before the joint moves), T4 and T2.
-  const Vec3& y5 = ws.y[f];
-  const Vec3 y4 = st.R_tilt * y5;
-  const Vec3 y2 = st.R_mount * y4;  // no bend at f here (HasTangent)
-  // A body twist (v, w) of the stage pose T with the point at y there.
-  const auto body = [](const lie::SE3& T, const Vec3& y, const Vec3& v, const Vec3& w) {
-    Tangent d;
-    d.w = T.rotation() * w;
-    d.dp = T.rotation() * (w.cross(y) + v);
-    return d;
-  };
-  // The joint moving by dq' (d/dq Exp(zeta q) = Exp(zeta q) zeta).
-  const auto joint = [&](double dq_ds) {
-    const Vec3 w = dq_ds * fr.joint.axis;
-    if (fr.joint.type == kinematics::JointType::kPrismatic) {
-      return body(st.T5, y5, w, Vec3::Zero());
-    }
-    return body(st.T5, y5 - fr.joint.point, Vec3::Zero(), w);
-  };
+  const kinematics::PpoeFrame& fr = chain_->model.frame(f);
+  local->T2 = lie::SE3(ws.T[fr.parent].rotation() * fr.T_parent_ip.rotation(), Vec3::Zero());
+  local->T4 = local->T5 = local->T2;
+  return *local;
+}
+
+void EffectModel::JointTangents(const Candidate& c, const Eigen::VectorXd& q, const ConfigLoads& L,
+                                const Workspace& ws, const lie::SE3& T5, Tangent* out) const {
+  const kinematics::PpoeFrame& fr = chain_->model.frame(c.frame);
+  const Vec3& y5 = ws.y[c.frame];
+  const auto joint = [&](double dq_ds) { return JointTangent(fr, T5, y5, dq_ds); };
   switch (c.type) {
     case EffectType::kJointOffset:
       out[0] = joint(1.0);
@@ -906,13 +1008,10 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
     case EffectType::kJointCompliance:
       out[0] = joint(Load(JointLoad(L, c.q_index, ws)));
       break;
-    case EffectType::kBacklash: {
+    case EffectType::kBacklash:
       // The flank as AccumulateTerms picks it (a sign: constant in the parameter).
-      const double tau = JointLoad(L, c.q_index, ws);
-      const double motion = L.motion_sign.size() ? L.motion_sign[c.q_index] : 0.0;
-      out[0] = joint(motion != 0.0 ? motion : tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0);
+      out[0] = joint(Flank(L, c.q_index, JointLoad(L, c.q_index, ws)));
       break;
-    }
     case EffectType::kTransmissionError:
     case EffectType::kJointErrorCurve: {
       const double qj = q[c.q_index];
@@ -923,56 +1022,96 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
       break;
     }
     case EffectType::kStiffeningSpring: {
-      constexpr double kTau0 = 10.0;
       const double tau = Load(JointLoad(L, c.q_index, ws));
       out[0] = joint(tau);
-      out[1] = joint(tau * tau * tau / (kTau0 * kTau0));
+      out[1] = joint(tau * tau * tau / (kSpringTau0 * kSpringTau0));
       break;
     }
+    default:
+      break;  // not a joint-level effect
+  }
+}
+
+void EffectModel::BaseComplianceTangents(const ConfigLoads& L, const Workspace& ws,
+                                         const lie::SE3& T4, const Vec3& y4, Tangent* out) const {
+  // d tilt / d c: MountTilt's at the active compliance; at none, the moment at rest.
+  const Vec3 M = Load(L.M_mount + ws.payload * L.M_mount_unit + L.R_mount_T * ws.couple);
+  const Eigen::Matrix2d J =
+      ws.mount_active ? ws.mount_J : Eigen::Matrix2d(Eigen::Vector2d(M.x(), M.y()).asDiagonal());
+  // Body rates of MountRotation = R_y(theta_y) R_x(theta_x): x for theta_x, R_x^T y for
+  // theta_y.
+  double sx, cx;
+  lie::SinCos(ws.mount_rot.x(), &sx, &cx);
+  const Vec3 by(0.0, cx, -sx);
+  for (int k = 0; k < 2; ++k) {
+    out[k] = BodyTangent(T4, y4, Vec3::Zero(), Vec3(J(0, k), 0.0, 0.0) + J(1, k) * by);
+  }
+}
+
+void EffectModel::LinkBendingTangent(FrameId f, const ConfigLoads& L, const Workspace& ws,
+                                     const Stages& st, Tangent* out) const {
+  // T3 = (Rb, mid - Rb mid) T2, Rb = Exp(phi): a base-frame turn about the link's middle.
+  const Vec3& dir = link_dir_[f];
+  const Vec3 M = MidMoment(L, f, ws.payload, ws.couple);
+  const Vec3 dphi = ws.T[prev_joint_[f]].rotation() * Load(Vec3(M - M.dot(dir) * dir));
+  out[0].w = lie::SO3LeftJacobian(st.phi) * dphi;
+  out[0].dp = out[0].w.cross(ws.T[ws.point].translation() - st.mid);
+}
+
+void EffectModel::TranslationTangents(const Candidate& c, const Workspace& ws, Tangent* out) const {
+  const kinematics::PpoeFrame& fr = chain_->model.frame(c.frame);
+  if (c.type == EffectType::kLinkLength) {
+    out[0].w.setZero();
+    out[0].dp = ws.T[fr.parent].rotation() * fr.T_parent_ip.translation().normalized();
+    return;
+  }
+  for (int k = 0; k < 3; ++k) {  // link_offset
+    out[k].w.setZero();
+    out[k].dp = ws.T[fr.parent].rotation().col(k);
+  }
+}
+
+void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q,
+                                    const ConfigLoads& L, const Workspace& ws, Tangent* out) const {
+  const FrameId f = c.frame;
+  if (!MovesFrame(f, ws.point)) {  // on another branch of the tree than the point
+    for (int k = 0; k < c.num_params; ++k) out[k] = Tangent();
+    return;
+  }
+  Stages local;
+  const Stages& st = TangentStages(c, ws, &local);
+  // The point in the coordinates of T5 (before the joint moves), T4 and T2.
+  const Vec3& y5 = ws.y[f];
+  const Vec3 y4 = st.R_tilt * y5;
+  const Vec3 y2 = st.R_mount * y4;  // no bend at f here (HasTangent)
+  switch (c.type) {
+    case EffectType::kJointOffset:
+    case EffectType::kJointCompliance:
+    case EffectType::kBacklash:
+    case EffectType::kTransmissionError:
+    case EffectType::kJointErrorCurve:
+    case EffectType::kStiffeningSpring:
+      JointTangents(c, q, L, ws, st.T5, out);
+      break;
     case EffectType::kAxisTilt:
-      out[0] = body(st.T5, y5, Vec3::Zero(),
-                    lie::SO3RightJacobian(ws.tilt[f]) * (c.axis ? tilt_b_[f] : tilt_a_[f]));
+      out[0] = BodyTangent(st.T5, y5, Vec3::Zero(),
+                           lie::SO3RightJacobian(ws.tilt[f]) * (c.axis ? tilt_b_[f] : tilt_a_[f]));
       break;
-    case EffectType::kBaseCompliance: {
-      // d tilt / d c: MountTilt's at the active compliance; at none, the moment at rest.
-      const Vec3 M = Load(L.M_mount + ws.payload * L.M_mount_unit + L.R_mount_T * ws.couple);
-      const Eigen::Matrix2d J = ws.mount_active
-                                    ? ws.mount_J
-                                    : Eigen::Matrix2d(Eigen::Vector2d(M.x(), M.y()).asDiagonal());
-      // Body rates of MountRotation = R_y(theta_y) R_x(theta_x): x for theta_x, R_x^T y for
-      // theta_y.
-      double sx, cx;
-      lie::SinCos(ws.mount_rot.x(), &sx, &cx);
-      const Vec3 by(0.0, cx, -sx);
-      for (int k = 0; k < 2; ++k) {
-        out[k] = body(st.T4, y4, Vec3::Zero(), Vec3(J(0, k), 0.0, 0.0) + J(1, k) * by);
-      }
+    case EffectType::kBaseCompliance:
+      BaseComplianceTangents(L, ws, st.T4, y4, out);
       break;
-    }
-    case EffectType::kLinkBending: {
-      // T3 = (Rb, mid - Rb mid) T2, Rb = Exp(phi): a base-frame turn about the link's middle.
-      const Vec3& dir = link_dir_[f];
-      const Vec3 M = L.M_mid[f] + ws.payload * L.M_mid_unit[f] + L.R_mid_T[f] * ws.couple;
-      const Vec3 dphi = ws.T[prev_joint_[f]].rotation() * Load(Vec3(M - M.dot(dir) * dir));
-      out[0].w = lie::SO3LeftJacobian(st.phi) * dphi;
-      out[0].dp = out[0].w.cross(ws.T[ws.point].translation() - st.mid);
+    case EffectType::kLinkBending:
+      LinkBendingTangent(f, L, ws, st, out);
       break;
-    }
     case EffectType::kLinkLength:
-      out[0].w.setZero();
-      out[0].dp = ws.T[fr.parent].rotation() * fr.T_parent_ip.translation().normalized();
-      break;
     case EffectType::kLinkOffset:
-      for (int k = 0; k < 3; ++k) {
-        out[k].w.setZero();
-        out[k].dp = ws.T[fr.parent].rotation().col(k);
-      }
+      TranslationTangents(c, ws, out);
       break;
     case EffectType::kJointOrigin: {
       // T2 = T1 Exp(xi): body twist Jr(xi) e_k, xi = [rho; theta].
       const Mat6 Jr = lie::SE3RightJacobian(ws.origin[f]);
       for (int k = 0; k < 6; ++k) {
-        out[k] = body(st.T2, y2, Jr.col(k).head<3>(), Jr.col(k).tail<3>());
+        out[k] = BodyTangent(st.T2, y2, Jr.col(k).head<3>(), Jr.col(k).tail<3>());
       }
       break;
     }

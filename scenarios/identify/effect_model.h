@@ -276,8 +276,27 @@ class EffectModel {
   // ws.T under them, and the terms back to zero.
   void AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L,
                        const std::vector<int>& active, const double* theta, Workspace& ws) const;
+  // AccumulateTerms' steps: the payload's terms, then each active effect's.
+  struct ChainTerms;
+  void PayloadTerms(const ConfigLoads& L, const std::vector<int>& active, const double* theta,
+                    ChainTerms* ct) const;
+  void AddTerms(const Candidate& c, const Eigen::VectorXd& q, const ConfigLoads& L, const double* t,
+                ChainTerms* ct, Workspace& ws) const;
   void ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L, Workspace& ws) const;
   void ClearTerms(const std::vector<int>& active, Workspace& ws) const;
+  // Loads' steps: the zero loads and the nominal poses at q; the arm standing at q_load; the
+  // centre of mass of body b's subtree (base coordinates) and the moment of its weight about
+  // a under gravity g; the gravity-linear loads under g into t, the geometry into L, per
+  // joint torque, link middle and mount.
+  struct LoadPose;
+  void InitLoads(const Eigen::VectorXd& q, ConfigLoads* L) const;
+  void StandAt(const Eigen::VectorXd& q_load, LoadPose* P) const;
+  Vec3 SubtreeCom(const LoadPose& P, int b) const;
+  Vec3 SubtreeMoment(const LoadPose& P, int b, const Vec3& a, const Vec3& g) const;
+  void GravityLoads(const LoadPose& P, const Vec3& g, GravityTerms* t, ConfigLoads* L) const;
+  void JointTorques(const LoadPose& P, const Vec3& g, GravityTerms* t, ConfigLoads* L) const;
+  void MidMoments(const LoadPose& P, const Vec3& g, GravityTerms* t, ConfigLoads* L) const;
+  void MountLoads(const LoadPose& P, const Vec3& g, GravityTerms* t, ConfigLoads* L) const;
   // The load a load-driven effect at joint k answers to (tau_J with the payload's share).
   double JointLoad(const ConfigLoads& L, int k, const Workspace& ws) const;
   // Whether frame f lies on a link that an active link_bending turns: the bend's pivot (the
@@ -294,6 +313,18 @@ class EffectModel {
   // The tangents of candidate c's parameters at the terms in ws (PointInFrames done).
   void CandidateTangents(const Candidate& c, const Eigen::VectorXd& q, const ConfigLoads& L,
                          const Workspace& ws, Tangent* out) const;
+  // CandidateTangents' steps: the stages of c's frame (those PointInFrames kept, else built in
+  // *local), and the tangents per family: joint-level corrections (their joint moving, T5 the
+  // frame's pose before it does), the mount's tilt (T4, y4: the mount stage and the point
+  // there), a bend, a link's length or offset.
+  const Stages& TangentStages(const Candidate& c, const Workspace& ws, Stages* local) const;
+  void JointTangents(const Candidate& c, const Eigen::VectorXd& q, const ConfigLoads& L,
+                     const Workspace& ws, const lie::SE3& T5, Tangent* out) const;
+  void BaseComplianceTangents(const ConfigLoads& L, const Workspace& ws, const lie::SE3& T4,
+                              const Vec3& y4, Tangent* out) const;
+  void LinkBendingTangent(FrameId f, const ConfigLoads& L, const Workspace& ws, const Stages& st,
+                          Tangent* out) const;
+  void TranslationTangents(const Candidate& c, const Workspace& ws, Tangent* out) const;
 
   const sim::DeclaredChain* chain_;
   FrameId point_frame_;

@@ -506,57 +506,24 @@ py::object RunCommand(F&& command, const std::string& out) {
   return result;
 }
 
-}  // namespace
-}  // namespace flexbench::python
+using ModelClass = py::class_<Model, std::shared_ptr<Model>>;
+using EstimatorClass = py::class_<PyEstimator>;
 
-using namespace flexbench;
-using namespace flexbench::python;
+// ---- Bindings ---------------------------------------------------------------------------
 
-PYBIND11_MODULE(flexbench, m) {
-  m.doc() =
-      "flexbench: declared PPOE models, probabilistic forward kinematics, the estimators by "
-      "name, and the runner (run_scenario, identify). See docs/python.md.";
-  m.attr("__version__") = FLEXBENCH_VERSION;
-  py::register_local_exception_translator(&TranslateExceptions);
-
-  py::class_<Model, std::shared_ptr<Model>>(m, "DeclaredModel",
-                                            "A declared model (models/<name>.declared.yaml) built "
-                                            "into its PPOE chain from the MuJoCo model it names.")
-      .def_static("load", &Model::Load, py::arg("path"),
-                  "Loads a declared-model YAML file (and the MJCF/URDF it names).")
-      .def_property_readonly("nq", &Model::nq, "number of joint variables (len(q))")
-      .def_property_readonly(
-          "joint_names", [](const Model& self) { return self.chain().q_joints; },
-          "MJCF joint of each entry of q")
-      .def_property_readonly(
-          "frame_names",
-          [](const Model& self) {
-            std::vector<std::string> names;
-            for (const auto& f : self.ppoe().frames()) names.push_back(f.name);
-            return names;
-          },
-          "typed names of the PPOE frames, by id")
-      .def_property_readonly("end_effector",
-                             [](const Model& self) { return self.declared().end_effector; })
-      .def_property_readonly("observed_frames",
-                             [](const Model& self) { return self.declared().observed_frames; })
-      .def_property_readonly("file", [](const Model& self) { return self.declared().file; })
-      .def_property_readonly("model_path",
-                             [](const Model& self) { return self.declared().model_path; })
-      .def(
-          "frame_id", [](const Model& self, const py::object& frame) { return self.Frame(frame); },
-          py::arg("frame"), "id of a frame given by name (or id, checked)")
-      .def(
-          "fk",
-          [](Model& self, const py::object& q, const py::object& frame) {
-            const FrameId f = self.Frame(frame);
-            return self.WithQ(q, [&](const Eigen::Ref<const Eigen::VectorXd>& qv) {
-              kinematics::ForwardKinematics(self.ppoe(), self.data(), qv);
-              return PoseArray(self.data().T_base_frame[f]);
-            });
-          },
-          py::arg("q"), py::arg("frame") = py::none(),
-          "Mean pose T_base_frame(q) as a 4x4 array (no identified effects applied).")
+// DeclaredModel: fk, fk_cov and jacobian.
+void BindModelKinematics(ModelClass& cls) {
+  cls.def(
+         "fk",
+         [](Model& self, const py::object& q, const py::object& frame) {
+           const FrameId f = self.Frame(frame);
+           return self.WithQ(q, [&](const Eigen::Ref<const Eigen::VectorXd>& qv) {
+             kinematics::ForwardKinematics(self.ppoe(), self.data(), qv);
+             return PoseArray(self.data().T_base_frame[f]);
+           });
+         },
+         py::arg("q"), py::arg("frame") = py::none(),
+         "Mean pose T_base_frame(q) as a 4x4 array (no identified effects applied).")
       .def(
           "fk_cov",
           [](Model& self, const py::object& q, const py::object& frame, int order) {
@@ -583,58 +550,65 @@ PYBIND11_MODULE(flexbench, m) {
             });
           },
           py::arg("q"), py::arg("frame") = py::none(),
-          "6 x nq local Jacobian: T(q + dq) = T(q) Exp(J dq) to first order.")
-      .def("__repr__", [](const Model& self) {
-        return "<flexbench.DeclaredModel '" + self.declared().file +
-               "' nq=" + std::to_string(self.nq()) + ">";
-      });
+          "6 x nq local Jacobian: T(q + dq) = T(q) Exp(J dq) to first order.");
+}
 
-  py::class_<PyEstimator>(m, "Estimator", "An estimator made by flexbench.make_estimator.")
-      .def_property_readonly("name", &PyEstimator::name)
-      .def("reset", [](PyEstimator& self) { self.get().Reset(); })
-      .def(
-          "predict", [](PyEstimator& self, double t) { self.get().Predict(t); }, py::arg("t"))
-      .def(
-          "estimate",
-          [](PyEstimator& self) {
-            const estimators::Belief b = self.get().Estimate();
-            return py::make_tuple(PoseArray(b.T_base_ee), MatrixArray(b.cov));
+// DeclaredModel: loading, names, frames, its kinematics.
+void BindDeclaredModel(py::module_& m) {
+  ModelClass cls(m, "DeclaredModel",
+                 "A declared model (models/<name>.declared.yaml) built "
+                 "into its PPOE chain from the MuJoCo model it names.");
+  cls.def_static("load", &Model::Load, py::arg("path"),
+                 "Loads a declared-model YAML file (and the MJCF/URDF it names).")
+      .def_property_readonly("nq", &Model::nq, "number of joint variables (len(q))")
+      .def_property_readonly(
+          "joint_names", [](const Model& self) { return self.chain().q_joints; },
+          "MJCF joint of each entry of q")
+      .def_property_readonly(
+          "frame_names",
+          [](const Model& self) {
+            std::vector<std::string> names;
+            for (const auto& f : self.ppoe().frames()) names.push_back(f.name);
+            return names;
           },
-          "(T 4x4, Sigma 6x6): the end-effector pose (in the base, or estimate_in) and its "
-          "covariance in the local tangent space.")
+          "typed names of the PPOE frames, by id")
+      .def_property_readonly("end_effector",
+                             [](const Model& self) { return self.declared().end_effector; })
+      .def_property_readonly("observed_frames",
+                             [](const Model& self) { return self.declared().observed_frames; })
+      .def_property_readonly("file", [](const Model& self) { return self.declared().file; })
+      .def_property_readonly("model_path",
+                             [](const Model& self) { return self.declared().model_path; })
       .def(
-          "belief",
-          [](PyEstimator& self) {
-            const estimators::Belief b = self.get().Estimate();
-            py::dict d;
-            d["t"] = b.t;
-            d["T"] = PoseArray(b.T_base_ee);
-            d["cov"] = MatrixArray(b.cov);
-            d["q"] = b.has_joints ? py::object(VectorArray(b.q)) : py::none();
-            d["q_std"] = b.has_joints ? py::object(VectorArray(b.q_std)) : py::none();
-            return d;
-          },
-          "the whole belief as a dict: t, T, cov, q and q_std (None without joints)")
-      .def_property_readonly("covariance_repairs",
-                             [](PyEstimator& self) { return self.get().covariance_repairs(); })
-      .def(
-          "update_joints",
-          [](PyEstimator& self, double t, const py::object& q, const py::object& std) {
-            const int nq = self.model().nq();
-            if (nq > estimators::kMaxJoints) throw ValueErrorMessage("too many joints");
-            estimators::JointReading z;
-            z.t = t;
-            z.q = ReadVector(q, "q", nq);
-            if (py::isinstance<py::float_>(std) || py::isinstance<py::int_>(std)) {
-              z.std = estimators::JointVector::Constant(nq, std.cast<double>());
-            } else {
-              z.std = ReadVector(std, "std", nq);
-            }
-            return self.Update(z);
-          },
-          py::arg("t"), py::arg("q"), py::arg("std") = 0.0,
-          "Encoder readings (rad or m, in q order) with their noise std (scalar or per joint). "
-          "Returns the update status ('accepted', 'ignored', 'rejected_non_finite', ...).")
+          "frame_id", [](const Model& self, const py::object& frame) { return self.Frame(frame); },
+          py::arg("frame"), "id of a frame given by name (or id, checked)");
+  BindModelKinematics(cls);
+  cls.def("__repr__", [](const Model& self) {
+    return "<flexbench.DeclaredModel '" + self.declared().file +
+           "' nq=" + std::to_string(self.nq()) + ">";
+  });
+}
+
+// Estimator: encoder, IMU and orientation readings.
+void BindReadingUpdates(EstimatorClass& cls) {
+  cls.def(
+         "update_joints",
+         [](PyEstimator& self, double t, const py::object& q, const py::object& std) {
+           const int nq = self.model().nq();
+           if (nq > estimators::kMaxJoints) throw ValueErrorMessage("too many joints");
+           estimators::JointReading z;
+           z.t = t;
+           z.q = ReadVector(q, "q", nq);
+           if (py::isinstance<py::float_>(std) || py::isinstance<py::int_>(std)) {
+             z.std = estimators::JointVector::Constant(nq, std.cast<double>());
+           } else {
+             z.std = ReadVector(std, "std", nq);
+           }
+           return self.Update(z);
+         },
+         py::arg("t"), py::arg("q"), py::arg("std") = 0.0,
+         "Encoder readings (rad or m, in q order) with their noise std (scalar or per joint). "
+         "Returns the update status ('accepted', 'ignored', 'rejected_non_finite', ...).")
       .def(
           "update_imu",
           [](PyEstimator& self, double t, const py::object& gyro, const py::object& accel,
@@ -658,22 +632,26 @@ PYBIND11_MODULE(flexbench, m) {
             return self.Update(z);
           },
           py::arg("t"), py::arg("frame"), py::arg("q_base_frame"),
-          "orientation of a frame in the base as a quaternion [w, x, y, z]")
-      .def(
-          "update_pixel",
-          [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
-             const py::object& uv, const py::object& cov, int camera) {
-            estimators::PixelPoint z;
-            z.t = t;
-            z.camera = camera;
-            z.frame = self.model().Frame(frame);
-            z.p_frame = ReadFixedVector<3>(p_frame, "p_frame");
-            z.uv = ReadFixedVector<2>(uv, "uv");
-            z.cov = CovOr<2>(cov, "cov");
-            return self.Update(z);
-          },
-          py::arg("t"), py::arg("frame"), py::arg("p_frame"), py::arg("uv"),
-          py::arg("cov") = py::none(), py::arg("camera") = 0)
+          "orientation of a frame in the base as a quaternion [w, x, y, z]");
+}
+
+// Estimator: pixel and tag-corner readings.
+void BindCameraUpdates(EstimatorClass& cls) {
+  cls.def(
+         "update_pixel",
+         [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
+            const py::object& uv, const py::object& cov, int camera) {
+           estimators::PixelPoint z;
+           z.t = t;
+           z.camera = camera;
+           z.frame = self.model().Frame(frame);
+           z.p_frame = ReadFixedVector<3>(p_frame, "p_frame");
+           z.uv = ReadFixedVector<2>(uv, "uv");
+           z.cov = CovOr<2>(cov, "cov");
+           return self.Update(z);
+         },
+         py::arg("t"), py::arg("frame"), py::arg("p_frame"), py::arg("uv"),
+         py::arg("cov") = py::none(), py::arg("camera") = 0)
       .def(
           "update_tag",
           [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
@@ -694,25 +672,29 @@ PYBIND11_MODULE(flexbench, m) {
           },
           py::arg("t"), py::arg("frame"), py::arg("p_frame"), py::arg("uv"),
           py::arg("cov") = py::none(), py::arg("camera") = 0, py::arg("tag_id") = -1,
-          "the four corners of a tag (4x3 points in the frame, 4x2 pixels, 8x8 covariance)")
-      .def(
-          "update_contact",
-          [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
-             const py::object& T_base_plane, const py::object& plane_cov, double distance,
-             double std) {
-            estimators::PlaneContact z;
-            z.t = t;
-            z.frame = self.model().Frame(frame);
-            z.p_frame = ReadFixedVector<3>(p_frame, "p_frame");
-            z.T_base_plane = ReadPose(T_base_plane, "T_base_plane");
-            z.plane_cov = plane_cov.is_none() ? Mat6(Mat6::Zero())
-                                              : Mat6(ReadMatrix<6, 6>(plane_cov, "plane_cov"));
-            z.distance = distance;
-            z.std = std;
-            return self.Update(z);
-          },
-          py::arg("t"), py::arg("frame"), py::arg("p_frame"), py::arg("T_base_plane"),
-          py::arg("plane_cov") = py::none(), py::arg("distance") = 0.0, py::arg("std") = 1e-3)
+          "the four corners of a tag (4x3 points in the frame, 4x2 pixels, 8x8 covariance)");
+}
+
+// Estimator: plane contacts, positions and poses.
+void BindGeometryUpdates(EstimatorClass& cls) {
+  cls.def(
+         "update_contact",
+         [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
+            const py::object& T_base_plane, const py::object& plane_cov, double distance,
+            double std) {
+           estimators::PlaneContact z;
+           z.t = t;
+           z.frame = self.model().Frame(frame);
+           z.p_frame = ReadFixedVector<3>(p_frame, "p_frame");
+           z.T_base_plane = ReadPose(T_base_plane, "T_base_plane");
+           z.plane_cov = plane_cov.is_none() ? Mat6(Mat6::Zero())
+                                             : Mat6(ReadMatrix<6, 6>(plane_cov, "plane_cov"));
+           z.distance = distance;
+           z.std = std;
+           return self.Update(z);
+         },
+         py::arg("t"), py::arg("frame"), py::arg("p_frame"), py::arg("T_base_plane"),
+         py::arg("plane_cov") = py::none(), py::arg("distance") = 0.0, py::arg("std") = 1e-3)
       .def(
           "update_position",
           [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
@@ -738,10 +720,48 @@ PYBIND11_MODULE(flexbench, m) {
             z.cov = CovOr<6>(cov, "cov");
             return self.Update(z);
           },
-          py::arg("t"), py::arg("frame"), py::arg("T_base_frame"), py::arg("cov") = py::none())
-      .def("__repr__",
-           [](const PyEstimator& self) { return "<flexbench.Estimator '" + self.name() + "'>"; });
+          py::arg("t"), py::arg("frame"), py::arg("T_base_frame"), py::arg("cov") = py::none());
+}
 
+// Estimator: its belief and its updates by reading type.
+void BindEstimator(py::module_& m) {
+  EstimatorClass cls(m, "Estimator", "An estimator made by flexbench.make_estimator.");
+  cls.def_property_readonly("name", &PyEstimator::name)
+      .def("reset", [](PyEstimator& self) { self.get().Reset(); })
+      .def(
+          "predict", [](PyEstimator& self, double t) { self.get().Predict(t); }, py::arg("t"))
+      .def(
+          "estimate",
+          [](PyEstimator& self) {
+            const estimators::Belief b = self.get().Estimate();
+            return py::make_tuple(PoseArray(b.T_base_ee), MatrixArray(b.cov));
+          },
+          "(T 4x4, Sigma 6x6): the end-effector pose (in the base, or estimate_in) and its "
+          "covariance in the local tangent space.")
+      .def(
+          "belief",
+          [](PyEstimator& self) {
+            const estimators::Belief b = self.get().Estimate();
+            py::dict d;
+            d["t"] = b.t;
+            d["T"] = PoseArray(b.T_base_ee);
+            d["cov"] = MatrixArray(b.cov);
+            d["q"] = b.has_joints ? py::object(VectorArray(b.q)) : py::none();
+            d["q_std"] = b.has_joints ? py::object(VectorArray(b.q_std)) : py::none();
+            return d;
+          },
+          "the whole belief as a dict: t, T, cov, q and q_std (None without joints)")
+      .def_property_readonly("covariance_repairs",
+                             [](PyEstimator& self) { return self.get().covariance_repairs(); });
+  BindReadingUpdates(cls);
+  BindCameraUpdates(cls);
+  BindGeometryUpdates(cls);
+  cls.def("__repr__",
+          [](const PyEstimator& self) { return "<flexbench.Estimator '" + self.name() + "'>"; });
+}
+
+// make_estimator and estimator_names.
+void BindEstimatorRegistry(py::module_& m) {
   m.def("make_estimator", &MakePyEstimator, py::arg("name"), py::arg("model"),
         "make_estimator(name, model, *, seed=0, estimate_in=None, camera_frames=(), "
         "imu_frames=(), **params): an estimator of the registry by name with its scenario-file "
@@ -754,7 +774,10 @@ PYBIND11_MODULE(flexbench, m) {
     for (const auto& e : estimators::EstimatorRegistry()) names.push_back(e.name);
     return names;
   });
+}
 
+// run_scenario: `flexbench run`.
+void BindRunScenario(py::module_& m) {
   m.def(
       "run_scenario",
       [](const std::string& path, const std::string& out, std::optional<std::uint64_t> seed,
@@ -772,7 +795,10 @@ PYBIND11_MODULE(flexbench, m) {
       py::arg("overrides") = py::dict(), py::arg("force") = false,
       "`flexbench run PATH --out OUT [--seed S] [--set K=V ...] --quiet`; returns "
       "OUT/summary.json as a dict. overrides: {dotted.key: value} or ['KEY=VALUE', ...].");
+}
 
+// identify: `flexbench identify`.
+void BindIdentify(py::module_& m) {
   m.def(
       "identify",
       [](const std::string& declared, const std::string& calibration, const std::string& validation,
@@ -810,7 +836,9 @@ PYBIND11_MODULE(flexbench, m) {
       py::arg("overrides") = py::dict(), py::arg("force") = false,
       "`flexbench identify` with the same options (--calibration -> calibration, --set -> "
       "overrides, ...); returns OUT/summary.json as a dict.");
+}
 
+void BindBenchmark(py::module_& m) {
   // The C++ side of the benchmark (scripts/bench_python.py): n calls of
   // ForwardKinematicsWithCovariance on a preallocated workspace, in seconds.
   m.def(
@@ -825,4 +853,25 @@ PYBIND11_MODULE(flexbench, m) {
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       },
       py::arg("model"), py::arg("q"), py::arg("n"), py::arg("order") = 2);
+}
+
+}  // namespace
+}  // namespace flexbench::python
+
+using namespace flexbench;
+using namespace flexbench::python;
+
+PYBIND11_MODULE(flexbench, m) {
+  m.doc() =
+      "flexbench: declared PPOE models, probabilistic forward kinematics, the estimators by "
+      "name, and the runner (run_scenario, identify). See docs/python.md.";
+  m.attr("__version__") = FLEXBENCH_VERSION;
+  py::register_local_exception_translator(&TranslateExceptions);
+
+  BindDeclaredModel(m);
+  BindEstimator(m);
+  BindEstimatorRegistry(m);
+  BindRunScenario(m);
+  BindIdentify(m);
+  BindBenchmark(m);
 }
