@@ -4,6 +4,7 @@
 #include <set>
 
 #include "sim/config.h"
+#include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
 
 namespace flexbench::sim {
@@ -143,6 +144,9 @@ std::vector<DeclaredCheckSource> CheckSources(const ConfigNode& sources,
 
 DeclaredCheckSummary CheckDeclaredFile(const std::string& path) {
   const ConfigNode root = ConfigNode::LoadFile(path);
+  // The format is the reader's (every key it knows, identified effects and couplings included,
+  // with its limits); what follows checks the names against the model.
+  ParseDeclaredModel(root);
   DeclaredCheckSummary s;
   s.file = path;
   s.model_path = ModelPath(root);

@@ -176,6 +176,29 @@ DeclaredModel LoadDeclaredModel(const std::string& path) {
 
 namespace {
 
+// The reader refuses NaN and inf: refuse them here rather than write a file nothing can load.
+void CheckFinite(const DeclaredModel& d) {
+  const auto fail = [&](const std::string& what) {
+    throw InputError("declared model from " + CapForMessage(d.file) + ": " + what +
+                     " is not finite; nothing written");
+  };
+  for (const DeclaredSource& s : d.sources) {
+    if (!s.cov.allFinite() || !std::isfinite(s.about_axis_rad)) fail("source at '" + s.at + "'");
+  }
+  for (const IdentifiedEffect& e : d.identified_effects) {
+    for (const std::vector<double>* v : {&e.value, &e.std}) {
+      for (double x : *v) {
+        if (!std::isfinite(x)) fail("identified effect '" + e.effect + "'");
+      }
+    }
+  }
+  for (const DeclaredCoupling& c : d.coupled) {
+    for (const auto& [driver, coef] : c.drivers) {
+      if (!std::isfinite(coef)) fail("coupling of '" + c.joint + "'");
+    }
+  }
+}
+
 void EmitNames(YAML::Emitter& y, const char* key, const std::vector<std::string>& names) {
   y << YAML::Key << key << YAML::Value << YAML::Flow << names;
 }
@@ -201,11 +224,13 @@ void EmitSources(YAML::Emitter& y, const std::vector<DeclaredSource>& sources) {
   y << YAML::Key << "sources" << YAML::Value << YAML::BeginSeq;
   for (const DeclaredSource& s : sources) {
     y << YAML::BeginMap << YAML::Key << "at" << YAML::Value << s.at;
-    if (s.about_axis_rad > 0) {
+    // Exactly zero, not Eigen's isZero: a source scaled down to 1e-13 still says something.
+    const bool has_cov = (s.cov.array() != 0.0).any();
+    // A source of zero is still a source: the reader needs one of its keys.
+    if (s.about_axis_rad > 0 || !has_cov) {
       y << YAML::Key << "about_axis_deg" << YAML::Value << s.about_axis_rad / (M_PI / 180.0);
     }
-    // Exactly zero, not Eigen's isZero: a source scaled down to 1e-13 still says something.
-    if ((s.cov.array() != 0.0).any()) {
+    if (has_cov) {
       std::vector<double> rows(36);
       for (int k = 0; k < 36; ++k) rows[k] = s.cov(k / 6, k % 6);
       y << YAML::Key << "covariance" << YAML::Value << YAML::Flow << rows;
@@ -230,6 +255,7 @@ void EmitIdentifiedEffects(YAML::Emitter& y, const std::vector<IdentifiedEffect>
 }  // namespace
 
 std::string EmitDeclaredModel(const DeclaredModel& d, const std::string& header, int digits) {
+  CheckFinite(d);
   YAML::Emitter y;
   y.SetDoublePrecision(digits);
   if (!header.empty()) y << YAML::Comment(header);

@@ -101,7 +101,8 @@ void AssignEffectJoints(const mjModel* m, ModelCatalog* c) {
       const int j = mj_name2id(m, mjOBJ_JOINT, part.c_str());
       if (j < 0) continue;  // bodies (payload, thermal expansion) are checked by their effect
       JointEntry& e = c->joints[j];
-      if (e.role == JointRole::kActuated) continue;  // joint_elasticity, backlash
+      if (e.role == JointRole::kActuated)
+        continue;  // joint_compliance (tagged joint_elasticity), backlash
       if (!e.effect.empty() && e.effect != effect) {
         throw InputError(c->model_name + ": joint '" + part + "' is listed by effect:" + e.effect +
                          " and effect:" + effect);

@@ -101,8 +101,11 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
   }
   std::set<std::string> seen;
   for (const auto& effect : effects) {
-    if (!seen.insert(effect->name()).second) {
-      throw InputError(effect->where() + ": effect '" + effect->name() + "' given twice");
+    // Under its former name an effect is still the same effect: given twice it would apply twice.
+    const std::string canonical = CanonicalEffectName(effect->name());
+    if (!seen.insert(canonical.empty() ? effect->name() : canonical).second) {
+      throw InputError(effect->where() + ": effect '" + effect->name() + "' given twice" +
+                       (canonical != effect->name() ? " (it is '" + canonical + "')" : ""));
     }
     effect->Apply(setup_);
     effect_names_.push_back(effect->name());

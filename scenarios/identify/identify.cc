@@ -165,6 +165,7 @@ void FittedEffects(const EffectModel& em, const DataSet& data,
     for (const EquivalenceSet& s : res->equivalence) {
       if (s.effect != static_cast<int>(e)) continue;
       fe.name = s.name;
+      fe.members.clear();
       for (const EquivalentMember& m : s.members) fe.members.push_back(m.name);
       fe.value = s.members[0].value;
       fe.unobservable = s.members[0].unobservable;

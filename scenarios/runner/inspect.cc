@@ -79,7 +79,7 @@ void PassiveAndCoupled(const mjModel* m, const sim::ModelCatalog& catalog, Json*
       p["stiffness"] = m->jnt_stiffness[e.id];
       p["damping"] = m->dof_damping[e.dof_adr];
       p["armature"] = m->dof_armature[e.dof_adr];
-      p["effect"] = e.effect.empty() ? Json() : Json(e.effect);
+      p["effect"] = e.effect.empty() ? Json() : Json(sim::EffectOfMjcfTag(e.effect));
       passive.push_back(p);
     } else if (e.role == JointRole::kCoupled) {
       Json c;
@@ -87,7 +87,7 @@ void PassiveAndCoupled(const mjModel* m, const sim::ModelCatalog& catalog, Json*
       c["type"] = JointType(e.type);
       c["follows"] = catalog.Joint(e.coupled_to).name;
       c["polycoef"] = Vec(m->eq_data + mjNEQDATA * e.coupling_eq, 5);
-      c["effect"] = e.effect.empty() ? Json() : Json(e.effect);
+      c["effect"] = e.effect.empty() ? Json() : Json(sim::EffectOfMjcfTag(e.effect));
       coupled.push_back(c);
     }
   }
@@ -162,7 +162,7 @@ Json Effects(const mjModel* m, const sim::ModelCatalog& catalog) {
     entry["name"] = e.name;
     entry["supported"] = effect->SupportedBy(catalog, m, &why);
     entry["description"] = e.description;
-    const auto parts = catalog.effect_parts.find(e.name);
+    const auto parts = catalog.effect_parts.find(sim::MjcfTag(e));
     if (parts != catalog.effect_parts.end()) entry["parts"] = parts->second;
     if (!why.empty()) entry["missing"] = why;
     effects.push_back(entry);

@@ -11,6 +11,11 @@ namespace flexbench::sim {
 namespace {
 
 constexpr double kDeg = M_PI / 180.0;
+// Gear stiffnesses a model lists itself: effect:joint_elasticity (joints) and
+// effect:joint_elasticity:stiffness (numbers).
+constexpr char kGearTag[] = "joint_elasticity";
+// joint_offset's former name, which gave the offset the other sign.
+constexpr char kEncoderOffset[] = "encoder_offset";
 
 std::string Num(double v) {
   std::ostringstream s;
@@ -57,7 +62,7 @@ class JointGroupEffect : public Effect {
     const std::vector<int> joints = s.catalog->JointsOfEffect(group_);
     if (joints.empty()) {
       throw InputError(where() + ": " + s.model_name + " has no passive joints for effect '" +
-                       group_ + "' (no <custom><text name=\"effect:" + group_ + "\">)");
+                       name() + "' (no <custom><text name=\"effect:" + group_ + "\">)");
     }
     for (int j : joints) {
       if (s.catalog->Joint(j).role == JointRole::kCoupled) {
@@ -83,7 +88,7 @@ std::unique_ptr<Effect> MakeGroup() {
 }
 
 // ---- Gear elasticity between motor (encoder) and link: a torsional spring per actuated joint.
-class JointElasticityEffect : public Effect {
+class JointComplianceEffect : public Effect {
  public:
   void Configure(const ComponentParams& p) override {
     scale_ = p.GetPositive("stiffness_scale", 1.0);
@@ -114,8 +119,8 @@ class JointElasticityEffect : public Effect {
     }
     if (k.empty()) {
       // The model's own values: effect:joint_elasticity (joints) + :stiffness (numbers).
-      const auto parts = s.catalog->effect_parts.find("joint_elasticity");
-      const auto nums = s.catalog->effect_numbers.find("joint_elasticity:stiffness");
+      const auto parts = s.catalog->effect_parts.find(kGearTag);
+      const auto nums = s.catalog->effect_numbers.find(std::string(kGearTag) + ":stiffness");
       if (parts == s.catalog->effect_parts.end() || nums == s.catalog->effect_numbers.end() ||
           parts->second.size() != nums->second.size()) {
         throw InputError(where() + ": " + s.model_name +
@@ -254,13 +259,14 @@ class PayloadEffect : public Effect {
   std::string body_;
 };
 
-// ---- Encoder offset: a calibration error added to both encoders of a joint.
-class EncoderOffsetEffect : public Effect {
+// ---- Joint offset: a calibration error of both encoders of a joint. The encoders read
+// link - offset (joint_offset) or link + offset (encoder_offset, the former name).
+class JointOffsetEffect : public Effect {
  public:
   void Configure(const ComponentParams& p) override {
     // joint_offset says what identification reports, link = reading + offset; the former name
     // said what the encoder adds. Negation is exact, so both give the same bits.
-    sign_ = name() == "encoder_offset" ? 1.0 : -1.0;
+    sign_ = name() == kEncoderOffset ? 1.0 : -1.0;
     const ConfigNode c = p.Require("offset_deg");
     if (c.IsMap()) {
       for (const std::string& j : c.Keys()) per_joint_[j] = c.GetDouble(j);
@@ -352,7 +358,7 @@ class TransmissionErrorEffect : public Effect {
 
 // ---- A gear spring that stiffens with deflection: torque = k d + k3 d^3.
 //   stiffening_spring: {stiffness_Nm_per_rad: {j2: 800}, cubic_Nm_per_rad3: {j2: 4e7}}
-class StiffeningJointEffect : public Effect {
+class StiffeningSpringEffect : public Effect {
  public:
   void Configure(const ComponentParams& p) override {
     for (const auto& [key, out] :
@@ -516,10 +522,10 @@ const std::vector<EffectEntry>& EffectRegistry() {
   // One line per effect.
   static const std::vector<EffectEntry> effects = {
       {"base_compliance", "base plate bends under load: passive tilt joints (stiffness_scale)",
-       MakeGroup<kBasePlate>, "base_plate_compliance"},
+       MakeGroup<kBasePlate>, "base_plate_compliance", kBasePlate},
       {"link_bending",
        "elastic links: passive bending hinges between link segments (stiffness_scale)",
-       MakeGroup<kLinks>, "link_elasticity"},
+       MakeGroup<kLinks>, "link_elasticity", kLinks},
       {kNeck, "continuum-elastic neck: chain of passive spring joints (stiffness_scale)",
        MakeGroup<kNeck>},
       {kCameraSag, "camera mount sags under the camera's weight: passive joint (stiffness_scale)",
@@ -529,7 +535,7 @@ const std::vector<EffectEntry>& EffectRegistry() {
       {"joint_compliance",
        "gear elasticity between motor encoder and link (stiffness_Nm_per_rad; identification "
        "reports its inverse, rad/Nm)",
-       Make<JointElasticityEffect>, "joint_elasticity"},
+       Make<JointComplianceEffect>, "joint_elasticity", kGearTag},
       {"backlash", "play between motor and link, load holds the link on one flank (width_deg)",
        Make<BacklashEffect>},
       {"payload", "extra mass at the end effector (mass_kg, offset_m, radius_m, body)",
@@ -537,7 +543,7 @@ const std::vector<EffectEntry>& EffectRegistry() {
       {"joint_offset",
        "encoder calibration offset: link angle = reading + offset_deg (encoder_offset, its former "
        "name, takes the encoder's error: reading = link + offset_deg)",
-       Make<EncoderOffsetEffect>, "encoder_offset"},
+       Make<JointOffsetEffect>, kEncoderOffset},
       {"thermal_expansion", "links grow by alpha * delta_T (delta_T_K, alpha_per_K, bodies)",
        Make<ThermalExpansionEffect>},
       {"transmission_error",
@@ -547,7 +553,7 @@ const std::vector<EffectEntry>& EffectRegistry() {
       {"stiffening_spring",
        "gear spring stiffening with deflection, k d + k3 d^3 "
        "(stiffness_Nm_per_rad, cubic_Nm_per_rad3)",
-       Make<StiffeningJointEffect>, "stiffening_joint"},
+       Make<StiffeningSpringEffect>, "stiffening_joint"},
       {"imu_bias", "IMU constant bias and bias random walk, hence yaw drift (gyro_bias_rad_s, ...)",
        Make<ImuBiasEffect>},
   };
@@ -565,6 +571,23 @@ const EffectEntry* FindEffect(const std::string& name, std::string* known) {
 }
 
 }  // namespace
+
+std::string MjcfTag(const EffectEntry& entry) {
+  return entry.mjcf_tag ? entry.mjcf_tag : entry.name;
+}
+
+std::string CanonicalEffectName(const std::string& name) {
+  std::string known;
+  const EffectEntry* entry = FindEffect(name, &known);
+  return entry ? entry->name : "";
+}
+
+std::string EffectOfMjcfTag(const std::string& tag) {
+  for (const EffectEntry& e : EffectRegistry()) {
+    if (MjcfTag(e) == tag) return e.name;
+  }
+  return tag;
+}
 
 std::unique_ptr<Effect> MakeEffect(const std::string& name, const ComponentParams& params) {
   std::string known;

@@ -285,7 +285,10 @@ TEST(DeclaredModelFile, WhatTheWriterWritesTheReaderReads) {
       ASSERT_EQ(r.sources.size(), d.sources.size()) << name;
       for (size_t i = 0; i < d.sources.size(); ++i) {
         EXPECT_EQ(r.sources[i].at, d.sources[i].at);
-        EXPECT_TRUE(near(r.sources[i].about_axis_rad, d.sources[i].about_axis_rad)) << name << i;
+        // Degrees on the page: deg -> rad -> deg may move the last bit, whatever the digits.
+        EXPECT_NEAR(r.sources[i].about_axis_rad, d.sources[i].about_axis_rad,
+                    std::max(tol, 4e-16) * d.sources[i].about_axis_rad)
+            << name << i;
         for (int k = 0; k < 36; ++k) {
           EXPECT_TRUE(near(r.sources[i].cov(k), d.sources[i].cov(k))) << name << " source " << i;
         }
@@ -310,6 +313,33 @@ TEST(DeclaredModelFile, WhatTheWriterWritesTheReaderReads) {
     }
   }
   EXPECT_GE(models, 4);
+}
+
+// What the reader accepts the writer can write: a source of zero comes back as one; a NaN is
+// refused before anything is written.
+TEST(DeclaredModelFile, TheWriterWritesZeroSourcesAndRefusesNaN) {
+  testing::TempDir tmp;
+  DeclaredModel d;
+  d.model_path = testing::SourceDir() + "/models/planar3.xml";
+  d.actuated_joints = {"joint1"};
+  d.end_effector = "ee";
+  DeclaredSource zero;
+  zero.at = "joint1";
+  d.sources.push_back(zero);
+  testing::WriteFile(tmp.path() / "z.yaml", EmitDeclaredModel(d, ""));
+  const DeclaredModel r = LoadDeclaredModel((tmp.path() / "z.yaml").string());
+  ASSERT_EQ(r.sources.size(), 1u);
+  EXPECT_EQ(r.sources[0].about_axis_rad, 0.0);
+  EXPECT_TRUE(r.sources[0].cov.isZero(0.0));
+  d.identified_effects.push_back({"joint_offset@joint1", {std::nan("")}, {}, "rad", ""});
+  try {
+    EmitDeclaredModel(d, "");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("identified effect 'joint_offset@joint1' is not finite"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 }  // namespace

@@ -428,6 +428,20 @@ TEST(Effects, FormerNamesBuildTheSameTruth) {
   }
 }
 
+// One effect under both its names would apply twice (offsets cancelling, a plate twice as soft).
+TEST(Effects, AnEffectUnderBothNamesIsGivenTwice) {
+  try {
+    Rover({{"joint_offset", "{offset_deg: 0.3}"}, {"encoder_offset", "{offset_deg: 0.3}"}});
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("effect 'encoder_offset' given twice (it is "
+                                         "'joint_offset')"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(Rover({{"base_plate_compliance", ""}, {"base_compliance", ""}}), InputError);
+}
+
 TEST(Effects, UnknownOrUnsupportedEffectsAreBadInput) {
   try {
     MakeEffect("gravity_waves");

@@ -42,9 +42,10 @@ TEST(Inspect, RoverModelAsJson) {
   EXPECT_EQ(j["actuated_joints"].size(), 8u);
   std::map<std::string, std::string> passive;
   for (const Json& p : j["passive_joints"]) passive[p["name"]] = p["effect"];
-  EXPECT_EQ(passive["plate_pitch"], "base_plate_compliance");
-  EXPECT_EQ(passive["plate_roll"], "base_plate_compliance");
-  EXPECT_EQ(passive["link2_bend_y"], "link_elasticity");
+  // Labelled with the effect's name, though the MJCF tags them effect:base_plate_compliance.
+  EXPECT_EQ(passive["plate_pitch"], "base_compliance");
+  EXPECT_EQ(passive["plate_roll"], "base_compliance");
+  EXPECT_EQ(passive["link2_bend_y"], "link_bending");
   EXPECT_EQ(passive["mast_sag"], "camera_mount_sag");
   std::set<int> ids;
   for (const Json& t : j["tags"]) ids.insert(t["id"].get<int>());
@@ -67,6 +68,13 @@ TEST(Inspect, RoverModelAsJson) {
   EXPECT_TRUE(supported["transmission_error"]);
   EXPECT_TRUE(supported["stiffening_spring"]);
   EXPECT_EQ(supported.size(), 13u);
+  std::map<std::string, std::vector<std::string>> parts;
+  for (const Json& e : j["effects"]) {
+    if (e.contains("parts")) parts[e["name"]] = e["parts"].get<std::vector<std::string>>();
+  }
+  EXPECT_EQ(parts["base_compliance"], (std::vector<std::string>{"plate_pitch", "plate_roll"}));
+  EXPECT_EQ(parts["link_bending"].size(), 4u);
+  EXPECT_EQ(parts["joint_compliance"].size(), 6u);
   EXPECT_EQ(j["sensors"]["encoders"].size(), 8u);
 }
 
@@ -79,6 +87,26 @@ TEST(Inspect, DeclaredFileAndOtherModels) {
   const CommandResult h = RunCommand(Flexbench() + " inspect " + Model("humanoid_upper.xml"));
   ASSERT_EQ(h.exit_code, 0) << h.err;
   EXPECT_EQ(Json::parse(h.out)["coupled_joints"].size(), 2u);
+}
+
+// What closed_loop writes, inspect reads: the format is the reader's (sim/declared_model.h).
+TEST(Inspect, AnAugmentedDeclaredFile) {
+  TempDir tmp;
+  const fs::path p = tmp.path() / "aug.declared.yaml";
+  WriteFile(p, "model: " + Model("rover_arm.xml") +
+                   "\nactuated_joints: [j1, j2]\nend_effector: ee\n"
+                   "sources:\n  - {at: j1, about_axis_deg: 0.5, covariance: [" +
+                   std::string("0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, ") +
+                   "0, 0, 0, 1e-6, 0, 0, 0, 0, 0, 0, 1e-6, 0, 0, 0, 0, 0, 0, 1e-6]}\n"
+                   "identified_effects:\n  - effect: joint_offset@j2\n"
+                   "    equivalent: [joint_offset@j2, link_offset@j3]\n"
+                   "    value: [0.001]\n    std: [1e-5]\n    unit: rad\n");
+  const CommandResult r = RunCommand(Flexbench() + " inspect " + p.string());
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  WriteFile(p, "model: " + Model("rover_arm.xml") +
+                   "\nactuated_joints: [j1]\nend_effector: ee\n"
+                   "identified_effects:\n  - {effect: joint_offset@j1, value: [.nan]}\n");
+  ExpectBadInput(Flexbench() + " inspect " + p.string(), p.string() + ":5");
 }
 
 TEST(BadInput, DeclaredFileNamingAMissingJointOrFrame) {

@@ -16,6 +16,7 @@ namespace {
 
 std::set<std::string> IdentifiedTypes() {
   std::set<std::string> names;
+  // kGravityTilt is the last enumerator (effect_model.h); a type added after it must move this.
   for (int t = 0; t <= static_cast<int>(EffectType::kGravityTilt); ++t) {
     names.insert(ToString(static_cast<EffectType>(t)));
   }
