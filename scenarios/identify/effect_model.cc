@@ -48,58 +48,63 @@ int BodyOfFrame(const mjModel* m, const std::string& typed) {
 
 constexpr double kDeg = M_PI / 180.0;
 
-// Physical bounds per family (effect_model.h says why).
-void SetBounds(Candidate* c, bool prismatic) {
-  const auto all = [&](double lo, double hi) {
-    c->lower.assign(c->num_params, lo);
-    c->upper.assign(c->num_params, hi);
+// The bound a family puts on each of its parameters alike, into *lo, *hi (effect_model.h says
+// why); false for the families bounded per parameter.
+bool UniformBound(EffectType type, bool prismatic, double* lo, double* hi) {
+  const auto set = [&](double l, double h) {
+    *lo = l;
+    *hi = h;
+    return true;
   };
-  switch (c->type) {
+  switch (type) {
     case EffectType::kJointOffset:
-      prismatic ? all(-0.1, 0.1) : all(-10 * kDeg, 10 * kDeg);
-      break;
+      return prismatic ? set(-0.1, 0.1) : set(-10 * kDeg, 10 * kDeg);
     case EffectType::kAxisTilt:
     case EffectType::kGravityTilt:
-      all(-10 * kDeg, 10 * kDeg);
-      break;
+      return set(-10 * kDeg, 10 * kDeg);
     case EffectType::kBacklash:
-      all(-5 * kDeg, 5 * kDeg);
-      break;
+      return set(-5 * kDeg, 5 * kDeg);
     case EffectType::kLinkLength:
     case EffectType::kLinkOffset:
-      all(-0.1, 0.1);
-      break;
+      return set(-0.1, 0.1);
     case EffectType::kJointCompliance:
-      all(-1.0, 0.0);
-      break;
+      return set(-1.0, 0.0);
     case EffectType::kLinkBending:
     case EffectType::kBaseCompliance:
-      all(0.0, 1.0);
-      break;
+      return set(0.0, 1.0);
     case EffectType::kThermalExpansion:
-      all(-1e-3, 1e-3);
-      break;
-    case EffectType::kPayload:
-      all(-50.0, 50.0);
-      c->lower[0] = -1e-3;
-      c->upper[0] = 100.0;
-      break;
+      return set(-1e-3, 1e-3);
+    case EffectType::kPayload:  // the first moment; SetBounds bounds the mass
+      return set(-50.0, 50.0);
     case EffectType::kTransmissionError:
     case EffectType::kJointErrorCurve:
-      all(-1 * kDeg, 1 * kDeg);
-      break;
+      return set(-1 * kDeg, 1 * kDeg);
     case EffectType::kStiffeningSpring:
-      c->lower = {-1.0, 0.0};
-      c->upper = {0.0, 1.0};
-      break;
     case EffectType::kCameraOffset:
-    case EffectType::kJointOrigin: {
-      const double lin = c->type == EffectType::kCameraOffset ? 0.5 : 0.1;
-      const double ang = c->type == EffectType::kCameraOffset ? 0.5 : 10 * kDeg;
-      c->lower = {-lin, -lin, -lin, -ang, -ang, -ang};
-      c->upper = {lin, lin, lin, ang, ang, ang};
-      break;
-    }
+    case EffectType::kJointOrigin:
+      return false;
+  }
+  return false;
+}
+
+// Physical bounds per family (effect_model.h says why).
+void SetBounds(Candidate* c, bool prismatic) {
+  double lo = 0.0, hi = 0.0;
+  if (UniformBound(c->type, prismatic, &lo, &hi)) {
+    c->lower.assign(c->num_params, lo);
+    c->upper.assign(c->num_params, hi);
+  }
+  if (c->type == EffectType::kPayload) {
+    c->lower[0] = -1e-3;
+    c->upper[0] = 100.0;
+  } else if (c->type == EffectType::kStiffeningSpring) {
+    c->lower = {-1.0, 0.0};
+    c->upper = {0.0, 1.0};
+  } else if (c->type == EffectType::kCameraOffset || c->type == EffectType::kJointOrigin) {
+    const double lin = c->type == EffectType::kCameraOffset ? 0.5 : 0.1;
+    const double ang = c->type == EffectType::kCameraOffset ? 0.5 : 10 * kDeg;
+    c->lower = {-lin, -lin, -lin, -ang, -ang, -ang};
+    c->upper = {lin, lin, lin, ang, ang, ang};
   }
 }
 
@@ -157,7 +162,34 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
     : chain_(&chain), point_frame_(point_frame), m_(m) {
   const kinematics::PpoeModel& model = chain.model;
   const int n = model.num_frames();
-  points_ = {point_frame};
+  SetPoints(more_points);
+  frame_body_.assign(n, -1);
+  for (FrameId f = 1; f < n; ++f) frame_body_[f] = BodyOfFrame(m, model.frame(f).name);
+  FindMount();
+  // Below 10 g the model carries no real masses (e.g. a URDF without inertials, where MuJoCo
+  // keeps a minimal mass): loads are then zero and the load-driven effects unidentifiable.
+  const FrameId first_joint = FirstJointOnPath();
+  has_masses_ = first_joint > 0 && frame_body_[first_joint] >= 0 &&
+                m->body_subtreemass[frame_body_[first_joint]] > 0.01;
+  SetTiltAxes();
+  AddJointFamilies();
+  AddLinkLengths();
+  AddLinkBending();
+  AddToolOffsets();
+  AddChainWide(camera);
+  AddEvidenceFamilies();
+  AddJointOrigins();
+  FindCoupledDrivers();
+  if (gravity_tilt) {
+    AddCandidate(EffectType::kGravityTilt, "base", -1, -1, 2, 1e-6, "rad");
+    gravity_tilt_ = static_cast<int>(candidates_.size()) - 1;
+  }
+}
+
+void EffectModel::SetPoints(const std::vector<FrameId>& more_points) {
+  const kinematics::PpoeModel& model = chain_->model;
+  const int n = model.num_frames();
+  points_ = {point_frame_};
   for (FrameId p : more_points) {
     if (std::find(points_.begin(), points_.end(), p) == points_.end()) points_.push_back(p);
   }
@@ -172,47 +204,52 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
       if (f == kinematics::kBaseFrame) break;
     }
   }
-  frame_body_.assign(n, -1);
-  for (FrameId f = 1; f < n; ++f) frame_body_[f] = BodyOfFrame(m, model.frame(f).name);
-  // The first joint on the way to the point.
-  FrameId first_joint = -1;
-  for (FrameId f = 1; f < n; ++f) {
-    if (on_path_[f] && model.frame(f).q_index >= 0) {
-      first_joint = f;
-      break;
-    }
+}
+
+FrameId EffectModel::FirstJointOnPath() const {
+  const kinematics::PpoeModel& model = chain_->model;
+  for (FrameId f = 1; f < model.num_frames(); ++f) {
+    if (on_path_[f] && model.frame(f).q_index >= 0) return f;
   }
-  // The arm's mount, where a compliant base tilts: the first frame with a declared source ahead
-  // of the first joint (the declared model says the base is uncertain there), else the first
-  // joint's anchor (frame axes before the joint turns). On a tree with several measured points
-  // the mount carries them all: a frame above every point (issue 20: one hand's shoulder is no
-  // mount of the other hand; two arms on a fixed torso have none).
-  const auto above_every_point = [&](FrameId f) {
-    for (FrameId p : points_) {
-      FrameId a = p;
-      while (a > 0 && a != f) a = model.frame(a).parent;
-      if (a != f) return false;
-    }
-    return true;
-  };
+  return -1;
+}
+
+bool EffectModel::AboveEveryPoint(FrameId f) const {
+  for (FrameId p : points_) {
+    FrameId a = p;
+    while (a > 0 && a != f) a = chain_->model.frame(a).parent;
+    if (a != f) return false;
+  }
+  return true;
+}
+
+// The arm's mount, where a compliant base tilts: the first frame with a declared source ahead of
+// the first joint (the declared model says the base is uncertain there), else the first joint's
+// anchor (frame axes before the joint turns). On a tree with several measured points the mount
+// carries them all: a frame above every point (issue 20: one hand's shoulder is no mount of the
+// other hand; two arms on a fixed torso have none).
+void EffectModel::FindMount() {
+  const kinematics::PpoeModel& model = chain_->model;
+  const int n = model.num_frames();
   FrameId mount_joint = -1;
   for (FrameId f = 1; f < n; ++f) {
-    if (on_path_[f] && model.frame(f).q_index >= 0 && above_every_point(f)) {
+    if (on_path_[f] && model.frame(f).q_index >= 0 && AboveEveryPoint(f)) {
       mount_joint = f;
       break;
     }
   }
   mount_ = mount_joint > 0 ? mount_joint : kinematics::kBaseFrame;
   for (FrameId f = 1; f < (mount_joint > 0 ? mount_joint : n); ++f) {
-    if (on_path_[f] && model.frame(f).has_source && above_every_point(f)) {
+    if (on_path_[f] && model.frame(f).has_source && AboveEveryPoint(f)) {
       mount_ = f;
       break;
     }
   }
-  // Below 10 g the model carries no real masses (e.g. a URDF without inertials, where MuJoCo
-  // keeps a minimal mass): loads are then zero and the load-driven effects unidentifiable.
-  has_masses_ = first_joint > 0 && frame_body_[first_joint] >= 0 &&
-                m->body_subtreemass[frame_body_[first_joint]] > 0.01;
+}
+
+void EffectModel::SetTiltAxes() {
+  const kinematics::PpoeModel& model = chain_->model;
+  const int n = model.num_frames();
   tilt_a_.assign(n, Vec3::Zero());
   tilt_b_.assign(n, Vec3::Zero());
   for (FrameId f = 1; f < n; ++f) {
@@ -223,98 +260,130 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
     tilt_a_[f] = (any - any.dot(w) * w).normalized();
     tilt_b_[f] = w.cross(tilt_a_[f]);
   }
+}
 
-  const auto add = [&](EffectType t, const std::string& loc, int q, FrameId f, int np, double step,
-                       const char* unit) {
-    Candidate c;
-    c.type = t;
-    c.location = loc;
-    c.q_index = q;
-    c.frame = f;
-    c.num_params = np;
-    c.step = step;
-    c.unit = unit;
-    SetBounds(&c, model.frame(f > 0 ? f : 0).joint.type == kinematics::JointType::kPrismatic);
-    candidates_.push_back(c);
-  };
+Candidate& EffectModel::AddCandidate(EffectType type, const std::string& location, int q, FrameId f,
+                                     int num_params, double step, const char* unit) {
+  const kinematics::PpoeModel& model = chain_->model;
+  Candidate c;
+  c.type = type;
+  c.location = location;
+  c.q_index = q;
+  c.frame = f;
+  c.num_params = num_params;
+  c.step = step;
+  c.unit = unit;
+  SetBounds(&c, model.frame(f > 0 ? f : 0).joint.type == kinematics::JointType::kPrismatic);
+  candidates_.push_back(c);
+  return candidates_.back();
+}
+
+void EffectModel::AddJointFamilies() {
+  const kinematics::PpoeModel& model = chain_->model;
   for (int k = 0; k < model.nq(); ++k) {
     const FrameId f = model.joint_frame(k);
     if (!on_path_[f]) continue;
-    const std::string& name = chain.q_joints[k];
-    add(EffectType::kJointOffset, name, k, f, 1, 1e-6,
-        model.frame(f).joint.type == kinematics::JointType::kPrismatic ? "m" : "rad");
-    add(EffectType::kAxisTilt, name, k, f, 1, 1e-6, "rad");
-    add(EffectType::kAxisTilt, name, k, f, 1, 1e-6, "rad");
-    candidates_.back().axis = 1;
-    add(EffectType::kLinkOffset, name, k, f, 3, 1e-6, "m");
+    const std::string& name = chain_->q_joints[k];
+    AddCandidate(EffectType::kJointOffset, name, k, f, 1, 1e-6,
+                 model.frame(f).joint.type == kinematics::JointType::kPrismatic ? "m" : "rad");
+    AddCandidate(EffectType::kAxisTilt, name, k, f, 1, 1e-6, "rad");
+    AddCandidate(EffectType::kAxisTilt, name, k, f, 1, 1e-6, "rad").axis = 1;
+    AddCandidate(EffectType::kLinkOffset, name, k, f, 3, 1e-6, "m");
     if (model.frame(f).joint.type != kinematics::JointType::kRevolute) continue;
-    add(EffectType::kJointCompliance, name, k, f, 1, 1e-7, "rad/Nm");
-    add(EffectType::kBacklash, name, k, f, 1, 1e-6, "rad");
+    AddCandidate(EffectType::kJointCompliance, name, k, f, 1, 1e-7, "rad/Nm");
+    AddCandidate(EffectType::kBacklash, name, k, f, 1, 1e-6, "rad");
   }
-  for (FrameId f = 1; f < n; ++f) {
+}
+
+void EffectModel::AddLinkLengths() {
+  const kinematics::PpoeModel& model = chain_->model;
+  for (FrameId f = 1; f < model.num_frames(); ++f) {
     if (!on_path_[f] || model.frame(f).T_parent_ip.translation().norm() < 0.01) continue;
     const std::string name = Untyped(model.frame(f).name);
-    add(EffectType::kLinkLength, name, -1, f, 1, 1e-6, "m");
+    AddCandidate(EffectType::kLinkLength, name, -1, f, 1, 1e-6, "m");
   }
-  // Links between consecutive joints (passive frames in between belong to the link).
+}
+
+// Links between consecutive joints (passive frames in between belong to the link).
+void EffectModel::AddLinkBending() {
+  const kinematics::PpoeModel& model = chain_->model;
+  const int n = model.num_frames();
   prev_joint_.assign(n, -1);
-  {
-    kinematics::PpoeData pd(model);
-    kinematics::ForwardKinematics(model, pd, Eigen::VectorXd::Zero(model.nq()));
-    for (FrameId f = 1; f < n; ++f) {
-      if (!on_path_[f] || model.frame(f).q_index < 0) continue;
-      FrameId p = model.frame(f).parent;
-      while (p > 0 && model.frame(p).q_index < 0) p = model.frame(p).parent;
-      if (p <= 0) continue;
-      const lie::SE3 T_pre = pd.T_base_frame[model.frame(f).parent] * model.frame(f).T_parent_ip;
-      const Vec3 link_p = pd.T_base_frame[p].rotation().transpose() *
-                          (T_pre.translation() - pd.T_base_frame[p].translation());
-      if (link_p.norm() < 0.05) continue;
-      prev_joint_[f] = p;
-      link_dir_.resize(n, Vec3::Zero());
-      link_dir_[f] = link_p.normalized();
-      add(EffectType::kLinkBending, chain.q_joints[model.frame(f).q_index], -1, f, 1, 1e-7,
-          "rad/Nm");
-    }
+  kinematics::PpoeData pd(model);
+  kinematics::ForwardKinematics(model, pd, Eigen::VectorXd::Zero(model.nq()));
+  for (FrameId f = 1; f < n; ++f) {
+    if (!on_path_[f] || model.frame(f).q_index < 0) continue;
+    FrameId p = model.frame(f).parent;
+    while (p > 0 && model.frame(p).q_index < 0) p = model.frame(p).parent;
+    if (p <= 0) continue;
+    const lie::SE3 T_pre = pd.T_base_frame[model.frame(f).parent] * model.frame(f).T_parent_ip;
+    const Vec3 link_p = pd.T_base_frame[p].rotation().transpose() *
+                        (T_pre.translation() - pd.T_base_frame[p].translation());
+    if (link_p.norm() < 0.05) continue;
+    prev_joint_[f] = p;
+    link_dir_.resize(n, Vec3::Zero());
+    link_dir_[f] = link_p.normalized();
+    AddCandidate(EffectType::kLinkBending, chain_->q_joints[model.frame(f).q_index], -1, f, 1, 1e-7,
+                 "rad/Nm");
   }
-  // The tool: where the measured point sits on the last link (a probe, a ball, a fingertip),
-  // unless the point frame is a joint frame, which has its link_offset already.
+}
+
+// The tool: where the measured point sits on the last link (a probe, a ball, a fingertip), unless
+// the point frame is a joint frame, which has its link_offset already.
+void EffectModel::AddToolOffsets() {
+  const kinematics::PpoeModel& model = chain_->model;
   for (FrameId point : points_) {
     if (model.frame(point).q_index < 0)
-      add(EffectType::kLinkOffset, Untyped(model.frame(point).name), -1, point, 3, 1e-6, "m");
+      AddCandidate(EffectType::kLinkOffset, Untyped(model.frame(point).name), -1, point, 3, 1e-6,
+                   "m");
   }
+}
+
+// The mount's compliance and the families that act on the whole chain.
+void EffectModel::AddChainWide(const std::string& camera) {
+  const kinematics::PpoeModel& model = chain_->model;
   if (mount_ != kinematics::kBaseFrame) {
-    add(EffectType::kBaseCompliance, Untyped(model.frame(mount_).name), -1, mount_, 2, 1e-7,
-        "rad/Nm");
+    AddCandidate(EffectType::kBaseCompliance, Untyped(model.frame(mount_).name), -1, mount_, 2,
+                 1e-7, "rad/Nm");
   }
-  add(EffectType::kThermalExpansion, "all", -1, -1, 1, 1e-6, "-");
-  if (!camera.empty()) add(EffectType::kCameraOffset, camera, -1, -1, 6, 1e-6, "m, rad");
-  add(EffectType::kPayload, Untyped(model.frame(point_frame).name), -1, point_frame, 4, 1e-3,
-      "kg, kg m");
-  // Families that enter only when the residual diagnostics point at their joint; after the
-  // others, so those keep their indices.
+  AddCandidate(EffectType::kThermalExpansion, "all", -1, -1, 1, 1e-6, "-");
+  if (!camera.empty()) AddCandidate(EffectType::kCameraOffset, camera, -1, -1, 6, 1e-6, "m, rad");
+  AddCandidate(EffectType::kPayload, Untyped(model.frame(point_frame_).name), -1, point_frame_, 4,
+               1e-3, "kg, kg m");
+}
+
+// Families that enter only when the residual diagnostics point at their joint; after the others,
+// so those keep their indices.
+void EffectModel::AddEvidenceFamilies() {
+  const kinematics::PpoeModel& model = chain_->model;
   for (int k = 0; k < model.nq(); ++k) {
     const FrameId f = model.joint_frame(k);
     if (!on_path_[f] || model.frame(f).joint.type != kinematics::JointType::kRevolute) continue;
-    add(EffectType::kTransmissionError, chain.q_joints[k], k, f, 4, 1e-6, "rad");
-    candidates_.back().needs_evidence = true;
-    add(EffectType::kJointErrorCurve, chain.q_joints[k], k, f, 6, 1e-6, "rad");
-    candidates_.back().needs_evidence = true;
-    add(EffectType::kStiffeningSpring, chain.q_joints[k], k, f, 2, 1e-7, "rad/Nm");
-    candidates_.back().needs_evidence = true;
+    const std::string& name = chain_->q_joints[k];
+    AddCandidate(EffectType::kTransmissionError, name, k, f, 4, 1e-6, "rad").needs_evidence = true;
+    AddCandidate(EffectType::kJointErrorCurve, name, k, f, 6, 1e-6, "rad").needs_evidence = true;
+    AddCandidate(EffectType::kStiffeningSpring, name, k, f, 2, 1e-7, "rad/Nm").needs_evidence =
+        true;
   }
-  // Complete geometry last, so the named candidates keep their indices.
+}
+
+// Complete geometry last, so the named candidates keep their indices.
+void EffectModel::AddJointOrigins() {
+  const kinematics::PpoeModel& model = chain_->model;
   for (int k = 0; k < model.nq(); ++k) {
     const FrameId f = model.joint_frame(k);
     if (!on_path_[f]) continue;
-    add(EffectType::kJointOrigin, chain.q_joints[k], k, f, 6, 1e-6, "m, rad");
-    candidates_.back().generic_geometry = true;
+    AddCandidate(EffectType::kJointOrigin, chain_->q_joints[k], k, f, 6, 1e-6, "m, rad")
+        .generic_geometry = true;
   }
-  // Joint variables that drive a coupled joint, directly or through another.
-  drives_coupled_.assign(model.nq(), 0);
+}
+
+// Joint variables that drive a coupled joint, directly or through another.
+void EffectModel::FindCoupledDrivers() {
+  drives_coupled_.assign(chain_->model.nq(), 0);
   for (bool grew = true; grew;) {
     grew = false;
-    for (const sim::DeclaredChain::Coupling& cp : chain.couplings) {
+    for (const sim::DeclaredChain::Coupling& cp : chain_->couplings) {
       std::vector<int> drivers;
       for (const auto& [k, coef] : cp.linear) drivers.push_back(k);
       if (cp.poly_driver >= 0) drivers.push_back(cp.poly_driver);
@@ -322,10 +391,6 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
         if (!drives_coupled_[k]) drives_coupled_[k] = 1, grew = true;
       }
     }
-  }
-  if (gravity_tilt) {
-    add(EffectType::kGravityTilt, "base", -1, -1, 2, 1e-6, "rad");
-    gravity_tilt_ = static_cast<int>(candidates_.size()) - 1;
   }
 }
 
@@ -760,13 +825,42 @@ void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L
   ws.mount_rot = mount_rot;
 }
 
+inline bool EffectModel::Touched(FrameId f, const Workspace& ws) const {
+  return ws.scale != 0.0 || ws.dlen[f] != 0.0 || !ws.offset[f].isZero(0.0) ||
+         !ws.origin[f].isZero(0.0) || !ws.bend[f].isZero(0.0) || !ws.tilt[f].isZero(0.0) ||
+         (f == mount_ && !ws.mount_rot.isZero());
+}
+
+// Frame f's step where the active effects touch it (Touched): its translation scaled,
+// lengthened and offset, its origin moved, its link bent, the mount turned, the axis tilted,
+// then the joint's motion.
+inline void EffectModel::TouchedStep(FrameId f, const Eigen::VectorXd& q, Workspace& ws) const {
+  const kinematics::PpoeFrame& fr = chain_->model.frame(f);
+  const Vec3& t0 = fr.T_parent_ip.translation();
+  Vec3 tr = t0 * (1.0 + ws.scale);
+  if (ws.dlen[f] != 0.0) tr += ws.dlen[f] * t0.normalized();
+  tr += ws.offset[f];
+  lie::SE3 T_parent_f(fr.T_parent_ip.rotation(), tr);
+  if (!ws.origin[f].isZero()) T_parent_f = T_parent_f * lie::SE3::Exp(ws.origin[f]);
+  ws.T[f] = ws.T[fr.parent] * T_parent_f;
+  if (!ws.bend[f].isZero()) {
+    // The link turns about its middle: an Euler-Bernoulli beam under an end moment.
+    const FrameId p = prev_joint_[f];
+    const Mat3 Rb = lie::SO3Exp(ws.T[p].rotation() * ws.bend[f]);
+    const Vec3 mid = 0.5 * (ws.T[p].translation() + ws.T[f].translation());
+    ws.T[f] = lie::SE3(Rb, mid - Rb * mid) * ws.T[f];
+  }
+  if (f == mount_ && !ws.mount_rot.isZero()) {
+    ws.T[f] = ws.T[f] * lie::SE3(kinematics::MountRotation(ws.mount_rot), Vec3::Zero());
+  }
+  if (!ws.tilt[f].isZero()) ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(ws.tilt[f]), Vec3::Zero());
+  if (fr.q_index >= 0) ws.T[f] = ws.T[f] * fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]);
+}
+
 void EffectModel::ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L, Workspace& ws) const {
   const kinematics::PpoeModel& model = chain_->model;
   const int n = model.num_frames();
-  const double scale = ws.scale;
-  const Vec3& mount_rot = ws.mount_rot;
   ws.T[0] = lie::SE3();
-  const bool mount_turns = !mount_rot.isZero();
   // Until the first frame the effects touch, the poses are the cached nominal ones (when cached
   // for this very q: the diagnostics predict at perturbed readings with a row's loads).
   bool nominal =
@@ -775,40 +869,21 @@ void EffectModel::ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L, Wor
                  [](double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; });
   for (FrameId f = 1; f < n; ++f) {
     if (!on_path_[f]) continue;
-    const kinematics::PpoeFrame& fr = model.frame(f);
-    if (scale == 0.0 && ws.dlen[f] == 0.0 && ws.offset[f].isZero(0.0) && ws.origin[f].isZero(0.0) &&
-        ws.bend[f].isZero(0.0) && ws.tilt[f].isZero(0.0) && !(f == mount_ && mount_turns)) {
-      // Untouched by the active effects (most frames, most calls): the FK kernels' form.
-      const double dqf = fr.q_index >= 0 ? ws.dq[fr.q_index] : 0.0;
-      if (nominal && dqf == 0.0 && !std::signbit(dqf)) {
-        ws.T[f] = L.T_nominal[f];
-        continue;
-      }
+    if (Touched(f, ws)) {
       nominal = false;
-      const double qf = fr.q_index >= 0 ? q[fr.q_index] + dqf : 0.0;
-      ws.T[f] = ws.T[fr.parent] * fr.FixedTimesMotion(qf);
+      TouchedStep(f, q, ws);
+      continue;
+    }
+    // Untouched by the active effects (most frames, most calls): the FK kernels' form.
+    const kinematics::PpoeFrame& fr = model.frame(f);
+    const double dqf = fr.q_index >= 0 ? ws.dq[fr.q_index] : 0.0;
+    if (nominal && dqf == 0.0 && !std::signbit(dqf)) {
+      ws.T[f] = L.T_nominal[f];
       continue;
     }
     nominal = false;
-    const Vec3& t0 = fr.T_parent_ip.translation();
-    Vec3 tr = t0 * (1.0 + scale);
-    if (ws.dlen[f] != 0.0) tr += ws.dlen[f] * t0.normalized();
-    tr += ws.offset[f];
-    lie::SE3 T_parent_f(fr.T_parent_ip.rotation(), tr);
-    if (!ws.origin[f].isZero()) T_parent_f = T_parent_f * lie::SE3::Exp(ws.origin[f]);
-    ws.T[f] = ws.T[fr.parent] * T_parent_f;
-    if (!ws.bend[f].isZero()) {
-      // The link turns about its middle: an Euler-Bernoulli beam under an end moment.
-      const FrameId p = prev_joint_[f];
-      const Mat3 Rb = lie::SO3Exp(ws.T[p].rotation() * ws.bend[f]);
-      const Vec3 mid = 0.5 * (ws.T[p].translation() + ws.T[f].translation());
-      ws.T[f] = lie::SE3(Rb, mid - Rb * mid) * ws.T[f];
-    }
-    if (f == mount_ && mount_turns) {
-      ws.T[f] = ws.T[f] * lie::SE3(kinematics::MountRotation(mount_rot), Vec3::Zero());
-    }
-    if (!ws.tilt[f].isZero()) ws.T[f] = ws.T[f] * lie::SE3(lie::SO3Exp(ws.tilt[f]), Vec3::Zero());
-    if (fr.q_index >= 0) ws.T[f] = ws.T[f] * fr.JointMotion(q[fr.q_index] + ws.dq[fr.q_index]);
+    const double qf = fr.q_index >= 0 ? q[fr.q_index] + dqf : 0.0;
+    ws.T[f] = ws.T[fr.parent] * fr.FixedTimesMotion(qf);
   }
 }
 
@@ -922,12 +997,6 @@ EffectModel::Stages EffectModel::FrameStages(FrameId f, const Workspace& ws) con
   st.T4 = T_parent * st.L4;
   st.T5 = st.T4 * lie::SE3(st.R_tilt, Vec3::Zero());
   return st;
-}
-
-bool EffectModel::Touched(FrameId f, const Workspace& ws) const {
-  return ws.scale != 0.0 || ws.dlen[f] != 0.0 || !ws.offset[f].isZero(0.0) ||
-         !ws.origin[f].isZero(0.0) || !ws.bend[f].isZero(0.0) || !ws.tilt[f].isZero(0.0) ||
-         (f == mount_ && !ws.mount_rot.isZero());
 }
 
 void EffectModel::PointInFrames(const Eigen::VectorXd& q, FrameId top, Workspace& ws) const {

@@ -268,6 +268,29 @@ class EffectModel {
                         int point = 0) const;
 
  private:
+  // The constructor's steps: the measured points and the frames on their way (points_,
+  // on_path_); the first joint on that way (-1: none); whether frame f is f or an ancestor of
+  // every point; the mount; each joint's tilt axes.
+  void SetPoints(const std::vector<FrameId>& more_points);
+  FrameId FirstJointOnPath() const;
+  bool AboveEveryPoint(FrameId f) const;
+  void FindMount();
+  void SetTiltAxes();
+  // A candidate at the end of candidates_, with its family's bounds (for more fields).
+  Candidate& AddCandidate(EffectType type, const std::string& location, int q, FrameId f,
+                          int num_params, double step, const char* unit);
+  // The candidates family by family, in candidates_' order: per joint (offset, tilts, link
+  // offset, compliance, backlash), link lengths, link bending (with prev_joint_, link_dir_), the
+  // tools' offsets, the chain-wide ones (base compliance, thermal expansion, camera, payload),
+  // those that need evidence, the joint origins.
+  void AddJointFamilies();
+  void AddLinkLengths();
+  void AddLinkBending();
+  void AddToolOffsets();
+  void AddChainWide(const std::string& camera);
+  void AddEvidenceFamilies();
+  void AddJointOrigins();
+  void FindCoupledDrivers();  // drives_coupled_
   // L's loads under the active gravity tilt (in ws.tilted, without the cached poses), or L
   // itself when none is active.
   const ConfigLoads& TiltedLoads(const ConfigLoads& L, const std::vector<int>& active,
@@ -283,6 +306,8 @@ class EffectModel {
   void AddTerms(const Candidate& c, const Eigen::VectorXd& q, const ConfigLoads& L, const double* t,
                 ChainTerms* ct, Workspace& ws) const;
   void ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L, Workspace& ws) const;
+  // ChainPoses' step of a frame the effects touch (Touched).
+  void TouchedStep(FrameId f, const Eigen::VectorXd& q, Workspace& ws) const;
   void ClearTerms(const std::vector<int>& active, Workspace& ws) const;
   // Loads' steps: the zero loads and the nominal poses at q; the arm standing at q_load; the
   // centre of mass of body b's subtree (base coordinates) and the moment of its weight about
