@@ -1314,7 +1314,7 @@ class ClosedLoopKind : public ScenarioKind {
     out.identified_effects.clear();
     for (const auto& e : res.effects) {
       const identify::Candidate& fitted = em_->candidates()[e.candidate];
-      sim::IdentifiedEffect ie{fitted.Name(), e.value, e.std, fitted.unit, ""};
+      sim::IdentifiedEffect ie{fitted.Name(), e.value, e.std, fitted.unit, "", {}};
       // An equivalence set's name lists every member; the values are the fitted member's.
       if (e.name != ie.effect) ie.equivalent = e.members;
       out.identified_effects.push_back(std::move(ie));

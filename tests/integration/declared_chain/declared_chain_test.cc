@@ -254,8 +254,12 @@ TEST(DeclaredModelFile, WhatTheWriterWritesTheReaderReads) {
     if (name.size() < 14 || name.substr(name.size() - 14) != ".declared.yaml") continue;
     ++models;
     DeclaredModel d = LoadDeclaredModel(f.path().string());
-    d.identified_effects.push_back(
-        {"joint_offset@" + d.actuated_joints[0], {-0.00524114, 1.0 / 3.0}, {1e-5, 2e-7}, "rad"});
+    d.identified_effects.push_back({"joint_offset@" + d.actuated_joints[0],
+                                    {-0.00524114, 1.0 / 3.0},
+                                    {1e-5, 2e-7},
+                                    "rad",
+                                    "",
+                                    {}});
     d.identified_effects.push_back(
         {"payload@ee", {0.5}, {}, "kg", "", {"payload@ee", "link_length@j1"}});
     d.coupled.push_back({"follower", {{d.actuated_joints[0], -1.0 / 3.0}}, {}, false, ""});
@@ -331,7 +335,7 @@ TEST(DeclaredModelFile, TheWriterWritesZeroSourcesAndRefusesNaN) {
   ASSERT_EQ(r.sources.size(), 1u);
   EXPECT_EQ(r.sources[0].about_axis_rad, 0.0);
   EXPECT_TRUE(r.sources[0].cov.isZero(0.0));
-  d.identified_effects.push_back({"joint_offset@joint1", {std::nan("")}, {}, "rad", ""});
+  d.identified_effects.push_back({"joint_offset@joint1", {std::nan("")}, {}, "rad", "", {}});
   try {
     EmitDeclaredModel(d, "");
     FAIL();

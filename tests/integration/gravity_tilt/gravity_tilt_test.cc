@@ -188,8 +188,8 @@ TEST(GravityTilt, TiltedLoadsAreMujocosGravityTorques) {
     worst = std::max(worst, (p - p_ref).norm());
     // The augmented declared model.
     sim::DeclaredModel aug = rig->declared;
-    aug.identified_effects = {{"joint_compliance@j2", {c}, {}, "rad/Nm", "t:1"},
-                              {"gravity_tilt@base", {phi1, phi2}, {}, "rad", "t:2"}};
+    aug.identified_effects = {{"joint_compliance@j2", {c}, {}, "rad/Nm", "t:1", {}},
+                              {"gravity_tilt@base", {phi1, phi2}, {}, "rad", "t:2", {}}};
     const sim::DeclaredChain chain = sim::BuildDeclaredChain(m, aug);
     kinematics::EffectiveChain kin(chain.model, chain.effects_or_null());
     kin.Update(q);

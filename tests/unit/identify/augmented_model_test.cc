@@ -149,7 +149,7 @@ TEST_P(AugmentedModel, EachEffectPredictsAsTheIdentificationModel) {
     const Candidate& c = rig->em->candidates()[i];
     const std::vector<double> v = Values(c, rng);
     sim::DeclaredModel aug = rig->declared;
-    aug.identified_effects.push_back({c.Name(), v, {}, c.unit, "test:1"});
+    aug.identified_effects.push_back({c.Name(), v, {}, c.unit, "test:1", {}});
     const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
     // A payload alone moves nothing (it loads compliances that are not there).
     if (c.type != EffectType::kPayload) {
@@ -174,7 +174,7 @@ TEST_P(AugmentedModel, AllEffectsAtOnce) {
   for (size_t i = 0; i < rig->em->candidates().size(); ++i) {
     const Candidate& c = rig->em->candidates()[i];
     const std::vector<double> v = Values(c, rng);
-    aug.identified_effects.push_back({c.Name(), v, {}, c.unit, "test:1"});
+    aug.identified_effects.push_back({c.Name(), v, {}, c.unit, "test:1", {}});
     active.push_back(static_cast<int>(i));
     theta.insert(theta.end(), v.begin(), v.end());
   }
@@ -210,7 +210,7 @@ TEST_P(AugmentedModel, ParameterStdsMatchMonteCarloThroughTheIdentificationModel
     std::vector<double> sd(v.size());
     for (size_t k = 0; k < v.size(); ++k) sd[k] = 0.2 * std::abs(v[k]);
     sim::DeclaredModel aug = rig->declared;
-    aug.identified_effects.push_back({c.Name(), v, sd, c.unit, "test:1"});
+    aug.identified_effects.push_back({c.Name(), v, sd, c.unit, "test:1", {}});
     sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
     for (kinematics::FrameId f = 1; f < chain.model.num_frames(); ++f) {
       chain.model.SetSourceCovariance(f, Mat6::Zero());
@@ -255,11 +255,11 @@ TEST(AugmentedModelEstimators, EveryEstimatorPredictsWithTheCorrectedModel) {
   const auto rig = MakeRig("arm4");
   sim::DeclaredModel aug = rig->declared;
   aug.identified_effects = {
-      {"joint_offset@j2", {0.02}, {}, "rad", "t:1"},
-      {"joint_compliance@j3", {-0.004}, {}, "rad/Nm", "t:2"},
-      {"link_bending@j3", {0.003}, {}, "rad/Nm", "t:3"},
-      {"base_compliance@j1", {0.002, 0.003}, {}, "rad/Nm", "t:4"},
-      {"link_offset@ee", {0.004, -0.003, 0.002}, {}, "m", "t:5"},
+      {"joint_offset@j2", {0.02}, {}, "rad", "t:1", {}},
+      {"joint_compliance@j3", {-0.004}, {}, "rad/Nm", "t:2", {}},
+      {"link_bending@j3", {0.003}, {}, "rad/Nm", "t:3", {}},
+      {"base_compliance@j1", {0.002, 0.003}, {}, "rad/Nm", "t:4", {}},
+      {"link_offset@ee", {0.004, -0.003, 0.002}, {}, "m", "t:5", {}},
   };
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
   const Eigen::VectorXd q = (Eigen::VectorXd(4) << 0.3, -0.6, 0.9, 0.2).finished();
@@ -307,8 +307,9 @@ TEST(AugmentedModelEstimators, EveryEstimatorPredictsWithTheCorrectedModel) {
 TEST(AugmentedModelEstimators, FkEqualsTheIdentificationPrediction) {
   const auto rig = MakeRig("rover_arm");
   sim::DeclaredModel aug = rig->declared;
-  aug.identified_effects = {{"joint_offset@j3", {-0.01}, {}, "rad", "t:1"},
-                            {"base_compliance@base_plate", {0.001, 0.0005}, {}, "rad/Nm", "t:2"}};
+  aug.identified_effects = {
+      {"joint_offset@j3", {-0.01}, {}, "rad", "t:1", {}},
+      {"base_compliance@base_plate", {0.001, 0.0005}, {}, "rad/Nm", "t:2", {}}};
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
   estimators::EstimatorSetup s;
   s.model = &chain.model;
@@ -349,21 +350,21 @@ TEST(AugmentedModelBadInput, NamesTheFileLineAndEffect) {
   const auto has = [](const std::string& msg, const std::string& part) {
     return msg.find(part) != std::string::npos;
   };
-  std::string e = ErrorOf(*rig, {"joint_offset@j9", {0.01}, {}, "rad", "aug.yaml:7"});
+  std::string e = ErrorOf(*rig, {"joint_offset@j9", {0.01}, {}, "rad", "aug.yaml:7", {}});
   EXPECT_TRUE(has(e, "aug.yaml:7") && has(e, "joint_offset@j9") && has(e, "'j9'")) << e;
-  e = ErrorOf(*rig, {"link_offset@nowhere", {0, 0, 0}, {}, "m", "aug.yaml:8"});
+  e = ErrorOf(*rig, {"link_offset@nowhere", {0, 0, 0}, {}, "m", "aug.yaml:8", {}});
   EXPECT_TRUE(has(e, "aug.yaml:8") && has(e, "nowhere")) << e;
-  e = ErrorOf(*rig, {"link_offset@ee", {0.1, 0.2}, {}, "m", "aug.yaml:9"});
+  e = ErrorOf(*rig, {"link_offset@ee", {0.1, 0.2}, {}, "m", "aug.yaml:9", {}});
   EXPECT_TRUE(has(e, "aug.yaml:9") && has(e, "needs 3 values, got 2")) << e;
-  e = ErrorOf(*rig, {"joint_offset@j2", {std::nan("")}, {}, "rad", "aug.yaml:10"});
+  e = ErrorOf(*rig, {"joint_offset@j2", {std::nan("")}, {}, "rad", "aug.yaml:10", {}});
   EXPECT_TRUE(has(e, "aug.yaml:10") && has(e, "finite")) << e;
-  e = ErrorOf(*rig, {"warp_drive@j2", {1}, {}, "", "aug.yaml:11"});
+  e = ErrorOf(*rig, {"warp_drive@j2", {1}, {}, "", "aug.yaml:11", {}});
   EXPECT_TRUE(has(e, "aug.yaml:11") && has(e, "not a known effect type")) << e;
-  e = ErrorOf(*rig, {"base_compliance@j2", {0.001, 0.001}, {}, "rad/Nm", "aug.yaml:12"});
+  e = ErrorOf(*rig, {"base_compliance@j2", {0.001, 0.001}, {}, "rad/Nm", "aug.yaml:12", {}});
   EXPECT_TRUE(has(e, "aug.yaml:12") && has(e, "mount")) << e;
-  e = ErrorOf(*rig, {"link_bending@j1", {0.001}, {}, "rad/Nm", "aug.yaml:13"});
+  e = ErrorOf(*rig, {"link_bending@j1", {0.001}, {}, "rad/Nm", "aug.yaml:13", {}});
   EXPECT_TRUE(has(e, "aug.yaml:13") && has(e, "5 cm")) << e;
-  e = ErrorOf(*rig, {"joint_offset", {0.01}, {}, "rad", "aug.yaml:14"});
+  e = ErrorOf(*rig, {"joint_offset", {0.01}, {}, "rad", "aug.yaml:14", {}});
   EXPECT_TRUE(has(e, "aug.yaml:14") && has(e, "type@location")) << e;
 
   // A load-driven effect on a model without masses (MuJoCo insists on a little: 2 g, as a URDF
@@ -389,10 +390,10 @@ TEST(AugmentedModelBadInput, NamesTheFileLineAndEffect) {
   bare.declared.model_path = "massless.xml";
   bare.declared.actuated_joints = {"j1", "j2"};
   bare.declared.end_effector = "ee";
-  e = ErrorOf(bare, {"joint_compliance@j2", {-0.001}, {}, "rad/Nm", "aug.yaml:15"});
+  e = ErrorOf(bare, {"joint_compliance@j2", {-0.001}, {}, "rad/Nm", "aug.yaml:15", {}});
   EXPECT_TRUE(has(e, "aug.yaml:15") && has(e, "no masses")) << e;
   // Geometry needs no masses.
-  EXPECT_EQ(ErrorOf(bare, {"joint_offset@j2", {0.01}, {}, "rad", "aug.yaml:16"}), "");
+  EXPECT_EQ(ErrorOf(bare, {"joint_offset@j2", {0.01}, {}, "rad", "aug.yaml:16", {}}), "");
 }
 
 // A declared file's NaN and wrong-length values are caught when the file is read.

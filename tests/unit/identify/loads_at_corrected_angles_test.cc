@@ -60,8 +60,8 @@ TEST(LoadsAtCorrectedAngles, IdentificationModelEqualsMuJoCoStatics) {
   estimators::EstimatorSetup setup;
   sim::DeclaredModel aug = declared;
   aug.identified_effects = {
-      {"joint_offset@j2", {theta[0]}, {}, "rad", "t:1"},
-      {"base_compliance@base_plate", {theta[1], theta[2]}, {}, "rad/Nm", "t:2"}};
+      {"joint_offset@j2", {theta[0]}, {}, "rad", "t:1", {}},
+      {"base_compliance@base_plate", {theta[1], theta[2]}, {}, "rad/Nm", "t:2", {}}};
   const sim::DeclaredChain aug_chain = sim::BuildDeclaredChain(sim->nominal_model(), aug);
   setup.model = &aug_chain.model;
   setup.effects = aug_chain.effects_or_null();
