@@ -84,7 +84,9 @@ TEST(SweepCli, LocalSweepIsDeterministicResumableAndIndependentOfWorkers) {
   for (int i = 0; i < 3; ++i) {
     r = Sweep(file, c, "--shard " + std::to_string(i) + "/3");
     ASSERT_EQ(r.exit_code, 0) << r.err;
-    if (i == 0) EXPECT_FALSE(fs::exists(c / "sweep.csv"));  // a shard does not collect
+    if (i == 0) {
+      EXPECT_FALSE(fs::exists(c / "sweep.csv"));  // a shard does not collect
+    }
     if (i == 1) {
       r = Sweep(file, c, "--collect");
       EXPECT_EQ(r.exit_code, 1) << r.err;
