@@ -28,21 +28,33 @@ TrackerTruth HumanoidTracker() {
   return ParseTrackerTruth(n.Child("tracker"));
 }
 
+// The humanoid's truth (with `effects`), its declared chain, and the tracker rows' set-up with
+// both hands' markers.
+struct HumanoidRig {
+  explicit HumanoidRig(const sim::EffectList& effects = {}) {
+    const std::string models = testing::SourceDir() + "/models/";
+    truth = sim::Simulation::Load(models + "humanoid_upper.xml", effects);
+    declared = sim::LoadDeclaredModel(models + "humanoid_upper.declared.yaml");
+    chain = sim::BuildDeclaredChain(truth->nominal_model(), declared);
+    setup.sim = truth.get();
+    setup.chain = &chain;
+    setup.base_body = declared.base;
+    setup.marker_points = {1, 2};
+  }
+  std::unique_ptr<sim::Simulation> truth;
+  sim::DeclaredModel declared;
+  sim::DeclaredChain chain;
+  TrackerRowsSetup setup;
+};
+
 // Without effects the truth is the declared chain: each row's marker, mapped back from the
 // tracker frame with the true pose, is the declared forward kinematics of its readings (an
 // oracle that shares neither MuJoCo's statics nor the row generator's frame bookkeeping).
 TEST(SimulatedTracker, RigidTruthRowsAreTheDeclaredMarkersInTheTrackerFrame) {
-  const std::string models = testing::SourceDir() + "/models/";
-  auto sim = sim::Simulation::Load(models + "humanoid_upper.xml");
-  const sim::DeclaredModel declared =
-      sim::LoadDeclaredModel(models + "humanoid_upper.declared.yaml");
-  const sim::DeclaredChain chain = sim::BuildDeclaredChain(sim->nominal_model(), declared);
+  HumanoidRig rig;
+  const sim::DeclaredChain& chain = rig.chain;
   const TrackerTruth t = HumanoidTracker();
-  TrackerRowsSetup s;
-  s.sim = sim.get();
-  s.chain = &chain;
-  s.base_body = declared.base;
-  s.marker_points = {1, 2};
+  TrackerRowsSetup& s = rig.setup;
   s.T_base_tracker = DrawTrackerPose(t, 7);
   identify::DataSet d;
   SimulateTrackerRows(t, s, 12, 7, "test", "cal", &d);
@@ -67,21 +79,14 @@ TEST(SimulatedTracker, RigidTruthRowsAreTheDeclaredMarkersInTheTrackerFrame) {
 // With the shoulders' gears elastic (1000 N m/rad), the hands sit below where their readings put
 // them, by millimetres (not centimetres: the sag stays well under 5 deg).
 TEST(SimulatedTracker, ElasticShouldersLowerTheHandsByMillimetres) {
-  const std::string models = testing::SourceDir() + "/models/";
   sim::EffectList effects;
   effects.push_back(
       sim::MakeEffect("joint_compliance",
                       "{stiffness_Nm_per_rad: {shoulder_pitch: 1000, l_shoulder_pitch: 1000}}"));
-  auto sim = sim::Simulation::Load(models + "humanoid_upper.xml", effects);
-  const sim::DeclaredModel declared =
-      sim::LoadDeclaredModel(models + "humanoid_upper.declared.yaml");
-  const sim::DeclaredChain chain = sim::BuildDeclaredChain(sim->nominal_model(), declared);
+  HumanoidRig rig(effects);
+  const sim::DeclaredChain& chain = rig.chain;
   const TrackerTruth t = HumanoidTracker();
-  TrackerRowsSetup s;
-  s.sim = sim.get();
-  s.chain = &chain;
-  s.base_body = declared.base;
-  s.marker_points = {1, 2};
+  TrackerRowsSetup& s = rig.setup;
   identify::DataSet d;
   SimulateTrackerRows(t, s, 20, 3, "test", "cal", &d);
   kinematics::PpoeData pd(chain.model);
@@ -98,10 +103,11 @@ TEST(SimulatedTracker, ElasticShouldersLowerTheHandsByMillimetres) {
   EXPECT_GT(largest, 2e-3);
   EXPECT_LT(largest, 2e-2);
   // The largest load: the arm stretched out forward. The gear gives a little over half a degree.
-  sim->SetCommand("shoulder_pitch", -M_PI / 2);
-  sim->Settle();
-  const int j = mj_name2id(sim->model(), mjOBJ_JOINT, "shoulder_pitch");
-  const double sag_deg = std::abs(sim->JointPosition(j) - sim->MotorPosition(j)) * 180.0 / M_PI;
+  rig.truth->SetCommand("shoulder_pitch", -M_PI / 2);
+  rig.truth->Settle();
+  const int j = mj_name2id(rig.truth->model(), mjOBJ_JOINT, "shoulder_pitch");
+  const double sag_deg =
+      std::abs(rig.truth->JointPosition(j) - rig.truth->MotorPosition(j)) * 180.0 / M_PI;
   std::printf(
       "hand off its readings by up to %.2f mm over 20 postures; %.2f deg of sag with the "
       "arm stretched out\n",
@@ -114,15 +120,13 @@ TEST(SimulatedTracker, ElasticShouldersLowerTheHandsByMillimetres) {
 // hand (with both measured, the humanoid's fixed torso leaves no mount candidate at all), while
 // one arm alone keeps its first joint's anchor as before.
 TEST(SimulatedTracker, TheMountOfSeveralMarkersIsAboveThemAll) {
-  const std::string models = testing::SourceDir() + "/models/";
-  auto sim = sim::Simulation::Load(models + "humanoid_upper.xml");
-  const sim::DeclaredModel declared =
-      sim::LoadDeclaredModel(models + "humanoid_upper.declared.yaml");
-  const sim::DeclaredChain chain = sim::BuildDeclaredChain(sim->nominal_model(), declared);
-  const identify::EffectModel one(sim->nominal_model(), chain, chain.end_effector);
+  HumanoidRig rig;
+  const sim::DeclaredChain& chain = rig.chain;
+  const mjModel* m = rig.truth->nominal_model();
+  const identify::EffectModel one(m, chain, chain.end_effector);
   EXPECT_GE(one.FindCandidate("base_compliance@shoulder_pitch"), 0);
   const identify::EffectModel both(
-      sim->nominal_model(), chain, chain.end_effector, "",
+      m, chain, chain.end_effector, "",
       {chain.ObservedFrame("right_marker"), chain.ObservedFrame("left_marker")});
   for (const identify::Candidate& c : both.candidates()) {
     EXPECT_NE(c.type, identify::EffectType::kBaseCompliance) << c.Name();
