@@ -31,6 +31,13 @@ inline std::vector<int> NamedCandidates(const identify::EffectModel& em,
   return c;
 }
 
+// The fitted effects for a test's messages, "a + b" ("-" for none).
+inline std::string EffectNames(const identify::IdentifyResult& r) {
+  std::string s;
+  for (const identify::FittedEffect& e : r.effects) s += (s.empty() ? "" : " + ") + e.name;
+  return s.empty() ? "-" : s;
+}
+
 // `rows` configurations of rig's truth (rig.sim, a sim::Simulation with a site "ee"; rig.chain,
 // its declared chain): commands uniform in +-1 rad, settled under gravity, the marker d_marker
 // off the site seen by a tracker at T_base_tracker (frame 0 of the data set) with noise_std per

@@ -179,12 +179,6 @@ bool Fitted(const IdentifyResult& r, const std::string& name, double* v, double*
   return false;
 }
 
-std::string Names(const IdentifyResult& r) {
-  std::string s;
-  for (const FittedEffect& e : r.effects) s += (s.empty() ? "" : " + ") + e.name;
-  return s.empty() ? "-" : s;
-}
-
 double MeanError(const EffectModel& em, const DataSet& val, const Fit& fit) {
   const auto loads = ComputeLoads(em, val, fit.active, fit.theta);
   const std::vector<double> e = RowErrors(val, PredictAll(em, val, loads, fit.active, fit.theta));
@@ -336,8 +330,9 @@ TEST(CoupledJoints, TheLinkagesOwnOffsetIsRecoveredOverSeeds) {
     std::printf(
         "seed %d: o2 %.3f, o4 %.3f deg; coupled: %s, o2 %.4f o4 %.4f deg (%.2f sigma), validation "
         "%.3g -> %.3g mm; faked reading: %s, j4 offset %.4f deg\n",
-        seed, t.o[1] / kDeg, t.o4 / kDeg, Names(res).c_str(), v2 / kDeg, v4 / kDeg, sig,
-        before * 1e3, after * 1e3, Names(res_f).c_str(), has_f ? f4 / kDeg : 0.0);
+        seed, t.o[1] / kDeg, t.o4 / kDeg, testing::EffectNames(res).c_str(), v2 / kDeg, v4 / kDeg,
+        sig, before * 1e3, after * 1e3, testing::EffectNames(res_f).c_str(),
+        has_f ? f4 / kDeg : 0.0);
   }
   std::printf(
       "coupled: both offsets found (and nothing else) %d/%d, within 3 sigma %d/%d, validation < "
@@ -373,7 +368,7 @@ TEST(CoupledJoints, ARatioErrorIsNotCalledExplained) {
     const std::string verdict = Verdict(res, before, after);
     explained += verdict == "explained";
     std::printf("ratio error, seed %d: %s (%s), validation %.3g -> %.3g mm; %s\n", seed,
-                Names(res).c_str(), verdict.c_str(), before * 1e3, after * 1e3,
+                testing::EffectNames(res).c_str(), verdict.c_str(), before * 1e3, after * 1e3,
                 res.finding.message.c_str());
   }
   std::printf("ratio error: verdict explained %d/%d\n", explained, kSeeds);

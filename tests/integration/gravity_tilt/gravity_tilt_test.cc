@@ -87,12 +87,6 @@ bool Named(const IdentifyResult& r, const std::string& prefix) {
   return false;
 }
 
-std::string Names(const IdentifyResult& r) {
-  std::string s;
-  for (const FittedEffect& e : r.effects) s += (s.empty() ? "" : " + ") + e.name;
-  return s.empty() ? "-" : s;
-}
-
 double MeanError(const EffectModel& em, const DataSet& val, const Fit& fit) {
   const DataSet in_base = InBase(val, fit.T_base_frames);
   const auto loads = ComputeLoads(em, in_base, fit.active, fit.theta);
@@ -289,9 +283,9 @@ TEST(GravityTilt, NamedBesideTheGearWhenTheBaseIsTiltedOverSeeds) {
     std::printf(
         "tilted %.2f deg, seed %d: %s (%s); tilt (%.3f, %.3f) deg vs true (%.3f, %.3f), %.2f "
         "sigma; validation %.3g -> %.3g mm\n",
-        tilt / kDeg, seed, Names(o.res).c_str(), o.verdict.c_str(), has ? v[0] / kDeg : 0.0,
-        has ? v[1] / kDeg : 0.0, truth[0] / kDeg, truth[1] / kDeg, sigmas, o.val_before * 1e3,
-        o.val_after * 1e3);
+        tilt / kDeg, seed, testing::EffectNames(o.res).c_str(), o.verdict.c_str(),
+        has ? v[0] / kDeg : 0.0, has ? v[1] / kDeg : 0.0, truth[0] / kDeg, truth[1] / kDeg, sigmas,
+        o.val_before * 1e3, o.val_after * 1e3);
     std::printf("  left: %s\n", o.res.finding.message.c_str());
   }
   std::printf(
@@ -314,8 +308,8 @@ TEST(GravityTilt, NotNamedWhenGravityIsNotTiltedOverSeeds) {
     tilt += Named(o.res, "gravity_tilt");
     gear += Named(o.res, "joint_compliance@j2");
     std::printf("level, seed %d: %s (%s), validation %.3g -> %.3g mm; %s\n", 50 + seed,
-                Names(o.res).c_str(), o.verdict.c_str(), o.val_before * 1e3, o.val_after * 1e3,
-                o.res.finding.message.c_str());
+                testing::EffectNames(o.res).c_str(), o.verdict.c_str(), o.val_before * 1e3,
+                o.val_after * 1e3, o.res.finding.message.c_str());
   }
   std::printf("level base: gravity_tilt named %d/%d, gear named %d/%d\n", tilt, kSeeds, gear,
               kSeeds);
@@ -337,7 +331,8 @@ TEST(GravityTilt, ATiltWithoutCompliancesIsNotNamed) {
                           "payload", "stiffening_spring"}) {
       loaded += Named(o.res, f);
     }
-    std::printf("rigid, seed %d: %s (%s)\n", 200 + seed, Names(o.res).c_str(), o.verdict.c_str());
+    std::printf("rigid, seed %d: %s (%s)\n", 200 + seed, testing::EffectNames(o.res).c_str(),
+                o.verdict.c_str());
   }
   std::printf(
       "tilt without compliance: gravity_tilt named %d/%d, a load-driven effect named %d/%d, "
@@ -362,7 +357,7 @@ TEST(GravityTilt, AnUnknownLoadPathIsNotPassedOffAsATilt) {
       tilt_named += level == 1 && Named(o.res, "gravity_tilt");
       explained += o.verdict == "explained";
       std::printf("gear denied, %s, seed %d: %s (%s), validation %.3g -> %.3g mm\n",
-                  level ? "level" : "tilted 2 deg", 300 + seed, Names(o.res).c_str(),
+                  level ? "level" : "tilted 2 deg", 300 + seed, testing::EffectNames(o.res).c_str(),
                   o.verdict.c_str(), o.val_before * 1e3, o.val_after * 1e3);
     }
   }
