@@ -115,32 +115,24 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
 
 Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vector<Snapshot>& snaps,
                      std::uint64_t seed, bool with_position, const RunContext& ctx, int* rejected) {
-  auto est = MakeLabelled(rig, spec, seed);
-  est->Reset();
-  Trace tr;
-  tr.label = spec.label;
-  tr.Resize(rig.nq());
-  *rejected = 0;
-  const auto count = [&](estimators::UpdateStatus st) {
-    *rejected +=
-        st != estimators::UpdateStatus::kAccepted && st != estimators::UpdateStatus::kIgnored;
-  };
+  TracedRun r(rig, spec, seed);
   for (size_t i = 0; i < snaps.size(); ++i) {
     const Snapshot& s = snaps[i];
-    est->Predict(s.t);
-    count(est->Update(s.joints));
-    for (const auto& o : s.imus) count(est->Update(o));
+    r.est->Predict(s.t);
+    r.Count(r.est->Update(s.joints));
+    for (const auto& o : s.imus) r.Count(r.est->Update(o));
     if (with_position) {
       estimators::PositionReading p;
       p.t = s.t;
       p.frame = rig.chain->end_effector;
       p.p_base = s.T_true.translation();
-      count(est->Update(p));
+      r.Count(r.est->Update(p));
     }
-    tr.Add(s.t, est->Estimate(), PfSummary(*est), s.T_true);
+    r.Record(s.t, s.T_true);
     ctx.progress(spec.label, static_cast<int>(i + 1), static_cast<int>(snaps.size()));
   }
-  return tr;
+  *rejected = r.rejected;
+  return std::move(r.trace);
 }
 
 }  // namespace flexbench::scenarios::jsk

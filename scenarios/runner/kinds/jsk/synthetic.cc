@@ -78,24 +78,16 @@ SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,
 
 Trace RunSynthetic(const Rig& rig, const EstimatorSpec& spec, const SyntheticRun& run,
                    std::uint64_t seed, int* rejected) {
-  auto est = MakeLabelled(rig, spec, seed);
-  est->Reset();
-  Trace tr;
-  tr.label = spec.label;
-  tr.Resize(rig.nq());
-  *rejected = 0;
-  const auto count = [&](estimators::UpdateStatus st) {
-    *rejected +=
-        st != estimators::UpdateStatus::kAccepted && st != estimators::UpdateStatus::kIgnored;
-  };
+  TracedRun r(rig, spec, seed);
   for (int s = 0; s < run.steps(); ++s) {
-    est->Predict(s);
-    count(est->Update(run.joints[s]));
-    for (const auto& o : run.orientations[s]) count(est->Update(o));
-    count(est->Update(run.positions[s]));
-    tr.Add(s, est->Estimate(), PfSummary(*est), run.T_true[s]);
+    r.est->Predict(s);
+    r.Count(r.est->Update(run.joints[s]));
+    for (const auto& o : run.orientations[s]) r.Count(r.est->Update(o));
+    r.Count(r.est->Update(run.positions[s]));
+    r.Record(s, run.T_true[s]);
   }
-  return tr;
+  *rejected = r.rejected;
+  return std::move(r.trace);
 }
 
 }  // namespace flexbench::scenarios::jsk

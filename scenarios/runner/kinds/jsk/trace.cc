@@ -35,6 +35,13 @@ const pf::ParticleSummary* PfSummary(const estimators::Estimator& e) {
   return p ? &p->filter().Summary() : nullptr;
 }
 
+TracedRun::TracedRun(const Rig& rig, const EstimatorSpec& spec, std::uint64_t seed)
+    : est(MakeLabelled(rig, spec, seed)) {
+  est->Reset();
+  trace.label = spec.label;
+  trace.Resize(rig.nq());
+}
+
 void WriteTraces(const Rig& rig, const std::vector<Trace>& traces,
                  const std::vector<std::vector<double>>* truth,
                  const std::vector<std::vector<double>>& reference, OutputDir* out) {

@@ -1,6 +1,8 @@
 // Per-step traces of the jsk kinds' estimators and the files written from them.
 #pragma once
 
+#include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -31,6 +33,23 @@ struct Trace {
 
 // The particle summary of an estimator when it is a particle filter.
 const pf::ParticleSummary* PfSummary(const estimators::Estimator& e);
+
+// One estimator's run over a jsk kind's readings: the estimator (reset), its trace, and the
+// count of updates it refused (neither accepted nor ignored).
+struct TracedRun {
+  TracedRun(const Rig& rig, const EstimatorSpec& spec, std::uint64_t seed);
+  void Count(estimators::UpdateStatus st) {
+    rejected +=
+        st != estimators::UpdateStatus::kAccepted && st != estimators::UpdateStatus::kIgnored;
+  }
+  // Appends the estimate after the step's updates.
+  void Record(double time, const lie::SE3& T_true) {
+    trace.Add(time, est->Estimate(), PfSummary(*est), T_true);
+  }
+  std::unique_ptr<estimators::Estimator> est;
+  Trace trace;
+  int rejected = 0;
+};
 
 // "traces.csv": t, label, joint, truth, reference, mean, lower, upper (degrees), "ee.csv" and
 // the TUM trajectories.
