@@ -7,6 +7,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
+#include <set>
 #include <sstream>
 
 namespace flexbench {
@@ -138,6 +140,32 @@ void CheckInputFile(const std::string& path, std::uintmax_t max_bytes) {
     throw InputError(CapForMessage(path) + ": " + std::to_string(size) + " bytes, more than the " +
                      std::to_string(max_bytes) + " allowed");
   }
+  RecordInputFile(path);
+}
+
+namespace {
+std::mutex& InputFilesMutex() {
+  static std::mutex m;
+  return m;
+}
+std::set<std::string>& InputFiles() {
+  static std::set<std::string> files;
+  return files;
+}
+}  // namespace
+
+void RecordInputFile(const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::path p = fs::weakly_canonical(fs::absolute(path, ec), ec);
+  if (ec) p = fs::absolute(path, ec).lexically_normal();
+  const std::lock_guard<std::mutex> lock(InputFilesMutex());
+  InputFiles().insert(p.string());
+}
+
+std::vector<std::string> RecordedInputFiles() {
+  const std::lock_guard<std::mutex> lock(InputFilesMutex());
+  return {InputFiles().begin(), InputFiles().end()};
 }
 
 ConfigOverride ParseOverride(const std::string& arg) {

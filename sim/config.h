@@ -25,7 +25,14 @@ inline constexpr std::uintmax_t kMaxConfigFileBytes = 16u << 20;
 // Checks that `path` names a regular file of at most `max_bytes`; throws InputError
 // "<path>: ..." (the path capped) when it does not exist, is a folder, a device or a pipe, or
 // is too big.
+// A file it accepts is recorded as an input of this process (RecordedInputFiles).
 void CheckInputFile(const std::string& path, std::uintmax_t max_bytes);
+
+// Every file this process has accepted as an input so far (absolute, normal paths): the
+// scenario, the models, the declared files, meshes, CSVs. An output folder that holds one of
+// them is never replaced. Thread-safe.
+std::vector<std::string> RecordedInputFiles();
+void RecordInputFile(const std::string& path);
 
 // A command-line override of one scenario key (`--set KEY=VALUE`): `key` a dotted path
 // (estimators.ppoe_ekf.iterations), `value` YAML text (3, [1, 2], {a: 1}, text).
