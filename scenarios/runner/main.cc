@@ -9,6 +9,7 @@
 #include "scenarios/runner/report.h"
 #include "scenarios/runner/runner.h"
 #include "scenarios/sweep/sweep_command.h"
+#include "sim/config.h"
 #include "sim/mujoco_model.h"
 
 namespace {
@@ -16,7 +17,7 @@ namespace {
 // The options of each subcommand, filled by CLI11.
 struct Options {
   flexbench::scenarios::RunOptions run;
-  std::uint64_t seed = 0;
+  std::string seed;
   CLI::Option* seed_opt = nullptr;
   std::string list_dir;
   std::string inspect_path;
@@ -30,7 +31,9 @@ CLI::App* AddRun(CLI::App& app, Options& o) {
   CLI::App* run_cmd = app.add_subcommand("run", "run a scenario file");
   run_cmd->add_option("scenario", o.run.scenario_path, "scenario YAML file")->required();
   run_cmd->add_option("--out", o.run.out_dir, "output folder (default: out/<scenario>)");
-  o.seed_opt = run_cmd->add_option("--seed", o.seed, "override the scenario's seed");
+  o.seed_opt = run_cmd->add_option("--seed", o.seed,
+                                   "override the scenario's seed (0 to 2147483647, as in the "
+                                   "file)");
   run_cmd->add_flag("--check-gates", o.run.check_gates, "exit 3 when a gate fails");
   run_cmd->add_flag("--quiet", o.run.quiet,
                     "no progress and no informational lines (errors and failed gates remain)");
@@ -111,6 +114,34 @@ CLI::App* AddSweep(CLI::App& app, Options& o) {
   return sweep_cmd;
 }
 
+// The seed as the scenario file allows it: a whole number from 0 to INT_MAX. CLI11 would wrap
+// "-1" or 2^64 into a uint64.
+std::uint64_t ParseSeed(const std::string& text) {
+  const auto fail = [&]() -> std::uint64_t {
+    throw flexbench::InputError("--seed '" + flexbench::CapForMessage(text) +
+                                "': expected a whole number from 0 to 2147483647");
+  };
+  if (text.empty() || text.size() > 10 ||
+      text.find_first_not_of("0123456789") != std::string::npos) {
+    return fail();
+  }
+  const std::uint64_t v = std::stoull(text);
+  return v > 2147483647u ? fail() : v;
+}
+
+// CLI11 answers an unknown first word with "A subcommand is required"; name the word instead.
+void CheckSubcommand(int argc, char** argv, const CLI::App& app) {
+  if (argc < 2 || argv[1][0] == '-') return;
+  const std::string word = argv[1];
+  std::string known;
+  for (const CLI::App* sub : app.get_subcommands({})) {
+    if (sub->get_name() == word) return;
+    known += (known.empty() ? "" : ", ") + sub->get_name();
+  }
+  throw flexbench::InputError("unknown command '" + flexbench::CapForMessage(word) +
+                              "' (expected one of: " + known + "; see flexbench --help)");
+}
+
 // `list` without --dir: ./scenarios, else the source tree's.
 std::string DefaultListDir() {
   std::error_code ec;
@@ -143,13 +174,14 @@ int Main(int argc, char** argv) {
   report_cmd
       ->add_option("dir", o.report_dir, "result folder (holds summary.json or aggregate.json)")
       ->required();
+  CheckSubcommand(argc, argv, app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int code = app.exit(e);
     return code == 0 ? 0 : flexbench::scenarios::kExitBadInput;
   }
-  if (*o.seed_opt) o.run.seed = o.seed;
+  if (*o.seed_opt) o.run.seed = ParseSeed(o.seed);
   // The command line as typed, recorded with the results.
   const std::string command =
       flexbench::scenarios::CommandLine(std::vector<std::string>(argv, argv + argc));
