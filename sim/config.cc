@@ -198,11 +198,26 @@ std::vector<std::string> SplitKey(const std::string& key) {
 // reset().
 void ApplyOverride(YAML::Node root, const ConfigOverride& o, const std::string& file) {
   const std::string where = "--set " + CapForMessage(o.key);
+  for (size_t i = 0; i < o.value.size();) {
+    const size_t n = Utf8SequenceLength(o.value, i);
+    if (n == 0) {
+      char hex[8];
+      std::snprintf(hex, sizeof(hex), "0x%02X", static_cast<unsigned char>(o.value[i]));
+      throw InputError(where + ": the value is not valid UTF-8 (byte " + hex + ")");
+    }
+    i += n;
+  }
   YAML::Node value;
   try {
     value = YAML::Load(o.value);
   } catch (const YAML::Exception& e) {
     throw InputError(where + ": YAML syntax error in the value: " + CapForMessage(e.msg));
+  }
+  // An empty value is YAML's null, which would delete the key and let the run go on with its
+  // default: never what a --set means.
+  if (value.IsNull()) {
+    throw InputError(where + ": no value ('" + CapForMessage(o.key) +
+                     "=' or null would remove the key; give a value)");
   }
   size_t visited = 0;
   CheckStructure(value, where, o.key, &visited);
