@@ -292,13 +292,6 @@ std::string Quoted(const std::string& s) {
   throw InputError(option + " " + CapForMessage(value) + ": " + what);
 }
 
-std::string ReadWhole(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 // The in-memory scenario's name in messages; "<name>:<line>" is replaced by the option that
 // line came from.
 constexpr const char* kIdentifyName = "flexbench identify";
@@ -359,11 +352,25 @@ void CheckIdentifyRows(const IdentifyCliOptions& o) {
       throw InputError(std::string(option) + ": " + e.what());
     }
   }
-  std::error_code ec;
-  if (fs::equivalent(o.calibration_csv, o.validation_csv, ec) ||
-      ReadWhole(o.calibration_csv) == ReadWhole(o.validation_csv)) {
-    OptionError("--validation", o.validation_csv,
-                "holds the same rows as --calibration; validate on other data");
+}
+
+// The options own these keys: a --set of one would be ignored (model) or bypass the option's
+// checks (the CSV files), so it is refused and the option named.
+void CheckIdentifyOverrides(const std::vector<std::string>& set) {
+  const std::vector<std::pair<std::string, std::string>> owned = {
+      {"model", "--model (the model is the one --declared names)"},
+      {"declared", "--declared"},
+      {"calibration", "--calibration"},
+      {"validation", "--validation"},
+      {"kind", "another command (identify is the closed_loop kind)"}};
+  for (const ConfigOverride& o : ParseOverrides(set)) {
+    const std::string top = o.key.substr(0, o.key.find('.'));
+    for (const auto& [key, option] : owned) {
+      if (top == key) {
+        throw InputError("--set " + CapForMessage(o.key) + ": identify sets '" + key +
+                         "' from its options; use " + option);
+      }
+    }
   }
 }
 
@@ -442,7 +449,15 @@ InputError WithOptionName(const InputError& e, const std::vector<std::string>& o
     const int ln = std::atoi(m.substr(prefix.size(), end - prefix.size()).c_str());
     const std::string option =
         ln > 0 && ln < static_cast<int>(option_of_line.size()) ? option_of_line[ln] : "";
-    m = (option.empty() ? std::string("identify") : option) + m.substr(end);
+    std::string rest = m.substr(end);
+    // The option names what the user wrote; the scenario key it became would only confuse.
+    const std::string key_prefix = ": key '";
+    const size_t key_end = rest.find("'", key_prefix.size());
+    if (!option.empty() && rest.compare(0, key_prefix.size(), key_prefix) == 0 &&
+        key_end != std::string::npos) {
+      rest.erase(0, key_end + 1);
+    }
+    m = (option.empty() ? std::string("identify") : option) + rest;
   }
   return InputError(m);
 }
@@ -457,6 +472,7 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
     const std::string declared_abs = fs::absolute(o.declared).lexically_normal().string();
     const sim::DeclaredModel declared = IdentifyDeclared(o, declared_abs);
     CheckIdentifyRows(o);
+    CheckIdentifyOverrides(o.set);
     std::vector<std::string> option_of_line;
     const std::string yaml = IdentifyScenario(o, declared, declared_abs, &option_of_line);
     const ConfigNode root = ConfigNode::LoadString(yaml, kIdentifyName, ParseOverrides(o.set));

@@ -18,6 +18,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
+#include <iterator>
 #include <optional>
 #include <random>
 #include <set>
@@ -63,7 +65,23 @@ struct Source {
   int postures = 0;  // tracker rows: settled postures
   int seed = 0;
   std::string where;
+  std::string path_where;  // where the file was named (a line, or the --set that named it)
 };
+
+// True when two files are one or hold the same bytes: "validating" on the calibration rows
+// reports the fit, not a held-out error.
+bool SameRows(const std::string& a, const std::string& b) {
+  std::error_code ec;
+  if (fs::equivalent(a, b, ec)) return true;
+  const std::uintmax_t size_a = fs::file_size(a, ec);
+  if (ec) return false;
+  const std::uintmax_t size_b = fs::file_size(b, ec);
+  if (ec || size_a != size_b) return false;
+  std::ifstream fa(a, std::ios::binary), fb(b, std::ios::binary);
+  return fa && fb &&
+         std::equal(std::istreambuf_iterator<char>(fa), std::istreambuf_iterator<char>(),
+                    std::istreambuf_iterator<char>(fb), std::istreambuf_iterator<char>());
+}
 
 // `tracker`: simulated data are tracker rows (truth.tracker), not sockets.
 Source ParseSource(const ConfigNode& n, bool tracker) {
@@ -77,6 +95,7 @@ Source ParseSource(const ConfigNode& n, bool tracker) {
   } else if (const auto c = n.Optional("csv")) {
     s.type = Source::Type::kCsv;
     s.path = c->ResolvePath(c->AsString());
+    s.path_where = c->WhereKey();
     if (const auto d = n.Optional("distances")) {
       for (const ConfigNode& e : d->Items()) {
         const std::vector<ConfigNode> it = e.Items();
@@ -267,6 +286,11 @@ class ClosedLoopKind : public ScenarioKind {
       root.Child("truth").Child("tracker").Fail(
           "simulates tracker rows: needs simulated calibration");
     }
+    if (calibration_.type == Source::Type::kCsv && validation_.type == Source::Type::kCsv &&
+        SameRows(calibration_.path, validation_.path)) {
+      throw InputError(validation_.path_where + ": " + CapForMessage(validation_.path) +
+                       " holds the same rows as the calibration file; validate on other data");
+    }
     for (const Source* s : {&calibration_, &validation_}) {
       if (s->type == Source::Type::kMukca && !fs::exists(s->path)) {
         throw InputError(s->where + ": MUKCa recordings not found at " + s->path +
@@ -428,6 +452,15 @@ class ClosedLoopKind : public ScenarioKind {
     verdict_ = identify::Verdict(res, (*m)["val_err_before_m"].get<double>(),
                                  (*m)["val_err_after_m"].get<double>());
     (*m)["verdict"] = verdict_;
+    const double noise_ratio = identify::NoiseRatio(res.after);
+    (*m)["cal_residual_noise_ratio"] = noise_ratio;
+    if (!(noise_ratio <= identify::kFarAboveNoise)) {
+      char ratio[32];
+      std::snprintf(ratio, sizeof(ratio), "%.3g", noise_ratio);
+      std::cerr << "[flexbench] warning: the calibration residual is " << ratio
+                << " times the stated noise after the fit: outliers the rejection missed "
+                   "(rejected_rows), wrong units, or a wrong noise level; verdict unexplained\n";
+    }
     (*m)["near_singular"] = res.near_singular;
     (*m)["effect_overlap"] = res.overlap;
     (*m)["attribution_unique"] = res.attribution_unique;
