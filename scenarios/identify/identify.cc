@@ -384,9 +384,9 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   res.folds_by = opt.cross_validation ? folds.by : "";
   res.num_folds = opt.cross_validation ? static_cast<int>(folds.test_rows.size()) : 0;
   if (opt.cross_validation && folds.test_rows.size() < 2) {
-    throw InputError("identify: cross-validation by " + folds.by + " needs at least two " +
-                     folds.by + "s with rows; the data has " +
-                     std::to_string(folds.test_rows.size()) +
+    const std::string unit = folds.by == "row" ? "rows" : folds.by + "s with rows";
+    throw InputError("identify: cross-validation by " + folds.by + " needs at least two " + unit +
+                     "; the data has " + std::to_string(folds.test_rows.size()) +
                      " (set cross_validation: false, or another folds_by)");
   }
   const SelectionContext ctx{em, data, loads, folds, opt, &res.steps};
@@ -502,7 +502,12 @@ DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop) {
   return d;
 }
 
+double NoiseRatio(const Fit& fit) {
+  return std::sqrt(fit.rss / std::max(1, fit.num_residuals - fit.num_params));
+}
+
 std::string Verdict(const IdentifyResult& res, double val_before, double val_after) {
+  if (!(NoiseRatio(res.after) <= kFarAboveNoise)) return "unexplained";
   const Fit& b = res.before;
   const bool noisy = b.rss > 2.0 * std::max(1, b.num_residuals - b.num_params);
   if (res.effects.empty()) {

@@ -235,7 +235,13 @@ DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop);
 //                       the correction holds, its cause is not singled out;
 //   "explained"         the validation error drops, no significant structure remains, and no
 //                       alternative explains the held-out data as well.
+// A fit whose whitened RMS residual exceeds kFarAboveNoise times the stated noise is
+// "unexplained" whatever else holds: outliers the rejection missed, wrong units, or a wrong
+// noise level, never a model that only needs another effect.
 std::string Verdict(const IdentifyResult& result, double val_before, double val_after);
+inline constexpr double kFarAboveNoise = 100.0;
+// The fit's RMS residual in units of the stated noise (sqrt(rss / dof)).
+double NoiseRatio(const Fit& fit);
 
 // Precomputed per-row loads for a data set, the arm at its readings.
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data);
