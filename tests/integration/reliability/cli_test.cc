@@ -2,13 +2,12 @@
 // option's checks, and a calibration that is far off its stated noise. Each ends with exit 2 and
 // one line naming the option, or with a warning and the verdict "unexplained".
 #include <gtest/gtest.h>
-#include <mujoco/mujoco.h>
 
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <random>
 
-#include "sim/mujoco_model.h"
+#include "tests/common/planar_rows.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::testing {
@@ -69,41 +68,13 @@ TEST(CliReliability, SetWithoutAValueOrWithInvalidUtf8IsRefused) {
       << r.err;
 }
 
-// Rows of planar3's end effector made by MuJoCo's own kinematics (the truth the declared model
-// matches), with 0.1 mm noise.
-std::string PlanarRows(int n, std::mt19937_64& rng) {
-  std::vector<std::string> warnings;
-  sim::MjModelPtr m = sim::LoadModel(SourceDir() + "/models/planar3.xml", &warnings);
-  mjData* d = mj_makeData(m.get());
-  const int ee = mj_name2id(m.get(), mjOBJ_SITE, "ee");
-  std::uniform_real_distribution<double> q(-1.2, 1.2);
-  std::normal_distribution<double> noise(0.0, 1e-4);
-  std::string csv;
-  for (int i = 0; i < n; ++i) {
-    double angle[3];
-    for (int j = 0; j < 3; ++j) {
-      angle[j] = q(rng);
-      const int jid = mj_name2id(m.get(), mjOBJ_JOINT, ("joint" + std::to_string(j + 1)).c_str());
-      d->qpos[m->jnt_qposadr[jid]] = angle[j];
-    }
-    mj_kinematics(m.get(), d);
-    char row[256];
-    std::snprintf(row, sizeof(row), "%.9f,%.9f,%.9f,%.9f,%.9f,%.9f\n", angle[0], angle[1], angle[2],
-                  d->site_xpos[3 * ee] + noise(rng), d->site_xpos[3 * ee + 1] + noise(rng),
-                  d->site_xpos[3 * ee + 2] + noise(rng));
-    csv += row;
-  }
-  mj_deleteData(d);
-  return csv;
-}
-
 class IdentifyReliability : public ::testing::Test {
  protected:
   void SetUp() override {
     std::mt19937_64 rng(5);
-    cal_ = "joint1,joint2,joint3,x,y,z\n" + PlanarRows(60, rng);
+    cal_ = kPlanarHeader + PlanarRows(60, rng);
     WriteFile(tmp_.path() / "cal.csv", cal_);
-    WriteFile(tmp_.path() / "val.csv", "joint1,joint2,joint3,x,y,z\n" + PlanarRows(40, rng));
+    WriteFile(tmp_.path() / "val.csv", kPlanarHeader + PlanarRows(40, rng));
   }
   CommandResult Identify(const std::string& cal, const std::string& extra) {
     return RunCommand(Flexbench() + " identify --declared " + SourceDir() +
