@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 
 #include "estimators/stats/chi_square.h"
 #include "scenarios/identify/problem.h"
@@ -41,7 +42,14 @@ Regression Regress(const Eigen::MatrixXd& X, const Eigen::VectorXd& z, const Eig
   return out;
 }
 
+// The most significant structure; one above the stated noise before any below it.
 void Keep(ResidualFinding candidate, ResidualFinding* best) {
+  const bool below = candidate.size < candidate.noise;
+  const bool best_below = best->kind.empty() || best->size < best->noise;
+  if (below != best_below) {
+    if (!below) *best = std::move(candidate);
+    return;
+  }
   if (candidate.p_value < best->p_value ||
       (candidate.p_value == best->p_value && candidate.statistic > best->statistic)) {
     *best = std::move(candidate);
@@ -91,33 +99,88 @@ JointSamples SampleJoint(const ResidualContext& c, int k, EffectModel::Workspace
   return out;
 }
 
+// The stated noise of a joint's projected residual (rad): one over the square root of the
+// typical weight, the rows' point noise seen as an angle at that joint.
+double NoiseOfJoint(const Eigen::VectorXd& w) {
+  std::vector<double> v(w.data(), w.data() + w.size());
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2] > 0 ? 1.0 / std::sqrt(v[v.size() / 2]) : 0.0;
+}
+
+// Half the peak-to-peak of `curve` (the fitted structure without its constant) over
+// [lo, hi], never more than half the peak-to-peak of the residual `z` it explains: the size of
+// what the data show, not of a curve extrapolated beyond them.
+double HalfPeakToPeak(const std::function<double(double)>& curve, double lo, double hi,
+                      const Eigen::VectorXd& z) {
+  double mn = HUGE_VAL, mx = -HUGE_VAL;
+  for (int i = 0; i <= 200; ++i) {
+    const double y = curve(lo + (hi - lo) * i / 200.0);
+    mn = std::min(mn, y);
+    mx = std::max(mx, y);
+  }
+  return std::min(0.5 * (mx - mn), 0.5 * (z.maxCoeff() - z.minCoeff()));
+}
+
+// Harmonics of 1 to 3 cycles a turn that the observed range of a joint can tell apart: over a
+// full turn all three, fitted together; over less, neighbouring harmonics are nearly the same
+// curve and each is fitted alone, and only where at least half of its cycle is seen (a shorter
+// stretch is a constant and a slope, which extrapolate to any amplitude).
+std::vector<std::vector<int>> HarmonicSets(double range) {
+  if (range >= 2.0 * M_PI) return {{1, 2, 3}};
+  std::vector<std::vector<int>> sets;
+  for (int c = 1; c <= 3; ++c) {
+    if (c * range >= M_PI) sets.push_back({c});
+  }
+  return sets;
+}
+
 // The residual of joint k against its angle: a periodic error of 1 to 3 cycles a turn.
 void TestPeriodic(int k, const JointSamples& js, ResidualFinding* best) {
   const int m = static_cast<int>(js.z.size());
   const Eigen::Map<const Eigen::VectorXd> z(js.z.data(), m), w(js.w.data(), m), q(js.q.data(), m);
-  Eigen::MatrixXd X(m, 6);
-  for (int c = 1; c <= 3; ++c) {
-    X.col(2 * c - 2) = (c * q.array()).cos();
-    X.col(2 * c - 1) = (c * q.array()).sin();
+  const double lo = q.minCoeff(), hi = q.maxCoeff();
+  for (const std::vector<int>& harmonics : HarmonicSets(hi - lo)) {
+    const int h = static_cast<int>(harmonics.size());
+    Eigen::MatrixXd X(m, 2 * h);
+    for (int i = 0; i < h; ++i) {
+      X.col(2 * i) = (harmonics[i] * q.array()).cos();
+      X.col(2 * i + 1) = (harmonics[i] * q.array()).sin();
+    }
+    const Regression g = Regress(X, z, w);
+    if (g.beta.size() == 0) continue;
+    ResidualFinding f;
+    f.kind = "periodic";
+    f.q_index = k;
+    // [const, cos 1q, sin 1q, cos 2q, sin 2q, cos 3q, sin 3q], zero where not fitted.
+    f.coefficients.assign(7, 0.0);
+    f.coefficients[0] = g.beta[0];
+    double amp = 0.0;
+    for (int i = 0; i < h; ++i) {
+      const int c = harmonics[i];
+      f.coefficients[2 * c - 1] = g.beta[2 * i + 1];
+      f.coefficients[2 * c] = g.beta[2 * i + 2];
+      const double a = std::hypot(g.beta[2 * i + 1], g.beta[2 * i + 2]);
+      if (a > amp) amp = a, f.cycles = c;
+    }
+    const std::vector<double> beta = f.coefficients;
+    f.size = HalfPeakToPeak(
+                 [&beta](double v) {
+                   double y = 0.0;
+                   for (int c = 1; c <= 3; ++c) {
+                     y += beta[2 * c - 1] * std::cos(c * v) + beta[2 * c] * std::sin(c * v);
+                   }
+                   return y;
+                 },
+                 lo, hi, z) /
+             kDeg;
+    f.unit = "deg";
+    f.noise = NoiseOfJoint(w) / kDeg;
+    f.p_value = g.p_value;
+    f.statistic = g.stat;
+    f.x.assign(q.data(), q.data() + m);
+    f.z.assign(z.data(), z.data() + m);
+    Keep(std::move(f), best);
   }
-  const Regression g = Regress(X, z, w);
-  if (g.beta.size() == 0) return;
-  ResidualFinding f;
-  f.kind = "periodic";
-  f.q_index = k;
-  double amp = 0.0;
-  for (int c = 1; c <= 3; ++c) {
-    const double a = std::hypot(g.beta[2 * c - 1], g.beta[2 * c]);
-    if (a > amp) amp = a, f.cycles = c;
-  }
-  f.size = amp / kDeg;
-  f.unit = "deg";
-  f.p_value = g.p_value;
-  f.statistic = g.stat;
-  f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
-  f.x.assign(q.data(), q.data() + m);
-  f.z.assign(z.data(), z.data() + m);
-  Keep(std::move(f), best);
 }
 
 // The residual of joint k against its gravity torque (linear and cubic: a spring, stiffening).
@@ -135,9 +198,13 @@ void TestLoad(int k, const JointSamples& js, ResidualFinding* best) {
   ResidualFinding f;
   f.kind = "load";
   f.q_index = k;
-  // The angle error at the largest load the data holds.
-  f.size = std::abs(g.beta[1] * scale + g.beta[2] * scale) / kDeg;
-  f.unit = "deg at the largest gravity torque";
+  // Half the peak-to-peak of the fitted angle error over the loads the data hold.
+  const double b1 = g.beta[1], b2 = g.beta[2];
+  f.size = HalfPeakToPeak([&](double t) { return b1 * t + b2 * std::pow(t / scale, 3) * scale; },
+                          tau.minCoeff(), tau.maxCoeff(), z) /
+           kDeg;
+  f.unit = "deg over the gravity torques";
+  f.noise = NoiseOfJoint(w) / kDeg;
   f.p_value = g.p_value;
   f.statistic = g.stat;
   f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
@@ -167,8 +234,9 @@ void TestDrift(const ResidualContext& c, ResidualFinding* best) {
     ResidualFinding f;
     f.kind = "drift";
     f.variable = std::string("row order, ") + "xyz"[axis];
-    f.size = std::abs(g.beta[1]) * 1e3;
+    f.size = std::min(0.5 * std::abs(g.beta[1]), 0.5 * (z.maxCoeff() - z.minCoeff())) * 1e3;
     f.unit = "mm over the data";
+    f.noise = c.opt.point_std_m * 1e3;
     f.p_value = g.p_value;
     f.statistic = g.stat;
     f.coefficients.assign(g.beta.data(), g.beta.data() + g.beta.size());
@@ -198,6 +266,7 @@ void TestSets(const ResidualContext& c, ResidualFinding* best) {
     f.variable = std::string("set, ") + "xyz"[axis];
     f.size = g.beta.tail(S - 1).cwiseAbs().maxCoeff() * 1e3;
     f.unit = "mm between sets";
+    f.noise = c.opt.point_std_m * 1e3;
     f.p_value = g.p_value;
     f.statistic = g.stat;
     Keep(std::move(f), best);
@@ -223,6 +292,13 @@ std::string FindingMessage(const ResidualFinding& best) {
                   best.variable.c_str(), best.size, best.unit.c_str(), rel, best.p_value);
   } else {
     std::snprintf(line, sizeof(line), "no residual structure tested");
+    return line;
+  }
+  if (best.below_noise) {
+    char noise[96];
+    std::snprintf(noise, sizeof(noise), ", below the stated noise (%.3g %s)", best.noise,
+                  best.kind == "periodic" || best.kind == "load" ? "deg" : "mm");
+    return line + std::string(noise);
   }
   return line;
 }
@@ -257,8 +333,11 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
     const size_t slash = best.variable.find('/');
     if (slash != std::string::npos) best.variable = best.variable.substr(slash + 1);
   }
-  best.significant = best.p_value < opt.diagnostic_p;
-  best.notable = best.p_value < opt.explained_p;
+  // A structure smaller than the stated noise is not evidence of a missing effect, however many
+  // rows make its p-value small.
+  best.below_noise = best.size < best.noise;
+  best.significant = best.p_value < opt.diagnostic_p && !best.below_noise;
+  best.notable = best.p_value < opt.explained_p && !best.below_noise;
   best.message = FindingMessage(best);
   return best;
 }

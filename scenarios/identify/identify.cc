@@ -246,8 +246,9 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
     for (const auto& n : a.effects) names += (names.empty() ? "" : " + ") + n;
     const bool close = !alt.active.empty() && cv < (1.0 + ctx.opt.ambiguity_cv) * res->cv_after;
     if (close) res->attribution_unique = false;
-    res->steps.push_back(Fmt("without %s: %s reach held-out %.4g (chosen %.4g)%s", a.banned.c_str(),
-                             names.empty() ? "nothing" : names.c_str(), cv, res->cv_after,
+    res->steps.push_back(Fmt("without %s: %s reach held-out %.4g sigma^2 (chosen %.4g)%s",
+                             a.banned.c_str(), names.empty() ? "nothing" : names.c_str(), cv,
+                             res->cv_after,
                              close ? ": as good, the cause is not singled out" : ""));
     res->alternatives.push_back(std::move(a));
   }
@@ -389,22 +390,38 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
                      "; the data has " + std::to_string(folds.test_rows.size()) +
                      " (set cross_validation: false, or another folds_by)");
   }
-  const SelectionContext ctx{em, data, loads, folds, opt, &res.steps};
+  bool capped = false;
+  const SelectionContext ctx{em, data, loads, folds, opt, &res.steps, &capped};
   double cv = CvError(ctx, res.before);
   res.cv_before = cv;
   if (opt.cross_validation) {
     res.steps.push_back(
         Fmt("cross-validation over %d folds by %s; declared model's held-out "
-            "error %.4g",
+            "error %.4g sigma^2 (mean squared residual in units of the stated noise)",
             res.num_folds, folds.by.c_str(), cv));
   }
   Fit cur = SelectEffects(ctx, res.before, Pool(em, candidates, false, false), true, &cv);
   cur = FollowFinding(ctx, candidates, std::move(cur), &cv, &res);
   const std::vector<int> generic = Pool(em, candidates, false, true);
-  if (!generic.empty() && static_cast<int>(cur.active.size()) < opt.max_effects) {
+  // Always tried: a cap limits what forward selection adds, never whether the joint origins are
+  // looked at (the block is one step, kept only when the held-out error falls).
+  if (!generic.empty()) {
     res.steps.push_back("complete geometry: joint origins beyond the named effects");
     cur = SelectEffects(ctx, cur, generic, false, &cv);
-    cur = AddGeometryBlock(ctx, cur, generic, &cv);
+    double cv_block = cv;
+    Fit block = AddGeometryBlock(ctx, cur, generic, &cv_block);
+    const bool full =
+        opt.max_effects >= 0 && static_cast<int>(cur.active.size()) >= opt.max_effects;
+    if (block.active.size() > cur.active.size() && full) {
+      res.steps.push_back(
+          Fmt("stop: max_effects %d reached, so the geometry block above is not "
+              "kept: the cap, not the data, ends the selection",
+              opt.max_effects));
+      capped = true;
+    } else {
+      cur = std::move(block);
+      cv = cv_block;
+    }
   }
   cur = PreferSimpler(ctx, candidates, std::move(cur), &cv);
   // The selection ran on the loads at the readings; the chosen model's values are refitted on
@@ -414,6 +431,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   const std::vector<ConfigLoads>& final_loads = shifted.empty() ? loads : shifted;
   res.after = cur;
   res.cv_after = cv;
+  res.stopped_by = capped ? "max_effects" : opt.cross_validation ? "held_out" : "bic";
   res.finding = FindResidualStructure(em, data, final_loads, cur, opt);
   if (!cur.active.empty() || !res.unlocked.empty()) {
     res.steps.push_back(std::string("diagnostics after: ") + res.finding.message +
@@ -516,7 +534,8 @@ std::string Verdict(const IdentifyResult& res, double val_before, double val_aft
   if (!(val_after < 0.99 * val_before)) return "unexplained";
   const Fit& a = res.after;
   const bool left = a.rss > 2.0 * std::max(1, a.num_residuals - a.num_params);
-  if (res.finding.notable || left) return "partly_explained";
+  // A cap that stopped the selection leaves what the data would still explain: never complete.
+  if (res.finding.notable || left || res.stopped_by == "max_effects") return "partly_explained";
   return res.attribution_unique ? "explained" : "ambiguous";
 }
 

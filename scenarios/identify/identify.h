@@ -116,7 +116,10 @@ struct IdentifyOptions {
   double ambiguity_bic = 2.0;
   double ambiguity_cos = 0.999;
   double rank_tol = 1e-3;  // share of a sensitivity outside the span of the others
-  int max_effects = 8;
+  // Most effects to choose; -1: no cap, selection stops where the held-out error (or, without
+  // cross-validation, BIC) stops falling. A cap that stops a selection the data would continue
+  // is reported (IdentifyResult::stopped_by) and keeps the verdict from "explained".
+  int max_effects = -1;
   int max_iterations = 50;  // Levenberg-Marquardt
   // Threads of a pass over the rows (0: one per core; parallel.h); any number, the same bits.
   int threads = 0;
@@ -175,8 +178,10 @@ struct ResidualFinding {
   std::string kind;          // "periodic", "load", "drift" ("" none tested)
   std::string variable;      // joint name, or "row order, x"
   int q_index = -1;
-  int cycles = 0;  // periodic: cycles per revolution of the strongest harmonic
-  double size = 0.0;
+  int cycles = 0;            // periodic: cycles per revolution of the strongest harmonic
+  double size = 0.0;         // half the fitted curve's peak-to-peak over the observed variable
+  double noise = 0.0;        // the stated noise in the same unit (a joint's: as an angle there)
+  bool below_noise = false;  // size < noise: never significant, whatever the p-value
   std::string unit;
   double p_value = 1.0;
   double statistic = 0.0;
@@ -199,9 +204,12 @@ struct IdentifyResult {
   std::string folds_by;               // cross-validation folds: "set", "group", "row", ""
   int num_folds = 0;
   double cv_before = 0.0, cv_after = 0.0;  // held-out mean squared whitened residual
-  std::vector<Alternative> alternatives;   // one per chosen effect (cross-validation only)
-  bool attribution_unique = true;          // no alternative comes within ambiguity_cv
-  std::vector<std::string> simpler;        // chosen effects that together equal a simpler one
+  // What ended the selection: "held_out" (the held-out error stopped falling), "bic" (without
+  // cross-validation), or "max_effects" (the cap, while a further effect still passed).
+  std::string stopped_by;
+  std::vector<Alternative> alternatives;  // one per chosen effect (cross-validation only)
+  bool attribution_unique = true;         // no alternative comes within ambiguity_cv
+  std::vector<std::string> simpler;       // chosen effects that together equal a simpler one
   // |sum of the effects' corrections|^2 / sum of their |correction|^2 (group points projected
   // out): about 1 for independent causes, well below 1 when effects cancel each other.
   double overlap = 1.0;

@@ -96,8 +96,10 @@ int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
     }
     const double cv = CvError(ctx, t.fit);
     if (!CvLower(ctx.opt, cv, cv_cur)) {
-      ctx.log->push_back(Fmt("not kept %s: BIC %.1f -> %.1f but held-out error %.4g -> %.4g",
-                             name.c_str(), cur.bic, t.fit.bic, cv_cur, cv));
+      ctx.log->push_back(
+          Fmt("not kept %s: BIC %.1f -> %.1f but held-out error %.4g -> %.4g "
+              "sigma^2",
+              name.c_str(), cur.bic, t.fit.bic, cv_cur, cv));
       continue;
     }
     if (best < 0 || (ctx.opt.cross_validation && cv < *cv_best)) {
@@ -213,29 +215,43 @@ Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::v
   if (!out.empty() || !CvLower(ctx.opt, cv_block, *cv)) {
     ctx.log->push_back(
         Fmt("geometry block of %d joint origins (%d directions) not kept: "
-            "held-out %.4g -> %.4g%s",
+            "held-out %.4g -> %.4g sigma^2%s",
             added, fit.num_params - start.num_params, *cv, cv_block,
             out.empty() ? "" : ", outside bounds"));
     return start;
   }
   ctx.log->push_back(
       Fmt("add geometry block of %d joint origins (%d directions): BIC %.1f -> "
-          "%.1f, held-out %.4g -> %.4g",
+          "%.1f, held-out %.4g -> %.4g sigma^2",
           added, fit.num_params - start.num_params, start.bic, fit.bic, *cv, cv_block));
   *cv = cv_block;
   return fit;
 }
 
+std::string HeldOutChange(const SelectionContext& ctx, double from, double to) {
+  return ctx.opt.cross_validation ? Fmt(", held-out %.4g -> %.4g sigma^2", from, to) : "";
+}
+
 Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
                   bool backward, double* cv, bool swap) {
   Fit cur = start;
-  for (int round = 0;
-       static_cast<int>(cur.active.size()) < ctx.opt.max_effects && round < 3 * ctx.opt.max_effects;
-       ++round) {
+  const int cap = ctx.opt.max_effects;
+  // Each round adds one effect; backward steps may take some out again.
+  const int rounds = 3 * (cap >= 0 ? cap : static_cast<int>(pool.size() + start.active.size()));
+  for (int round = 0; round < rounds; ++round) {
     std::vector<Trial> trials = ScreenCandidates(ctx, cur, pool);
     if (trials.empty()) break;
     double cv_best = 0.0;
     const int k = PickTrial(ctx, cur, *cv, &trials, &cv_best);
+    if (k >= 0 && cap >= 0 && static_cast<int>(cur.active.size()) >= cap) {
+      ctx.log->push_back(
+          Fmt("stop: max_effects %d reached, but %s would still be added "
+              "(BIC %.1f -> %.1f%s): the cap, not the data, ends the selection",
+              cap, ctx.em.candidates()[trials[k].c].Name().c_str(), cur.bic, trials[k].fit.bic,
+              HeldOutChange(ctx, *cv, cv_best).c_str()));
+      if (ctx.capped) *ctx.capped = true;
+      break;
+    }
     if (k < 0) {
       ctx.log->push_back(Fmt("stop: best next %s changes BIC by %.1f%s",
                              ctx.em.candidates()[trials[0].c].Name().c_str(),
@@ -244,9 +260,9 @@ Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vect
       break;
     }
     const Trial& t = trials[k];
-    ctx.log->push_back(Fmt("add %s: BIC %.1f -> %.1f, RSS %.4g -> %.4g, held-out %.4g -> %.4g",
+    ctx.log->push_back(Fmt("add %s: BIC %.1f -> %.1f, RSS %.4g -> %.4g%s",
                            ctx.em.candidates()[t.c].Name().c_str(), cur.bic, t.fit.bic, cur.rss,
-                           t.fit.rss, *cv, cv_best));
+                           t.fit.rss, HeldOutChange(ctx, *cv, cv_best).c_str()));
     cur = t.fit;
     *cv = cv_best;
     if (backward) cur = BackwardStep(ctx, std::move(cur), cv);

@@ -26,7 +26,12 @@ struct SelectionContext {
   const Folds& folds;
   const IdentifyOptions& opt;
   std::vector<std::string>* log;
+  bool* capped = nullptr;  // set when max_effects stopped a selection the data would continue
 };
+
+// ", held-out A -> B sigma^2" (the mean squared held-out residual in units of the stated
+// noise), or "" without cross-validation.
+std::string HeldOutChange(const SelectionContext& ctx, double from, double to);
 
 // Parameters of `fit` outside their candidates' bounds, as "name[k] = v outside [lo, hi]";
 // empty when all are inside.

@@ -71,7 +71,9 @@ CLI::App* AddIdentify(CLI::App& app, flexbench::scenarios::IdentifyCliOptions& i
   identify_cmd->add_option("--reading-std-deg", id.reading_std_deg,
                            "the joint readings' noise [deg]: sizes the augmented model's sources "
                            "on the validation rows with it");
-  identify_cmd->add_option("--max-effects", id.max_effects, "most effects to choose (default 8)");
+  identify_cmd->add_option("--max-effects", id.max_effects,
+                           "most effects to choose (default: no cap; selection stops "
+                           "where the held-out error stops falling)");
   identify_cmd->add_option("--bic-threshold", id.bic_threshold,
                            "BIC drop a candidate must bring to be tried (default 10)");
   identify_cmd->add_option("--folds-by", id.folds_by,

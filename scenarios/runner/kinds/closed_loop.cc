@@ -210,7 +210,9 @@ class ClosedLoopKind : public ScenarioKind {
     }
     opt_.bic_threshold = root.GetDouble("bic_threshold", opt_.bic_threshold);
     opt_.max_effects = root.GetInt("max_effects", opt_.max_effects);
-    if (opt_.max_effects < 0) root.Child("max_effects").Fail("must be >= 0");
+    if (root.Has("max_effects") && opt_.max_effects < 0) {
+      root.Child("max_effects").Fail("must be >= 0 (leave it out for no cap)");
+    }
     opt_.cross_validation = root.GetBool("cross_validation", opt_.cross_validation);
     opt_.folds_by = root.GetString("folds_by", opt_.folds_by);
     if (opt_.folds_by != "auto" && opt_.folds_by != "set" && opt_.folds_by != "group" &&
@@ -452,6 +454,7 @@ class ClosedLoopKind : public ScenarioKind {
     verdict_ = identify::Verdict(res, (*m)["val_err_before_m"].get<double>(),
                                  (*m)["val_err_after_m"].get<double>());
     (*m)["verdict"] = verdict_;
+    (*m)["stopped_by"] = res.stopped_by;
     const double noise_ratio = identify::NoiseRatio(res.after);
     (*m)["cal_residual_noise_ratio"] = noise_ratio;
     if (!(noise_ratio <= identify::kFarAboveNoise)) {
@@ -556,7 +559,7 @@ class ClosedLoopKind : public ScenarioKind {
           "validation data (verdict " +
           verdict_ + ")");
     }
-    PlotFinding(ctx, res.finding.significant ? res.finding : res.first_finding);
+    PlotFinding(ctx, res.finding);  // the finding summary.json reports
     WriteResiduals(ctx, sets.cal, sc.cal_before, sc.cal_after, sets.cal_loads, sc.cal_p0,
                    "calibration");
     WriteResiduals(ctx, sets.val, sc.val_before, sc.val_after, sets.val_loads, sc.val_p0,
@@ -1215,9 +1218,16 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   static Json FindingJson(const identify::ResidualFinding& f) {
-    return {{"significant", f.significant}, {"kind", f.kind},      {"variable", f.variable},
-            {"cycles", f.cycles},           {"size", f.size},      {"unit", f.unit},
-            {"p_value", f.p_value},         {"message", f.message}};
+    return {{"significant", f.significant},
+            {"kind", f.kind},
+            {"variable", f.variable},
+            {"cycles", f.cycles},
+            {"size", f.size},
+            {"unit", f.unit},
+            {"noise", f.noise},
+            {"below_noise", f.below_noise},
+            {"p_value", f.p_value},
+            {"message", f.message}};
   }
 
   Json EquivalenceJson(const identify::IdentifyResult& res) const {
@@ -1265,7 +1275,10 @@ class ClosedLoopKind : public ScenarioKind {
     render::Figure fig(900, 560);
     char title[160];
     std::snprintf(title, sizeof(title), "Residual left: %s in %s, p = %.2g%s", f.kind.c_str(),
-                  f.variable.c_str(), f.p_value, f.significant ? "" : " (not significant)");
+                  f.variable.c_str(), f.p_value,
+                  f.significant   ? ""
+                  : f.below_noise ? " (below the stated noise)"
+                                  : " (not significant)");
     fig.title = title;
     render::Axes& ax = fig.axes();
     ax.x_label = angle              ? f.variable + " [deg]"

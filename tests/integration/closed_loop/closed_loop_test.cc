@@ -441,17 +441,19 @@ TEST(Identify, TwoCandidatesTheDataCannotTellApartAreBothNamedNeverOne) {
 
 // Points of kArm3 whose j3 turns by an error periodic in its own angle, 2 cycles per revolution
 // (a strain-wave transmission error): written with the declared chain's plain forward kinematics,
-// not with the effect model under test. Two sets, so cross-validation leaves one out.
-DataSet PeriodicErrorData(const EffectModel& em, double amplitude, int rows, std::mt19937_64& rng) {
+// not with the effect model under test. Two sets, so cross-validation leaves one out. j3 spans
+// +-j3_scale * pi; the points carry Gaussian noise of noise_m per axis.
+DataSet PeriodicErrorData(const EffectModel& em, double amplitude, int rows, std::mt19937_64& rng,
+                          double j3_scale = 0.6, double noise_m = 1e-4) {
   DataSet d;
   d.sets = {"a", "b"};
   std::uniform_real_distribution<double> u(-M_PI, M_PI);
-  std::normal_distribution<double> n(0.0, 1e-4);
+  std::normal_distribution<double> n(0.0, noise_m);
   kinematics::PpoeData pd(em.chain());
   const kinematics::FrameId ee = em.chain().num_frames() - 1;
   for (int r = 0; r < rows; ++r) {
     Observation o;
-    o.q = Eigen::Vector3d(u(rng), 0.6 * u(rng), 0.6 * u(rng));
+    o.q = Eigen::Vector3d(u(rng), 0.6 * u(rng), j3_scale * u(rng));
     Eigen::VectorXd q_link = o.q;
     q_link[2] += amplitude * std::sin(2.0 * o.q[2] + 0.7);
     kinematics::ForwardKinematics(em.chain(), pd, q_link);
@@ -498,6 +500,68 @@ TEST(Identify, AnEffectOutsideTheLibraryIsReportedNotMisnamed) {
   EXPECT_LE(after, before) << log;
   EXPECT_NE(Verdict(r, before, after), "explained") << log;
   EXPECT_NE(Verdict(r, before, after), "no_effect") << log;
+  EXPECT_FALSE(r.finding.below_noise) << log;
+}
+
+// A periodic finding's size is what the data show: half the fitted curve's peak-to-peak over the
+// joint's observed range, never more than the residual it explains. On noise alone a
+// three-harmonic fit's largest coefficient once read hundreds of degrees.
+TEST(Identify, APeriodicSizeIsWhatTheObservedRangeShows) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  for (const double scale : {0.6, 0.15}) {
+    std::mt19937_64 rng(7);
+    const DataSet cal = PeriodicErrorData(*f.em, 0.0, 120, rng, scale);
+    const IdentifyResult r = Identify(*f.em, cal, ComputeLoads(*f.em, cal),
+                                      WithoutNeedsEvidence(*f.em), IdentifyOptions{});
+    if (r.finding.kind != "periodic") continue;
+    double lo = HUGE_VAL, hi = -HUGE_VAL;
+    for (const double z : r.finding.z) lo = std::min(lo, z), hi = std::max(hi, z);
+    EXPECT_LE(r.finding.size, 0.5 * (hi - lo) * 180.0 / M_PI + 1e-12) << r.finding.message;
+    EXPECT_FALSE(r.finding.significant) << r.finding.message;
+  }
+}
+
+// Over a third of a turn the harmonics of 1, 2 and 3 cycles are nearly the same curve: they are
+// not fitted together, and one is fitted alone only where half its cycle is seen.
+TEST(Identify, HarmonicsTheRangeCannotTellApartAreNotFittedTogether) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  std::mt19937_64 rng(31);
+  // j3 over +-0.3 pi (108 deg): only the 2- and 3-cycle harmonics, each alone.
+  const DataSet cal = PeriodicErrorData(*f.em, 0.08 * M_PI / 180.0, 160, rng, 0.3);
+  const IdentifyResult r = Identify(*f.em, cal, ComputeLoads(*f.em, cal),
+                                    WithoutNeedsEvidence(*f.em), IdentifyOptions{});
+  ASSERT_EQ(r.finding.kind, "periodic") << r.finding.message;
+  EXPECT_EQ(r.finding.variable, "j3");
+  // Over 0.3 of a turn the 2- and 3-cycle curves differ by less than a third of a cycle: either
+  // may be reported, but never both fitted together.
+  EXPECT_TRUE(r.finding.cycles == 2 || r.finding.cycles == 3) << r.finding.message;
+  EXPECT_TRUE(r.finding.significant) << r.finding.message;
+  int fitted = 0;
+  for (int c = 1; c <= 3; ++c) {
+    fitted += r.finding.coefficients[2 * c - 1] != 0.0 || r.finding.coefficients[2 * c] != 0.0;
+  }
+  EXPECT_EQ(fitted, 1) << r.finding.message;
+  EXPECT_LE(r.finding.size, 0.08 + 0.02) << r.finding.message;
+}
+
+// Noise-free points whose deterministic residual is 0.15x the stated noise: a tiny p-value, but
+// no evidence of a missing effect.
+TEST(Identify, AStructureBelowTheStatedNoiseIsNeverSignificant) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  std::mt19937_64 rng(5);
+  // The stated point noise (1e-4 m) seen as an angle at j3, whose marker is 0.6 m away.
+  const double noise_rad = 1e-4 / 0.6;
+  const DataSet cal = PeriodicErrorData(*f.em, 0.15 * noise_rad, 160, rng, 0.6, 1e-12);
+  const IdentifyResult r = Identify(*f.em, cal, ComputeLoads(*f.em, cal),
+                                    WithoutNeedsEvidence(*f.em), IdentifyOptions{});
+  EXPECT_FALSE(r.finding.significant) << r.finding.message;
+  EXPECT_FALSE(r.finding.notable) << r.finding.message;
+  if (r.finding.kind == "periodic") {
+    EXPECT_TRUE(r.finding.below_noise) << r.finding.message;
+    EXPECT_NE(r.finding.message.find("below the stated noise"), std::string::npos)
+        << r.finding.message;
+  }
+  EXPECT_NE(Verdict(r, 1.0, 0.5), "unexplained") << r.finding.message;
 }
 
 TEST(Identify, OnlyTheObservablePartOfAnOffsetIsReported) {
