@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <set>
 #include <thread>
 
@@ -109,7 +110,15 @@ void WriteSweepCommand(const fs::path& out, const SweepSpec& spec, const std::st
 int CollectAndGate(const SweepSpec& spec, const std::vector<SweepPoint>& points,
                    const std::vector<SweepRun>& runs, const fs::path& out,
                    const std::string& command) {
-  const std::vector<RunOutcome> outcomes = ReadOutcomes(out, points, runs);
+  const RunKeys keys(spec, points);
+  std::map<std::string, size_t> stale;
+  const std::vector<RunOutcome> outcomes = ReadOutcomes(out, points, runs, keys, &stale);
+  if (!stale.empty()) {
+    size_t n = 0;
+    for (const auto& [why, k] : stale) n += k;
+    Log(std::to_string(n) + " results made with other settings not collected (" +
+        RerunReasons(stale) + "): run the sweep again without --collect to redo them");
+  }
   const Collected c = Collect(spec, points, runs, outcomes);
   WriteCollected(out, spec, points, c);
   if (!command.empty()) WriteSweepCommand(out, spec, command);
@@ -173,7 +182,11 @@ int SweepCommand(const SweepCliOptions& o) {
     if (o.executor != "local" && o.executor != "slurm") {
       throw InputError("--executor '" + CapForMessage(o.executor) + "': expected local or slurm");
     }
-    if (o.jobs < 0 || o.jobs > 1024) throw InputError("-j: must be between 1 and 1024");
+    if (o.jobs < 0 || o.jobs > 1024) {
+      throw InputError("-j " + std::to_string(o.jobs) +
+                       ": must be between 1 and 1024 (or 0: one per core)");
+    }
+    CheckSlurmOptions(o.slurm);
     int shard_index = 0, shard_count = 0;
     if (!o.shard.empty()) ParseShard(o.shard, &shard_index, &shard_count);
     if (o.executor == "slurm") CheckSlurmClients();
@@ -190,17 +203,24 @@ int SweepCommand(const SweepCliOptions& o) {
       return CollectAndGate(spec, points, runs, out, o.command);
     }
     CheckPoints(spec, points);
+    if (o.executor == "slurm") CheckSlurmOut(out);
     PrepareOutDir(out, spec);
     if (o.executor == "slurm") return RunOnSlurm(o, spec, points, runs, out);
-    const std::vector<size_t> todo = PendingRuns(out, runs, shard_index, shard_count);
+    const RunKeys keys(spec, points);
+    const PendingRunList pending = PendingRuns(out, runs, keys, shard_index, shard_count);
     const int jobs =
         o.jobs > 0 ? o.jobs : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+    if (!pending.rerun.empty()) Log(RerunMessage(pending.rerun));
     Log(spec.name + ": " + std::to_string(points.size()) + " points x " +
         std::to_string(spec.seeds.size()) + " seeds" +
-        (shard_count ? ", shard " + o.shard : std::string()) + ": " + std::to_string(todo.size()) +
-        " runs to do, -j " + std::to_string(jobs));
-    const int failed = RunLocal(spec, points, runs, todo, out, jobs);
-    if (shard_count) return failed ? kExitInternal : kExitOk;
+        (shard_count ? ", shard " + o.shard : std::string()) + ": " +
+        std::to_string(pending.todo.size()) + " runs to do, -j " + std::to_string(jobs));
+    const LocalOutcome done = RunLocal(spec, points, runs, pending.todo, out, jobs, keys);
+    if (done.signal) {
+      Log("stopped by a signal; the finished runs are kept: run the same command to resume");
+      return 128 + done.signal;
+    }
+    if (shard_count) return done.failed ? kExitInternal : kExitOk;
     return CollectAndGate(spec, points, runs, out, o.command);
   } catch (const std::exception& e) {
     return ReportError(e);
