@@ -78,14 +78,21 @@ std::string BinaryIdentity() {
          (build_id.empty() ? std::string() : " build " + build_id);
 }
 
-RunKeys::RunKeys(const SweepSpec& spec, const std::vector<SweepPoint>& points)
+RunKeys::RunKeys(const SweepSpec& spec, const std::vector<SweepPoint>& points,
+                 const std::vector<std::string>& input_files)
     : fixed_set_(spec.set), points_(points), binary_(BinaryIdentity()) {
-  // The sweep's checks have already read this file; its bytes decide the key.
-  std::ifstream in(spec.scenario, std::ios::binary);
-  std::ostringstream bytes;
-  bytes << in.rdbuf();
-  if (!in) throw InputError(CapForMessage(spec.scenario) + ": cannot read the scenario file");
-  scenario_hash_ = Hex(Fnv1a64(bytes.str()));
+  // The sweep's checks have already accepted these files (regular, within their size caps).
+  const auto read = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream bytes;
+    bytes << in.rdbuf();
+    if (!in) throw InputError(CapForMessage(path) + ": cannot read this input of the sweep");
+    return bytes.str();
+  };
+  scenario_hash_ = Hex(Fnv1a64(read(spec.scenario)));
+  std::vector<std::string> contents;
+  for (const std::string& f : input_files) contents.push_back(read(f));
+  inputs_hash_ = Hex(HashList(contents));
 }
 
 RunKey RunKeys::Of(const SweepRun& run) const {
@@ -94,10 +101,11 @@ RunKey RunKeys::Of(const SweepRun& run) const {
   set.insert(set.end(), point.set.begin(), point.set.end());
   RunKey k;
   k.scenario = scenario_hash_;
+  k.inputs = inputs_hash_;
   k.overrides = Hex(HashList(set));
   k.seed = run.seed;
   k.flexbench = binary_;
-  k.key = Hex(HashList({k.scenario, k.overrides, std::to_string(k.seed), k.flexbench}));
+  k.key = Hex(HashList({k.scenario, k.inputs, k.overrides, std::to_string(k.seed), k.flexbench}));
   return k;
 }
 
@@ -105,6 +113,7 @@ void WriteRunKey(const fs::path& run_dir, const RunKey& k) {
   Json j;
   j["key"] = k.key;
   j["scenario"] = k.scenario;
+  j["inputs"] = k.inputs;
   j["overrides"] = k.overrides;
   j["seed"] = k.seed;
   j["flexbench"] = k.flexbench;
@@ -145,6 +154,7 @@ std::string StaleReason(const fs::path& run_dir, const RunKey& expected) {
   };
   if (text("key") == expected.key) return "";
   if (text("scenario") != expected.scenario) return "scenario file changed";
+  if (text("inputs") != expected.inputs) return "an input file changed";
   if (text("overrides") != expected.overrides) return "overrides changed";
   if (!j.contains("seed") || !j["seed"].is_number_unsigned() ||
       j["seed"].get<std::uint64_t>() != expected.seed) {

@@ -108,9 +108,8 @@ void WriteSweepCommand(const fs::path& out, const SweepSpec& spec, const std::st
 }
 
 int CollectAndGate(const SweepSpec& spec, const std::vector<SweepPoint>& points,
-                   const std::vector<SweepRun>& runs, const fs::path& out,
+                   const std::vector<SweepRun>& runs, const RunKeys& keys, const fs::path& out,
                    const std::string& command) {
-  const RunKeys keys(spec, points);
   std::map<std::string, size_t> stale;
   const std::vector<RunOutcome> outcomes = ReadOutcomes(out, points, runs, keys, &stale);
   if (!stale.empty()) {
@@ -149,7 +148,7 @@ int CollectAndGate(const SweepSpec& spec, const std::vector<SweepPoint>& points,
 
 int RunOnSlurm(const SweepCliOptions& o, const SweepSpec& spec,
                const std::vector<SweepPoint>& points, const std::vector<SweepRun>& runs,
-               const fs::path& out) {
+               const RunKeys& keys, const fs::path& out) {
   int tasks = 0;
   const std::string id = SubmitSlurm(spec, runs.size(), out, o.slurm, &tasks);
   Log("submitted Slurm job " + id + " (" + std::to_string(tasks) + " array tasks)");
@@ -172,7 +171,19 @@ int RunOnSlurm(const SweepCliOptions& o, const SweepSpec& spec,
     Log("resubmit the failed tasks alone: flexbench sweep " + spec.file + " --out " + out.string() +
         " --executor slurm --tasks " + std::to_string(tasks) + " --array " + list);
   }
-  return CollectAndGate(spec, points, runs, out, o.command);
+  return CollectAndGate(spec, points, runs, keys, out, o.command);
+}
+
+// The files the points' checks accepted (scenario, models, declared models, CSVs), without the
+// sweep file: with the scenario file they define the runs' results.
+std::vector<std::string> InputFiles(const SweepSpec& spec) {
+  std::error_code ec;
+  const std::string sweep_file = fs::weakly_canonical(fs::absolute(spec.file), ec).string();
+  std::vector<std::string> files;
+  for (const std::string& f : RecordedInputFiles()) {
+    if (f != sweep_file) files.push_back(f);
+  }
+  return files;
 }
 
 }  // namespace
@@ -200,13 +211,14 @@ int SweepCommand(const SweepCliOptions& o) {
       if (!fs::is_regular_file(out / kMarker, ec)) {
         throw InputError("--out " + CapForMessage(out.string()) + ": not a sweep's folder");
       }
-      return CollectAndGate(spec, points, runs, out, o.command);
     }
+    // Also before --collect: the checks read the input files that the run keys cover.
     CheckPoints(spec, points);
+    const RunKeys keys(spec, points, InputFiles(spec));
+    if (o.collect) return CollectAndGate(spec, points, runs, keys, out, o.command);
     if (o.executor == "slurm") CheckSlurmOut(out);
     PrepareOutDir(out, spec);
-    if (o.executor == "slurm") return RunOnSlurm(o, spec, points, runs, out);
-    const RunKeys keys(spec, points);
+    if (o.executor == "slurm") return RunOnSlurm(o, spec, points, runs, keys, out);
     const PendingRunList pending = PendingRuns(out, runs, keys, shard_index, shard_count);
     const int jobs =
         o.jobs > 0 ? o.jobs : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
@@ -221,7 +233,7 @@ int SweepCommand(const SweepCliOptions& o) {
       return 128 + done.signal;
     }
     if (shard_count) return done.failed ? kExitInternal : kExitOk;
-    return CollectAndGate(spec, points, runs, out, o.command);
+    return CollectAndGate(spec, points, runs, keys, out, o.command);
   } catch (const std::exception& e) {
     return ReportError(e);
   }

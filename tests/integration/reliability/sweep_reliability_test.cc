@@ -43,13 +43,22 @@ std::string LastLine(std::string e) {
   return nl == std::string::npos ? e : e.substr(nl + 1);
 }
 
-// A copy of the contact scenario (about 0.1 s a run) that a test may edit.
+// A copy of the contact scenario (about 0.1 s a run) and of its declared model, which a test
+// may edit.
 fs::path ContactScenario(const fs::path& dir) {
+  const auto copy = [](std::string text, const std::string& from, const std::string& to) {
+    for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + 1)) {
+      text.replace(at, from.size(), to);
+    }
+    return text;
+  };
+  const fs::path declared = dir / "humanoid_upper.declared.yaml";
+  WriteFile(declared, copy(ReadFile(SourceDir() + "/models/humanoid_upper.declared.yaml"),
+                           "model: humanoid_upper.xml",
+                           "model: " + SourceDir() + "/models/humanoid_upper.xml"));
   std::string text = ReadFile(SourceDir() + "/scenarios/humanoid_table_contact.yaml");
-  for (size_t at = text.find("../models/"); at != std::string::npos;
-       at = text.find("../models/", at)) {
-    text.replace(at, 10, SourceDir() + "/models/");
-  }
+  text = copy(text, "../models/humanoid_upper.declared.yaml", declared.string());
+  text = copy(text, "../models/", SourceDir() + "/models/");
   const fs::path s = dir / "contact.yaml";
   WriteFile(s, text);
   return s;
@@ -89,6 +98,12 @@ TEST(SweepReliability, ResumeRerunsRunsMadeWithOtherSettings) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("4 runs rerun: scenario file changed"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("4 runs to do"), std::string::npos) << r.err;
+
+  // A file the scenario names edited (here its declared model).
+  std::ofstream(tmp.path() / "humanoid_upper.declared.yaml", std::ios::app) << "# edited\n";
+  r = Sweep(file, out, "-j 2");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("4 runs rerun: an input file changed"), std::string::npos) << r.err;
 
   // The sweep's set: changed; the new results, not the old ones, are reported.
   WriteFile(file, SweepYaml(scenario, "set: {iterations: 5}\n" + grid));
