@@ -194,6 +194,12 @@ void StopWorkers(const std::map<pid_t, size_t>& running, int sig) {
   }
 }
 
+bool EndedBySignal(int status) {
+  const auto stopping = [](int sig) { return sig == SIGINT || sig == SIGTERM; };
+  return (WIFSIGNALED(status) && stopping(WTERMSIG(status))) ||
+         (WIFEXITED(status) && WEXITSTATUS(status) > 128 && stopping(WEXITSTATUS(status) - 128));
+}
+
 // Blocks the signals RunLocal waits for while it lives (SIGCHLD, and the forwarded ones), so
 // that none is lost between a check and the wait; restores the mask at scope exit.
 class BlockedSignals {
@@ -205,6 +211,13 @@ class BlockedSignals {
   }
   ~BlockedSignals() { ::sigprocmask(SIG_SETMASK, &old_, nullptr); }
   const sigset_t& old() const { return old_; }
+  // A forwarded signal that has arrived (taken), or 0.
+  int Poll() const {
+    siginfo_t info;
+    const timespec now{0, 0};
+    const int sig = ::sigtimedwait(&forwarded_, &info, &now);
+    return sig > 0 ? sig : 0;
+  }
   // Waits for a worker's end (0) or a forwarded signal (its number).
   int Wait() const {
     for (;;) {
@@ -234,7 +247,8 @@ LocalOutcome RunLocal(const SweepSpec& spec, const std::vector<SweepPoint>& poin
   std::fflush(stdout);
   std::fflush(stderr);
   const BlockedSignals signals;
-  while (done < todo.size()) {
+  int stop = 0;
+  while (done < todo.size() && !(stop = signals.Poll())) {
     while (next < todo.size() && static_cast<int>(running.size()) < jobs) {
       const SweepRun& run = runs[todo[next]];
       const fs::path log = out / LogPath(run, points);
@@ -251,19 +265,28 @@ LocalOutcome RunLocal(const SweepSpec& spec, const std::vector<SweepPoint>& poin
     const pid_t pid = ::waitpid(-1, &status, WNOHANG);
     if (pid < 0) throw std::runtime_error("waitpid failed");
     if (pid == 0) {
-      const int sig = signals.Wait();
-      if (sig == 0) continue;
-      std::fprintf(stderr, "%s[sweep] %s: stopping %zu running runs\n",
-                   isatty(fileno(stderr)) ? "\n" : "", sig == SIGINT ? "SIGINT" : "SIGTERM",
-                   running.size());
-      StopWorkers(running, sig);
-      return {static_cast<int>(failed), sig};
+      stop = signals.Wait();
+      if (stop) break;
+      continue;
     }
     const auto it = running.find(pid);
     if (it == running.end()) continue;
-    RecordOutcome(runs[it->second], points, out, status, &failed);
+    const size_t index = it->second;
     running.erase(it);
+    // A terminal's Ctrl-C reaches the workers too: one ended by the signal that stops the
+    // sweep (killed by it, or exiting 128 + it after its own clean-up) was interrupted, not
+    // failed.
+    if (EndedBySignal(status) && (stop = signals.Poll())) break;
+    RecordOutcome(runs[index], points, out, status, &failed);
     progress.Update(++done, failed);
+  }
+  if (stop == 0) stop = signals.Poll();  // arrived as the last run ended
+  if (stop) {
+    std::fprintf(stderr, "%s[sweep] %s: stopping %zu running runs\n",
+                 isatty(fileno(stderr)) ? "\n" : "", stop == SIGINT ? "SIGINT" : "SIGTERM",
+                 running.size());
+    StopWorkers(running, stop);
+    return {static_cast<int>(failed), stop};
   }
   return {static_cast<int>(failed), 0};
 }

@@ -303,40 +303,41 @@ bool Alive(pid_t pid) {
   return rest >> state && state != "Z";
 }
 
-TEST(SweepReliability, SigtermStopsTheWorkersAndExits143) {
-  TempDir tmp;
-  const fs::path file = tmp.path() / "s.yaml";
-  // Runs of many seconds each (200 rendered configurations), two at a time.
+// Starts a sweep of runs of many seconds each (200 rendered configurations), two at a time, in
+// a process group of its own; returns its pid once both workers run, and their pids.
+pid_t StartSlowSweep(const fs::path& dir, std::vector<pid_t>* workers) {
+  const fs::path file = dir / "s.yaml";
   WriteFile(file, "sweep: stopped\nscenario: " + SourceDir() +
                       "/scenarios/rover_apriltag_exp1.yaml\nseeds: {from: 1, to: 4}\n"
                       "set: {random_configurations.count: 200}\n");
-  const fs::path out = tmp.path() / "out";
-  const std::string err_file = (tmp.path() / "err.txt").string();
+  const std::string cmd = "exec " + Flexbench() + " sweep " + file.string() + " --out " +
+                          (dir / "out").string() + " -j 2 </dev/null >/dev/null 2>" +
+                          (dir / "err.txt").string();
   const pid_t sweep = ::fork();
-  ASSERT_GE(sweep, 0);
   if (sweep == 0) {
-    const std::string cmd = "exec " + Flexbench() + " sweep " + file.string() + " --out " +
-                            out.string() + " -j 2 </dev/null >/dev/null 2>" + err_file;
+    ::setpgid(0, 0);
     ::execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
     ::_exit(127);
   }
-  std::vector<pid_t> workers;
-  for (int k = 0; k < 6000 && workers.size() < 2; ++k) {
+  for (int k = 0; k < 6000 && workers->size() < 2; ++k) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    workers = ChildrenOf(sweep);
+    *workers = ChildrenOf(sweep);
   }
-  ASSERT_EQ(workers.size(), 2u) << "the workers did not start: " << ReadFile(err_file);
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // both at work
-  ASSERT_EQ(::kill(sweep, SIGTERM), 0);
+  return sweep;
+}
+
+// Waits for the sweep; expects exit 128 + `sig`, no worker alive within a few seconds, and no
+// run recorded as failed.
+void ExpectStopped(pid_t sweep, const std::vector<pid_t>& workers, int sig, const fs::path& dir) {
   int status = 0;
   ASSERT_EQ(::waitpid(sweep, &status, 0), sweep);
-  const std::string err = ReadFile(err_file);
-  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 128 + SIGTERM)
+  const std::string err = ReadFile(dir / "err.txt");
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 128 + sig)
       << (WIFSIGNALED(status) ? "killed by signal " + std::to_string(WTERMSIG(status))
                               : "exit " + std::to_string(WEXITSTATUS(status)))
       << "\n"
       << err;
-  // Within a few seconds no worker is left.
   bool any_alive = true;
   for (int k = 0; k < 300 && any_alive; ++k) {
     any_alive = false;
@@ -347,8 +348,34 @@ TEST(SweepReliability, SigtermStopsTheWorkersAndExits143) {
   for (pid_t w : workers) {
     if (Alive(w)) ::kill(w, SIGKILL);  // not left running by a failed test
   }
-  EXPECT_NE(err.find("SIGTERM: stopping 2 running runs"), std::string::npos) << err;
-  EXPECT_FALSE(fs::exists(out / "failed")) << err;  // an interruption is not a failed run
+  EXPECT_NE(err.find(std::string(sig == SIGINT ? "SIGINT" : "SIGTERM") + ": stopping "),
+            std::string::npos)
+      << err;
+  EXPECT_FALSE(fs::exists(dir / "out" / "failed")) << err;  // an interruption is no failed run
+}
+
+// SIGTERM to the sweep alone (as `kill` or a scheduler sends it).
+TEST(SweepReliability, SigtermStopsTheWorkersAndExits143) {
+  TempDir tmp;
+  std::vector<pid_t> workers;
+  const pid_t sweep = StartSlowSweep(tmp.path(), &workers);
+  ASSERT_GT(sweep, 0);
+  ASSERT_EQ(workers.size(), 2u) << "the workers did not start: "
+                                << ReadFile(tmp.path() / "err.txt");
+  ASSERT_EQ(::kill(sweep, SIGTERM), 0);
+  ExpectStopped(sweep, workers, SIGTERM, tmp.path());
+}
+
+// SIGINT to the whole process group, as a terminal's Ctrl-C: the workers get it too.
+TEST(SweepReliability, CtrlCStopsTheSweepWithoutRecordingFailures) {
+  TempDir tmp;
+  std::vector<pid_t> workers;
+  const pid_t sweep = StartSlowSweep(tmp.path(), &workers);
+  ASSERT_GT(sweep, 0);
+  ASSERT_EQ(workers.size(), 2u) << "the workers did not start: "
+                                << ReadFile(tmp.path() / "err.txt");
+  ASSERT_EQ(::kill(-sweep, SIGINT), 0);
+  ExpectStopped(sweep, workers, SIGINT, tmp.path());
 }
 
 }  // namespace
