@@ -194,6 +194,7 @@ int Main(int argc, char** argv) {
   if (*run_cmd) return flexbench::scenarios::RunScenario(o.run);
   if (*sweep_cmd) {
     o.sw.slurm.wait = !o.no_wait;
+    o.sw.slurm.tasks_given = sweep_cmd->get_option("--tasks")->count() > 0;
     return flexbench::scenarios::sweep::SweepCommand(o.sw);
   }
   if (*inspect_cmd) return flexbench::scenarios::InspectCommand(o.inspect_path);

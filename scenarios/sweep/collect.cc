@@ -161,13 +161,22 @@ std::string FailurePath(const SweepRun& run, const std::vector<SweepPoint>& poin
 }
 
 std::vector<RunOutcome> ReadOutcomes(const fs::path& out, const std::vector<SweepPoint>& points,
-                                     const std::vector<SweepRun>& runs) {
+                                     const std::vector<SweepRun>& runs, const RunKeys& keys,
+                                     std::map<std::string, size_t>* stale) {
   std::vector<RunOutcome> outcomes(runs.size());
   for (size_t i = 0; i < runs.size(); ++i) {
     RunOutcome& o = outcomes[i];
     const fs::path summary = out / runs[i].dir / "summary.json";
     std::error_code ec;
-    if (fs::is_regular_file(summary, ec)) {
+    bool current = fs::is_regular_file(summary, ec);
+    if (current) {
+      const std::string why = StaleReason(out / runs[i].dir, keys.Of(runs[i]));
+      if (!why.empty()) {
+        ++(*stale)[why];
+        current = false;
+      }
+    }
+    if (current) {
       std::ifstream in(summary);
       o.summary = Json::parse(in, nullptr, false);
       if (o.summary.is_discarded()) {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "scenarios/runner/scenario_kind.h"
+#include "scenarios/sweep/run_key.h"
 #include "scenarios/sweep/sweep_file.h"
 
 namespace flexbench::scenarios::sweep {
@@ -26,9 +27,13 @@ struct RunOutcome {
 std::string LogPath(const SweepRun& run, const std::vector<SweepPoint>& points);
 std::string FailurePath(const SweepRun& run, const std::vector<SweepPoint>& points);
 
+// A summary.json whose run.key is not `keys.Of(run)` was made with other settings: it is not
+// read (the run counts as failed when it has a failure record, else as missing), and `stale`
+// counts it under its reason.
 std::vector<RunOutcome> ReadOutcomes(const std::filesystem::path& out,
                                      const std::vector<SweepPoint>& points,
-                                     const std::vector<SweepRun>& runs);
+                                     const std::vector<SweepRun>& runs, const RunKeys& keys,
+                                     std::map<std::string, size_t>* stale);
 
 struct Collected {
   std::string csv;

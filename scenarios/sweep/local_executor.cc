@@ -1,5 +1,6 @@
 #include "scenarios/sweep/local_executor.h"
 
+#include <errno.h>
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -10,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <string>
+#include <thread>
 
 #include "scenarios/runner/output.h"
 #include "scenarios/runner/runner.h"
@@ -30,10 +32,13 @@ std::string LastLine(const fs::path& log) {
   return CapForMessage(last, 500);
 }
 
-// The child: the run's stdout and stderr into its log, RunScenario in this process (the
-// parent already checked the scenario), _exit with its code so no parent state is flushed.
+// The child: the signal mask the sweep had before it blocked the signals it waits for, the
+// run's stdout and stderr into its log, RunScenario in this process (the parent already checked
+// the scenario), the run key beside a result, _exit with its code so no parent state is flushed.
 [[noreturn]] void RunChild(const SweepSpec& spec, const SweepPoint& point, const SweepRun& run,
-                           const fs::path& out, const fs::path& log) {
+                           const fs::path& out, const fs::path& log, const RunKey& key,
+                           const sigset_t& mask) {
+  ::sigprocmask(SIG_SETMASK, &mask, nullptr);
   const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   if (fd >= 0) {
     ::dup2(fd, STDOUT_FILENO);
@@ -46,7 +51,15 @@ std::string LastLine(const fs::path& log) {
   o.seed = run.seed;
   o.set = spec.set;
   o.set.insert(o.set.end(), point.set.begin(), point.set.end());
-  const int rc = RunScenario(o);
+  int rc = RunScenario(o);
+  if (rc == kExitOk) {
+    try {
+      WriteRunKey(out / run.dir, key);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "flexbench: error: the run's key was not written: %s\n", e.what());
+      rc = kExitInternal;
+    }
+  }
   std::fflush(stdout);
   std::fflush(stderr);
   ::_exit(rc);
@@ -106,46 +119,176 @@ void RecordOutcome(const SweepRun& run, const std::vector<SweepPoint>& points, c
 
 }  // namespace
 
-std::vector<size_t> PendingRuns(const fs::path& out, const std::vector<SweepRun>& runs,
-                                int shard_index, int shard_count) {
-  std::vector<size_t> todo;
+PendingRunList PendingRuns(const fs::path& out, const std::vector<SweepRun>& runs,
+                           const RunKeys& keys, int shard_index, int shard_count) {
+  PendingRunList p;
   for (size_t k = 0; k < runs.size(); ++k) {
     if (shard_count > 0 && static_cast<int>(k % shard_count) != shard_index) continue;
     std::error_code ec;
-    if (!fs::is_regular_file(out / runs[k].dir / "summary.json", ec)) todo.push_back(k);
+    if (!fs::is_regular_file(out / runs[k].dir / "summary.json", ec)) {
+      p.todo.push_back(k);
+      continue;
+    }
+    const std::string why = StaleReason(out / runs[k].dir, keys.Of(runs[k]));
+    if (why.empty()) continue;
+    p.todo.push_back(k);
+    ++p.rerun[why];
   }
-  return todo;
+  return p;
 }
 
-int RunLocal(const SweepSpec& spec, const std::vector<SweepPoint>& points,
-             const std::vector<SweepRun>& runs, const std::vector<size_t>& todo,
-             const fs::path& out, int jobs) {
+std::string RerunReasons(const std::map<std::string, size_t>& counts) {
+  if (counts.size() == 1) return counts.begin()->first;
+  std::string text;
+  for (const auto& [why, n] : counts) {
+    text += (text.empty() ? "" : ", ") + std::to_string(n) + " " + why;
+  }
+  return text;
+}
+
+std::string RerunMessage(const std::map<std::string, size_t>& rerun) {
+  size_t total = 0;
+  for (const auto& [why, n] : rerun) total += n;
+  if (total == 0) return "";
+  return std::to_string(total) + (total == 1 ? " run" : " runs") + " rerun: " + RerunReasons(rerun);
+}
+
+namespace {
+
+// The signals a sweep passes on to its workers; one the sweep was started ignoring (as a
+// background job of a script ignores SIGINT) stays ignored.
+sigset_t ForwardedSignals() {
+  sigset_t set;
+  sigemptyset(&set);
+  for (int sig : {SIGTERM, SIGINT}) {
+    struct sigaction current {};
+    if (::sigaction(sig, nullptr, &current) == 0 && current.sa_handler == SIG_IGN) continue;
+    sigaddset(&set, sig);
+  }
+  return set;
+}
+
+// Passes `sig` to every running worker and waits for them; a worker still there after 10 s is
+// killed. Their runs are not recorded as failures: a resumed sweep runs them again.
+void StopWorkers(const std::map<pid_t, size_t>& running, int sig) {
+  for (const auto& [pid, run] : running) ::kill(pid, sig);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  std::map<pid_t, size_t> left = running;
+  while (!left.empty()) {
+    for (auto it = left.begin(); it != left.end();) {
+      int status = 0;
+      const pid_t r = ::waitpid(it->first, &status, WNOHANG);
+      it = r == it->first || (r < 0 && errno != EINTR) ? left.erase(it) : std::next(it);
+    }
+    if (left.empty()) break;
+    if (std::chrono::steady_clock::now() > deadline) {
+      for (const auto& [pid, run] : left) ::kill(pid, SIGKILL);
+      for (const auto& [pid, run] : left) {
+        int status = 0;
+        while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+        }
+      }
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+bool EndedBySignal(int status) {
+  const auto stopping = [](int sig) { return sig == SIGINT || sig == SIGTERM; };
+  return (WIFSIGNALED(status) && stopping(WTERMSIG(status))) ||
+         (WIFEXITED(status) && WEXITSTATUS(status) > 128 && stopping(WEXITSTATUS(status) - 128));
+}
+
+// Blocks the signals RunLocal waits for while it lives (SIGCHLD, and the forwarded ones), so
+// that none is lost between a check and the wait; restores the mask at scope exit.
+class BlockedSignals {
+ public:
+  BlockedSignals() : forwarded_(ForwardedSignals()) {
+    waited_ = forwarded_;
+    sigaddset(&waited_, SIGCHLD);
+    ::sigprocmask(SIG_BLOCK, &waited_, &old_);
+  }
+  ~BlockedSignals() { ::sigprocmask(SIG_SETMASK, &old_, nullptr); }
+  const sigset_t& old() const { return old_; }
+  // A forwarded signal that has arrived (taken), or 0.
+  int Poll() const {
+    siginfo_t info;
+    const timespec now{0, 0};
+    const int sig = ::sigtimedwait(&forwarded_, &info, &now);
+    return sig > 0 ? sig : 0;
+  }
+  // Waits for a worker's end (0) or a forwarded signal (its number).
+  int Wait() const {
+    for (;;) {
+      siginfo_t info;
+      const int sig = ::sigwaitinfo(&waited_, &info);
+      if (sig < 0) {
+        if (errno == EINTR) continue;
+        return 0;
+      }
+      return sig == SIGCHLD ? 0 : sig;
+    }
+  }
+
+ private:
+  sigset_t forwarded_, waited_, old_;
+};
+
+}  // namespace
+
+LocalOutcome RunLocal(const SweepSpec& spec, const std::vector<SweepPoint>& points,
+                      const std::vector<SweepRun>& runs, const std::vector<size_t>& todo,
+                      const fs::path& out, int jobs, const RunKeys& keys) {
   Progress progress(todo.size());
   std::map<pid_t, size_t> running;
-  size_t next = 0, done = 0, failed = 0;
+  size_t next = 0, done = 0;
+  size_t failed = 0;
   std::fflush(stdout);
   std::fflush(stderr);
-  while (done < todo.size()) {
+  const BlockedSignals signals;
+  int stop = 0;
+  while (done < todo.size() && !(stop = signals.Poll())) {
     while (next < todo.size() && static_cast<int>(running.size()) < jobs) {
       const SweepRun& run = runs[todo[next]];
       const fs::path log = out / LogPath(run, points);
       fs::create_directories(log.parent_path());
       fs::create_directories((out / run.dir).parent_path());
+      const RunKey key = keys.Of(run);
       const pid_t pid = ::fork();
       if (pid < 0) throw std::runtime_error("fork failed");
-      if (pid == 0) RunChild(spec, points[run.point], run, out, log);
+      if (pid == 0) RunChild(spec, points[run.point], run, out, log, key, signals.old());
       running[pid] = todo[next++];
     }
+    // Every worker that has ended; when none has, wait for one to end or for a signal.
     int status = 0;
-    const pid_t pid = ::waitpid(-1, &status, 0);
+    const pid_t pid = ::waitpid(-1, &status, WNOHANG);
     if (pid < 0) throw std::runtime_error("waitpid failed");
+    if (pid == 0) {
+      stop = signals.Wait();
+      if (stop) break;
+      continue;
+    }
     const auto it = running.find(pid);
     if (it == running.end()) continue;
-    RecordOutcome(runs[it->second], points, out, status, &failed);
+    const size_t index = it->second;
     running.erase(it);
+    // A terminal's Ctrl-C reaches the workers too: one ended by the signal that stops the
+    // sweep (killed by it, or exiting 128 + it after its own clean-up) was interrupted, not
+    // failed.
+    if (EndedBySignal(status) && (stop = signals.Poll())) break;
+    RecordOutcome(runs[index], points, out, status, &failed);
     progress.Update(++done, failed);
   }
-  return static_cast<int>(failed);
+  if (stop == 0) stop = signals.Poll();  // arrived as the last run ended
+  if (stop) {
+    std::fprintf(stderr, "%s[sweep] %s: stopping %zu running runs\n",
+                 isatty(fileno(stderr)) ? "\n" : "", stop == SIGINT ? "SIGINT" : "SIGTERM",
+                 running.size());
+    StopWorkers(running, stop);
+    return {static_cast<int>(failed), stop};
+  }
+  return {static_cast<int>(failed), 0};
 }
 
 }  // namespace flexbench::scenarios::sweep

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -24,6 +25,78 @@ std::string ShellQuote(const std::string& s) {
   std::string q = "'";
   for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return q + "'";
+}
+
+constexpr int kMaxSlurmTasks = 100000;
+
+bool AllDigits(const std::string& s, size_t max_len = 9) {
+  return !s.empty() && s.size() <= max_len &&
+         std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+std::vector<std::string> Split(const std::string& s, char sep) {
+  std::vector<std::string> parts;
+  size_t start = 0;
+  for (;;) {
+    const size_t at = s.find(sep, start);
+    parts.push_back(s.substr(start, at == std::string::npos ? std::string::npos : at - start));
+    if (at == std::string::npos) return parts;
+    start = at + 1;
+  }
+}
+
+bool IsPartitionList(const std::string& s) {
+  if (s.size() > 1000) return false;
+  for (const std::string& name : Split(s, ',')) {
+    if (name.empty() || !std::all_of(name.begin(), name.end(), [](char c) {
+          return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' || c == '-';
+        })) {
+      return false;
+    }
+  }
+  return true;
+}
+
+// sbatch --time: MINUTES, MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS.
+bool IsSlurmTime(const std::string& s) {
+  if (s == "UNLIMITED" || s == "INFINITE") return true;
+  std::string clock = s;
+  const size_t dash = s.find('-');
+  if (dash != std::string::npos) {
+    if (!AllDigits(s.substr(0, dash))) return false;
+    clock = s.substr(dash + 1);
+  }
+  const std::vector<std::string> parts = Split(clock, ':');
+  if (parts.size() > 3) return false;
+  return std::all_of(parts.begin(), parts.end(), [](const std::string& p) { return AllDigits(p); });
+}
+
+bool IsSlurmMemory(const std::string& s) {
+  std::string digits = s;
+  if (!s.empty() && std::string("KMGTkmgt").find(s.back()) != std::string::npos) {
+    digits.pop_back();
+  }
+  return AllDigits(digits, 15);
+}
+
+bool IsIndexList(const std::string& s) {
+  if (s.size() > 10000) return false;
+  for (const std::string& item : Split(s, ',')) {
+    const size_t dash = item.find('-');
+    if (dash == std::string::npos
+            ? !AllDigits(item)
+            : !AllDigits(item.substr(0, dash)) || !AllDigits(item.substr(dash + 1))) {
+      return false;
+    }
+  }
+  return true;
+}
+
+// Slurm expands %a, %j, ... in --output; a literal % is %%.
+std::string EscapeSlurmPattern(const std::string& s) {
+  std::string out;
+  for (char c : s) out += c == '%' ? std::string("%%") : std::string(1, c);
+  return out;
 }
 
 bool OnPath(const std::string& program) {
@@ -88,31 +161,81 @@ void CheckSlurmClients() {
   }
 }
 
-std::string SubmitSlurm(const SweepSpec& spec, size_t run_count, const fs::path& out,
-                        const SlurmOptions& o, int* task_count) {
-  const int n = o.tasks > 0 ? o.tasks : static_cast<int>(std::min<size_t>(run_count, 64));
-  *task_count = n;
+void CheckSlurmOptions(const SlurmOptions& o) {
+  const auto fail = [](const std::string& option, const std::string& value,
+                       const std::string& expected) {
+    throw InputError(option + " '" + CapForMessage(value) + "': expected " + expected);
+  };
+  if (o.tasks_given && (o.tasks < 1 || o.tasks > kMaxSlurmTasks)) {
+    throw InputError("--tasks " + std::to_string(o.tasks) + ": must be between 1 and " +
+                     std::to_string(kMaxSlurmTasks));
+  }
+  if (!o.partition.empty() && !IsPartitionList(o.partition)) {
+    fail("--partition", o.partition,
+         "partition names of letters, digits, '_', '.' and '-', "
+         "comma-separated");
+  }
+  if (!o.time.empty() && !IsSlurmTime(o.time)) {
+    fail("--time", o.time, "MINUTES, MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS or UNLIMITED");
+  }
+  if (!o.mem.empty() && !IsSlurmMemory(o.mem)) {
+    fail("--mem", o.mem, "a size in megabytes, or digits with a K, M, G or T suffix");
+  }
+  if (!o.array.empty() && !IsIndexList(o.array)) {
+    fail("--array", o.array, "task indices and ranges, comma-separated (e.g. 3,5,7-9)");
+  }
+}
+
+void CheckSlurmOut(const fs::path& out) {
+  const std::string path = fs::absolute(out).lexically_normal().string();
+  for (unsigned char c : path) {
+    // An #SBATCH line ends at a newline, and a backslash turns off Slurm's %a in --output.
+    if (c < 0x20 || c == 0x7f || c == '\\') {
+      throw InputError("--out " + CapForMessage(path) +
+                       ": a control character or a backslash cannot be passed to Slurm's "
+                       "--output; choose another folder");
+    }
+  }
+}
+
+std::string SlurmJobScript(const SweepSpec& spec, const fs::path& out, const SlurmOptions& o, int n,
+                           const std::string& exe) {
   const fs::path abs_out = fs::absolute(out).lexically_normal();
   const fs::path dir = abs_out / "slurm";
-  fs::create_directories(dir);
+  // sbatch reads an #SBATCH line as words with the shell's quotes (and a backslash escape), so
+  // ShellQuote suits it as well as bash; % is Slurm's file-name pattern character.
+  const std::string output = EscapeSlurmPattern(dir.string()) + "/task_%a.out";
   std::ostringstream job;
   job << "#!/bin/bash\n"
       << "# flexbench sweep " << spec.name << ": task i of the array runs shard i/" << n << ".\n"
-      << "#SBATCH --job-name=flexbench-" << spec.name << "\n"
+      << "#SBATCH --job-name=" << ShellQuote("flexbench-" + spec.name) << "\n"
       << "#SBATCH --array=0-" << n - 1 << "\n"
-      << "#SBATCH --output=" << (dir / "task_%a.out").string() << "\n"
+      << "#SBATCH --output=" << ShellQuote(output) << "\n"
+      << "#SBATCH --error=" << ShellQuote(output) << "\n"
       << "#SBATCH --cpus-per-task=1\n";
-  if (!o.partition.empty()) job << "#SBATCH --partition=" << o.partition << "\n";
-  if (!o.time.empty()) job << "#SBATCH --time=" << o.time << "\n";
-  if (!o.mem.empty()) job << "#SBATCH --mem=" << o.mem << "\n";
-  job << ShellQuote(SelfExe()) << " sweep "
+  if (!o.partition.empty()) job << "#SBATCH --partition=" << ShellQuote(o.partition) << "\n";
+  if (!o.time.empty()) job << "#SBATCH --time=" << ShellQuote(o.time) << "\n";
+  if (!o.mem.empty()) job << "#SBATCH --mem=" << ShellQuote(o.mem) << "\n";
+  job << ShellQuote(exe) << " sweep "
       << ShellQuote(fs::absolute(spec.file).lexically_normal().string()) << " --out "
       << ShellQuote(abs_out.string()) << " --shard \"$SLURM_ARRAY_TASK_ID/" << n << "\" -j 1\n"
       << "rc=$?\n"
       << "echo $rc > " << ShellQuote((dir / "task_").string()) << "\"$SLURM_ARRAY_TASK_ID"
       << ".exit\"\n"
       << "exit $rc\n";
-  WriteFileAtomic(dir / "job.sh", job.str());
+  return job.str();
+}
+
+std::string SubmitSlurm(const SweepSpec& spec, size_t run_count, const fs::path& out,
+                        const SlurmOptions& o, int* task_count) {
+  CheckSlurmOptions(o);
+  CheckSlurmOut(out);
+  const int n = o.tasks > 0 ? o.tasks : static_cast<int>(std::min<size_t>(run_count, 64));
+  *task_count = n;
+  const fs::path abs_out = fs::absolute(out).lexically_normal();
+  const fs::path dir = abs_out / "slurm";
+  fs::create_directories(dir);
+  WriteFileAtomic(dir / "job.sh", SlurmJobScript(spec, out, o, n, SelfExe()));
   // A resubmitted task writes its exit file again.
   for (int i = 0; i < n; ++i) {
     std::error_code ec;

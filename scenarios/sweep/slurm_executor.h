@@ -13,8 +13,9 @@
 namespace flexbench::scenarios::sweep {
 
 struct SlurmOptions {
-  int tasks = 0;          // array size (shards); 0: one per run, at most 64
-  std::string partition;  // passed through to sbatch when set
+  int tasks = 0;             // array size (shards); 0: one per run, at most 64
+  bool tasks_given = false;  // --tasks was on the command line (then it must be >= 1)
+  std::string partition;     // passed through to sbatch when set
   std::string time;
   std::string mem;
   std::string array;  // only these task indices ("3,5"): resubmitting failed tasks
@@ -29,6 +30,23 @@ struct SlurmTaskEnd {
 
 // Throws InputError when sbatch is not on PATH.
 void CheckSlurmClients();
+
+// Checks the options against Slurm's grammar before anything is written; throws InputError
+// naming the option:
+//   --partition  names of [A-Za-z0-9_.-], comma-separated
+//   --time       MINUTES, MM:SS, HH:MM:SS, D-HH, D-HH:MM, D-HH:MM:SS (digits), or UNLIMITED
+//   --mem        digits with an optional K, M, G or T suffix
+//   --array      indices and ranges, comma-separated (3,5,7-9)
+//   --tasks      1 to 100000 when given
+void CheckSlurmOptions(const SlurmOptions& options);
+// Checks that `out` can be named in an #SBATCH line: no control character (the line would
+// end), no backslash (it turns off Slurm's %a). Spaces, quotes and % are fine.
+void CheckSlurmOut(const std::filesystem::path& out);
+
+// The text of <out>/slurm/job.sh for `n` array tasks; every value in it is quoted for both
+// bash and sbatch's #SBATCH parser, and Slurm's % patterns in the output path are escaped.
+std::string SlurmJobScript(const SweepSpec& spec, const std::filesystem::path& out,
+                           const SlurmOptions& options, int n, const std::string& exe);
 
 // Writes <out>/slurm/job.sh and submits it; returns the job id. `sweep_file` and `out` are
 // made absolute so the tasks find them from any node.

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <set>
 #include <thread>
 
@@ -107,9 +108,16 @@ void WriteSweepCommand(const fs::path& out, const SweepSpec& spec, const std::st
 }
 
 int CollectAndGate(const SweepSpec& spec, const std::vector<SweepPoint>& points,
-                   const std::vector<SweepRun>& runs, const fs::path& out,
+                   const std::vector<SweepRun>& runs, const RunKeys& keys, const fs::path& out,
                    const std::string& command) {
-  const std::vector<RunOutcome> outcomes = ReadOutcomes(out, points, runs);
+  std::map<std::string, size_t> stale;
+  const std::vector<RunOutcome> outcomes = ReadOutcomes(out, points, runs, keys, &stale);
+  if (!stale.empty()) {
+    size_t n = 0;
+    for (const auto& [why, k] : stale) n += k;
+    Log(std::to_string(n) + " results made with other settings not collected (" +
+        RerunReasons(stale) + "): run the sweep again without --collect to redo them");
+  }
   const Collected c = Collect(spec, points, runs, outcomes);
   WriteCollected(out, spec, points, c);
   if (!command.empty()) WriteSweepCommand(out, spec, command);
@@ -140,7 +148,7 @@ int CollectAndGate(const SweepSpec& spec, const std::vector<SweepPoint>& points,
 
 int RunOnSlurm(const SweepCliOptions& o, const SweepSpec& spec,
                const std::vector<SweepPoint>& points, const std::vector<SweepRun>& runs,
-               const fs::path& out) {
+               const RunKeys& keys, const fs::path& out) {
   int tasks = 0;
   const std::string id = SubmitSlurm(spec, runs.size(), out, o.slurm, &tasks);
   Log("submitted Slurm job " + id + " (" + std::to_string(tasks) + " array tasks)");
@@ -163,7 +171,19 @@ int RunOnSlurm(const SweepCliOptions& o, const SweepSpec& spec,
     Log("resubmit the failed tasks alone: flexbench sweep " + spec.file + " --out " + out.string() +
         " --executor slurm --tasks " + std::to_string(tasks) + " --array " + list);
   }
-  return CollectAndGate(spec, points, runs, out, o.command);
+  return CollectAndGate(spec, points, runs, keys, out, o.command);
+}
+
+// The files the points' checks accepted (scenario, models, declared models, CSVs), without the
+// sweep file: with the scenario file they define the runs' results.
+std::vector<std::string> InputFiles(const SweepSpec& spec) {
+  std::error_code ec;
+  const std::string sweep_file = fs::weakly_canonical(fs::absolute(spec.file), ec).string();
+  std::vector<std::string> files;
+  for (const std::string& f : RecordedInputFiles()) {
+    if (f != sweep_file) files.push_back(f);
+  }
+  return files;
 }
 
 }  // namespace
@@ -173,7 +193,11 @@ int SweepCommand(const SweepCliOptions& o) {
     if (o.executor != "local" && o.executor != "slurm") {
       throw InputError("--executor '" + CapForMessage(o.executor) + "': expected local or slurm");
     }
-    if (o.jobs < 0 || o.jobs > 1024) throw InputError("-j: must be between 1 and 1024");
+    if (o.jobs < 0 || o.jobs > 1024) {
+      throw InputError("-j " + std::to_string(o.jobs) +
+                       ": must be between 1 and 1024 (or 0: one per core)");
+    }
+    CheckSlurmOptions(o.slurm);
     int shard_index = 0, shard_count = 0;
     if (!o.shard.empty()) ParseShard(o.shard, &shard_index, &shard_count);
     if (o.executor == "slurm") CheckSlurmClients();
@@ -187,21 +211,29 @@ int SweepCommand(const SweepCliOptions& o) {
       if (!fs::is_regular_file(out / kMarker, ec)) {
         throw InputError("--out " + CapForMessage(out.string()) + ": not a sweep's folder");
       }
-      return CollectAndGate(spec, points, runs, out, o.command);
     }
+    // Also before --collect: the checks read the input files that the run keys cover.
     CheckPoints(spec, points);
+    const RunKeys keys(spec, points, InputFiles(spec));
+    if (o.collect) return CollectAndGate(spec, points, runs, keys, out, o.command);
+    if (o.executor == "slurm") CheckSlurmOut(out);
     PrepareOutDir(out, spec);
-    if (o.executor == "slurm") return RunOnSlurm(o, spec, points, runs, out);
-    const std::vector<size_t> todo = PendingRuns(out, runs, shard_index, shard_count);
+    if (o.executor == "slurm") return RunOnSlurm(o, spec, points, runs, keys, out);
+    const PendingRunList pending = PendingRuns(out, runs, keys, shard_index, shard_count);
     const int jobs =
         o.jobs > 0 ? o.jobs : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+    if (!pending.rerun.empty()) Log(RerunMessage(pending.rerun));
     Log(spec.name + ": " + std::to_string(points.size()) + " points x " +
         std::to_string(spec.seeds.size()) + " seeds" +
-        (shard_count ? ", shard " + o.shard : std::string()) + ": " + std::to_string(todo.size()) +
-        " runs to do, -j " + std::to_string(jobs));
-    const int failed = RunLocal(spec, points, runs, todo, out, jobs);
-    if (shard_count) return failed ? kExitInternal : kExitOk;
-    return CollectAndGate(spec, points, runs, out, o.command);
+        (shard_count ? ", shard " + o.shard : std::string()) + ": " +
+        std::to_string(pending.todo.size()) + " runs to do, -j " + std::to_string(jobs));
+    const LocalOutcome done = RunLocal(spec, points, runs, pending.todo, out, jobs, keys);
+    if (done.signal) {
+      Log("stopped by a signal; the finished runs are kept: run the same command to resume");
+      return 128 + done.signal;
+    }
+    if (shard_count) return done.failed ? kExitInternal : kExitOk;
+    return CollectAndGate(spec, points, runs, keys, out, o.command);
   } catch (const std::exception& e) {
     return ReportError(e);
   }

@@ -58,8 +58,11 @@ std::vector<std::uint64_t> ParseSeeds(const ConfigNode& node) {
     if (a < 0) from.Fail("seeds must be >= 0");
     if (a > b)
       to.Fail("seed range is empty: from " + std::to_string(a) + " > to " + std::to_string(b));
-    if (static_cast<size_t>(b - a) >= kMaxRuns) to.Fail("more than 1000000 seeds");
-    for (int s = a; s <= b; ++s) seeds.push_back(static_cast<std::uint64_t>(s));
+    // In 64 bits: `to` may be the largest int, where an int counter would wrap and never end.
+    const std::int64_t first = a;
+    const std::int64_t last = b;
+    if (last - first >= static_cast<std::int64_t>(kMaxRuns)) to.Fail("more than 1000000 seeds");
+    for (std::int64_t s = first; s <= last; ++s) seeds.push_back(static_cast<std::uint64_t>(s));
   } else {
     for (const ConfigNode& s : node.Items()) {
       if (s.AsInt() < 0) s.Fail("seeds must be >= 0");
@@ -164,9 +167,15 @@ int ParseBootstrapResamples(const ConfigNode& b) {
 
 // Checks that need the whole file: the run count, and that a gate's point is one of the grid's.
 void CheckSweepSize(const ConfigNode& root, const SweepSpec& spec) {
-  size_t points = 1;
-  for (const SweepAxis& a : spec.grid) points *= a.values.size();
-  if (points * spec.seeds.size() > kMaxRuns) root.Fail("more than 1000000 runs");
+  // Every partial product stays at most kMaxRuns, so none can wrap (64 keys of two values
+  // would make 2^64, that is 0).
+  size_t runs = spec.seeds.size();
+  for (const SweepAxis& a : spec.grid) {
+    if (a.values.size() > kMaxRuns / runs) {
+      root.Fail("more than 1000000 runs (seeds times the grid's points)");
+    }
+    runs *= a.values.size();
+  }
   const std::vector<SweepPoint> expanded = ExpandPoints(spec);
   for (const SweepGate& g : spec.gates) {
     if (g.point.empty()) continue;

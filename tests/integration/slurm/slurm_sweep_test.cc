@@ -141,8 +141,9 @@ TEST_F(SlurmCluster, SweepOnSlurmEqualsTheLocalSweep) {
   ASSERT_EQ(r.exit_code, 0) << r.err << Tail(dir_ / "log" / "slurmctld.log");
   EXPECT_NE(r.err.find("submitted Slurm job"), std::string::npos) << r.err;
   const std::string job = ReadFile(dir_ / "slurm" / "slurm" / "job.sh");
-  for (const char* line : {"#SBATCH --array=0-3", "#SBATCH --partition=debug", "#SBATCH --time=10",
-                           "#SBATCH --mem=200", "--shard \"$SLURM_ARRAY_"}) {
+  for (const char* line :
+       {"#SBATCH --array=0-3", "#SBATCH --partition='debug'", "#SBATCH --time='10'",
+        "#SBATCH --mem='200'", "--shard \"$SLURM_ARRAY_"}) {
     EXPECT_NE(job.find(line), std::string::npos) << line << "\n" << job;
   }
   for (int i = 0; i < 4; ++i) {  // every task ran its shard
@@ -152,6 +153,29 @@ TEST_F(SlurmCluster, SweepOnSlurmEqualsTheLocalSweep) {
   EXPECT_EQ(ReadFile(dir_ / "slurm" / "sweep.csv"), ReadFile(dir_ / "local" / "sweep.csv"));
   EXPECT_EQ(ReadFile(dir_ / "slurm" / "aggregate.json"),
             ReadFile(dir_ / "local" / "aggregate.json"));
+}
+
+// sbatch reads the job script's quoted #SBATCH values and the escaped % of an --out with
+// spaces, quotes, $(...) and Slurm's own patterns: every task's output lands in its own file
+// in that folder, and nothing in the name is run.
+TEST_F(SlurmCluster, AnOutWithSpacesQuotesAndPercentWorks) {
+  const fs::path file = SweepFile("hostile_out", "");
+  const fs::path out = dir_ / "my results %j %a 'q' $(touch PWNED)";
+  const std::string quoted =
+      "'" + (dir_ / "my results %j %a ").string() + "'\\''q'\\'' " + "$(touch PWNED)'";
+  const CommandResult r =
+      RunCommand("cd " + dir_.string() + " && " + Env() + "timeout 300 " + Flexbench() + " sweep " +
+                 file.string() + " --out " + quoted +
+                 " --executor slurm --tasks 2 --partition debug --time 0:10:00 --mem 200M");
+  ASSERT_EQ(r.exit_code, 0) << r.err << Tail(dir_ / "log" / "slurmctld.log");
+  EXPECT_FALSE(fs::exists(dir_ / "PWNED"));
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_EQ(Trim(ReadFile(out / "slurm" / ("task_" + std::to_string(i) + ".exit"))), "0");
+    EXPECT_TRUE(fs::is_regular_file(out / "slurm" / ("task_" + std::to_string(i) + ".out")))
+        << "task " << i;
+  }
+  Json a = Json::parse(ReadFile(out / "aggregate.json"));
+  EXPECT_EQ(a["succeeded"], 4);
 }
 
 TEST_F(SlurmCluster, AFailedTaskIsListedAndResubmittedAlone) {
