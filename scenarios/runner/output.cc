@@ -522,6 +522,11 @@ OutputDir::OutputDir(const fs::path& final_dir, bool force, const std::vector<fs
   if (final_.filename().empty() || final_ == final_.root_path()) {
     throw InputError("--out " + Shown(final_dir) + ": not a usable output folder");
   }
+  // Before any work: the results could never be moved to a name the file system refuses.
+  if (final_.filename().string().size() > kNameMax) {
+    throw InputError("--out " + Shown(final_dir) + ": its last name is longer than " +
+                     std::to_string(kNameMax) + " bytes");
+  }
   CheckReplaceable(final_, force_, inputs_);
   std::error_code ec;
   fs::create_directories(final_.parent_path(), ec);
