@@ -3,8 +3,10 @@
 #include <filesystem>
 #include <iostream>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "estimators/error.h"
 #include "scenarios/runner/inspect.h"
 #include "scenarios/runner/report.h"
 #include "scenarios/runner/runner.h"
@@ -24,13 +26,17 @@ struct Options {
   flexbench::scenarios::IdentifyCliOptions id;
   flexbench::scenarios::sweep::SweepCliOptions sw;
   bool no_wait = false;
+  // The --out options, to tell `--out ''` from no --out (both leave the string empty).
+  std::vector<std::pair<CLI::Option*, const std::string*>> outs;
   std::string report_dir;
 };
 
 CLI::App* AddRun(CLI::App& app, Options& o) {
   CLI::App* run_cmd = app.add_subcommand("run", "run a scenario file");
   run_cmd->add_option("scenario", o.run.scenario_path, "scenario YAML file")->required();
-  run_cmd->add_option("--out", o.run.out_dir, "output folder (default: out/<scenario>)");
+  o.outs.emplace_back(
+      run_cmd->add_option("--out", o.run.out_dir, "output folder (default: out/<scenario>)"),
+      &o.run.out_dir);
   o.seed_opt = run_cmd->add_option("--seed", o.seed,
                                    "override the scenario's seed (0 to 2147483647, as in the "
                                    "file)");
@@ -48,7 +54,8 @@ CLI::App* AddRun(CLI::App& app, Options& o) {
 }
 
 // identify: the closed_loop kind on a user's own model, declared model and CSV files.
-CLI::App* AddIdentify(CLI::App& app, flexbench::scenarios::IdentifyCliOptions& id) {
+CLI::App* AddIdentify(CLI::App& app, Options& o) {
+  flexbench::scenarios::IdentifyCliOptions& id = o.id;
   CLI::App* identify_cmd = app.add_subcommand(
       "identify", "find the effects a declared model lacks from measured data (closed_loop)");
   identify_cmd->add_option("--model", id.model,
@@ -87,7 +94,9 @@ CLI::App* AddIdentify(CLI::App& app, flexbench::scenarios::IdentifyCliOptions& i
                    "override a closed_loop key: KEY=VALUE (repeatable; e.g. "
                    "--set cv_min_gain=0.05)")
       ->allow_extra_args(false);
-  identify_cmd->add_option("--out", id.out_dir, "output folder (default: out/identify)");
+  o.outs.emplace_back(
+      identify_cmd->add_option("--out", id.out_dir, "output folder (default: out/identify)"),
+      &id.out_dir);
   identify_cmd->add_flag("--quiet", id.quiet, "no progress and no informational lines");
   identify_cmd->add_flag("--force", id.force,
                          "let --out replace an existing folder that is not a flexbench result");
@@ -99,7 +108,9 @@ CLI::App* AddSweep(CLI::App& app, Options& o) {
   CLI::App* sweep_cmd = app.add_subcommand(
       "sweep", "run a scenario over seeds and a grid of overrides; statistics and gates");
   sweep_cmd->add_option("sweep", sw.sweep_path, "sweep YAML file")->required();
-  sweep_cmd->add_option("--out", sw.out_dir, "output folder (default: out/sweeps/<sweep>)");
+  o.outs.emplace_back(
+      sweep_cmd->add_option("--out", sw.out_dir, "output folder (default: out/sweeps/<sweep>)"),
+      &sw.out_dir);
   sweep_cmd->add_option("-j,--jobs", sw.jobs, "local worker processes (default: cores)");
   sweep_cmd->add_option("--executor", sw.executor, "local (default) or slurm");
   sweep_cmd->add_option("--shard", sw.shard, "run only shard i/n of the runs, no collect");
@@ -169,7 +180,7 @@ int Main(int argc, char** argv) {
   CLI::App* inspect_cmd = app.add_subcommand(
       "inspect", "print a model's joints, sensors, cameras, tags and effects as JSON");
   inspect_cmd->add_option("model", o.inspect_path, "MJCF model or declared-model YAML")->required();
-  CLI::App* identify_cmd = AddIdentify(app, o.id);
+  CLI::App* identify_cmd = AddIdentify(app, o);
   CLI::App* sweep_cmd = AddSweep(app, o);
   CLI::App* report_cmd = app.add_subcommand(
       "report", "write report.html in a run's or a sweep's result folder (again)");
@@ -184,6 +195,13 @@ int Main(int argc, char** argv) {
     return code == 0 ? 0 : flexbench::scenarios::kExitBadInput;
   }
   if (*o.seed_opt) o.run.seed = ParseSeed(o.seed);
+  // An empty --out (an unset shell variable) would silently write the default folder.
+  for (const auto& [option, value] : o.outs) {
+    if (option->count() > 0 && value->empty()) {
+      return flexbench::scenarios::ReportError(flexbench::InputError(
+          "--out '': an empty folder name; name a folder, or omit --out for the default"));
+    }
+  }
   // The command line as typed, recorded with the results.
   const std::string command =
       flexbench::scenarios::CommandLine(std::vector<std::string>(argv, argv + argc));

@@ -136,48 +136,6 @@ TEST(Reliability, OutThatIsARegularFileIsRefusedAndKept) {
   }
 }
 
-TEST(Reliability, TemporariesOfKilledRunsAreRemovedByTheNextRun) {
-  TempDir tmp;
-  const fs::path s = tmp.path() / "s.yaml";
-  WriteFile(s, SmokeYaml());
-  // pid_max is at most 2^22: these processes cannot exist.
-  WriteFile(tmp.path() / "out.tmp-99999999" / "summary.json", "{}");
-  WriteFile(tmp.path() / "out.old-99999998" / "x.csv", "1");
-  // A live run's temporary (this test's own pid) and unrelated names are kept.
-  const std::string live = "out.tmp-" + std::to_string(::getpid());
-  WriteFile(tmp.path() / live / "a", "");
-  WriteFile(tmp.path() / "out.tmp-notapid" / "a", "");
-  const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_FALSE(fs::exists(tmp.path() / "out.tmp-99999999"));
-  EXPECT_FALSE(fs::exists(tmp.path() / "out.old-99999998"));
-  EXPECT_TRUE(fs::exists(tmp.path() / live));
-  EXPECT_TRUE(fs::exists(tmp.path() / "out.tmp-notapid"));
-}
-
-// A run killed together with its parent (a sweep's worker) is a zombie until init reaps it;
-// kill(pid, 0) still succeeds then, so its temporary looked like a live run's and stayed.
-TEST(Reliability, TemporariesOfZombieRunsAreRemovedByTheNextRun) {
-  TempDir tmp;
-  const fs::path s = tmp.path() / "s.yaml";
-  WriteFile(s, SmokeYaml());
-  const pid_t zombie = ::fork();
-  ASSERT_GE(zombie, 0);
-  if (zombie == 0) ::_exit(0);
-  // Not reaped until the end of the test: it stays a zombie ('Z' in /proc/PID/stat).
-  for (int k = 0; k < 500; ++k) {
-    const std::string stat = ReadFile("/proc/" + std::to_string(zombie) + "/stat");
-    if (stat.find(") Z") != std::string::npos) break;
-    ::usleep(2000);
-  }
-  const fs::path stale = tmp.path() / ("out.tmp-" + std::to_string(zombie));
-  WriteFile(stale / "summary.json", "{}");
-  const CommandResult r = RunCommand(RunCmd(s, tmp.path() / "out"));
-  ::waitpid(zombie, nullptr, 0);
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_FALSE(fs::exists(stale));
-}
-
 TEST(Reliability, NonUtf8ScenarioIsBadInputBeforeAnyWork) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
