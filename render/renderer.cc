@@ -7,6 +7,7 @@
 
 #include "estimators/error.h"
 #include "render/gl_context.h"
+#include "sim/mujoco_model.h"
 
 namespace flexbench::render {
 
@@ -29,38 +30,44 @@ Renderer::Renderer(const mjModel* m, RenderMode mode)
       model_(m),
       width_(m->vis.global.offwidth),
       height_(m->vis.global.offheight) {
-  // MuJoCo's offscreen buffer: a size OSMesa cannot allocate ends in mju_error, a negative one
-  // in an OSMesa failure; both are the model's (bad input), said before any GL call.
-  constexpr int kMaxOffscreen = 8192;
-  if (width_ < 1 || height_ < 1 || width_ > kMaxOffscreen || height_ > kMaxOffscreen) {
-    throw InputError("model's <visual><global offwidth=\"" + std::to_string(width_) +
-                     "\" offheight=\"" + std::to_string(height_) +
-                     "\">: the offscreen buffer must be 1.." + std::to_string(kMaxOffscreen) +
-                     " pixels each way");
-  }
-  if (m->vis.quality.offsamples < 0 || m->vis.quality.offsamples > 16) {
-    throw InputError("model's <visual><quality offsamples=\"" +
-                     std::to_string(m->vis.quality.offsamples) + "\">: must be 0..16");
-  }
+  // Sizes OSMesa cannot allocate end in mju_error or an OSMesa failure: the model's (bad
+  // input), said before any GL call. LoadModel checked already; a model made otherwise has not.
+  sim::CheckRenderSizes(m, "model");
   gl_renderer_ = EnsureGlContext();
   mjv_defaultScene(&impl_->scene);
   mjv_defaultCamera(&impl_->camera);
   mjv_defaultOption(&impl_->option);
   mjr_defaultContext(&impl_->context);
-  mjv_makeScene(m, &impl_->scene, 2000);
-  // Multisampling is a property of the offscreen buffer, fixed at context creation; MuJoCo
-  // reads it from the model, so set it for the call and restore it.
-  mjModel* mutable_model = const_cast<mjModel*>(m);
-  const int samples = m->vis.quality.offsamples;
-  if (mode == RenderMode::kFast) mutable_model->vis.quality.offsamples = 0;
-  mjr_makeContext(m, &impl_->context, mjFONTSCALE_100);
-  mutable_model->vis.quality.offsamples = samples;
-  mjr_setBuffer(mjFB_OFFSCREEN, &impl_->context);
-  if (impl_->context.currentBuffer != mjFB_OFFSCREEN) {
-    throw std::runtime_error("OSMesa: offscreen framebuffer not available");
-  }
-  if (impl_->context.offWidth < width_ || impl_->context.offHeight < height_) {
-    throw std::runtime_error("offscreen buffer smaller than the model's offwidth/offheight");
+  // A MuJoCo error below throws (sim::InstallMujocoHandlers) and the destructor will not run:
+  // free what was made so far.
+  try {
+    mjv_makeScene(m, &impl_->scene, 2000);
+    // Multisampling is a property of the offscreen buffer, fixed at context creation; MuJoCo
+    // reads it from the model, so set it for the call and restore it.
+    mjModel* mutable_model = const_cast<mjModel*>(m);
+    const int samples = m->vis.quality.offsamples;
+    if (mode == RenderMode::kFast) mutable_model->vis.quality.offsamples = 0;
+    try {
+      mjr_makeContext(m, &impl_->context, mjFONTSCALE_100);
+    } catch (...) {
+      mutable_model->vis.quality.offsamples = samples;
+      throw;
+    }
+    mutable_model->vis.quality.offsamples = samples;
+    mjr_setBuffer(mjFB_OFFSCREEN, &impl_->context);
+    if (impl_->context.currentBuffer != mjFB_OFFSCREEN) {
+      throw std::runtime_error("OSMesa: offscreen framebuffer not available");
+    }
+    if (impl_->context.offWidth < width_ || impl_->context.offHeight < height_) {
+      throw std::runtime_error("offscreen buffer smaller than the model's offwidth/offheight");
+    }
+  } catch (...) {
+    mjr_freeContext(&impl_->context);
+    mjv_freeScene(&impl_->scene);
+    // The failed call's GL errors would be reported against the next context made.
+    for (int i = 0; i < 16 && mjr_getError() != 0; ++i) {
+    }
+    throw;
   }
   impl_->scene.flags[mjRND_SHADOW] = mode == RenderMode::kQuality ? 1 : 0;
   impl_->camera.type = mjCAMERA_FIXED;

@@ -2,7 +2,6 @@
 
 #include <cctype>
 #include <cstdio>
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -37,9 +36,8 @@ void PrintWarning(const char* msg) {
   for (char& c : m) {
     if (c == '\n') c = ' ';
   }
-  std::fprintf(stderr, "flexbench: error: MuJoCo: %s\n", CapForMessage(m, 400).c_str());
-  std::fflush(stderr);
-  std::_Exit(2);
+  // MuJoCo assumes the handler never returns: an exception leaves the failed call for good.
+  throw MujocoError("MuJoCo: " + CapForMessage(m, 400));
 }
 
 void CollectWarning(const char* msg) {
@@ -183,12 +181,13 @@ MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings
   std::vector<std::string> local;
   WarningScope scope(warnings ? warnings : &local);
   char error[1024] = "";
-  mjModel* m = mj_loadXML(path.c_str(), nullptr, error, sizeof(error));
+  MjModelPtr m(mj_loadXML(path.c_str(), nullptr, error, sizeof(error)));
   if (!m) {
     throw InputError(CapForMessage(path) +
                      ": MuJoCo rejected the model: " + CapForMessage(Trim(error), 400));
   }
-  return MjModelPtr(m);
+  CheckRenderSizes(m.get(), path);
+  return m;
 }
 
 MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name,
@@ -207,16 +206,41 @@ MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name,
   int index = mj_findFileVFS(vfs.get(), name.c_str());
   std::memcpy(vfs->filedata[index], xml.data(), xml.size());
   char error[1024] = "";
-  mjModel* m = mj_loadXML(name.c_str(), vfs.get(), error, sizeof(error));
+  MjModelPtr m(mj_loadXML(name.c_str(), vfs.get(), error, sizeof(error)));
   mj_deleteVFS(vfs.get());
   if (!m) {
     throw InputError(CapForMessage(name) +
                      ": MuJoCo rejected the model: " + CapForMessage(Trim(error), 400));
   }
-  return MjModelPtr(m);
+  CheckRenderSizes(m.get(), name);
+  return m;
 }
 
 MjDataPtr MakeData(const mjModel* m) { return MjDataPtr(mj_makeData(m)); }
+
+void CheckRenderSizes(const mjModel* m, const std::string& model_name) {
+  // OSMesa allocates these in memory; 8192 is the largest texture a software GL promises.
+  constexpr int kMaxPixels = 8192;
+  const std::string name = CapForMessage(model_name);
+  const int width = m->vis.global.offwidth;
+  const int height = m->vis.global.offheight;
+  if (width < 1 || height < 1 || width > kMaxPixels || height > kMaxPixels) {
+    throw InputError(name + ": <visual><global offwidth=\"" + std::to_string(width) +
+                     "\" offheight=\"" + std::to_string(height) +
+                     "\">: the offscreen buffer must be 1.." + std::to_string(kMaxPixels) +
+                     " pixels each way");
+  }
+  if (m->vis.quality.offsamples < 0 || m->vis.quality.offsamples > 16) {
+    throw InputError(name + ": <visual><quality offsamples=\"" +
+                     std::to_string(m->vis.quality.offsamples) + "\">: must be 0..16");
+  }
+  const int shadow = m->vis.quality.shadowsize;
+  if (shadow < 0 || shadow > kMaxPixels) {
+    throw InputError(name + ": <visual><quality shadowsize=\"" + std::to_string(shadow) +
+                     "\">: the shadow map must be 0.." + std::to_string(kMaxPixels) +
+                     " pixels (0: no shadows)");
+  }
+}
 
 int JointId(const mjModel* m, const std::string& name, const std::string& model_name) {
   return IdOrThrow(m, mjOBJ_JOINT, "joint", name, model_name);

@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "estimators/error.h"
+
 namespace flexbench::sim {
 
 struct MjModelDeleter {
@@ -20,13 +22,21 @@ struct MjDataDeleter {
 using MjModelPtr = std::unique_ptr<mjModel, MjModelDeleter>;
 using MjDataPtr = std::unique_ptr<mjData, MjDataDeleter>;
 
+// A fatal MuJoCo error (mju_error): in practice a model MuJoCo cannot serve (an allocation it
+// cannot make, a GL buffer it cannot create), so bad input. The message is "MuJoCo: <text>".
+class MujocoError : public InputError {
+ public:
+  using InputError::InputError;
+};
+
 // Installs MuJoCo's process-wide error and warning handlers (idempotent; LoadModel calls it):
 // a warning goes to stderr as one line "[flexbench] MuJoCo warning: ..." (never to
 // MUJOCO_LOG.TXT); a fatal MuJoCo error (MuJoCo's default would print "Press Enter to exit",
-// wait on stdin and write MUJOCO_LOG.TXT) prints one line "flexbench: error: MuJoCo: ..." and
-// ends the process with exit code 2 (bad input: in practice a model MuJoCo cannot serve, e.g.
-// an offscreen buffer too big). A fatal error cannot be thrown as a C++ exception through
-// MuJoCo's C frames, and the handler must not return.
+// wait on stdin and write MUJOCO_LOG.TXT) throws MujocoError out of the MuJoCo call, so the
+// caller's destructors run (an output temporary is removed) and a host process such as the
+// Python interpreter survives. The exception crosses MuJoCo's C frames: libmujoco is built with
+// unwind tables (.eh_frame covers every function), and those frames hold no cleanups, so what
+// MuJoCo allocated in them leaks; callers free what they own (Renderer frees its context).
 void InstallMujocoHandlers();
 
 // Largest model file read (bytes).
@@ -44,6 +54,12 @@ MjModelPtr LoadModelFromString(const std::string& xml, const std::string& name =
                                std::vector<std::string>* warnings = nullptr);
 
 MjDataPtr MakeData(const mjModel* m);
+
+// The model's offscreen buffer (<visual><global offwidth offheight>), multisampling and shadow
+// map (<visual><quality offsamples shadowsize>) within what the software GL can allocate;
+// outside, MuJoCo ends in mju_error or OSMesa fails. InputError naming `model_name` and the
+// attribute. LoadModel checks every model it loads; Renderer checks again.
+void CheckRenderSizes(const mjModel* m, const std::string& model_name);
 
 // URDF text made loadable for kinematics: <visual>/<collision> elements with meshes MuJoCo
 // cannot read (missing, or not STL/OBJ/MSH) are dropped with a warning each, fixed links stay

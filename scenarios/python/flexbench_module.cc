@@ -7,17 +7,23 @@
 // Errors: everything the command line would report as bad input (InputError, exit code 2)
 // raises ValueError with the text the CLI prints after "flexbench: error: " (the runner's own
 // ReportError formats it); wrong array shapes and dtypes raise ValueError too. Other C++
-// exceptions become RuntimeError; none reaches the interpreter as a crash.
+// exceptions become RuntimeError; none reaches the interpreter as a crash. A fatal MuJoCo error
+// is an exception too (sim::InstallMujocoHandlers), so it unwinds to here as ValueError.
+//
+// Threads: what touches MuJoCo's hooks, the GL context or std::cerr (run_scenario, identify,
+// DeclaredModel.load) runs one call at a time under a process-wide lock; see LockProcess.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <Eigen/Eigenvalues>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -51,18 +57,45 @@ struct ValueErrorMessage : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// ---- One caller at a time ------------------------------------------------------------------
+
+// MuJoCo's error and warning hooks, the OSMesa context and std::cerr (captured during a run) are
+// process-wide: run_scenario, identify and DeclaredModel.load from several Python threads take
+// turns. The GIL is released while waiting, so the other threads' Python code runs meanwhile.
+std::mutex g_process_mutex;
+
+// The lock, taken with the GIL held (every binding is called with it); waits without the GIL,
+// so a thread holding the lock can take the GIL back.
+std::unique_lock<std::mutex> LockProcess() {
+  std::unique_lock<std::mutex> lock(g_process_mutex, std::try_to_lock);
+  if (!lock.owns_lock()) {
+    py::gil_scoped_release release;
+    lock.lock();
+  }
+  return lock;
+}
+
+// std::cerr into `sink` for the scope (callers hold LockProcess()).
+class CerrCapture {
+ public:
+  explicit CerrCapture(std::ostream& sink) : old_(std::cerr.rdbuf(sink.rdbuf())) {}
+  ~CerrCapture() { std::cerr.rdbuf(old_); }
+  CerrCapture(const CerrCapture&) = delete;
+  CerrCapture& operator=(const CerrCapture&) = delete;
+
+ private:
+  std::streambuf* old_;
+};
+
 // What the runner prints for `e` (ReportError, one line on std::cerr), captured; *code is the
 // exit code it returns.
 std::string CliLine(const std::exception& e, int* code) {
+  const std::unique_lock<std::mutex> lock = LockProcess();
   std::ostringstream text;
-  std::streambuf* old = std::cerr.rdbuf(text.rdbuf());
-  try {
+  {
+    const CerrCapture capture(text);
     *code = scenarios::ReportError(e);
-  } catch (...) {
-    std::cerr.rdbuf(old);
-    throw;
   }
-  std::cerr.rdbuf(old);
   std::string line = text.str();
   while (!line.empty() && line.back() == '\n') line.pop_back();
   return line;
@@ -228,47 +261,147 @@ std::string NumberText(double v) {
   return buf;
 }
 
-// A Python value as the YAML text a scenario file (or --set) would hold: numbers, booleans,
-// strings (as YAML text, like a --set value), lists, tuples, arrays and dicts of those.
-std::string YamlText(const py::handle& v, const std::string& what) {
-  if (v.is_none()) return "null";
-  if (py::isinstance<py::bool_>(v)) return v.cast<bool>() ? "true" : "false";
-  if (py::isinstance<py::int_>(v)) return py::str(v).cast<std::string>();
-  if (py::isinstance<py::float_>(v)) return NumberText(v.cast<double>());
-  if (py::isinstance<py::str>(v)) return v.cast<std::string>();
-  if (py::isinstance<py::array>(v) || py::hasattr(v, "tolist")) {
-    return YamlText(v.attr("tolist")(), what);  // numpy arrays and scalars
-  }
-  if (py::isinstance<py::dict>(v)) {
-    std::string s = "{";
-    bool first = true;
-    for (const auto& [key, value] : py::reinterpret_borrow<py::dict>(v)) {
-      s += (first ? "" : ", ") + py::str(key).cast<std::string>() + ": " + YamlText(value, what);
-      first = false;
-    }
-    return s + "}";
-  }
-  if (py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v)) {
-    std::string s = "[";
-    bool first = true;
-    for (const auto& item : v) {
-      s += (first ? "" : ", ") + YamlText(item, what);
-      first = false;
-    }
-    return s + "]";
-  }
-  throw ValueErrorMessage(what + ": cannot express a value of type " +
-                          py::str(py::type::handle_of(v).attr("__name__")).cast<std::string>() +
-                          " in a scenario file");
+// Nesting deeper than this in an override or a parameter is refused: no scenario key is that
+// deep, and converting has to stop somewhere on a structure that never ends.
+constexpr int kMaxValueDepth = 64;
+
+std::string TypeName(const py::handle& v) {
+  return py::str(py::type::handle_of(v).attr("__name__")).cast<std::string>();
 }
 
-// overrides: a dict {dotted.key: value} (in order) or a list of "KEY=VALUE" strings.
+// A key of plain names: [A-Za-z0-9_]+ separated by single dots ("detector.threads"). Anything
+// else could carry YAML syntax (':', ',', '{', a newline) into the override.
+bool IsPlainDottedKey(const std::string& key, bool allow_dots = true) {
+  bool part_empty = true;
+  for (const char c : key) {
+    if (c == '.' && allow_dots) {
+      if (part_empty) return false;
+      part_empty = true;
+    } else if ((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
+               c == '_') {
+      part_empty = false;
+    } else {
+      return false;
+    }
+  }
+  return !part_empty;
+}
+
+// `text` as a YAML double-quoted scalar: always a string, never syntax.
+std::string QuotedYaml(const std::string& text) {
+  std::string s = "\"";
+  for (const char ch : text) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (ch == '"' || ch == '\\') {
+      s += '\\';
+      s += ch;
+    } else if (c < 0x20 || c == 0x7f) {
+      char buf[8];
+      std::snprintf(buf, sizeof(buf), "\\x%02x", c);
+      s += buf;
+    } else {
+      s += ch;  // UTF-8 from Python passes through
+    }
+  }
+  return s + "\"";
+}
+
+// Converts Python values to YAML text. `what` names the override or parameter in every error;
+// containers on the path being converted are remembered, so a list or dict that contains itself
+// is an error rather than an endless recursion.
+class YamlWriter {
+ public:
+  explicit YamlWriter(std::string what) : what_(std::move(what)) {}
+
+  // A top-level str is YAML text, as a --set value is; a str inside a list or dict is a string.
+  std::string Top(const py::handle& v) {
+    if (py::isinstance<py::str>(v)) return v.cast<std::string>();
+    return Value(v, 0);
+  }
+
+ private:
+  std::string Value(const py::handle& v, int depth) {
+    if (v.is_none()) return "null";
+    if (py::isinstance<py::bool_>(v)) return v.cast<bool>() ? "true" : "false";
+    if (py::isinstance<py::int_>(v)) return py::str(v).cast<std::string>();
+    if (py::isinstance<py::float_>(v)) return NumberText(v.cast<double>());
+    if (py::isinstance<py::str>(v)) return QuotedYaml(v.cast<std::string>());
+    const bool is_dict = py::isinstance<py::dict>(v);
+    const bool is_list = py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v);
+    const bool is_array =
+        !is_dict && !is_list && (py::isinstance<py::array>(v) || py::hasattr(v, "tolist"));
+    if (!is_dict && !is_list && !is_array) {
+      throw ValueErrorMessage(what_ + ": cannot express a value of type " + TypeName(v) +
+                              " in a scenario file");
+    }
+    if (depth >= kMaxValueDepth) {
+      throw ValueErrorMessage(what_ + ": nested deeper than " + std::to_string(kMaxValueDepth) +
+                              " levels");
+    }
+    for (const PyObject* open : path_) {
+      if (open == v.ptr()) {
+        throw ValueErrorMessage(what_ + ": a " + TypeName(v) +
+                                " that contains itself cannot be written as YAML");
+      }
+    }
+    path_.push_back(v.ptr());
+    std::string s;
+    if (is_array) {
+      s = Value(v.attr("tolist")(), depth + 1);  // numpy arrays and scalars
+    } else if (is_dict) {
+      s = "{";
+      bool first = true;
+      for (const auto& [key, value] : py::reinterpret_borrow<py::dict>(v)) {
+        if (!py::isinstance<py::str>(key) &&
+            !(py::isinstance<py::int_>(key) && !py::isinstance<py::bool_>(key))) {
+          throw ValueErrorMessage(what_ + ": a dict key must be a str, got " + TypeName(key));
+        }
+        s += (first ? "" : ", ") + QuotedYaml(py::str(key).cast<std::string>()) + ": " +
+             Value(value, depth + 1);
+        first = false;
+      }
+      s += "}";
+    } else {
+      s = "[";
+      bool first = true;
+      for (const auto& item : v) {
+        s += (first ? "" : ", ") + Value(item, depth + 1);
+        first = false;
+      }
+      s += "]";
+    }
+    path_.pop_back();
+    return s;
+  }
+
+  std::string what_;
+  std::vector<const PyObject*> path_;
+};
+
+std::string YamlText(const py::handle& v, const std::string& what) {
+  return YamlWriter(what).Top(v);
+}
+
+// overrides: a dict {dotted.key: value} (in order) or a list of "KEY=VALUE" strings. Keys are
+// plain dotted names; values become YAML text with strings inside lists and dicts quoted, so
+// nothing the caller passes is read as YAML syntax outside its own value.
 std::vector<std::string> OverrideArgs(const py::object& overrides) {
   std::vector<std::string> set;
   if (overrides.is_none()) return set;
+  const auto check_key = [](const std::string& key) {
+    if (!IsPlainDottedKey(key)) {
+      throw ValueErrorMessage("overrides: key '" + CapForMessage(key) +
+                              "' is not a dotted name (letters, digits and '_' separated by "
+                              "'.', such as 'detector.threads')");
+    }
+  };
   if (py::isinstance<py::dict>(overrides)) {
     for (const auto& [key, value] : py::reinterpret_borrow<py::dict>(overrides)) {
-      const std::string k = py::str(key).cast<std::string>();
+      if (!py::isinstance<py::str>(key)) {
+        throw ValueErrorMessage("overrides: a key must be a str, got " + TypeName(key));
+      }
+      const std::string k = key.cast<std::string>();
+      check_key(k);
       set.push_back(k + "=" + YamlText(value, "overrides['" + k + "']"));
     }
     return set;
@@ -280,7 +413,11 @@ std::vector<std::string> OverrideArgs(const py::object& overrides) {
     if (!py::isinstance<py::str>(item)) {
       throw ValueErrorMessage("overrides: expected a dict or a list of 'KEY=VALUE' strings");
     }
-    set.push_back(item.cast<std::string>());
+    std::string arg = item.cast<std::string>();
+    // Without '=' the runner's own message says what is missing.
+    const size_t eq = arg.find('=');
+    if (eq != std::string::npos) check_key(arg.substr(0, eq));
+    set.push_back(std::move(arg));
   }
   return set;
 }
@@ -307,6 +444,8 @@ py::sequence ListArg(const py::handle& v, const std::string& what) {
 class Model {
  public:
   static std::shared_ptr<Model> Load(const std::string& path) {
+    const std::unique_lock<std::mutex> lock = LockProcess();
+    const py::gil_scoped_release release;
     auto m = std::shared_ptr<Model>(new Model());
     m->declared_ = sim::LoadDeclaredModel(path);
     m->mj_ = sim::LoadModel(m->declared_.model_path);
@@ -416,6 +555,11 @@ std::unique_ptr<PyEstimator> MakePyEstimator(const std::string& name,
                                              const std::shared_ptr<Model>& model,
                                              const py::kwargs& kwargs) {
   if (!model) throw ValueErrorMessage("model: expected a flexbench.DeclaredModel");
+  // The name and the parameter names become override keys: plain names only (no YAML syntax).
+  if (!IsPlainDottedKey(name, false)) {
+    throw ValueErrorMessage("estimator name '" + CapForMessage(name) +
+                            "': expected letters, digits and '_' (flexbench.estimator_names())");
+  }
   estimators::EstimatorSetup setup;
   setup.model = &model->ppoe();
   setup.effects = model->chain().effects_or_null();
@@ -440,6 +584,10 @@ std::unique_ptr<PyEstimator> MakePyEstimator(const std::string& name,
     } else if (key == "imu_frames") {
       for (const auto& f : ListArg(value, "imu_frames")) setup.imus.push_back({model->Frame(f)});
     } else {
+      if (!IsPlainDottedKey(key, false)) {
+        throw ValueErrorMessage("parameter '" + CapForMessage(key) +
+                                "': expected letters, digits and '_'");
+      }
       overrides.push_back(
           {"estimators." + name + "." + key, YamlText(value, "parameter '" + key + "'")});
     }
@@ -453,10 +601,54 @@ std::unique_ptr<PyEstimator> MakePyEstimator(const std::string& name,
   return std::make_unique<PyEstimator>(model, name, setup);
 }
 
+// ---- Noise and time of a reading ----------------------------------------------------------
+// A reading's values (angles, pixels, points) that are not finite are the sensor's: the
+// estimator rejects them ('rejected_non_finite'). Its time and its noise are the caller's
+// statement about it: a time that is not finite, a std that is not > 0 or a covariance that is
+// not a covariance would be taken as given and spoil the belief, so they raise ValueError.
+
+std::string Shown(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof(buf), "%.6g", v);
+  return buf;
+}
+
+double CheckTime(double t) {
+  if (!std::isfinite(t)) throw ValueErrorMessage("t: expected a finite time, got " + Shown(t));
+  return t;
+}
+
+double CheckStd(double v, const std::string& what) {
+  if (!(std::isfinite(v) && v > 0.0)) {
+    throw ValueErrorMessage(what + ": expected a finite noise std > 0, got " + Shown(v));
+  }
+  return v;
+}
+
+// A covariance: finite, symmetric, and positive definite (semi-definite with `allow_singular`,
+// e.g. a plane known exactly is all zeros).
+template <int N>
+Eigen::Matrix<double, N, N> CheckCovariance(const Eigen::Matrix<double, N, N>& c, const char* what,
+                                            bool allow_singular) {
+  if (!c.allFinite()) throw ValueErrorMessage(std::string(what) + ": not finite");
+  const double scale = c.cwiseAbs().maxCoeff();
+  if ((c - c.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale) {
+    throw ValueErrorMessage(std::string(what) + ": not symmetric");
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, N, N>> eig(c);
+  const double smallest = eig.eigenvalues().minCoeff();
+  if (allow_singular ? smallest < -1e-12 * scale : !(smallest > 0.0)) {
+    throw ValueErrorMessage(std::string(what) + ": not positive " +
+                            (allow_singular ? "semi-definite" : "definite") +
+                            " (smallest eigenvalue " + Shown(smallest) + ")");
+  }
+  return c;
+}
+
 template <int N>
 Eigen::Matrix<double, N, N> CovOr(const py::object& obj, const char* what) {
   if (obj.is_none()) return Eigen::Matrix<double, N, N>::Identity();
-  return ReadMatrix<N, N>(obj, what);
+  return CheckCovariance<N>(ReadMatrix<N, N>(obj, what), what, false);
 }
 
 // ---- run / identify -----------------------------------------------------------------------
@@ -469,18 +661,16 @@ py::object RunCommand(F&& command, const std::string& out) {
   std::ostringstream text;
   int code = 0;
   {
-    std::streambuf* old = std::cerr.rdbuf(text.rdbuf());
+    const std::unique_lock<std::mutex> lock = LockProcess();
+    py::gil_scoped_release release;
+    const CerrCapture capture(text);
     try {
-      py::gil_scoped_release release;
       code = command();
-    } catch (const std::exception& e) {
-      std::cerr.rdbuf(old);
+    } catch (const std::exception&) {
       throw;
     } catch (...) {
-      std::cerr.rdbuf(old);
       throw std::runtime_error("unknown C++ exception");
     }
-    std::cerr.rdbuf(old);
   }
   std::istringstream lines(text.str());
   std::string line, error;
@@ -559,7 +749,8 @@ void BindDeclaredModel(py::module_& m) {
                  "A declared model (models/<name>.declared.yaml) built "
                  "into its PPOE chain from the MuJoCo model it names.");
   cls.def_static("load", &Model::Load, py::arg("path"),
-                 "Loads a declared-model YAML file (and the MJCF/URDF it names).")
+                 "Loads a declared-model YAML file (and the MJCF/URDF it names). Calls from "
+                 "several threads are serialised, with run_scenario and identify.")
       .def_property_readonly("nq", &Model::nq, "number of joint variables (len(q))")
       .def_property_readonly(
           "joint_names", [](const Model& self) { return self.chain().q_joints; },
@@ -597,24 +788,27 @@ void BindReadingUpdates(EstimatorClass& cls) {
            const int nq = self.model().nq();
            if (nq > estimators::kMaxJoints) throw ValueErrorMessage("too many joints");
            estimators::JointReading z;
-           z.t = t;
+           z.t = CheckTime(t);
            z.q = ReadVector(q, "q", nq);
-           if (py::isinstance<py::float_>(std) || py::isinstance<py::int_>(std)) {
-             z.std = estimators::JointVector::Constant(nq, std.cast<double>());
+           if (py::isinstance<py::float_>(std) ||
+               (py::isinstance<py::int_>(std) && !py::isinstance<py::bool_>(std))) {
+             z.std = estimators::JointVector::Constant(nq, CheckStd(std.cast<double>(), "std"));
            } else {
              z.std = ReadVector(std, "std", nq);
+             for (int i = 0; i < nq; ++i) CheckStd(z.std[i], "std[" + std::to_string(i) + "]");
            }
            return self.Update(z);
          },
-         py::arg("t"), py::arg("q"), py::arg("std") = 0.0,
-         "Encoder readings (rad or m, in q order) with their noise std (scalar or per joint). "
-         "Returns the update status ('accepted', 'ignored', 'rejected_non_finite', ...).")
+         py::arg("t"), py::arg("q"), py::arg("std"),
+         "Encoder readings (rad or m, in q order) with their noise std (> 0, scalar or per "
+         "joint). Returns the update status ('accepted', 'ignored', 'rejected_non_finite', ...); "
+         "a time that is not finite or a std that is not > 0 raises ValueError.")
       .def(
           "update_imu",
           [](PyEstimator& self, double t, const py::object& gyro, const py::object& accel,
              int imu) {
             estimators::ImuReading z;
-            z.t = t;
+            z.t = CheckTime(t);
             z.imu = imu;
             z.gyro = ReadFixedVector<3>(gyro, "gyro");
             z.accel = ReadFixedVector<3>(accel, "accel");
@@ -625,7 +819,7 @@ void BindReadingUpdates(EstimatorClass& cls) {
           "update_orientation",
           [](PyEstimator& self, double t, const py::object& frame, const py::object& wxyz) {
             estimators::OrientationReading z;
-            z.t = t;
+            z.t = CheckTime(t);
             z.frame = self.model().Frame(frame);
             const Vec4 v = ReadFixedVector<4>(wxyz, "q_base_frame");
             z.q_base_frame = QuatFromWxyz(v.data());
@@ -642,7 +836,7 @@ void BindCameraUpdates(EstimatorClass& cls) {
          [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
             const py::object& uv, const py::object& cov, int camera) {
            estimators::PixelPoint z;
-           z.t = t;
+           z.t = CheckTime(t);
            z.camera = camera;
            z.frame = self.model().Frame(frame);
            z.p_frame = ReadFixedVector<3>(p_frame, "p_frame");
@@ -657,7 +851,7 @@ void BindCameraUpdates(EstimatorClass& cls) {
           [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
              const py::object& uv, const py::object& cov, int camera, int tag_id) {
             estimators::TagCorners z;
-            z.t = t;
+            z.t = CheckTime(t);
             z.camera = camera;
             z.tag_id = tag_id;
             z.frame = self.model().Frame(frame);
@@ -683,14 +877,16 @@ void BindGeometryUpdates(EstimatorClass& cls) {
             const py::object& T_base_plane, const py::object& plane_cov, double distance,
             double std) {
            estimators::PlaneContact z;
-           z.t = t;
+           z.t = CheckTime(t);
            z.frame = self.model().Frame(frame);
            z.p_frame = ReadFixedVector<3>(p_frame, "p_frame");
            z.T_base_plane = ReadPose(T_base_plane, "T_base_plane");
-           z.plane_cov = plane_cov.is_none() ? Mat6(Mat6::Zero())
-                                             : Mat6(ReadMatrix<6, 6>(plane_cov, "plane_cov"));
+           z.plane_cov = plane_cov.is_none()
+                             ? Mat6(Mat6::Zero())
+                             : CheckCovariance<6>(ReadMatrix<6, 6>(plane_cov, "plane_cov"),
+                                                  "plane_cov", true);
            z.distance = distance;
-           z.std = std;
+           z.std = CheckStd(std, "std");
            return self.Update(z);
          },
          py::arg("t"), py::arg("frame"), py::arg("p_frame"), py::arg("T_base_plane"),
@@ -700,7 +896,7 @@ void BindGeometryUpdates(EstimatorClass& cls) {
           [](PyEstimator& self, double t, const py::object& frame, const py::object& p_frame,
              const py::object& p_base, const py::object& cov) {
             estimators::PositionReading z;
-            z.t = t;
+            z.t = CheckTime(t);
             z.frame = self.model().Frame(frame);
             z.p_frame = ReadFixedVector<3>(p_frame, "p_frame");
             z.p_base = ReadFixedVector<3>(p_base, "p_base");
@@ -714,7 +910,7 @@ void BindGeometryUpdates(EstimatorClass& cls) {
           [](PyEstimator& self, double t, const py::object& frame, const py::object& T,
              const py::object& cov) {
             estimators::PoseReading z;
-            z.t = t;
+            z.t = CheckTime(t);
             z.frame = self.model().Frame(frame);
             z.T_base_frame = ReadPose(T, "T_base_frame");
             z.cov = CovOr<6>(cov, "cov");
@@ -729,7 +925,8 @@ void BindEstimator(py::module_& m) {
   cls.def_property_readonly("name", &PyEstimator::name)
       .def("reset", [](PyEstimator& self) { self.get().Reset(); })
       .def(
-          "predict", [](PyEstimator& self, double t) { self.get().Predict(t); }, py::arg("t"))
+          "predict", [](PyEstimator& self, double t) { self.get().Predict(CheckTime(t)); },
+          py::arg("t"))
       .def(
           "estimate",
           [](PyEstimator& self) {
@@ -794,7 +991,10 @@ void BindRunScenario(py::module_& m) {
       py::arg("path"), py::arg("out"), py::arg("seed") = py::none(),
       py::arg("overrides") = py::dict(), py::arg("force") = false,
       "`flexbench run PATH --out OUT [--seed S] [--set K=V ...] --quiet`; returns "
-      "OUT/summary.json as a dict. overrides: {dotted.key: value} or ['KEY=VALUE', ...].");
+      "OUT/summary.json as a dict. overrides: {dotted.key: value} or ['KEY=VALUE', ...] (keys "
+      "are names of letters, digits and '_' separated by '.'). Bad input, including a fatal "
+      "MuJoCo error, raises ValueError and leaves nothing behind. Calls from several threads "
+      "are serialised (one runs at a time; the others wait without holding the GIL).");
 }
 
 // identify: `flexbench identify`.
@@ -835,7 +1035,8 @@ void BindIdentify(py::module_& m) {
       py::arg("outlier_iqr") = py::none(), py::arg("no_cross_validation") = false,
       py::arg("overrides") = py::dict(), py::arg("force") = false,
       "`flexbench identify` with the same options (--calibration -> calibration, --set -> "
-      "overrides, ...); returns OUT/summary.json as a dict.");
+      "overrides, ...); returns OUT/summary.json as a dict. Calls from several threads are "
+      "serialised, with run_scenario and DeclaredModel.load.");
 }
 
 void BindBenchmark(py::module_& m) {
@@ -867,6 +1068,8 @@ PYBIND11_MODULE(flexbench, m) {
       "name, and the runner (run_scenario, identify). See docs/python.md.";
   m.attr("__version__") = FLEXBENCH_VERSION;
   py::register_local_exception_translator(&TranslateExceptions);
+  // Before any MuJoCo call: its fatal errors must throw, never end the interpreter.
+  sim::InstallMujocoHandlers();
 
   BindDeclaredModel(m);
   BindEstimator(m);
