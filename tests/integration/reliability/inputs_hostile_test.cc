@@ -142,6 +142,54 @@ TEST_F(InputFiles, AbsurdJointValueFromSetIsRefused) {
   EXPECT_FALSE(fs::exists(Path("out")));
 }
 
+// A URDF goes through the same checks (MuJoCo's importer opens its meshes); lines are the
+// URDF's own.
+TEST_F(InputFiles, UrdfMeshDeviceAndAbsurdOriginAreRefused) {
+  fs::create_symlink("/dev/zero", Path("zero.obj"));
+  const std::string joint =
+      "  <joint name=\"j1\" type=\"revolute\"><parent link=\"base\"/><child link=\"l1\"/>"
+      "<axis xyz=\"0 0 1\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/>";
+  WriteFile(Path("mesh.urdf"),
+            "<robot name=\"r\">\n  <link name=\"base\"><visual><geometry><mesh "
+            "filename=\"zero.obj\"/></geometry></visual></link>\n  <link name=\"l1\"/>\n" +
+                joint + "</joint>\n</robot>\n");
+  ExpectBadInput(Fb("inspect " + Path("mesh.urdf").string()), "zero.obj: not a regular file");
+  WriteFile(Path("far.urdf"),
+            "<robot name=\"r\">\n  <link name=\"base\"/>\n  <link "
+            "name=\"l1\"/>\n" +
+                joint + "<origin xyz=\"1e300 0 0\"/></joint>\n</robot>\n");
+  ExpectBadInput(Fb("inspect " + Path("far.urdf").string()),
+                 "far.urdf:4: <origin> xyz: '1e300' is out of range");
+}
+
+// identify loads the declared file's model through the same scan.
+TEST_F(InputFiles, IdentifyRefusesAModelIncludingAFifo) {
+  ASSERT_EQ(mkfifo(Path("part.xml").c_str(), 0600), 0);
+  WriteFile(Path("model.xml"), ModelWith("<include file=\"part.xml\"/>"));
+  std::string declared = ReadFile(fs::path(SourceDir()) / "models" / "planar3.declared.yaml");
+  const size_t at = declared.find("\nmodel:");
+  ASSERT_NE(at, std::string::npos);
+  declared.replace(at, declared.find('\n', at + 1) - at, "\nmodel: " + Path("model.xml").string());
+  WriteFile(Path("declared.yaml"), declared);
+  WriteFile(Path("cal.csv"), "joint1,joint2,joint3,x,y,z\n0.1,0.2,0.3,0.4,0.1,0.1\n");
+  WriteFile(Path("val.csv"), "joint1,joint2,joint3,x,y,z\n0.2,0.2,0.3,0.4,0.1,0.1\n");
+  ExpectBadInput(Fb("identify --declared " + Path("declared.yaml").string() + " --calibration " +
+                    Path("cal.csv").string() + " --validation " + Path("val.csv").string() +
+                    " --out " + Path("out").string()),
+                 "include 'part.xml': " + Path("part.xml").string() + ": not a regular file");
+  EXPECT_FALSE(fs::exists(Path("out")));
+}
+
+// A value no check bounds that makes a metric NaN ends the run as bad input, not a null.
+TEST_F(InputFiles, NonFiniteMetricIsAnErrorNotANull) {
+  const CommandResult r =
+      Fb("run " + SourceDir() + "/scenarios/planar3_covariance.yaml --out " + Path("out").string() +
+         " --set 'cases.a.q_deg=[1e300, 40, 30]' --set samples=200 --set covariance_samples=1000");
+  ExpectBadInput(r, "metric 'a.");
+  EXPECT_NE(LastLine(r.err).find("not finite; check the inputs"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(Path("out")));
+}
+
 // A list of 3.9 million items in 15 MiB: under the byte cap, gigabytes as a tree.
 TEST_F(InputFiles, HugeYamlListIsRefusedWhileParsing) {
   {
