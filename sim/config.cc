@@ -86,8 +86,9 @@ void CheckUtf8(const std::string& text, const std::string& name) {
 // Counts visited nodes: aliases can make a small file a huge tree.
 void CheckStructure(const YAML::Node& node, const std::string& name, const std::string& path,
                     size_t* visited) {
-  if (++*visited > 1000000) {
-    throw InputError(name + ": more than 1,000,000 YAML nodes (aliases expanding?)");
+  if (++*visited > kMaxYamlNodes) {
+    throw InputError(name + ": more than " + std::to_string(kMaxYamlNodes) +
+                     " YAML nodes (aliases expanding?)");
   }
   if (node.IsMap()) {
     std::set<std::string> seen;
@@ -193,6 +194,8 @@ std::vector<std::string> SplitKey(const std::string& key) {
   return parts;
 }
 
+YAML::Node LoadOneDocument(const std::string& text, const std::string& name);
+
 // Sets `o` in `root`: the value parsed and checked like file text, the maps on its path created
 // when absent. yaml-cpp's Node::operator= writes through to the node, so the walk rebinds with
 // reset().
@@ -209,7 +212,7 @@ void ApplyOverride(YAML::Node root, const ConfigOverride& o, const std::string& 
   }
   YAML::Node value;
   try {
-    value = YAML::Load(o.value);
+    value = LoadOneDocument(o.value, where);
   } catch (const YAML::Exception& e) {
     throw InputError(where + ": YAML syntax error in the value: " + CapForMessage(e.msg));
   }
@@ -244,22 +247,50 @@ void ApplyOverride(YAML::Node root, const ConfigOverride& o, const std::string& 
 
 namespace {
 
-// Where each document of a YAML stream starts; nothing else is kept.
+// Where each document of a YAML stream starts, and the size of the tree YAML::Load would build:
+// nodes are counted and nesting measured while the events stream by, so a file under the byte
+// cap that would build a tree of gigabytes (a list of millions of short items) or recurse
+// deeply is refused before any tree exists.
 class DocumentStarts : public YAML::EventHandler {
  public:
+  explicit DocumentStarts(std::string name) : name_(std::move(name)) {}
   std::vector<YAML::Mark> starts;
   void OnDocumentStart(const YAML::Mark& mark) override { starts.push_back(mark); }
   void OnDocumentEnd() override {}
-  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
-  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
-  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t,
-                const std::string&) override {}
-  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
-                       YAML::EmitterStyle::value) override {}
-  void OnSequenceEnd() override {}
-  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
-                  YAML::EmitterStyle::value) override {}
-  void OnMapEnd() override {}
+  void OnNull(const YAML::Mark& mark, YAML::anchor_t) override { Node(mark); }
+  void OnAlias(const YAML::Mark& mark, YAML::anchor_t) override { Node(mark); }
+  void OnScalar(const YAML::Mark& mark, const std::string&, YAML::anchor_t,
+                const std::string&) override {
+    Node(mark);
+  }
+  void OnSequenceStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {
+    Open(mark);
+  }
+  void OnSequenceEnd() override { --depth_; }
+  void OnMapStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {
+    Open(mark);
+  }
+  void OnMapEnd() override { --depth_; }
+
+ private:
+  void Node(const YAML::Mark& mark) {
+    if (++nodes_ > kMaxYamlNodes) {
+      throw InputError(name_ + ":" + LineOf(mark) + ": more than " + std::to_string(kMaxYamlNodes) +
+                       " YAML nodes (values, lists, mappings)");
+    }
+  }
+  void Open(const YAML::Mark& mark) {
+    Node(mark);
+    if (++depth_ > kMaxYamlDepth) {
+      throw InputError(name_ + ":" + LineOf(mark) + ": lists and mappings nested more than " +
+                       std::to_string(kMaxYamlDepth) + " deep");
+    }
+  }
+  std::string name_;
+  size_t nodes_ = 0;
+  int depth_ = 0;
 };
 
 // The one document of `text`, or an InputError. Never YAML::LoadAll: yaml-cpp 0.7 loops forever
@@ -268,7 +299,7 @@ class DocumentStarts : public YAML::EventHandler {
 // moving on. Here at most two documents are parsed, and a second one starting where the first
 // did is that loop: a syntax error at that place.
 YAML::Node LoadOneDocument(const std::string& text, const std::string& name) {
-  DocumentStarts events;
+  DocumentStarts events(name);
   {
     std::istringstream in(text);
     YAML::Parser parser(in);

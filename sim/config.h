@@ -22,6 +22,12 @@ std::string CapForMessage(const std::string& value, size_t max_chars = 200);
 // Largest scenario or declared-model file read (bytes); a bigger one is refused as bad input.
 inline constexpr std::uintmax_t kMaxConfigFileBytes = 16u << 20;
 
+// Largest YAML tree read from a file or a --set value: nodes (every value, list and mapping;
+// counted while parsing, before any tree is built) and nesting depth. A parsed node costs
+// hundreds of bytes, so the byte cap alone lets a 15 MiB list build gigabytes.
+inline constexpr size_t kMaxYamlNodes = 1000000;
+inline constexpr int kMaxYamlDepth = 64;
+
 // Checks that `path` names a regular file of at most `max_bytes`; throws InputError
 // "<path>: ..." (the path capped) when it does not exist, is a folder, a device or a pipe, or
 // is too big.

@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 namespace flexbench::sim {
 namespace {
 
-// Includes nested deeper than this are left to MuJoCo (it reports its own limit or a cycle).
+// Includes nested deeper than this are refused.
 constexpr int kMaxIncludeDepth = 16;
 
 struct Element {
@@ -127,14 +127,25 @@ bool ParseFinite(const std::string& token) {
 
 std::string Quoted(const std::string& s) { return "'" + CapForMessage(s, 40) + "'"; }
 
-std::string ReadCapped(const fs::path& file) {
+// `file` when it exists: a regular file of at most kMaxModelFileBytes (recorded as an input of
+// the run), else an InputError "<what>: <file>: ...". MuJoCo would block on a FIFO or a
+// terminal and read a device such as /dev/zero until memory runs out. A missing file is left to
+// MuJoCo, which names it. Returns whether the file exists.
+bool CheckReferencedFile(const fs::path& file, const std::string& what) {
   std::error_code ec;
-  const std::uintmax_t size = fs::file_size(file, ec);
-  if (ec) return {};
-  if (size > kMaxModelFileBytes) {
-    throw InputError(CapForMessage(file.string()) + ": " + std::to_string(size) +
-                     " bytes, more than the " + std::to_string(kMaxModelFileBytes) + " allowed");
+  const fs::file_status st = fs::status(file, ec);
+  if (ec || !fs::exists(st)) return false;
+  try {
+    CheckInputFile(file.string(), kMaxModelFileBytes);
+  } catch (const InputError& e) {
+    throw InputError(what + ": " + e.what());
   }
+  return true;
+}
+
+// The bytes of `file`, checked by CheckReferencedFile first ("" when it does not exist).
+std::string ReadCapped(const fs::path& file, const std::string& what) {
+  if (!CheckReferencedFile(file, what)) return {};
   std::ifstream in(file, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
@@ -190,7 +201,7 @@ void CheckInlineMesh(const Element& mesh, const std::string& what) {
 }
 
 void CheckObj(const fs::path& file, const std::string& what) {
-  const std::string text = ReadCapped(file);
+  const std::string text = ReadCapped(file, what);
   const std::string shown = what + " (" + CapForMessage(file.string()) + ")";
   // Pass 1: the total number of vertices (a positive index counts from the file's first one).
   // Pass 2: every face's vertex index; a negative one counts back from the vertices read so far.
@@ -235,7 +246,7 @@ void CheckObj(const fs::path& file, const std::string& what) {
 }
 
 void CheckMsh(const fs::path& file, const std::string& what) {
-  const std::string bytes = ReadCapped(file);
+  const std::string bytes = ReadCapped(file, what);
   const std::string shown = what + " (" + CapForMessage(file.string()) + ")";
   std::int32_t header[4];
   if (bytes.size() < sizeof(header)) throw InputError(shown + ": shorter than its 16-byte header");
@@ -269,24 +280,62 @@ struct Scanned {
   Element element;
 };
 
+std::string Where(const std::string& file, int line) {
+  return CapForMessage(file) + ":" + std::to_string(line);
+}
+
 void Collect(const std::string& xml, const std::string& file, const fs::path& main_dir, int depth,
              std::set<fs::path>* visited, std::vector<Scanned>* out) {
   const fs::path dir = fs::path(file).parent_path();
   for (Element& e : StartTags(xml)) {
-    if (e.name == "include" && depth < kMaxIncludeDepth) {
+    if (e.name == "include") {
+      // Deeper nesting is no model anyone writes; unchecked, a file at that depth could be a
+      // pipe MuJoCo would block on.
+      if (depth >= kMaxIncludeDepth) {
+        throw InputError(Where(file, e.line) + ": <include> nested more than " +
+                         std::to_string(kMaxIncludeDepth) + " files deep");
+      }
       if (const std::string* name = e.Find("file")) {
         // MuJoCo resolves an include against the main file's folder; the including file's
         // folder is checked too, so a guess on either side does not skip a file.
+        const std::string what = Where(file, e.line) + ": include " + Quoted(*name);
         for (const fs::path& base : {main_dir, dir}) {
           const fs::path p = base / *name;
+          if (!CheckReferencedFile(p, what)) continue;
           std::error_code ec;
           const fs::path key = fs::weakly_canonical(p, ec);
-          if (!IsRegularFile(p) || !visited->insert(ec ? p : key).second) continue;
-          Collect(ReadCapped(p), p.string(), main_dir, depth + 1, visited, out);
+          if (!visited->insert(ec ? p : key).second) continue;
+          Collect(ReadCapped(p, what), p.string(), main_dir, depth + 1, visited, out);
         }
       }
     }
     out->push_back({file, dir, std::move(e)});
+  }
+}
+
+// Attributes naming a file MuJoCo opens: `file` (include, mesh, skin, hfield, texture), a cube
+// texture's `fileright` ... `fileback`, a URDF mesh's `filename`.
+bool IsFileAttribute(const std::string& key) { return key.compare(0, 4, "file") == 0; }
+
+// Largest coordinate accepted in a position (m): far beyond any robot or scene, small enough
+// that products of positions (inertias, distances squared) stay finite.
+constexpr double kMaxPosition = 1e6;
+
+// `pos` and `fromto` of any element (a URDF's <origin xyz>): every number finite and within
+// kMaxPosition. Values that are not numbers are left to MuJoCo's parser.
+void CheckPositions(const Scanned& s) {
+  const Element& e = s.element;
+  for (const auto& [key, value] : e.attributes) {
+    if (key != "pos" && key != "fromto" && !(key == "xyz" && e.name == "origin")) continue;
+    for (const std::string& t : Tokens(value)) {
+      char* end = nullptr;
+      const double v = std::strtod(t.c_str(), &end);
+      if (end == t.c_str() || *end != '\0') continue;
+      if (!std::isfinite(v) || std::abs(v) > kMaxPosition) {
+        throw InputError(Where(s.file, e.line) + ": <" + CapForMessage(e.name, 40) + "> " + key +
+                         ": " + Quoted(t) + " is out of range (|value| <= 1e6 m)");
+      }
+    }
   }
 }
 
@@ -303,34 +352,52 @@ void CheckMjcfMeshes(const std::string& xml, const std::string& path) {
   std::set<fs::path> visited;
   std::vector<Scanned> elements;
   Collect(xml, path, main_dir, 0, &visited, &elements);
-  // Mesh files are found through <compiler meshdir/assetdir>; every folder MuJoCo might use
-  // is tried, and each existing candidate is checked.
-  std::vector<std::string> mesh_dirs;
+  // Asset files are found through <compiler meshdir/texturedir/assetdir> (and, with strippath,
+  // by their bare name); every folder MuJoCo might use is tried, and each existing candidate
+  // is checked.
+  std::vector<fs::path> asset_dirs;
   for (const Scanned& s : elements) {
     if (s.element.name != "compiler") continue;
-    for (const char* key : {"meshdir", "assetdir"}) {
-      if (const std::string* d = s.element.Find(key)) mesh_dirs.push_back(*d);
+    for (const char* key : {"meshdir", "texturedir", "assetdir"}) {
+      if (const std::string* d = s.element.Find(key)) {
+        asset_dirs.push_back(fs::path(*d).is_absolute() ? fs::path(*d) : main_dir / *d);
+      }
     }
   }
+  const auto candidates = [&](const Scanned& s, const std::string& value) {
+    const fs::path v(value);
+    std::vector<fs::path> out = {main_dir / v, s.dir / v, main_dir / v.filename()};
+    for (const fs::path& d : asset_dirs) {
+      out.push_back(d / v);
+      out.push_back(d / v.filename());
+    }
+    std::set<fs::path> seen;
+    std::vector<fs::path> unique;
+    for (const fs::path& c : out) {
+      if (seen.insert(c.lexically_normal()).second) unique.push_back(c);
+    }
+    return unique;
+  };
   int index = 0;
   for (const Scanned& s : elements) {
     const Element& e = s.element;
+    CheckPositions(s);
+    for (const auto& [key, value] : e.attributes) {
+      if (!IsFileAttribute(key) || value.empty()) continue;
+      const std::string what = Where(s.file, e.line) + ": <" + CapForMessage(e.name, 40) + "> " +
+                               key + " " + Quoted(value);
+      for (const fs::path& c : candidates(s, value)) CheckReferencedFile(c, what);
+    }
     if (e.name != "mesh") continue;
     const std::string* name = e.Find("name");
     const std::string* file = e.Find("file");
-    std::string what = CapForMessage(s.file) + ":" + std::to_string(e.line) + ": mesh ";
+    std::string what = Where(s.file, e.line) + ": mesh ";
     what += name ? Quoted(*name) : file ? "from " + Quoted(*file) : "#" + std::to_string(index);
     ++index;
     CheckInlineMesh(e, what);
     if (!file) continue;
-    std::vector<fs::path> candidates = {main_dir / *file, s.dir / *file};
-    for (const std::string& d : mesh_dirs) {
-      const fs::path base = fs::path(d).is_absolute() ? fs::path(d) : main_dir / d;
-      candidates.push_back(base / *file);
-    }
-    std::set<fs::path> checked;
-    for (const fs::path& c : candidates) {
-      if (IsRegularFile(c) && checked.insert(c.lexically_normal()).second) CheckMeshFile(c, what);
+    for (const fs::path& c : candidates(s, *file)) {
+      if (IsRegularFile(c)) CheckMeshFile(c, what);
     }
   }
 }

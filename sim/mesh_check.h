@@ -13,13 +13,23 @@
 
 namespace flexbench::sim {
 
-// Checks every <mesh> element of MJCF text `xml` (read from `path`, which names it in errors
-// and resolves relative files): inline `vertex` / `face` lists (numbers only, a multiple of 3
-// each, every face index in [0, number of vertices)) and mesh files ending in .obj or .msh
-// (see CheckMeshFile). Files named by <include> are checked the same way (MuJoCo resolves
-// them against the main file's folder). Files that do not exist are left to MuJoCo, which
-// reports them. The scan is a small XML tokenizer (comments, CDATA, quoted attribute values
-// holding '>' are skipped correctly); malformed XML is left to MuJoCo's parser.
+// Checks MJCF text `xml` (read from `path`, which names it in errors and resolves relative
+// files) before MuJoCo opens anything it names:
+//   - every file an element names (`file` of include, mesh, skin, hfield, texture; a cube
+//     texture's `fileright` ... `fileback`; a URDF mesh's `filename`), at each place MuJoCo may
+//     look for it (the main file's folder, the including file's, <compiler meshdir / texturedir
+//     / assetdir>, the bare name): one that exists must be a regular file of at most
+//     kMaxModelFileBytes (CheckInputFile; it is recorded as an input of the run). MuJoCo blocks
+//     forever on a FIFO or /dev/stdin and reads /dev/zero until memory runs out. Files that do
+//     not exist are left to MuJoCo, which reports them;
+//   - <include> files are scanned the same way, at most 16 deep;
+//   - every <mesh>: inline `vertex` / `face` lists (numbers only, a multiple of 3 each, every
+//     face index in [0, number of vertices)) and mesh files ending in .obj or .msh (see
+//     CheckMeshFile);
+//   - `pos` and `fromto` of every element (a URDF's <origin xyz>): finite, |value| <= 1e6 m
+//     (larger ones compile, then every result is NaN).
+// The scan is a small XML tokenizer (comments, CDATA, quoted attribute values holding '>' are
+// skipped correctly); malformed XML is left to MuJoCo's parser.
 void CheckMjcfMeshes(const std::string& xml, const std::string& path);
 
 // Checks the face indices of one mesh file (.obj: `f` lines against the `v` lines, 1-based or

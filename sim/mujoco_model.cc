@@ -146,8 +146,9 @@ std::string PrepareUrdf(const std::string& urdf, const std::string& path,
     const size_t robot = out.find("<robot");
     const size_t open_end = robot == std::string::npos ? robot : out.find('>', robot);
     if (open_end != std::string::npos) {
+      // On the <robot> line, so that lines in messages are the URDF's own.
       out.insert(open_end + 1,
-                 "\n  <mujoco><compiler fusestatic=\"false\" discardvisual=\"false\" "
+                 "<mujoco><compiler fusestatic=\"false\" discardvisual=\"false\" "
                  "boundmass=\"1e-6\" boundinertia=\"1e-9\"/></mujoco>");
     }
   }

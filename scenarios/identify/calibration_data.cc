@@ -65,11 +65,50 @@ double ParseNumber(const std::string& cell, const std::string& where, const std:
   return v;
 }
 
+// Lines of `path` (a last line without '\n' counts): an upper bound of its data rows, found
+// without keeping any of it.
+std::uintmax_t CountLines(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::vector<char> buffer(1 << 20);
+  std::uintmax_t lines = 0;
+  char last = '\n';
+  while (in) {
+    in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+    const std::streamsize n = in.gcount();
+    if (n <= 0) break;
+    lines += static_cast<std::uintmax_t>(std::count(buffer.data(), buffer.data() + n, '\n'));
+    last = buffer[static_cast<size_t>(n) - 1];
+  }
+  return lines + (last != '\n' ? 1 : 0);
+}
+
+std::string Gigabytes(double bytes) {
+  char b[32];
+  std::snprintf(b, sizeof(b), "%.1f GB", bytes / 1e9);
+  return b;
+}
+
+// Refuses a file whose rows would need more than kMaxCalibrationMemoryBytes, before any is read:
+// the byte cap alone lets a file of a million short rows take gigabytes.
+void CheckRowMemory(const std::string& path, size_t num_joints) {
+  const std::uintmax_t rows = CountLines(path);
+  const double need =
+      static_cast<double>(rows) * static_cast<double>(CalibrationBytesPerRow(num_joints));
+  if (need > static_cast<double>(kMaxCalibrationMemoryBytes)) {
+    throw InputError(CapForMessage(path) + ": " + std::to_string(rows) + " rows need about " +
+                     Gigabytes(need) + " of memory to identify; the limit is " +
+                     Gigabytes(static_cast<double>(kMaxCalibrationMemoryBytes)) +
+                     " (split the data or thin it)");
+  }
+}
+
 // The data lines of a CSV file: blank lines and '#' comments skipped, cells trimmed.
 class CsvLines {
  public:
-  explicit CsvLines(const std::string& path) : path_(CapForMessage(path)) {
+  // `num_joints`: the joint columns a row holds, for the memory estimate (CheckRowMemory).
+  CsvLines(const std::string& path, size_t num_joints) : path_(CapForMessage(path)) {
     CheckInputFile(path, kMaxCalibrationCsvBytes);
+    CheckRowMemory(path, num_joints);
     in_.open(path, std::ios::binary);
     if (!in_) throw InputError(path_ + ": cannot open");
   }
@@ -359,7 +398,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   const std::function<bool(const std::string&)> is_coupled = [&](const std::string& j) {
     return std::find(coupled.begin(), coupled.end(), j) != coupled.end();
   };
-  CsvLines csv(path);
+  CsvLines csv(path, joints.size());
   const size_t first_row = data->rows.size();
   LabelIndexer group_index(&data->groups), set_index(&data->sets);
   std::vector<std::string> header;
@@ -394,7 +433,7 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
   int groups[2];
   for (int h = 0; h < 2; ++h) {
     const std::string path = dir + "/hole_" + std::to_string(h) + ".csv";
-    CsvLines csv(path);
+    CsvLines csv(path, static_cast<size_t>(std::max(num_joints, 0)));
     groups[h] = LabelIndex(&data->groups, set + "/hole_" + std::to_string(h));
     int rows = 0;
     std::vector<std::string> cells;
@@ -419,6 +458,10 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
     if (rows == 0) throw InputError(CapForMessage(path) + ": no data rows");
   }
   data->distances.push_back({groups[0], groups[1], socket_distance_m});
+}
+
+std::uintmax_t CalibrationBytesPerRow(size_t num_joints) {
+  return kCalibrationBytesPerRow + kCalibrationBytesPerJoint * num_joints;
 }
 
 }  // namespace flexbench::identify

@@ -33,6 +33,17 @@ namespace flexbench::identify {
 // The largest calibration CSV read (bigger is bad input, refused before reading).
 constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 
+// Memory the identification takes per calibration row (the Observation, its copies, the fit's
+// residual and Jacobian rows), and the most one file's rows may take. Measured with `identify`
+// on planar3 (3 joints): 2 x 20,000 rows peak at 0.39 GB, 2 x 60,000 rows at 0.93 GB, about
+// 7 KB a row; the estimate (2 KB + 2 KB a joint) rounds that up and grows with the joints. A
+// file whose line count times CalibrationBytesPerRow exceeds the budget is refused before any
+// row is read ("N rows need about X GB; the limit is Y GB").
+constexpr std::uintmax_t kCalibrationBytesPerRow = 2048;
+constexpr std::uintmax_t kCalibrationBytesPerJoint = 2048;
+constexpr std::uintmax_t kMaxCalibrationMemoryBytes = 2000000000;
+std::uintmax_t CalibrationBytesPerRow(size_t num_joints);
+
 // Appends the file's rows to `data` (groups and sets are matched by label; pixel rows need
 // data->camera). `coupled`: joints of `joints` driven by others (sim::DeclaredChain::couplings):
 // they have no column (one is bad input), their entries of q are left 0 for the caller to set.

@@ -90,16 +90,100 @@ void Flatten(const Json& j, const std::string& prefix,
   }
 }
 
+// A result file as `flatten` and the tables use it: a JSON object, read within the caps of
+// report.h. Deeper nesting is refused while parsing (the tables recurse through it).
 Json ReadJson(const fs::path& path) {
+  const std::string shown = CapForMessage(path.string());
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) throw InputError(shown + ": cannot read");
+  if (!fs::is_regular_file(st)) throw InputError(shown + ": not a regular file");
+  const std::uintmax_t size = fs::file_size(path, ec);
+  if (ec) throw InputError(shown + ": cannot read: " + ec.message());
+  if (size > kMaxResultJsonBytes) {
+    throw InputError(shown + ": " + std::to_string(size) + " bytes, more than the " +
+                     std::to_string(kMaxResultJsonBytes) + " a result file may have");
+  }
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(CapForMessage(path.string()) + ": cannot read");
+  if (!in) throw InputError(shown + ": cannot read");
   std::stringstream ss;
   ss << in.rdbuf();
+  Json j;
   try {
-    return Json::parse(ss.str());
+    j = Json::parse(ss.str(), [&shown](int depth, Json::parse_event_t, Json&) {
+      if (depth > kMaxResultJsonDepth) {
+        throw InputError(shown + ": nested more than " + std::to_string(kMaxResultJsonDepth) +
+                         " levels deep");
+      }
+      return true;
+    });
   } catch (const Json::parse_error& e) {
-    throw InputError(CapForMessage(path.string()) + ": not JSON (" + e.what() + ")");
+    throw InputError(shown + ": not JSON (" + e.what() + ")");
   }
+  if (!j.is_object()) throw InputError(shown + ": expected a JSON object at the top level");
+  return j;
+}
+
+// --- Shape checks ---------------------------------------------------------------------------
+// The pages read result files leniently (a missing key is a dash), but a key of the wrong type
+// would stop them with a JSON type error: it is bad input, named with its file and key.
+
+[[noreturn]] void ShapeError(const fs::path& file, const std::string& key,
+                             const std::string& expected) {
+  throw InputError(CapForMessage(file.string()) + ": key '" + CapForMessage(key) + "': expected " +
+                   expected);
+}
+
+// `j[key]`, when present, is a string.
+void OptionalString(const Json& j, const std::string& key, const std::string& shown,
+                    const fs::path& file) {
+  if (j.contains(key) && !j[key].is_string()) ShapeError(file, shown, "a string");
+}
+
+// `j[key]`, when present, is an array of objects; `each` checks each one.
+template <typename Each>
+void OptionalObjects(const Json& j, const std::string& key, const fs::path& file, Each each) {
+  if (!j.contains(key)) return;
+  if (!j[key].is_array()) ShapeError(file, key, "a list");
+  for (size_t i = 0; i < j[key].size(); ++i) {
+    const std::string item = key + "[" + std::to_string(i) + "]";
+    if (!j[key][i].is_object()) ShapeError(file, item, "an object");
+    each(j[key][i], item);
+  }
+}
+
+void CheckGateShape(const Json& g, const std::string& where, const fs::path& file) {
+  if (g.contains("passed") && !g["passed"].is_boolean()) {
+    ShapeError(file, where + ".passed", "true or false");
+  }
+}
+
+void CheckRunShape(const Json& s, const fs::path& file) {
+  OptionalString(s, "scenario", "scenario", file);
+  OptionalObjects(s, "gates", file,
+                  [&](const Json& g, const std::string& w) { CheckGateShape(g, w, file); });
+}
+
+// An object whose values are objects (a point's metrics, ratios, gates).
+void CheckObjectOfObjects(const Json& p, const std::string& key, const std::string& where,
+                          const fs::path& file) {
+  if (!p.contains(key)) return;
+  if (!p[key].is_object()) ShapeError(file, where + "." + key, "an object");
+  for (auto it = p[key].begin(); it != p[key].end(); ++it) {
+    if (!it.value().is_object()) ShapeError(file, where + "." + key + "." + it.key(), "an object");
+  }
+}
+
+void CheckSweepShape(const Json& a, const fs::path& file) {
+  OptionalString(a, "sweep", "sweep", file);
+  if (a.contains("seeds") && !a["seeds"].is_array()) ShapeError(file, "seeds", "a list");
+  OptionalObjects(a, "gates", file,
+                  [&](const Json& g, const std::string& w) { CheckGateShape(g, w, file); });
+  OptionalObjects(a, "failed", file, [](const Json&, const std::string&) {});
+  OptionalObjects(a, "points", file, [&](const Json& p, const std::string& w) {
+    if (p.contains("set") && !p["set"].is_object()) ShapeError(file, w + ".set", "an object");
+    for (const char* key : {"gates", "metrics", "ratios"}) CheckObjectOfObjects(p, key, w, file);
+  });
 }
 
 // --- The folder's files ---------------------------------------------------------------------
@@ -295,8 +379,9 @@ void FileLinks(const std::vector<FileEntry>& files, Keep keep, std::ostringstrea
 
 // --- A run ----------------------------------------------------------------------------------
 
-std::string RunReport(const fs::path& dir) {
+std::string RunReportUnchecked(const fs::path& dir) {
   const Json s = ReadJson(dir / "summary.json");
+  CheckRunShape(s, dir / "summary.json");
   const std::vector<FileEntry> files = ListFiles(dir);
   const std::string scenario = s.value("scenario", std::string("(unnamed)"));
   std::ostringstream h;
@@ -397,8 +482,9 @@ void PointGates(const Json& point, std::ostringstream* h) {
   *h << "</table>\n";
 }
 
-std::string SweepReport(const fs::path& dir) {
+std::string SweepReportUnchecked(const fs::path& dir) {
   const Json a = ReadJson(dir / "aggregate.json");
+  CheckSweepShape(a, dir / "aggregate.json");
   Json how = Json::object();
   if (fs::is_regular_file(dir / kSweepCommandFile)) how = ReadJson(dir / kSweepCommandFile);
   const std::vector<FileEntry> files = ListFiles(dir);
@@ -462,6 +548,26 @@ std::string SweepReport(const fs::path& dir) {
       &h);
   Tail("aggregate.json", &h);
   return h.str();
+}
+
+// The shape checks cover what the pages read; a JSON type error they missed is still the
+// file's fault, never an internal error.
+std::string RunReport(const fs::path& dir) {
+  try {
+    return RunReportUnchecked(dir);
+  } catch (const Json::exception& e) {
+    throw InputError(CapForMessage((dir / "summary.json").string()) +
+                     ": unexpected content: " + e.what());
+  }
+}
+
+std::string SweepReport(const fs::path& dir) {
+  try {
+    return SweepReportUnchecked(dir);
+  } catch (const Json::exception& e) {
+    throw InputError(CapForMessage((dir / "aggregate.json").string()) +
+                     ": unexpected content: " + e.what());
+  }
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 // same bytes as the run did, and the same folder always gives the same page.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -14,6 +15,12 @@ namespace flexbench::scenarios {
 // Written by a sweep's collect beside aggregate.json: {"command", "sweep_file", "scenario"},
 // how the sweep was run (aggregate.json stays the same bytes whatever the command).
 inline constexpr const char* kSweepCommandFile = "sweep_command.json";
+
+// The largest summary.json / aggregate.json a report reads (bytes; a run's summary is some
+// kilobytes), and the deepest nesting of lists and objects in it. Beyond either the file is
+// refused as bad input before a tree is built.
+inline constexpr std::uintmax_t kMaxResultJsonBytes = 64u << 20;
+inline constexpr int kMaxResultJsonDepth = 64;
 
 // `text` with &, <, >, " and ' replaced by entities: text from result files is never markup.
 std::string HtmlEscape(const std::string& text);
@@ -30,7 +37,8 @@ std::string ShellQuote(const std::string& arg);
 std::string CommandLine(const std::vector<std::string>& args);
 
 // The report of `dir`: a run's when it holds summary.json, else a sweep's when it holds
-// aggregate.json. Throws InputError naming `dir` when it holds neither or one is not JSON.
+// aggregate.json. Throws InputError naming `dir` when it holds neither, and naming the file
+// (and the key) when one is not JSON, too big, too deep or of the wrong shape.
 std::string RenderReport(const std::filesystem::path& dir);
 
 // Writes RenderReport(dir) to dir/report.html through a temporary file and a rename; in a

@@ -102,6 +102,26 @@ std::string EquivalentCommand(const RunOptions& options, const fs::path& out_dir
   return CommandLine(args);
 }
 
+// A metric that is NaN or infinite would be written as null, like a metric the kind had no
+// value for: inputs that pass their checks yet overflow a computation (an absurd value in the
+// scenario, a --set or the model) must not end as a quiet success. Explicit nulls pass.
+void CheckMetricsFinite(const Json& j, const std::string& path) {
+  if (j.is_number_float() && !std::isfinite(j.get<double>())) {
+    throw InputError("metric '" + CapForMessage(path) + "' is " +
+                     (std::isnan(j.get<double>()) ? "NaN" : "infinite") +
+                     ": not finite; check the inputs (the scenario's values, --set, the model)");
+  }
+  if (j.is_object()) {
+    for (auto it = j.begin(); it != j.end(); ++it) {
+      CheckMetricsFinite(it.value(), path.empty() ? it.key() : path + "." + it.key());
+    }
+  } else if (j.is_array()) {
+    for (size_t i = 0; i < j.size(); ++i) {
+      CheckMetricsFinite(j[i], path + "[" + std::to_string(i) + "]");
+    }
+  }
+}
+
 // Runs a loaded scenario. `inputs` are files the run reads (never replaced by --out).
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
               const std::vector<fs::path>& inputs) {
@@ -153,6 +173,8 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   info("scenario " + name + " (" + shown_path + "), seed " + std::to_string(seed));
   kind->Run(ctx);
 
+  CheckMetricsFinite(summary["metrics"], "");
+  CheckMetricsFinite(summary["estimators"], "estimators");
   CheckGateMetricsExist(gates, summary);
   bool all_passed = true;
   summary["gates"] = EvaluateGates(gates, summary, &all_passed);

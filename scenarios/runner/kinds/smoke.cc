@@ -25,7 +25,12 @@ class SmokeKind : public ScenarioKind {
     camera_ = root.GetString("camera");
     if (const auto cfg = root.Optional("configuration")) {
       for (const std::string& joint : cfg->Keys()) {
-        configuration_.emplace_back(joint, cfg->GetDouble(joint));
+        const ConfigNode value = cfg->Child(joint);
+        const double angle = value.AsDouble();
+        // The calibration CSV's joint range (rad, or m for slides): beyond it the pose
+        // overflows and every metric is NaN.
+        if (std::abs(angle) > 1e3) value.Fail("out of range (|value| <= 1000)");
+        configuration_.emplace_back(joint, angle);
       }
     }
     mode_ = ParseRenderMode(root, render::RenderMode::kQuality);
