@@ -18,6 +18,25 @@ namespace flexbench::testing {
 
 inline std::string SourceDir() { return FLEXBENCH_SOURCE_DIR; }
 inline std::string BinDir() { return FLEXBENCH_BIN_DIR; }
+inline std::string Flexbench() { return BinDir() + "/flexbench"; }
+
+// The last non-empty line of a command's stderr: the error line.
+inline std::string LastLine(std::string err) {
+  while (!err.empty() && err.back() == '\n') err.pop_back();
+  const size_t nl = err.rfind('\n');
+  return nl == std::string::npos ? err : err.substr(nl + 1);
+}
+
+// Regular files below `dir` now (0 when it does not exist or is moved away meanwhile).
+inline int FilesIn(const std::filesystem::path& dir) {
+  int n = 0;
+  std::error_code ec;
+  for (std::filesystem::recursive_directory_iterator it(dir, ec), end; !ec && it != end;
+       it.increment(ec)) {
+    n += it->is_regular_file(ec);
+  }
+  return n;
+}
 
 // The message of the InputError that f throws; "" when it throws none.
 inline std::string ErrorOf(const std::function<void()>& f) {

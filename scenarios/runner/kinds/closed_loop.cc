@@ -68,6 +68,10 @@ struct Source {
   std::string path_where;  // where the file was named (a line, or the --set that named it)
 };
 
+// A metric that does not apply here (no cross-validation, no position rows) is null: NaN in a
+// summary is an error the runner reports.
+Json FiniteOrNull(double v) { return std::isfinite(v) ? Json(v) : Json(); }
+
 // True when two files are one or hold the same bytes: "validating" on the calibration rows
 // reports the fit, not a held-out error.
 bool SameRows(const std::string& a, const std::string& b) {
@@ -467,8 +471,8 @@ class ClosedLoopKind : public ScenarioKind {
     (*m)["near_singular"] = res.near_singular;
     (*m)["effect_overlap"] = res.overlap;
     (*m)["attribution_unique"] = res.attribution_unique;
-    (*m)["cv_err_before"] = res.cv_before;
-    (*m)["cv_err_after"] = res.cv_after;
+    (*m)["cv_err_before"] = FiniteOrNull(res.cv_before);
+    (*m)["cv_err_after"] = FiniteOrNull(res.cv_after);
     (*m)["residual_finding"] = FindingJson(res.finding);
     ctx.log("verdict: " + verdict_ + "; " + res.finding.message +
             (res.finding.significant
@@ -485,8 +489,8 @@ class ClosedLoopKind : public ScenarioKind {
     const std::vector<Mat3> noise_after = RowNoise(val, sc.val_loads_after, &res);
     const stats::ChiSquareBounds nb =
         stats::MeanChiSquareBounds(3.0, static_cast<int>(val.rows.size()));
-    (*m)["nees_before"] = MeanNees(val, sc.val_p0, noise_before);
-    (*m)["nees_after"] = MeanNees(val, sc.val_p1, noise_after);
+    (*m)["nees_before"] = FiniteOrNull(MeanNees(val, sc.val_p0, noise_before));
+    (*m)["nees_after"] = FiniteOrNull(MeanNees(val, sc.val_p1, noise_after));
     (*m)["nees_bound_low"] = nb.lower;
     (*m)["nees_bound_high"] = nb.upper;
     // With the readings' noise stated, the rows' NEES has a consistent size of its own: the
@@ -507,7 +511,7 @@ class ClosedLoopKind : public ScenarioKind {
       ctx.log("the declared sources cannot cover what the effects leave: validation mean NEES " +
               Num(nees_scaled_) + " at the largest source scale");
     }
-    (*m)["nees_after_scaled"] = nees_scaled_;
+    (*m)["nees_after_scaled"] = FiniteOrNull(nees_scaled_);
   }
 
   void WriteIdentification(const identify::IdentifyResult& res, Json* id) const {

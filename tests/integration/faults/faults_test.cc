@@ -29,8 +29,6 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 using Json = nlohmann::json;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
 // A child running `args` (flexbench's), in its own process group so that a kill reaches the
@@ -118,16 +116,6 @@ void ExpectComplete(const fs::path& dir) {
   for (const auto& e : fs::recursive_directory_iterator(dir)) {
     EXPECT_NE(e.path().extension(), ".part") << e.path();
   }
-}
-
-// Regular files below `dir` now (0 when it does not exist or is moved away meanwhile).
-int FilesIn(const fs::path& dir) {
-  int n = 0;
-  std::error_code ec;
-  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    n += it->is_regular_file(ec);
-  }
-  return n;
 }
 
 // A long run (rover_apriltag_exp2: ~3-5 s, 40 files written as it goes: 29 rendered frames,

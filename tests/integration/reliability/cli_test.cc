@@ -15,15 +15,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
-std::string LastLine(const std::string& err) {
-  std::string e = err;
-  while (!e.empty() && e.back() == '\n') e.pop_back();
-  const size_t nl = e.rfind('\n');
-  return nl == std::string::npos ? e : e.substr(nl + 1);
-}
-
 CommandResult RunSmoke(const TempDir& tmp, const std::string& args) {
   return RunCommand(Flexbench() + " run " + SourceDir() + "/scenarios/smoke.yaml --out " +
                     (tmp.path() / "out").string() + " " + args + " </dev/null");

@@ -19,20 +19,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
 // Every command has a deadline: a hang is a failure, not a stuck test. The address space is
 // capped so that a reader building gigabytes fails here as it would on a small machine.
 CommandResult Fb(const std::string& args, const std::string& stdin_from = "/dev/null") {
   return RunCommand("ulimit -v 3000000; timeout 30 " + Flexbench() + " " + args + " <" +
                     stdin_from);
-}
-
-std::string LastLine(const std::string& err) {
-  std::string e = err;
-  while (!e.empty() && e.back() == '\n') e.pop_back();
-  const size_t nl = e.rfind('\n');
-  return nl == std::string::npos ? e : e.substr(nl + 1);
 }
 
 // A one-line error: exit 2 and the last stderr line holds `needle`.

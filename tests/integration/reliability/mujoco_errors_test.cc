@@ -31,12 +31,6 @@ fs::path ModelWith(const fs::path& dir, const std::string& from, const std::stri
   return path;
 }
 
-std::string LastLine(std::string err) {
-  while (!err.empty() && err.back() == '\n') err.pop_back();
-  const size_t nl = err.rfind('\n');
-  return nl == std::string::npos ? err : err.substr(nl + 1);
-}
-
 // Anything named `out` or `out` + suffix (a temporary) beside it.
 std::vector<std::string> Leftovers(const fs::path& out) {
   std::vector<std::string> found;

@@ -30,8 +30,6 @@ using scenarios::kTemporaryMarker;
 using scenarios::OutputDir;
 using scenarios::TemporaryName;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
 std::string SmokeYaml() {
   return "scenario: smoke_copy\nkind: smoke\nseed: 3\nmodel: " + SourceDir() +
          "/models/planar3.xml\ncamera: overview\nconfiguration: {joint1: 0.35, joint2: -0.6, "
@@ -321,16 +319,6 @@ int SignalWhen(pid_t pid, int sig, pid_t waited, const std::function<bool()>& re
     if (Clock::now() - start > std::chrono::seconds(120)) ::kill(waited, SIGKILL);
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
-}
-
-// Files below `dir` now (0 when it does not exist or is moved away meanwhile).
-int FilesIn(const fs::path& dir) {
-  int n = 0;
-  std::error_code ec;
-  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    n += it->is_regular_file(ec);
-  }
-  return n;
 }
 
 // Issue 35.18: a run ended by SIGTERM or SIGINT mid-run removes its temporary and ends by the

@@ -20,8 +20,6 @@ namespace {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
 std::string Quoted(const std::string& s) {
   std::string q = "'";
   for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -35,12 +33,6 @@ CommandResult Sweep(const fs::path& file, const fs::path& out, const std::string
   return RunCommand("ulimit -v 4000000; " + env + "timeout 120 " + Flexbench() + " sweep " +
                     Quoted(file.string()) + " --out " + Quoted(out.string()) + " " + extra +
                     " </dev/null");
-}
-
-std::string LastLine(std::string e) {
-  while (!e.empty() && e.back() == '\n') e.pop_back();
-  const size_t nl = e.rfind('\n');
-  return nl == std::string::npos ? e : e.substr(nl + 1);
 }
 
 // A copy of the contact scenario (about 0.1 s a run) and of its declared model, which a test

@@ -19,8 +19,6 @@ namespace {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
 constexpr const char* kChromium = "/usr/bin/chromium";
 
 CommandResult RunSmoke(const fs::path& out, const std::string& extra = "") {

@@ -16,8 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
 std::string SmokeYaml(const std::string& extra = "", const std::string& model = "") {
   const std::string model_path = model.empty() ? SourceDir() + "/models/planar3.xml" : model;
   return "scenario: smoke_copy\nkind: smoke\nseed: 3\nmodel: " + model_path +
@@ -27,14 +25,6 @@ std::string SmokeYaml(const std::string& extra = "", const std::string& model = 
 std::string RunCmd(const fs::path& scenario, const fs::path& out, const std::string& extra = "") {
   return Flexbench() + " run " + scenario.string() + " --out " + out.string() + " " + extra +
          " </dev/null";
-}
-
-// The last stderr line is the error line.
-std::string LastLine(const std::string& err) {
-  std::string e = err;
-  while (!e.empty() && e.back() == '\n') e.pop_back();
-  const size_t nl = e.rfind('\n');
-  return nl == std::string::npos ? e : e.substr(nl + 1);
 }
 
 // --set KEY=VALUE on `run` (issue 17): the value is used and recorded; a wrong path or type is

@@ -11,8 +11,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
 std::string SmokeYaml(const std::string& extra = "", const std::string& model = "") {
   const std::string model_path = model.empty() ? SourceDir() + "/models/planar3.xml" : model;
   return "scenario: smoke_copy\nkind: smoke\nseed: 3\nmodel: " + model_path +

@@ -14,7 +14,6 @@ namespace {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
 std::string Model(const std::string& name) { return SourceDir() + "/models/" + name; }
 
 void ExpectBadInput(const std::string& command, const std::string& must_contain) {

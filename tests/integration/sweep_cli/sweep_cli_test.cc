@@ -20,8 +20,6 @@ namespace {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
-std::string Flexbench() { return BinDir() + "/flexbench"; }
-
 // The contact scenario runs in ~0.1 s and its metrics depend on the seed.
 std::string SweepYaml(const std::string& extra = "",
                       const std::string& grid = "grid:\n  distance_std_m: [0.001, 0.002]\n") {
@@ -32,12 +30,6 @@ std::string SweepYaml(const std::string& extra = "",
 CommandResult Sweep(const fs::path& file, const fs::path& out, const std::string& extra = "") {
   return RunCommand(Flexbench() + " sweep " + file.string() + " --out " + out.string() + " " +
                     extra + " </dev/null");
-}
-
-std::string LastLine(std::string e) {
-  while (!e.empty() && e.back() == '\n') e.pop_back();
-  const size_t nl = e.rfind('\n');
-  return nl == std::string::npos ? e : e.substr(nl + 1);
 }
 
 TEST(SweepCli, LocalSweepIsDeterministicResumableAndIndependentOfWorkers) {
