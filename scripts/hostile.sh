@@ -706,6 +706,14 @@ point_csv "$D/plain.csv" 30
 point_csv "$D/val.csv" 31
 attack i21_csv_bom_accepted 0 "kept:o/summary.json" -- "$FB" identify --declared "$DECLARED" \
   --calibration cal.csv --validation val.csv --out o --candidates joint_offset --quiet
+fresh i21_group_spanning_sets_warned
+for f in cal val; do
+  awk -v k="$([ $f = cal ] && echo 0.05 || echo 0.04)" 'BEGIN { print "joint1,joint2,joint3,group,set";
+    for (i = 0; i < 24; ++i) printf "%.3f,%.3f,%.3f,g%d,s%d\n", k * i, -0.02 * i, 0.03 * i, i % 3, i % 2 }' >"$D/$f.csv"
+done
+attack i21_group_spanning_sets_warned "0|2|3" "err~warning.*group.'g0'.spans.sets" -- "$FB" identify \
+  --declared "$DECLARED" --calibration cal.csv --validation val.csv --out o --candidates joint_offset
+skip i21_10k_point_rows_under_5s "a benchmark, not an attack: BM_IdentifyPointCsv"
 fresh i21_identify_option_named
 point_csv "$D/cal.csv" 30
 point_csv "$D/val.csv" 31
@@ -730,6 +738,22 @@ fresh i21_scenario_name_escape
 smoke_yaml "$D/s.yaml"
 sed -i 's|scenario: smoke_copy|scenario: ../../escape|' "$D/s.yaml"
 attack i21_scenario_name_escape 2 "1line err~plain.name" -- "$FB" run s.yaml
+
+# === Found by the fuzz targets (tests/fuzz/regressions/) ===================================
+
+# A number JSON cannot hold (nlohmann's out_of_range 406, not a parse_error).
+fresh fuzz_report_number_overflow
+mkdir -p "$D/r"
+echo '{"scenario": "s", "metrics": {"x": 1e999}}' >"$D/r/summary.json"
+attack fuzz_report_number_overflow 2 "1line err~summary.json" -- "$FB" report r
+# An AprilTag family error names neither the file nor the --set.
+fresh fuzz_set_detector_family_named
+smoke_yaml "$D/s.yaml"
+attack fuzz_set_detector_family_named 2 "1line err~--set.detector.family" -- "$FB" run s.yaml --out o \
+  --set detector.family=bogus
+fresh fuzz_scenario_detector_family_named
+smoke_yaml "$D/s.yaml" "detector: {family: bogus}"
+attack fuzz_scenario_detector_family_named 2 "1line err~s.yaml:[0-9]+" -- "$FB" run s.yaml --out o
 
 # === Summary =================================================================================
 wait
