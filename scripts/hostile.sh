@@ -10,7 +10,8 @@
 # details of every failure, and last the line "hostile: N passed, M failed"; exits 1 when an
 # attack failed. Every attack runs in its own folder under one `mktemp -d` folder (removed at
 # the end) with `timeout` and `ulimit -v`; nothing outside that folder is written. Attacks run
-# two at a time (HOSTILE_JOBS; HOSTILE_TIMEOUT, HOSTILE_MEM_KB change the bounds).
+# two at a time (HOSTILE_JOBS; HOSTILE_TIMEOUT, HOSTILE_MEM_KB change the bounds;
+# HOSTILE_ONLY=REGEX runs only the attacks whose name matches).
 #
 # Adding an attack: make its folder with `fresh NAME`, write its inputs into "$D", then
 #   attack NAME EXPECTED_EXIT "CHECK ..." -- CMD ARGS...
@@ -191,6 +192,7 @@ attack() {
   local name=$1 expected_exit=$2 checks=$3 c expected
   shift 3
   [ "${1:-}" = "--" ] && shift
+  [[ -n "${HOSTILE_ONLY:-}" && ! "$name" =~ $HOSTILE_ONLY ]] && return 0
   expected="exit $expected_exit"
   for c in $checks; do expected+="; $(describe_check "$c")"; done
   INDEX=$((INDEX + 1))
@@ -200,6 +202,7 @@ attack() {
 }
 
 skip() {  # skip NAME REASON
+  [[ -n "${HOSTILE_ONLY:-}" && ! "$1" =~ $HOSTILE_ONLY ]] && return 0
   INDEX=$((INDEX + 1))
   { echo SKIP; row "$1" "-" "$2" SKIP; } >"$W/.results/$(printf '%04d' "$INDEX")"
 }
@@ -746,6 +749,16 @@ fresh fuzz_report_number_overflow
 mkdir -p "$D/r"
 echo '{"scenario": "s", "metrics": {"x": 1e999}}' >"$D/r/summary.json"
 attack fuzz_report_number_overflow 2 "1line err~summary.json" -- "$FB" report r
+# Nesting deep inside a value: report's recursive JSON copy overflows the stack (SIGSEGV).
+fresh fuzz_report_deep_metric
+mkdir -p "$D/r"
+{
+  printf '{"scenario": "s", "metrics": {"a": '
+  head -c 1000000 /dev/zero | tr '\0' '['
+  head -c 1000000 /dev/zero | tr '\0' ']'
+  printf '}}\n'
+} >"$D/r/summary.json"
+attack fuzz_report_deep_metric 2 "1line err~summary.json" -- "$FB" report r
 # An AprilTag family error names neither the file nor the --set.
 fresh fuzz_set_detector_family_named
 smoke_yaml "$D/s.yaml"
