@@ -182,7 +182,8 @@ run_attack() {
     else
       echo FAIL
       row "$name" "$expected" "$observed" FAIL
-      echo "  $name: $why; stderr: $(cut_to 240 "$(grep -vE '^\[(flexbench|sweep)\] ' "$D/.stderr" | tail -n 2)")"
+      echo "  $name: $why; stderr: $(cut_to 240 "$(grep -vE '^\[(flexbench|sweep)\] ' "$D/.stderr" |
+        tail -n 2)")$([ -s "$D/.stdout" ] && echo "; stdout: $(cut_to 160 "$(tail -n 1 "$D/.stdout")")")"
     fi
   } >"$result"
 }
@@ -606,15 +607,21 @@ fresh i35_18_sigterm_sweep_workers
 cp "$SRC/scenarios/rover_apriltag_exp1.yaml" "$D/slow.yaml"
 sed -i "s|\.\./models/|$SRC/models/|g" "$D/slow.yaml"
 sweep_yaml "$D/sw.yaml" slow.yaml "seeds: [1, 2, 3, 4]"
+# A worker outlived its sweep when it still runs, or made or renamed a folder in runs/, after
+# the sweep's death (a run may take less than a second).
 attack i35_18_sigterm_sweep_workers 0 "log~no.worker.left" -- bash -c '
   "$FB" sweep sw.yaml --out "$D/sw" -j 2 >/dev/null 2>&1 &
   pid=$!
-  for k in $(seq 100); do compgen -G "sw/runs/*/*.tmp-*" >/dev/null && break; sleep 0.05; done
+  # Its workers are forks with the same command line: wait until one runs.
+  for k in $(seq 150); do [ "$(pgrep -cf -- "--out $D/sw -j")" -ge 2 ] && break; sleep 0.1; done
+  [ "$(pgrep -cf -- "--out $D/sw -j")" -ge 2 ] || { echo "no worker seen"; exit 93; }
   kill -TERM $pid
   wait $pid
-  sleep 1
+  touch killed
+  sleep 2
   left=$(pgrep -f -- "--out $D/sw -j" | tr "\n" " ")
-  [ -z "$left" ] && echo "no worker left" || echo "workers left: $left"'
+  late=$(find sw/runs -mindepth 2 -maxdepth 2 -cnewer killed | head -n 1)
+  [ -z "$left$late" ] && echo "no worker left" || echo "workers left: $left; wrote after: $late"'
 fresh i35_18_one_row_message
 point_csv "$D/one.csv" 1
 point_csv "$D/val.csv" 30
