@@ -10,7 +10,9 @@
 #include "estimators/error.h"
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/runner/gates.h"
+#include "scenarios/runner/report.h"
 #include "scenarios/runner/runner.h"
+#include "scenarios/sweep/sweep_file.h"
 #include "sim/config.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -35,7 +37,8 @@ void MakeWorkDir() {
   g_work_dir = pattern;
   std::atexit(RemoveWorkDir);
   const fs::path w(g_work_dir);
-  for (const char* d : {"scenarios", "declared", "calibration", "mukca/front", "gates", "mjcf"}) {
+  for (const char* d : {"scenarios", "declared", "calibration", "mukca/front", "gates", "mjcf",
+                        "repo/sweeps", "set", "report/run", "report/sweep"}) {
     fs::create_directories(w / d);
   }
   // Scenario files name their models as ../models/<file>, declared files as <file> (links to
@@ -45,6 +48,16 @@ void MakeWorkDir() {
   for (const fs::directory_entry& e : fs::directory_iterator(models)) {
     fs::create_symlink(e.path(), w / "declared" / e.path().filename());
   }
+  // The sweep target's scenarios: links to the repository's scenario files (read only; their
+  // ../models/ is the link above), beside the folder that holds the sweep file.
+  const fs::path scenarios = fs::path(FLEXBENCH_SOURCE_DIR) / "scenarios";
+  for (const fs::directory_entry& e : fs::directory_iterator(scenarios)) {
+    if (e.is_regular_file() && e.path().extension() == ".yaml") {
+      fs::create_symlink(e.path(), w / "repo" / e.path().filename());
+    }
+  }
+  // The --set target's scenario: a copy, so no override can reach the repository's file.
+  fs::copy_file(scenarios / "smoke.yaml", w / "set" / "base.yaml");
 }
 
 // Writes `size` bytes to `path` (replacing it); returns the path.
@@ -166,6 +179,56 @@ std::optional<std::string> Mjcf(const std::uint8_t* data, std::size_t size) {
   return Guard([&] { sim::LoadModel(path); });
 }
 
+std::optional<std::string> Sweep(const std::uint8_t* data, std::size_t size) {
+  const std::string path = WriteFile(Work("repo/sweeps/fuzz.yaml"), data, size);
+  return Guard([&] {
+    const scenarios::sweep::SweepSpec spec = scenarios::sweep::LoadSweep(path);
+    const std::vector<scenarios::sweep::SweepPoint> points = scenarios::sweep::ExpandPoints(spec);
+    scenarios::sweep::ExpandRuns(spec, points);
+    // `flexbench sweep` configures every point before any run; a few points reach every path
+    // of the overrides without making one input cost seconds.
+    constexpr size_t kCheckedPoints = 3;
+    for (size_t i = 0; i < points.size() && i < kCheckedPoints; ++i) {
+      std::vector<std::string> set = spec.set;
+      set.insert(set.end(), points[i].set.begin(), points[i].set.end());
+      try {
+        scenarios::CheckScenario(spec.scenario, set);
+      } catch (const InputError& e) {
+        // As `flexbench sweep` reports it: the sweep file and the point.
+        throw InputError(path + ": point '" + points[i].name + "': " + e.what());
+      }
+    }
+  });
+}
+
+std::optional<std::string> SetOverride(const std::uint8_t* data, std::size_t size) {
+  std::vector<std::string> args(1);
+  for (std::size_t i = 0; i < size; ++i) {
+    if (data[i] == 0) {
+      args.emplace_back();
+    } else {
+      args.back() += static_cast<char>(data[i]);
+    }
+  }
+  const std::string base = Work("set/base.yaml").string();
+  return Guard([&] { scenarios::CheckScenario(base, args); });
+}
+
+std::optional<std::string> Report(const std::uint8_t* data, std::size_t size) {
+  std::optional<std::string> error;
+  for (const char* file : {"report/run/summary.json", "report/sweep/aggregate.json"}) {
+    const fs::path path = Work(file);
+    WriteFile(path, data, size);
+    // Both folders are rendered even when the first is refused; the messages are joined.
+    if (std::optional<std::string> e = Guard([&] { scenarios::WriteReport(path.parent_path()); })) {
+      error = error ? *error + " | " + *e : *e;
+    }
+    std::error_code ec;
+    fs::remove(path.parent_path() / "report.html", ec);  // the next input sees the same folder
+  }
+  return error;
+}
+
 const std::vector<Target>& Targets() {
   static const std::vector<Target> targets = {
       {"scenario", Scenario},
@@ -174,6 +237,9 @@ const std::vector<Target>& Targets() {
       {"mukca", Mukca},
       {"gates", Gates},
       {"mjcf", Mjcf},
+      {"sweep", Sweep},
+      {"set", SetOverride, "--set"},
+      {"report", Report},
   };
   return targets;
 }

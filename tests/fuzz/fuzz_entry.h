@@ -6,7 +6,8 @@
 //
 // The readers name files, so the bytes are written to files in a private work folder
 // (WorkDir(), made on first use, removed at exit). Every message of a bad input names a file
-// under that folder (the scenario's models/ is a link to the repository's models/).
+// under that folder (the scenario's models/ is a link to the repository's models/), or the
+// option an input that is no file stands for (Target::also_named).
 #pragma once
 
 #include <cstddef>
@@ -22,6 +23,9 @@ using Entry = std::optional<std::string> (*)(const std::uint8_t* data, std::size
 struct Target {
   const char* name;  // tests/fuzz/corpus/<name>/, build/bin/fuzz_<name>
   Entry entry;
+  // Besides a file under the work folder, what a rejection's message may name instead: the
+  // input of an entry that is not a file ("--set" for an override); nullptr: a file only.
+  const char* also_named = nullptr;
 };
 
 // Makes the work folder and installs MuJoCo's handlers (idempotent; every entry calls it).
@@ -50,6 +54,20 @@ std::optional<std::string> Mukca(const std::uint8_t* data, std::size_t size);
 std::optional<std::string> Gates(const std::uint8_t* data, std::size_t size);
 // MJCF text (<work>/mjcf/model.xml) through LoadModel (MuJoCo's parser and compiler).
 std::optional<std::string> Mjcf(const std::uint8_t* data, std::size_t size);
+// A sweep file (<work>/repo/sweeps/fuzz.yaml) checked as `flexbench sweep` checks it before
+// running anything: LoadSweep, the points and runs expanded, and the scenario configured with
+// the first points' overrides (CheckScenario). <work>/repo/ holds links to the repository's
+// scenario files, so `scenario: ../smoke.yaml` (the repository's sweeps' form) resolves.
+std::optional<std::string> Sweep(const std::uint8_t* data, std::size_t size);
+// `--set` arguments applied to a fixed valid scenario (<work>/set/base.yaml, the smoke
+// scenario): the bytes split at NUL bytes (which no command-line argument can hold) are the
+// arguments, each through ParseOverride and all through CheckScenario as `flexbench run` loads
+// them (ConfigNode with overrides, the kind configured).
+std::optional<std::string> SetOverride(const std::uint8_t* data, std::size_t size);
+// `flexbench report` on a run's and on a sweep's folder: the bytes are written as
+// <work>/report/run/summary.json and as <work>/report/sweep/aggregate.json, and WriteReport
+// renders each (reading the JSON, writing report.html).
+std::optional<std::string> Report(const std::uint8_t* data, std::size_t size);
 
 // Every target, in the order above.
 const std::vector<Target>& Targets();
