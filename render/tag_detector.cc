@@ -17,8 +17,7 @@ struct TagDetector::Impl {
   apriltag_detector_t* detector = nullptr;
 };
 
-TagDetector::TagDetector(const DetectorSettings& settings)
-    : impl_(std::make_unique<Impl>()), settings_(settings) {
+void ValidateDetectorSettings(const DetectorSettings& settings) {
   // Upper bounds too: the AprilTag library crashes on a decimation that leaves no image or a
   // blur kernel sized from a huge sigma.
   if (!(settings.decimate >= 1.0 && settings.decimate <= 8.0)) {
@@ -42,6 +41,12 @@ TagDetector::TagDetector(const DetectorSettings& settings)
   if (!(settings.pixel_noise_std >= 0.0 && settings.pixel_noise_std <= 1e3)) {
     throw InputError("detector.pixel_noise_std: must be in [0, 1000]");
   }
+  MakeFamily(settings.family, "detector.family");
+}
+
+TagDetector::TagDetector(const DetectorSettings& settings)
+    : impl_(std::make_unique<Impl>()), settings_(settings) {
+  ValidateDetectorSettings(settings);
   impl_->family = MakeFamily(settings.family, "detector.family");
   impl_->detector = apriltag_detector_create();
   apriltag_detector_add_family(impl_->detector, impl_->family.get());

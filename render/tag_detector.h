@@ -70,6 +70,9 @@ struct DetectionResult {
 // ratio of the singular values of the homography's Jacobian at the tag centre.
 double ViewAngleFromHomography(const Eigen::Matrix3d& H);
 
+// Throws InputError "detector.<key>: ..." for a setting libapriltag cannot take (ranges, family).
+void ValidateDetectorSettings(const DetectorSettings& settings);
+
 class TagDetector {
  public:
   // Throws InputError for an unknown family or bad parameters.

@@ -508,7 +508,7 @@ attack i35_14_identify_set_model 2 "1line err~model gone:o" -- "$FB" identify --
 fresh i35_14_identify_set_validation
 point_csv "$D/cal.csv" 30
 point_csv "$D/val.csv" 31
-attack i35_14_identify_set_validation 2 "1line err~calibration gone:o" -- "$FB" identify \
+attack i35_14_identify_set_validation 2 "1line err~--set.validation.csv gone:o" -- "$FB" identify \
   --declared "$DECLARED" --calibration cal.csv --validation val.csv --out o \
   --set validation.csv=cal.csv
 py_attack i35_14_py_override_key_yaml "log~3.of.3.refused" '

@@ -20,6 +20,19 @@ render::DetectorSettings ParseDetectorSettings(const ConfigNode& root) {
   s.min_edge_px = d->GetDouble("min_edge_px", s.min_edge_px);
   s.max_view_angle_deg = d->GetDouble("max_view_angle_deg", s.max_view_angle_deg);
   s.border_margin_px = d->GetDouble("border_margin_px", s.border_margin_px);
+  // Checked here, where the file's line or the --set is known: the detector names only the key.
+  try {
+    render::ValidateDetectorSettings(s);
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    const std::string prefix = "detector.";
+    const size_t colon = m.find(": ");
+    if (m.compare(0, prefix.size(), prefix) == 0 && colon != std::string::npos) {
+      const std::string key = m.substr(prefix.size(), colon - prefix.size());
+      if (d->Has(key)) d->Child(key).Fail(m.substr(colon + 2));
+    }
+    d->Fail(m);
+  }
   return s;
 }
 
