@@ -25,6 +25,20 @@ std::string TypeName(const py::handle& v) {
   return py::str(py::type::handle_of(v).attr("__name__")).cast<std::string>();
 }
 
+// The UTF-8 text of a str. A str with a lone surrogate (what os.fsdecode makes of bytes that are
+// not UTF-8) has none: refused, as the runner refuses a --set value that is not UTF-8.
+std::string Utf8(const py::handle& s, const std::string& what) {
+  Py_ssize_t size = 0;
+  const char* data = PyUnicode_AsUTF8AndSize(s.ptr(), &size);
+  if (!data) {
+    PyErr_Clear();
+    throw ValueErrorMessage(what +
+                            ": a str that is not valid Unicode (a lone surrogate such as "
+                            "'\\udcff')");
+  }
+  return std::string(data, static_cast<size_t>(size));
+}
+
 // `text` as a YAML double-quoted scalar: always a string, never syntax.
 std::string QuotedYaml(const std::string& text) {
   std::string s = "\"";
@@ -53,17 +67,33 @@ class YamlWriter {
 
   // A top-level str is YAML text, as a --set value is; a str inside a list or dict is a string.
   std::string Top(const py::handle& v) {
-    if (py::isinstance<py::str>(v)) return v.cast<std::string>();
+    if (py::isinstance<py::str>(v)) return Utf8(v, what_);
     return Value(v, 0);
   }
 
  private:
+  // A list or dict may hold the same object many times over without containing itself
+  // ([v, v] of [v, v] ...): 40 levels are 2**40 values. The scenario parser refuses more than
+  // kMaxYamlNodes values or kMaxConfigFileBytes of text anyway, so the conversion stops there.
+  std::string Leaf(std::string text) {
+    bytes_ += text.size();
+    if (bytes_ > kMaxConfigFileBytes) {
+      throw ValueErrorMessage(what_ + ": more than " + std::to_string(kMaxConfigFileBytes >> 20) +
+                              " MiB as YAML text");
+    }
+    return text;
+  }
+
   std::string Value(const py::handle& v, int depth) {
-    if (v.is_none()) return "null";
-    if (py::isinstance<py::bool_>(v)) return v.cast<bool>() ? "true" : "false";
-    if (py::isinstance<py::int_>(v)) return py::str(v).cast<std::string>();
-    if (py::isinstance<py::float_>(v)) return NumberText(v.cast<double>());
-    if (py::isinstance<py::str>(v)) return QuotedYaml(v.cast<std::string>());
+    if (++values_ > kMaxYamlNodes) {
+      throw ValueErrorMessage(what_ + ": more than " + std::to_string(kMaxYamlNodes) +
+                              " values (a list or dict that holds the same object many times?)");
+    }
+    if (v.is_none()) return Leaf("null");
+    if (py::isinstance<py::bool_>(v)) return Leaf(v.cast<bool>() ? "true" : "false");
+    if (py::isinstance<py::int_>(v)) return Leaf(py::str(v).cast<std::string>());
+    if (py::isinstance<py::float_>(v)) return Leaf(NumberText(v.cast<double>()));
+    if (py::isinstance<py::str>(v)) return Leaf(QuotedYaml(Utf8(v, what_)));
     const bool is_dict = py::isinstance<py::dict>(v);
     const bool is_list = py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v);
     const bool is_array =
@@ -94,7 +124,7 @@ class YamlWriter {
             !(py::isinstance<py::int_>(key) && !py::isinstance<py::bool_>(key))) {
           throw ValueErrorMessage(what_ + ": a dict key must be a str, got " + TypeName(key));
         }
-        s += (first ? "" : ", ") + QuotedYaml(py::str(key).cast<std::string>()) + ": " +
+        s += (first ? "" : ", ") + Leaf(QuotedYaml(Utf8(py::str(key), what_ + " (a key)"))) + ": " +
              Value(value, depth + 1);
         first = false;
       }
@@ -114,6 +144,8 @@ class YamlWriter {
 
   std::string what_;
   std::vector<const PyObject*> path_;
+  size_t values_ = 0;  // converted so far, containers included
+  size_t bytes_ = 0;   // of the scalars' text so far
 };
 
 }  // namespace
@@ -153,20 +185,22 @@ std::vector<std::string> OverrideArgs(const py::object& overrides) {
       if (!py::isinstance<py::str>(key)) {
         throw ValueErrorMessage("overrides: a key must be a str, got " + TypeName(key));
       }
-      const std::string k = key.cast<std::string>();
+      const std::string k = Utf8(key, "overrides: a key");
       check_key(k);
       set.push_back(k + "=" + YamlText(value, "overrides['" + k + "']"));
     }
     return set;
   }
-  if (py::isinstance<py::str>(overrides)) {
-    throw ValueErrorMessage("overrides: expected a dict or a list of 'KEY=VALUE' strings");
+  // Neither a str nor what cannot be iterated (an int, a float) is a list of overrides.
+  if (py::isinstance<py::str>(overrides) || !py::isinstance<py::iterable>(overrides)) {
+    throw ValueErrorMessage("overrides: expected a dict or a list of 'KEY=VALUE' strings, got " +
+                            TypeName(overrides));
   }
   for (const auto& item : overrides) {
     if (!py::isinstance<py::str>(item)) {
       throw ValueErrorMessage("overrides: expected a dict or a list of 'KEY=VALUE' strings");
     }
-    std::string arg = item.cast<std::string>();
+    std::string arg = Utf8(item, "overrides: an item");
     // Without '=' the runner's own message says what is missing.
     const size_t eq = arg.find('=');
     if (eq != std::string::npos) check_key(arg.substr(0, eq));
