@@ -113,8 +113,6 @@ class Program {
     return stack_.empty() ? py::none() : stack_.back();
   }
 
-  bool made_cycle() const { return made_cycle_; }
-
  private:
   std::uint8_t Byte() { return pos_ < size_ ? data_[pos_++] : 0; }
 
@@ -250,7 +248,9 @@ class Program {
         break;
       }
       case 14: {  // numpy: the top object as an array (dtype chosen by numpy, or object)
-        if (stack_.empty()) break;
+        // Not after a cycle: numpy's search for the shape of a list that contains itself takes
+        // seconds, and that is numpy's, not the conversion's.
+        if (stack_.empty() || made_cycle_) break;
         py::object np = py::module_::import("numpy");
         try {
           py::object a = (Byte() & 1) ? np.attr("asarray")(stack_.back())
@@ -298,6 +298,8 @@ void Convert(const py::object& overrides) {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  // Python's objects come from its own arenas (pymalloc): PYTHONMALLOC=malloc would let ASan see
+  // a use after free of an object, but makes every value converted several times slower.
   // Never finalized: the interpreter lives as long as the process, and everything it holds
   // stays reachable for the leak checker. No signal handlers, so libFuzzer keeps SIGINT.
   static py::scoped_interpreter* interpreter = new py::scoped_interpreter(false);
@@ -307,7 +309,6 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  bool cycle = false;
   {
     Program program(data, size);
     py::object overrides;
@@ -316,7 +317,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     } catch (py::error_already_set&) {
       return 0;  // building failed (str() of a huge int, RecursionError, ...): not the subject
     }
-    cycle = program.made_cycle();
     try {
       Convert(overrides);
     } catch (const flexbench::python::ValueErrorMessage&) {
@@ -326,6 +326,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       if (!e.matches(PyExc_ValueError)) throw;
     }
   }
-  if (cycle) PyGC_Collect();
   return 0;
 }
+
+// Python never frees everything it allocates (interned strings, types, objects linked through
+// tagged GC pointers the leak checker cannot follow): leak reports would be Python's own.
+extern "C" const char* __asan_default_options() { return "detect_leaks=0"; }
