@@ -389,7 +389,7 @@ std::unique_ptr<PyEstimator> MakePyEstimator(const std::string& name,
   setup.end_effector = model->chain().end_effector;
   std::vector<ConfigOverride> overrides;
   for (const auto& [key_obj, value] : kwargs) {
-    const std::string key = py::str(key_obj).cast<std::string>();
+    const std::string key = Utf8(key_obj, "a parameter name");
     if (key == "seed") {
       if (!py::isinstance<py::int_>(value) || value.cast<long long>() < 0) {
         throw ValueErrorMessage("seed: expected an int >= 0");

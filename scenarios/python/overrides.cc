@@ -25,20 +25,6 @@ std::string TypeName(const py::handle& v) {
   return py::str(py::type::handle_of(v).attr("__name__")).cast<std::string>();
 }
 
-// The UTF-8 text of a str. A str with a lone surrogate (what os.fsdecode makes of bytes that are
-// not UTF-8) has none: refused, as the runner refuses a --set value that is not UTF-8.
-std::string Utf8(const py::handle& s, const std::string& what) {
-  Py_ssize_t size = 0;
-  const char* data = PyUnicode_AsUTF8AndSize(s.ptr(), &size);
-  if (!data) {
-    PyErr_Clear();
-    throw ValueErrorMessage(what +
-                            ": a str that is not valid Unicode (a lone surrogate such as "
-                            "'\\udcff')");
-  }
-  return std::string(data, static_cast<size_t>(size));
-}
-
 // `text` as a YAML double-quoted scalar: always a string, never syntax.
 std::string QuotedYaml(const std::string& text) {
   std::string s = "\"";
@@ -84,6 +70,16 @@ class YamlWriter {
     return text;
   }
 
+  // Python refuses to write an int of more than sys.get_int_max_str_digits() digits as text.
+  std::string IntText(const py::handle& v) {
+    try {
+      return py::str(v).cast<std::string>();
+    } catch (py::error_already_set& e) {
+      if (!e.matches(PyExc_ValueError)) throw;
+      throw ValueErrorMessage(what_ + ": an int with more digits than Python writes as text");
+    }
+  }
+
   std::string Value(const py::handle& v, int depth) {
     if (++values_ > kMaxYamlNodes) {
       throw ValueErrorMessage(what_ + ": more than " + std::to_string(kMaxYamlNodes) +
@@ -91,7 +87,7 @@ class YamlWriter {
     }
     if (v.is_none()) return Leaf("null");
     if (py::isinstance<py::bool_>(v)) return Leaf(v.cast<bool>() ? "true" : "false");
-    if (py::isinstance<py::int_>(v)) return Leaf(py::str(v).cast<std::string>());
+    if (py::isinstance<py::int_>(v)) return Leaf(IntText(v));
     if (py::isinstance<py::float_>(v)) return Leaf(NumberText(v.cast<double>()));
     if (py::isinstance<py::str>(v)) return Leaf(QuotedYaml(Utf8(v, what_)));
     const bool is_dict = py::isinstance<py::dict>(v);
@@ -149,6 +145,18 @@ class YamlWriter {
 };
 
 }  // namespace
+
+std::string Utf8(const py::handle& s, const std::string& what) {
+  Py_ssize_t size = 0;
+  const char* data = PyUnicode_AsUTF8AndSize(s.ptr(), &size);
+  if (!data) {
+    PyErr_Clear();
+    throw ValueErrorMessage(what +
+                            ": a str that is not valid Unicode (a lone surrogate such as "
+                            "'\\udcff')");
+  }
+  return std::string(data, static_cast<size_t>(size));
+}
 
 bool IsPlainDottedKey(const std::string& key, bool allow_dots) {
   bool part_empty = true;

@@ -29,6 +29,11 @@ inline constexpr int kMaxValueDepth = 64;
 // newline) into the override.
 bool IsPlainDottedKey(const std::string& key, bool allow_dots = true);
 
+// The UTF-8 text of the str `s`. A str with a lone surrogate (what os.fsdecode makes of bytes
+// that are not UTF-8) has none: ValueErrorMessage naming `what`, as the runner refuses a --set
+// value that is not UTF-8.
+std::string Utf8(const pybind11::handle& s, const std::string& what);
+
 // `v` as YAML text: a top-level str as it is (YAML text, as a --set value is); None, bool,
 // int, float (.nan, .inf), str inside containers (always quoted), list, tuple, dict (str or
 // int keys) and numpy arrays or scalars (through tolist()) converted. `what` names the

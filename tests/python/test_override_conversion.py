@@ -80,3 +80,14 @@ def test_value_that_repeats_an_object_is_capped(tmp_path, make, message):
     assert p.returncode == 0 and len(lines) == 2, p.stdout + p.stderr
     assert "overrides['configuration']" in lines[0] and message in lines[0], lines
     assert "parameter 'covariance_order'" in lines[1] and message in lines[1], lines
+
+
+def test_parameter_name_with_a_lone_surrogate_is_value_error():
+    model = flexbench.DeclaredModel.load(DECLARED)
+    with pytest.raises(ValueError, match="a parameter name: .*lone surrogate"):
+        flexbench.make_estimator("ppoe_ekf", model, **{LONE: 1})
+
+
+def test_int_too_long_to_write_names_the_override(tmp_path):
+    with pytest.raises(ValueError, match=r"overrides\['seed'\]: an int with more digits"):
+        flexbench.run_scenario(SMOKE, str(tmp_path / "o"), overrides={"seed": 10**5000})
