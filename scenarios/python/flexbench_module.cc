@@ -34,6 +34,7 @@
 #include "estimators/estimator.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/kinematics/ppoe_data.h"
+#include "scenarios/python/overrides.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/runner.h"
 #include "sim/camera.h"
@@ -49,13 +50,6 @@ namespace {
 
 using kinematics::FrameId;
 using RowMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-// ---- Errors -------------------------------------------------------------------------------
-
-// Python's ValueError, raised from C++ with a message.
-struct ValueErrorMessage : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
 
 // ---- One caller at a time ------------------------------------------------------------------
 
@@ -251,177 +245,6 @@ py::array_t<double> VectorArray(const Eigen::MatrixBase<Derived>& v) {
   return out;
 }
 
-// ---- Python values as YAML text (parameters and --set values) -----------------------------
-
-std::string NumberText(double v) {
-  if (std::isnan(v)) return ".nan";
-  if (std::isinf(v)) return v > 0 ? ".inf" : "-.inf";
-  char buf[40];
-  std::snprintf(buf, sizeof(buf), "%.17g", v);
-  return buf;
-}
-
-// Nesting deeper than this in an override or a parameter is refused: no scenario key is that
-// deep, and converting has to stop somewhere on a structure that never ends.
-constexpr int kMaxValueDepth = 64;
-
-std::string TypeName(const py::handle& v) {
-  return py::str(py::type::handle_of(v).attr("__name__")).cast<std::string>();
-}
-
-// A key of plain names: [A-Za-z0-9_]+ separated by single dots ("detector.threads"). Anything
-// else could carry YAML syntax (':', ',', '{', a newline) into the override.
-bool IsPlainDottedKey(const std::string& key, bool allow_dots = true) {
-  bool part_empty = true;
-  for (const char c : key) {
-    if (c == '.' && allow_dots) {
-      if (part_empty) return false;
-      part_empty = true;
-    } else if ((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
-               c == '_') {
-      part_empty = false;
-    } else {
-      return false;
-    }
-  }
-  return !part_empty;
-}
-
-// `text` as a YAML double-quoted scalar: always a string, never syntax.
-std::string QuotedYaml(const std::string& text) {
-  std::string s = "\"";
-  for (const char ch : text) {
-    const auto c = static_cast<unsigned char>(ch);
-    if (ch == '"' || ch == '\\') {
-      s += '\\';
-      s += ch;
-    } else if (c < 0x20 || c == 0x7f) {
-      char buf[8];
-      std::snprintf(buf, sizeof(buf), "\\x%02x", c);
-      s += buf;
-    } else {
-      s += ch;  // UTF-8 from Python passes through
-    }
-  }
-  return s + "\"";
-}
-
-// Converts Python values to YAML text. `what` names the override or parameter in every error;
-// containers on the path being converted are remembered, so a list or dict that contains itself
-// is an error rather than an endless recursion.
-class YamlWriter {
- public:
-  explicit YamlWriter(std::string what) : what_(std::move(what)) {}
-
-  // A top-level str is YAML text, as a --set value is; a str inside a list or dict is a string.
-  std::string Top(const py::handle& v) {
-    if (py::isinstance<py::str>(v)) return v.cast<std::string>();
-    return Value(v, 0);
-  }
-
- private:
-  std::string Value(const py::handle& v, int depth) {
-    if (v.is_none()) return "null";
-    if (py::isinstance<py::bool_>(v)) return v.cast<bool>() ? "true" : "false";
-    if (py::isinstance<py::int_>(v)) return py::str(v).cast<std::string>();
-    if (py::isinstance<py::float_>(v)) return NumberText(v.cast<double>());
-    if (py::isinstance<py::str>(v)) return QuotedYaml(v.cast<std::string>());
-    const bool is_dict = py::isinstance<py::dict>(v);
-    const bool is_list = py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v);
-    const bool is_array =
-        !is_dict && !is_list && (py::isinstance<py::array>(v) || py::hasattr(v, "tolist"));
-    if (!is_dict && !is_list && !is_array) {
-      throw ValueErrorMessage(what_ + ": cannot express a value of type " + TypeName(v) +
-                              " in a scenario file");
-    }
-    if (depth >= kMaxValueDepth) {
-      throw ValueErrorMessage(what_ + ": nested deeper than " + std::to_string(kMaxValueDepth) +
-                              " levels");
-    }
-    for (const PyObject* open : path_) {
-      if (open == v.ptr()) {
-        throw ValueErrorMessage(what_ + ": a " + TypeName(v) +
-                                " that contains itself cannot be written as YAML");
-      }
-    }
-    path_.push_back(v.ptr());
-    std::string s;
-    if (is_array) {
-      s = Value(v.attr("tolist")(), depth + 1);  // numpy arrays and scalars
-    } else if (is_dict) {
-      s = "{";
-      bool first = true;
-      for (const auto& [key, value] : py::reinterpret_borrow<py::dict>(v)) {
-        if (!py::isinstance<py::str>(key) &&
-            !(py::isinstance<py::int_>(key) && !py::isinstance<py::bool_>(key))) {
-          throw ValueErrorMessage(what_ + ": a dict key must be a str, got " + TypeName(key));
-        }
-        s += (first ? "" : ", ") + QuotedYaml(py::str(key).cast<std::string>()) + ": " +
-             Value(value, depth + 1);
-        first = false;
-      }
-      s += "}";
-    } else {
-      s = "[";
-      bool first = true;
-      for (const auto& item : v) {
-        s += (first ? "" : ", ") + Value(item, depth + 1);
-        first = false;
-      }
-      s += "]";
-    }
-    path_.pop_back();
-    return s;
-  }
-
-  std::string what_;
-  std::vector<const PyObject*> path_;
-};
-
-std::string YamlText(const py::handle& v, const std::string& what) {
-  return YamlWriter(what).Top(v);
-}
-
-// overrides: a dict {dotted.key: value} (in order) or a list of "KEY=VALUE" strings. Keys are
-// plain dotted names; values become YAML text with strings inside lists and dicts quoted, so
-// nothing the caller passes is read as YAML syntax outside its own value.
-std::vector<std::string> OverrideArgs(const py::object& overrides) {
-  std::vector<std::string> set;
-  if (overrides.is_none()) return set;
-  const auto check_key = [](const std::string& key) {
-    if (!IsPlainDottedKey(key)) {
-      throw ValueErrorMessage("overrides: key '" + CapForMessage(key) +
-                              "' is not a dotted name (letters, digits and '_' separated by "
-                              "'.', such as 'detector.threads')");
-    }
-  };
-  if (py::isinstance<py::dict>(overrides)) {
-    for (const auto& [key, value] : py::reinterpret_borrow<py::dict>(overrides)) {
-      if (!py::isinstance<py::str>(key)) {
-        throw ValueErrorMessage("overrides: a key must be a str, got " + TypeName(key));
-      }
-      const std::string k = key.cast<std::string>();
-      check_key(k);
-      set.push_back(k + "=" + YamlText(value, "overrides['" + k + "']"));
-    }
-    return set;
-  }
-  if (py::isinstance<py::str>(overrides)) {
-    throw ValueErrorMessage("overrides: expected a dict or a list of 'KEY=VALUE' strings");
-  }
-  for (const auto& item : overrides) {
-    if (!py::isinstance<py::str>(item)) {
-      throw ValueErrorMessage("overrides: expected a dict or a list of 'KEY=VALUE' strings");
-    }
-    std::string arg = item.cast<std::string>();
-    // Without '=' the runner's own message says what is missing.
-    const size_t eq = arg.find('=');
-    if (eq != std::string::npos) check_key(arg.substr(0, eq));
-    set.push_back(std::move(arg));
-  }
-  return set;
-}
-
 // A str argument, or ValueError naming it.
 std::string StringArg(const py::handle& v, const std::string& what) {
   if (!py::isinstance<py::str>(v)) {
@@ -566,7 +389,7 @@ std::unique_ptr<PyEstimator> MakePyEstimator(const std::string& name,
   setup.end_effector = model->chain().end_effector;
   std::vector<ConfigOverride> overrides;
   for (const auto& [key_obj, value] : kwargs) {
-    const std::string key = py::str(key_obj).cast<std::string>();
+    const std::string key = Utf8(key_obj, "a parameter name");
     if (key == "seed") {
       if (!py::isinstance<py::int_>(value) || value.cast<long long>() < 0) {
         throw ValueErrorMessage("seed: expected an int >= 0");
