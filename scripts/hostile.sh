@@ -522,6 +522,19 @@ for o in [{"configuration.joint1: 9, x": 1},
     except ValueError:
         refused += 1
 print("%d of 3 refused" % refused)'
+# What fuzz_python_overrides found: a lone surrogate, overrides that are not a mapping or list, a
+# value repeating one object 2^40 times, an int too long for Python to print.
+py_attack fuzz_py_overrides_found "log~4.of.4.refused" '
+import functools
+refused = 0
+for o in [{"render.mode": ["\udcff"]}, 5, {"configuration": functools.reduce(lambda a, _: [a, a], range(40), 0)},
+          {"seed": 10**5000}]:
+    try:
+        flexbench.run_scenario("s.yaml", "out", overrides=o, force=True)
+        print("accepted", type(o))
+    except ValueError:
+        refused += 1
+print("%d of 4 refused" % refused)'
 
 # 15. Absurd finite values are bad input, not null metrics with exit 0.
 fresh i35_15_set_joint_1e300
