@@ -1,7 +1,9 @@
 // Helpers shared by the test suites: running the flexbench binary, temporary folders, files.
 #pragma once
 
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <cstdio>
@@ -11,6 +13,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "estimators/error.h"
 
@@ -25,6 +28,50 @@ inline std::string LastLine(std::string err) {
   while (!err.empty() && err.back() == '\n') err.pop_back();
   const size_t nl = err.rfind('\n');
   return nl == std::string::npos ? err : err.substr(nl + 1);
+}
+
+// A child running `args` (args[0] a path), stdin from /dev/null, stdout and stderr into `log`,
+// SIGTERM, SIGINT and SIGHUP at their default action (as from a shell). `own_group`: in a process
+// group of its own, so that a kill of the group reaches a sweep's workers too, as a power cut or
+// the OOM killer taking the group would.
+inline pid_t Spawn(const std::vector<std::string>& args, const std::filesystem::path& log,
+                   bool own_group = false) {
+  std::fflush(stdout);  // or the child's freopen writes this process's buffered lines again
+  std::fflush(stderr);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    if (own_group) ::setpgid(0, 0);
+    for (int sig : {SIGTERM, SIGINT, SIGHUP}) ::signal(sig, SIG_DFL);
+    std::freopen("/dev/null", "r", stdin);
+    std::freopen(log.c_str(), "w", stdout);
+    std::freopen(log.c_str(), "a", stderr);
+    std::vector<char*> argv;
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    ::execv(argv[0], argv.data());
+    ::_exit(127);
+  }
+  return pid;
+}
+
+// The children of `parent` now (a sweep's workers), from /proc/<pid>/stat.
+inline std::vector<pid_t> ChildrenOf(pid_t parent) {
+  std::vector<pid_t> children;
+  std::error_code ec;
+  for (std::filesystem::directory_iterator it("/proc", ec), end; !ec && it != end;
+       it.increment(ec)) {
+    const std::string name = it->path().filename();
+    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream stat(it->path() / "stat");
+    std::string line;
+    if (!std::getline(stat, line)) continue;
+    // pid (comm) state ppid ...: comm may hold spaces, so read after the last ')'.
+    std::istringstream rest(line.substr(line.rfind(')') + 1));
+    std::string state;
+    pid_t ppid = 0;
+    if (rest >> state >> ppid && ppid == parent) children.push_back(std::stoi(name));
+  }
+  return children;
 }
 
 // Regular files below `dir` now (0 when it does not exist or is moved away meanwhile).

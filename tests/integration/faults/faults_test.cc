@@ -31,27 +31,6 @@ using Json = nlohmann::json;
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
-// A child running `args` (flexbench's), in its own process group so that a kill reaches the
-// sweep's workers too, as a power cut or the OOM killer taking the group would.
-pid_t Spawn(const std::vector<std::string>& args, const fs::path& log) {
-  std::fflush(stdout);  // or the child's freopen writes this process's buffered lines again
-  std::fflush(stderr);
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    ::setpgid(0, 0);
-    std::freopen("/dev/null", "r", stdin);
-    std::freopen(log.c_str(), "w", stdout);
-    std::freopen(log.c_str(), "a", stderr);
-    std::vector<char*> argv;
-    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(argv[0], argv.data());
-    ::_exit(127);
-  }
-  if (pid > 0) ::setpgid(pid, pid);  // also here: the kill may come before the child runs
-  return pid;
-}
-
 struct Ended {
   bool killed = false;  // false: it exited by itself before the kill time
   int status = 0;
@@ -134,7 +113,7 @@ TEST(Faults, KilledRunLeavesNothingOrACompleteResult) {
       "--out",     out.string(), "--quiet"};
   // The reference: an uninterrupted run to the same --out (the command it records names it).
   const Clock::time_point t0 = Clock::now();
-  const Ended ref = KillWhen(Spawn(args, log), [] { return false; });
+  const Ended ref = KillWhen(Spawn(args, log, true), [] { return false; });
   const double duration = Seconds(Clock::now() - t0);
   ASSERT_TRUE(WIFEXITED(ref.status) && WEXITSTATUS(ref.status) == 0) << ReadFile(log);
   ExpectComplete(out);
@@ -174,7 +153,7 @@ TEST(Faults, KilledRunLeavesNothingOrACompleteResult) {
     if (replace) fs::copy(previous, out, fs::copy_options::recursive);
     const double at_s = early ? early_s(rng) : 0.0;
     const int at_files = early || targeted ? 0 : files_written(rng);
-    const pid_t pid = Spawn(args, log);
+    const pid_t pid = Spawn(args, log, true);
     const fs::path work =
         out.parent_path() / (out.filename().string() + ".tmp-" + std::to_string(pid));
     const Clock::time_point start = Clock::now();
@@ -201,7 +180,7 @@ TEST(Faults, KilledRunLeavesNothingOrACompleteResult) {
     expect_absent_or_reference("after kill " + std::to_string(k));
   }
   // The next run completes and removes the killed runs' temporaries (their processes are gone).
-  const Ended last = KillWhen(Spawn(args, log), [] { return false; });
+  const Ended last = KillWhen(Spawn(args, log, true), [] { return false; });
   ASSERT_TRUE(WIFEXITED(last.status) && WEXITSTATUS(last.status) == 0) << ReadFile(log);
   expect_absent_or_reference("after the last run");
   EXPECT_TRUE(fs::exists(out));
@@ -238,7 +217,7 @@ TEST(Faults, KilledSweepResumesToTheSameBytes) {
                                     "-j",        "2"};
   };
   const fs::path ref = tmp.path() / "ref";
-  const Ended r = KillWhen(Spawn(args(ref), log), [] { return false; });
+  const Ended r = KillWhen(Spawn(args(ref), log, true), [] { return false; });
   ASSERT_TRUE(WIFEXITED(r.status) && WEXITSTATUS(r.status) == 0) << ReadFile(log);
 
   const fs::path out = tmp.path() / "killed";
@@ -248,8 +227,8 @@ TEST(Faults, KilledSweepResumesToTheSameBytes) {
     const int before = RunsDone(out, kSeeds);
     const int more = runs_finished(rng);
     const Clock::time_point start = Clock::now();
-    const Ended e =
-        KillWhen(Spawn(args(out), log), [&] { return RunsDone(out, kSeeds) >= before + more; });
+    const Ended e = KillWhen(Spawn(args(out), log, true),
+                             [&] { return RunsDone(out, kSeeds) >= before + more; });
     EXPECT_TRUE(e.killed) << "sweep " << k << " ended before its kill point";
     int present = 0;
     for (int seed = 1; seed <= kSeeds; ++seed) {
@@ -263,7 +242,7 @@ TEST(Faults, KilledSweepResumesToTheSameBytes) {
                 e.killed ? "killed" : "ended", more, Seconds(Clock::now() - start), present,
                 kSeeds);
   }
-  const Ended resumed = KillWhen(Spawn(args(out), log), [] { return false; });
+  const Ended resumed = KillWhen(Spawn(args(out), log, true), [] { return false; });
   ASSERT_TRUE(WIFEXITED(resumed.status) && WEXITSTATUS(resumed.status) == 0) << ReadFile(log);
   const std::string csv = ReadFile(out / "sweep.csv");
   EXPECT_EQ(CountLines(csv), kSeeds + 1);  // the header and a row per run

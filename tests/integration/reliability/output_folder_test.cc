@@ -285,25 +285,6 @@ TEST(OutputFolder, EmptyOutIsRefused) {
   }
 }
 
-// Starts `args` with the signals the test sends at their default action, output to `log`.
-pid_t Spawn(const std::vector<std::string>& args, const fs::path& log) {
-  std::fflush(stdout);
-  std::fflush(stderr);
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    for (int sig : {SIGTERM, SIGINT, SIGHUP}) ::signal(sig, SIG_DFL);
-    std::freopen("/dev/null", "r", stdin);
-    std::freopen(log.c_str(), "w", stdout);
-    std::freopen(log.c_str(), "a", stderr);
-    std::vector<char*> argv;
-    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(argv[0], argv.data());
-    ::_exit(127);
-  }
-  return pid;
-}
-
 // Waits until `ready()` (then sends `sig` to `pid`) or until `waited` exits by itself;
 // returns its wait status.
 int SignalWhen(pid_t pid, int sig, pid_t waited, const std::function<bool()>& ready, bool* sent) {

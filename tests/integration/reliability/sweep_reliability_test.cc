@@ -268,23 +268,6 @@ TEST(SweepReliability, SlurmOptionsCannotInjectCommandsIntoTheJobScript) {
   EXPECT_EQ(ReadFile(out / "aggregate.json"), ReadFile(local / "aggregate.json"));
 }
 
-// The children of `parent` (the sweep's workers), from /proc/<pid>/stat.
-std::vector<pid_t> ChildrenOf(pid_t parent) {
-  std::vector<pid_t> children;
-  for (const auto& entry : fs::directory_iterator("/proc")) {
-    const std::string name = entry.path().filename();
-    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
-    std::ifstream stat(entry.path() / "stat");
-    std::string line;
-    if (!std::getline(stat, line)) continue;
-    std::istringstream rest(line.substr(line.rfind(')') + 1));
-    std::string state;
-    pid_t ppid = 0;
-    if (rest >> state >> ppid && ppid == parent) children.push_back(std::stoi(name));
-  }
-  return children;
-}
-
 // Alive: in the process table and not a zombie.
 bool Alive(pid_t pid) {
   std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");

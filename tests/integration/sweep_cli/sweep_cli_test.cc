@@ -121,23 +121,6 @@ TEST(SweepCli, AFailedRunIsRecordedAndTheSweepGoesOn) {
   EXPECT_FALSE(fs::exists(out / "failed/base/seed_2.json"));
 }
 
-// The pid of a child of `parent` (a forked sweep worker), or -1: from /proc/<pid>/stat.
-pid_t ChildOf(pid_t parent) {
-  for (const auto& entry : fs::directory_iterator("/proc")) {
-    const std::string name = entry.path().filename();
-    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
-    std::ifstream stat(entry.path() / "stat");
-    std::string line;
-    if (!std::getline(stat, line)) continue;
-    // pid (comm) state ppid ...: comm may hold spaces, so read after the last ')'.
-    std::istringstream rest(line.substr(line.rfind(')') + 1));
-    std::string state;
-    pid_t ppid = 0;
-    if (rest >> state >> ppid && ppid == parent) return std::stoi(name);
-  }
-  return -1;
-}
-
 // A run that dies by a signal (here SIGKILL, as the OOM killer would) is recorded with the
 // signal and the sweep goes on with the next run.
 TEST(SweepCli, ARunKilledByASignalIsRecordedAndTheSweepGoesOn) {
@@ -159,7 +142,8 @@ TEST(SweepCli, ARunKilledByASignalIsRecordedAndTheSweepGoesOn) {
   pid_t worker = -1;
   for (int k = 0; k < 3000 && worker < 0; ++k) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    worker = ChildOf(sweep);
+    const std::vector<pid_t> children = ChildrenOf(sweep);
+    worker = children.empty() ? -1 : children.front();
   }
   ASSERT_GT(worker, 0) << "no worker appeared";
   ASSERT_EQ(::kill(worker, SIGKILL), 0);
