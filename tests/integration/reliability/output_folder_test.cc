@@ -87,7 +87,7 @@ std::string Marker(const std::string& host, const std::string& ns, long pid,
          "\npid=" + std::to_string(pid) + "\nstart_time=" + std::to_string(start) + "\n";
 }
 
-// Issue 35.1: only a temporary with a marker of this host and PID namespace whose process has
+// only a temporary with a marker of this host and PID namespace whose process has
 // ended (gone, its PID reused, or a zombie) is removed; a user's folder named like one, a
 // live run's and one of another host or container are kept.
 TEST(OutputFolder, OnlyMarkedTemporariesOfEndedRunsAreRemoved) {
@@ -164,7 +164,7 @@ TEST(OutputFolder, TemporaryHoldsItsMakersMarker) {
   EXPECT_TRUE(fs::exists(out / kResultMarker));
 }
 
-// Issue 35.2: a summary.json that is not a flexbench summary does not make a folder a result.
+// a summary.json that is not a flexbench summary does not make a folder a result.
 TEST(OutputFolder, OnlyARealSummaryOrTheMarkerMakesAResult) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
@@ -216,7 +216,7 @@ TEST(OutputFolder, ResultMarkerKeepsRunsIdentical) {
   }
 }
 
-// Issue 35.3: --force never replaces a folder that holds a file the run read (here the model
+// --force never replaces a folder that holds a file the run read (here the model
 // the scenario names, not the scenario itself).
 TEST(OutputFolder, ForceNeverReplacesAFolderHoldingAnInput) {
   TempDir tmp;
@@ -242,7 +242,7 @@ TEST(OutputFolder, ForceNeverReplacesAFolderHoldingAnInput) {
   EXPECT_EQ(ReadFile(w2 / "models" / "planar3.xml"), model);
 }
 
-// Issue 35.18: a 250-character --out works (its temporary's name is cut and hashed to fit).
+// a 250-character --out works (its temporary's name is cut and hashed to fit).
 TEST(OutputFolder, LongOutNameFitsItsTemporary) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
@@ -262,7 +262,7 @@ TEST(OutputFolder, LongOutNameFitsItsTemporary) {
             TemporaryName(std::string(249, 'a') + "b", "tmp", 7));
 }
 
-// Issue 35.18: `--out ''` is refused naming --out (it wrote ./out/<scenario>).
+// `--out ''` is refused naming --out (it wrote ./out/<scenario>).
 TEST(OutputFolder, EmptyOutIsRefused) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
@@ -302,7 +302,7 @@ int SignalWhen(pid_t pid, int sig, pid_t waited, const std::function<bool()>& re
   }
 }
 
-// Issue 35.18: a run ended by SIGTERM or SIGINT mid-run removes its temporary and ends by the
+// a run ended by SIGTERM or SIGINT mid-run removes its temporary and ends by the
 // signal (exit status 128 + signal in a shell); a previous result at --out stays as it was.
 TEST(OutputFolder, SigtermAndSigintRemoveTheTemporary) {
   TempDir tmp;
