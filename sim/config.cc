@@ -173,6 +173,13 @@ ConfigOverride ParseOverride(const std::string& arg) {
   const size_t eq = arg.find('=');
   const std::string shown = "--set '" + CapForMessage(arg) + "'";
   if (eq == std::string::npos) throw InputError(shown + ": expected KEY=VALUE");
+  // The file's cap holds for one override too (the shell's argument limit bounds a --set, but
+  // not a Python caller's string): the parser's time and memory grow with the text.
+  if (arg.size() > kMaxConfigFileBytes) {
+    throw InputError("--set " + CapForMessage(arg.substr(0, eq), 60) + ": " +
+                     std::to_string(arg.size()) + " bytes, more than the " +
+                     std::to_string(kMaxConfigFileBytes) + " an override may hold");
+  }
   ConfigOverride o{arg.substr(0, eq), arg.substr(eq + 1)};
   if (o.key.empty() || o.key.front() == '.' || o.key.back() == '.' ||
       o.key.find("..") != std::string::npos ||

@@ -365,3 +365,12 @@ def test_readings_that_are_not_finite_are_rejected_not_raised(model):
         "rejected_non_finite"
     T1, cov1 = est.estimate()
     assert np.array_equal(T0, T1) and np.array_equal(cov0, cov1)
+
+
+def test_an_override_longer_than_the_file_cap_is_refused_unparsed(tmp_path):
+    # A 300 MB "KEY=VALUE" string once took 31 s and 2 GB in the YAML parser.
+    value = "configuration.joint1=" + "1" * (17 << 20)
+    with pytest.raises(ValueError) as e:
+        flexbench.run_scenario(SMOKE, str(tmp_path / "o"), overrides=[value])
+    assert "more than the 16777216 an override may hold" in str(e.value)
+    assert not (tmp_path / "o").exists()
