@@ -229,9 +229,15 @@ class Program {
         if (o) Push(*o);
         break;
       }
-      case 12: {  // "KEY=VALUE" from the top two objects' str()
+      case 12: {  // "KEY=VALUE" from the top two objects' str(), scalars only: str() of a list
+                  // sharing its items 2^k times is Python's own gigabyte, not the conversion's
         std::vector<py::object> kv = Take(2);
         if (kv.size() < 2) break;
+        const auto scalar = [](const py::object& o) {
+          return py::isinstance<py::str>(o) || py::isinstance<py::int_>(o) ||
+                 py::isinstance<py::float_>(o) || o.is_none();
+        };
+        if (!scalar(kv[0]) || !scalar(kv[1])) break;
         Push(py::str(kv[0]) + py::str("=") + py::str(kv[1]));
         break;
       }
