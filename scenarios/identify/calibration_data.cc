@@ -240,7 +240,7 @@ namespace {
 struct CsvColumns {
   std::vector<int> joint_col, motion_col;
   int frame_col = -1, marker_col = -1;
-  int group_col = -1, set_col = -1, xyz_col[3] = {-1, -1, -1}, quat_col[4] = {-1, -1, -1, -1},
+  int group_col = -1, set_col = -1, pose_col = -1, xyz_col[3] = {-1, -1, -1}, quat_col[4] = {-1, -1, -1, -1},
       uv_col[2] = {-1, -1};
   bool has_xyz = false, has_uv = false;
   int num_quat = 0;
@@ -272,6 +272,7 @@ CsvColumns ParseHeader(const std::vector<std::string>& header, const std::string
     }
     if (h == "group") cols.group_col = static_cast<int>(c), known = true;
     if (h == "set") cols.set_col = static_cast<int>(c), known = true;
+    if (h == "pose") cols.pose_col = static_cast<int>(c), known = true;
     if (h == "frame") cols.frame_col = static_cast<int>(c), known = true;
     if (h == "marker") cols.marker_col = static_cast<int>(c), known = true;
     if (h == "x") cols.xyz_col[0] = static_cast<int>(c), known = true;
@@ -293,7 +294,7 @@ CsvColumns ParseHeader(const std::vector<std::string>& header, const std::string
     if (!known) {
       throw InputError(hdr + ": column '" + CapForMessage(h) +
                        "' is neither an actuated joint of the declared model nor one of group, "
-                       "set, frame, marker, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
+                       "set, pose, frame, marker, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
     }
   }
   return cols;
@@ -335,7 +336,7 @@ void CheckColumns(const std::string& hdr, const std::vector<std::string>& joints
 Observation ParseRow(const std::vector<std::string>& cells, const std::string& where,
                      const std::string& path, const std::vector<std::string>& joints,
                      const CsvColumns& cols, const DataSet& data, LabelIndexer& group_index,
-                     LabelIndexer& set_index) {
+                     LabelIndexer& set_index, LabelIndexer& pose_index) {
   Observation o;
   o.where = where;
   o.q.resize(joints.size());
@@ -388,6 +389,10 @@ Observation ParseRow(const std::vector<std::string>& cells, const std::string& w
     throw InputError(where + ": column 'set' is empty");
   }
   o.set = set_index(cols.set_col >= 0 ? cells[cols.set_col] : path);
+  if (cols.pose_col >= 0) {
+    if (cells[cols.pose_col].empty()) throw InputError(where + ": column 'pose' is empty");
+    o.pose = pose_index(cells[cols.pose_col]);
+  }
   return o;
 }
 
@@ -400,7 +405,7 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   };
   CsvLines csv(path, joints.size());
   const size_t first_row = data->rows.size();
-  LabelIndexer group_index(&data->groups), set_index(&data->sets);
+  LabelIndexer group_index(&data->groups), set_index(&data->sets), pose_index(&data->poses);
   std::vector<std::string> header;
   if (!csv.Next(&header)) throw InputError(path + ": no header row");
   const std::string hdr = csv.Where();
@@ -414,7 +419,8 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
                        std::to_string(header.size()));
     }
-    data->rows.push_back(ParseRow(cells, where, path, joints, cols, *data, group_index, set_index));
+    data->rows.push_back(ParseRow(cells, where, path, joints, cols, *data, group_index, set_index,
+                                  pose_index));
     ++rows;
   }
   if (rows == 0) throw InputError(CapForMessage(path) + ": no data rows");

@@ -14,6 +14,9 @@
 //     reading (which flank of a backlash it rests on; 0 unknown);
 //   - optional `set`: a label for the placement or session the row belongs to (errors are
 //     averaged per set, then over sets);
+//   - optional `pose`: a label for the posture the row was measured in (one row per marker seen
+//     at it); cross-validation keeps a posture's rows in one fold (rows without it: those with
+//     identical readings in one set);
 //   - optional `frame`: `base`, or the name of a measurement frame (set DataSet::frames first;
 //     the scenario's `frames` key) in which the row's x, y, z (and quaternion) were measured,
 //     e.g. a laser tracker's own frame (measurement_frames.h);

@@ -1,10 +1,37 @@
 #include "scenarios/identify/cross_validation.h"
 
 #include <algorithm>
+#include <string>
+#include <unordered_map>
 
 #include "scenarios/identify/problem.h"
 
 namespace flexbench::identify {
+
+namespace {
+
+// Per row, its posture in order of first appearance: the `pose` label within its set where the
+// data gives one, else its set and identical readings (every marker seen at one posture).
+std::vector<int> PostureOfRows(const DataSet& data) {
+  std::unordered_map<std::string, int> index;
+  std::vector<int> posture(data.rows.size());
+  std::string key;
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const Observation& o = data.rows[r];
+    key.assign(reinterpret_cast<const char*>(&o.set), sizeof(o.set));
+    if (o.pose >= 0) {
+      key += 'p';
+      key.append(reinterpret_cast<const char*>(&o.pose), sizeof(o.pose));
+    } else {
+      key += 'q';
+      key.append(reinterpret_cast<const char*>(o.q.data()), sizeof(double) * o.q.size());
+    }
+    posture[r] = index.emplace(key, static_cast<int>(index.size())).first->second;
+  }
+  return posture;
+}
+
+}  // namespace
 
 Folds MakeFolds(const DataSet& data, const std::string& by) {
   Folds f;
@@ -26,22 +53,26 @@ Folds MakeFolds(const DataSet& data, const std::string& by) {
   if (by == "auto" || by == "group")
     by_label("group", static_cast<int>(data.groups.size()),
              [](const Observation& o) { return o.type == ObservationType::kGroup ? o.group : -1; });
+  const std::vector<int> posture = PostureOfRows(data);
   if (f.test_rows.size() >= 4 || by == "group") {
-    // Rows without a group (points) join the folds in round robin.
-    int k = 0;
+    // Rows without a group (points) join the folds in round robin by posture.
+    std::unordered_map<int, int> fold_of;
     for (size_t r = 0; r < data.rows.size(); ++r) {
       if (data.rows[r].type != ObservationType::kGroup) {
-        f.test_rows[k++ % f.test_rows.size()].push_back(static_cast<int>(r));
+        const int k = fold_of.emplace(posture[r], static_cast<int>(fold_of.size())).first->second;
+        f.test_rows[k % f.test_rows.size()].push_back(static_cast<int>(r));
       }
     }
     for (auto& t : f.test_rows) std::sort(t.begin(), t.end());
     return f;
   }
+  // Round robin over postures, so two markers of one posture never sit in different folds.
   f.by = "row";
-  const int k = static_cast<int>(std::min<size_t>(5, data.rows.size()));
+  const int postures = posture.empty() ? 0 : *std::max_element(posture.begin(), posture.end()) + 1;
+  const int k = std::min(5, postures);
   f.test_rows.assign(k, {});
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    f.test_rows[r % k].push_back(static_cast<int>(r));
+    f.test_rows[posture[r] % k].push_back(static_cast<int>(r));
   }
   return f;
 }

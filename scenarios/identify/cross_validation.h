@@ -1,7 +1,9 @@
 // Cross-validation of a model's effects: fit on all data but one fold, score the fold.
 //
 // Folds are the data's sets (placements, sessions) when it has two or more; with one set, the
-// groups (sockets) when there are at least four; otherwise rows in round robin (k = 5). A
+// groups (sockets) when there are at least four; otherwise rows in round robin (k = 5), the rows
+// of one posture (a `pose` label, else the same readings in the same set: every marker seen at
+// once) always in the same fold, since they share the posture's reading errors. A
 // held-out fold is scored with its own nuisance parameters re-estimated from the prediction
 // (each group's point is the mean of its rows), so the score sees only what the effects
 // predict: the mean squared whitened residual per residual entry, distances included.

@@ -62,6 +62,10 @@ struct Observation {
   Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // kPixel: the point seen by DataSet::camera
   Eigen::VectorXd motion_sign;  // optional, per joint: +1/-1 last motion direction, 0 unknown
   int set = 0;                  // index into DataSet::sets (a placement, a session)
+  // The posture the row was measured in (index into DataSet::poses, the CSV's `pose` labels;
+  // -1: none given): rows of one posture (two markers seen at once) share their readings'
+  // errors, so cross-validation keeps them together.
+  int pose = -1;
   int point = 0;      // the measured frame: index into DataSet::points (EffectModel::points())
   std::string where;  // "<file>:<line>" for messages
 };
@@ -88,6 +92,7 @@ struct DataSet {
   std::vector<std::string> groups;
   std::vector<GroupDistance> distances;
   std::vector<std::string> sets;
+  std::vector<std::string> poses;  // `pose` labels (Subset keeps the rows' indices, not these)
   std::vector<MeasurementFrame> frames;  // external frames rows may be measured in
   // Names of the frames of the declared model rows may measure (CSV `marker`), in the order of
   // EffectModel::points(); the first is the end effector. Empty: the end effector only.

@@ -642,6 +642,45 @@ TEST(Identify, FoldsAreSetsThenGroupsThenRows) {
   EXPECT_EQ(sub.sets, std::vector<std::string>{"b"});
 }
 
+// Two markers seen at one posture share its reading errors: a fold holding one of them and
+// training on the other would score the posture's own errors as predicted. Rows with the same
+// readings (and set), or the same `pose` label, stay in one fold.
+TEST(Identify, FoldsKeepAPosturesRowsTogether) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  std::mt19937_64 rng(23);
+  DataSet points = PointData(*f.em, {}, Eigen::VectorXd(), 12, 1e-4, rng);
+  DataSet twice;
+  twice.sets = points.sets;
+  for (const Observation& o : points.rows) {
+    twice.rows.push_back(o);
+    twice.rows.push_back(o);  // the second marker: same readings, another point
+    twice.rows.back().p_base += Vec3(0.01, 0.0, 0.0);
+  }
+  const Folds by_posture = MakeFolds(twice);
+  ASSERT_EQ(by_posture.test_rows.size(), 5u);
+  EXPECT_EQ(by_posture.test_rows[2], (std::vector<int>{4, 5, 14, 15}));
+  for (const std::vector<int>& fold : by_posture.test_rows) {
+    for (int r : fold) {
+      const int other = r % 2 ? r - 1 : r + 1;
+      EXPECT_NE(std::find(fold.begin(), fold.end(), other), fold.end()) << "row " << r;
+    }
+  }
+  // A `pose` label ties rows whose readings differ (a reading per marker); different labels
+  // part rows whose readings are the same.
+  for (size_t r = 0; r < twice.rows.size(); ++r) {
+    twice.rows[r].pose = LabelIndex(&twice.poses, "p" + std::to_string(r / 4));
+  }
+  for (size_t r = 0; r < twice.rows.size(); r += 4) twice.rows[r + 2].q[0] += 1e-3;
+  const Folds by_label = MakeFolds(twice);
+  ASSERT_EQ(by_label.test_rows.size(), 5u);
+  EXPECT_EQ(by_label.test_rows[0], (std::vector<int>{0, 1, 2, 3, 20, 21, 22, 23}));
+  twice.poses.clear();
+  for (size_t r = 0; r < twice.rows.size(); ++r) {
+    twice.rows[r].pose = LabelIndex(&twice.poses, "p" + std::to_string(r));
+  }
+  EXPECT_EQ(MakeFolds(twice).test_rows[1], (std::vector<int>{1, 6, 11, 16, 21}));
+}
+
 // Full poses (a tracker with orientation) and pixels of a fixed, slightly miscalibrated camera.
 TEST(Identify, PosesAndPixelsWithACameraOffset) {
   sim::MjModelPtr m = sim::LoadModelFromString(kArm3, "inline.xml");
@@ -773,6 +812,18 @@ TEST_F(CalibrationCsv, ReadsGroupsSetsAndPoints) {
   ReadCalibrationCsv(Write("j1,j2,x,y,z,qw,qx,qy,qz\n0,0,1,2,3,0,0,0,1\n"), {"j1", "j2"}, &q);
   EXPECT_EQ(q.rows[0].type, ObservationType::kPose);
   EXPECT_TRUE(q.rows[0].R_base.isApprox(Eigen::Vector3d(-1, -1, 1).asDiagonal().toDenseMatrix()));
+}
+
+TEST_F(CalibrationCsv, APoseColumnLabelsPostures) {
+  DataSet d;
+  ReadCalibrationCsv(Write("j1,j2,x,y,z,pose\n0,0,1,2,3,7\n0,0,1,2,4,7\n0,1,1,2,3,8\n"),
+                     {"j1", "j2"}, &d);
+  ASSERT_EQ(d.rows.size(), 3u);
+  EXPECT_EQ(d.poses, (std::vector<std::string>{"7", "8"}));
+  EXPECT_EQ(d.rows[1].pose, 0);
+  EXPECT_EQ(d.rows[2].pose, 1);
+  EXPECT_NE(Error("j1,j2,x,y,z,pose\n0,0,1,2,3,\n").find("data.csv:2: column 'pose' is empty"),
+            std::string::npos);
 }
 
 TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
