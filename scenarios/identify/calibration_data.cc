@@ -240,8 +240,8 @@ namespace {
 struct CsvColumns {
   std::vector<int> joint_col, motion_col;
   int frame_col = -1, marker_col = -1;
-  int group_col = -1, set_col = -1, pose_col = -1, xyz_col[3] = {-1, -1, -1}, quat_col[4] = {-1, -1, -1, -1},
-      uv_col[2] = {-1, -1};
+  int group_col = -1, set_col = -1, pose_col = -1, xyz_col[3] = {-1, -1, -1},
+      quat_col[4] = {-1, -1, -1, -1}, uv_col[2] = {-1, -1};
   bool has_xyz = false, has_uv = false;
   int num_quat = 0;
 };
@@ -419,8 +419,8 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
       throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
                        std::to_string(header.size()));
     }
-    data->rows.push_back(ParseRow(cells, where, path, joints, cols, *data, group_index, set_index,
-                                  pose_index));
+    data->rows.push_back(
+        ParseRow(cells, where, path, joints, cols, *data, group_index, set_index, pose_index));
     ++rows;
   }
   if (rows == 0) throw InputError(CapForMessage(path) + ": no data rows");
