@@ -427,6 +427,72 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   WarnGroupsSpanningSets(*data, first_row);
 }
 
+std::string FormatCalibrationCsv(const DataSet& data, const std::vector<std::string>& joints,
+                                 const std::vector<std::string>& coupled) {
+  if (data.rows.empty()) return "";
+  const ObservationType type = data.rows[0].type;
+  bool pose = false, motion = false, frame = !data.frames.empty();
+  for (const Observation& o : data.rows) {
+    if (o.type != type) {
+      throw InputError(o.where + ": a CSV holds rows of one type (the first row's); this one " +
+                       "is another");
+    }
+    pose = pose || o.pose >= 0;
+    motion = motion || o.motion_sign.size() > 0;
+  }
+  const bool marker = data.points.size() > 1;
+  std::vector<int> cols;
+  std::string out;
+  for (size_t j = 0; j < joints.size(); ++j) {
+    if (std::find(coupled.begin(), coupled.end(), joints[j]) != coupled.end()) continue;
+    out += (cols.empty() ? "" : ",") + joints[j];
+    cols.push_back(static_cast<int>(j));
+  }
+  out += ",set";
+  if (pose) out += ",pose";
+  if (frame) out += ",frame";
+  if (marker) out += ",marker";
+  const bool xyz = type == ObservationType::kPoint || type == ObservationType::kPose;
+  if (type == ObservationType::kGroup) out += ",group";
+  if (xyz) out += ",x,y,z";
+  if (type == ObservationType::kPose) out += ",qw,qx,qy,qz";
+  if (type == ObservationType::kPixel) out += ",u,v";
+  if (motion) {
+    for (int j : cols) out += ",motion_" + joints[j];
+  }
+  out += "\n";
+  char num[32];
+  const auto put = [&](double v) {
+    std::snprintf(num, sizeof(num), "%.17g", v);
+    out += num;
+  };
+  for (const Observation& o : data.rows) {
+    for (size_t k = 0; k < cols.size(); ++k) {
+      if (k) out += ",";
+      put(o.q[cols[k]]);
+    }
+    out += "," + data.sets[o.set];
+    if (pose) out += "," + (o.pose >= 0 ? data.poses[o.pose] : "none");
+    if (frame) out += "," + (o.frame >= 0 ? data.frames[o.frame].name : std::string("base"));
+    if (marker) out += "," + data.points[o.point];
+    if (type == ObservationType::kGroup) out += "," + data.groups[o.group];
+    const Vec3& p = o.frame >= 0 ? o.p_frame : o.p_base;
+    if (xyz) {
+      for (int k = 0; k < 3; ++k) out += ",", put(p[k]);
+    }
+    if (type == ObservationType::kPose) {
+      const Eigen::Quaterniond qt(o.frame >= 0 ? o.R_frame : o.R_base);
+      for (double v : {qt.w(), qt.x(), qt.y(), qt.z()}) out += ",", put(v);
+    }
+    if (type == ObservationType::kPixel) out += ",", put(o.uv[0]), out += ",", put(o.uv[1]);
+    if (motion) {
+      for (int j : cols) out += ",", put(o.motion_sign.size() ? o.motion_sign[j] : 0.0);
+    }
+    out += "\n";
+  }
+  return out;
+}
+
 void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_joints,
                         double socket_distance_m, DataSet* data) {
   if (!(std::isfinite(socket_distance_m) && socket_distance_m > 0.0 && socket_distance_m <= 10.0)) {

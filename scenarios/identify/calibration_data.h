@@ -54,6 +54,16 @@ std::uintmax_t CalibrationBytesPerRow(size_t num_joints);
 void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>& joints,
                         DataSet* data, const std::vector<std::string>& coupled = {});
 
+// The rows of `data` as a CSV that ReadCalibrationCsv reads back into the same rows (numbers
+// with 17 significant digits): one column per joint of `joints` but the `coupled` ones, then
+// `set`, `pose` (when rows carry one), `frame` and `marker` (when the data has measurement
+// frames or more than one measured frame) and the measurement: group, or x, y, z (qw, qx, qy,
+// qz), or u, v; `motion_<joint>` where the rows record it. Every row must be of one type
+// (the reader takes the type from the header); throws InputError naming the first row that is
+// not.
+std::string FormatCalibrationCsv(const DataSet& data, const std::vector<std::string>& joints,
+                                 const std::vector<std::string>& coupled = {});
+
 // One MUKCa tool placement: `dir`/hole_0.csv and hole_1.csv (7 joint angles per row, no
 // header) become groups "<set>/hole_0" and "<set>/hole_1", 0.050 m apart.
 void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_joints,

@@ -34,6 +34,8 @@ void AppendMarkerRows(const TrackerTruth& t, const TrackerRowsSetup& s, const Ei
                       int posture, int set, sim::NoiseStream& noise, identify::DataSet* d) {
   const Eigen::Isometry3d T_base_world = s.sim->BodyPose(s.base_body).inverse();
   const lie::SE3 T_tracker_base = s.T_base_tracker.Inverse();
+  const int pose = static_cast<int>(d->poses.size());
+  d->poses.push_back(d->sets[set] + "/posture_" + std::to_string(posture));
   for (size_t m = 0; m < t.markers.size(); ++m) {
     identify::Observation o;
     o.q = q;
@@ -44,7 +46,8 @@ void AppendMarkerRows(const TrackerTruth& t, const TrackerRowsSetup& s, const Ei
     o.p_frame = T_tracker_base * p_base;
     for (int k = 0; k < 3; ++k) o.p_frame[k] += noise.Normal(t.noise_std_m);
     o.set = set;
-    o.where = d->sets[set] + "/posture_" + std::to_string(posture) + "/" + t.markers[m];
+    o.pose = pose;
+    o.where = d->poses[pose] + "/" + t.markers[m];
     d->rows.push_back(o);
   }
 }

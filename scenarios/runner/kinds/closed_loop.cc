@@ -629,6 +629,7 @@ class ClosedLoopKind : public ScenarioKind {
       }
     }
     if (d.rows.empty()) throw InputError(s.where + ": no " + what + " rows");
+    if (s.type == Source::Type::kSimulate) WriteDataCsv(ctx, d, what);
     return d;
   }
 
@@ -1371,6 +1372,14 @@ class ClosedLoopKind : public ScenarioKind {
     }
     WriteFileAtomic(ctx.out->File("declared_augmented.yaml"),
                     sim::EmitDeclaredModel(out, header.str()));
+  }
+
+  // Simulated rows as the measured data a user brings (`flexbench identify --calibration`).
+  void WriteDataCsv(RunContext& ctx, const DataSet& d, const std::string& what) const {
+    std::vector<std::string> coupled;
+    for (const auto& c : chain_->couplings) coupled.push_back(chain_->q_joints[c.q_index]);
+    WriteFileAtomic(ctx.out->File(what + "_data.csv"),
+                    identify::FormatCalibrationCsv(d, chain_->q_joints, coupled));
   }
 
   void WriteResiduals(RunContext& ctx, const DataSet& d, const std::vector<double>& before,

@@ -909,6 +909,64 @@ TEST(MukcaPlacement, SocketDistanceMustBePositive) {
 }
 
 // "Bring your own robot and data": a model file, a declared model and two CSVs through the CLI.
+// A simulated scenario writes its rows as the CSV a user brings; `flexbench identify` on them
+// finds what the scenario found, to the last bit (the same rows, the same options).
+TEST(IdentifyCommand, ASimulatedScenariosDataCsvReproducesItsResult) {
+  const fs::path dir = fs::temp_directory_path() / ("flexbench_rows_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const std::string run = testing::Flexbench() + " run " + testing::SourceDir() +
+                          "/scenarios/closed_loop_humanoid_tracker.yaml --quiet --set "
+                          "calibration.simulate.postures=25 --set validation.simulate.postures=10 "
+                          "--out " +
+                          (dir / "scenario").string();
+  const testing::CommandResult sim = testing::RunCommand(run);
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  const std::string csv = testing::ReadFile(dir / "scenario" / "calibration_data.csv");
+  EXPECT_EQ(testing::CountLines(csv), 1 + 2 * 25);
+  EXPECT_EQ(csv.rfind("shoulder_pitch,", 0), 0u) << csv.substr(0, 200);
+  EXPECT_NE(csv.find(",set,pose,frame,marker,x,y,z\n"), std::string::npos);
+  const testing::CommandResult id = testing::RunCommand(
+      testing::Flexbench() + " identify --quiet --declared " + testing::SourceDir() +
+      "/models/humanoid_upper.declared.yaml --calibration " +
+      (dir / "scenario" / "calibration_data.csv").string() + " --validation " +
+      (dir / "scenario" / "validation_data.csv").string() +
+      " --frame tracker --marker right_marker --marker left_marker --out " +
+      (dir / "identify").string());
+  ASSERT_EQ(id.exit_code, 0) << id.err;
+  const auto a = nlohmann::json::parse(testing::ReadFile(dir / "scenario" / "summary.json"));
+  const auto b = nlohmann::json::parse(testing::ReadFile(dir / "identify" / "summary.json"));
+  for (const char* k : {"val_err_before_m", "val_err_after_m", "cal_err_after_m", "cv_err_after",
+                        "effects_found", "verdict"}) {
+    EXPECT_EQ(a["metrics"][k], b["metrics"][k]) << k;
+  }
+  fs::remove_all(dir);
+}
+
+// Every row type written and read back gives the same rows, bit for bit.
+TEST(IdentifyCommand, CalibrationCsvRoundTrips) {
+  const Fixture f = Make(kArm3, {"j1", "j2", "j3"});
+  std::mt19937_64 rng(5);
+  DataSet points = PointData(*f.em, {}, Eigen::VectorXd(), 6, 1e-4, rng);
+  DataSet sockets = SocketData(*f.em, {}, Eigen::VectorXd(), 3, rng);
+  for (DataSet* d : {&points, &sockets}) {
+    const fs::path p =
+        fs::temp_directory_path() / ("flexbench_rt_" + std::to_string(::getpid()) + ".csv");
+    testing::WriteFile(p, FormatCalibrationCsv(*d, {"j1", "j2", "j3"}));
+    DataSet back;
+    ReadCalibrationCsv(p.string(), {"j1", "j2", "j3"}, &back);
+    fs::remove(p);
+    ASSERT_EQ(back.rows.size(), d->rows.size());
+    for (size_t r = 0; r < back.rows.size(); ++r) {
+      EXPECT_EQ(back.rows[r].q, d->rows[r].q);
+      EXPECT_EQ(back.rows[r].p_base, d->rows[r].p_base);
+      EXPECT_EQ(back.rows[r].type, d->rows[r].type);
+      EXPECT_EQ(back.groups.size(), d->groups.size());
+    }
+  }
+  points.rows[1].type = ObservationType::kGroup;
+  EXPECT_THROW(FormatCalibrationCsv(points, {"j1", "j2", "j3"}), InputError);
+}
+
 TEST(IdentifyCommand, FindsTheEffectInAUsersCsvAndRejectsABadRow) {
   const fs::path dir = fs::temp_directory_path() / ("flexbench_byo_" + std::to_string(::getpid()));
   fs::create_directories(dir);
