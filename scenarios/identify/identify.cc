@@ -390,8 +390,9 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
                      "; the data has " + std::to_string(folds.test_rows.size()) +
                      " (set cross_validation: false, or another folds_by)");
   }
-  bool capped = false;
-  const SelectionContext ctx{em, data, loads, folds, opt, &res.steps, &capped};
+  bool capped = false, out_of_time = false;
+  SelectionContext ctx{em, data, loads, folds, opt, &res.steps, &capped};
+  ctx.out_of_time = &out_of_time;
   double cv = CvError(ctx, res.before);
   res.cv_before = cv;
   if (opt.cross_validation) {
@@ -405,7 +406,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   const std::vector<int> generic = Pool(em, candidates, false, true);
   // Always tried: a cap limits what forward selection adds, never whether the joint origins are
   // looked at (the block is one step, kept only when the held-out error falls).
-  if (!generic.empty()) {
+  if (!generic.empty() && !OutOfTime(ctx, "so the complete geometry is not tried")) {
     res.steps.push_back("complete geometry: joint origins beyond the named effects");
     cur = SelectEffects(ctx, cur, generic, false, &cv);
     double cv_block = cv;
@@ -431,7 +432,10 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   const std::vector<ConfigLoads>& final_loads = shifted.empty() ? loads : shifted;
   res.after = cur;
   res.cv_after = cv;
-  res.stopped_by = capped ? "max_effects" : opt.cross_validation ? "held_out" : "bic";
+  res.stopped_by = out_of_time            ? "time_budget"
+                   : capped               ? "max_effects"
+                   : opt.cross_validation ? "held_out"
+                                          : "bic";
   res.finding = FindResidualStructure(em, data, final_loads, cur, opt);
   if (!cur.active.empty() || !res.unlocked.empty()) {
     res.steps.push_back(std::string("diagnostics after: ") + res.finding.message +
@@ -535,7 +539,10 @@ std::string Verdict(const IdentifyResult& res, double val_before, double val_aft
   const Fit& a = res.after;
   const bool left = a.rss > 2.0 * std::max(1, a.num_residuals - a.num_params);
   // A cap that stopped the selection leaves what the data would still explain: never complete.
-  if (res.finding.notable || left || res.stopped_by == "max_effects") return "partly_explained";
+  if (res.finding.notable || left || res.stopped_by == "max_effects" ||
+      res.stopped_by == "time_budget") {
+    return "partly_explained";
+  }
   return res.attribution_unique ? "explained" : "ambiguous";
 }
 

@@ -125,6 +125,10 @@ struct IdentifyOptions {
   // cross-validation, BIC) stops falling. A cap that stops a selection the data would continue
   // is reported (IdentifyResult::stopped_by) and keeps the verdict from "explained".
   int max_effects = -1;
+  // Wall-clock budget of the selection in seconds; 0: none. A budget that ends the selection is
+  // reported as a cap is (stopped_by "time_budget"). With a budget the result depends on the
+  // machine's speed: the same seed no longer gives the same bytes.
+  double time_budget_s = 0.0;
   int max_iterations = 50;  // Levenberg-Marquardt
   // Threads of a pass over the rows (0: one per core; parallel.h); any number, the same bits.
   int threads = 0;
@@ -210,7 +214,8 @@ struct IdentifyResult {
   int num_folds = 0;
   double cv_before = 0.0, cv_after = 0.0;  // held-out mean squared whitened residual
   // What ended the selection: "held_out" (the held-out error stopped falling), "bic" (without
-  // cross-validation), or "max_effects" (the cap, while a further effect still passed).
+  // cross-validation), "max_effects" (the cap, while a further effect still passed) or
+  // "time_budget" (IdentifyOptions::time_budget_s ran out before the selection ended).
   std::string stopped_by;
   std::vector<Alternative> alternatives;  // one per chosen effect (cross-validation only)
   bool attribution_unique = true;         // no alternative comes within ambiguity_cv

@@ -232,6 +232,21 @@ std::string HeldOutChange(const SelectionContext& ctx, double from, double to) {
   return ctx.opt.cross_validation ? Fmt(", held-out %.4g -> %.4g sigma^2", from, to) : "";
 }
 
+bool OutOfTime(const SelectionContext& ctx, const char* stops) {
+  if (ctx.opt.time_budget_s <= 0.0 || !ctx.out_of_time) return false;
+  const double used =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - ctx.started).count();
+  if (used < ctx.opt.time_budget_s) return false;
+  if (!*ctx.out_of_time) {
+    ctx.log->push_back(
+        Fmt("stop: time budget %.4g s used up after %.1f s, %s: the budget, not "
+            "the data, ends the selection",
+            ctx.opt.time_budget_s, used, stops));
+  }
+  *ctx.out_of_time = true;
+  return true;
+}
+
 Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,
                   bool backward, double* cv, bool swap) {
   Fit cur = start;
@@ -239,6 +254,7 @@ Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vect
   // Each round adds one effect; backward steps may take some out again.
   const int rounds = 3 * (cap >= 0 ? cap : static_cast<int>(pool.size() + start.active.size()));
   for (int round = 0; round < rounds; ++round) {
+    if (OutOfTime(ctx, "no further effect is screened")) return cur;
     std::vector<Trial> trials = ScreenCandidates(ctx, cur, pool);
     if (trials.empty()) break;
     double cv_best = 0.0;

@@ -11,6 +11,7 @@
 // back when it leaves. At the end, a chosen effect is swapped for another candidate when the
 // swap lowers BIC by more than `ambiguity_bic` without raising the held-out error.
 #pragma once
+#include <chrono>
 #include <string>
 #include <vector>
 
@@ -27,7 +28,13 @@ struct SelectionContext {
   const IdentifyOptions& opt;
   std::vector<std::string>* log;
   bool* capped = nullptr;  // set when max_effects stopped a selection the data would continue
+  // When the selection started, for IdentifyOptions::time_budget_s; set when it ran out.
+  std::chrono::steady_clock::time_point started = std::chrono::steady_clock::now();
+  bool* out_of_time = nullptr;
 };
+
+// Whether the time budget has run out (logged once, with what it stops).
+bool OutOfTime(const SelectionContext& ctx, const char* stops);
 
 // ", held-out A -> B sigma^2" (the mean squared held-out residual in units of the stated
 // noise), or "" without cross-validation.

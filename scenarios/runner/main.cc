@@ -81,6 +81,9 @@ CLI::App* AddIdentify(CLI::App& app, Options& o) {
   identify_cmd->add_option("--max-effects", id.max_effects,
                            "most effects to choose (default: no cap; selection stops "
                            "where the held-out error stops falling)");
+  identify_cmd->add_option("--time-budget", id.time_budget_s,
+                           "seconds the selection may take (default: none); a budget that ends "
+                           "it is reported and the verdict is at most partly_explained");
   identify_cmd->add_option("--bic-threshold", id.bic_threshold,
                            "BIC drop a candidate must bring to be tried (default 10)");
   identify_cmd->add_option("--folds-by", id.folds_by,

@@ -430,6 +430,10 @@ std::string IdentifyScenario(const IdentifyCliOptions& o, const sim::DeclaredMod
     line("--reading-std-deg", std::string("reading_std_deg: ") + num);
   }
   if (o.max_effects) line("--max-effects", "max_effects: " + std::to_string(*o.max_effects));
+  if (o.time_budget_s) {
+    std::snprintf(num, sizeof(num), "%.17g", *o.time_budget_s);
+    line("--time-budget", std::string("time_budget_s: ") + num);
+  }
   if (o.bic_threshold) {
     std::snprintf(num, sizeof(num), "%.17g", *o.bic_threshold);
     line("--bic-threshold", std::string("bic_threshold: ") + num);

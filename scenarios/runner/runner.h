@@ -44,6 +44,7 @@ struct IdentifyCliOptions {
   std::optional<double> reading_std_deg;  // the joint readings' noise, when stated
   // Selection options (closed_loop keys of the same names); unset: the kind's defaults.
   std::optional<int> max_effects;
+  std::optional<double> time_budget_s;
   std::optional<double> bic_threshold;
   std::optional<std::string> folds_by;
   std::optional<double> outlier_iqr;

@@ -217,6 +217,10 @@ class ClosedLoopKind : public ScenarioKind {
     if (root.Has("max_effects") && opt_.max_effects < 0) {
       root.Child("max_effects").Fail("must be >= 0 (leave it out for no cap)");
     }
+    opt_.time_budget_s = root.GetDouble("time_budget_s", opt_.time_budget_s);
+    if (root.Has("time_budget_s") && !(opt_.time_budget_s > 0.0 && opt_.time_budget_s <= 1e6)) {
+      root.Child("time_budget_s").Fail("must be in (0, 1e6] seconds (leave it out for none)");
+    }
     opt_.cross_validation = root.GetBool("cross_validation", opt_.cross_validation);
     opt_.folds_by = root.GetString("folds_by", opt_.folds_by);
     if (opt_.folds_by != "auto" && opt_.folds_by != "set" && opt_.folds_by != "group" &&

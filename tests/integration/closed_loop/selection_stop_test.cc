@@ -1,6 +1,6 @@
 // What ends a selection, said in the results: the held-out error (the default, no cap), BIC
-// without cross-validation, or a cap the user gave that stopped a selection the data would
-// continue (then never "explained"). Rows made by MuJoCo with two planted joint offsets.
+// without cross-validation, or a cap or time budget the user gave that stopped a selection the
+// data would continue (then never "explained"). Rows made by MuJoCo with two planted joint offsets.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -66,6 +66,27 @@ TEST_F(SelectionStop, WithoutCrossValidationBicStopsAndNoNanIsPrinted) {
   EXPECT_EQ(m["stopped_by"], "bic");
   EXPECT_EQ(m["effects_found"].size(), 2u) << m["effects_found"];
   EXPECT_EQ(err.find("nan"), std::string::npos) << err;
+}
+
+// A time budget that runs out is said like a cap: log, stopped_by, never "explained". A budget
+// of a microsecond is used up before the first round; one of an hour changes nothing.
+TEST_F(SelectionStop, ATimeBudgetThatRunsOutIsSaidAndNeverExplained) {
+  std::string err;
+  const nlohmann::json m = Identify("budget", "--time-budget 1e-6", &err);
+  EXPECT_EQ(m["stopped_by"], "time_budget");
+  EXPECT_EQ(m["effects_found"].size(), 0u) << m["effects_found"];
+  EXPECT_NE(m["verdict"], "explained");
+  EXPECT_NE(err.find("stop: time budget 1e-06 s used up"), std::string::npos) << err;
+  const nlohmann::json hour = Identify("hour", "--time-budget 3600", &err);
+  EXPECT_EQ(hour["stopped_by"], "held_out");
+  EXPECT_EQ(hour["effects_found"].size(), 2u);
+  const CommandResult bad = RunCommand(BinDir() + "/flexbench identify --declared " + SourceDir() +
+                                       "/models/planar3.declared.yaml --calibration " +
+                                       (tmp_.path() / "cal.csv").string() + " --validation " +
+                                       (tmp_.path() / "val.csv").string() + " --time-budget -1" +
+                                       " --out " + (tmp_.path() / "bad").string());
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(LastLine(bad.err).find("--time-budget"), std::string::npos) << bad.err;
 }
 
 }  // namespace
