@@ -198,7 +198,7 @@ void SetRowFrame(const std::string& cell, const std::string& where, const DataSe
   if (f < 0) {
     throw InputError(where + ": column 'frame': '" + CapForMessage(cell) +
                      "' is not a declared measurement frame (declared: " + names +
-                     "; the scenario's 'frames' key)");
+                     "; declare it in the scenario's 'frames' key, --frame NAME on the command line)");
   }
   if (o->type != ObservationType::kPoint && o->type != ObservationType::kPose) {
     throw InputError(where + ": column 'frame': only point and pose rows (x, y, z) are measured " +
@@ -221,7 +221,7 @@ int MarkerIndex(const std::string& cell, const std::string& where, const DataSet
   throw InputError(where + ": column 'marker': '" + CapForMessage(cell) +
                    "' is not a measured frame of the declared model (" +
                    (names.empty() ? std::string("none declared") : "measured: " + names) +
-                   "; the scenario's 'markers' key names the end effector's companions)");
+                   "; the scenario's 'markers' key, --marker NAME on the command line)");
 }
 
 }  // namespace
