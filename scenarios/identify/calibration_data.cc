@@ -196,9 +196,10 @@ void SetRowFrame(const std::string& cell, const std::string& where, const DataSe
     names += ", " + data.frames[k].name;
   }
   if (f < 0) {
-    throw InputError(where + ": column 'frame': '" + CapForMessage(cell) +
-                     "' is not a declared measurement frame (declared: " + names +
-                     "; declare it in the scenario's 'frames' key, --frame NAME on the command line)");
+    throw InputError(
+        where + ": column 'frame': '" + CapForMessage(cell) +
+        "' is not a declared measurement frame (declared: " + names +
+        "; declare it in the scenario's 'frames' key, --frame NAME on the command line)");
   }
   if (o->type != ObservationType::kPoint && o->type != ObservationType::kPose) {
     throw InputError(where + ": column 'frame': only point and pose rows (x, y, z) are measured " +

@@ -74,6 +74,9 @@ CLI::App* AddIdentify(CLI::App& app, Options& o) {
   identify_cmd->add_option("--marker", id.markers,
                            "an observed frame of the declared model the CSVs' 'marker' column "
                            "names beside the end effector (repeatable)");
+  identify_cmd->add_option("--unknown-marker-offset", id.unknown_marker_offsets,
+                           "a marker (or the end effector) whose offset on its link is unknown: "
+                           "3 parameters fitted with the effects (repeatable)");
   identify_cmd->add_option("--point-std", id.point_std_m, "point noise [m] (default 1e-4)");
   identify_cmd->add_option("--reading-std-deg", id.reading_std_deg,
                            "the joint readings' noise [deg]: sizes the augmented model's sources "

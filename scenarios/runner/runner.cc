@@ -455,6 +455,13 @@ std::string IdentifyScenario(const IdentifyCliOptions& o, const sim::DeclaredMod
     for (size_t i = 0; i < o.markers.size(); ++i) m += (i ? ", " : "") + Quoted(o.markers[i]);
     line("--marker", m + "]");
   }
+  if (!o.unknown_marker_offsets.empty()) {
+    std::string u = "unknown_marker_offsets: [";
+    for (size_t i = 0; i < o.unknown_marker_offsets.size(); ++i) {
+      u += (i ? ", " : "") + Quoted(o.unknown_marker_offsets[i]);
+    }
+    line("--unknown-marker-offset", u + "]");
+  }
   if (!o.candidates.empty()) {
     std::string c = "candidates: [";
     for (size_t i = 0; i < o.candidates.size(); ++i) {

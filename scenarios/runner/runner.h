@@ -40,6 +40,7 @@ struct IdentifyCliOptions {
   std::vector<std::string> frames;
   // Observed frames of the declared model the CSVs' `marker` column may name.
   std::vector<std::string> markers;
+  std::vector<std::string> unknown_marker_offsets;
   double point_std_m = 1e-4;
   std::optional<double> reading_std_deg;  // the joint readings' noise, when stated
   // Selection options (closed_loop keys of the same names); unset: the kind's defaults.

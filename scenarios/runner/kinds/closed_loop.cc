@@ -670,8 +670,9 @@ class ClosedLoopKind : public ScenarioKind {
     for (const std::string& m : tracker_->markers) {
       const auto it = std::find(points_.begin(), points_.end(), m);
       if (it == points_.end()) {
-        throw InputError(tracker_->markers_where + ": '" + m +
-                         "' is neither the end effector nor one of 'markers' (--marker on the command line)");
+        throw InputError(
+            tracker_->markers_where + ": '" + m +
+            "' is neither the end effector nor one of 'markers' (--marker on the command line)");
       }
       tracker_points_.push_back(static_cast<int>(it - points_.begin()));
       sim_->Frame(m);  // the truth has it (InputError naming the model otherwise)
@@ -1154,8 +1155,9 @@ class ClosedLoopKind : public ScenarioKind {
     for (const auto& [name, where] : unknown_offset_nodes_) {
       const auto it = std::find(points_.begin(), points_.end(), name);
       if (it == points_.end()) {
-        throw InputError(where + ": unknown_marker_offsets: '" + name +
-                         "' is neither the end effector nor one of 'markers' (--marker on the command line)");
+        throw InputError(
+            where + ": unknown_marker_offsets: '" + name +
+            "' is neither the end effector nor one of 'markers' (--marker on the command line)");
       }
       out[it - points_.begin()] = 1;
     }

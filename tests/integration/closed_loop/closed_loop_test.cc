@@ -939,6 +939,17 @@ TEST(IdentifyCommand, ASimulatedScenariosDataCsvReproducesItsResult) {
                         "effects_found", "verdict"}) {
     EXPECT_EQ(a["metrics"][k], b["metrics"][k]) << k;
   }
+  // A bad name in an option says the option, not the scenario key it became.
+  const testing::CommandResult bad = testing::RunCommand(
+      testing::Flexbench() + " identify --quiet --declared " + testing::SourceDir() +
+      "/models/humanoid_upper.declared.yaml --calibration " +
+      (dir / "scenario" / "calibration_data.csv").string() + " --validation " +
+      (dir / "scenario" / "validation_data.csv").string() +
+      " --frame tracker --marker right_marker --unknown-marker-offset left_hand --out " +
+      (dir / "bad").string());
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(testing::LastLine(bad.err).find("flexbench: error: --unknown-marker-offset: "), 0u)
+      << bad.err;
   fs::remove_all(dir);
 }
 
