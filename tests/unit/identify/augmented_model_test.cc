@@ -85,6 +85,7 @@ std::vector<double> Values(const Candidate& c, std::mt19937_64& rng) {
       case EffectType::kLinkBending:
       case EffectType::kBaseCompliance:
       case EffectType::kStiffeningSpring:
+      case EffectType::kLateralCompliance:
         scale = 2e-3;
         break;
       case EffectType::kThermalExpansion:
@@ -107,6 +108,7 @@ std::vector<double> Values(const Candidate& c, std::mt19937_64& rng) {
   if (c.type == EffectType::kLinkBending) v[0] = std::abs(v[0]);
   if (c.type == EffectType::kBaseCompliance) v[0] = std::abs(v[0]), v[1] = std::abs(v[1]);
   if (c.type == EffectType::kPayload) v[0] = std::abs(v[0]);
+  if (c.type == EffectType::kLateralCompliance) v[0] = std::abs(v[0]), v[1] = std::abs(v[1]);
   return v;
 }
 
