@@ -251,7 +251,7 @@ class ChainBuilder {
   bool SkippedLateralHinge(int j) {
     const int J = LateralHingeOf(m_, j);
     if (J < 0 || !(Eigen::Map<const Vec3>(m_->jnt_pos + 3 * j) ==
-          Eigen::Map<const Vec3>(m_->jnt_pos + 3 * J))) {
+                   Eigen::Map<const Vec3>(m_->jnt_pos + 3 * J))) {
       return false;
     }
     if (const auto src = joint_sources_.find(j); src != joint_sources_.end()) {

@@ -410,8 +410,7 @@ void EffectiveChain::SetConstantSources() {
     source_fixed_[f] = declared_->frame(f).source_cov + u.frames[f];
     changed[f] = !u.frames[f].isZero(0.0);
     source_varies_[f] = (f == e.mount && !u.mount_compliance.isZero(0.0)) ||
-                        (u.bend[f] != 0.0 && e.frames[f].bend != 0.0) ||
-                        !u.lateral[f].isZero(0.0);
+                        (u.bend[f] != 0.0 && e.frames[f].bend != 0.0) || !u.lateral[f].isZero(0.0);
     if (e.on_path[f]) path_end_ = f;
   }
   if (u.thermal != 0.0 && path_end_ > 0) source_varies_[path_end_] = 1;
@@ -528,8 +527,8 @@ void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_rea
     if (!t.lateral.isZero(0.0)) {
       // About the joint's anchor, in the frame's axes before the joint moves: rel_ is
       // T_parent_ip Exp(zeta q), so the joint's own turn is R_ip^T rel_'s.
-      const Vec3 M = fr.T_parent_ip.rotation().transpose() * rel_[f].rotation() *
-                     moment(f, fr.joint.point);
+      const Vec3 M =
+          fr.T_parent_ip.rotation().transpose() * rel_[f].rotation() * moment(f, fr.joint.point);
       lateral_moment_[f] = Eigen::Vector2d(t.lateral_a.dot(M), t.lateral_b.dot(M));
     }
     if (f == e.mount && !e.mount_compliance.isZero(0.0)) {

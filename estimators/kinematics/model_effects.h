@@ -76,7 +76,7 @@ struct ModelEffects {
     // Per frame: covariance of the constant geometric terms (length, offset, origin, tilt,
     // thermal) as a twist at F_{i,p}, the frame's source position.
     std::vector<Mat6> frames;
-    std::vector<double> bend;  // per frame: variance of the link's bending compliance
+    std::vector<double> bend;              // per frame: variance of the link's bending compliance
     std::vector<Eigen::Vector2d> lateral;  // per frame: variances of its lateral compliances
     Eigen::Vector2d mount_compliance = Eigen::Vector2d::Zero();
     double thermal = 0.0;
@@ -199,9 +199,9 @@ class EffectiveChain {
   FrameId last_gravity_ = 0;          // gravity_ is needed up to here
   std::vector<FrameId> varying_frames_;  // ModelEffects::FrameVaries, in increasing order
   std::vector<lie::SE3> static_;         // per frame: the fixed part without load-driven terms
-  std::vector<Vec3> bend_;           // per frame: the link's bend (rotation vector, start's axes)
+  std::vector<Vec3> bend_;  // per frame: the link's bend (rotation vector, start's axes)
   std::vector<Eigen::Vector2d> lateral_moment_;  // per frame: M_a, M_b of its lateral compliance
-  Mat3 mount_R_ = Mat3::Identity();  // the mount's tilt at the reading, MountRotation
+  Mat3 mount_R_ = Mat3::Identity();              // the mount's tilt at the reading, MountRotation
   Eigen::Matrix2d J_mount_c_ = Eigen::Matrix2d::Zero();  // d mount tilt / d compliance
   // Parameter uncertainty (ModelEffects::Uncertainty) as PPOE sources.
   std::vector<Mat6> source_fixed_;   // per frame: declared source + the constant terms

@@ -62,10 +62,11 @@
 // b = -play/2; moments M are those of the weight itself, so plates and links that sag fit with
 // c > 0. The fit leaves every sign free.
 // Coupled joints (sim::DeclaredChain::couplings) are joint variables like the actuated ones, with
-// their own candidates (but no lateral compliance: a linkage's joint has no bearing of its own
-// to bend; EffectModel::skipped() lists it) (their own offset is the linkage's assembly offset: a parameter of its
-// own); a joint-level correction of a driver (offset, compliance, backlash, periodic errors)
-// moves the joints it drives as well, as the driver's true angle drives the linkage.
+// their own candidates (their own offset is the linkage's assembly offset: a parameter of its
+// own), but no lateral compliance: a linkage's joint has no bearing of its own to bend
+// (EffectModel::skipped() lists it). A joint-level correction of a driver (offset, compliance,
+// backlash, periodic errors) moves the joints it drives as well, as the driver's true angle
+// drives the linkage.
 // tau_J is the gravity torque the joint carries (MuJoCo masses, nominal configuration), M the
 // moment of the weight beyond a point, in the local frame. Loads are computed once per
 // configuration; a model without masses gives zero loads, and the load-driven candidates are
@@ -145,7 +146,7 @@ struct GravityTerms {
 
 // Gravity loads of one configuration (nominal model), in the frames the effects act in.
 struct ConfigLoads {
-  Eigen::VectorXd tau;          // per PPOE joint variable, N m
+  Eigen::VectorXd tau;  // per PPOE joint variable, N m
   // Per joint variable: the moment about its anchor of the weight beyond it, about its lateral
   // axes a and b (pre-motion), N m.
   Eigen::Matrix2Xd M_lat;
@@ -159,9 +160,9 @@ struct ConfigLoads {
   // Moment (base axes) per unit first moment m c of the payload about the end effector (ee
   // axes): the same at every point, as a couple. With the axes to carry it into each load.
   Mat3 M_first = Mat3::Zero();
-  Eigen::Matrix3Xd axis_base;  // joint axes, base coordinates
+  Eigen::Matrix3Xd axis_base;               // joint axes, base coordinates
   Eigen::Matrix3Xd lat_a_base, lat_b_base;  // joint lateral axes a, b, base coordinates
-  std::vector<Mat3> R_mid_T;   // base -> start-joint axes, per link
+  std::vector<Mat3> R_mid_T;                // base -> start-joint axes, per link
   Mat3 R_mount_T = Mat3::Identity();
   // For the mount's tilted equilibrium (kinematics::MountTilt), mount axes: the first moment of
   // its load about the pivot, the same of 1 kg at the end effector, the end effector's axes

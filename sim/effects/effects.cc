@@ -182,10 +182,10 @@ class LateralComplianceEffect : public Effect {
     const Vec3 expected = axis == 0 ? a : b;
     if ((Vec3(m->jnt_axis + 3 * h).normalized() - expected).norm() > 1e-9 ||
         (Vec3(m->jnt_pos + 3 * h) - Vec3(m->jnt_pos + 3 * J)).norm() > 1e-9) {
-      throw InputError(where() + ": '" + name + "' of " + s.model_name + " must sit at the anchor of '" +
-                       joint + "' with axis [" + Num(expected.x()) + " " + Num(expected.y()) + " " +
-                       Num(expected.z()) + "] (the identification's lateral axis " +
-                       (axis == 0 ? "a" : "b") + ")");
+      throw InputError(where() + ": '" + name + "' of " + s.model_name +
+                       " must sit at the anchor of '" + joint + "' with axis [" +
+                       Num(expected.x()) + " " + Num(expected.y()) + " " + Num(expected.z()) +
+                       "] (the identification's lateral axis " + (axis == 0 ? "a" : "b") + ")");
     }
     return h;
   }

@@ -324,8 +324,8 @@ class ClosedLoopKind : public ScenarioKind {
       }
       for (const identify::EffectModel::Skipped& sk : em_->skipped()) {
         if (!any && sk.name == spec) {
-          throw InputError(where + ": candidate effect '" + spec + "' is not offered: " +
-                           sk.reason);
+          throw InputError(where + ": candidate effect '" + spec +
+                           "' is not offered: " + sk.reason);
         }
       }
       if (!any) throw InputError(where + ": no candidate effect '" + spec + "' on this chain");

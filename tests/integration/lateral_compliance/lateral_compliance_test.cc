@@ -18,6 +18,7 @@
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/kinematics/model_effects.h"
+#include "estimators/lie/so3.h"
 #include "scenarios/identify/effect_model.h"
 #include "scenarios/identify/identify.h"
 #include "sim/declared_chain.h"
@@ -96,8 +97,8 @@ std::unique_ptr<Rig> MakeRig(const sim::EffectList& effects) {
   rig->sim = sim::Simulation::FromString(kArm, "arm_lateral.xml", effects);
   rig->declared = Declared();
   rig->chain = sim::BuildDeclaredChain(rig->sim->nominal_model(), rig->declared);
-  rig->em = std::make_unique<EffectModel>(rig->sim->nominal_model(), rig->chain,
-                                          rig->chain.end_effector);
+  rig->em =
+      std::make_unique<EffectModel>(rig->sim->nominal_model(), rig->chain, rig->chain.end_effector);
   return rig;
 }
 
@@ -148,10 +149,10 @@ void NominalMoment(const mjModel* m, const Eigen::VectorXd& q, Vec3* M, Vec3* a,
 TEST(LateralCompliance, StaticsBendTheHingesByTheWeightsMomentOverTheStiffness) {
   for (const double scale : {1.0, 5.0}) {
     const double ka = 900.0 * scale, kb = 1400.0 * scale;
-    auto sim = sim::Simulation::FromString(
-        kArm, "arm_lateral.xml",
-        Lateral("{stiffness_Nm_per_rad: {j2: [" + std::to_string(ka) + ", " + std::to_string(kb) +
-                "]}}"));
+    auto sim =
+        sim::Simulation::FromString(kArm, "arm_lateral.xml",
+                                    Lateral("{stiffness_Nm_per_rad: {j2: [" + std::to_string(ka) +
+                                            ", " + std::to_string(kb) + "]}}"));
     std::mt19937_64 rng(7);
     double worst_exact = 0.0, worst_first = 0.0;
     for (int t = 0; t < 10; ++t) {
@@ -174,9 +175,10 @@ TEST(LateralCompliance, StaticsBendTheHingesByTheWeightsMomentOverTheStiffness) 
         EXPECT_LT(err, 0.1 / scale) << "trial " << t << ": " << theta[i] << " vs " << first;
       }
     }
-    std::printf("k x %.0f: k theta vs the settled moment %.2g N m; theta vs nominal moment / k: "
-                "worst %.3g relative\n",
-                scale, worst_exact, worst_first);
+    std::printf(
+        "k x %.0f: k theta vs the settled moment %.2g N m; theta vs nominal moment / k: "
+        "worst %.3g relative\n",
+        scale, worst_exact, worst_first);
   }
 }
 
@@ -233,8 +235,7 @@ IdentifyResult IdentifyRows(const Rig& rig, const DataSet& cal) {
   IdentifyOptions opt;
   opt.point_std_m = kNoise;
   opt.threads = 1;
-  return Identify(*rig.em, cal, ComputeLoads(*rig.em, cal), testing::NamedCandidates(*rig.em),
-                  opt);
+  return Identify(*rig.em, cal, ComputeLoads(*rig.em, cal), testing::NamedCandidates(*rig.em), opt);
 }
 
 const FittedEffect* Found(const IdentifyResult& r, const std::string& name) {
@@ -262,8 +263,8 @@ TEST(LateralCompliance, IdentificationNamesItAndRecoversTheCompliances) {
     bool ok = true;
     for (int i = 0; i < 2; ++i) {
       const double truth = 1.0 / k[i], err = std::abs(e->value[i] - truth);
-      std::printf("  kappa_%c %.4g (std %.2g) vs %.4g: %.2f%%, %.1f std\n", "ab"[i], e->value[i],
-                  e->std[i], truth, 100 * err / truth, err / e->std[i]);
+      std::printf("  kappa_%c %.4g (std %.2g) vs %.4g: %.2f%%, %.1f std\n", "ab"[i], e -> value[i],
+                  e -> std[i], truth, 100 * err / truth, err / e -> std[i]);
       ok &= err <= 3.0 * e->std[i] || err <= 0.03 * truth;
     }
     recovered += ok;
@@ -336,6 +337,88 @@ TEST(LateralCompliance, DeclaredModelPredictsAsTheIdentificationModel) {
   EXPECT_GT(moved, 1e-3);
 }
 
+// The analytic derivatives (EffectModel::PoseTangents) of lateral_compliance@j2 and @j3 equal
+// central differences of PredictPose, with the family active itself, beside a tilt at the same
+// joint and a payload (its share of the moment).
+TEST(LateralCompliance, TangentsEqualCentralDifferences) {
+  auto rig = MakeRig({});
+  const EffectModel& em = *rig->em;
+  const int lat2 = em.FindCandidate("lateral_compliance@j2");
+  const int lat3 = em.FindCandidate("lateral_compliance@j3");
+  const int tilt = em.FindCandidate("joint_axis_tilt_b@j2");
+  const int payload = em.FindCandidate("payload@ee");
+  ASSERT_TRUE(lat2 >= 0 && lat3 >= 0 && tilt >= 0 && payload >= 0);
+  const std::vector<int> active = {lat2, tilt, payload};
+  const std::vector<double> theta = {4e-4, 2e-4, 0.01, 1.2, 0.02, -0.01, 0.03};
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  std::mt19937_64 rng(11);
+  for (int t = 0; t < 10; ++t) {
+    const Eigen::VectorXd q = 1.5 * RandomCommand(rng);
+    const ConfigLoads L = em.Loads(q);
+    for (const int c : {lat2, lat3}) {
+      ASSERT_TRUE(em.HasTangent(c, active));
+      EffectModel::Tangent tangent[2];
+      em.PoseTangents(q, L, active, theta.data(), {c}, ws, tangent);
+      std::vector<int> act = active;
+      act.push_back(c);
+      for (int k = 0; k < 2; ++k) {
+        const double h = em.candidates()[c].step;
+        std::vector<double> tp = theta, tm = theta;
+        tp.insert(tp.end(), {0.0, 0.0});
+        tm.insert(tm.end(), {0.0, 0.0});
+        tp[theta.size() + k] += h;
+        tm[theta.size() + k] -= h;
+        const lie::SE3 Tp = em.PredictPose(q, L, act, tp.data(), ws);
+        const lie::SE3 Tm = em.PredictPose(q, L, act, tm.data(), ws);
+        const Vec3 dp = (Tp.translation() - Tm.translation()) / (2 * h);
+        const Vec3 w = lie::SO3Log(Tp.rotation() * Tm.rotation().transpose()) / (2 * h);
+        EXPECT_LT((tangent[k].dp - dp).norm(), 1e-7 * (1.0 + dp.norm())) << c << " " << k;
+        EXPECT_LT((tangent[k].w - w).norm(), 1e-7 * (1.0 + w.norm())) << c << " " << k;
+        EXPECT_GT(dp.norm(), 1e-3) << "a vacuous column";
+      }
+    }
+  }
+}
+
+// What the augmented declared file says is what it was written from: lateral_compliance@J with
+// its values and stds, read back into the same corrected chain; the stds become the joint
+// frame's source, scaled by the moment at the reading.
+TEST(LateralCompliance, AugmentedFileRoundTrips) {
+  testing::TempDir tmp;
+  testing::WriteFile(tmp.path() / "arm_lateral.xml", kArm);
+  sim::DeclaredModel aug = Declared();
+  aug.model_path = (tmp.path() / "arm_lateral.xml").string();
+  aug.identified_effects = {
+      {"lateral_compliance@j2", {4e-4, 2.5e-4}, {1e-5, 2e-5}, "rad/Nm", "test:1", {}}};
+  testing::WriteFile(tmp.path() / "aug.declared.yaml", sim::EmitDeclaredModel(aug, "test", 17));
+  const sim::DeclaredModel back =
+      sim::LoadDeclaredModel((tmp.path() / "aug.declared.yaml").string());
+  ASSERT_EQ(back.identified_effects.size(), 1u);
+  EXPECT_EQ(back.identified_effects[0].effect, "lateral_compliance@j2");
+  sim::MjModelPtr m = sim::LoadModel(aug.model_path);
+  const sim::DeclaredChain a = sim::BuildDeclaredChain(m.get(), aug);
+  const sim::DeclaredChain b = sim::BuildDeclaredChain(m.get(), back);
+  kinematics::EffectiveChain ka(a.model, a.effects_or_null()), kb(b.model, b.effects_or_null());
+  kinematics::PpoeData pa(a.model), pb(b.model);
+  std::mt19937_64 rng(10);
+  const FrameId f = a.model.joint_frame(a.QIndex("j2"));
+  for (int t = 0; t < 5; ++t) {
+    const Eigen::VectorXd q = RandomCommand(rng);
+    ka.Update(q);
+    kb.Update(q);
+    kinematics::ForwardKinematics(ka.model(), pa, ka.q());
+    kinematics::ForwardKinematics(kb.model(), pb, kb.q());
+    EXPECT_LT((pa.T_base_frame[a.end_effector].translation() -
+               pb.T_base_frame[b.end_effector].translation())
+                  .norm(),
+              1e-15);
+    // The stds' share: rotation variance about a and b at j2's frame, std x moment.
+    const Mat3 C = kb.model().frame(f).source_cov.block<3, 3>(kRotIdx, kRotIdx);
+    EXPECT_GT(C.trace(), 0.0);
+    EXPECT_LT(std::sqrt(C.trace()), 2e-5 * 50.0);
+  }
+}
+
 TEST(LateralCompliance, NotOfferedAtACoupledJointAndListedAsSkipped) {
   sim::MjModelPtr m = sim::LoadModelFromString(kArm, "arm_lateral.xml");
   sim::DeclaredModel d = Declared();
@@ -368,8 +451,8 @@ TEST(LateralComplianceBadInput, UnknownJointMissingHingesNegativeStiffness) {
   const std::string unknown = InputErrorOf("{stiffness_Nm_per_rad: {j9: 800}}");
   EXPECT_NE(unknown.find("no joint named 'j9'"), std::string::npos) << unknown;
   const std::string missing = InputErrorOf("{stiffness_Nm_per_rad: {j3: 800}}");
-  for (const char* part : {"effect 'lateral_compliance'", "joint 'j3'", "'j3_lateral_a'",
-                           "'j3_lateral_b'"}) {
+  for (const char* part :
+       {"effect 'lateral_compliance'", "joint 'j3'", "'j3_lateral_a'", "'j3_lateral_b'"}) {
     EXPECT_NE(missing.find(part), std::string::npos) << missing;
   }
   for (const char* bad : {"{stiffness_Nm_per_rad: {j2: -5}}", "{stiffness_Nm_per_rad: {j2: [800]}}",
@@ -383,11 +466,11 @@ TEST(LateralComplianceBadInput, UnknownJointMissingHingesNegativeStiffness) {
 TEST(LateralComplianceBadInput, CommandLineExitsTwoWithOneLine) {
   testing::TempDir tmp;
   for (const char* set : {"elbow=-5", "wrist_pitch=800", "nope=800"}) {
-    const testing::CommandResult r = testing::RunCommand(
-        testing::Flexbench() + " run " + testing::SourceDir() +
-        "/scenarios/closed_loop_humanoid_tracker.yaml --quiet --out " +
-        (tmp.path() / "out").string() +
-        " --set truth.effects.lateral_compliance.stiffness_Nm_per_rad." + set);
+    const testing::CommandResult r =
+        testing::RunCommand(testing::Flexbench() + " run " + testing::SourceDir() +
+                            "/scenarios/closed_loop_humanoid_tracker.yaml --quiet --out " +
+                            (tmp.path() / "out").string() +
+                            " --set truth.effects.lateral_compliance.stiffness_Nm_per_rad." + set);
     EXPECT_EQ(r.exit_code, 2) << set << ": " << r.err;
     std::string err = r.err;
     while (!err.empty() && err.back() == '\n') err.pop_back();
