@@ -77,7 +77,7 @@ TEST(Models, LoadWithoutWarningsWithTheExpectedJoints) {
     int passive;
     int coupled;
   };
-  for (const Expect& e : {Expect{"rover_arm", 8, 7, 0}, Expect{"humanoid_upper", 19, 6, 2},
+  for (const Expect& e : {Expect{"rover_arm", 8, 7, 0}, Expect{"humanoid_upper", 19, 14, 2},
                           Expect{"jsk_arm", 4, 4, 0}}) {
     std::vector<std::string> warnings;
     MjModelPtr m = LoadModel(ModelPath(e.name), &warnings);
@@ -242,6 +242,7 @@ TEST(Effects, CompliantJointGroupsOffAreExactlyZero) {
   struct Case {
     std::string model, effect, joint, frame;
     std::map<std::string, double> pose;
+    std::string params = "";
   };
   const std::vector<Case> cases = {
       {"rover_arm", "base_compliance", "plate_pitch", "ee", kOutstretched},
@@ -254,6 +255,12 @@ TEST(Effects, CompliantJointGroupsOffAreExactlyZero) {
        "index_tip",
        {{"wrist_pitch", 30}}},
       {"jsk_arm", "link_bending", "link2_bend_y", "grasp_point", {{"link2_pitch_joint", 90}}},
+      {"humanoid_upper",
+       "lateral_compliance",
+       "elbow_lateral_a",
+       "index_tip",
+       {{"shoulder_roll", -60}},
+       "{stiffness_Nm_per_rad: 800}"},
   };
   for (const Case& c : cases) {
     // The effect off while every other compliance effect of the model is on.
@@ -272,7 +279,7 @@ TEST(Effects, CompliantJointGroupsOffAreExactlyZero) {
       }
     }
     auto off = Simulation::Load(ModelPath(c.model), Effects(others));
-    others.push_back({c.effect, ""});
+    others.push_back({c.effect, c.params});
     auto on = Simulation::Load(ModelPath(c.model), Effects(others));
     for (Simulation* s : {off.get(), on.get()}) {
       s->SetCommand(Command(*s, c.pose));
