@@ -184,6 +184,13 @@ TEST(Settle, StaticSolveEqualsMujocosDynamicEquilibrium) {
         {"wrist_yaw", 15}},
        "index_tip",
        1e-4},
+      // Bearing and housing compliance: the hinges' springs and their damping.
+      {"humanoid_upper",
+       {{"lateral_compliance",
+         "{stiffness_Nm_per_rad: {shoulder_pitch: [3000, 5000], elbow: 800}}"}},
+       {{"shoulder_roll", -60}, {"shoulder_pitch", -30}, {"elbow", -40}},
+       "right_marker",
+       1e-6},
   };
   for (const Case& c : cases) {
     auto sim = Simulation::Load(ModelPath(c.model), Effects(c.effects));
