@@ -6,6 +6,7 @@
 
 #include "estimators/error.h"
 #include "sim/declared_effects.h"
+#include "sim/model_catalog.h"
 #include "sim/mujoco_model.h"
 
 namespace flexbench::sim {
@@ -218,6 +219,7 @@ class ChainBuilder {
       const Vec3 axis = Eigen::Map<const Vec3>(m_->jnt_axis + 3 * j).normalized();
       // A coupled joint moves like an actuated one; its angle comes from its drivers.
       const bool actuated = actuated_.count(j) > 0 || coupled_.count(j) > 0;
+      if (!actuated && SkippedLateralHinge(j)) continue;
       Joint joint = Joint::Fixed();
       if (actuated) joint = type == mjJNT_HINGE ? Joint::Revolute(axis) : Joint::Prismatic(axis);
       const auto src = joint_sources_.find(j);
@@ -240,6 +242,26 @@ class ChainBuilder {
         out_->model.AddFrame(current, "body/" + ObjectName(m_, mjOBJ_BODY, b), pending, cov);
     body_frame_[b] = frame;
     return frame;
+  }
+
+  // A lateral compliance hinge (ModelCatalog's convention) at the anchor of its joint J adds no
+  // frame: locked at its reference it is the identity, and J's frame then carries the link as in
+  // a model without the hinges (the same candidates, names and bits). A declared source there is
+  // refused: J's frame is the place for it.
+  bool SkippedLateralHinge(int j) {
+    const int J = LateralHingeOf(m_, j);
+    if (J < 0 || !(Eigen::Map<const Vec3>(m_->jnt_pos + 3 * j) ==
+                   Eigen::Map<const Vec3>(m_->jnt_pos + 3 * J))) {
+      return false;
+    }
+    if (const auto src = joint_sources_.find(j); src != joint_sources_.end()) {
+      throw InputError(src->second.front()->where + ": source at '" + src->second.front()->at +
+                       "': a lateral compliance hinge is not in the declared chain; put the "
+                       "source at '" +
+                       ObjectName(m_, mjOBJ_JOINT, J) + "'");
+    }
+    used_joints_.insert(j);
+    return true;
   }
 
   const mjModel* m_;

@@ -38,6 +38,7 @@ const std::map<std::string, TypeInfo>& Types() {
       {"joint_error_curve", {6, false}},
       {"stiffening_spring", {2, true}},
       {"gravity_tilt", {2, true}},
+      {"lateral_compliance", {2, true}},
   };
   return types;
 }
@@ -199,6 +200,8 @@ class EffectsBuilder {
       for (size_t i = 0; i < v2.size(); ++i) j.harmonic[i] += v2[i];
     } else if (type == "link_bending") {
       u.bend[f] += v2[0];
+    } else if (type == "lateral_compliance") {
+      u.lateral[f] += Eigen::Vector2d(v2[0], v2[1]);
     } else {
       Fail(ie, "has no uncertainty model");  // Types() and this list disagree
     }
@@ -207,10 +210,9 @@ class EffectsBuilder {
   // The identification's tilt axes: a, the first of x, y not along the joint axis w, made
   // normal to w; b = w x a.
   static Vec3 TiltAxis(const Vec3& axis, bool a_axis) {
-    const Vec3 w = axis.normalized();
-    const Vec3 any = std::abs(w.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
-    const Vec3 a = (any - any.dot(w) * w).normalized();
-    return a_axis ? a : Vec3(w.cross(a));
+    Vec3 a, b;
+    kinematics::TiltAxes(axis, &a, &b);
+    return a_axis ? a : b;
   }
 
   void AddJointEffect(const IdentifiedEffect& ie, const std::string& type, const std::string& loc) {
@@ -246,6 +248,10 @@ class EffectsBuilder {
     } else if (type == "link_bending") {
       SetBendingLink(ie, f);
       e.frames[f].bend += v[0];
+    } else if (type == "lateral_compliance") {
+      ModelEffects::FrameTerms& t = e.frames[f];
+      t.lateral += Eigen::Vector2d(v[0], v[1]);
+      kinematics::TiltAxes(fr.joint.axis, &t.lateral_a, &t.lateral_b);
     }
   }
 

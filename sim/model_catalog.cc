@@ -112,6 +112,17 @@ void AssignEffectJoints(const mjModel* m, ModelCatalog* c) {
   }
 }
 
+// Hinges named by the lateral compliance convention belong to that effect unless a field lists
+// them under another.
+void ClaimLateralHinges(const mjModel* m, ModelCatalog* c) {
+  for (int j = 0; j < m->njnt; ++j) {
+    JointEntry& e = c->joints[j];
+    if (e.role == JointRole::kPassive && e.effect.empty() && LateralHingeOf(m, j) >= 0) {
+      e.effect = kLateralEffect;
+    }
+  }
+}
+
 void FindImuSites(const mjModel* m, ModelCatalog* c) {
   for (int s = 0; s < m->nsite; ++s) {
     bool gyro = false;
@@ -135,6 +146,7 @@ ModelCatalog ModelCatalog::Build(const mjModel* m, const std::string& model_name
   ReadCouplings(m, &c);
   ReadEffectFields(m, &c);
   AssignEffectJoints(m, &c);
+  ClaimLateralHinges(m, &c);
   FindImuSites(m, &c);
   return c;
 }
@@ -145,6 +157,21 @@ std::vector<int> ModelCatalog::JointsOfEffect(const std::string& effect) const {
     if (e.effect == effect) out.push_back(e.id);
   }
   return out;
+}
+
+std::string LateralHingeName(const std::string& joint, int axis) {
+  return joint + (axis == 0 ? "_lateral_a" : "_lateral_b");
+}
+
+int LateralHingeOf(const mjModel* m, int j) {
+  const std::string name = ObjectName(m, mjOBJ_JOINT, j);
+  constexpr size_t kSuffix = sizeof("_lateral_a") - 1;
+  if (name.size() <= kSuffix || m->jnt_type[j] != mjJNT_HINGE) return -1;
+  const std::string joint = name.substr(0, name.size() - kSuffix);
+  if (name != LateralHingeName(joint, 0) && name != LateralHingeName(joint, 1)) return -1;
+  const int J = mj_name2id(m, mjOBJ_JOINT, joint.c_str());
+  if (J <= j || m->jnt_bodyid[J] != m->jnt_bodyid[j] || m->jnt_type[J] != mjJNT_HINGE) return -1;
+  return J;
 }
 
 std::vector<std::string> ModelCatalog::ActuatedNames() const {

@@ -19,6 +19,7 @@ ModelEffects ModelEffects::None(const PpoeModel& model) {
   e.uncertainty.joints.assign(model.nq(), JointTerms{});
   e.uncertainty.frames.assign(model.num_frames(), Mat6::Zero());
   e.uncertainty.bend.assign(model.num_frames(), 0.0);
+  e.uncertainty.lateral.assign(model.num_frames(), Eigen::Vector2d::Zero());
   return e;
 }
 
@@ -35,6 +36,9 @@ bool ModelEffects::Uncertainty::empty() const {
   for (double b : bend) {
     if (b != 0.0) return false;
   }
+  for (const Eigen::Vector2d& l : lateral) {
+    if (!l.isZero(0.0)) return false;
+  }
   return mount_compliance.isZero(0.0) && thermal == 0.0;
 }
 
@@ -43,13 +47,14 @@ bool ModelEffects::NeedsLoads() const {
     if (j.backlash != 0.0 || j.compliance != 0.0 || j.cubic != 0.0) return true;
   }
   for (const FrameTerms& f : frames) {
-    if (f.bend != 0.0) return true;
+    if (f.bend != 0.0 || !f.lateral.isZero(0.0)) return true;
   }
   return !mount_compliance.isZero(0.0);
 }
 
 bool ModelEffects::FrameVaries(FrameId f) const {
-  return frames[f].bend != 0.0 || (f == mount && !mount_compliance.isZero(0.0));
+  return frames[f].bend != 0.0 || !frames[f].lateral.isZero(0.0) ||
+         (f == mount && !mount_compliance.isZero(0.0));
 }
 
 bool ModelEffects::empty() const {
@@ -263,6 +268,13 @@ Vec3 MountTilt(const Eigen::Vector2d& compliance, const Vec3& M0, const Vec3& fi
   return theta;
 }
 
+void TiltAxes(const Vec3& axis, Vec3* a, Vec3* b) {
+  const Vec3 w = axis.normalized();
+  const Vec3 any = std::abs(w.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+  *a = (any - any.dot(w) * w).normalized();
+  *b = w.cross(*a);
+}
+
 Mat3 MountRotation(const Vec3& theta) { return RotationFrom(TrigAt(theta)); }
 
 void GravityTiltAxes(const Vec3& g, Vec3* a1, Vec3* a2) {
@@ -316,6 +328,7 @@ EffectiveChain::EffectiveChain(const PpoeModel& declared, const ModelEffects* ef
   }
   static_.assign(n, lie::SE3());
   bend_.assign(n, Vec3::Zero());
+  lateral_moment_.assign(n, Eigen::Vector2d::Zero());
   for (FrameId f = 1; f < n; ++f) {
     const ModelEffects::FrameTerms& t = e.frames[f];
     const lie::SE3& T_ip = declared.frame(f).T_parent_ip;
@@ -367,6 +380,7 @@ void EffectiveChain::SetConstantLoads() {
   }
   for (const FrameId f : varying_frames_) {
     if (e.frames[f].bend != 0.0) last_gravity_ = std::max(last_gravity_, e.frames[f].bend_start);
+    if (!e.frames[f].lateral.isZero(0.0)) last_gravity_ = std::max(last_gravity_, f);
     if (f == e.mount) last_gravity_ = std::max(last_gravity_, model.frame(f).parent);
     last_rel_ = std::max(last_rel_, model.frame(f).parent);  // a bend's end: rel_ to its parent
   }
@@ -396,7 +410,7 @@ void EffectiveChain::SetConstantSources() {
     source_fixed_[f] = declared_->frame(f).source_cov + u.frames[f];
     changed[f] = !u.frames[f].isZero(0.0);
     source_varies_[f] = (f == e.mount && !u.mount_compliance.isZero(0.0)) ||
-                        (u.bend[f] != 0.0 && e.frames[f].bend != 0.0);
+                        (u.bend[f] != 0.0 && e.frames[f].bend != 0.0) || !u.lateral[f].isZero(0.0);
     if (e.on_path[f]) path_end_ = f;
   }
   if (u.thermal != 0.0 && path_end_ > 0) source_varies_[path_end_] = 1;
@@ -446,6 +460,14 @@ void EffectiveChain::UpdateSources(const Eigen::Ref<const Eigen::VectorXd>& q_re
           J_mount_c_ * u.mount_compliance.asDiagonal() * J_mount_c_.transpose();
     }
     if (u.bend[f] != 0.0) c.noalias() += u.bend[f] * bend_twist_[f] * bend_twist_[f].transpose();
+    if (!u.lateral[f].isZero(0.0)) {
+      // A turn about a (b) of M_a (M_b) per unit compliance, where the tilt acts.
+      const ModelEffects::FrameTerms& t = e.frames[f];
+      const Eigen::Vector2d& M = lateral_moment_[f];
+      c.block<3, 3>(kRotIdx, kRotIdx).noalias() +=
+          (u.lateral[f].x() * M.x() * M.x()) * t.lateral_a * t.lateral_a.transpose() +
+          (u.lateral[f].y() * M.y() * M.y()) * t.lateral_b * t.lateral_b.transpose();
+    }
     if (f == path_end_ && u.thermal != 0.0) {
       // Where the source sits (F_{f,p}), from the declared chain at the reading.
       const lie::SE3 T = nominal_.T_base_frame[fr.parent] * fr.T_parent_ip;
@@ -502,6 +524,13 @@ void EffectiveChain::ComputeLoads(const Eigen::Ref<const Eigen::VectorXd>& q_rea
       const Vec3 M = moment(p, 0.5 * end);
       bend_[f] = t.bend * (M - M.dot(t.bend_dir) * t.bend_dir);
     }
+    if (!t.lateral.isZero(0.0)) {
+      // About the joint's anchor, in the frame's axes before the joint moves: rel_ is
+      // T_parent_ip Exp(zeta q), so the joint's own turn is R_ip^T rel_'s.
+      const Vec3 M =
+          fr.T_parent_ip.rotation().transpose() * rel_[f].rotation() * moment(f, fr.joint.point);
+      lateral_moment_[f] = Eigen::Vector2d(t.lateral_a.dot(M), t.lateral_b.dot(M));
+    }
     if (f == e.mount && !e.mount_compliance.isZero(0.0)) {
       // The subtree's first moment about the mount's pivot, and gravity, in the pivot's axes.
       const Mat3& R_ip = fr.T_parent_ip.rotation();
@@ -523,7 +552,9 @@ void EffectiveChain::CorrectFrames() {
   for (const FrameId f : varying_frames_) {
     lie::SE3 local = e.frames[f].bend != 0.0 ? BentFixedPart(f) : static_[f];
     if (f == e.mount) local = lie::SE3(local.rotation() * mount_R_, local.translation());
-    const Vec3& tilt = e.frames[f].tilt;
+    const ModelEffects::FrameTerms& t = e.frames[f];
+    const Vec3 tilt = t.tilt + t.lateral.x() * lateral_moment_[f].x() * t.lateral_a +
+                      t.lateral.y() * lateral_moment_[f].y() * t.lateral_b;
     if (!tilt.isZero(0.0)) local = local * lie::SE3(lie::SO3Exp(tilt), Vec3::Zero());
     // The source stays where the static geometry put it: the load turns it by milliradians.
     effective_.SetFixedTransform(f, local, /*move_source=*/false);

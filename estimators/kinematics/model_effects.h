@@ -8,10 +8,13 @@
 //   joint angle   q = q_read + offset + sum_h (a_h cos h q_read + b_h sin h q_read)
 //                     + backlash * flank + compliance * tau + cubic * tau^3
 //   fixed part    T_parent_ip' = B * (R_ip, t_ip (1 + thermal) + dlen t_ip/|t_ip| + offset)
-//                 Exp(origin) * Exp(mount) * Exp(tilt)
+//                 Exp(origin) * Exp(mount) * Exp(tilt + kappa_a M_a a + kappa_b M_b b)
 //
 // where tau is the gravity torque the joint holds, B turns a bent link about its middle by
-// c * (the moment of the weight beyond it, across the link), and Exp(mount) tilts the arm's
+// c * (the moment of the weight beyond it, across the link), a joint's lateral compliance turns its
+// frame before the joint moves about its tilt axes a, b (TiltAxes) by kappa times the moment M of
+// the weight beyond the joint about its anchor (Tenhumberg & Bauml 2021's kappa_alpha,
+// kappa_beta), and Exp(mount) tilts the arm's
 // mount by C M at its loaded equilibrium (MountTilt). The loads come from the declared masses at
 // the nominal chain's configuration q_read (as the identification computes them), with the payload
 // as a mass on its frame. A backlash rests on the flank its gravity torque presses (the
@@ -58,6 +61,10 @@ struct ModelEffects {
     double bend = 0.0;             // rad / (N m) of the link from bend_start to this frame
     FrameId bend_start = -1;       // the joint frame where that link starts
     Vec3 bend_dir = Vec3::Zero();  // its direction in bend_start's coordinates (unit)
+    // Lateral compliance of the frame's joint, rad / (N m) about its tilt axes a and b (frame
+    // coordinates, TiltAxes), times the moment about them.
+    Eigen::Vector2d lateral = Eigen::Vector2d::Zero();
+    Vec3 lateral_a = Vec3::Zero(), lateral_b = Vec3::Zero();
   };
 
   // The identified parameters' variances (their stds squared; correlations between parameters
@@ -69,7 +76,8 @@ struct ModelEffects {
     // Per frame: covariance of the constant geometric terms (length, offset, origin, tilt,
     // thermal) as a twist at F_{i,p}, the frame's source position.
     std::vector<Mat6> frames;
-    std::vector<double> bend;  // per frame: variance of the link's bending compliance
+    std::vector<double> bend;              // per frame: variance of the link's bending compliance
+    std::vector<Eigen::Vector2d> lateral;  // per frame: variances of its lateral compliances
     Eigen::Vector2d mount_compliance = Eigen::Vector2d::Zero();
     double thermal = 0.0;
     bool empty() const;
@@ -141,6 +149,10 @@ void GravityTiltAxes(const Vec3& g, Vec3* a1, Vec3* a2);
 Vec3 GravityTiltWeights(double phi1, double phi2);
 Vec3 TiltedGravity(const Vec3& g, double phi1, double phi2);
 
+// The axes normal to a joint's axis w that its tilt and lateral compliance turn about: a, the
+// first of the frame's x, y not along w, made normal to w; b = w x a (frame coordinates).
+void TiltAxes(const Vec3& w, Vec3* a, Vec3* b);
+
 // The declared model at one joint reading with the effects applied: model() and q() are what an
 // estimator's kinematics use instead of the declared model and the reading. Without effects
 // (nullptr or empty) they are the declared model and the reading themselves.
@@ -187,8 +199,9 @@ class EffectiveChain {
   FrameId last_gravity_ = 0;          // gravity_ is needed up to here
   std::vector<FrameId> varying_frames_;  // ModelEffects::FrameVaries, in increasing order
   std::vector<lie::SE3> static_;         // per frame: the fixed part without load-driven terms
-  std::vector<Vec3> bend_;           // per frame: the link's bend (rotation vector, start's axes)
-  Mat3 mount_R_ = Mat3::Identity();  // the mount's tilt at the reading, MountRotation
+  std::vector<Vec3> bend_;  // per frame: the link's bend (rotation vector, start's axes)
+  std::vector<Eigen::Vector2d> lateral_moment_;  // per frame: M_a, M_b of its lateral compliance
+  Mat3 mount_R_ = Mat3::Identity();              // the mount's tilt at the reading, MountRotation
   Eigen::Matrix2d J_mount_c_ = Eigen::Matrix2d::Zero();  // d mount tilt / d compliance
   // Parameter uncertainty (ModelEffects::Uncertainty) as PPOE sources.
   std::vector<Mat6> source_fixed_;   // per frame: declared source + the constant terms

@@ -72,6 +72,8 @@ bool UniformBound(EffectType type, bool prismatic, double* lo, double* hi) {
     case EffectType::kLinkBending:
     case EffectType::kBaseCompliance:
       return set(0.0, 1.0);
+    case EffectType::kLateralCompliance:
+      return set(0.0, 1e-2);
     case EffectType::kThermalExpansion:
       return set(-1e-3, 1e-3);
     case EffectType::kPayload:  // the first moment; SetBounds bounds the mass
@@ -152,6 +154,8 @@ const char* ToString(EffectType type) {
       return "stiffening_spring";
     case EffectType::kGravityTilt:
       return "gravity_tilt";
+    case EffectType::kLateralCompliance:
+      return "lateral_compliance";
   }
   return "?";
 }
@@ -177,6 +181,7 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
   AddLinkBending();
   AddToolOffsets();
   AddChainWide(camera);
+  AddLateralCompliance();
   AddEvidenceFamilies();
   AddJointOrigins();
   FindCoupledDrivers();
@@ -255,10 +260,7 @@ void EffectModel::SetTiltAxes() {
   for (FrameId f = 1; f < n; ++f) {
     const kinematics::PpoeFrame& fr = model.frame(f);
     if (fr.q_index < 0) continue;
-    const Vec3 w = fr.joint.axis.normalized();
-    const Vec3 any = std::abs(w.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
-    tilt_a_[f] = (any - any.dot(w) * w).normalized();
-    tilt_b_[f] = w.cross(tilt_a_[f]);
+    kinematics::TiltAxes(fr.joint.axis, &tilt_a_[f], &tilt_b_[f]);
   }
 }
 
@@ -352,6 +354,26 @@ void EffectModel::AddChainWide(const std::string& camera) {
                1e-3, "kg, kg m");
 }
 
+// Bearing and housing compliance at each revolute joint; after the families that came before it,
+// so those keep their indices.
+void EffectModel::AddLateralCompliance() {
+  const kinematics::PpoeModel& model = chain_->model;
+  for (int k = 0; k < model.nq(); ++k) {
+    const FrameId f = model.joint_frame(k);
+    if (!on_path_[f] || model.frame(f).joint.type != kinematics::JointType::kRevolute) continue;
+    const std::string& name = chain_->q_joints[k];
+    if (chain_->IsCoupled(k)) {
+      skipped_.push_back({std::string(ToString(EffectType::kLateralCompliance)) + "@" + name,
+                          "'" + name +
+                              "' is a coupled joint: its angle follows a linkage, which has no "
+                              "bearing of its own to bend (lateral compliance of its drivers is "
+                              "offered)"});
+      continue;
+    }
+    AddCandidate(EffectType::kLateralCompliance, name, k, f, 2, 1e-7, "rad/Nm").after_named = true;
+  }
+}
+
 // Families that enter only when the residual diagnostics point at their joint; after the others,
 // so those keep their indices.
 void EffectModel::AddEvidenceFamilies() {
@@ -435,6 +457,7 @@ bool EffectModel::LoadsShift(const std::vector<int>& active) const {
       case EffectType::kBaseCompliance:
       case EffectType::kStiffeningSpring:
       case EffectType::kPayload:
+      case EffectType::kLateralCompliance:
         loaded = true;
         break;
       default:
@@ -465,6 +488,10 @@ void EffectModel::InitLoads(const Eigen::VectorXd& q, ConfigLoads* L) const {
   const int n = model.num_frames();
   L->tau = Eigen::VectorXd::Zero(model.nq());
   L->tau_unit = Eigen::VectorXd::Zero(model.nq());
+  L->M_lat = Eigen::Matrix2Xd::Zero(2, model.nq());
+  L->M_lat_unit = Eigen::Matrix2Xd::Zero(2, model.nq());
+  L->lat_a_base = Eigen::Matrix3Xd::Zero(3, model.nq());
+  L->lat_b_base = Eigen::Matrix3Xd::Zero(3, model.nq());
   L->M_mid.assign(n, Vec3::Zero());
   L->M_mid_unit.assign(n, Vec3::Zero());
   L->axis_base = Eigen::Matrix3Xd::Zero(3, model.nq());
@@ -531,9 +558,18 @@ void EffectModel::JointTorques(const LoadPose& P, const Vec3& g, GravityTerms* t
     const Vec3 axis = T.rotation() * fr.joint.axis;
     const Vec3 a = T * fr.joint.point;
     // The torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest).
-    t->tau[k] = -axis.dot(SubtreeMoment(P, frame_body_[f], a, g));
+    const Vec3 M = SubtreeMoment(P, frame_body_[f], a, g);
+    const Vec3 M_unit = UnitMoment(P.p_ee, a, g);
+    t->tau[k] = -axis.dot(M);
     L->axis_base.col(k) = axis;
-    t->tau_unit[k] = -axis.dot(UnitMoment(P.p_ee, a, g));
+    t->tau_unit[k] = -axis.dot(M_unit);
+    // The same moment about the lateral axes, which turn with the frame before the joint moves.
+    const Mat3 R_pre = P.pd.T_base_frame[fr.parent].rotation() * fr.T_parent_ip.rotation();
+    const Vec3 lat_a = R_pre * tilt_a_[f], lat_b = R_pre * tilt_b_[f];
+    L->lat_a_base.col(k) = lat_a;
+    L->lat_b_base.col(k) = lat_b;
+    t->M_lat.col(k) = Eigen::Vector2d(lat_a.dot(M), lat_b.dot(M));
+    t->M_lat_unit.col(k) = Eigen::Vector2d(lat_a.dot(M_unit), lat_b.dot(M_unit));
   }
 }
 
@@ -577,6 +613,8 @@ void EffectModel::GravityLoads(const LoadPose& P, const Vec3& g, GravityTerms* t
   const int n = chain_->model.num_frames();
   t->tau = Eigen::VectorXd::Zero(nq);
   t->tau_unit = Eigen::VectorXd::Zero(nq);
+  t->M_lat = Eigen::Matrix2Xd::Zero(2, nq);
+  t->M_lat_unit = Eigen::Matrix2Xd::Zero(2, nq);
   t->M_mid.assign(n, Vec3::Zero());
   t->M_mid_unit.assign(n, Vec3::Zero());
   JointTorques(P, g, t, L);
@@ -596,6 +634,8 @@ ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& 
   GravityLoads(P, P.g_base, &t, &L);
   L.tau = std::move(t.tau);
   L.tau_unit = std::move(t.tau_unit);
+  L.M_lat = std::move(t.M_lat);
+  L.M_lat_unit = std::move(t.M_lat_unit);
   L.M_mid = std::move(t.M_mid);
   L.M_mid_unit = std::move(t.M_mid_unit);
   L.M_mount = t.M_mount;
@@ -631,6 +671,8 @@ const ConfigLoads& EffectModel::TiltedLoads(const ConfigLoads& L, const std::vec
   ConfigLoads& T = ws.tilted;
   T.tau = w[0] * L.tau + w[1] * h1.tau + w[2] * h2.tau;
   T.tau_unit = w[0] * L.tau_unit + w[1] * h1.tau_unit + w[2] * h2.tau_unit;
+  T.M_lat = w[0] * L.M_lat + w[1] * h1.M_lat + w[2] * h2.M_lat;
+  T.M_lat_unit = w[0] * L.M_lat_unit + w[1] * h1.M_lat_unit + w[2] * h2.M_lat_unit;
   T.M_mid.resize(L.M_mid.size());
   T.M_mid_unit.resize(L.M_mid_unit.size());
   for (size_t f = 0; f < L.M_mid.size(); ++f) {
@@ -643,6 +685,8 @@ const ConfigLoads& EffectModel::TiltedLoads(const ConfigLoads& L, const std::vec
   T.M_first = w[0] * L.M_first + w[1] * h1.M_first + w[2] * h2.M_first;
   // The geometry stays.
   T.axis_base = L.axis_base;
+  T.lat_a_base = L.lat_a_base;
+  T.lat_b_base = L.lat_b_base;
   T.R_mid_T = L.R_mid_T;
   T.R_mount_T = L.R_mount_T;
   T.s_mount = L.s_mount;
@@ -692,6 +736,14 @@ inline double Flank(const ConfigLoads& L, int k, double tau) {
   return motion != 0.0 ? motion : tau > 1e-3 ? 1.0 : tau < -1e-3 ? -1.0 : 0.0;
 }
 
+// The moment about joint k's lateral axes (M_a, M_b) with the payload's share (its mass
+// `payload`, its couple in base axes).
+inline Eigen::Vector2d LateralLoadOf(const ConfigLoads& L, int k, double payload,
+                                     const Vec3& couple) {
+  return L.M_lat.col(k) + payload * L.M_lat_unit.col(k) +
+         Eigen::Vector2d(L.lat_a_base.col(k).dot(couple), L.lat_b_base.col(k).dot(couple));
+}
+
 // The stiffening spring's reference torque tau0 [N m].
 constexpr double kSpringTau0 = 10.0;
 
@@ -723,6 +775,12 @@ inline void AddLoadDriven(const Candidate& c, const ConfigLoads& L, double tau, 
 }
 
 }  // namespace
+
+Vec3 EffectModel::LateralTurn(const ConfigLoads& L, int k, FrameId f, const double* kappa,
+                              double payload, const Vec3& couple) const {
+  const Eigen::Vector2d M = LateralLoadOf(L, k, payload, couple);
+  return kappa[0] * M.x() * tilt_a_[f] + kappa[1] * M.y() * tilt_b_[f];
+}
 
 // The chain-wide terms of AccumulateTerms while the effects add up.
 struct EffectModel::ChainTerms {
@@ -768,6 +826,9 @@ inline void EffectModel::AddTerms(const Candidate& c, const Eigen::VectorXd& q,
       break;
     case EffectType::kAxisTilt:
       ws.tilt[c.frame] += t[0] * (c.axis ? tilt_b_[c.frame] : tilt_a_[c.frame]);
+      break;
+    case EffectType::kLateralCompliance:
+      ws.tilt[c.frame] += LateralTurn(L, c.q_index, c.frame, t, ct->payload, ct->couple);
       break;
     case EffectType::kLinkBending:
       ws.bend[c.frame] +=
@@ -1166,6 +1227,14 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
       out[0] = BodyTangent(st.T5, y5, Vec3::Zero(),
                            lie::SO3RightJacobian(ws.tilt[f]) * (c.axis ? tilt_b_[f] : tilt_a_[f]));
       break;
+    case EffectType::kLateralCompliance: {
+      // The tilt's rate, each axis's turn scaled by its moment (T5 = T4 Exp(tilt)).
+      const Mat3 Jr = lie::SO3RightJacobian(ws.tilt[f]);
+      const Eigen::Vector2d M = LateralLoadOf(L, c.q_index, ws.payload, ws.couple);
+      out[0] = BodyTangent(st.T5, y5, Vec3::Zero(), Jr * (Load(M.x()) * tilt_a_[f]));
+      out[1] = BodyTangent(st.T5, y5, Vec3::Zero(), Jr * (Load(M.y()) * tilt_b_[f]));
+      break;
+    }
     case EffectType::kBaseCompliance:
       BaseComplianceTangents(L, ws, st.T4, y4, out);
       break;

@@ -12,6 +12,11 @@
 //   joint_axis_tilt_a@J   rotation about a, the first of J's frame axes not along J's axis
 //   joint_axis_tilt_b@J   rotation about b = w x a; both before the joint moves [rad] (bearing
 //                         misalignment; two candidates, since data often sees only one)
+//   lateral_compliance@J  J's frame turns, before J moves, about a and b (joint_axis_tilt's
+//                         axes) by kappa_a M_a(q) and kappa_b M_b(q), M the moment of the
+//                         weight beyond J about J's anchor in J's pre-motion axes: bearing and
+//                         housing compliance (Tenhumberg & Bauml 2021, kappa_alpha and
+//                         kappa_beta)                         kappa_a, kappa_b [rad/(N m)]
 //   link_bending@J        the link from the previous joint to J turns by c * M_perp(q) about
 //                         its middle (Euler-Bernoulli beam under an end moment: the tip
 //                         turns like a hinge at mid-length)              c [rad/(N m)]
@@ -46,7 +51,9 @@
 // Physical bounds (Candidate::lower/upper; a fit outside them is not accepted): angles within
 // 10 deg (offsets, tilts, joint origins) and 5 deg (backlash half play, either sign: the flank
 // convention decides it), lengths within 0.1 m, a gear compliance c <= 0 (stiffness k = -1/c
-// > 0), plate and link compliances c >= 0 (they sag under their weight), |thermal strain| <=
+// > 0), plate, link and lateral compliances c >= 0 (they sag under their weight; a lateral
+// compliance at most 0.01 rad/(N m), a bearing stiffness of 100 N m/rad: 10 N m would tip the
+// joint by 6 deg, a broken joint rather than a compliant one), |thermal strain| <=
 // 1e-3 (about 80 K of steel), a payload mass in [-1 g, 100 kg] (a gram below zero is zero
 // within the fit's precision; the MUKCa-like data cannot separate it), its first moment within
 // 50 kg m, a camera within 0.5 m and 0.5 rad of its stated pose, gravity within 10 deg.
@@ -56,8 +63,10 @@
 // c > 0. The fit leaves every sign free.
 // Coupled joints (sim::DeclaredChain::couplings) are joint variables like the actuated ones, with
 // their own candidates (their own offset is the linkage's assembly offset: a parameter of its
-// own); a joint-level correction of a driver (offset, compliance, backlash, periodic errors)
-// moves the joints it drives as well, as the driver's true angle drives the linkage.
+// own), but no lateral compliance: a linkage's joint has no bearing of its own to bend
+// (EffectModel::skipped() lists it). A joint-level correction of a driver (offset, compliance,
+// backlash, periodic errors) moves the joints it drives as well, as the driver's true angle
+// drives the linkage.
 // tau_J is the gravity torque the joint carries (MuJoCo masses, nominal configuration), M the
 // moment of the weight beyond a point, in the local frame. Loads are computed once per
 // configuration; a model without masses gives zero loads, and the load-driven candidates are
@@ -95,6 +104,7 @@ enum class EffectType {
   kJointErrorCurve,
   kStiffeningSpring,
   kGravityTilt,
+  kLateralCompliance,
 };
 
 const char* ToString(EffectType type);
@@ -112,6 +122,11 @@ struct Candidate {
   bool needs_evidence = false;
   // Can represent any geometric error at its location; chosen after the named effects.
   bool generic_geometry = false;
+  // Chosen after the named effects (and what their diagnostics let in), before complete
+  // geometry: a lateral axis can be the axis of the joint before it through the same point (a
+  // shoulder's roll joint turned about the pitch axis is the pitch joint turning), so where a
+  // named family explains the data as well it is the one chosen.
+  bool after_named = false;
   // Physical bounds per parameter (empty: none); a fit outside them is not accepted.
   std::vector<double> lower, upper;
   std::string Name() const {
@@ -123,6 +138,7 @@ struct Candidate {
 // The parts of ConfigLoads that are linear in gravity, for one gravity vector.
 struct GravityTerms {
   Eigen::VectorXd tau, tau_unit;
+  Eigen::Matrix2Xd M_lat, M_lat_unit;
   std::vector<Vec3> M_mid, M_mid_unit;
   Vec3 M_mount = Vec3::Zero(), M_mount_unit = Vec3::Zero(), g_mount = Vec3::Zero();
   Mat3 M_first = Mat3::Zero();
@@ -130,18 +146,23 @@ struct GravityTerms {
 
 // Gravity loads of one configuration (nominal model), in the frames the effects act in.
 struct ConfigLoads {
-  Eigen::VectorXd tau;          // per PPOE joint variable, N m
+  Eigen::VectorXd tau;  // per PPOE joint variable, N m
+  // Per joint variable: the moment about its anchor of the weight beyond it, about its lateral
+  // axes a and b (pre-motion), N m.
+  Eigen::Matrix2Xd M_lat;
   std::vector<Vec3> M_mid;      // per joint frame: moment at its link's middle, start joint axes
   Vec3 M_mount = Vec3::Zero();  // about the first joint's anchor, its pre-motion axes
   // The same quantities for 1 kg at the end effector (payload sensitivity).
   Eigen::VectorXd tau_unit;
+  Eigen::Matrix2Xd M_lat_unit;
   std::vector<Vec3> M_mid_unit;
   Vec3 M_mount_unit = Vec3::Zero();
   // Moment (base axes) per unit first moment m c of the payload about the end effector (ee
   // axes): the same at every point, as a couple. With the axes to carry it into each load.
   Mat3 M_first = Mat3::Zero();
-  Eigen::Matrix3Xd axis_base;  // joint axes, base coordinates
-  std::vector<Mat3> R_mid_T;   // base -> start-joint axes, per link
+  Eigen::Matrix3Xd axis_base;               // joint axes, base coordinates
+  Eigen::Matrix3Xd lat_a_base, lat_b_base;  // joint lateral axes a, b, base coordinates
+  std::vector<Mat3> R_mid_T;                // base -> start-joint axes, per link
   Mat3 R_mount_T = Mat3::Identity();
   // For the mount's tilted equilibrium (kinematics::MountTilt), mount axes: the first moment of
   // its load about the pivot, the same of 1 kg at the end effector, the end effector's axes
@@ -178,6 +199,12 @@ class EffectModel {
 
   const kinematics::PpoeModel& chain() const { return chain_->model; }
   const std::vector<Candidate>& candidates() const { return candidates_; }
+  // Candidates a family cannot offer at a location, with the reason ("lateral_compliance@J":
+  // "J is a coupled joint ...").
+  struct Skipped {
+    std::string name, reason;
+  };
+  const std::vector<Skipped>& skipped() const { return skipped_; }
   int FindCandidate(const std::string& name) const;  // -1 when absent
   FrameId mount() const { return mount_; }
   const std::vector<FrameId>& points() const { return points_; }
@@ -288,6 +315,7 @@ class EffectModel {
   void AddLinkBending();
   void AddToolOffsets();
   void AddChainWide(const std::string& camera);
+  void AddLateralCompliance();
   void AddEvidenceFamilies();
   void AddJointOrigins();
   void FindCoupledDrivers();  // drives_coupled_
@@ -324,6 +352,10 @@ class EffectModel {
   void MountLoads(const LoadPose& P, const Vec3& g, GravityTerms* t, ConfigLoads* L) const;
   // The load a load-driven effect at joint k answers to (tau_J with the payload's share).
   double JointLoad(const ConfigLoads& L, int k, const Workspace& ws) const;
+  // The rotation vector (frame f's pre-motion axes) of lateral compliances kappa at joint
+  // variable k under the loads L with the payload's share.
+  Vec3 LateralTurn(const ConfigLoads& L, int k, FrameId f, const double* kappa, double payload,
+                   const Vec3& couple) const;
   // Whether frame f lies on a link that an active link_bending turns: the bend's pivot (the
   // link's middle) moves when f's translation does (`at_bend`: f's own bend counts too).
   bool OnBentLink(FrameId f, const std::vector<int>& active, bool at_bend) const;
@@ -357,6 +389,7 @@ class EffectModel {
   FrameId mount_ = 0;
   bool has_masses_ = false;
   std::vector<Candidate> candidates_;
+  std::vector<Skipped> skipped_;
   int gravity_tilt_ = -1;              // the gravity_tilt candidate, -1 without one
   std::vector<char> drives_coupled_;   // per joint variable: it drives a coupled joint
   std::vector<char> on_path_;          // frames between the base and the point frame

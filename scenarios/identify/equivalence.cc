@@ -156,6 +156,10 @@ void FindEquivalents(const EffectModel& em, const DataSet& data,
         // A full joint-origin recalibration can make any geometric correction at its joint;
         // naming it beside every geometric finding says nothing.
         if (em.candidates()[c].generic_geometry && !generic) continue;
+        // A lateral compliance (chosen after the named effects) beside a named effect: where its
+        // axis is the axis of the joint before it through the same point, it is that joint's
+        // compliance by construction, not a competing cause.
+        if (em.candidates()[c].after_named && !em.candidates()[ce].after_named) continue;
         // Likewise the wider families that need evidence (a stiffening spring contains the
         // linear one, the error curve the transmission error) beside a narrower chosen one.
         if (em.candidates()[c].needs_evidence &&

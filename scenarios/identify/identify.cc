@@ -18,13 +18,17 @@
 namespace flexbench::identify {
 namespace {
 
-// Candidates by stage: physically named ones first, those that need evidence, complete geometry.
+// Candidates by stage: physically named ones first, those that need evidence, those chosen after
+// the named ones, complete geometry.
 std::vector<int> Pool(const EffectModel& em, const std::vector<int>& candidates, bool evidence,
-                      bool generic) {
+                      bool generic, bool after_named = false) {
   std::vector<int> out;
   for (int c : candidates) {
     const Candidate& cand = em.candidates()[c];
-    if (cand.needs_evidence == evidence && cand.generic_geometry == generic) out.push_back(c);
+    if (cand.needs_evidence == evidence && cand.generic_geometry == generic &&
+        cand.after_named == after_named) {
+      out.push_back(c);
+    }
   }
   return out;
 }
@@ -403,6 +407,11 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   }
   Fit cur = SelectEffects(ctx, res.before, Pool(em, candidates, false, false), true, &cv);
   cur = FollowFinding(ctx, candidates, std::move(cur), &cv, &res);
+  const std::vector<int> after_named = Pool(em, candidates, false, false, true);
+  if (!after_named.empty()) {
+    res.steps.push_back("beyond the named effects: lateral joint compliance");
+    cur = SelectEffects(ctx, cur, after_named, false, &cv);
+  }
   const std::vector<int> generic = Pool(em, candidates, false, true);
   // Always tried: a cap limits what forward selection adds, never whether the joint origins are
   // looked at (the block is one step, kept only when the held-out error falls).

@@ -1,9 +1,11 @@
 // The effects catalogue. Each class edits only the TruthSetup; the simulation does the rest.
 #include <Eigen/Eigenvalues>
+#include <array>
 #include <cmath>
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/kinematics/model_effects.h"
 #include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
 
@@ -86,6 +88,111 @@ template <const char* kGroup>
 std::unique_ptr<Effect> MakeGroup() {
   return std::make_unique<JointGroupEffect>(kGroup);
 }
+
+// ---- Lateral joint compliance: bearing and housing of a joint bend about the two axes normal to
+// its own under the weight beyond it (Tenhumberg & Bauml 2021, kappa_alpha / kappa_beta). The
+// MJCF provides the passive hinges (ModelCatalog's lateral convention); this releases them with
+// the given stiffness, and the statics settle them.
+//   lateral_compliance: {stiffness_Nm_per_rad: {shoulder_pitch: [k_a, k_b], elbow: 800}}
+// A scalar is both axes; a scalar in place of the map is every joint the model has hinges at.
+class LateralComplianceEffect : public Effect {
+ public:
+  void Configure(const ComponentParams& p) override {
+    const ConfigNode c = p.Require("stiffness_Nm_per_rad");
+    if (!c.IsMap()) {
+      all_ = Stiffness(c);
+      return;
+    }
+    for (const std::string& j : c.Keys()) per_joint_[j] = Stiffness(c.Child(j));
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (!c.JointsOfEffect(kLateralEffect).empty()) return true;
+    *why = "no passive hinges J_lateral_a, J_lateral_b before a joint J in its body";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    std::map<std::string, std::array<double, 2>> k = per_joint_;
+    if (per_joint_.empty()) {
+      for (int h : s.catalog->JointsOfEffect(kLateralEffect)) {
+        k[s.catalog->Joint(LateralHingeOf(s.model, h)).name] = all_;
+      }
+      if (k.empty()) {
+        throw InputError(where() + ": " + s.model_name +
+                         " has no lateral hinges (J_lateral_a, J_lateral_b before a joint J)");
+      }
+    }
+    for (const auto& [joint, stiffness] : k) {
+      const int J = mj_name2id(s.model, mjOBJ_JOINT, joint.c_str());
+      if (J < 0) {
+        throw InputError(where() + ": " + s.model_name + " has no joint named '" + joint + "'");
+      }
+      for (int axis = 0; axis < 2; ++axis) {
+        const int h = Hinge(s, joint, J, axis);
+        s.model->jnt_stiffness[h] = stiffness[axis];
+        s.released[h] = 1;
+      }
+    }
+  }
+  std::string Describe() const override {
+    std::string d = per_joint_.empty() ? "stiffness_Nm_per_rad=" + Num(all_[0]) : "";
+    for (const auto& [j, v] : per_joint_) {
+      d += (d.empty() ? "" : " ") + j + "=[" + Num(v[0]) + "," + Num(v[1]) + "]";
+    }
+    return d;
+  }
+
+ private:
+  // [k_a, k_b] from a scalar or a pair, each > 0.
+  static std::array<double, 2> Stiffness(const ConfigNode& v) {
+    std::vector<double> k;
+    if (v.IsSequence()) {
+      k = v.AsDoubleList();
+      if (k.size() != 2) v.Fail("expected a stiffness or [k_a, k_b] in N m/rad");
+    } else {
+      k = {v.AsDouble(), v.AsDouble()};
+    }
+    for (double x : k) {
+      if (!(x > 0) || !std::isfinite(x)) v.Fail("must be > 0 (N m/rad)");
+    }
+    return {k[0], k[1]};
+  }
+
+  // J's hinge about axis a (0) or b (1), checked against the convention the identification's
+  // lateral_compliance@J assumes: in J's body before J, at J's anchor, about its axis.
+  int Hinge(const TruthSetup& s, const std::string& joint, int J, int axis) const {
+    const mjModel* m = s.model;
+    const std::string name = LateralHingeName(joint, axis);
+    const int h = mj_name2id(m, mjOBJ_JOINT, name.c_str());
+    const std::string missing =
+        std::string(h < 0 ? "'" + name + "'" : "") +
+        (mj_name2id(m, mjOBJ_JOINT, LateralHingeName(joint, 1 - axis).c_str()) < 0
+             ? std::string(h < 0 ? ", " : "") + "'" + LateralHingeName(joint, 1 - axis) + "'"
+             : "");
+    if (!missing.empty()) {
+      throw InputError(where() + ": joint '" + joint + "' of " + s.model_name +
+                       " lacks the lateral hinge(s) " + missing +
+                       " (passive hinges in its body, listed before it, at its anchor)");
+    }
+    if (LateralHingeOf(m, h) != J || s.catalog->Joint(h).role != JointRole::kPassive) {
+      throw InputError(where() + ": '" + name + "' of " + s.model_name +
+                       " is not a passive hinge in the body of '" + joint + "' listed before it");
+    }
+    Vec3 a, b;
+    kinematics::TiltAxes(Vec3(m->jnt_axis + 3 * J), &a, &b);
+    const Vec3 expected = axis == 0 ? a : b;
+    if ((Vec3(m->jnt_axis + 3 * h).normalized() - expected).norm() > 1e-9 ||
+        (Vec3(m->jnt_pos + 3 * h) - Vec3(m->jnt_pos + 3 * J)).norm() > 1e-9) {
+      throw InputError(where() + ": '" + name + "' of " + s.model_name +
+                       " must sit at the anchor of '" + joint + "' with axis [" +
+                       Num(expected.x()) + " " + Num(expected.y()) + " " + Num(expected.z()) +
+                       "] (the identification's lateral axis " + (axis == 0 ? "a" : "b") + ")");
+    }
+    return h;
+  }
+
+  std::array<double, 2> all_{0.0, 0.0};
+  std::map<std::string, std::array<double, 2>> per_joint_;
+};
 
 // ---- Gear elasticity between motor (encoder) and link: a torsional spring per actuated joint.
 class JointComplianceEffect : public Effect {
@@ -532,6 +639,11 @@ const std::vector<EffectEntry>& EffectRegistry() {
        MakeGroup<kCameraSag>},
       {kWrist, "wrist is a nonlinear linkage: coupled joints follow the actuated ones (scale)",
        MakeGroup<kWrist>},
+      {kLateralEffect,
+       "bearing and housing of a joint bend about the two axes normal to its own: releases the "
+       "MJCF's passive hinges J_lateral_a, J_lateral_b (stiffness_Nm_per_rad: {J: [k_a, k_b]}; "
+       "identification reports compliances 1/k, rad/Nm)",
+       Make<LateralComplianceEffect>},
       {"joint_compliance",
        "gear elasticity between motor encoder and link (stiffness_Nm_per_rad; identification "
        "reports its inverse, rad/Nm)",

@@ -85,6 +85,30 @@ void BM_Identify(benchmark::State& state) {
 // Arg 1: cross-validated selection (the default); arg 0: BIC only.
 BENCHMARK(BM_Identify)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->Iterations(1);
 
+// What the lateral compliance family costs: identification over every candidate of the rover
+// (Arg 1) against the same without lateral_compliance (Arg 0), all stages on; the family's
+// columns are analytic (EffectModel::PoseTangents) and its loads come with the joint torques.
+void BM_IdentifyLateralFamily(benchmark::State& state) {
+  Setup& s = Rover();
+  std::vector<int> candidates;
+  for (size_t i = 0; i < s.em->candidates().size(); ++i) {
+    if (state.range(0) == 0 && s.em->candidates()[i].type == EffectType::kLateralCompliance) {
+      continue;
+    }
+    candidates.push_back(static_cast<int>(i));
+  }
+  size_t found = 0;
+  for (auto _ : state) {
+    const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
+    const IdentifyResult r = Identify(*s.em, s.data, loads, candidates, IdentifyOptions());
+    found = r.effects.size();
+    benchmark::DoNotOptimize(found);
+  }
+  state.counters["candidates"] = candidates.size();
+  state.counters["effects_found"] = found;
+}
+BENCHMARK(BM_IdentifyLateralFamily)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->Iterations(1);
+
 void BM_Predict(benchmark::State& state) {
   Setup& s = Rover();
   const std::vector<int> active = {s.em->FindCandidate("joint_compliance@j2"),

@@ -326,6 +326,12 @@ class ClosedLoopKind : public ScenarioKind {
           any = true;
         }
       }
+      for (const identify::EffectModel::Skipped& sk : em_->skipped()) {
+        if (!any && sk.name == spec) {
+          throw InputError(where + ": candidate effect '" + spec +
+                           "' is not offered: " + sk.reason);
+        }
+      }
       if (!any) throw InputError(where + ": no candidate effect '" + spec + "' on this chain");
     }
   }
@@ -458,6 +464,16 @@ class ClosedLoopKind : public ScenarioKind {
     }
     (*m)["cal_group_distances_fitted_m"] = fitted_distances;
     (*m)["unidentifiable"] = res.unidentifiable;
+    // Families a location cannot offer (only where there are some: earlier results stay as
+    // they were).
+    if (!em_->skipped().empty()) {
+      Json skipped = Json::array();
+      for (const identify::EffectModel::Skipped& sk : em_->skipped()) {
+        skipped.push_back({{"candidate", sk.name}, {"reason", sk.reason}});
+        ctx.log("skipped candidate " + sk.name + ": " + sk.reason);
+      }
+      (*m)["skipped_candidates"] = skipped;
+    }
     (*m)["indistinguishable"] = res.indistinguishable;
     verdict_ = identify::Verdict(res, (*m)["val_err_before_m"].get<double>(),
                                  (*m)["val_err_after_m"].get<double>());
@@ -736,7 +752,8 @@ class ClosedLoopKind : public ScenarioKind {
   static bool IsLoadDriven(identify::EffectType t) {
     using T = identify::EffectType;
     return t == T::kJointCompliance || t == T::kBacklash || t == T::kLinkBending ||
-           t == T::kBaseCompliance || t == T::kPayload || t == T::kStiffeningSpring;
+           t == T::kBaseCompliance || t == T::kPayload || t == T::kStiffeningSpring ||
+           t == T::kLateralCompliance;
   }
 
   // The fitted tracker pose against the truth's: the error of xi (T = T_ref Exp(xi)) under the

@@ -446,6 +446,22 @@ TEST(CoupledJoints, IdentifyCliReadsCsvWithoutCoupledColumns) {
   const std::string aug = testing::ReadFile(dir / "out" / "declared_augmented.yaml");
   EXPECT_NE(aug.find("coupled:\n  j4: {j2: -1, j3: -1}\n  j5: mjcf\n"), std::string::npos) << aug;
   EXPECT_NE(aug.find("joint_offset@j4"), std::string::npos) << aug;
+  // Lateral compliance is not offered at the coupled joints: the report lists it, with why.
+  const std::string summary = testing::ReadFile(dir / "out" / "summary.json");
+  for (const char* skipped : {"\"candidate\": \"lateral_compliance@j4\"",
+                              "\"candidate\": \"lateral_compliance@j5\"", "is a coupled joint"}) {
+    EXPECT_NE(summary.find(skipped), std::string::npos) << skipped;
+  }
+  // Asked for by name, it is bad input naming the reason.
+  const testing::CommandResult s = testing::RunCommand(
+      testing::BinDir() + "/flexbench identify --declared " + (dir / "arm.declared.yaml").string() +
+      " --calibration " + (dir / "cal.csv").string() + " --validation " +
+      (dir / "val.csv").string() + " --candidates lateral_compliance@j4 --out " +
+      (dir / "out_s").string() + " --quiet");
+  EXPECT_EQ(s.exit_code, 2) << s.err;
+  EXPECT_NE(s.err.find("'lateral_compliance@j4' is not offered: 'j4' is a coupled joint"),
+            std::string::npos)
+      << s.err;
   // The readings' noise (reading_std_deg) reaches the coupled joints through their drivers.
   const testing::CommandResult n = testing::RunCommand(
       testing::BinDir() + "/flexbench identify --declared " + (dir / "arm.declared.yaml").string() +

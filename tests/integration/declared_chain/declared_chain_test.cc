@@ -187,6 +187,52 @@ TEST(DeclaredChain, ActuatedJointsOffTheChainsStillGetTheirBranch) {
   ExpectChainMatchesMujoco(m.get(), chain, 5);
 }
 
+// Lateral compliance hinges (sim::LateralHingeOf's convention) at an anchor off the body origin
+// in a turned body: held at their reference they add no frame, and the chain still matches
+// MuJoCo; a source there is refused with the joint to put it at.
+constexpr char kLateralXml[] = R"(<mujoco><compiler angle="radian"/>
+  <worldbody>
+    <body name="torso" pos="0.1 0.2 0.3" euler="0.1 0.2 0.3">
+      <joint name="waist" type="hinge" axis="0 0 1"/>
+      <geom type="box" size=".1 .1 .1"/>
+      <body name="arm" pos="0.3 0 0" quat="0.9 0.1 0.3 0.2">
+        <joint name="a1_lateral_a" type="hinge" axis="0 1 0" pos="0 0.1 0.02"/>
+        <joint name="a1_lateral_b" type="hinge" axis="0 0 1" pos="0 0.1 0.02"/>
+        <joint name="a1" type="hinge" axis="1 0 0" pos="0 0.1 0.02"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02"/>
+        <site name="tip" pos="0.3 0.01 -0.02" euler="0.3 0.2 0.1"/>
+      </body>
+    </body>
+  </worldbody></mujoco>)";
+
+TEST(DeclaredChain, LateralHingesAddNoFrameAndStayAtTheirReference) {
+  MjModelPtr m = LoadModelFromString(kLateralXml);
+  DeclaredModel d;
+  d.file = "lateral.declared.yaml";
+  d.model_path = "lateral.xml";
+  d.actuated_joints = {"waist", "a1"};
+  d.end_effector = "tip";
+  const DeclaredChain chain = BuildDeclaredChain(m.get(), d);
+  EXPECT_FALSE(chain.model.HasFrame("joint/a1_lateral_a"));
+  EXPECT_FALSE(chain.model.HasFrame("joint/a1_lateral_b"));
+  EXPECT_TRUE(chain.model.HasFrame("joint/a1"));
+  ExpectChainMatchesMujoco(m.get(), chain, 20);
+  DeclaredSource s;
+  s.at = "a1_lateral_b";
+  s.about_axis_rad = 0.01;
+  s.where = "lateral.declared.yaml:7";
+  d.sources.push_back(s);
+  try {
+    BuildDeclaredChain(m.get(), d);
+    ADD_FAILURE() << "a source at a lateral hinge was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("lateral.declared.yaml:7: source at 'a1_lateral_b'"),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("'a1'"), std::string::npos) << e.what();
+  }
+}
+
 TEST(DeclaredModelFile, FormatErrorsNameFileLineAndKey) {
   testing::TempDir tmp;
   const auto path = tmp.path() / "x.declared.yaml";

@@ -77,7 +77,7 @@ TEST(Models, LoadWithoutWarningsWithTheExpectedJoints) {
     int passive;
     int coupled;
   };
-  for (const Expect& e : {Expect{"rover_arm", 8, 7, 0}, Expect{"humanoid_upper", 19, 6, 2},
+  for (const Expect& e : {Expect{"rover_arm", 8, 7, 0}, Expect{"humanoid_upper", 19, 14, 2},
                           Expect{"jsk_arm", 4, 4, 0}}) {
     std::vector<std::string> warnings;
     MjModelPtr m = LoadModel(ModelPath(e.name), &warnings);
@@ -184,6 +184,13 @@ TEST(Settle, StaticSolveEqualsMujocosDynamicEquilibrium) {
         {"wrist_yaw", 15}},
        "index_tip",
        1e-4},
+      // Bearing and housing compliance: the hinges' springs and their damping.
+      {"humanoid_upper",
+       {{"lateral_compliance",
+         "{stiffness_Nm_per_rad: {shoulder_pitch: [3000, 5000], elbow: 800}}"}},
+       {{"shoulder_roll", -60}, {"shoulder_pitch", -30}, {"elbow", -40}},
+       "right_marker",
+       1e-6},
   };
   for (const Case& c : cases) {
     auto sim = Simulation::Load(ModelPath(c.model), Effects(c.effects));
@@ -242,6 +249,7 @@ TEST(Effects, CompliantJointGroupsOffAreExactlyZero) {
   struct Case {
     std::string model, effect, joint, frame;
     std::map<std::string, double> pose;
+    std::string params = "";
   };
   const std::vector<Case> cases = {
       {"rover_arm", "base_compliance", "plate_pitch", "ee", kOutstretched},
@@ -254,6 +262,12 @@ TEST(Effects, CompliantJointGroupsOffAreExactlyZero) {
        "index_tip",
        {{"wrist_pitch", 30}}},
       {"jsk_arm", "link_bending", "link2_bend_y", "grasp_point", {{"link2_pitch_joint", 90}}},
+      {"humanoid_upper",
+       "lateral_compliance",
+       "elbow_lateral_a",
+       "index_tip",
+       {{"shoulder_roll", -60}},
+       "{stiffness_Nm_per_rad: 800}"},
   };
   for (const Case& c : cases) {
     // The effect off while every other compliance effect of the model is on.
@@ -272,7 +286,7 @@ TEST(Effects, CompliantJointGroupsOffAreExactlyZero) {
       }
     }
     auto off = Simulation::Load(ModelPath(c.model), Effects(others));
-    others.push_back({c.effect, ""});
+    others.push_back({c.effect, c.params});
     auto on = Simulation::Load(ModelPath(c.model), Effects(others));
     for (Simulation* s : {off.get(), on.get()}) {
       s->SetCommand(Command(*s, c.pose));

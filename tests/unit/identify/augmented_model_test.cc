@@ -85,6 +85,7 @@ std::vector<double> Values(const Candidate& c, std::mt19937_64& rng) {
       case EffectType::kLinkBending:
       case EffectType::kBaseCompliance:
       case EffectType::kStiffeningSpring:
+      case EffectType::kLateralCompliance:
         scale = 2e-3;
         break;
       case EffectType::kThermalExpansion:
@@ -107,6 +108,7 @@ std::vector<double> Values(const Candidate& c, std::mt19937_64& rng) {
   if (c.type == EffectType::kLinkBending) v[0] = std::abs(v[0]);
   if (c.type == EffectType::kBaseCompliance) v[0] = std::abs(v[0]), v[1] = std::abs(v[1]);
   if (c.type == EffectType::kPayload) v[0] = std::abs(v[0]);
+  if (c.type == EffectType::kLateralCompliance) v[0] = std::abs(v[0]), v[1] = std::abs(v[1]);
   return v;
 }
 
@@ -260,6 +262,7 @@ TEST(AugmentedModelEstimators, EveryEstimatorPredictsWithTheCorrectedModel) {
       {"link_bending@j3", {0.003}, {}, "rad/Nm", "t:3", {}},
       {"base_compliance@j1", {0.002, 0.003}, {}, "rad/Nm", "t:4", {}},
       {"link_offset@ee", {0.004, -0.003, 0.002}, {}, "m", "t:5", {}},
+      {"lateral_compliance@j2", {0.002, 0.001}, {}, "rad/Nm", "t:6", {}},
   };
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
   const Eigen::VectorXd q = (Eigen::VectorXd(4) << 0.3, -0.6, 0.9, 0.2).finished();
@@ -309,7 +312,8 @@ TEST(AugmentedModelEstimators, FkEqualsTheIdentificationPrediction) {
   sim::DeclaredModel aug = rig->declared;
   aug.identified_effects = {
       {"joint_offset@j3", {-0.01}, {}, "rad", "t:1", {}},
-      {"base_compliance@base_plate", {0.001, 0.0005}, {}, "rad/Nm", "t:2", {}}};
+      {"base_compliance@base_plate", {0.001, 0.0005}, {}, "rad/Nm", "t:2", {}},
+      {"lateral_compliance@j3", {4e-4, 3e-4}, {}, "rad/Nm", "t:3", {}}};
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
   estimators::EstimatorSetup s;
   s.model = &chain.model;
@@ -319,10 +323,12 @@ TEST(AugmentedModelEstimators, FkEqualsTheIdentificationPrediction) {
   std::mt19937_64 rng(5);
   EffectModel::Workspace ws = rig->em->MakeWorkspace();
   const std::vector<int> active = {rig->em->FindCandidate("joint_offset@j3"),
-                                   rig->em->FindCandidate("base_compliance@base_plate")};
+                                   rig->em->FindCandidate("base_compliance@base_plate"),
+                                   rig->em->FindCandidate("lateral_compliance@j3")};
   ASSERT_GE(active[0], 0);
   ASSERT_GE(active[1], 0);
-  const double theta[] = {-0.01, 0.001, 0.0005};
+  ASSERT_GE(active[2], 0);
+  const double theta[] = {-0.01, 0.001, 0.0005, 4e-4, 3e-4};
   for (const Eigen::VectorXd& q : Configurations(chain.model.nq(), rng)) {
     estimators::JointReading z;
     z.q = q;

@@ -59,6 +59,7 @@ double Value(const Candidate& c, int k, std::mt19937_64& rng) {
     case EffectType::kLinkBending:
     case EffectType::kBaseCompliance:
     case EffectType::kStiffeningSpring:
+    case EffectType::kLateralCompliance:
       return 2e-3 * std::abs(n(rng));
     case EffectType::kThermalExpansion:
       return 4e-4 * n(rng);

@@ -16,8 +16,9 @@ namespace {
 
 std::set<std::string> IdentifiedTypes() {
   std::set<std::string> names;
-  // kGravityTilt is the last enumerator (effect_model.h); a type added after it must move this.
-  for (int t = 0; t <= static_cast<int>(EffectType::kGravityTilt); ++t) {
+  // kLateralCompliance is the last enumerator (effect_model.h); a type added after it must move
+  // this.
+  for (int t = 0; t <= static_cast<int>(EffectType::kLateralCompliance); ++t) {
     names.insert(ToString(static_cast<EffectType>(t)));
   }
   return names;
