@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <set>
 #include <stdexcept>
+#include <tuple>
 
 #include "estimators/error.h"
 #include "sim/camera.h"
@@ -53,13 +54,6 @@ double DeadZone(double x, double half_width) {
   return 0.0;
 }
 
-// Value and derivative of MuJoCo's joint-equality polynomial: y - y0 = sum_k a_k (x - x0)^k.
-void CouplingPolynomial(const mjModel* m, int eq, double dx, double* dy, double* slope) {
-  const mjtNum* a = m->eq_data + eq * mjNEQDATA;
-  *dy = a[0] + dx * (a[1] + dx * (a[2] + dx * (a[3] + dx * a[4])));
-  *slope = a[1] + dx * (2 * a[2] + dx * (3 * a[3] + dx * 4 * a[4]));
-}
-
 Eigen::Isometry3d MakePose(const mjtNum* pos, const mjtNum* mat) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = RotFromRowMajor(mat);
@@ -95,9 +89,10 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
   setup_.released.assign(m->njnt, 0);
   setup_.gear.assign(m->njnt, GearSpec{});
   setup_.encoder_offset.assign(m->njnt, 0.0);
-  // Passive joints no effect claims are part of the model's own physics: always free.
+  // Passive joints and linkages no effect claims are part of the model's own physics: always
+  // free (a linkage: always following its drivers).
   for (const JointEntry& j : catalog_.joints) {
-    if (j.role == JointRole::kPassive && j.effect.empty()) setup_.released[j.id] = 1;
+    if (j.role != JointRole::kActuated && j.effect.empty()) setup_.released[j.id] = 1;
   }
   std::set<std::string> seen;
   for (const auto& effect : effects) {
@@ -118,10 +113,13 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
     const bool released = setup_.released[j.id] != 0;
     if (j.role == JointRole::kCoupled) {
       m->eq_active[j.coupling_eq] = released ? 1 : 0;
-      const JointEntry& driver = catalog_.Joint(j.coupled_to);
-      if (released && driver.role != JointRole::kActuated) {
-        throw InputError(model_name_ + ": coupled joint '" + j.name + "' follows '" + driver.name +
-                         "', which is not actuated (only actuated drivers are supported)");
+      for (int k : j.drivers) {
+        const JointEntry& driver = catalog_.Joint(k);
+        if (released && driver.role != JointRole::kActuated) {
+          throw InputError(model_name_ + ": coupled joint '" + j.name + "' follows '" +
+                           driver.name +
+                           "', which is not actuated (only actuated drivers are supported)");
+        }
       }
     }
     if (j.role != JointRole::kActuated && !released) locked_joints_.push_back(j.id);
@@ -201,14 +199,15 @@ void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const 
   for (size_t k = 0; k < free_joints.size(); ++k) {
     d->qpos[m->jnt_qposadr[free_joints[k]]] = x[k];
   }
-  std::vector<std::pair<int, double>> couplings;  // (coupled joint, d q_coupled / d q_driver)
+  // (coupled joint, driver, d q_coupled / d q_driver)
+  std::vector<std::tuple<int, int, double>> couplings;
+  std::vector<double> slopes;
   for (const JointEntry& j : catalog_.joints) {
     if (j.role != JointRole::kCoupled || !setup_.released[j.id]) continue;
-    const int a2 = m->jnt_qposadr[j.coupled_to];
-    double dy, slope;
-    CouplingPolynomial(m, j.coupling_eq, d->qpos[a2] - m->qpos0[a2], &dy, &slope);
+    double dy;
+    CoupledValue(m, j, d->qpos, &dy, &slopes);
     d->qpos[j.qpos_adr] = m->qpos0[j.qpos_adr] + dy;
-    couplings.emplace_back(j.id, slope);
+    for (size_t k = 0; k < slopes.size(); ++k) couplings.emplace_back(j.id, j.drivers[k], slopes[k]);
   }
   mju_zero(d->qvel, m->nv);
   mj_kinematics(m, d);
@@ -233,8 +232,8 @@ void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const 
     (*residual)[static_cast<int>(k)] = r;
   }
   // A linkage driven by a free (elastic) joint passes its load on: virtual work, chain rule.
-  for (const auto& [c, slope] : couplings) {
-    const auto it = std::find(free_joints.begin(), free_joints.end(), catalog_.Joint(c).coupled_to);
+  for (const auto& [c, driver, slope] : couplings) {
+    const auto it = std::find(free_joints.begin(), free_joints.end(), driver);
     if (it == free_joints.end()) continue;
     const int dof = m->jnt_dofadr[c];
     (*residual)[static_cast<int>(it - free_joints.begin())] +=

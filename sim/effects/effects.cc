@@ -67,6 +67,10 @@ class JointGroupEffect : public Effect {
     for (int j : joints) {
       if (s.catalog->Joint(j).role == JointRole::kCoupled) {
         // A linkage: follows its equality constraint; stiffness_scale scales the polynomial.
+        if (!s.catalog->Joint(j).driver_slopes.empty()) {
+          throw InputError(where() + ": '" + s.catalog->Joint(j).name + "' of " + s.model_name +
+                           " is a tendon linkage; effect '" + name() + "' scales polynomials");
+        }
         const int eq = s.catalog->Joint(j).coupling_eq;
         for (int k = 0; k < 5; ++k) s.model->eq_data[eq * mjNEQDATA + k] *= scale_;
       } else {
