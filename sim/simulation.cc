@@ -122,6 +122,8 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
         }
       }
     }
+    if (j.role == JointRole::kCoupled && released) released_linkages_.push_back(j.id);
+    if (j.role == JointRole::kCoupled && j.effect.empty()) mechanism_linkages_.push_back(j.id);
     if (j.role != JointRole::kActuated && !released) locked_joints_.push_back(j.id);
     if (j.role == JointRole::kPassive && released) free_joints_.push_back(j.id);
     if (j.role == JointRole::kActuated && setup_.gear[j.id].stiffness > 0) {
@@ -406,6 +408,19 @@ void Simulation::ApplyServo() const {
       d->qfrc_applied[dof] = 0.0;
     }
   }
+  // A rigid gear holds the load of the linkages it drives as well (virtual work), as the
+  // static solve's drivers do.
+  for (int c : released_linkages_) {
+    const JointEntry& linkage = catalog_.Joint(c);
+    double dy;
+    CoupledValue(m, linkage, d->qpos, &dy, &slopes_);
+    for (size_t k = 0; k < slopes_.size(); ++k) {
+      const GearSpec& g = setup_.gear[linkage.drivers[k]];
+      if (g.stiffness > 0 || g.backlash > 0) continue;
+      d->qfrc_applied[m->jnt_dofadr[linkage.drivers[k]]] +=
+          slopes_[k] * d->qfrc_bias[m->jnt_dofadr[c]];
+    }
+  }
 }
 
 void Simulation::ProjectLocked() const {
@@ -592,15 +607,26 @@ ImuBiasSpec Simulation::ImuBias(const std::string& site) const {
 
 // ---------------------------------------------------------------- nominal model
 
+void Simulation::SetNominalQpos(const Eigen::VectorXd& q) const {
+  const mjModel* m = nominal_.get();
+  mjData* d = nominal_data_.get();
+  mju_copy(d->qpos, m->qpos0, m->nq);
+  for (int i = 0; i < num_actuated(); ++i) d->qpos[m->jnt_qposadr[catalog_.actuated[i]]] = q[i];
+  for (int c : mechanism_linkages_) {
+    double dy;
+    CoupledValue(m, catalog_.Joint(c), d->qpos, &dy, &slopes_);
+    d->qpos[m->jnt_qposadr[c]] = m->qpos0[m->jnt_qposadr[c]] + dy;
+  }
+}
+
 Eigen::Isometry3d Simulation::NominalPose(const FrameRef& frame, const Eigen::VectorXd& q) const {
   if (q.size() != num_actuated()) {
     throw std::invalid_argument(model_name_ + ": NominalPose needs " +
                                 std::to_string(num_actuated()) + " actuated angles");
   }
+  SetNominalQpos(q);
   const mjModel* m = nominal_.get();
   mjData* d = nominal_data_.get();
-  mju_copy(d->qpos, m->qpos0, m->nq);
-  for (int i = 0; i < num_actuated(); ++i) d->qpos[m->jnt_qposadr[catalog_.actuated[i]]] = q[i];
   mj_kinematics(m, d);
   mj_comPos(m, d);
   mj_camlight(m, d);
@@ -612,16 +638,23 @@ Eigen::VectorXd Simulation::GravityTorque(const Eigen::VectorXd& q) const {
     throw std::invalid_argument(model_name_ + ": GravityTorque needs " +
                                 std::to_string(num_actuated()) + " actuated angles");
   }
+  SetNominalQpos(q);
   const mjModel* m = nominal_.get();
   mjData* d = nominal_data_.get();
-  mju_copy(d->qpos, m->qpos0, m->nq);
   mju_zero(d->qvel, m->nv);
-  for (int i = 0; i < num_actuated(); ++i) d->qpos[m->jnt_qposadr[catalog_.actuated[i]]] = q[i];
   mj_kinematics(m, d);
   mj_comPos(m, d);
   mj_comVel(m, d);
   std::vector<mjtNum> bias(m->nv);
   mj_rne(m, d, 0, bias.data());
+  // A linkage's load rests on its drivers (virtual work).
+  for (int c : mechanism_linkages_) {
+    double dy;
+    CoupledValue(m, catalog_.Joint(c), d->qpos, &dy, &slopes_);
+    for (size_t k = 0; k < slopes_.size(); ++k) {
+      bias[m->jnt_dofadr[catalog_.Joint(c).drivers[k]]] += slopes_[k] * bias[m->jnt_dofadr[c]];
+    }
+  }
   Eigen::VectorXd g(num_actuated());
   for (int i = 0; i < num_actuated(); ++i) g[i] = bias[m->jnt_dofadr[catalog_.actuated[i]]];
   return g;
