@@ -36,7 +36,7 @@ struct JointEntry {
   // Tendon linkages: d q / d q_driver per driver, and q - qpos0 with the drivers at qpos0.
   std::vector<double> driver_slopes;
   double linkage_offset = 0.0;
-  std::string effect;    // effect whose custom field lists the joint ("" when none)
+  std::string effect;  // effect whose custom field lists the joint ("" when none)
 };
 
 // A coupled joint's value from its drivers' qpos: q - qpos0 into *dq and d q / d q_driver per

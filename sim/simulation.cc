@@ -209,7 +209,8 @@ void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const 
     double dy;
     CoupledValue(m, j, d->qpos, &dy, &slopes);
     d->qpos[j.qpos_adr] = m->qpos0[j.qpos_adr] + dy;
-    for (size_t k = 0; k < slopes.size(); ++k) couplings.emplace_back(j.id, j.drivers[k], slopes[k]);
+    for (size_t k = 0; k < slopes.size(); ++k)
+      couplings.emplace_back(j.id, j.drivers[k], slopes[k]);
   }
   mju_zero(d->qvel, m->nv);
   mj_kinematics(m, d);

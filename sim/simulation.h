@@ -167,10 +167,10 @@ class Simulation {
   std::vector<std::string> effect_names_;
   std::vector<std::string> actuated_names_;
   Eigen::VectorXd command_;
-  std::vector<double> gear_reference_;  // per actuated joint: unloaded gear-spring position
-  std::vector<int> locked_joints_;      // held at qpos0 (effects off)
-  std::vector<int> free_joints_;        // solved in Settle: released passive + elastic gears
-  std::vector<int> released_linkages_;  // coupled joints that follow their drivers
+  std::vector<double> gear_reference_;   // per actuated joint: unloaded gear-spring position
+  std::vector<int> locked_joints_;       // held at qpos0 (effects off)
+  std::vector<int> free_joints_;         // solved in Settle: released passive + elastic gears
+  std::vector<int> released_linkages_;   // coupled joints that follow their drivers
   std::vector<int> mechanism_linkages_;  // coupled joints no effect claims: in the nominal too
   mutable std::vector<double> slopes_;   // CoupledValue's scratch
   long steps_ = 0;

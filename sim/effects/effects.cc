@@ -527,8 +527,9 @@ class JointOriginEffect : public Effect {
       if (m->body_simple[b]) {
         m->body_simple[b] = 0;
         for (int i = m->nv - 1; i >= 0; --i) {
-          m->dof_simplenum[i] =
-              m->body_simple[m->dof_bodyid[i]] ? 1 + (i + 1 < m->nv ? m->dof_simplenum[i + 1] : 0) : 0;
+          m->dof_simplenum[i] = m->body_simple[m->dof_bodyid[i]]
+                                    ? 1 + (i + 1 < m->nv ? m->dof_simplenum[i + 1] : 0)
+                                    : 0;
         }
       }
     }

@@ -1503,10 +1503,10 @@ class ClosedLoopKind : public ScenarioKind {
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;
   bool has_truth_ = false;
-  std::optional<TrackerTruth> tracker_;  // simulated tracker rows instead of sockets
-  int tracker_frame_ = -1;               // its index in frames_
-  std::vector<int> tracker_points_;      // its markers' indices in points_
-  lie::SE3 T_true_tracker_;              // drawn per run
+  std::optional<TrackerTruth> tracker_;          // simulated tracker rows instead of sockets
+  int tracker_frame_ = -1;                       // its index in frames_
+  std::vector<int> tracker_points_;              // its markers' indices in points_
+  lie::SE3 T_true_tracker_;                      // drawn per run
   std::map<std::string, double> truth_row_err_;  // simulated tracker rows by `where`
   double socket_distance_m_ = 0.05;
   double encoder_noise_rad_ = 0.0;

@@ -106,9 +106,9 @@ TEST(SimulatedTracker, CoupledTorsoAndMarkersOffTheirSites) {
   SimulateTrackerRows(t, s, 40, 5, "test", "cal", &d, &truth_errors);
   ASSERT_EQ(truth_errors.size(), d.rows.size());
   const int k1 = chain.QIndex("torso_pitch_1"), k2 = chain.QIndex("torso_pitch_2");
-  const int k3 = static_cast<int>(std::find(chain.q_joints.begin(), chain.q_joints.end(),
-                                            "torso_pitch_3") -
-                                  chain.q_joints.begin());
+  const int k3 =
+      static_cast<int>(std::find(chain.q_joints.begin(), chain.q_joints.end(), "torso_pitch_3") -
+                       chain.q_joints.begin());
   ASSERT_TRUE(chain.IsCoupled(k3));
   kinematics::PpoeData pd(chain.model);
   double worst = 0.0, mean_truth = 0.0, mean_on_site = 0.0;
@@ -116,14 +116,15 @@ TEST(SimulatedTracker, CoupledTorsoAndMarkersOffTheirSites) {
     const identify::Observation& o = d.rows[r];
     EXPECT_EQ(o.q[k3], -(o.q[k1] + o.q[k2])) << o.where;
     kinematics::ForwardKinematics(chain.model, pd, o.q);
-    const kinematics::FrameId f = chain.ObservedFrame(o.point == 0 ? "right_marker" : "left_marker");
+    const kinematics::FrameId f =
+        chain.ObservedFrame(o.point == 0 ? "right_marker" : "left_marker");
     const Vec3 p_model = pd.T_base_frame[f] * t.marker_offsets[o.point];
     const double e = (s.T_base_tracker * o.p_frame - p_model).norm();
     EXPECT_NEAR(e, truth_errors[r], 1e-9) << o.where;  // the truth is the declared chain here
     worst = std::max(worst, e);
     mean_truth += truth_errors[r] / d.rows.size();
-    mean_on_site += (s.T_base_tracker * o.p_frame - pd.T_base_frame[f].translation()).norm() /
-                    d.rows.size();
+    mean_on_site +=
+        (s.T_base_tracker * o.p_frame - pd.T_base_frame[f].translation()).norm() / d.rows.size();
   }
   // 3-D Gaussian noise of 0.2 mm per axis: mean distance sqrt(8 / pi) 0.2 mm = 0.32 mm.
   EXPECT_NEAR(mean_truth, std::sqrt(8.0 / M_PI) * 2e-4, 0.5e-4);
@@ -137,8 +138,8 @@ TEST(SimulatedTracker, ACoupledJointTakesNoPostureRange) {
   const std::string models = testing::SourceDir() + "/models/";
   auto truth = sim::Simulation::Load(models + "humanoid_upper.xml");
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(
-      truth->nominal_model(),
-      sim::LoadDeclaredModel(models + "humanoid_upper_torso.declared.yaml"), true);
+      truth->nominal_model(), sim::LoadDeclaredModel(models + "humanoid_upper_torso.declared.yaml"),
+      true);
   const ConfigNode n = ConfigNode::LoadString(
       "tracker:\n  frame: tracker\n  T_base_tracker: [2.5, 0, 1.6, 0, 0, 0, 1]\n"
       "  pose_std_m: 0\n  pose_std_deg: 0\n  noise_std_m: 1.0e-4\n  markers: [right_marker]\n"

@@ -89,8 +89,8 @@ TEST(Models, LoadWithoutWarningsWithTheExpectedJoints) {
       passive += j.role == JointRole::kPassive;
       coupled += j.role == JointRole::kCoupled;
       // A linkage without an effect is the model's own mechanism (the humanoid's torso).
-      if (j.role == JointRole::kPassive || (j.role == JointRole::kCoupled && j.effect.empty() &&
-                                            j.driver_slopes.empty())) {
+      if (j.role == JointRole::kPassive ||
+          (j.role == JointRole::kCoupled && j.effect.empty() && j.driver_slopes.empty())) {
         EXPECT_FALSE(j.effect.empty())
             << e.name << ": passive joint " << j.name << " has no effect";
       }
@@ -248,10 +248,10 @@ TEST(Settle, TorsoLinkageKeepsTheChestUpright) {
   const double forward = 0.3 * std::sin(25 * kDeg) + 0.25 * std::sin(40 * kDeg);
   EXPECT_NEAR(T_chest.translation().head<2>().norm(), forward, 1e-12);
   // The rigid nominal model knows its own mechanism.
-  EXPECT_LT((sim->NominalPose("right_marker", q).translation() -
-             sim->Pose("right_marker").translation())
-                .norm(),
-            1e-12);
+  EXPECT_LT(
+      (sim->NominalPose("right_marker", q).translation() - sim->Pose("right_marker").translation())
+          .norm(),
+      1e-12);
   const Vec3 p_static = sim->Pose("left_marker").translation();
   sim->SetCommand(Eigen::VectorXd::Zero(q.size()));
   sim->Step(300);

@@ -23,8 +23,8 @@ namespace {
 constexpr double kDeg = M_PI / 180.0;
 
 TEST(JointOriginTruth, MujocoPosesEqualTheIdentifiedEffectModel) {
-  const sim::DeclaredModel d = sim::LoadDeclaredModel(
-      testing::SourceDir() + "/models/humanoid_upper_torso.declared.yaml");
+  const sim::DeclaredModel d =
+      sim::LoadDeclaredModel(testing::SourceDir() + "/models/humanoid_upper_torso.declared.yaml");
   const sim::MjModelPtr m = sim::LoadModel(d.model_path);
   const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), d, /*with_couplings=*/true);
   const kinematics::FrameId left = chain.ObservedFrame("left_marker");
@@ -42,7 +42,8 @@ TEST(JointOriginTruth, MujocoPosesEqualTheIdentifiedEffectModel) {
   std::vector<double> theta;
   for (const auto& [joint, e] : errors) {
     char buf[256];
-    std::snprintf(buf, sizeof(buf), "%s: {pos_mm: [%.17g, %.17g, %.17g], rot_deg: [%.17g, %.17g, %.17g]}, ",
+    std::snprintf(buf, sizeof(buf),
+                  "%s: {pos_mm: [%.17g, %.17g, %.17g], rot_deg: [%.17g, %.17g, %.17g]}, ",
                   joint.c_str(), e[0], e[1], e[2], e[3], e[4], e[5]);
     yaml += buf;
     active.push_back(em.FindCandidate("joint_origin@" + joint));
@@ -81,8 +82,9 @@ TEST(JointOriginTruth, MujocoPosesEqualTheIdentifiedEffectModel) {
       moved = std::max(moved, (N.translation() - M.translation()).norm());
     }
   }
-  std::printf("joint_origin: truth vs identification's model %.3g (the errors move a hand by %.3g m)\n",
-              worst, moved);
+  std::printf(
+      "joint_origin: truth vs identification's model %.3g (the errors move a hand by %.3g m)\n",
+      worst, moved);
   EXPECT_LT(worst, 1e-9);
   EXPECT_GT(moved, 2e-3);  // the comparison is not of two nominal models
 }
