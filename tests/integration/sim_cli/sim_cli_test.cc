@@ -66,7 +66,8 @@ TEST(Inspect, RoverModelAsJson) {
   EXPECT_FALSE(supported["neck_elasticity"]);
   EXPECT_TRUE(supported["transmission_error"]);
   EXPECT_TRUE(supported["stiffening_spring"]);
-  EXPECT_EQ(supported.size(), 13u);
+  EXPECT_TRUE(supported["joint_origin"]);
+  EXPECT_EQ(supported.size(), 14u);
   std::map<std::string, std::vector<std::string>> parts;
   for (const Json& e : j["effects"]) {
     if (e.contains("parts")) parts[e["name"]] = e["parts"].get<std::vector<std::string>>();
