@@ -64,17 +64,57 @@ void ReadActuators(const mjModel* m, ModelCatalog* c) {
   }
 }
 
+void ReadJointCoupling(const mjModel* m, int e, ModelCatalog* c) {
+  JointEntry& j1 = c->joints[m->eq_obj1id[e]];
+  if (j1.role == JointRole::kActuated) {
+    throw InputError(c->model_name + ": joint '" + j1.name +
+                     "' is actuated and also coupled by an equality constraint");
+  }
+  j1.role = JointRole::kCoupled;
+  j1.coupling_eq = e;
+  j1.drivers = {m->eq_obj2id[e]};
+}
+
+// A fixed tendon held at its reference length: its one joint without an actuator follows the
+// others.
+void ReadTendonCoupling(const mjModel* m, int e, ModelCatalog* c) {
+  const int t = m->eq_obj1id[e];
+  const std::string where = c->model_name + ": tendon '" + ObjectName(m, mjOBJ_TENDON, t) + "'";
+  int coupled = -1;
+  double coupled_coef = 0.0;
+  std::vector<std::pair<int, double>> drivers;
+  for (int w = m->tendon_adr[t]; w < m->tendon_adr[t] + m->tendon_num[t]; ++w) {
+    if (m->wrap_type[w] != mjWRAP_JOINT) {
+      throw InputError(where + " of an equality constraint is not a fixed tendon (joints only)");
+    }
+    const int j = m->wrap_objid[w];
+    if (c->joints[j].role == JointRole::kActuated) {
+      drivers.emplace_back(j, m->wrap_prm[w]);
+    } else if (coupled >= 0) {
+      throw InputError(where + " couples two joints without an actuator ('" +
+                       c->joints[coupled].name + "', '" + c->joints[j].name + "'): one follows");
+    } else {
+      coupled = j;
+      coupled_coef = m->wrap_prm[w];
+    }
+  }
+  if (coupled < 0 || coupled_coef == 0.0 || drivers.empty()) {
+    throw InputError(where + " needs one joint without an actuator (nonzero coef) and drivers");
+  }
+  JointEntry& jc = c->joints[coupled];
+  jc.role = JointRole::kCoupled;
+  jc.coupling_eq = e;
+  for (const auto& [j, coef] : drivers) {
+    jc.drivers.push_back(j);
+    jc.driver_slopes.push_back(-coef / coupled_coef);
+  }
+  jc.linkage_offset = m->eq_data[e * mjNEQDATA] / coupled_coef;
+}
+
 void ReadCouplings(const mjModel* m, ModelCatalog* c) {
   for (int e = 0; e < m->neq; ++e) {
-    if (m->eq_type[e] != mjEQ_JOINT || m->eq_obj2id[e] < 0) continue;
-    JointEntry& j1 = c->joints[m->eq_obj1id[e]];
-    if (j1.role == JointRole::kActuated) {
-      throw InputError(c->model_name + ": joint '" + j1.name +
-                       "' is actuated and also coupled by an equality constraint");
-    }
-    j1.role = JointRole::kCoupled;
-    j1.coupling_eq = e;
-    j1.coupled_to = m->eq_obj2id[e];
+    if (m->eq_type[e] == mjEQ_JOINT && m->eq_obj2id[e] >= 0) ReadJointCoupling(m, e, c);
+    if (m->eq_type[e] == mjEQ_TENDON && m->eq_obj2id[e] < 0) ReadTendonCoupling(m, e, c);
   }
 }
 
@@ -149,6 +189,26 @@ ModelCatalog ModelCatalog::Build(const mjModel* m, const std::string& model_name
   ClaimLateralHinges(m, &c);
   FindImuSites(m, &c);
   return c;
+}
+
+void CoupledValue(const mjModel* m, const JointEntry& joint, const mjtNum* qpos, double* dq,
+                  std::vector<double>* slopes) {
+  slopes->resize(joint.drivers.size());
+  if (joint.driver_slopes.empty()) {
+    // MuJoCo's joint-equality polynomial: y - y0 = sum_k a_k (x - x0)^k.
+    const int a2 = m->jnt_qposadr[joint.drivers[0]];
+    const double x = qpos[a2] - m->qpos0[a2];
+    const mjtNum* a = m->eq_data + joint.coupling_eq * mjNEQDATA;
+    *dq = a[0] + x * (a[1] + x * (a[2] + x * (a[3] + x * a[4])));
+    (*slopes)[0] = a[1] + x * (2 * a[2] + x * (3 * a[3] + x * 4 * a[4]));
+    return;
+  }
+  *dq = joint.linkage_offset;
+  for (size_t k = 0; k < joint.drivers.size(); ++k) {
+    const int a = m->jnt_qposadr[joint.drivers[k]];
+    *dq += joint.driver_slopes[k] * (qpos[a] - m->qpos0[a]);
+    (*slopes)[k] = joint.driver_slopes[k];
+  }
 }
 
 std::vector<int> ModelCatalog::JointsOfEffect(const std::string& effect) const {

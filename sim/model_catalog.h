@@ -6,7 +6,10 @@
 //   <text name="effect:base_plate_compliance" data="plate_pitch plate_roll"/>
 //   <numeric name="effect:joint_elasticity:stiffness" data="120 80"/>
 // A passive joint is a hinge or slide without an actuator; a coupled joint is joint1 of an
-// active two-joint <equality><joint> (its value is a polynomial of joint2, e.g. a linkage).
+// active two-joint <equality><joint> (its value is a polynomial of joint2, e.g. a linkage), or
+// the one joint without an actuator in a fixed tendon that an active one-tendon
+// <equality><tendon> holds at its reference length (a linear linkage of several drivers:
+// sum_k coef_k (q_k - qpos0_k) = polycoef[0]).
 #pragma once
 
 #include <mujoco/mujoco.h>
@@ -28,9 +31,18 @@ struct JointEntry {
   JointRole role = JointRole::kPassive;
   int actuator = -1;     // position actuator driving the joint (actuated joints)
   int coupling_eq = -1;  // equality constraint defining the joint (coupled joints)
-  int coupled_to = -1;   // joint2 of that constraint
-  std::string effect;    // effect whose custom field lists the joint ("" when none)
+  // The joints it follows: joint2 of a joint equality, or the tendon's other joints.
+  std::vector<int> drivers;
+  // Tendon linkages: d q / d q_driver per driver, and q - qpos0 with the drivers at qpos0.
+  std::vector<double> driver_slopes;
+  double linkage_offset = 0.0;
+  std::string effect;  // effect whose custom field lists the joint ("" when none)
 };
+
+// A coupled joint's value from its drivers' qpos: q - qpos0 into *dq and d q / d q_driver per
+// driver (JointEntry::drivers' order) into slopes.
+void CoupledValue(const mjModel* m, const JointEntry& joint, const mjtNum* qpos, double* dq,
+                  std::vector<double>* slopes);
 
 struct ModelCatalog {
   std::string model_name;

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <set>
 #include <stdexcept>
+#include <tuple>
 
 #include "estimators/error.h"
 #include "sim/camera.h"
@@ -53,13 +54,6 @@ double DeadZone(double x, double half_width) {
   return 0.0;
 }
 
-// Value and derivative of MuJoCo's joint-equality polynomial: y - y0 = sum_k a_k (x - x0)^k.
-void CouplingPolynomial(const mjModel* m, int eq, double dx, double* dy, double* slope) {
-  const mjtNum* a = m->eq_data + eq * mjNEQDATA;
-  *dy = a[0] + dx * (a[1] + dx * (a[2] + dx * (a[3] + dx * a[4])));
-  *slope = a[1] + dx * (2 * a[2] + dx * (3 * a[3] + dx * 4 * a[4]));
-}
-
 Eigen::Isometry3d MakePose(const mjtNum* pos, const mjtNum* mat) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = RotFromRowMajor(mat);
@@ -95,9 +89,10 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
   setup_.released.assign(m->njnt, 0);
   setup_.gear.assign(m->njnt, GearSpec{});
   setup_.encoder_offset.assign(m->njnt, 0.0);
-  // Passive joints no effect claims are part of the model's own physics: always free.
+  // Passive joints and linkages no effect claims are part of the model's own physics: always
+  // free (a linkage: always following its drivers).
   for (const JointEntry& j : catalog_.joints) {
-    if (j.role == JointRole::kPassive && j.effect.empty()) setup_.released[j.id] = 1;
+    if (j.role != JointRole::kActuated && j.effect.empty()) setup_.released[j.id] = 1;
   }
   std::set<std::string> seen;
   for (const auto& effect : effects) {
@@ -118,12 +113,17 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
     const bool released = setup_.released[j.id] != 0;
     if (j.role == JointRole::kCoupled) {
       m->eq_active[j.coupling_eq] = released ? 1 : 0;
-      const JointEntry& driver = catalog_.Joint(j.coupled_to);
-      if (released && driver.role != JointRole::kActuated) {
-        throw InputError(model_name_ + ": coupled joint '" + j.name + "' follows '" + driver.name +
-                         "', which is not actuated (only actuated drivers are supported)");
+      for (int k : j.drivers) {
+        const JointEntry& driver = catalog_.Joint(k);
+        if (released && driver.role != JointRole::kActuated) {
+          throw InputError(model_name_ + ": coupled joint '" + j.name + "' follows '" +
+                           driver.name +
+                           "', which is not actuated (only actuated drivers are supported)");
+        }
       }
     }
+    if (j.role == JointRole::kCoupled && released) released_linkages_.push_back(j.id);
+    if (j.role == JointRole::kCoupled && j.effect.empty()) mechanism_linkages_.push_back(j.id);
     if (j.role != JointRole::kActuated && !released) locked_joints_.push_back(j.id);
     if (j.role == JointRole::kPassive && released) free_joints_.push_back(j.id);
     if (j.role == JointRole::kActuated && setup_.gear[j.id].stiffness > 0) {
@@ -201,14 +201,16 @@ void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const 
   for (size_t k = 0; k < free_joints.size(); ++k) {
     d->qpos[m->jnt_qposadr[free_joints[k]]] = x[k];
   }
-  std::vector<std::pair<int, double>> couplings;  // (coupled joint, d q_coupled / d q_driver)
+  // (coupled joint, driver, d q_coupled / d q_driver)
+  std::vector<std::tuple<int, int, double>> couplings;
+  std::vector<double> slopes;
   for (const JointEntry& j : catalog_.joints) {
     if (j.role != JointRole::kCoupled || !setup_.released[j.id]) continue;
-    const int a2 = m->jnt_qposadr[j.coupled_to];
-    double dy, slope;
-    CouplingPolynomial(m, j.coupling_eq, d->qpos[a2] - m->qpos0[a2], &dy, &slope);
+    double dy;
+    CoupledValue(m, j, d->qpos, &dy, &slopes);
     d->qpos[j.qpos_adr] = m->qpos0[j.qpos_adr] + dy;
-    couplings.emplace_back(j.id, slope);
+    for (size_t k = 0; k < slopes.size(); ++k)
+      couplings.emplace_back(j.id, j.drivers[k], slopes[k]);
   }
   mju_zero(d->qvel, m->nv);
   mj_kinematics(m, d);
@@ -233,8 +235,8 @@ void Simulation::ComputeStaticForces(const std::vector<int>& free_joints, const 
     (*residual)[static_cast<int>(k)] = r;
   }
   // A linkage driven by a free (elastic) joint passes its load on: virtual work, chain rule.
-  for (const auto& [c, slope] : couplings) {
-    const auto it = std::find(free_joints.begin(), free_joints.end(), catalog_.Joint(c).coupled_to);
+  for (const auto& [c, driver, slope] : couplings) {
+    const auto it = std::find(free_joints.begin(), free_joints.end(), driver);
     if (it == free_joints.end()) continue;
     const int dof = m->jnt_dofadr[c];
     (*residual)[static_cast<int>(it - free_joints.begin())] +=
@@ -405,6 +407,19 @@ void Simulation::ApplyServo() const {
       const double tau = g.stiffness > 0 ? g.SpringTorque(dz) : kp * dz;
       d->ctrl[a] = q + tau / kp;
       d->qfrc_applied[dof] = 0.0;
+    }
+  }
+  // A rigid gear holds the load of the linkages it drives as well (virtual work), as the
+  // static solve's drivers do.
+  for (int c : released_linkages_) {
+    const JointEntry& linkage = catalog_.Joint(c);
+    double dy;
+    CoupledValue(m, linkage, d->qpos, &dy, &slopes_);
+    for (size_t k = 0; k < slopes_.size(); ++k) {
+      const GearSpec& g = setup_.gear[linkage.drivers[k]];
+      if (g.stiffness > 0 || g.backlash > 0) continue;
+      d->qfrc_applied[m->jnt_dofadr[linkage.drivers[k]]] +=
+          slopes_[k] * d->qfrc_bias[m->jnt_dofadr[c]];
     }
   }
 }
@@ -593,15 +608,26 @@ ImuBiasSpec Simulation::ImuBias(const std::string& site) const {
 
 // ---------------------------------------------------------------- nominal model
 
+void Simulation::SetNominalQpos(const Eigen::VectorXd& q) const {
+  const mjModel* m = nominal_.get();
+  mjData* d = nominal_data_.get();
+  mju_copy(d->qpos, m->qpos0, m->nq);
+  for (int i = 0; i < num_actuated(); ++i) d->qpos[m->jnt_qposadr[catalog_.actuated[i]]] = q[i];
+  for (int c : mechanism_linkages_) {
+    double dy;
+    CoupledValue(m, catalog_.Joint(c), d->qpos, &dy, &slopes_);
+    d->qpos[m->jnt_qposadr[c]] = m->qpos0[m->jnt_qposadr[c]] + dy;
+  }
+}
+
 Eigen::Isometry3d Simulation::NominalPose(const FrameRef& frame, const Eigen::VectorXd& q) const {
   if (q.size() != num_actuated()) {
     throw std::invalid_argument(model_name_ + ": NominalPose needs " +
                                 std::to_string(num_actuated()) + " actuated angles");
   }
+  SetNominalQpos(q);
   const mjModel* m = nominal_.get();
   mjData* d = nominal_data_.get();
-  mju_copy(d->qpos, m->qpos0, m->nq);
-  for (int i = 0; i < num_actuated(); ++i) d->qpos[m->jnt_qposadr[catalog_.actuated[i]]] = q[i];
   mj_kinematics(m, d);
   mj_comPos(m, d);
   mj_camlight(m, d);
@@ -613,16 +639,23 @@ Eigen::VectorXd Simulation::GravityTorque(const Eigen::VectorXd& q) const {
     throw std::invalid_argument(model_name_ + ": GravityTorque needs " +
                                 std::to_string(num_actuated()) + " actuated angles");
   }
+  SetNominalQpos(q);
   const mjModel* m = nominal_.get();
   mjData* d = nominal_data_.get();
-  mju_copy(d->qpos, m->qpos0, m->nq);
   mju_zero(d->qvel, m->nv);
-  for (int i = 0; i < num_actuated(); ++i) d->qpos[m->jnt_qposadr[catalog_.actuated[i]]] = q[i];
   mj_kinematics(m, d);
   mj_comPos(m, d);
   mj_comVel(m, d);
   std::vector<mjtNum> bias(m->nv);
   mj_rne(m, d, 0, bias.data());
+  // A linkage's load rests on its drivers (virtual work).
+  for (int c : mechanism_linkages_) {
+    double dy;
+    CoupledValue(m, catalog_.Joint(c), d->qpos, &dy, &slopes_);
+    for (size_t k = 0; k < slopes_.size(); ++k) {
+      bias[m->jnt_dofadr[catalog_.Joint(c).drivers[k]]] += slopes_[k] * bias[m->jnt_dofadr[c]];
+    }
+  }
   Eigen::VectorXd g(num_actuated());
   for (int i = 0; i < num_actuated(); ++i) g[i] = bias[m->jnt_dofadr[catalog_.actuated[i]]];
   return g;

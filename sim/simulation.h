@@ -115,14 +115,17 @@ class Simulation {
   Vec3 SiteSpecificForce(int site_id) const;
 
   // ---- Nominal (rigid) model.
-  // Pose of a frame with the actuated joints at q (actuator order), every other joint at qpos0.
+  // Pose of a frame with the actuated joints at q (actuator order), every other joint at qpos0
+  // but the linkages of the model's own mechanism (coupled joints no effect lists), which follow
+  // their drivers.
   Eigen::Isometry3d NominalPose(const FrameRef& frame, const Eigen::VectorXd& q) const;
   Eigen::Isometry3d NominalPose(const std::string& name, const Eigen::VectorXd& q) const {
     return NominalPose(Frame(name), q);
   }
   // Generalised gravity torque g(q) of the nominal model at actuated angles q (actuator order):
   // qfrc_bias at zero velocity (mj_rne, flg_acc = 0), restricted to the actuated DoFs. g is the
-  // torque that holds the arm; gravity pulls the joints towards -g.
+  // torque that holds the arm; gravity pulls the joints towards -g. A mechanism's linkage passes
+  // its share to its drivers.
   Eigen::VectorXd GravityTorque(const Eigen::VectorXd& q) const;
 
   // ---- Effect state read by sensors.
@@ -146,6 +149,9 @@ class Simulation {
   bool PickBacklashFlanks(std::vector<int>* backlash_sign) const;
   void ComeToRest();
   void ApplyServo() const;
+  // The nominal model's qpos (nominal_data_) at actuated angles q: qpos0 elsewhere, the
+  // mechanism's linkages following their drivers.
+  void SetNominalQpos(const Eigen::VectorXd& q) const;
   void ProjectLocked() const;
   void EnsureKinematics() const;
   void EnsureAccelerations() const;
@@ -161,9 +167,12 @@ class Simulation {
   std::vector<std::string> effect_names_;
   std::vector<std::string> actuated_names_;
   Eigen::VectorXd command_;
-  std::vector<double> gear_reference_;  // per actuated joint: unloaded gear-spring position
-  std::vector<int> locked_joints_;      // held at qpos0 (effects off)
-  std::vector<int> free_joints_;        // solved in Settle: released passive + elastic gears
+  std::vector<double> gear_reference_;   // per actuated joint: unloaded gear-spring position
+  std::vector<int> locked_joints_;       // held at qpos0 (effects off)
+  std::vector<int> free_joints_;         // solved in Settle: released passive + elastic gears
+  std::vector<int> released_linkages_;   // coupled joints that follow their drivers
+  std::vector<int> mechanism_linkages_;  // coupled joints no effect claims: in the nominal too
+  mutable std::vector<double> slopes_;   // CoupledValue's scratch
   long steps_ = 0;
   bool at_rest_ = false;
   mutable bool kinematics_current_ = false;

@@ -85,8 +85,17 @@ void PassiveAndCoupled(const mjModel* m, const sim::ModelCatalog& catalog, Json*
       Json c;
       c["name"] = e.name;
       c["type"] = JointType(e.type);
-      c["follows"] = catalog.Joint(e.coupled_to).name;
-      c["polycoef"] = Vec(m->eq_data + mjNEQDATA * e.coupling_eq, 5);
+      if (e.driver_slopes.empty()) {
+        c["follows"] = catalog.Joint(e.drivers[0]).name;
+        c["polycoef"] = Vec(m->eq_data + mjNEQDATA * e.coupling_eq, 5);
+      } else {
+        Json slopes;
+        for (size_t k = 0; k < e.drivers.size(); ++k) {
+          slopes[catalog.Joint(e.drivers[k]).name] = e.driver_slopes[k];
+        }
+        c["follows"] = slopes;  // d q / d q_driver of a linear linkage
+        c["offset"] = e.linkage_offset;
+      }
       c["effect"] = e.effect.empty() ? Json() : Json(sim::EffectOfMjcfTag(e.effect));
       coupled.push_back(c);
     }

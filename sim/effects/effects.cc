@@ -2,10 +2,13 @@
 #include <Eigen/Eigenvalues>
 #include <array>
 #include <cmath>
+#include <optional>
 #include <sstream>
+#include <tuple>
 
 #include "estimators/error.h"
 #include "estimators/kinematics/model_effects.h"
+#include "estimators/lie/se3.h"
 #include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
 
@@ -69,6 +72,10 @@ class JointGroupEffect : public Effect {
     for (int j : joints) {
       if (s.catalog->Joint(j).role == JointRole::kCoupled) {
         // A linkage: follows its equality constraint; stiffness_scale scales the polynomial.
+        if (!s.catalog->Joint(j).driver_slopes.empty()) {
+          throw InputError(where() + ": '" + s.catalog->Joint(j).name + "' of " + s.model_name +
+                           " is a tendon linkage; effect '" + name() + "' scales polynomials");
+        }
         const int eq = s.catalog->Joint(j).coupling_eq;
         for (int k = 0; k < 5; ++k) s.model->eq_data[eq * mjNEQDATA + k] *= scale_;
       } else {
@@ -574,6 +581,81 @@ class ThermalExpansionEffect : public Effect {
   std::vector<std::string> bodies_;
 };
 
+// ---- Joint origin: a joint placed off its nominal pose (machining, assembly). J's frame (at its
+// anchor, axes of its body, before it moves) becomes T Exp(xi), xi = [rho; theta], as
+// identification's joint_origin@J: the body is moved so that its joint frame lands there
+// (P' = P Tr(a) Exp(xi) Tr(-a), a the anchor in the body), the anchor kept in the body.
+//   joint_origin: {errors: {J: {pos_mm: [x, y, z], rot_deg: [x, y, z]}}}
+class JointOriginEffect : public Effect {
+ public:
+  void Configure(const ComponentParams& p) override {
+    const ConfigNode errors = p.Require("errors");
+    if (!errors.IsMap()) errors.Fail("expected {joint: {pos_mm: [x, y, z], rot_deg: [x, y, z]}}");
+    for (const std::string& j : errors.Keys()) {
+      const ConfigNode e = errors.Child(j);
+      if (!e.IsMap()) e.Fail("expected {pos_mm: [x, y, z], rot_deg: [x, y, z]}");
+      Vec6 xi = Vec6::Zero();
+      for (const auto& [key, scale, at] :
+           {std::tuple{"pos_mm", 1e-3, 0}, std::tuple{"rot_deg", kDeg, 3}}) {
+        const std::optional<ConfigNode> v = e.Optional(key);
+        if (!v) continue;
+        const std::vector<double> x = v->AsDoubleList();
+        if (x.size() != 3) v->Fail("expected [x, y, z]");
+        for (int k = 0; k < 3; ++k) xi[at + k] = x[k] * scale;
+      }
+      errors_.emplace_back(j, xi, e.WhereKey());
+    }
+  }
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    if (!c.joints.empty()) return true;
+    *why = "no joints";
+    return false;
+  }
+  void Apply(TruthSetup& s) const override {
+    mjModel* m = s.model;
+    for (const auto& [joint, xi, where_key] : errors_) {
+      const int j = mj_name2id(m, mjOBJ_JOINT, joint.c_str());
+      if (j < 0) {
+        throw InputError(where_key + ": " + s.model_name + " has no joint named '" + joint + "'");
+      }
+      const int b = m->jnt_bodyid[j];
+      if (m->body_jntadr[b] != j) {
+        throw InputError(where_key + ": joint '" + joint + "' is not the first joint of body '" +
+                         ObjectName(m, mjOBJ_BODY, b) + "' (its origin sits between two joints)");
+      }
+      const Vec3 a(m->jnt_pos + 3 * j);
+      const lie::SE3 P(QuatFromWxyz(m->body_quat + 4 * b).toRotationMatrix(),
+                       Vec3(m->body_pos + 3 * b));
+      const lie::SE3 P_new =
+          P * lie::SE3::Translation(a) * lie::SE3::Exp(xi) * lie::SE3::Translation(-a);
+      Eigen::Map<Vec3>(m->body_pos + 3 * b) = P_new.translation();
+      QuatToWxyz(Quat(P_new.rotation()).normalized(), m->body_quat + 4 * b);
+      // A "simple" body (diagonal mass matrix, frame aligned with the world) is no longer one.
+      if (m->body_simple[b]) {
+        m->body_simple[b] = 0;
+        for (int i = m->nv - 1; i >= 0; --i) {
+          m->dof_simplenum[i] = m->body_simple[m->dof_bodyid[i]]
+                                    ? 1 + (i + 1 < m->nv ? m->dof_simplenum[i + 1] : 0)
+                                    : 0;
+        }
+      }
+    }
+    s.constants_changed = true;
+  }
+  std::string Describe() const override {
+    std::string d;
+    for (const auto& [j, xi, where_key] : errors_) {
+      d += (d.empty() ? "" : " ") + j + "=[" + Num(xi[0] * 1e3) + "," + Num(xi[1] * 1e3) + "," +
+           Num(xi[2] * 1e3) + " mm; " + Num(xi[3] / kDeg) + "," + Num(xi[4] / kDeg) + "," +
+           Num(xi[5] / kDeg) + " deg]";
+    }
+    return d;
+  }
+
+ private:
+  std::vector<std::tuple<std::string, Vec6, std::string>> errors_;  // joint, xi, where
+};
+
 // ---- IMU bias and yaw drift: constant biases plus bias random walks. With no magnetometer,
 // integrated yaw drifts with the gyro bias about the vertical.
 class ImuBiasEffect : public Effect {
@@ -656,6 +738,10 @@ const std::vector<EffectEntry>& EffectRegistry() {
        "encoder calibration offset: link angle = reading + offset_deg (encoder_offset, its former "
        "name, takes the encoder's error: reading = link + offset_deg)",
        Make<JointOffsetEffect>, kEncoderOffset},
+      {"joint_origin",
+       "a joint's frame off its nominal pose, T Exp(xi) before it moves "
+       "(errors: {joint: {pos_mm: [x, y, z], rot_deg: [x, y, z]}})",
+       Make<JointOriginEffect>},
       {"thermal_expansion", "links grow by alpha * delta_T (delta_T_K, alpha_per_K, bodies)",
        Make<ThermalExpansionEffect>},
       {"transmission_error",

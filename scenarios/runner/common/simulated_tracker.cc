@@ -31,7 +31,8 @@ double NonNegative(const ConfigNode& t, const char* key) {
 
 // One row per marker of the settled truth: its position in the tracker frame, with noise.
 void AppendMarkerRows(const TrackerTruth& t, const TrackerRowsSetup& s, const Eigen::VectorXd& q,
-                      int posture, int set, sim::NoiseStream& noise, identify::DataSet* d) {
+                      int posture, int set, sim::NoiseStream& noise, identify::DataSet* d,
+                      std::vector<double>* truth_errors) {
   const Eigen::Isometry3d T_base_world = s.sim->BodyPose(s.base_body).inverse();
   const lie::SE3 T_tracker_base = s.T_base_tracker.Inverse();
   const int pose = static_cast<int>(d->poses.size());
@@ -42,9 +43,11 @@ void AppendMarkerRows(const TrackerTruth& t, const TrackerRowsSetup& s, const Ei
     o.type = identify::ObservationType::kPoint;
     o.frame = s.frame_index;
     o.point = s.marker_points[m];
-    const Vec3 p_base = T_base_world * s.sim->Pose(t.markers[m]).translation();
-    o.p_frame = T_tracker_base * p_base;
+    const Vec3 p_base = T_base_world * (s.sim->Pose(t.markers[m]) * t.marker_offsets[m]);
+    const Vec3 p_true = T_tracker_base * p_base;
+    o.p_frame = p_true;
     for (int k = 0; k < 3; ++k) o.p_frame[k] += noise.Normal(t.noise_std_m);
+    if (truth_errors) truth_errors->push_back((o.p_frame - p_true).norm());
     o.set = set;
     o.pose = pose;
     o.where = d->poses[pose] + "/" + t.markers[m];
@@ -75,6 +78,18 @@ TrackerTruth ParseTrackerTruth(const ConfigNode& n) {
   for (const std::string& j : p.Keys()) {
     if (j != "default") t.ranges.emplace_back(j, ParseRange(p.Child(j)));
   }
+  t.marker_offsets.assign(t.markers.size(), Vec3::Zero());
+  if (const auto o = n.Optional("marker_offsets_mm")) {
+    if (!o->IsMap()) o->Fail("expected {marker: [x, y, z]} in mm");
+    for (const std::string& name : o->Keys()) {
+      const ConfigNode v = o->Child(name);
+      const auto it = std::find(t.markers.begin(), t.markers.end(), name);
+      if (it == t.markers.end()) v.Fail("'" + name + "' is not one of the tracker's markers");
+      const std::vector<double> x = v.AsDoubleList();
+      if (x.size() != 3) v.Fail("expected [x, y, z] in mm");
+      t.marker_offsets[it - t.markers.begin()] = Vec3(x[0], x[1], x[2]) * 1e-3;
+    }
+  }
   return t;
 }
 
@@ -91,7 +106,7 @@ PostureSpace ResolvePostures(const TrackerTruth& t, const sim::Simulation& sim,
   PostureSpace out;
   out.actuator = ActuatorIndices(sim, chain);
   for (size_t k = 0; k < out.actuator.size(); ++k) {
-    if (out.actuator[k] < 0) {
+    if (out.actuator[k] < 0 && !chain.IsCoupled(static_cast<int>(k))) {
       throw InputError(t.postures_where + ": joint '" + chain.q_joints[k] +
                        "' of the declared model is not actuated in the truth");
     }
@@ -103,6 +118,10 @@ PostureSpace ResolvePostures(const TrackerTruth& t, const sim::Simulation& sim,
       throw InputError(t.postures_where + ": '" + joint +
                        "' is not an actuated joint of the declared model");
     }
+    if (chain.IsCoupled(static_cast<int>(it - chain.q_joints.begin()))) {
+      throw InputError(t.postures_where + ": '" + joint +
+                       "' is coupled in the declared model: it follows its drivers' ranges");
+    }
     out.range[it - chain.q_joints.begin()] = r;
   }
   return out;
@@ -110,7 +129,7 @@ PostureSpace ResolvePostures(const TrackerTruth& t, const sim::Simulation& sim,
 
 void SimulateTrackerRows(const TrackerTruth& t, const TrackerRowsSetup& s, int postures,
                          std::uint64_t seed, const std::string& stream, const std::string& set,
-                         identify::DataSet* d) {
+                         identify::DataSet* d, std::vector<double>* truth_errors) {
   const sim::DeclaredChain& chain = *s.chain;
   const int nq = chain.model.nq();
   const PostureSpace space = ResolvePostures(t, *s.sim, chain);
@@ -119,18 +138,21 @@ void SimulateTrackerRows(const TrackerTruth& t, const TrackerRowsSetup& s, int p
   Eigen::VectorXd cmd = Eigen::VectorXd::Zero(s.sim->num_actuated());
   for (int c = 0; c < postures; ++c) {
     for (int k = 0; k < nq; ++k) {
+      if (space.actuator[k] < 0) continue;  // coupled
       const auto [lo, hi] = space.range[k];
       cmd[space.actuator[k]] = lo + (hi - lo) * u.Uniform();
     }
     s.sim->SetCommand(cmd);
     s.sim->Settle();
     // Readings: the encoders (motor side of an elastic gear) with their offsets and noise.
-    Eigen::VectorXd q(nq);
+    Eigen::VectorXd q = Eigen::VectorXd::Zero(nq);
     for (int k = 0; k < nq; ++k) {
+      if (space.actuator[k] < 0) continue;
       const int jid = mj_name2id(s.sim->model(), mjOBJ_JOINT, chain.q_joints[k].c_str());
       q[k] = s.sim->MotorPosition(jid) + s.sim->EncoderOffset(jid) + n.Normal(s.encoder_noise_rad);
     }
-    AppendMarkerRows(t, s, q, c, si, n, d);
+    chain.ApplyCouplings(&q);
+    AppendMarkerRows(t, s, q, c, si, n, d, truth_errors);
   }
 }
 

@@ -13,6 +13,12 @@
 //       noise_std_m: 1.5e-4             # per axis and reading
 //       markers: [right_marker, left_marker]   # observed frames of the declared model
 //       postures_deg: {default: [-30, 30], shoulder_pitch: [-100, 0]}  # command ranges
+//       marker_offsets_mm: {right_marker: [x, y, z]}   # optional: where a marker really sits,
+//                                       # off the declared site, in its frame (mm)
+//
+// Coupled joints of the declared model (its `coupled:`) are never commanded nor read: the truth's
+// own linkage moves them, and each row's q takes them from its readings (ApplyCouplings), as
+// identification reads a CSV.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -36,6 +42,7 @@ struct TrackerTruth {
   std::vector<std::string> markers;
   std::pair<double, double> default_range{0.0, 0.0};                      // rad
   std::vector<std::pair<std::string, std::pair<double, double>>> ranges;  // joint, rad
+  std::vector<Vec3> marker_offsets;  // per marker: the true marker in its site's frame (m)
   // Where each key was given (file, line, key), for messages.
   std::string frame_where, markers_where, postures_where;
 };
@@ -48,8 +55,8 @@ TrackerTruth ParseTrackerTruth(const ConfigNode& n);
 lie::SE3 DrawTrackerPose(const TrackerTruth& t, std::uint64_t seed);
 
 // Per declared joint (chain order): its actuator's index in the truth's command vector and its
-// command range (rad). InputError naming postures_deg when a range names no declared joint or a
-// declared joint is not actuated in the truth.
+// command range (rad); -1 for a coupled joint. InputError naming postures_deg when a range names
+// no declared joint or a coupled one, or a declared read joint is not actuated in the truth.
 struct PostureSpace {
   std::vector<int> actuator;
   std::vector<std::pair<double, double>> range;
@@ -70,8 +77,10 @@ struct TrackerRowsSetup {
 
 // Appends `postures` settled postures to `d`, one row per marker each, in set `set`; the
 // random streams are named after `stream` (same seed, same rows). Bad input as ResolvePostures.
+// `truth_errors` (if given) receives per appended row the distance of the measured point from
+// the true one: the tracker's noise, the floor any model's error stays above.
 void SimulateTrackerRows(const TrackerTruth& t, const TrackerRowsSetup& s, int postures,
                          std::uint64_t seed, const std::string& stream, const std::string& set,
-                         identify::DataSet* d);
+                         identify::DataSet* d, std::vector<double>* truth_errors = nullptr);
 
 }  // namespace flexbench::scenarios

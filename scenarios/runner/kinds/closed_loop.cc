@@ -14,12 +14,14 @@
 //     settled postures; rows are the encoder readings and the markers in the tracker's frame.
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <iterator>
+#include <map>
 #include <optional>
 #include <random>
 #include <set>
@@ -179,11 +181,19 @@ class ClosedLoopKind : public ScenarioKind {
   // collect (load, loads, outliers) -> identify -> score (errors before and after, names,
   // NEES) -> report (identification, augmented model, residuals, plots).
   void Run(RunContext& ctx) override {
+    using Clock = std::chrono::steady_clock;
+    const auto seconds_since = [](Clock::time_point t) {
+      return std::chrono::duration<double>(Clock::now() - t).count();
+    };
+    const Clock::time_point t0 = Clock::now();
     Sets sets = Collect(ctx);
+    (*ctx.timing)["data_s"] = seconds_since(t0);
     ctx.log("identify: " + std::to_string(sets.cal.rows.size()) + " calibration rows, " +
             std::to_string(candidates_.size()) + " candidate effects");
+    const Clock::time_point t1 = Clock::now();
     identify::IdentifyResult res =
         identify::Identify(*em_, sets.cal, sets.cal_loads, candidates_, opt_);
+    (*ctx.timing)["identify_s"] = seconds_since(t1);
     for (const std::string& s : res.steps) ctx.log("  " + s);
     const Scored sc = Score(ctx, &sets, &res);
     Json& m = (*ctx.summary)["metrics"];
@@ -425,6 +435,9 @@ class ClosedLoopKind : public ScenarioKind {
     }
     (*m)["val_err_before_m"] = identify::ConsistencyError(val, sc.val_before);
     (*m)["val_err_after_m"] = identify::ConsistencyError(val, sc.val_after);
+    if (const auto e = TruthRowErrors(val)) {
+      (*m)["val_err_truth_m"] = identify::ConsistencyError(val, *e);
+    }
     (*m)["cal_err_before_m"] = identify::ConsistencyError(cal, sc.cal_before);
     (*m)["cal_err_after_m"] = identify::ConsistencyError(cal, sc.cal_after);
     for (const auto& [name, e] :
@@ -440,6 +453,18 @@ class ClosedLoopKind : public ScenarioKind {
     }
     (*m)["calibration_rows"] = cal.rows.size();
     (*m)["validation_rows"] = val.rows.size();
+  }
+
+  // Simulated tracker rows: the truth's own error per row (its marker against the measured
+  // point: the tracker's noise), weighted as the other errors. nullopt when a row has none.
+  std::optional<std::vector<double>> TruthRowErrors(const DataSet& d) const {
+    std::vector<double> out(d.rows.size(), 0.0);
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      const auto it = truth_row_err_.find(d.rows[r].where);
+      if (it == truth_row_err_.end()) return std::nullopt;
+      out[r] = it->second;
+    }
+    return out;
   }
 
   static void WriteRowErrorStats(const std::string& prefix, const std::string& unit,
@@ -597,8 +622,11 @@ class ClosedLoopKind : public ScenarioKind {
     d.frames = frames_;
     d.points = points_;
     d.offset_unknown = offset_unknown_;
-    if (!chain_->couplings.empty() && s.type != Source::Type::kCsv) {
-      throw InputError(s.where + ": coupled joints (the declared model's coupled:) need csv data");
+    if (!chain_->couplings.empty() && s.type != Source::Type::kCsv &&
+        !(s.type == Source::Type::kSimulate && tracker_)) {
+      throw InputError(s.where +
+                       ": coupled joints (the declared model's coupled:) need csv data or a "
+                       "simulated tracker");
     }
     switch (s.type) {
       case Source::Type::kMukca:
@@ -708,8 +736,14 @@ class ClosedLoopKind : public ScenarioKind {
     setup.frame_index = tracker_frame_;
     setup.T_base_tracker = T_true_tracker_;
     setup.encoder_noise_rad = encoder_noise_rad_;
+    std::vector<double> truth_errors;
+    const size_t first = d->rows.size();
     SimulateTrackerRows(*tracker_, setup, s.postures, ctx.seed,
-                        "closed_loop/" + what + "/" + std::to_string(s.seed), what, d);
+                        "closed_loop/" + what + "/" + std::to_string(s.seed), what, d,
+                        &truth_errors);
+    for (size_t r = first; r < d->rows.size(); ++r) {
+      truth_row_err_[d->rows[r].where] = truth_errors[r - first];
+    }
   }
 
   // The truth's effects against the found ones, where the data cannot single out every cause (a
@@ -1501,10 +1535,11 @@ class ClosedLoopKind : public ScenarioKind {
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;
   bool has_truth_ = false;
-  std::optional<TrackerTruth> tracker_;  // simulated tracker rows instead of sockets
-  int tracker_frame_ = -1;               // its index in frames_
-  std::vector<int> tracker_points_;      // its markers' indices in points_
-  lie::SE3 T_true_tracker_;              // drawn per run
+  std::optional<TrackerTruth> tracker_;          // simulated tracker rows instead of sockets
+  int tracker_frame_ = -1;                       // its index in frames_
+  std::vector<int> tracker_points_;              // its markers' indices in points_
+  lie::SE3 T_true_tracker_;                      // drawn per run
+  std::map<std::string, double> truth_row_err_;  // simulated tracker rows by `where`
   double socket_distance_m_ = 0.05;
   double encoder_noise_rad_ = 0.0;
   double reading_std_rad_ = 0.0;

@@ -91,8 +91,11 @@ TEST(DeclaredChain, EveryModelInModelsMatchesMujoco) {
     SCOPED_TRACE(path);
     const DeclaredModel declared = LoadDeclaredModel(path);
     MjModelPtr m = LoadModel(declared.model_path);
-    const DeclaredChain chain = BuildDeclaredChain(m.get(), declared);
-    EXPECT_EQ(chain.model.nq(), static_cast<int>(declared.actuated_joints.size()));
+    // A coupled joint is a chain variable as well (humanoid_upper_torso: the torso's fourth).
+    const DeclaredChain chain =
+        BuildDeclaredChain(m.get(), declared, /*with_couplings=*/!declared.coupled.empty());
+    EXPECT_EQ(chain.model.nq(),
+              static_cast<int>(declared.actuated_joints.size() + declared.coupled.size()));
     ExpectChainMatchesMujoco(m.get(), chain, 20);
     ++models;
   }

@@ -76,6 +76,84 @@ TEST(SimulatedTracker, RigidTruthRowsAreTheDeclaredMarkersInTheTrackerFrame) {
   EXPECT_LT((s.T_base_tracker.translation() - t.T_nominal.translation()).norm(), 0.5);
 }
 
+// The torso-enabled declared model: its coupled torso_pitch_3 is neither commanded nor read, the
+// truth's linkage moves it and each row takes it from its drivers' readings; the markers sit
+// where marker_offsets_mm puts them, in their sites' frames; the truth's own error of a row is
+// the tracker's noise alone. The oracle is the declared chain's forward kinematics.
+TEST(SimulatedTracker, CoupledTorsoAndMarkersOffTheirSites) {
+  const std::string models = testing::SourceDir() + "/models/";
+  auto truth = sim::Simulation::Load(models + "humanoid_upper.xml");
+  const sim::DeclaredModel declared =
+      sim::LoadDeclaredModel(models + "humanoid_upper_torso.declared.yaml");
+  const sim::DeclaredChain chain =
+      sim::BuildDeclaredChain(truth->nominal_model(), declared, /*with_couplings=*/true);
+  const ConfigNode n = ConfigNode::LoadString(
+      "tracker:\n  frame: tracker\n  T_base_tracker: [2.5, 0, 1.6, 0, 0, 0, 1]\n"
+      "  pose_std_m: 0.05\n  pose_std_deg: 5\n  noise_std_m: 2.0e-4\n"
+      "  markers: [right_marker, left_marker]\n"
+      "  marker_offsets_mm: {left_marker: [-0.9, -3.5, -0.4], right_marker: [0.7, -4.2, 1.9]}\n"
+      "  postures_deg: {default: [-30, 30], torso_pitch_1: [-15, 30]}\n",
+      "t.yaml");
+  const TrackerTruth t = ParseTrackerTruth(n.Child("tracker"));
+  TrackerRowsSetup s;
+  s.sim = truth.get();
+  s.chain = &chain;
+  s.base_body = declared.base;
+  s.marker_points = {0, 1};
+  s.T_base_tracker = DrawTrackerPose(t, 5);
+  identify::DataSet d;
+  std::vector<double> truth_errors;
+  SimulateTrackerRows(t, s, 40, 5, "test", "cal", &d, &truth_errors);
+  ASSERT_EQ(truth_errors.size(), d.rows.size());
+  const int k1 = chain.QIndex("torso_pitch_1"), k2 = chain.QIndex("torso_pitch_2");
+  const int k3 =
+      static_cast<int>(std::find(chain.q_joints.begin(), chain.q_joints.end(), "torso_pitch_3") -
+                       chain.q_joints.begin());
+  ASSERT_TRUE(chain.IsCoupled(k3));
+  kinematics::PpoeData pd(chain.model);
+  double worst = 0.0, mean_truth = 0.0, mean_on_site = 0.0;
+  for (size_t r = 0; r < d.rows.size(); ++r) {
+    const identify::Observation& o = d.rows[r];
+    EXPECT_EQ(o.q[k3], -(o.q[k1] + o.q[k2])) << o.where;
+    kinematics::ForwardKinematics(chain.model, pd, o.q);
+    const kinematics::FrameId f =
+        chain.ObservedFrame(o.point == 0 ? "right_marker" : "left_marker");
+    const Vec3 p_model = pd.T_base_frame[f] * t.marker_offsets[o.point];
+    const double e = (s.T_base_tracker * o.p_frame - p_model).norm();
+    EXPECT_NEAR(e, truth_errors[r], 1e-9) << o.where;  // the truth is the declared chain here
+    worst = std::max(worst, e);
+    mean_truth += truth_errors[r] / d.rows.size();
+    mean_on_site +=
+        (s.T_base_tracker * o.p_frame - pd.T_base_frame[f].translation()).norm() / d.rows.size();
+  }
+  // 3-D Gaussian noise of 0.2 mm per axis: mean distance sqrt(8 / pi) 0.2 mm = 0.32 mm.
+  EXPECT_NEAR(mean_truth, std::sqrt(8.0 / M_PI) * 2e-4, 0.5e-4);
+  EXPECT_LT(worst, 1.2e-3);
+  // Read in mm; taken for sites without their offsets, the rows miss by millimetres.
+  EXPECT_NEAR(t.marker_offsets[1].norm(), 3.6359e-3, 1e-7);
+  EXPECT_GT(mean_on_site, 3e-3);
+}
+
+TEST(SimulatedTracker, ACoupledJointTakesNoPostureRange) {
+  const std::string models = testing::SourceDir() + "/models/";
+  auto truth = sim::Simulation::Load(models + "humanoid_upper.xml");
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(
+      truth->nominal_model(), sim::LoadDeclaredModel(models + "humanoid_upper_torso.declared.yaml"),
+      true);
+  const ConfigNode n = ConfigNode::LoadString(
+      "tracker:\n  frame: tracker\n  T_base_tracker: [2.5, 0, 1.6, 0, 0, 0, 1]\n"
+      "  pose_std_m: 0\n  pose_std_deg: 0\n  noise_std_m: 1.0e-4\n  markers: [right_marker]\n"
+      "  postures_deg: {default: [-30, 30], torso_pitch_3: [-15, 30]}\n",
+      "t.yaml");
+  try {
+    ResolvePostures(ParseTrackerTruth(n.Child("tracker")), *truth, chain);
+    ADD_FAILURE() << "a range for a coupled joint accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("'torso_pitch_3' is coupled"), std::string::npos)
+        << e.what();
+  }
+}
+
 // With the shoulders' gears elastic (1000 N m/rad), the hands sit below where their readings put
 // them, by millimetres (not centimetres: the sag stays well under 5 deg).
 TEST(SimulatedTracker, ElasticShouldersLowerTheHandsByMillimetres) {
@@ -149,6 +227,8 @@ TEST(SimulatedTracker, BadTrackerBlockIsOneLineAndExit2) {
       {"truth.tracker.markers=[index_tip, l_foot]", "'l_foot' is neither the end effector"},
       {"truth.tracker.postures_deg.l_elbow=[10, -10]", "postures_deg.l_elbow"},
       {"truth.tracker.postures_deg.l_knee=[0, 10]", "'l_knee' is not an actuated joint"},
+      {"truth.tracker.marker_offsets_mm={l_foot: [1, 2, 3]}", "'l_foot' is not one of"},
+      {"truth.tracker.marker_offsets_mm={left_marker: [1, 2]}", "expected [x, y, z] in mm"},
       {"calibration.simulate.postures=2", "postures"},
       {"calibration.simulate.placements=3", "placements"},
   };

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <map>
+#include <regex>
 
 #include "estimators/error.h"
 #include "sim/effects/effect.h"
@@ -77,7 +78,7 @@ TEST(Models, LoadWithoutWarningsWithTheExpectedJoints) {
     int passive;
     int coupled;
   };
-  for (const Expect& e : {Expect{"rover_arm", 8, 7, 0}, Expect{"humanoid_upper", 19, 14, 2},
+  for (const Expect& e : {Expect{"rover_arm", 8, 7, 0}, Expect{"humanoid_upper", 22, 14, 3},
                           Expect{"jsk_arm", 4, 4, 0}}) {
     std::vector<std::string> warnings;
     MjModelPtr m = LoadModel(ModelPath(e.name), &warnings);
@@ -87,7 +88,9 @@ TEST(Models, LoadWithoutWarningsWithTheExpectedJoints) {
     for (const JointEntry& j : c.joints) {
       passive += j.role == JointRole::kPassive;
       coupled += j.role == JointRole::kCoupled;
-      if (j.role != JointRole::kActuated) {
+      // A linkage without an effect is the model's own mechanism (the humanoid's torso).
+      if (j.role == JointRole::kPassive ||
+          (j.role == JointRole::kCoupled && j.effect.empty() && j.driver_slopes.empty())) {
         EXPECT_FALSE(j.effect.empty())
             << e.name << ": passive joint " << j.name << " has no effect";
       }
@@ -130,6 +133,13 @@ TEST(GravityTorque, IsTheGradientOfThePotentialEnergy) {
       mju_copy(d->qpos, m->qpos0, m->nq);
       for (int i = 0; i < sim->num_actuated(); ++i) {
         d->qpos[m->jnt_qposadr[sim->catalog().actuated[i]]] = q[i];
+      }
+      for (const JointEntry& j : sim->catalog().joints) {  // the humanoid's torso linkage
+        if (j.role != JointRole::kCoupled || !j.effect.empty()) continue;
+        double dq;
+        std::vector<double> slopes;
+        CoupledValue(m, j, d->qpos, &dq, &slopes);
+        d->qpos[j.qpos_adr] = m->qpos0[j.qpos_adr] + dq;
       }
       mj_kinematics(m, d);
       double v = 0.0;
@@ -219,6 +229,71 @@ TEST(Settle, NoEffectsMeansTheNominalModelExactly) {
       sim->Settle();
       ExpectAllFramesNominal(*sim, 1e-12);
     }
+  }
+}
+
+// The humanoid's torso (DLR Justin's): torso_pitch_3 = -(torso_pitch_1 + torso_pitch_2) through a
+// fixed tendon held at its length, so the chest stays upright whatever the two pitches. The static
+// solve sets the linkage from its drivers; MuJoCo's dynamics, left to come to rest, must agree
+// (its soft tendon constraint and the servos with their feed-forward, an independent path).
+TEST(Settle, TorsoLinkageKeepsTheChestUpright) {
+  auto sim = Simulation::Load(ModelPath("humanoid_upper"));
+  const auto qpos = [&](const char* joint) { return sim->JointPosition(joint); };
+  const Eigen::VectorXd q = Command(*sim, {{"torso_yaw", 20},
+                                           {"torso_pitch_1", 25},
+                                           {"torso_pitch_2", 15},
+                                           {"shoulder_pitch", -60},
+                                           {"l_shoulder_pitch", -30},
+                                           {"l_elbow", -40}});
+  sim->SetCommand(q);
+  sim->Settle();
+  EXPECT_NEAR(qpos("torso_pitch_3"), -40 * kDeg, 1e-12);
+  // Upright: the chest turned about the vertical by the yaw alone, but 0.43 m further forward.
+  const Eigen::Isometry3d T_chest = sim->BodyPose("torso");
+  const Eigen::Matrix3d R_yaw = Eigen::AngleAxisd(20 * kDeg, Vec3::UnitZ()).toRotationMatrix();
+  EXPECT_LT((T_chest.linear() - R_yaw).cwiseAbs().maxCoeff(), 1e-12);
+  const double forward = 0.3 * std::sin(25 * kDeg) + 0.25 * std::sin(40 * kDeg);
+  EXPECT_NEAR(T_chest.translation().head<2>().norm(), forward, 1e-12);
+  // The rigid nominal model knows its own mechanism.
+  EXPECT_LT(
+      (sim->NominalPose("right_marker", q).translation() - sim->Pose("right_marker").translation())
+          .norm(),
+      1e-12);
+  const Vec3 p_static = sim->Pose("left_marker").translation();
+  sim->SetCommand(Eigen::VectorXd::Zero(q.size()));
+  sim->Step(300);
+  sim->SetCommand(q);
+  sim->SettleDynamic(30.0, 1e-8);
+  // MuJoCo's soft constraint gives a little under the chest's weight (2e-5 rad measured).
+  EXPECT_NEAR(qpos("torso_pitch_3"), -40 * kDeg, 5e-5);
+  EXPECT_LT((sim->Pose("left_marker").translation() - p_static).norm(), 2e-5);
+}
+
+TEST(Settle, ATendonLinkageNeedsOneFollowerAndActuatedDrivers) {
+  const std::string xml = R"(
+<mujoco><worldbody><body><joint name="a" axis="0 1 0"/><geom size="0.1" mass="1"/>
+  <body pos="0 0 0.3"><joint name="b" axis="0 1 0"/><geom size="0.1" mass="1"/>
+  <body pos="0 0 0.3"><joint name="c" axis="0 1 0"/><geom size="0.1" mass="1"/>
+  </body></body></body></worldbody>
+  <tendon><fixed name="link"><joint joint="a" coef="1"/><joint joint="b" coef="2"/>
+    <joint joint="c" coef="1"/></fixed></tendon>
+  <equality><tendon tendon1="link"/></equality>
+  <actuator><position joint="a" kp="100"/>ACTUATOR_B</actuator></mujoco>)";
+  const auto with = [&](const std::string& b) {
+    return std::regex_replace(xml, std::regex("ACTUATOR_B"), b);
+  };
+  const ModelCatalog c = ModelCatalog::Build(
+      LoadModelFromString(with("<position joint=\"b\" kp=\"100\"/>"), "t").get(), "t");
+  ASSERT_EQ(c.joints[2].role, JointRole::kCoupled);
+  EXPECT_EQ(c.joints[2].drivers, (std::vector<int>{0, 1}));
+  EXPECT_EQ(c.joints[2].driver_slopes, (std::vector<double>{-1.0, -2.0}));
+  try {
+    ModelCatalog::Build(LoadModelFromString(with(""), "t").get(), "t");
+    ADD_FAILURE() << "two followers accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("tendon 'link' couples two joints without an actuator"),
+              std::string::npos)
+        << e.what();
   }
 }
 

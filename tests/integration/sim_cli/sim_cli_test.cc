@@ -67,7 +67,8 @@ TEST(Inspect, RoverModelAsJson) {
   EXPECT_TRUE(supported["transmission_error"]);
   EXPECT_TRUE(supported["stiffening_spring"]);
   EXPECT_FALSE(supported["lateral_compliance"]);  // no J_lateral_a/b hinges
-  EXPECT_EQ(supported.size(), 14u);
+  EXPECT_TRUE(supported["joint_origin"]);
+  EXPECT_EQ(supported.size(), 15u);
   std::map<std::string, std::vector<std::string>> parts;
   for (const Json& e : j["effects"]) {
     if (e.contains("parts")) parts[e["name"]] = e["parts"].get<std::vector<std::string>>();
@@ -86,7 +87,10 @@ TEST(Inspect, DeclaredFileAndOtherModels) {
   EXPECT_EQ(j["truth"]["sensors"]["imu_sites"], Json({"imu_link2", "imu_link3"}));
   const CommandResult h = RunCommand(Flexbench() + " inspect " + Model("humanoid_upper.xml"));
   ASSERT_EQ(h.exit_code, 0) << h.err;
-  EXPECT_EQ(Json::parse(h.out)["coupled_joints"].size(), 2u);
+  const Json coupled = Json::parse(h.out)["coupled_joints"];
+  ASSERT_EQ(coupled.size(), 3u);  // the wrist linkage's two, the torso's one
+  EXPECT_EQ(coupled[0]["name"], "torso_pitch_3");
+  EXPECT_EQ(coupled[0]["follows"], Json({{"torso_pitch_1", -1.0}, {"torso_pitch_2", -1.0}}));
 }
 
 // What closed_loop writes, inspect reads: the format is the reader's (sim/declared_model.h).

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+
 #include "estimators/error.h"
 #include "tests/common/test_util.h"
 
@@ -106,6 +108,28 @@ TEST(SweepFile, BadInputNamesFileLineAndKey) {
     EXPECT_NE(e.find("s.yaml"), std::string::npos) << e;
     EXPECT_EQ(e.find('\n'), std::string::npos) << e;
   }
+}
+
+}  // namespace
+}  // namespace flexbench::scenarios::sweep
+
+namespace flexbench::scenarios::sweep {
+namespace {
+
+// Every sweep file of the repository reads, names a scenario file that exists and runs seeds.
+TEST(SweepFile, EverySweepOfTheRepositoryReads) {
+  int sweeps = 0;
+  for (const auto& entry :
+       std::filesystem::directory_iterator(flexbench::testing::SourceDir() + "/scenarios/sweeps")) {
+    if (entry.path().extension() != ".yaml") continue;
+    SCOPED_TRACE(entry.path().string());
+    const SweepSpec spec = LoadSweep(entry.path().string());
+    EXPECT_TRUE(std::filesystem::exists(spec.scenario)) << spec.scenario;
+    EXPECT_GE(spec.seeds.size(), 1u);
+    EXPECT_FALSE(spec.gates.empty());
+    ++sweeps;
+  }
+  EXPECT_GE(sweeps, 9);
 }
 
 }  // namespace
