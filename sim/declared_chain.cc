@@ -278,7 +278,12 @@ DeclaredChain BuildDeclaredChain(const mjModel* m, const DeclaredModel& declared
   if (!with_couplings && !declared.coupled.empty()) {
     throw InputError(declared.coupled.front().where +
                      ": coupled joints are read by identification only (closed_loop, identify); "
-                     "the estimators need a reading of every joint of their chain");
+                     "the estimators need a reading of every joint of their chain. To score this "
+                     "model on measured rows run `flexbench identify --declared " +
+                     CapForMessage(declared.file) +
+                     " --calibration ROWS.csv --validation ROWS.csv --max-effects 0`; to "
+                     "estimate with it, move the joint into actuated_joints and give its angle "
+                     "with the readings");
   }
   DeclaredChain chain{kinematics::PpoeModel(declared.file), {}, {}, {}, 0, -1, {}, {}, {}};
   ChainBuilder(m, declared, &chain).Build();
