@@ -3,6 +3,7 @@
 #include <mujoco/mujoco.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -268,32 +269,41 @@ std::string SaveLastXml(const mjModel* m) {
   return text.str();
 }
 
-}  // namespace
+// The model with the declared file's geometry folded in (Folder), and what MJCF cannot hold.
+struct Folded {
+  MjModelPtr model;
+  std::map<std::string, double> gear;   // GearStiffness
+  std::vector<std::string> compliance;  // the identified compliances (written as gear)
+  bool tilt = false;                    // <option gravity> turned
+  std::vector<std::string> skipped;
+};
 
-ExportedModel ExportMjcf(const DeclaredModel& declared) {
+Folded Fold(const DeclaredModel& declared) {
   const std::string ext = std::filesystem::path(declared.model_path).extension().string();
   if (ext != ".xml" && ext != ".XML") {
     throw InputError(declared.file + ": model " + CapForMessage(declared.model_path) +
                      " is not an MJCF file (.xml): export writes from an MJCF model");
   }
-  ExportedModel out;
+  Folded out;
   DeclaredModel geometric = declared;
   geometric.identified_effects.clear();
-  bool tilt = false;
   for (const IdentifiedEffect& e : declared.identified_effects) {
     const std::string type = TypeOf(e.effect);
     if (IsGeometric(type)) {
       geometric.identified_effects.push_back(e);
     } else if (type == "gravity_tilt") {
-      tilt = true;
+      out.tilt = true;
+    } else if (type == "joint_compliance") {
+      out.compliance.push_back(e.effect);
     } else if (type == "stiffening_spring") {
+      out.compliance.push_back(e.effect);
       out.skipped.push_back(e.effect + " (its cubic term; the linear one is written)");
-    } else if (type != "joint_compliance") {
+    } else {
       out.skipped.push_back(e.effect);
     }
   }
-  MjModelPtr owned = LoadModel(declared.model_path);
-  mjModel* m = owned.get();
+  out.model = LoadModel(declared.model_path);
+  mjModel* m = out.model.get();
   // The whole file first: a bad effect is refused, not skipped.
   const DeclaredChain full = BuildDeclaredChain(m, declared, /*with_couplings=*/true);
   const DeclaredChain chain = BuildDeclaredChain(m, geometric, /*with_couplings=*/true);
@@ -302,20 +312,176 @@ ExportedModel ExportMjcf(const DeclaredModel& declared) {
       out.skipped.push_back("the marker offset of body '" + mo.frame + "' (move a site instead)");
     }
   }
-  const std::map<std::string, double> gear = GearStiffness(m, full, &out.skipped);
+  out.gear = GearStiffness(m, full, &out.skipped);
   Folder(m, chain, &out.skipped).Fold();
-  if (tilt) {
+  if (out.tilt) {
     MjDataPtr data = MakeData(m);
     mj_kinematics(m, data.get());
-    const Mat3 R_w_base =
-        Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(data->xmat + 9 * full.base_body);
+    const Mat3 R_w_base = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
+        data->xmat + 9 * full.base_body);
     const Vec3 g = R_w_base * full.effects.g_base;
     for (int k = 0; k < 3; ++k) m->opt.gravity[k] = g[k];
   }
-  const std::string saved = SaveLastXml(m);
-  out.mjcf = WithGearAnnotation(
-      WithFullPrecision(saved, m, std::filesystem::absolute(declared.model_path).parent_path()),
-      gear);
+  return out;
+}
+
+SE3 PoseOf(const double* pos, const double* quat) {
+  return SE3(QuatFromWxyz(quat).normalized(), Eigen::Map<const Vec3>(pos));
+}
+
+// URDF's origin: xyz and fixed-axis roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll)).
+std::string Origin(const SE3& T) {
+  const Mat3& R = T.rotation();
+  const double roll = std::atan2(R(2, 1), R(2, 2));
+  const double pitch = std::atan2(-R(2, 0), std::hypot(R(2, 1), R(2, 2)));
+  const double yaw = std::atan2(R(1, 0), R(0, 0));
+  const double xyz[3] = {T.translation().x(), T.translation().y(), T.translation().z()};
+  const double rpy[3] = {roll, pitch, yaw};
+  return "<origin xyz=\"" + Nums(xyz, 3) + "\" rpy=\"" + Nums(rpy, 3) + "\"/>";
+}
+
+// The folded model as URDF: a link per body (at its last joint's anchor, as URDF joints turn
+// about their link's origin; a body with several joints gets one link per joint), a fixed link
+// per site, camera and named geom, inertials. No visual or collision geometry.
+class UrdfWriter {
+ public:
+  UrdfWriter(const mjModel* m, std::vector<std::string>* skipped) : m_(m), skipped_(skipped) {}
+
+  std::string Write() {
+    // MuJoCo's names start with the model's own.
+    const std::string model = m_->names;
+    u_ << "<?xml version=\"1.0\"?>\n<robot name=\"" << (model.empty() ? "model" : model) << "\">\n";
+    u_ << "  <link name=\"" << kRoot << "\"/>\n";
+    used_.insert(kRoot);
+    link_of_.assign(m_->nbody, kRoot);
+    offset_.assign(m_->nbody, SE3());
+    for (int b = 1; b < m_->nbody; ++b) Body(b);
+    Attach(mjOBJ_SITE, m_->nsite, m_->site_bodyid, m_->site_pos, m_->site_quat, false);
+    Attach(mjOBJ_CAMERA, m_->ncam, m_->cam_bodyid, m_->cam_pos, m_->cam_quat, false);
+    Attach(mjOBJ_GEOM, m_->ngeom, m_->geom_bodyid, m_->geom_pos, m_->geom_quat, true);
+    u_ << "</robot>\n";
+    return u_.str();
+  }
+
+ private:
+  static constexpr const char* kRoot = "flexbench_world";
+
+  std::string Name(mjtObj type, int id, const std::string& fallback) const {
+    const std::string n = ObjectName(m_, type, id);
+    return n.empty() ? fallback : n;
+  }
+
+  void Joint(const std::string& name, const std::string& type, const std::string& parent,
+             const std::string& child, const SE3& origin, const std::string& extra) {
+    u_ << "  <joint name=\"" << name << "\" type=\"" << type << "\">\n    " << Origin(origin)
+       << "\n    <parent link=\"" << parent << "\"/>\n    <child link=\"" << child << "\"/>\n"
+       << extra << "  </joint>\n";
+  }
+
+  void Body(int b) {
+    const std::string name = Name(mjOBJ_BODY, b, "body" + std::to_string(b));
+    const std::string parent = link_of_[m_->body_parentid[b]];
+    const SE3 B = offset_[m_->body_parentid[b]].Inverse() * PoseOf(m_->body_pos + 3 * b,
+                                                                     m_->body_quat + 4 * b);
+    const int j0 = m_->body_jntadr[b], nj = m_->body_jntnum[b];
+    std::string prev = parent;
+    SE3 origin = B;
+    for (int j = j0; j < j0 + nj; ++j) {
+      const Vec3 a = Eigen::Map<const Vec3>(m_->jnt_pos + 3 * j);
+      origin = origin * SE3::Translation(a);
+      const std::string jname = Name(mjOBJ_JOINT, j, "joint" + std::to_string(j));
+      const std::string link = j + 1 == j0 + nj ? name : name + "__" + jname;
+      const bool hinge = m_->jnt_type[j] == mjJNT_HINGE;
+      if (!hinge && m_->jnt_type[j] != mjJNT_SLIDE) {
+        skipped_->push_back("joint '" + jname + "' (ball or free: no URDF form)");
+      }
+      const Vec3 w = Eigen::Map<const Vec3>(m_->jnt_axis + 3 * j).normalized();
+      const double axis[3] = {w.x(), w.y(), w.z()};
+      std::string extra = "    <axis xyz=\"" + Nums(axis, 3) + "\"/>\n";
+      std::string type = hinge ? "continuous" : "prismatic";
+      if (m_->jnt_limited[j]) {
+        type = hinge ? "revolute" : "prismatic";
+        extra += "    <limit lower=\"" + Num(m_->jnt_range[2 * j]) + "\" upper=\"" +
+                 Num(m_->jnt_range[2 * j + 1]) + "\" effort=\"0\" velocity=\"0\"/>\n";
+      }
+      if (j + 1 < j0 + nj) Link(link, -1, SE3());
+      Joint(jname, type, prev, link, origin, extra);
+      prev = link;
+      origin = SE3::Translation(-a);
+    }
+    // The body's link stands at its last joint's anchor (the body's own pose without joints).
+    const SE3 L = nj > 0 ? SE3::Translation(Eigen::Map<const Vec3>(m_->jnt_pos + 3 * (j0 + nj - 1)))
+                         : SE3();
+    if (nj == 0) Joint(name + "__fixed", "fixed", parent, name, B, "");
+    Link(name, b, L);
+    link_of_[b] = name;
+    offset_[b] = L;
+  }
+
+  // A link; with its body's inertial when b >= 0 (L: the link's pose in the body).
+  void Link(const std::string& name, int b, const SE3& L) {
+    used_.insert(name);
+    if (b < 0 || !(m_->body_mass[b] > 0.0)) {
+      u_ << "  <link name=\"" << name << "\"/>\n";
+      return;
+    }
+    const SE3 I = L.Inverse() * PoseOf(m_->body_ipos + 3 * b, m_->body_iquat + 4 * b);
+    const double* d = m_->body_inertia + 3 * b;
+    u_ << "  <link name=\"" << name << "\">\n    <inertial>\n      " << Origin(I)
+       << "\n      <mass value=\"" << Num(m_->body_mass[b]) << "\"/>\n      <inertia ixx=\""
+       << Num(d[0]) << "\" ixy=\"0\" ixz=\"0\" iyy=\"" << Num(d[1]) << "\" iyz=\"0\" izz=\""
+       << Num(d[2]) << "\"/>\n    </inertial>\n  </link>\n";
+  }
+
+  // Sites, cameras and (named) geoms as fixed links named as they are.
+  void Attach(mjtObj type, int n, const int* body, const double* pos, const double* quat,
+              bool named_only) {
+    for (int i = 0; i < n; ++i) {
+      std::string name = ObjectName(m_, type, i);
+      if (name.empty()) {
+        if (named_only) continue;
+        name = std::string(type == mjOBJ_SITE ? "site" : "camera") + std::to_string(i);
+      }
+      if (used_.count(name)) {
+        skipped_->push_back("the frame of '" + name + "' (a link of that name exists)");
+        continue;
+      }
+      const int b = body[i];
+      Joint(name + "__fixed", "fixed", link_of_[b], name,
+            offset_[b].Inverse() * PoseOf(pos + 3 * i, quat + 4 * i), "");
+      Link(name, -1, SE3());
+    }
+  }
+
+  const mjModel* m_;
+  std::vector<std::string>* skipped_;
+  std::ostringstream u_;
+  std::set<std::string> used_;
+  std::vector<std::string> link_of_;  // per body: its (last) link
+  std::vector<SE3> offset_;           // per body: that link's pose in the body
+};
+
+}  // namespace
+
+ExportedModel ExportMjcf(const DeclaredModel& declared) {
+  Folded f = Fold(declared);
+  const std::string saved = SaveLastXml(f.model.get());
+  ExportedModel out;
+  out.skipped = std::move(f.skipped);
+  out.text = WithGearAnnotation(
+      WithFullPrecision(saved, f.model.get(),
+                        std::filesystem::absolute(declared.model_path).parent_path()),
+      f.gear);
+  return out;
+}
+
+ExportedModel ExportUrdf(const DeclaredModel& declared) {
+  Folded f = Fold(declared);
+  ExportedModel out;
+  out.skipped = std::move(f.skipped);
+  for (const std::string& c : f.compliance) out.skipped.push_back(c + " (URDF has no spring)");
+  if (f.tilt) out.skipped.push_back("gravity_tilt@base (URDF has no gravity)");
+  out.text = UrdfWriter(f.model.get(), &out.skipped).Write();
   return out;
 }
 

@@ -26,7 +26,7 @@
 namespace flexbench::sim {
 
 struct ExportedModel {
-  std::string mjcf;                  // the text of the calibrated MJCF
+  std::string text;                  // the file's text
   std::vector<std::string> skipped;  // identified effects (or parts) the MJCF cannot hold
 };
 
@@ -34,5 +34,12 @@ struct ExportedModel {
 // frames carry every digit. Throws InputError naming the declared file for a bad model or
 // effect (as BuildDeclaredChain does).
 ExportedModel ExportMjcf(const DeclaredModel& declared);
+
+// The same model as URDF (loaded by sim::LoadModel's URDF path): a link per body at its last
+// joint's anchor (URDF joints turn about their link's origin; a body with several joints gets
+// a link per joint, named BODY__JOINT), a fixed link per site, camera and named geom (named as
+// it), the bodies' inertials; no visual or collision geometry. Compliances and a gravity tilt
+// have no URDF form and are in `skipped` as well.
+ExportedModel ExportUrdf(const DeclaredModel& declared);
 
 }  // namespace flexbench::sim

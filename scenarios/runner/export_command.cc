@@ -25,22 +25,33 @@ void CheckOutput(const std::string& option, const std::string& path, bool force)
   }
 }
 
+// Writes one format's file and names in one warning line what it cannot hold.
+void WriteOne(const std::string& path, const char* format, const sim::ExportedModel& model) {
+  WriteFileAtomic(path, model.text);
+  if (!model.skipped.empty()) {
+    std::string names;
+    for (const std::string& s : model.skipped) names += (names.empty() ? "" : ", ") + s;
+    std::cerr << "[flexbench] warning: not in " << path << " (" << format
+              << " has no form for them): " << names << "\n";
+  }
+  std::cout << "wrote " << path << "\n";
+}
+
 }  // namespace
 
 int ExportCommand(const ExportCliOptions& o) {
   try {
-    if (o.mjcf.empty()) throw InputError("export: name the output with --mjcf OUT.xml");
-    CheckOutput("--mjcf", o.mjcf, o.force);
-    const sim::DeclaredModel declared = sim::LoadDeclaredModel(o.declared);
-    const sim::ExportedModel mjcf = sim::ExportMjcf(declared);
-    WriteFileAtomic(o.mjcf, mjcf.mjcf);
-    if (!mjcf.skipped.empty()) {
-      std::string names;
-      for (const std::string& s : mjcf.skipped) names += (names.empty() ? "" : ", ") + s;
-      std::cerr << "[flexbench] warning: not in " << o.mjcf << " (MJCF has no form for them): "
-                << names << "\n";
+    if (o.mjcf.empty() && o.urdf.empty()) {
+      throw InputError("export: name an output with --mjcf OUT.xml and/or --urdf OUT.urdf");
     }
-    std::cout << "wrote " << o.mjcf << "\n";
+    if (!o.mjcf.empty()) CheckOutput("--mjcf", o.mjcf, o.force);
+    if (!o.urdf.empty()) CheckOutput("--urdf", o.urdf, o.force);
+    const sim::DeclaredModel declared = sim::LoadDeclaredModel(o.declared);
+    // Both built before either is written: bad input leaves no file behind.
+    const sim::ExportedModel mjcf = o.mjcf.empty() ? sim::ExportedModel{} : sim::ExportMjcf(declared);
+    const sim::ExportedModel urdf = o.urdf.empty() ? sim::ExportedModel{} : sim::ExportUrdf(declared);
+    if (!o.mjcf.empty()) WriteOne(o.mjcf, "MJCF", mjcf);
+    if (!o.urdf.empty()) WriteOne(o.urdf, "URDF", urdf);
     return kExitOk;
   } catch (const InputError& e) {
     return ReportError(e);

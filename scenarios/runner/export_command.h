@@ -1,5 +1,5 @@
 // `flexbench export`: the calibrated model (a declared file with its identified effects) written
-// as MJCF for other tools (sim/export_model.h).
+// as MJCF and URDF for other tools (sim/export_model.h).
 #pragma once
 
 #include <string>
@@ -8,7 +8,8 @@ namespace flexbench::scenarios {
 
 struct ExportCliOptions {
   std::string declared;  // the declared-model YAML (e.g. a run's declared_augmented.yaml)
-  std::string mjcf;      // output MJCF path
+  std::string mjcf;      // output MJCF path ("" none)
+  std::string urdf;      // output URDF path ("" none)
   bool force = false;    // replace an existing output file
 };
 

@@ -105,14 +105,15 @@ CLI::App* AddIdentify(CLI::App& app, Options& o) {
   return identify_cmd;
 }
 
-// export: the calibrated model (a declared file with identified effects) as MJCF.
+// export: the calibrated model (a declared file with identified effects) as MJCF and URDF.
 CLI::App* AddExport(CLI::App& app, Options& o) {
   CLI::App* cmd = app.add_subcommand(
-      "export", "write a declared model with its identified effects as MJCF (geometry folded in)");
+      "export", "write a declared model with its identified effects as MJCF / URDF (geometry folded in)");
   cmd->add_option("declared", o.ex.declared, "declared-model YAML (e.g. declared_augmented.yaml)")
       ->required();
   // Checked by ExportCommand: one line naming the option (CLI11 adds a second).
   cmd->add_option("--mjcf", o.ex.mjcf, "output MJCF file");
+  cmd->add_option("--urdf", o.ex.urdf, "output URDF file");
   cmd->add_flag("--force", o.ex.force, "replace an existing output file");
   return cmd;
 }

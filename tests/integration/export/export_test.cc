@@ -158,6 +158,63 @@ double MaxPoseError(const sim::DeclaredModel& d, const std::string& exported, in
   return worst;
 }
 
+// The same for the URDF through the project's URDF loader: a body's link stands at its last
+// joint's anchor with the body's axes, sites and cameras are links of their own names.
+double MaxUrdfPoseError(const sim::DeclaredModel& d, const std::string& urdf, int postures) {
+  sim::MjModelPtr m0 = sim::LoadModel(d.model_path);
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(m0.get(), d);
+  sim::MjModelPtr m = sim::LoadModel(urdf);
+  sim::MjDataPtr data = sim::MakeData(m.get());
+  kinematics::EffectiveChain kin(chain.model, chain.effects_or_null());
+  kinematics::PpoeData pd(chain.model);
+  std::mt19937_64 rng(8);
+  std::uniform_real_distribution<double> u(-1.5, 1.5);
+  double worst = 0.0;
+  int compared = 0;
+  for (int t = 0; t < postures; ++t) {
+    Eigen::VectorXd q(chain.model.nq());
+    for (int k = 0; k < q.size(); ++k) q[k] = u(rng);
+    mju_copy(data->qpos, m->qpos0, m->nq);
+    for (int k = 0; k < q.size(); ++k) {
+      const int j = mj_name2id(m.get(), mjOBJ_JOINT, chain.q_joints[k].c_str());
+      if (j < 0) {
+        ADD_FAILURE() << "no joint " << chain.q_joints[k] << " in " << urdf;
+        return 1.0;
+      }
+      data->qpos[m->jnt_qposadr[j]] = q[k];  // URDF has no ref: the reading itself
+    }
+    mj_kinematics(m.get(), data.get());
+    kin.Update(q);
+    kinematics::ForwardKinematics(kin.model(), pd, kin.q());
+    const auto pose = [&](const std::string& typed) { return pd.T_base_frame[chain.model.FindFrame(typed)]; };
+    for (int b = 1; b < m->nbody; ++b) {
+      const std::string name = sim::ObjectName(m.get(), mjOBJ_BODY, b);
+      std::string typed = sim::TypedFrameName(m0.get(), name);
+      if (typed.empty() || !chain.model.HasFrame(typed)) continue;
+      Mat3 R = pose(typed).rotation();
+      Vec3 p = pose(typed).translation();
+      if (typed.rfind("camera/", 0) == 0) R = R * Vec3(1, -1, -1).asDiagonal();
+      if (typed.rfind("body/", 0) == 0) {
+        const int b0 = mj_name2id(m0.get(), mjOBJ_BODY, name.c_str());
+        const int nj = m0->body_jntnum[b0];
+        if (nj > 0) {
+          const int j = m0->body_jntadr[b0] + nj - 1;
+          p = pose("joint/" + sim::ObjectName(m0.get(), mjOBJ_JOINT, j)).translation();
+        }
+      }
+      Mat3 Rm;
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) Rm(r, c) = data->xmat[9 * b + 3 * r + c];
+      }
+      worst = std::max(worst, (p - Eigen::Map<const Vec3>(data->xpos + 3 * b)).norm());
+      worst = std::max(worst, (R - Rm).cwiseAbs().maxCoeff());
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, postures * 3);
+  return worst;
+}
+
 TEST_F(Export, MujocoPosesOfTheWrittenMjcfAreTheCalibratedChains) {
   for (const std::string robot : {"arm4", "rover_arm"}) {
     sim::DeclaredModel d;
@@ -179,11 +236,14 @@ TEST_F(Export, MujocoPosesOfTheWrittenMjcfAreTheCalibratedChains) {
     const fs::path yaml = dir_ / (robot + ".aug.yaml");
     testing::WriteFile(yaml, sim::EmitDeclaredModel(d, ""));
     const fs::path out = dir_ / (robot + ".calibrated.xml");
-    const testing::CommandResult r = Run(yaml.string() + " --mjcf " + out.string());
+    const fs::path urdf = dir_ / (robot + ".calibrated.urdf");
+    const testing::CommandResult r =
+        Run(yaml.string() + " --mjcf " + out.string() + " --urdf " + urdf.string());
     ASSERT_EQ(r.exit_code, 0) << r.err;
     EXPECT_EQ(r.err, "") << robot;  // geometry only: nothing left out
     const sim::DeclaredModel reread = sim::LoadDeclaredModel(yaml.string());
     EXPECT_LT(MaxPoseError(reread, out.string(), 20), 1e-9) << robot;
+    EXPECT_LT(MaxUrdfPoseError(reread, urdf.string(), 20), 1e-9) << robot;
     // The nominal model is millimetres away: the comparison would see a missing effect.
     sim::DeclaredModel nominal = reread;
     nominal.identified_effects.clear();
@@ -224,6 +284,15 @@ TEST_F(Export, CompliancesBecomeGearAnnotationsAndTheRestIsNamed) {
   ASSERT_EQ(m->numeric_size[n], 2);
   EXPECT_NEAR(m->numeric_data[m->numeric_adr[n]], 500.0, 1e-9);
   EXPECT_NEAR(m->numeric_data[m->numeric_adr[n] + 1], 2500.0, 1e-9);
+  // URDF has no spring: the compliances are named too, in the URDF's own line.
+  const fs::path urdf = dir_ / "c.urdf";
+  const testing::CommandResult u = Run((dir_ / "c.yaml").string() + " --urdf " + urdf.string());
+  ASSERT_EQ(u.exit_code, 0) << u.err;
+  EXPECT_EQ(testing::CountLines(u.err), 1) << u.err;
+  for (const char* name : {"joint_compliance@j2", "stiffening_spring@j3", "backlash@j3"}) {
+    EXPECT_NE(u.err.find(name), std::string::npos) << u.err;
+  }
+  EXPECT_NE(u.err.find("c.urdf"), std::string::npos) << u.err;
 }
 
 TEST_F(Export, AnExistingFileNeedsForceAndBadInputIsOneLine) {
