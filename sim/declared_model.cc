@@ -210,9 +210,8 @@ std::vector<DeclaredMarkerOffset> ReadMarkerOffsets(const ConfigNode& node,
   std::vector<DeclaredMarkerOffset> out;
   for (const std::string& name : node.Keys()) {
     const ConfigNode m = node.Child(name);
-    if (name != d.end_effector &&
-        std::find(d.observed_frames.begin(), d.observed_frames.end(), name) ==
-            d.observed_frames.end()) {
+    if (name != d.end_effector && std::find(d.observed_frames.begin(), d.observed_frames.end(),
+                                            name) == d.observed_frames.end()) {
       m.Fail("'" + CapForMessage(name) +
              "' is neither the end effector nor one of observed_frames");
     }

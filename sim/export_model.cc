@@ -108,7 +108,8 @@ class Folder {
       const SE3 G_inv = G.Inverse();
       const Vec3 anchor = G_inv.translation();
       const Vec3 axis = G_inv.rotation() * Eigen::Map<const Vec3>(m_->jnt_axis + 3 * j);
-      for (int k = 0; k < 3; ++k) m_->jnt_pos[3 * j + k] = anchor[k], m_->jnt_axis[3 * j + k] = axis[k];
+      for (int k = 0; k < 3; ++k)
+        m_->jnt_pos[3 * j + k] = anchor[k], m_->jnt_axis[3 * j + k] = axis[k];
       G = Fixed(Find("joint/", mjOBJ_JOINT, j)) * G;
     }
     SetPose(G, m_->body_pos + 3 * b, m_->body_quat + 4 * b);
@@ -155,9 +156,11 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
   std::string line;
   bool world = false;
   int body = 1, joint = 0, geom = 0, site = 0, cam = 0;
-  const auto is = [&](const char* tag) { return line.find(std::string("<") + tag + " ") != std::string::npos ||
-                                                line.find(std::string("<") + tag + "/>") != std::string::npos ||
-                                                line.find(std::string("<") + tag + ">") != std::string::npos; };
+  const auto is = [&](const char* tag) {
+    return line.find(std::string("<") + tag + " ") != std::string::npos ||
+           line.find(std::string("<") + tag + "/>") != std::string::npos ||
+           line.find(std::string("<") + tag + ">") != std::string::npos;
+  };
   while (std::getline(in, line)) {
     if (line.find("<worldbody") != std::string::npos) world = true;
     if (line.find("</worldbody") != std::string::npos) world = false;
@@ -381,8 +384,8 @@ class UrdfWriter {
   void Body(int b) {
     const std::string name = Name(mjOBJ_BODY, b, "body" + std::to_string(b));
     const std::string parent = link_of_[m_->body_parentid[b]];
-    const SE3 B = offset_[m_->body_parentid[b]].Inverse() * PoseOf(m_->body_pos + 3 * b,
-                                                                     m_->body_quat + 4 * b);
+    const SE3 B = offset_[m_->body_parentid[b]].Inverse() *
+                  PoseOf(m_->body_pos + 3 * b, m_->body_quat + 4 * b);
     const int j0 = m_->body_jntadr[b], nj = m_->body_jntnum[b];
     std::string prev = parent;
     SE3 origin = B;
@@ -410,8 +413,8 @@ class UrdfWriter {
       origin = SE3::Translation(-a);
     }
     // The body's link stands at its last joint's anchor (the body's own pose without joints).
-    const SE3 L = nj > 0 ? SE3::Translation(Eigen::Map<const Vec3>(m_->jnt_pos + 3 * (j0 + nj - 1)))
-                         : SE3();
+    const SE3 L =
+        nj > 0 ? SE3::Translation(Eigen::Map<const Vec3>(m_->jnt_pos + 3 * (j0 + nj - 1))) : SE3();
     if (nj == 0) Joint(name + "__fixed", "fixed", parent, name, B, "");
     Link(name, b, L);
     link_of_[b] = name;

@@ -395,8 +395,7 @@ void EffectModel::FindCoupledDrivers() {
 }
 
 template <typename F>
-void EffectModel::ForEachEffect(const std::vector<int>& active, const double* theta,
-                                F&& f) const {
+void EffectModel::ForEachEffect(const std::vector<int>& active, const double* theta, F&& f) const {
   const double* t = base_theta_.data();
   for (int i : base_) {
     f(i, t);
@@ -460,21 +459,21 @@ bool EffectModel::LoadsShift(const std::vector<int>& active) const {
   for (const std::vector<int>* list : {&base_, &active}) {
     for (int i : *list) {
       switch (candidates_[i].type) {
-      case EffectType::kJointOffset:
-      case EffectType::kTransmissionError:
-      case EffectType::kJointErrorCurve:
-        shift = true;
-        break;
-      case EffectType::kJointCompliance:
-      case EffectType::kBacklash:
-      case EffectType::kLinkBending:
-      case EffectType::kBaseCompliance:
-      case EffectType::kStiffeningSpring:
-      case EffectType::kPayload:
-        loaded = true;
-        break;
-      default:
-        break;
+        case EffectType::kJointOffset:
+        case EffectType::kTransmissionError:
+        case EffectType::kJointErrorCurve:
+          shift = true;
+          break;
+        case EffectType::kJointCompliance:
+        case EffectType::kBacklash:
+        case EffectType::kLinkBending:
+        case EffectType::kBaseCompliance:
+        case EffectType::kStiffeningSpring:
+        case EffectType::kPayload:
+          loaded = true;
+          break;
+        default:
+          break;
       }
     }
   }

@@ -366,8 +366,8 @@ class EffectModel {
   void ForEachEffect(const std::vector<int>& active, const double* theta, F&& f) const;
 
   const sim::DeclaredChain* chain_;
-  std::vector<int> base_;        // SetBaseEffects: candidate indices
-  Eigen::VectorXd base_theta_;   // and their parameters, concatenated
+  std::vector<int> base_;       // SetBaseEffects: candidate indices
+  Eigen::VectorXd base_theta_;  // and their parameters, concatenated
   FrameId point_frame_;
   std::vector<FrameId> points_;  // point_frame_, then the further measured frames
   FrameId mount_ = 0;

@@ -20,8 +20,7 @@ void CheckOutput(const std::string& option, const std::string& path, bool force)
     throw InputError(option + " " + CapForMessage(path) + ": is a folder; name a file");
   }
   if (std::filesystem::exists(path, ec) && !force) {
-    throw InputError(option + " " + CapForMessage(path) +
-                     ": the file exists; --force replaces it");
+    throw InputError(option + " " + CapForMessage(path) + ": the file exists; --force replaces it");
   }
 }
 
@@ -48,8 +47,10 @@ int ExportCommand(const ExportCliOptions& o) {
     if (!o.urdf.empty()) CheckOutput("--urdf", o.urdf, o.force);
     const sim::DeclaredModel declared = sim::LoadDeclaredModel(o.declared);
     // Both built before either is written: bad input leaves no file behind.
-    const sim::ExportedModel mjcf = o.mjcf.empty() ? sim::ExportedModel{} : sim::ExportMjcf(declared);
-    const sim::ExportedModel urdf = o.urdf.empty() ? sim::ExportedModel{} : sim::ExportUrdf(declared);
+    const sim::ExportedModel mjcf =
+        o.mjcf.empty() ? sim::ExportedModel{} : sim::ExportMjcf(declared);
+    const sim::ExportedModel urdf =
+        o.urdf.empty() ? sim::ExportedModel{} : sim::ExportUrdf(declared);
     if (!o.mjcf.empty()) WriteOne(o.mjcf, "MJCF", mjcf);
     if (!o.urdf.empty()) WriteOne(o.urdf, "URDF", urdf);
     return kExitOk;

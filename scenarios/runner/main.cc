@@ -108,7 +108,8 @@ CLI::App* AddIdentify(CLI::App& app, Options& o) {
 // export: the calibrated model (a declared file with identified effects) as MJCF and URDF.
 CLI::App* AddExport(CLI::App& app, Options& o) {
   CLI::App* cmd = app.add_subcommand(
-      "export", "write a declared model with its identified effects as MJCF / URDF (geometry folded in)");
+      "export",
+      "write a declared model with its identified effects as MJCF / URDF (geometry folded in)");
   cmd->add_option("declared", o.ex.declared, "declared-model YAML (e.g. declared_augmented.yaml)")
       ->required();
   // Checked by ExportCommand: one line naming the option (CLI11 adds a second).

@@ -1389,8 +1389,9 @@ class ClosedLoopKind : public ScenarioKind {
   // squares (the two fits' errors are independent).
   static void AddIdentifiedEffect(sim::IdentifiedEffect ie,
                                   std::vector<sim::IdentifiedEffect>* effects) {
-    const auto same = std::find_if(effects->begin(), effects->end(),
-                                   [&](const sim::IdentifiedEffect& e) { return e.effect == ie.effect; });
+    const auto same =
+        std::find_if(effects->begin(), effects->end(),
+                     [&](const sim::IdentifiedEffect& e) { return e.effect == ie.effect; });
     if (same == effects->end()) {
       effects->push_back(std::move(ie));
       return;
@@ -1413,8 +1414,8 @@ class ClosedLoopKind : public ScenarioKind {
       const auto same = std::find_if(out->marker_offsets.begin(), out->marker_offsets.end(),
                                      [&](const auto& m) { return m.frame == points_[k]; });
       if (same == out->marker_offsets.end()) {
-        out->marker_offsets.push_back({points_[k], res.after.marker_offsets[k],
-                                       res.marker_offset_cov[k], ""});
+        out->marker_offsets.push_back(
+            {points_[k], res.after.marker_offsets[k], res.marker_offset_cov[k], ""});
       } else {
         same->offset_m += res.after.marker_offsets[k];
         same->cov += res.marker_offset_cov[k];

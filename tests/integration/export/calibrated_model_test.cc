@@ -116,11 +116,10 @@ class CalibratedModel : public ::testing::Test {
 
   testing::CommandResult Identify(const fs::path& declared, const std::string& out,
                                   const std::string& extra) const {
-    return testing::RunCommand(testing::Flexbench() + " identify --declared " + declared.string() +
-                               " --calibration " + (dir_ / "cal.csv").string() +
-                               " --validation " + (dir_ / "val.csv").string() +
-                               " --frame tracker --point-std 5e-5 --quiet --out " +
-                               (dir_ / out).string() + extra);
+    return testing::RunCommand(
+        testing::Flexbench() + " identify --declared " + declared.string() + " --calibration " +
+        (dir_ / "cal.csv").string() + " --validation " + (dir_ / "val.csv").string() +
+        " --frame tracker --point-std 5e-5 --quiet --out " + (dir_ / out).string() + extra);
   }
   nlohmann::json Metrics(const std::string& out) const {
     return nlohmann::json::parse(testing::ReadFile(dir_ / out / "summary.json"))["metrics"];
@@ -210,12 +209,13 @@ TEST_F(CalibratedModel, ABadAugmentedFileIsOneLineNamingFileLineAndEntry) {
   e = run("base.yaml", "frames:\n  base: {T_base_frame: [0, 0, 0, 1, 0, 0, 0]}\n");
   EXPECT_NE(e.find("base.yaml:6"), std::string::npos) << e;
   // A frame pose and a moved body are read, and used (the run gets past the model).
-  testing::WriteFile(dir_ / "good.yaml",
-                     head +
-                         "frames:\n  tracker: {T_base_frame: [1.2, -0.4, 0.3, 1, 0, 0, 0], "
-                         "covariance: [1e-6, 0, 0, 0, 0, 0, 0, 1e-6, 0, 0, 0, 0, 0, 0, 1e-6, 0, 0, 0, "
-                         "0, 0, 0, 1e-6, 0, 0, 0, 0, 0, 0, 1e-6, 0, 0, 0, 0, 0, 0, 1e-6]}\n"
-                         "marker_offsets:\n  hand: {offset_m: [0.01, 0, 0]}\n");
+  testing::WriteFile(
+      dir_ / "good.yaml",
+      head +
+          "frames:\n  tracker: {T_base_frame: [1.2, -0.4, 0.3, 1, 0, 0, 0], "
+          "covariance: [1e-6, 0, 0, 0, 0, 0, 0, 1e-6, 0, 0, 0, 0, 0, 0, 1e-6, 0, 0, 0, "
+          "0, 0, 0, 1e-6, 0, 0, 0, 0, 0, 0, 1e-6, 0, 0, 0, 0, 0, 0, 1e-6]}\n"
+          "marker_offsets:\n  hand: {offset_m: [0.01, 0, 0]}\n");
   const testing::CommandResult ok = Identify(dir_ / "good.yaml", "good", " --max-effects 0");
   EXPECT_EQ(ok.exit_code, 0) << ok.err;
 }

@@ -186,7 +186,9 @@ double MaxUrdfPoseError(const sim::DeclaredModel& d, const std::string& urdf, in
     mj_kinematics(m.get(), data.get());
     kin.Update(q);
     kinematics::ForwardKinematics(kin.model(), pd, kin.q());
-    const auto pose = [&](const std::string& typed) { return pd.T_base_frame[chain.model.FindFrame(typed)]; };
+    const auto pose = [&](const std::string& typed) {
+      return pd.T_base_frame[chain.model.FindFrame(typed)];
+    };
     for (int b = 1; b < m->nbody; ++b) {
       const std::string name = sim::ObjectName(m.get(), mjOBJ_BODY, b);
       std::string typed = sim::TypedFrameName(m0.get(), name);
@@ -249,7 +251,8 @@ TEST_F(Export, MujocoPosesOfTheWrittenMjcfAreTheCalibratedChains) {
     nominal.identified_effects.clear();
     nominal.marker_offsets.clear();
     testing::WriteFile(dir_ / "nominal.yaml", sim::EmitDeclaredModel(nominal, ""));
-    EXPECT_GT(MaxPoseError(reread, sim::LoadDeclaredModel((dir_ / "nominal.yaml").string()).model_path, 5),
+    EXPECT_GT(MaxPoseError(reread,
+                           sim::LoadDeclaredModel((dir_ / "nominal.yaml").string()).model_path, 5),
               1e-3)
         << robot;
   }
@@ -296,8 +299,9 @@ TEST_F(Export, CompliancesBecomeGearAnnotationsAndTheRestIsNamed) {
 }
 
 TEST_F(Export, AnExistingFileNeedsForceAndBadInputIsOneLine) {
-  testing::WriteFile(dir_ / "d.yaml", "model: " + (dir_ / "arm4.xml").string() +
-                                          "\nactuated_joints: [j1, j2, j3, j4]\nend_effector: ee\n");
+  testing::WriteFile(dir_ / "d.yaml",
+                     "model: " + (dir_ / "arm4.xml").string() +
+                         "\nactuated_joints: [j1, j2, j3, j4]\nend_effector: ee\n");
   const std::string d = (dir_ / "d.yaml").string();
   const fs::path out = dir_ / "d.xml";
   testing::WriteFile(out, "keep me");
@@ -321,8 +325,7 @@ TEST_F(Export, AnExistingFileNeedsForceAndBadInputIsOneLine) {
   testing::WriteFile(dir_ / "effect.yaml", testing::ReadFile(dir_ / "d.yaml") +
                                                "identified_effects:\n"
                                                "  - {effect: joint_offset@j9, value: [0.1]}\n");
-  bad((dir_ / "effect.yaml").string() + " --mjcf " + (dir_ / "x.xml").string(),
-      "effect.yaml:5");
+  bad((dir_ / "effect.yaml").string() + " --mjcf " + (dir_ / "x.xml").string(), "effect.yaml:5");
   bad(d + " --mjcf " + dir_.string(), "folder");
   bad(d, "--mjcf");
   EXPECT_FALSE(fs::exists(dir_ / "x.xml"));
