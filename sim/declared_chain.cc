@@ -168,24 +168,34 @@ class ChainBuilder {
       Fail(key + ": no site, geom, camera or body named '" + name + "' in " + d_.model_path);
     }
     const std::string kind = typed.substr(0, typed.find('/'));
-    if (kind == "body") return EnsureBody(mj_name2id(m_, mjOBJ_BODY, name.c_str()));
+    // A fitted marker offset (marker_offsets:) moves the frame in its own axes. A body's frame
+    // carries its children, so a moved body is a frame of its own below it.
+    const Vec3 offset = d_.MarkerOffset(name);
+    const SE3 moved = SE3::Translation(offset);
+    if (kind == "body") {
+      const FrameId b = EnsureBody(mj_name2id(m_, mjOBJ_BODY, name.c_str()));
+      if (offset.isZero(0.0)) return b;
+      const std::string typed_moved = typed + "/moved";
+      if (out_->model.HasFrame(typed_moved)) return out_->model.FindFrame(typed_moved);
+      return out_->model.AddFrame(b, typed_moved, moved);
+    }
     if (out_->model.HasFrame(typed)) return out_->model.FindFrame(typed);
     if (kind == "site") {
       const int s = mj_name2id(m_, mjOBJ_SITE, name.c_str());
       return out_->model.AddFrame(EnsureBody(m_->site_bodyid[s]), typed,
-                                  PoseFrom(m_->site_pos + 3 * s, m_->site_quat + 4 * s));
+                                  PoseFrom(m_->site_pos + 3 * s, m_->site_quat + 4 * s) * moved);
     }
     if (kind == "geom") {
       const int g = mj_name2id(m_, mjOBJ_GEOM, name.c_str());
       return out_->model.AddFrame(EnsureBody(m_->geom_bodyid[g]), typed,
-                                  PoseFrom(m_->geom_pos + 3 * g, m_->geom_quat + 4 * g));
+                                  PoseFrom(m_->geom_pos + 3 * g, m_->geom_quat + 4 * g) * moved);
     }
     const int c = mj_name2id(m_, mjOBJ_CAMERA, name.c_str());
     const SE3 T_body_mjcam = PoseFrom(m_->cam_pos + 3 * c, m_->cam_quat + 4 * c);
     // MuJoCo cameras look along -z with y up; the optical frame has y down, z forward.
     const SE3 T_mjcam_optical(Mat3(Vec3(1.0, -1.0, -1.0).asDiagonal()), Vec3::Zero());
     return out_->model.AddFrame(EnsureBody(m_->cam_bodyid[c]), typed,
-                                T_body_mjcam * T_mjcam_optical);
+                                T_body_mjcam * T_mjcam_optical * moved);
   }
 
   Mat6 SourceCov(const std::vector<const DeclaredSource*>& sources, const Vec3& axis) const {
@@ -290,7 +300,12 @@ DeclaredChain BuildDeclaredChain(const mjModel* m, const DeclaredModel& declared
   if (!with_couplings && !declared.coupled.empty()) {
     throw InputError(declared.coupled.front().where +
                      ": coupled joints are read by identification only (closed_loop, identify); "
-                     "the estimators need a reading of every joint of their chain");
+                     "the estimators need a reading of every joint of their chain. To score this "
+                     "model on measured rows run `flexbench identify --declared " +
+                     CapForMessage(declared.file) +
+                     " --calibration ROWS.csv --validation ROWS.csv --max-effects 0`; to "
+                     "estimate with it, move the joint into actuated_joints and give its angle "
+                     "with the readings");
   }
   DeclaredChain chain{kinematics::PpoeModel(declared.file), {}, {}, {}, 0, -1, {}, {}, {}};
   ChainBuilder(m, declared, &chain).Build();

@@ -2,6 +2,9 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -140,7 +143,97 @@ IdentifiedEffect ReadIdentifiedEffect(const ConfigNode& e) {
   return ie;
 }
 
+// A fitted covariance: `n` x `n` row-major numbers, finite, symmetric and positive definite.
+Eigen::MatrixXd ReadPdMatrix(const ConfigNode& node, int n) {
+  const std::vector<double> v = node.AsDoubleList();
+  if (static_cast<int>(v.size()) != n * n) {
+    node.Fail("expected " + std::to_string(n * n) + " numbers (a " + std::to_string(n) + "x" +
+              std::to_string(n) + " matrix, row-major)");
+  }
+  for (double x : v) {
+    if (!std::isfinite(x)) node.Fail("must hold finite numbers (no NaN or inf)");
+  }
+  const Eigen::MatrixXd m = Eigen::Map<const Eigen::MatrixXd>(v.data(), n, n).transpose();
+  if (!m.isApprox(m.transpose(), 1e-9)) node.Fail("covariance must be symmetric");
+  if (m.llt().info() != Eigen::Success || !(m.diagonal().minCoeff() > 0.0)) {
+    node.Fail("covariance must be positive definite");
+  }
+  return m;
+}
+
+std::vector<double> ReadFinite(const ConfigNode& node, size_t n, const char* form) {
+  const std::vector<double> v = node.AsDoubleList();
+  if (v.size() != n) node.Fail(std::string("expected ") + form);
+  for (double x : v) {
+    if (!std::isfinite(x) || std::abs(x) > 1000.0) {
+      node.Fail("must hold finite numbers within 1000 (no NaN or inf)");
+    }
+  }
+  return v;
+}
+
+bool IsIdentifier(const std::string& s) {
+  if (s.empty() || std::isdigit(static_cast<unsigned char>(s[0]))) return false;
+  for (char c : s) {
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-') return false;
+  }
+  return true;
+}
+
+// `frames:` name -> {T_base_frame, covariance}.
+std::vector<DeclaredFramePose> ReadFramePoses(const ConfigNode& node) {
+  if (!node.IsMap()) node.Fail("expected a map: frame -> {T_base_frame, covariance}");
+  std::vector<DeclaredFramePose> out;
+  for (const std::string& name : node.Keys()) {
+    const ConfigNode f = node.Child(name);
+    if (!IsIdentifier(name) || name == "base") {
+      f.Fail("a measurement frame's name is an identifier other than 'base'");
+    }
+    DeclaredFramePose fp;
+    fp.name = name;
+    fp.where = f.WhereKey();
+    const ConfigNode pose = f.Child("T_base_frame");
+    const std::vector<double> v = ReadFinite(pose, 7, "[x, y, z, qw, qx, qy, qz]");
+    const Quat q = QuatFromWxyz(v.data() + 3);
+    if (std::abs(q.norm() - 1.0) > 1e-6) pose.Fail("quaternion is not of unit length");
+    fp.T_base_frame = lie::SE3(q.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
+    if (const auto cov = f.Optional("covariance")) fp.cov = ReadPdMatrix(*cov, 6);
+    out.push_back(std::move(fp));
+  }
+  return out;
+}
+
+// `marker_offsets:` frame -> {offset_m, covariance}; each the end effector or an observed frame.
+std::vector<DeclaredMarkerOffset> ReadMarkerOffsets(const ConfigNode& node,
+                                                    const DeclaredModel& d) {
+  if (!node.IsMap()) node.Fail("expected a map: observed frame -> {offset_m, covariance}");
+  std::vector<DeclaredMarkerOffset> out;
+  for (const std::string& name : node.Keys()) {
+    const ConfigNode m = node.Child(name);
+    if (name != d.end_effector && std::find(d.observed_frames.begin(), d.observed_frames.end(),
+                                            name) == d.observed_frames.end()) {
+      m.Fail("'" + CapForMessage(name) +
+             "' is neither the end effector nor one of observed_frames");
+    }
+    DeclaredMarkerOffset mo;
+    mo.frame = name;
+    mo.where = m.WhereKey();
+    const std::vector<double> v = ReadFinite(m.Child("offset_m"), 3, "[dx, dy, dz] in metres");
+    mo.offset_m = Vec3(v[0], v[1], v[2]);
+    if (const auto cov = m.Optional("covariance")) mo.cov = ReadPdMatrix(*cov, 3);
+    out.push_back(std::move(mo));
+  }
+  return out;
+}
+
 }  // namespace
+
+Vec3 DeclaredModel::MarkerOffset(const std::string& frame) const {
+  for (const DeclaredMarkerOffset& m : marker_offsets) {
+    if (m.frame == frame) return m.offset_m;
+  }
+  return Vec3::Zero();
+}
 
 DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
   DeclaredModel d;
@@ -158,6 +251,8 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
     for (const ConfigNode& e : fx->Items()) d.identified_effects.push_back(ReadIdentifiedEffect(e));
   }
   if (const auto coupled = node.Optional("coupled")) d.coupled = ReadCouplings(*coupled);
+  if (const auto frames = node.Optional("frames")) d.frames = ReadFramePoses(*frames);
+  if (const auto mo = node.Optional("marker_offsets")) d.marker_offsets = ReadMarkerOffsets(*mo, d);
   // Checked last, so format errors come first. (In a scenario's inline `declared:` block the
   // scenario's own `model` is what is loaded; a path here that names nothing is still an error.)
   std::error_code ec;
@@ -197,10 +292,23 @@ void CheckFinite(const DeclaredModel& d) {
       if (!std::isfinite(coef)) fail("coupling of '" + c.joint + "'");
     }
   }
+  for (const DeclaredFramePose& f : d.frames) {
+    if (!f.T_base_frame.Matrix().allFinite() || !f.cov.allFinite()) fail("frame '" + f.name + "'");
+  }
+  for (const DeclaredMarkerOffset& m : d.marker_offsets) {
+    if (!m.offset_m.allFinite() || !m.cov.allFinite()) fail("marker offset of '" + m.frame + "'");
+  }
 }
 
 void EmitNames(YAML::Emitter& y, const char* key, const std::vector<std::string>& names) {
   y << YAML::Key << key << YAML::Value << YAML::Flow << names;
+}
+
+// Every digit: these numbers are the model.
+void EmitExact(YAML::Emitter& y, const char* key, const std::vector<double>& v) {
+  y << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginSeq;
+  for (double x : v) y << YAML::DoublePrecision(17) << x;
+  y << YAML::EndSeq;
 }
 
 void EmitCouplings(YAML::Emitter& y, const std::vector<DeclaredCoupling>& coupled) {
@@ -245,11 +353,47 @@ void EmitIdentifiedEffects(YAML::Emitter& y, const std::vector<IdentifiedEffect>
   for (const IdentifiedEffect& e : effects) {
     y << YAML::BeginMap << YAML::Key << "effect" << YAML::Value << e.effect;
     if (!e.equivalent.empty()) EmitNames(y, "equivalent", e.equivalent);
-    y << YAML::Key << "value" << YAML::Value << YAML::Flow << e.value;
+    // Every digit: the values are the model (re-scoring it reproduces the fit's errors).
+    EmitExact(y, "value", e.value);
     y << YAML::Key << "std" << YAML::Value << YAML::Flow << e.std;
     y << YAML::Key << "unit" << YAML::Value << e.unit << YAML::EndMap;
   }
   y << YAML::EndSeq;
+}
+
+// Every digit for what places a frame (it is the model); `digits` for the covariance. A
+// covariance that is not positive definite (a direction the fit could not determine) is left
+// out: the reader refuses it.
+template <int N>
+void EmitPoseCovariance(YAML::Emitter& y, const Eigen::Matrix<double, N, N>& cov) {
+  if (cov.isZero(0.0) || cov.llt().info() != Eigen::Success) return;
+  std::vector<double> rows(N * N);
+  for (int k = 0; k < N * N; ++k) rows[k] = cov(k / N, k % N);
+  y << YAML::Key << "covariance" << YAML::Value << YAML::Flow << rows;
+}
+
+void EmitFramePoses(YAML::Emitter& y, const std::vector<DeclaredFramePose>& frames) {
+  y << YAML::Key << "frames" << YAML::Value << YAML::BeginMap;
+  for (const DeclaredFramePose& f : frames) {
+    const Vec3& t = f.T_base_frame.translation();
+    const Quat q(f.T_base_frame.rotation());
+    y << YAML::Key << f.name << YAML::Value << YAML::BeginMap;
+    EmitExact(y, "T_base_frame", {t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z()});
+    EmitPoseCovariance<6>(y, f.cov);
+    y << YAML::EndMap;
+  }
+  y << YAML::EndMap;
+}
+
+void EmitMarkerOffsets(YAML::Emitter& y, const std::vector<DeclaredMarkerOffset>& offsets) {
+  y << YAML::Key << "marker_offsets" << YAML::Value << YAML::BeginMap;
+  for (const DeclaredMarkerOffset& m : offsets) {
+    y << YAML::Key << m.frame << YAML::Value << YAML::BeginMap;
+    EmitExact(y, "offset_m", {m.offset_m.x(), m.offset_m.y(), m.offset_m.z()});
+    EmitPoseCovariance<3>(y, m.cov);
+    y << YAML::EndMap;
+  }
+  y << YAML::EndMap;
 }
 
 }  // namespace
@@ -268,6 +412,8 @@ std::string EmitDeclaredModel(const DeclaredModel& d, const std::string& header,
   if (!d.coupled.empty()) EmitCouplings(y, d.coupled);
   if (!d.sources.empty()) EmitSources(y, d.sources);
   if (!d.identified_effects.empty()) EmitIdentifiedEffects(y, d.identified_effects);
+  if (!d.frames.empty()) EmitFramePoses(y, d.frames);
+  if (!d.marker_offsets.empty()) EmitMarkerOffsets(y, d.marker_offsets);
   y << YAML::EndMap;
   return std::string(y.c_str()) + "\n";
 }

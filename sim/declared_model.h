@@ -16,6 +16,14 @@
 //     - effect: joint_offset@j2     # the fitted member of an equivalence set:
 //       equivalent: [joint_offset@j2, joint_axis_tilt_a@j1]   # every member (the data
 //       value: [0.003]              # could not tell them apart); informative only
+//   frames:                         # measurement frames' fitted poses in the base frame
+//     tracker:                      #   (closed_loop / identify write them; a re-run starts
+//       T_base_frame: [x, y, z, qw, qx, qy, qz]      # the frame's fit from here)
+//       covariance: [36 numbers]    # optional: of xi, T = T_base_frame Exp(xi), [rho; theta]
+//   marker_offsets:                 # observed frames moved by fitted offsets (their own axes;
+//     ee:                           #   closed_loop's unknown_marker_offsets)
+//       offset_m: [dx, dy, dz]
+//       covariance: [9 numbers]     # optional, m^2
 //   coupled:                        # joints driven by others, never read (issue 20)
 //     torso_pitch_3: {torso_pitch_1: -1, torso_pitch_2: -1}   # q = sum_j c_j q_j
 //     wrist_follower: mjcf          # the MJCF's <equality><joint> on it (a polynomial of one
@@ -33,6 +41,7 @@
 #include <vector>
 
 #include "estimators/conventions.h"
+#include "estimators/lie/se3.h"
 #include "sim/config.h"
 
 namespace flexbench::sim {
@@ -55,6 +64,26 @@ struct IdentifiedEffect {
   std::vector<std::string> equivalent;
 };
 
+// A measurement frame's pose in the base frame (`frames:`), fitted by closed_loop / `flexbench
+// identify`: where re-scoring or estimating with this model starts the frame from.
+struct DeclaredFramePose {
+  std::string name;
+  lie::SE3 T_base_frame;
+  // Of xi, T = T_base_frame Exp(xi), [rho; theta] in m and rad (zero when not given).
+  Mat6 cov = Mat6::Zero();
+  std::string where;  // "<file>:<line>: key 'frames.<name>'"
+};
+
+// An observed frame (or the end effector) moved by a fitted offset in its own axes
+// (`marker_offsets:`, closed_loop's unknown_marker_offsets): BuildDeclaredChain places the
+// frame at T_parent_frame * Translation(offset_m).
+struct DeclaredMarkerOffset {
+  std::string frame;
+  Vec3 offset_m = Vec3::Zero();
+  Mat3 cov = Mat3::Zero();  // m^2, the frame's axes (zero when not given)
+  std::string where;
+};
+
 // A coupled joint (`coupled:`): a hinge or slide of the model driven by other declared joints
 // (actuated or coupled themselves, without cycles). Names are checked by BuildDeclaredChain.
 struct DeclaredCoupling {
@@ -75,6 +104,10 @@ struct DeclaredModel {
   std::vector<DeclaredSource> sources;
   std::vector<IdentifiedEffect> identified_effects;
   std::vector<DeclaredCoupling> coupled;
+  std::vector<DeclaredFramePose> frames;
+  std::vector<DeclaredMarkerOffset> marker_offsets;
+  // The offset of an observed frame (zero when it has none).
+  Vec3 MarkerOffset(const std::string& frame) const;
 };
 
 // Reads and checks the format (not the names: see BuildDeclaredChain). Throws InputError
@@ -87,8 +120,9 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node);
 // leading comment lines. `d.model_path` is written as given: a caller writing the file
 // elsewhere makes it relative to that folder. Sources come out as `about_axis_deg` and a full
 // `covariance` (the per-axis stds they may have been given as are folded in by then).
-// Numbers carry `digits` significant digits (fitted values and stds are not known better);
-// coupling coefficients carry every digit, since they are geometry.
+// Numbers carry `digits` significant digits (stds and covariances are not known better);
+// identified effects' values and coupling coefficients carry every digit, since they are the
+// model (re-scoring it on its own rows reproduces the fit's errors).
 std::string EmitDeclaredModel(const DeclaredModel& d, const std::string& header, int digits = 6);
 
 }  // namespace flexbench::sim

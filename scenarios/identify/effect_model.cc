@@ -416,6 +416,42 @@ void EffectModel::FindCoupledDrivers() {
   }
 }
 
+template <typename F>
+void EffectModel::ForEachEffect(const std::vector<int>& active, const double* theta, F&& f) const {
+  const double* t = base_theta_.data();
+  for (int i : base_) {
+    f(i, t);
+    t += candidates_[i].num_params;
+  }
+  t = theta;
+  for (int i : active) {
+    f(i, t);
+    if (t != nullptr) t += candidates_[i].num_params;
+  }
+}
+
+std::vector<std::string> EffectModel::SetBaseEffects(
+    const std::vector<sim::IdentifiedEffect>& effects) {
+  base_.clear();
+  std::vector<double> theta;
+  std::vector<std::string> not_here;
+  for (const sim::IdentifiedEffect& e : effects) {
+    const int c = FindCandidate(e.effect);
+    if (c < 0) {
+      not_here.push_back(e.effect);
+      continue;
+    }
+    if (static_cast<int>(e.value.size()) != candidates_[c].num_params) {
+      throw InputError(e.where + ": identified_effects: '" + e.effect + "' needs " +
+                       std::to_string(candidates_[c].num_params) + " values");
+    }
+    base_.push_back(c);
+    theta.insert(theta.end(), e.value.begin(), e.value.end());
+  }
+  base_theta_ = Eigen::Map<const Eigen::VectorXd>(theta.data(), theta.size());
+  return not_here;
+}
+
 int EffectModel::FindCandidate(const std::string& name) const {
   for (size_t i = 0; i < candidates_.size(); ++i) {
     if (candidates_[i].Name() == name) return static_cast<int>(i);
@@ -423,20 +459,18 @@ int EffectModel::FindCandidate(const std::string& name) const {
   return -1;
 }
 
-ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const { return Loads(q, q); }
+ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q) const { return LoadsFor(q, {}, nullptr); }
 
 Eigen::VectorXd EffectModel::ReadingShift(const Eigen::VectorXd& q, const std::vector<int>& active,
                                           const double* theta) const {
   Eigen::VectorXd dq = Eigen::VectorXd::Zero(q.size());
-  const double* t = theta;
-  for (int i : active) {
+  ForEachEffect(active, theta, [&](int i, const double* t) {
     const Candidate& c = candidates_[i];
     if (c.type == EffectType::kJointOffset) dq[c.q_index] += t[0];
     if (c.type == EffectType::kTransmissionError || c.type == EffectType::kJointErrorCurve) {
       AddPeriodicError(c, q[c.q_index], t, &dq[c.q_index]);
     }
-    t += c.num_params;
-  }
+  });
   if (!chain_->couplings.empty()) chain_->PropagateShift(q, &dq);
   return dq;
 }
@@ -444,24 +478,26 @@ Eigen::VectorXd EffectModel::ReadingShift(const Eigen::VectorXd& q, const std::v
 bool EffectModel::LoadsShift(const std::vector<int>& active) const {
   if (!has_masses_) return false;
   bool shift = false, loaded = false;
-  for (int i : active) {
-    switch (candidates_[i].type) {
-      case EffectType::kJointOffset:
-      case EffectType::kTransmissionError:
-      case EffectType::kJointErrorCurve:
-        shift = true;
-        break;
-      case EffectType::kJointCompliance:
-      case EffectType::kBacklash:
-      case EffectType::kLinkBending:
-      case EffectType::kBaseCompliance:
-      case EffectType::kStiffeningSpring:
-      case EffectType::kPayload:
-      case EffectType::kLateralCompliance:
-        loaded = true;
-        break;
-      default:
-        break;
+  for (const std::vector<int>* list : {&base_, &active}) {
+    for (int i : *list) {
+      switch (candidates_[i].type) {
+        case EffectType::kJointOffset:
+        case EffectType::kTransmissionError:
+        case EffectType::kJointErrorCurve:
+          shift = true;
+          break;
+        case EffectType::kJointCompliance:
+        case EffectType::kBacklash:
+        case EffectType::kLinkBending:
+        case EffectType::kBaseCompliance:
+        case EffectType::kStiffeningSpring:
+        case EffectType::kPayload:
+        case EffectType::kLateralCompliance:
+          loaded = true;
+          break;
+        default:
+          break;
+      }
     }
   }
   return shift && loaded;
@@ -469,7 +505,7 @@ bool EffectModel::LoadsShift(const std::vector<int>& active) const {
 
 ConfigLoads EffectModel::LoadsFor(const Eigen::VectorXd& q, const std::vector<int>& active,
                                   const double* theta) const {
-  if (!LoadsShift(active)) return Loads(q);
+  if (!LoadsShift(active)) return Loads(q, q);
   return Loads(q, q + ReadingShift(q, active, theta));
 }
 
@@ -655,17 +691,16 @@ ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& 
 const ConfigLoads& EffectModel::TiltedLoads(const ConfigLoads& L, const std::vector<int>& active,
                                             const double* theta, Workspace& ws) const {
   if (L.horizontal.size() != 2) return L;
-  const double* t = theta;
   bool tilted = false;
-  Vec3 w = Vec3::Zero();
-  for (int i : active) {
+  Eigen::Vector2d phi = Eigen::Vector2d::Zero();
+  ForEachEffect(active, theta, [&](int i, const double* t) {
     if (i == gravity_tilt_) {
-      w = kinematics::GravityTiltWeights(t[0], t[1]);
+      phi += Eigen::Vector2d(t[0], t[1]);
       tilted = true;
     }
-    t += candidates_[i].num_params;
-  }
+  });
   if (!tilted) return L;
+  const Vec3 w = kinematics::GravityTiltWeights(phi[0], phi[1]);
   const GravityTerms& h1 = L.horizontal[0];
   const GravityTerms& h2 = L.horizontal[1];
   ConfigLoads& T = ws.tilted;
@@ -794,15 +829,15 @@ struct EffectModel::ChainTerms {
 // The payload's parameters among `active` (mass, first moment) and its couple, into *ct.
 inline void EffectModel::PayloadTerms(const ConfigLoads& L, const std::vector<int>& active,
                                       const double* theta, ChainTerms* ct) const {
-  const double* t = theta;
-  for (int i : active) {
+  bool any = false;
+  ForEachEffect(active, theta, [&](int i, const double* t) {
     if (candidates_[i].type == EffectType::kPayload) {
-      ct->payload = t[0];
-      ct->payload_first = Vec3(t[1], t[2], t[3]);
-      ct->couple = L.M_first * ct->payload_first;
+      ct->payload += t[0];
+      ct->payload_first += Vec3(t[1], t[2], t[3]);
+      any = true;
     }
-    t += candidates_[i].num_params;
-  }
+  });
+  if (any) ct->couple = L.M_first * ct->payload_first;
 }
 
 // One active effect's terms (parameters t) onto ws and *ct.
@@ -867,12 +902,8 @@ void EffectModel::AccumulateTerms(const Eigen::VectorXd& q, const ConfigLoads& L
   ws.dq.setZero();
   Vec3 mount_rot = Vec3::Zero();
   ws.mount_active = false;
-  const double* t = theta;
-  for (int i : active) {
-    const Candidate& c = candidates_[i];
-    AddTerms(c, q, L, t, &ct, ws);
-    t += c.num_params;
-  }
+  ForEachEffect(active, theta,
+                [&](int i, const double* t) { AddTerms(candidates_[i], q, L, t, &ct, ws); });
   // A driver's true angle drives its coupled joints (sim::DeclaredChain::couplings).
   if (!chain_->couplings.empty()) chain_->PropagateShift(q, &ws.dq);
   if (ws.mount_active) {
@@ -949,15 +980,15 @@ void EffectModel::ChainPoses(const Eigen::VectorXd& q, const ConfigLoads& L, Wor
 }
 
 void EffectModel::ClearTerms(const std::vector<int>& active, Workspace& ws) const {
-  for (int i : active) {
+  ForEachEffect(active, nullptr, [&](int i, const double*) {
     const int f = candidates_[i].frame;
-    if (f < 0) continue;
+    if (f < 0) return;
     ws.dlen[f] = 0.0;
     ws.bend[f].setZero();
     ws.offset[f].setZero();
     ws.tilt[f].setZero();
     ws.origin[f].setZero();
-  }
+  });
 }
 
 // Analytic derivatives of PredictPose (issue 21: finite differences re-predicted every row twice
@@ -990,16 +1021,17 @@ Vec3 Load(const Vec3& load) { return Vec3(Load(load.x()), Load(load.y()), Load(l
 
 bool EffectModel::OnBentLink(FrameId f, const std::vector<int>& active, bool at_bend) const {
   const kinematics::PpoeModel& model = chain_->model;
-  for (int i : active) {
+  bool on = false;
+  ForEachEffect(active, nullptr, [&](int i, const double*) {
     const Candidate& b = candidates_[i];
-    if (b.type != EffectType::kLinkBending) continue;
-    if (at_bend && b.frame == f) return true;
+    if (on || b.type != EffectType::kLinkBending) return;
+    if (at_bend && b.frame == f) on = true;
     for (FrameId g = model.frame(b.frame).parent; g > 0 && g != prev_joint_[b.frame];
          g = model.frame(g).parent) {
-      if (g == f) return true;
+      if (g == f) on = true;
     }
-  }
-  return false;
+  });
+  return on;
 }
 
 bool EffectModel::HasTangent(int c, const std::vector<int>& active) const {

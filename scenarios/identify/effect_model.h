@@ -197,6 +197,16 @@ class EffectModel {
               const std::string& camera = "", const std::vector<FrameId>& more_points = {},
               bool gravity_tilt = false);
 
+  // The effects a declared file already carries (its identified_effects): applied under every
+  // prediction, loads and tangent, with the candidates acting on top of them (a candidate's
+  // value adds to the same one's here, as ModelEffects sums repeated effects). Returns the names
+  // of those that are no candidate of this model (they move no measured point: off the chain to
+  // every point, or a camera that is not observed); the caller says so. Throws InputError
+  // (the entry's file and line) on a wrong number of values.
+  std::vector<std::string> SetBaseEffects(const std::vector<sim::IdentifiedEffect>& effects);
+  const std::vector<int>& base_effects() const { return base_; }
+  const Eigen::VectorXd& base_theta() const { return base_theta_; }
+
   const kinematics::PpoeModel& chain() const { return chain_->model; }
   const std::vector<Candidate>& candidates() const { return candidates_; }
   // Candidates a family cannot offer at a location, with the reason ("lateral_compliance@J":
@@ -383,7 +393,13 @@ class EffectModel {
                           Tangent* out) const;
   void TranslationTangents(const Candidate& c, const Workspace& ws, Tangent* out) const;
 
+  // Calls f(candidate index, its parameters) for the base effects, then for `active`.
+  template <typename F>
+  void ForEachEffect(const std::vector<int>& active, const double* theta, F&& f) const;
+
   const sim::DeclaredChain* chain_;
+  std::vector<int> base_;       // SetBaseEffects: candidate indices
+  Eigen::VectorXd base_theta_;  // and their parameters, concatenated
   FrameId point_frame_;
   std::vector<FrameId> points_;  // point_frame_, then the further measured frames
   FrameId mount_ = 0;

@@ -44,17 +44,23 @@ int RowDim(const Observation& o) {
 
 lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vector<int>& active,
                     const double* theta) {
-  lie::SE3 T = data.camera.T_base_cam;
-  for (int i : active) {
-    const Candidate& c = em.candidates()[i];
-    if (c.type == EffectType::kCameraOffset) {
-      Vec6 xi;
-      for (int k = 0; k < 6; ++k) xi[k] = theta[k];
-      T = T * lie::SE3::Exp(xi);
+  // Offsets add up, the declared file's own (EffectModel::SetBaseEffects) included, as
+  // ModelEffects sums a frame's origin terms.
+  Vec6 xi = Vec6::Zero();
+  bool any = false;
+  const auto add = [&](const std::vector<int>& list, const double* t) {
+    for (int i : list) {
+      const Candidate& c = em.candidates()[i];
+      if (c.type == EffectType::kCameraOffset) {
+        xi += Eigen::Map<const Vec6>(t);
+        any = true;
+      }
+      t += c.num_params;
     }
-    theta += c.num_params;
-  }
-  return T;
+  };
+  add(em.base_effects(), em.base_theta().data());
+  add(active, theta);
+  return any ? data.camera.T_base_cam * lie::SE3::Exp(xi) : data.camera.T_base_cam;
 }
 
 Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& p_base) {

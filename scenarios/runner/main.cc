@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "estimators/error.h"
+#include "scenarios/runner/export_command.h"
 #include "scenarios/runner/inspect.h"
 #include "scenarios/runner/report.h"
 #include "scenarios/runner/runner.h"
@@ -25,6 +26,7 @@ struct Options {
   std::string inspect_path;
   flexbench::scenarios::IdentifyCliOptions id;
   flexbench::scenarios::sweep::SweepCliOptions sw;
+  flexbench::scenarios::ExportCliOptions ex;
   bool no_wait = false;
   // The --out options, to tell `--out ''` from no --out (both leave the string empty).
   std::vector<std::pair<CLI::Option*, const std::string*>> outs;
@@ -109,6 +111,20 @@ CLI::App* AddIdentify(CLI::App& app, Options& o) {
   return identify_cmd;
 }
 
+// export: the calibrated model (a declared file with identified effects) as MJCF and URDF.
+CLI::App* AddExport(CLI::App& app, Options& o) {
+  CLI::App* cmd = app.add_subcommand(
+      "export",
+      "write a declared model with its identified effects as MJCF / URDF (geometry folded in)");
+  cmd->add_option("declared", o.ex.declared, "declared-model YAML (e.g. declared_augmented.yaml)")
+      ->required();
+  // Checked by ExportCommand: one line naming the option (CLI11 adds a second).
+  cmd->add_option("--mjcf", o.ex.mjcf, "output MJCF file");
+  cmd->add_option("--urdf", o.ex.urdf, "output URDF file");
+  cmd->add_flag("--force", o.ex.force, "replace an existing output file");
+  return cmd;
+}
+
 CLI::App* AddSweep(CLI::App& app, Options& o) {
   flexbench::scenarios::sweep::SweepCliOptions& sw = o.sw;
   CLI::App* sweep_cmd = app.add_subcommand(
@@ -188,6 +204,7 @@ int Main(int argc, char** argv) {
   inspect_cmd->add_option("model", o.inspect_path, "MJCF model or declared-model YAML")->required();
   CLI::App* identify_cmd = AddIdentify(app, o);
   CLI::App* sweep_cmd = AddSweep(app, o);
+  CLI::App* export_cmd = AddExport(app, o);
   CLI::App* report_cmd = app.add_subcommand(
       "report", "write report.html in a run's or a sweep's result folder (again)");
   report_cmd
@@ -222,6 +239,7 @@ int Main(int argc, char** argv) {
     return flexbench::scenarios::sweep::SweepCommand(o.sw);
   }
   if (*inspect_cmd) return flexbench::scenarios::InspectCommand(o.inspect_path);
+  if (*export_cmd) return flexbench::scenarios::ExportCommand(o.ex);
   if (*identify_cmd) {
     if (o.id.out_dir.empty()) o.id.out_dir = "out/identify";
     return flexbench::scenarios::IdentifyCommand(o.id);

@@ -170,6 +170,8 @@ class ClosedLoopKind : public ScenarioKind {
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
                                                   camera_.present ? camera_.name : "",
                                                   MarkerFrames(), gravity_tilt_);
+    // The declared file's identified effects are the model identification starts from.
+    base_not_applied_ = em_->SetBaseEffects(declared_.identified_effects);
     offset_unknown_ = UnknownOffsets();
     SelectCandidates();
     if (has_truth_) {
@@ -186,6 +188,7 @@ class ClosedLoopKind : public ScenarioKind {
       return std::chrono::duration<double>(Clock::now() - t).count();
     };
     const Clock::time_point t0 = Clock::now();
+    LogBaseEffects(ctx);
     Sets sets = Collect(ctx);
     (*ctx.timing)["data_s"] = seconds_since(t0);
     ctx.log("identify: " + std::to_string(sets.cal.rows.size()) + " calibration rows, " +
@@ -206,6 +209,42 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
  private:
+  // A frame the declared file gives a pose for (`frames:`, a fit's result) starts its fit there
+  // unless the scenario gives its own guess or prior.
+  void StartFramesAtDeclaredPoses() {
+    for (const sim::DeclaredFramePose& fp : declared_.frames) {
+      const auto it = std::find_if(frames_.begin(), frames_.end(),
+                                   [&](const auto& f) { return f.name == fp.name; });
+      if (it == frames_.end()) {
+        unused_frames_.push_back(fp.name);
+      } else if (!it->has_guess) {
+        it->T_ref = fp.T_base_frame;
+        it->has_guess = true;
+      }
+    }
+  }
+
+  // The declared file's identified effects the identification applies, and those it cannot
+  // (they move none of the measured points), never silently.
+  void LogBaseEffects(RunContext& ctx) const {
+    const size_t n = em_->base_effects().size();
+    for (const sim::DeclaredMarkerOffset& mo : declared_.marker_offsets) {
+      ctx.log("declared model: '" + mo.frame + "' moved by its fitted offset (marker_offsets)");
+    }
+    if (n > 0) {
+      ctx.log("declared model: " + std::to_string(n) +
+              " identified effect(s) applied; candidates act on top of them");
+    }
+    for (const std::string& name : unused_frames_) {
+      ctx.log("declared model: frame '" + name +
+              "' (frames:) is not a measurement frame of this run (--frame / frames): unused");
+    }
+    for (const std::string& name : base_not_applied_) {
+      ctx.log("declared model: identified effect '" + name +
+              "' moves none of the measured points here: not applied by the identification");
+    }
+  }
+
   // The identification's settings (noise levels, selection, cross-validation, outliers).
   void ParseOptions(const ConfigNode& root) {
     opt_.point_std_m = root.GetDouble("point_std_m", opt_.point_std_m);
@@ -275,10 +314,15 @@ class ClosedLoopKind : public ScenarioKind {
   void ParseFramesAndMarkers(const ConfigNode& root) {
     // External measurement frames (a tracker) the CSV's `frame` column may name.
     if (const auto f = root.Optional("frames")) frames_ = identify::ParseMeasurementFrames(*f);
+    StartFramesAtDeclaredPoses();
     // The gravity direction (a base mounted tilted) as a candidate: by default with data in an
     // external frame, whose fitted pose leaves the base's tilt to be seen through the loads
     // alone; else when asked for, by this key or by name in `candidates`.
     gravity_tilt_ = root.GetBool("gravity_tilt", !frames_.empty());
+    // A tilt the declared file already carries is applied (EffectModel::SetBaseEffects).
+    for (const sim::IdentifiedEffect& e : declared_.identified_effects) {
+      gravity_tilt_ |= e.effect == "gravity_tilt@base";
+    }
     for (const auto& spec : candidate_specs_) {
       if (spec.first.rfind("gravity_tilt", 0) == 0 && !root.Has("gravity_tilt")) {
         gravity_tilt_ = true;
@@ -1399,6 +1443,44 @@ class ClosedLoopKind : public ScenarioKind {
     return steps.empty() ? 3.0 : SharedNeesBounds(steps, 0.05).upper;
   }
 
+  // Appends `ie`, or adds it to an entry of the same name: values add up, stds by root sum of
+  // squares (the two fits' errors are independent).
+  static void AddIdentifiedEffect(sim::IdentifiedEffect ie,
+                                  std::vector<sim::IdentifiedEffect>* effects) {
+    const auto same =
+        std::find_if(effects->begin(), effects->end(),
+                     [&](const sim::IdentifiedEffect& e) { return e.effect == ie.effect; });
+    if (same == effects->end()) {
+      effects->push_back(std::move(ie));
+      return;
+    }
+    for (size_t k = 0; k < ie.value.size(); ++k) same->value[k] += ie.value[k];
+    if (same->std.empty()) same->std.assign(ie.value.size(), 0.0);
+    for (size_t k = 0; k < ie.std.size(); ++k) same->std[k] = std::hypot(same->std[k], ie.std[k]);
+    same->equivalent = ie.equivalent;
+  }
+
+  // The fitted measurement frames' poses and marker offsets, with their covariances: a fitted
+  // offset adds to the declared one (the fit moved the frame the file had already moved).
+  void AddFittedFrames(const identify::IdentifyResult& res, sim::DeclaredModel* out) const {
+    out->frames.clear();
+    for (size_t f = 0; f < frames_.size(); ++f) {
+      out->frames.push_back({frames_[f].name, res.after.T_base_frames[f], res.frame_cov[f], ""});
+    }
+    for (size_t k = 0; k < points_.size(); ++k) {
+      if (!offset_unknown_[k]) continue;
+      const auto same = std::find_if(out->marker_offsets.begin(), out->marker_offsets.end(),
+                                     [&](const auto& m) { return m.frame == points_[k]; });
+      if (same == out->marker_offsets.end()) {
+        out->marker_offsets.push_back(
+            {points_[k], res.after.marker_offsets[k], res.marker_offset_cov[k], ""});
+      } else {
+        same->offset_m += res.after.marker_offsets[k];
+        same->cov += res.marker_offset_cov[k];
+      }
+    }
+  }
+
   void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
     std::ostringstream header;
     header << "Declared model augmented by flexbench closed_loop: the identified effects with "
@@ -1419,14 +1501,16 @@ class ClosedLoopKind : public ScenarioKind {
       s.about_axis_rad = std::sqrt(source_scale_) * s.about_axis_rad;
       s.cov = source_scale_ * s.cov;
     }
-    out.identified_effects.clear();
+    // The declared file's own effects stay (the fit acted on top of them); a refit of one of
+    // them adds to it.
     for (const auto& e : res.effects) {
       const identify::Candidate& fitted = em_->candidates()[e.candidate];
       sim::IdentifiedEffect ie{fitted.Name(), e.value, e.std, fitted.unit, "", {}};
       // An equivalence set's name lists every member; the values are the fitted member's.
       if (e.name != ie.effect) ie.equivalent = e.members;
-      out.identified_effects.push_back(std::move(ie));
+      AddIdentifiedEffect(std::move(ie), &out.identified_effects);
     }
+    AddFittedFrames(res, &out);
     WriteFileAtomic(ctx.out->File("declared_augmented.yaml"),
                     sim::EmitDeclaredModel(out, header.str()));
   }
@@ -1548,6 +1632,8 @@ class ClosedLoopKind : public ScenarioKind {
   sim::MjModelPtr mj_;
   std::unique_ptr<sim::DeclaredChain> chain_;
   std::unique_ptr<identify::EffectModel> em_;
+  std::vector<std::string> base_not_applied_;  // identified effects of declared_ em_ lacks
+  std::vector<std::string> unused_frames_;     // declared_.frames no row is measured in
   std::unique_ptr<sim::Simulation> sim_;
   double source_scale_ = 1.0;
   std::string verdict_;

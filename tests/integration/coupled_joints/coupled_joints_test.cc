@@ -412,10 +412,15 @@ TEST(CoupledJoints, BadInputIsOneLineNamingFileKeyAndLine) {
   testing::WriteFile(dir.path() / "ok.yaml", kCoupled);
   const sim::DeclaredModel d = sim::LoadDeclaredModel((dir.path() / "ok.yaml").string());
   const sim::MjModelPtr m = sim::LoadModel(d.model_path);
-  EXPECT_NE(testing::ErrorOf([&] {
-              sim::BuildDeclaredChain(m.get(), d);
-            }).find("ok.yaml:5: key 'coupled.j4': coupled joints are read by identification only"),
+  const std::string refusal = testing::ErrorOf([&] { sim::BuildDeclaredChain(m.get(), d); });
+  EXPECT_NE(refusal.find("ok.yaml:5: key 'coupled.j4': coupled joints are read by identification "
+                         "only"),
             std::string::npos);
+  // It says what to do instead: the command that scores such a model, and how to estimate.
+  EXPECT_NE(refusal.find("flexbench identify --declared "), std::string::npos) << refusal;
+  EXPECT_NE(refusal.find("--max-effects 0"), std::string::npos) << refusal;
+  EXPECT_NE(refusal.find("move the joint into actuated_joints"), std::string::npos) << refusal;
+  EXPECT_EQ(refusal.find('\n'), std::string::npos) << refusal;
   // A CSV column for a coupled joint.
   testing::WriteFile(dir.path() / "c.csv", "j1,j2,j3,j4,x,y,z\n0,0,0,0,1,2,3\n");
   DataSet data;

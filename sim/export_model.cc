@@ -1,0 +1,491 @@
+#include "sim/export_model.h"
+
+#include <mujoco/mujoco.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "estimators/error.h"
+#include "estimators/kinematics/model_effects.h"
+#include "sim/declared_chain.h"
+#include "sim/mujoco_model.h"
+
+namespace flexbench::sim {
+namespace {
+
+using kinematics::FrameId;
+using lie::SE3;
+
+// Identified effects that are geometry: folded into the MJCF's poses.
+bool IsGeometric(const std::string& type) {
+  static const std::set<std::string> kTypes = {
+      "joint_offset",      "link_length",       "link_offset",  "joint_axis_tilt_a",
+      "joint_axis_tilt_b", "thermal_expansion", "joint_origin", "camera_offset"};
+  return kTypes.count(type) > 0;
+}
+
+std::string TypeOf(const std::string& effect) { return effect.substr(0, effect.find('@')); }
+
+// The gear-stiffness annotations of the truth's joint_compliance effect (sim/effects).
+constexpr char kGearText[] = "effect:joint_elasticity";
+constexpr char kGearNumbers[] = "effect:joint_elasticity:stiffness";
+
+// MuJoCo's camera looks along -z with y up; the declared chain's optical frame has y down.
+const SE3 kMjcamOptical(Mat3(Vec3(1.0, -1.0, -1.0).asDiagonal()), Vec3::Zero());
+
+void SetPose(const SE3& T, double* pos, double* quat) {
+  for (int k = 0; k < 3; ++k) pos[k] = T.translation()[k];
+  QuatToWxyz(Quat(T.rotation()).normalized(), quat);
+}
+
+// Folds the corrected fixed parts of the declared chain (EffectiveChain at reading 0, the
+// constant joint offsets as a turn of the joint's frame) into the model's poses, anchors and
+// axes. MuJoCo places body b at P B Trans(a) Rot_w(q) Trans(-a); the chain at P Jc Rot_w(q) Bc
+// (Jc the joint frame's fixed part, Bc the body frame's): B' = Jc Bc, a' = Bc^-1 0, w' = Rc^T w.
+class Folder {
+ public:
+  Folder(mjModel* m, const DeclaredChain& chain, std::vector<std::string>* skipped)
+      : m_(m), chain_(chain), kin_(chain.model, chain.effects_or_null()), skipped_(skipped) {
+    kin_.Update(Eigen::VectorXd::Zero(chain.model.nq()));
+  }
+
+  void Fold() {
+    for (int b = 1; b < m_->nbody; ++b) FoldBody(b);
+    for (int s = 0; s < m_->nsite; ++s) {
+      if (const FrameId f = Find("site/", mjOBJ_SITE, s); f > 0) {
+        SetPose(Fixed(f), m_->site_pos + 3 * s, m_->site_quat + 4 * s);
+      }
+    }
+    for (int g = 0; g < m_->ngeom; ++g) {
+      if (const FrameId f = Find("geom/", mjOBJ_GEOM, g); f > 0) {
+        SetPose(Fixed(f), m_->geom_pos + 3 * g, m_->geom_quat + 4 * g);
+      }
+    }
+    for (int c = 0; c < m_->ncam; ++c) {
+      if (const FrameId f = Find("camera/", mjOBJ_CAMERA, c); f > 0) {
+        SetPose(Fixed(f) * kMjcamOptical, m_->cam_pos + 3 * c, m_->cam_quat + 4 * c);
+      }
+    }
+  }
+
+ private:
+  FrameId Find(const char* prefix, mjtObj type, int id) const {
+    const std::string name = ObjectName(m_, type, id);
+    const std::string typed = prefix + name;
+    return !name.empty() && chain_.model.HasFrame(typed) ? chain_.model.FindFrame(typed) : -1;
+  }
+
+  // Frame f's corrected fixed part; a joint frame's with its constant offset turned in.
+  SE3 Fixed(FrameId f) const {
+    const kinematics::PpoeFrame& fr = kin_.model().frame(f);
+    if (fr.q_index < 0) return fr.T_parent_ip;
+    return fr.T_parent_ip * fr.JointMotion(kin_.q()[fr.q_index]);
+  }
+
+  // With G_k = J_{k+1} ... J_n Bc (the corrected fixed parts after joint k), MuJoCo's
+  // B' Rot_1 ... Rot_n equals J_1 R_1 J_2 ... R_n Bc for B' = J_1 G_1 and joint k about
+  // axis Rg_k^T w_k through G_k^-1 0 (Rot_k = G_k^-1 R_k G_k).
+  void FoldBody(int b) {
+    const FrameId fb = Find("body/", mjOBJ_BODY, b);
+    if (fb < 0) return;  // off the declared chain: as it was
+    const int j0 = m_->body_jntadr[b];
+    const int nj = m_->body_jntnum[b];
+    for (int j = j0; j < j0 + nj; ++j) {
+      if (Find("joint/", mjOBJ_JOINT, j) < 0) {
+        skipped_->push_back("the geometry at body '" + ObjectName(m_, mjOBJ_BODY, b) +
+                            "' (an unnamed joint)");
+        return;
+      }
+    }
+    SE3 G = Fixed(fb);
+    for (int j = j0 + nj - 1; j >= j0; --j) {
+      const SE3 G_inv = G.Inverse();
+      const Vec3 anchor = G_inv.translation();
+      const Vec3 axis = G_inv.rotation() * Eigen::Map<const Vec3>(m_->jnt_axis + 3 * j);
+      for (int k = 0; k < 3; ++k)
+        m_->jnt_pos[3 * j + k] = anchor[k], m_->jnt_axis[3 * j + k] = axis[k];
+      G = Fixed(Find("joint/", mjOBJ_JOINT, j)) * G;
+    }
+    SetPose(G, m_->body_pos + 3 * b, m_->body_quat + 4 * b);
+  }
+
+  mjModel* m_;
+  const DeclaredChain& chain_;
+  kinematics::EffectiveChain kin_;
+  std::vector<std::string>* skipped_;
+};
+
+std::string Num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof(b), "%.17g", v);
+  return b;
+}
+
+std::string Nums(const double* v, int n) {
+  std::string s;
+  for (int k = 0; k < n; ++k) s += (k ? " " : "") + Num(v[k]);
+  return s;
+}
+
+// Sets attribute `key` of the element opening `line` to `value` (added after the tag if absent).
+void SetAttribute(std::string* line, const std::string& key, const std::string& value) {
+  const std::string pat = " " + key + "=\"";
+  const size_t at = line->find(pat);
+  if (at != std::string::npos) {
+    const size_t start = at + pat.size();
+    line->replace(start, line->find('"', start) - start, value);
+    return;
+  }
+  const size_t tag_end = line->find_first_of(" />", line->find('<') + 1);
+  line->insert(tag_end, pat + value + "\"");
+}
+
+// MuJoCo's writer keeps six digits: every pose inside <worldbody> gets all of them again (the
+// elements come in the model's order, type by type), and relative asset folders are made
+// absolute (the file is written elsewhere).
+std::string WithFullPrecision(const std::string& xml, const mjModel* m,
+                              const std::filesystem::path& model_dir) {
+  std::istringstream in(xml);
+  std::ostringstream out;
+  std::string line;
+  bool world = false;
+  int body = 1, joint = 0, geom = 0, site = 0, cam = 0;
+  const auto is = [&](const char* tag) {
+    return line.find(std::string("<") + tag + " ") != std::string::npos ||
+           line.find(std::string("<") + tag + "/>") != std::string::npos ||
+           line.find(std::string("<") + tag + ">") != std::string::npos;
+  };
+  while (std::getline(in, line)) {
+    if (line.find("<worldbody") != std::string::npos) world = true;
+    if (line.find("</worldbody") != std::string::npos) world = false;
+    if (line.find("<compiler") != std::string::npos) {
+      for (const char* key : {"meshdir", "texturedir"}) {
+        const std::string pat = std::string(" ") + key + "=\"";
+        const size_t at = line.find(pat);
+        std::string dir = model_dir.string() + "/";
+        if (at != std::string::npos) {
+          const size_t s = at + pat.size();
+          const std::filesystem::path given = line.substr(s, line.find('"', s) - s);
+          dir = (given.is_absolute() ? given : model_dir / given).lexically_normal().string() + "/";
+        }
+        SetAttribute(&line, key, dir);
+      }
+    }
+    if (world) {
+      if (is("body")) {
+        SetAttribute(&line, "pos", Nums(m->body_pos + 3 * body, 3));
+        SetAttribute(&line, "quat", Nums(m->body_quat + 4 * body, 4));
+        ++body;
+      } else if (is("joint")) {
+        SetAttribute(&line, "pos", Nums(m->jnt_pos + 3 * joint, 3));
+        SetAttribute(&line, "axis", Nums(m->jnt_axis + 3 * joint, 3));
+        ++joint;
+      } else if (is("freejoint")) {
+        ++joint;
+      } else if (is("geom")) {
+        SetAttribute(&line, "pos", Nums(m->geom_pos + 3 * geom, 3));
+        SetAttribute(&line, "quat", Nums(m->geom_quat + 4 * geom, 4));
+        ++geom;
+      } else if (is("site")) {
+        SetAttribute(&line, "pos", Nums(m->site_pos + 3 * site, 3));
+        SetAttribute(&line, "quat", Nums(m->site_quat + 4 * site, 4));
+        ++site;
+      } else if (is("camera")) {
+        SetAttribute(&line, "pos", Nums(m->cam_pos + 3 * cam, 3));
+        SetAttribute(&line, "quat", Nums(m->cam_quat + 4 * cam, 4));
+        ++cam;
+      }
+    }
+    out << line << "\n";
+  }
+  if (body != m->nbody || joint != m->njnt || geom != m->ngeom || site != m->nsite ||
+      cam != m->ncam) {
+    throw std::logic_error("export: MuJoCo's saved XML does not list the model's elements");
+  }
+  return out.str();
+}
+
+// The gear stiffnesses: the model's own annotation, the identified compliances' k = -1/c over it.
+std::map<std::string, double> GearStiffness(const mjModel* m, const DeclaredChain& full,
+                                            std::vector<std::string>* skipped) {
+  std::map<std::string, double> k;
+  const int t = mj_name2id(m, mjOBJ_TEXT, kGearText);
+  const int n = mj_name2id(m, mjOBJ_NUMERIC, kGearNumbers);
+  if (t >= 0 && n >= 0) {
+    std::istringstream names(std::string(m->text_data + m->text_adr[t]));  // NUL-terminated
+    std::string name;
+    for (int i = 0; names >> name && i < m->numeric_size[n]; ++i) {
+      k[name] = m->numeric_data[m->numeric_adr[n] + i];
+    }
+  }
+  for (size_t q = 0; q < full.q_joints.size(); ++q) {
+    const double c = full.effects.joints.empty() ? 0.0 : full.effects.joints[q].compliance;
+    if (c < 0.0) {
+      k[full.q_joints[q]] = -1.0 / c;
+    } else if (c > 0.0) {
+      skipped->push_back("the compliance of '" + full.q_joints[q] + "' (c > 0 is no spring)");
+    }
+  }
+  return k;
+}
+
+// The saved XML with the gear annotation replaced by `k` (nothing when empty).
+std::string WithGearAnnotation(std::string xml, const std::map<std::string, double>& k) {
+  for (const char* name : {kGearText, kGearNumbers}) {
+    const size_t at = xml.find(std::string("name=\"") + name + "\"");
+    if (at == std::string::npos) continue;
+    const size_t start = xml.rfind('\n', at) + 1;
+    xml.erase(start, xml.find('\n', at) + 1 - start);
+  }
+  if (k.empty()) return xml;
+  std::string joints, values;
+  for (const auto& [j, v] : k) {
+    joints += (joints.empty() ? "" : " ") + j;
+    values += (values.empty() ? "" : " ") + Num(v);
+  }
+  const std::string lines = "    <text name=\"" + std::string(kGearText) + "\" data=\"" + joints +
+                            "\"/>\n    <numeric name=\"" + kGearNumbers + "\" size=\"" +
+                            std::to_string(k.size()) + "\" data=\"" + values + "\"/>\n";
+  const size_t custom = xml.find("<custom>");
+  if (custom != std::string::npos) return xml.insert(xml.find('\n', custom) + 1, lines);
+  return xml.insert(xml.find("  <worldbody>"), "  <custom>\n" + lines + "  </custom>\n");
+}
+
+// MuJoCo's XML of the model it loaded last (mj_saveLastXML writes a file only).
+std::string SaveLastXml(const mjModel* m) {
+  const std::filesystem::path tmp = std::filesystem::temp_directory_path() /
+                                    ("flexbench_export_" + std::to_string(::getpid()) + ".xml");
+  char error[1024] = "";
+  const int ok = mj_saveLastXML(tmp.c_str(), m, error, sizeof(error));
+  std::ifstream in(tmp);
+  std::stringstream text;
+  text << in.rdbuf();
+  std::error_code ec;
+  std::filesystem::remove(tmp, ec);
+  if (!ok) throw InputError(std::string("export: MuJoCo could not write the model: ") + error);
+  return text.str();
+}
+
+// The model with the declared file's geometry folded in (Folder), and what MJCF cannot hold.
+struct Folded {
+  MjModelPtr model;
+  std::map<std::string, double> gear;   // GearStiffness
+  std::vector<std::string> compliance;  // the identified compliances (written as gear)
+  bool tilt = false;                    // <option gravity> turned
+  std::vector<std::string> skipped;
+};
+
+Folded Fold(const DeclaredModel& declared) {
+  const std::string ext = std::filesystem::path(declared.model_path).extension().string();
+  if (ext != ".xml" && ext != ".XML") {
+    throw InputError(declared.file + ": model " + CapForMessage(declared.model_path) +
+                     " is not an MJCF file (.xml): export writes from an MJCF model");
+  }
+  Folded out;
+  DeclaredModel geometric = declared;
+  geometric.identified_effects.clear();
+  for (const IdentifiedEffect& e : declared.identified_effects) {
+    const std::string type = TypeOf(e.effect);
+    if (IsGeometric(type)) {
+      geometric.identified_effects.push_back(e);
+    } else if (type == "gravity_tilt") {
+      out.tilt = true;
+    } else if (type == "joint_compliance") {
+      out.compliance.push_back(e.effect);
+    } else if (type == "stiffening_spring") {
+      out.compliance.push_back(e.effect);
+      out.skipped.push_back(e.effect + " (its cubic term; the linear one is written)");
+    } else {
+      out.skipped.push_back(e.effect);
+    }
+  }
+  out.model = LoadModel(declared.model_path);
+  mjModel* m = out.model.get();
+  // The whole file first: a bad effect is refused, not skipped.
+  const DeclaredChain full = BuildDeclaredChain(m, declared, /*with_couplings=*/true);
+  const DeclaredChain chain = BuildDeclaredChain(m, geometric, /*with_couplings=*/true);
+  for (const DeclaredMarkerOffset& mo : declared.marker_offsets) {
+    if (chain.model.HasFrame("body/" + mo.frame + "/moved")) {
+      out.skipped.push_back("the marker offset of body '" + mo.frame + "' (move a site instead)");
+    }
+  }
+  out.gear = GearStiffness(m, full, &out.skipped);
+  Folder(m, chain, &out.skipped).Fold();
+  if (out.tilt) {
+    MjDataPtr data = MakeData(m);
+    mj_kinematics(m, data.get());
+    const Mat3 R_w_base = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
+        data->xmat + 9 * full.base_body);
+    const Vec3 g = R_w_base * full.effects.g_base;
+    for (int k = 0; k < 3; ++k) m->opt.gravity[k] = g[k];
+  }
+  return out;
+}
+
+SE3 PoseOf(const double* pos, const double* quat) {
+  return SE3(QuatFromWxyz(quat).normalized(), Eigen::Map<const Vec3>(pos));
+}
+
+// URDF's origin: xyz and fixed-axis roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll)).
+std::string Origin(const SE3& T) {
+  const Mat3& R = T.rotation();
+  const double roll = std::atan2(R(2, 1), R(2, 2));
+  const double pitch = std::atan2(-R(2, 0), std::hypot(R(2, 1), R(2, 2)));
+  const double yaw = std::atan2(R(1, 0), R(0, 0));
+  const double xyz[3] = {T.translation().x(), T.translation().y(), T.translation().z()};
+  const double rpy[3] = {roll, pitch, yaw};
+  return "<origin xyz=\"" + Nums(xyz, 3) + "\" rpy=\"" + Nums(rpy, 3) + "\"/>";
+}
+
+// The folded model as URDF: a link per body (at its last joint's anchor, as URDF joints turn
+// about their link's origin; a body with several joints gets one link per joint), a fixed link
+// per site, camera and named geom, inertials. No visual or collision geometry.
+class UrdfWriter {
+ public:
+  UrdfWriter(const mjModel* m, std::vector<std::string>* skipped) : m_(m), skipped_(skipped) {}
+
+  std::string Write() {
+    // MuJoCo's names start with the model's own.
+    const std::string model = m_->names;
+    u_ << "<?xml version=\"1.0\"?>\n<robot name=\"" << (model.empty() ? "model" : model) << "\">\n";
+    u_ << "  <link name=\"" << kRoot << "\"/>\n";
+    used_.insert(kRoot);
+    link_of_.assign(m_->nbody, kRoot);
+    offset_.assign(m_->nbody, SE3());
+    for (int b = 1; b < m_->nbody; ++b) Body(b);
+    Attach(mjOBJ_SITE, m_->nsite, m_->site_bodyid, m_->site_pos, m_->site_quat, false);
+    Attach(mjOBJ_CAMERA, m_->ncam, m_->cam_bodyid, m_->cam_pos, m_->cam_quat, false);
+    Attach(mjOBJ_GEOM, m_->ngeom, m_->geom_bodyid, m_->geom_pos, m_->geom_quat, true);
+    u_ << "</robot>\n";
+    return u_.str();
+  }
+
+ private:
+  static constexpr const char* kRoot = "flexbench_world";
+
+  std::string Name(mjtObj type, int id, const std::string& fallback) const {
+    const std::string n = ObjectName(m_, type, id);
+    return n.empty() ? fallback : n;
+  }
+
+  void Joint(const std::string& name, const std::string& type, const std::string& parent,
+             const std::string& child, const SE3& origin, const std::string& extra) {
+    u_ << "  <joint name=\"" << name << "\" type=\"" << type << "\">\n    " << Origin(origin)
+       << "\n    <parent link=\"" << parent << "\"/>\n    <child link=\"" << child << "\"/>\n"
+       << extra << "  </joint>\n";
+  }
+
+  void Body(int b) {
+    const std::string name = Name(mjOBJ_BODY, b, "body" + std::to_string(b));
+    const std::string parent = link_of_[m_->body_parentid[b]];
+    const SE3 B = offset_[m_->body_parentid[b]].Inverse() *
+                  PoseOf(m_->body_pos + 3 * b, m_->body_quat + 4 * b);
+    const int j0 = m_->body_jntadr[b], nj = m_->body_jntnum[b];
+    std::string prev = parent;
+    SE3 origin = B;
+    for (int j = j0; j < j0 + nj; ++j) {
+      const Vec3 a = Eigen::Map<const Vec3>(m_->jnt_pos + 3 * j);
+      origin = origin * SE3::Translation(a);
+      const std::string jname = Name(mjOBJ_JOINT, j, "joint" + std::to_string(j));
+      const std::string link = j + 1 == j0 + nj ? name : name + "__" + jname;
+      const bool hinge = m_->jnt_type[j] == mjJNT_HINGE;
+      if (!hinge && m_->jnt_type[j] != mjJNT_SLIDE) {
+        skipped_->push_back("joint '" + jname + "' (ball or free: no URDF form)");
+      }
+      const Vec3 w = Eigen::Map<const Vec3>(m_->jnt_axis + 3 * j).normalized();
+      const double axis[3] = {w.x(), w.y(), w.z()};
+      std::string extra = "    <axis xyz=\"" + Nums(axis, 3) + "\"/>\n";
+      std::string type = hinge ? "continuous" : "prismatic";
+      if (m_->jnt_limited[j]) {
+        type = hinge ? "revolute" : "prismatic";
+        extra += "    <limit lower=\"" + Num(m_->jnt_range[2 * j]) + "\" upper=\"" +
+                 Num(m_->jnt_range[2 * j + 1]) + "\" effort=\"0\" velocity=\"0\"/>\n";
+      }
+      if (j + 1 < j0 + nj) Link(link, -1, SE3());
+      Joint(jname, type, prev, link, origin, extra);
+      prev = link;
+      origin = SE3::Translation(-a);
+    }
+    // The body's link stands at its last joint's anchor (the body's own pose without joints).
+    const SE3 L =
+        nj > 0 ? SE3::Translation(Eigen::Map<const Vec3>(m_->jnt_pos + 3 * (j0 + nj - 1))) : SE3();
+    if (nj == 0) Joint(name + "__fixed", "fixed", parent, name, B, "");
+    Link(name, b, L);
+    link_of_[b] = name;
+    offset_[b] = L;
+  }
+
+  // A link; with its body's inertial when b >= 0 (L: the link's pose in the body).
+  void Link(const std::string& name, int b, const SE3& L) {
+    used_.insert(name);
+    if (b < 0 || !(m_->body_mass[b] > 0.0)) {
+      u_ << "  <link name=\"" << name << "\"/>\n";
+      return;
+    }
+    const SE3 I = L.Inverse() * PoseOf(m_->body_ipos + 3 * b, m_->body_iquat + 4 * b);
+    const double* d = m_->body_inertia + 3 * b;
+    u_ << "  <link name=\"" << name << "\">\n    <inertial>\n      " << Origin(I)
+       << "\n      <mass value=\"" << Num(m_->body_mass[b]) << "\"/>\n      <inertia ixx=\""
+       << Num(d[0]) << "\" ixy=\"0\" ixz=\"0\" iyy=\"" << Num(d[1]) << "\" iyz=\"0\" izz=\""
+       << Num(d[2]) << "\"/>\n    </inertial>\n  </link>\n";
+  }
+
+  // Sites, cameras and (named) geoms as fixed links named as they are.
+  void Attach(mjtObj type, int n, const int* body, const double* pos, const double* quat,
+              bool named_only) {
+    for (int i = 0; i < n; ++i) {
+      std::string name = ObjectName(m_, type, i);
+      if (name.empty()) {
+        if (named_only) continue;
+        name = std::string(type == mjOBJ_SITE ? "site" : "camera") + std::to_string(i);
+      }
+      if (used_.count(name)) {
+        skipped_->push_back("the frame of '" + name + "' (a link of that name exists)");
+        continue;
+      }
+      const int b = body[i];
+      Joint(name + "__fixed", "fixed", link_of_[b], name,
+            offset_[b].Inverse() * PoseOf(pos + 3 * i, quat + 4 * i), "");
+      Link(name, -1, SE3());
+    }
+  }
+
+  const mjModel* m_;
+  std::vector<std::string>* skipped_;
+  std::ostringstream u_;
+  std::set<std::string> used_;
+  std::vector<std::string> link_of_;  // per body: its (last) link
+  std::vector<SE3> offset_;           // per body: that link's pose in the body
+};
+
+}  // namespace
+
+ExportedModel ExportMjcf(const DeclaredModel& declared) {
+  Folded f = Fold(declared);
+  const std::string saved = SaveLastXml(f.model.get());
+  ExportedModel out;
+  out.skipped = std::move(f.skipped);
+  out.text = WithGearAnnotation(
+      WithFullPrecision(saved, f.model.get(),
+                        std::filesystem::absolute(declared.model_path).parent_path()),
+      f.gear);
+  return out;
+}
+
+ExportedModel ExportUrdf(const DeclaredModel& declared) {
+  Folded f = Fold(declared);
+  ExportedModel out;
+  out.skipped = std::move(f.skipped);
+  for (const std::string& c : f.compliance) out.skipped.push_back(c + " (URDF has no spring)");
+  if (f.tilt) out.skipped.push_back("gravity_tilt@base (URDF has no gravity)");
+  out.text = UrdfWriter(f.model.get(), &out.skipped).Write();
+  return out;
+}
+
+}  // namespace flexbench::sim
