@@ -12,6 +12,7 @@
 #include "scenarios/identify/diagnostics.h"
 #include "scenarios/identify/equivalence.h"
 #include "scenarios/identify/measurement_frames.h"
+#include "scenarios/identify/parallel.h"
 #include "scenarios/identify/problem.h"
 #include "scenarios/identify/selection.h"
 
@@ -213,12 +214,15 @@ Fit FollowFinding(const SelectionContext& ctx, const std::vector<int>& candidate
   return SelectEffects(ctx, cur, pool, true, cv);
 }
 
-// For each chosen effect, the best selection without it (cross-validation only).
+// For each chosen effect, the best selection without it (cross-validation only). The
+// selections are independent: they run side by side, and are reported in the chosen order.
 void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candidates,
                       IdentifyResult* res) {
   if (!ctx.opt.cross_validation) return;
   std::vector<int> pool = Pool(ctx.em, candidates, false, false);
   for (const std::string& u : res->unlocked) pool.push_back(ctx.em.FindCandidate(u));
+  std::vector<int> banned_list;
+  std::vector<std::vector<int>> rests;
   for (int banned : res->after.active) {
     if (ctx.em.candidates()[banned].generic_geometry) continue;
     // A wider family of the same kind (the generic error curve beside a transmission error)
@@ -233,17 +237,29 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
       }
       rest.push_back(c);
     }
+    banned_list.push_back(banned);
+    rests.push_back(std::move(rest));
+  }
+  const int n = static_cast<int>(banned_list.size());
+  const int threads = TaskThreads(n, ctx.opt.threads);
+  const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
+  std::vector<Fit> alts(n);
+  std::vector<double> cvs(n, res->cv_before);
+  ForEachTask(n, threads, [&](int i) {
     std::vector<std::string> quiet;
-    const SelectionContext alt_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, ctx.opt, &quiet};
-    double cv = res->cv_before;
+    const SelectionContext alt_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, task_opt, &quiet};
     // No swap step: an alternative needs to be found, not polished.
-    const Fit alt = SelectEffects(alt_ctx, res->before, rest, true, &cv, false);
+    alts[i] = SelectEffects(alt_ctx, res->before, rests[i], true, &cvs[i], false);
+  });
+  for (int i = 0; i < n; ++i) {
+    const Fit& alt = alts[i];
+    const double cv = cvs[i];
     Alternative a;
-    a.banned = ctx.em.candidates()[banned].Name();
+    a.banned = ctx.em.candidates()[banned_list[i]].Name();
     a.cv = cv;
     for (int c : alt.active) a.effects.push_back(ctx.em.candidates()[c].Name());
     std::string names;
-    for (const auto& n : a.effects) names += (names.empty() ? "" : " + ") + n;
+    for (const auto& name : a.effects) names += (names.empty() ? "" : " + ") + name;
     const bool close = !alt.active.empty() && cv < (1.0 + ctx.opt.ambiguity_cv) * res->cv_after;
     if (close) res->attribution_unique = false;
     res->steps.push_back(Fmt("without %s: %s reach held-out %.4g sigma^2 (chosen %.4g)%s",

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "scenarios/identify/equivalence.h"
+#include "scenarios/identify/parallel.h"
 #include "scenarios/identify/problem.h"
 
 namespace flexbench::identify {
@@ -33,24 +34,32 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
   const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
   const Projector proj(J_cur);
   const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
-  IdentifyOptions screen = ctx.opt;
-  screen.max_iterations = 4;
   std::vector<int> screened;
   for (int c : pool) {
     if (!Contains(cur.active, c)) screened.push_back(c);
   }
   const std::vector<Eigen::MatrixXd> Jc =
       CandidateJacobians(ctx.em, ctx.data, ctx.loads, cur, screened, ctx.opt);
-  std::vector<Trial> trials;
-  for (size_t i = 0; i < screened.size(); ++i) {
+  // Each candidate's screen on its own, side by side; kept in the pool's order.
+  const int n = static_cast<int>(screened.size());
+  const int threads = TaskThreads(n, ctx.opt.threads);
+  IdentifyOptions screen = TaskOptions(ctx.opt, threads);
+  screen.max_iterations = 4;
+  std::vector<Fit> fits(n);
+  std::vector<char> kept(n, 0);
+  ForEachTask(n, threads, [&](int i) {
     const int c = screened[i];
     double rel = 0.0;
     const Eigen::MatrixXd B = ObservableBasis(Jc[i], proj, ctx.opt.rank_tol, &rel);
-    if (B.cols() == 0) continue;
+    if (B.cols() == 0) return;
     // Never more unknowns than residuals.
-    if (cur.num_params + B.cols() >= cur.num_residuals) continue;
-    Fit f = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[i], r_cur, screen);
-    if (std::isfinite(f.bic)) trials.push_back({c, std::move(f)});
+    if (cur.num_params + B.cols() >= cur.num_residuals) return;
+    fits[i] = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[i], r_cur, screen);
+    kept[i] = std::isfinite(fits[i].bic);
+  });
+  std::vector<Trial> trials;
+  for (int i = 0; i < n; ++i) {
+    if (kept[i]) trials.push_back({screened[i], std::move(fits[i])});
   }
   std::stable_sort(trials.begin(), trials.end(), [](const Trial& a, const Trial& b) {
     if (a.fit.bic != b.fit.bic) return a.fit.bic < b.fit.bic;
@@ -59,42 +68,69 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
   return trials;
 }
 
+// A screened trial refitted in full, the earlier effects it pushes past their bounds dropped
+// (with the log lines that says so), its own bound violations and its held-out error.
+struct Refit {
+  std::vector<std::string> log;
+  std::vector<std::string> out;
+  double cv = 0.0;
+};
+Refit RefitTrial(const SelectionContext& ctx, Trial* t) {
+  Refit r;
+  t->fit =
+      FitEffects(ctx.em, ctx.data, ctx.loads, t->fit.active, t->fit.basis, t->fit.theta, ctx.opt);
+  const std::string name = ctx.em.candidates()[t->c].Name();
+  // An earlier effect pushed past its bound by the new one is made redundant by it: it
+  // leaves (the backward step's job, done here so the bound never sees it).
+  for (size_t e = 0; e + 1 < t->fit.active.size();) {
+    Fit one = t->fit;
+    one.active = {t->fit.active[e]};
+    int off = 0;
+    for (size_t k = 0; k < e; ++k) off += ctx.em.candidates()[t->fit.active[k]].num_params;
+    one.theta = t->fit.theta.segment(off, ctx.em.candidates()[t->fit.active[e]].num_params);
+    if (BoundViolations(ctx.em, one).empty()) {
+      ++e;
+      continue;
+    }
+    r.log.push_back("with " + name + ", " + ctx.em.candidates()[t->fit.active[e]].Name() +
+                    " leaves (pushed outside its physical bounds)");
+    t->fit = FitWithout(ctx.em, ctx.data, ctx.loads, t->fit, e, ctx.opt);
+    e = 0;
+  }
+  r.out = BoundViolations(ctx.em, t->fit);
+  if (r.out.empty()) r.cv = CvError(ctx, t->fit);
+  return r;
+}
+
 // The best of the screened trials that passes BIC, bounds and held-out error; -1 when none.
+// The trials BIC lets through are refitted side by side, then judged in BIC order.
 int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
               std::vector<Trial>* trials, double* cv_best) {
   int best = -1;
   *cv_best = std::numeric_limits<double>::infinity();
-  int tried = 0;
-  for (size_t k = 0; k < trials->size() && tried < ctx.opt.cv_trials; ++k) {
-    Trial& t = (*trials)[k];
-    if (t.fit.bic - cur.bic > -ctx.opt.bic_threshold) break;
-    ++tried;
-    t.fit =
-        FitEffects(ctx.em, ctx.data, ctx.loads, t.fit.active, t.fit.basis, t.fit.theta, ctx.opt);
+  std::vector<size_t> tried;
+  for (size_t k = 0; k < trials->size() && static_cast<int>(tried.size()) < ctx.opt.cv_trials;
+       ++k) {
+    if ((*trials)[k].fit.bic - cur.bic > -ctx.opt.bic_threshold) break;
+    tried.push_back(k);
+  }
+  const int threads = TaskThreads(static_cast<int>(tried.size()), ctx.opt.threads);
+  const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
+  const SelectionContext task_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, task_opt, ctx.log};
+  std::vector<Refit> refits(tried.size());
+  ForEachTask(static_cast<int>(tried.size()), threads,
+              [&](int i) { refits[i] = RefitTrial(task_ctx, &(*trials)[tried[i]]); });
+  for (size_t i = 0; i < tried.size(); ++i) {
+    const size_t k = tried[i];
+    const Trial& t = (*trials)[k];
+    const Refit& r = refits[i];
+    ctx.log->insert(ctx.log->end(), r.log.begin(), r.log.end());
     const std::string name = ctx.em.candidates()[t.c].Name();
-    // An earlier effect pushed past its bound by the new one is made redundant by it: it
-    // leaves (the backward step's job, done here so the bound never sees it).
-    for (size_t e = 0; e + 1 < t.fit.active.size();) {
-      Fit one = t.fit;
-      one.active = {t.fit.active[e]};
-      int off = 0;
-      for (size_t k = 0; k < e; ++k) off += ctx.em.candidates()[t.fit.active[k]].num_params;
-      one.theta = t.fit.theta.segment(off, ctx.em.candidates()[t.fit.active[e]].num_params);
-      if (BoundViolations(ctx.em, one).empty()) {
-        ++e;
-        continue;
-      }
-      ctx.log->push_back("with " + name + ", " + ctx.em.candidates()[t.fit.active[e]].Name() +
-                         " leaves (pushed outside its physical bounds)");
-      t.fit = FitWithout(ctx.em, ctx.data, ctx.loads, t.fit, e, ctx.opt);
-      e = 0;
-    }
-    const std::vector<std::string> out = BoundViolations(ctx.em, t.fit);
-    if (!out.empty()) {
-      ctx.log->push_back("reject " + name + ": outside its physical bounds (" + out[0] + ")");
+    if (!r.out.empty()) {
+      ctx.log->push_back("reject " + name + ": outside its physical bounds (" + r.out[0] + ")");
       continue;
     }
-    const double cv = CvError(ctx, t.fit);
+    const double cv = r.cv;
     if (!CvLower(ctx.opt, cv, cv_cur)) {
       ctx.log->push_back(
           Fmt("not kept %s: BIC %.1f -> %.1f but held-out error %.4g -> %.4g "
@@ -116,9 +152,18 @@ Fit BackwardStep(const SelectionContext& ctx, Fit cur, double* cv_cur) {
     size_t worst = 0;
     Fit best_without;
     double best_bic = std::numeric_limits<double>::infinity();
-    for (size_t e = 0; e + 1 < cur.active.size(); ++e) {
-      Fit w = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, ctx.opt);
-      if (w.bic < best_bic) best_bic = w.bic, best_without = std::move(w), worst = e;
+    // Each removal refitted on its own, side by side; the first lowest BIC wins.
+    const int n = static_cast<int>(cur.active.size()) - 1;
+    const int threads = TaskThreads(n, ctx.opt.threads);
+    const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
+    std::vector<Fit> without(n);
+    ForEachTask(n, threads, [&](int e) {
+      without[e] = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, task_opt);
+    });
+    for (int e = 0; e < n; ++e) {
+      if (without[e].bic < best_bic) {
+        best_bic = without[e].bic, best_without = std::move(without[e]), worst = e;
+      }
     }
     if (!std::isfinite(best_bic) || best_bic - cur.bic >= ctx.opt.bic_threshold) break;
     const double cv = CvError(ctx, best_without);

@@ -431,6 +431,7 @@ void BM_IdentifyHumanoid(benchmark::State& state) {
     noise_ratio = NoiseRatio(r.after);
     alternatives = static_cast<int>(r.alternatives.size());
     stopped = r.stopped_by;
+    if (std::getenv("BENCH_LOG")) for (const auto& l : r.steps) std::fprintf(stderr, "%s\n", l.c_str());
   }
   state.counters["rows"] = h.data.rows.size();
   state.counters["candidates"] = h.candidates.size();
