@@ -247,7 +247,8 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
   std::vector<double> cvs(n, res->cv_before);
   ForEachTask(n, threads, [&](int i) {
     std::vector<std::string> quiet;
-    const SelectionContext alt_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, task_opt, &quiet};
+    const SelectionContext alt_ctx{ctx.em,   ctx.data, ctx.loads, ctx.folds,
+                                   task_opt, &quiet,   nullptr,   ctx.memo};
     // No swap step: an alternative needs to be found, not polished.
     alts[i] = SelectEffects(alt_ctx, res->before, rests[i], true, &cvs[i], false);
   });
@@ -407,7 +408,8 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
                      " (set cross_validation: false, or another folds_by)");
   }
   bool capped = false;
-  const SelectionContext ctx{em, data, loads, folds, opt, &res.steps, &capped};
+  SelectionMemo memo;
+  const SelectionContext ctx{em, data, loads, folds, opt, &res.steps, &capped, &memo};
   double cv = CvError(ctx, res.before);
   res.cv_before = cv;
   if (opt.cross_validation) {

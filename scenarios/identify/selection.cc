@@ -28,38 +28,58 @@ struct Trial {
   Fit fit;
 };
 
-// Screened fits of every pool candidate beside `cur`, best BIC first.
+// `key` with index i appended.
+std::string KeyWith(const std::string& key, int i) {
+  std::string out = key;
+  out.append(reinterpret_cast<const char*>(&i), sizeof(i));
+  return out;
+}
+
+// Screened fits of every pool candidate beside `cur`, best BIC first. Each candidate's screen
+// on its own, side by side, those the memo has taken from there.
 std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
                                     const std::vector<int>& pool) {
-  const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
-  const Projector proj(J_cur);
-  const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
   std::vector<int> screened;
   for (int c : pool) {
     if (!Contains(cur.active, c)) screened.push_back(c);
   }
-  const std::vector<Eigen::MatrixXd> Jc =
-      CandidateJacobians(ctx.em, ctx.data, ctx.loads, cur, screened, ctx.opt);
-  // Each candidate's screen on its own, side by side; kept in the pool's order.
   const int n = static_cast<int>(screened.size());
-  const int threads = TaskThreads(n, ctx.opt.threads);
-  IdentifyOptions screen = TaskOptions(ctx.opt, threads);
-  screen.max_iterations = 4;
-  std::vector<Fit> fits(n);
-  std::vector<char> kept(n, 0);
-  ForEachTask(n, threads, [&](int i) {
-    const int c = screened[i];
-    double rel = 0.0;
-    const Eigen::MatrixXd B = ObservableBasis(Jc[i], proj, ctx.opt.rank_tol, &rel);
-    if (B.cols() == 0) return;
-    // Never more unknowns than residuals.
-    if (cur.num_params + B.cols() >= cur.num_residuals) return;
-    fits[i] = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[i], r_cur, screen);
-    kept[i] = std::isfinite(fits[i].bic);
-  });
+  const std::string key = ctx.memo ? SelectionMemo::Key(cur) : std::string();
+  std::vector<SelectionMemo::Screen> screens(n);
+  std::vector<int> todo;  // indices into screened
+  for (int i = 0; i < n; ++i) {
+    if (!ctx.memo || !ctx.memo->screens.Find(KeyWith(key, screened[i]), &screens[i])) {
+      todo.push_back(i);
+    }
+  }
+  if (!todo.empty()) {
+    const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+    const Projector proj(J_cur);
+    const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+    std::vector<int> cs;
+    for (int i : todo) cs.push_back(screened[i]);
+    // A candidate's columns do not depend on which others are computed with it.
+    const std::vector<Eigen::MatrixXd> Jc =
+        CandidateJacobians(ctx.em, ctx.data, ctx.loads, cur, cs, ctx.opt);
+    const int threads = TaskThreads(static_cast<int>(todo.size()), ctx.opt.threads);
+    IdentifyOptions screen = TaskOptions(ctx.opt, threads);
+    screen.max_iterations = 4;
+    ForEachTask(static_cast<int>(todo.size()), threads, [&](int j) {
+      const int c = cs[j];
+      SelectionMemo::Screen& out = screens[todo[j]];
+      double rel = 0.0;
+      const Eigen::MatrixXd B = ObservableBasis(Jc[j], proj, ctx.opt.rank_tol, &rel);
+      // Never more unknowns than residuals.
+      if (B.cols() > 0 && cur.num_params + B.cols() < cur.num_residuals) {
+        out.fit = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[j], r_cur, screen);
+        out.kept = std::isfinite(out.fit.bic);
+      }
+      if (ctx.memo) ctx.memo->screens.Put(KeyWith(key, c), out);
+    });
+  }
   std::vector<Trial> trials;
   for (int i = 0; i < n; ++i) {
-    if (kept[i]) trials.push_back({screened[i], std::move(fits[i])});
+    if (screens[i].kept) trials.push_back({screened[i], std::move(screens[i].fit)});
   }
   std::stable_sort(trials.begin(), trials.end(), [](const Trial& a, const Trial& b) {
     if (a.fit.bic != b.fit.bic) return a.fit.bic < b.fit.bic;
@@ -69,36 +89,34 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
 }
 
 // A screened trial refitted in full, the earlier effects it pushes past their bounds dropped
-// (with the log lines that says so), its own bound violations and its held-out error.
-struct Refit {
-  std::vector<std::string> log;
-  std::vector<std::string> out;
-  double cv = 0.0;
-};
-Refit RefitTrial(const SelectionContext& ctx, Trial* t) {
+// (with the log lines that say so), its own bound violations and its held-out error.
+using Refit = SelectionMemo::Refit;
+Refit RefitTrial(const SelectionContext& ctx, const Trial& t) {
   Refit r;
-  t->fit =
-      FitEffects(ctx.em, ctx.data, ctx.loads, t->fit.active, t->fit.basis, t->fit.theta, ctx.opt);
-  const std::string name = ctx.em.candidates()[t->c].Name();
+  const std::string key = ctx.memo ? KeyWith(SelectionMemo::Key(t.fit), t.c) : std::string();
+  if (ctx.memo && ctx.memo->refits.Find(key, &r)) return r;
+  r.fit = FitEffects(ctx.em, ctx.data, ctx.loads, t.fit.active, t.fit.basis, t.fit.theta, ctx.opt);
+  const std::string name = ctx.em.candidates()[t.c].Name();
   // An earlier effect pushed past its bound by the new one is made redundant by it: it
   // leaves (the backward step's job, done here so the bound never sees it).
-  for (size_t e = 0; e + 1 < t->fit.active.size();) {
-    Fit one = t->fit;
-    one.active = {t->fit.active[e]};
+  for (size_t e = 0; e + 1 < r.fit.active.size();) {
+    Fit one = r.fit;
+    one.active = {r.fit.active[e]};
     int off = 0;
-    for (size_t k = 0; k < e; ++k) off += ctx.em.candidates()[t->fit.active[k]].num_params;
-    one.theta = t->fit.theta.segment(off, ctx.em.candidates()[t->fit.active[e]].num_params);
+    for (size_t k = 0; k < e; ++k) off += ctx.em.candidates()[r.fit.active[k]].num_params;
+    one.theta = r.fit.theta.segment(off, ctx.em.candidates()[r.fit.active[e]].num_params);
     if (BoundViolations(ctx.em, one).empty()) {
       ++e;
       continue;
     }
-    r.log.push_back("with " + name + ", " + ctx.em.candidates()[t->fit.active[e]].Name() +
+    r.log.push_back("with " + name + ", " + ctx.em.candidates()[r.fit.active[e]].Name() +
                     " leaves (pushed outside its physical bounds)");
-    t->fit = FitWithout(ctx.em, ctx.data, ctx.loads, t->fit, e, ctx.opt);
+    r.fit = FitWithout(ctx.em, ctx.data, ctx.loads, r.fit, e, ctx.opt);
     e = 0;
   }
-  r.out = BoundViolations(ctx.em, t->fit);
-  if (r.out.empty()) r.cv = CvError(ctx, t->fit);
+  r.out = BoundViolations(ctx.em, r.fit);
+  if (r.out.empty()) r.cv = CvError(ctx, r.fit);
+  if (ctx.memo) ctx.memo->refits.Put(key, r);
   return r;
 }
 
@@ -116,14 +134,16 @@ int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
   }
   const int threads = TaskThreads(static_cast<int>(tried.size()), ctx.opt.threads);
   const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
-  const SelectionContext task_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, task_opt, ctx.log};
+  const SelectionContext task_ctx{ctx.em,   ctx.data, ctx.loads, ctx.folds,
+                                  task_opt, ctx.log,  nullptr,   ctx.memo};
   std::vector<Refit> refits(tried.size());
   ForEachTask(static_cast<int>(tried.size()), threads,
-              [&](int i) { refits[i] = RefitTrial(task_ctx, &(*trials)[tried[i]]); });
+              [&](int i) { refits[i] = RefitTrial(task_ctx, (*trials)[tried[i]]); });
   for (size_t i = 0; i < tried.size(); ++i) {
     const size_t k = tried[i];
-    const Trial& t = (*trials)[k];
-    const Refit& r = refits[i];
+    Trial& t = (*trials)[k];
+    Refit& r = refits[i];
+    t.fit = std::move(r.fit);
     ctx.log->insert(ctx.log->end(), r.log.begin(), r.log.end());
     const std::string name = ctx.em.candidates()[t.c].Name();
     if (!r.out.empty()) {
@@ -157,8 +177,11 @@ Fit BackwardStep(const SelectionContext& ctx, Fit cur, double* cv_cur) {
     const int threads = TaskThreads(n, ctx.opt.threads);
     const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
     std::vector<Fit> without(n);
+    const std::string key = ctx.memo ? SelectionMemo::Key(cur) : std::string();
     ForEachTask(n, threads, [&](int e) {
+      if (ctx.memo && ctx.memo->withouts.Find(KeyWith(key, e), &without[e])) return;
       without[e] = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, task_opt);
+      if (ctx.memo) ctx.memo->withouts.Put(KeyWith(key, e), without[e]);
     });
     for (int e = 0; e < n; ++e) {
       if (without[e].bic < best_bic) {
@@ -229,7 +252,40 @@ std::vector<std::string> BoundViolations(const EffectModel& em, const Fit& fit) 
 
 double CvError(const SelectionContext& ctx, const Fit& fit) {
   if (!ctx.opt.cross_validation) return std::nan("");
-  return CrossValidate(ctx.em, ctx.data, ctx.loads, ctx.folds, fit, ctx.opt);
+  const std::string key = ctx.memo ? SelectionMemo::Key(fit) : std::string();
+  double cv = 0.0;
+  if (ctx.memo && ctx.memo->held_out.Find(key, &cv)) return cv;
+  cv = CrossValidate(ctx.em, ctx.data, ctx.loads, ctx.folds, fit, ctx.opt);
+  if (ctx.memo) ctx.memo->held_out.Put(key, cv);
+  return cv;
+}
+
+std::string SelectionMemo::Key(const Fit& fit) {
+  std::string k;
+  const auto add = [&k](const void* p, size_t bytes) {
+    k.append(static_cast<const char*>(p), bytes);
+  };
+  const auto add_int = [&add](long v) { add(&v, sizeof(v)); };
+  add_int(static_cast<long>(fit.active.size()));
+  add(fit.active.data(), sizeof(int) * fit.active.size());
+  add_int(static_cast<long>(fit.basis.size()));
+  for (const Eigen::MatrixXd& B : fit.basis) {
+    add_int(B.rows());
+    add_int(B.cols());
+    add(B.data(), sizeof(double) * B.size());
+  }
+  add_int(fit.theta.size());
+  add(fit.theta.data(), sizeof(double) * fit.theta.size());
+  add_int(static_cast<long>(fit.group_points.size()));
+  for (const Vec3& p : fit.group_points) add(p.data(), sizeof(double) * 3);
+  add_int(static_cast<long>(fit.T_base_frames.size()));
+  for (const lie::SE3& T : fit.T_base_frames) {
+    add(T.rotation().data(), sizeof(double) * 9);
+    add(T.translation().data(), sizeof(double) * 3);
+  }
+  add_int(static_cast<long>(fit.marker_offsets.size()));
+  for (const Vec3& d : fit.marker_offsets) add(d.data(), sizeof(double) * 3);
+  return k;
 }
 
 Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,

@@ -11,13 +11,60 @@
 // back when it leaves. At the end, a chosen effect is swapped for another candidate when the
 // swap lowers BIC by more than `ambiguity_bic` without raising the held-out error.
 #pragma once
+#include <mutex>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/identify.h"
 
 namespace flexbench::identify {
+
+// The selection's steps by their exact inputs, for one data set, its loads, folds and options:
+// the alternatives (a selection per chosen effect, each with one candidate banned) retrace the
+// chosen selection's rounds until the banned effect would enter, and those rounds' screens,
+// refits, removals and held-out errors are the same bits. Safe for tasks side by side.
+class SelectionMemo {
+ public:
+  // The exact state of a fit (effects, bases, parameters, nuisance states), as bytes.
+  static std::string Key(const Fit& fit);
+
+  template <typename V>
+  class Table {
+   public:
+    bool Find(const std::string& key, V* out) const {
+      std::lock_guard<std::mutex> lock(mutex_);
+      const auto it = map_.find(key);
+      if (it == map_.end()) return false;
+      *out = it->second;
+      return true;
+    }
+    void Put(const std::string& key, const V& v) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      map_.emplace(key, v);
+    }
+
+   private:
+    mutable std::mutex mutex_;
+    std::unordered_map<std::string, V> map_;
+  };
+
+  struct Screen {
+    bool kept = false;
+    Fit fit;
+  };
+  struct Refit {
+    Fit fit;
+    std::vector<std::string> log;  // earlier effects it pushed past their bounds
+    std::vector<std::string> out;  // its own bound violations
+    double cv = 0.0;
+  };
+  Table<Screen> screens;    // Key(cur) + candidate
+  Table<Refit> refits;      // Key(screened fit) + candidate
+  Table<Fit> withouts;      // Key(fit) + index of the effect removed
+  Table<double> held_out;   // Key(fit)
+};
 
 struct SelectionContext {
   const EffectModel& em;
@@ -27,6 +74,7 @@ struct SelectionContext {
   const IdentifyOptions& opt;
   std::vector<std::string>* log;
   bool* capped = nullptr;  // set when max_effects stopped a selection the data would continue
+  SelectionMemo* memo = nullptr;  // null: every step computed
 };
 
 // ", held-out A -> B sigma^2" (the mean squared held-out residual in units of the stated
