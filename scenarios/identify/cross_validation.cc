@@ -163,22 +163,23 @@ double CrossValidate(const EffectModel& em, const DataSet& data,
                      const std::vector<ConfigLoads>& loads, const Folds& folds, const Fit& fit,
                      const IdentifyOptions& opt) {
   // Each fold starts from the full-data fit, a few steps from its own optimum. The folds run
-  // side by side; their sums add up in fold order.
+  // side by side when cached (made here, one fold's copy of the rows at a time); their sums
+  // add up in fold order.
   const int num_folds = static_cast<int>(folds.test_rows.size());
-  const int threads = TaskThreads(num_folds, opt.threads);
+  const bool cached = folds.cache.size() == folds.test_rows.size();
+  const int threads =
+      cached ? TaskThreads(num_folds, static_cast<int>(data.rows.size()), opt.threads) : 1;
   IdentifyOptions fold_opt = TaskOptions(opt, threads);
   const IdentifyOptions test_opt = fold_opt;
   fold_opt.max_iterations = std::min(opt.max_iterations, 8);
-  const bool nuisance = !data.frames.empty() ||
-                        std::count(data.offset_unknown.begin(), data.offset_unknown.end(), 1);
+  const bool nuisance =
+      !data.frames.empty() || std::count(data.offset_unknown.begin(), data.offset_unknown.end(), 1);
   std::vector<double> fold_ss(num_folds, 0.0);
   std::vector<int> fold_entries(num_folds, 0);
   ForEachTask(num_folds, threads, [&](int k) {
     FoldData made;
-    if (folds.cache.size() != folds.test_rows.size()) {
-      made = MakeFoldData(data, loads, folds.test_rows[k]);
-    }
-    const FoldData& f = folds.cache.size() == folds.test_rows.size() ? folds.cache[k] : made;
+    if (!cached) made = MakeFoldData(data, loads, folds.test_rows[k]);
+    const FoldData& f = cached ? folds.cache[k] : made;
     Fit train = fit;
     if (!fit.active.empty() || nuisance) {
       train = FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt);

@@ -130,8 +130,10 @@ struct GravityTerms {
 
 // Gravity loads of one configuration (nominal model), in the frames the effects act in.
 struct ConfigLoads {
-  Eigen::VectorXd tau;          // per PPOE joint variable, N m
-  std::vector<Vec3> M_mid;      // per joint frame: moment at its link's middle, start joint axes
+  Eigen::VectorXd tau;  // per PPOE joint variable, N m
+  // Per link that can bend (a joint frame a link's length after the previous joint; the
+  // EffectModel numbers them): the moment at the link's middle, start joint axes.
+  std::vector<Vec3> M_mid;
   Vec3 M_mount = Vec3::Zero();  // about the first joint's anchor, its pre-motion axes
   // The same quantities for 1 kg at the end effector (payload sensitivity).
   Eigen::VectorXd tau_unit;
@@ -141,7 +143,7 @@ struct ConfigLoads {
   // axes): the same at every point, as a couple. With the axes to carry it into each load.
   Mat3 M_first = Mat3::Zero();
   Eigen::Matrix3Xd axis_base;  // joint axes, base coordinates
-  std::vector<Mat3> R_mid_T;   // base -> start-joint axes, per link
+  std::vector<Mat3> R_mid_T;   // base -> start-joint axes, per link that can bend
   Mat3 R_mount_T = Mat3::Identity();
   // For the mount's tilted equilibrium (kinematics::MountTilt), mount axes: the first moment of
   // its load about the pivot, the same of 1 kg at the end effector, the end effector's axes
@@ -362,6 +364,8 @@ class EffectModel {
   std::vector<char> on_path_;          // frames between the base and the point frame
   std::vector<Vec3> tilt_a_, tilt_b_;  // per joint frame: unit normals of its axis
   std::vector<FrameId> prev_joint_;    // per joint frame: the joint at its link's start, or -1
+  std::vector<int> mid_slot_;          // per frame with a prev_joint_: its link's loads entry
+  int num_mid_ = 0;                    // links with a prev_joint_
   std::vector<Vec3> link_dir_;         // that link's direction in the start joint's frame
   // MuJoCo bodies behind each chain frame (-1: none) for loads.
   std::vector<int> frame_body_;

@@ -241,7 +241,7 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
     rests.push_back(std::move(rest));
   }
   const int n = static_cast<int>(banned_list.size());
-  const int threads = TaskThreads(n, ctx.opt.threads);
+  const int threads = TaskThreads(n, static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
   const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
   std::vector<Fit> alts(n);
   std::vector<double> cvs(n, res->cv_before);
@@ -333,13 +333,34 @@ Fit RefitAtCorrectedLoads(const EffectModel& em, const DataSet& data, Fit fit,
 
 }  // namespace
 
+namespace {
+
+// Whether the rows' loads keep their nominal poses (ConfigLoads::T_nominal, a pose per frame on
+// the way to the points: most of a row's loads): while they take at most
+// kNominalPoseCacheBytes in all. Beyond, PredictPose computes them (the same bits, slower).
+bool CacheNominalPoses(const EffectModel& em, const DataSet& data) {
+  const double bytes = static_cast<double>(data.rows.size()) * sizeof(lie::SE3) *
+                       static_cast<double>(em.chain().num_frames());
+  return bytes <= kNominalPoseCacheBytes;
+}
+
+// `L` with its motion signs and, unless cached, without its nominal poses.
+ConfigLoads Stored(ConfigLoads L, const Observation& o, bool cache) {
+  L.motion_sign = o.motion_sign;
+  if (!cache) {
+    L.T_nominal = std::vector<lie::SE3>();
+    L.q_nominal = Eigen::VectorXd();
+  }
+  return L;
+}
+
+}  // namespace
+
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data) {
   std::vector<ConfigLoads> loads;
   loads.reserve(data.rows.size());
-  for (const Observation& o : data.rows) {
-    loads.push_back(em.Loads(o.q));
-    loads.back().motion_sign = o.motion_sign;
-  }
+  const bool cache = CacheNominalPoses(em, data);
+  for (const Observation& o : data.rows) loads.push_back(Stored(em.Loads(o.q), o, cache));
   return loads;
 }
 
@@ -349,9 +370,9 @@ std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data
   if (!em.LoadsShift(active)) return ComputeLoads(em, data);
   std::vector<ConfigLoads> loads;
   loads.reserve(data.rows.size());
+  const bool cache = CacheNominalPoses(em, data);
   for (const Observation& o : data.rows) {
-    loads.push_back(em.LoadsFor(o.q, active, theta.data()));
-    loads.back().motion_sign = o.motion_sign;
+    loads.push_back(Stored(em.LoadsFor(o.q, active, theta.data()), o, cache));
   }
   return loads;
 }

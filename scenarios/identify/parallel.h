@@ -57,9 +57,12 @@ void ForEachRowChunk(int rows, int threads, Fn&& fn) {
   }
 }
 
-// Threads for `tasks` independent tasks: `requested` (0: the machine's cores), at most one per
-// task, at least 1.
-inline int TaskThreads(int tasks, int requested) {
+// Threads for `tasks` independent tasks over `rows` rows: `requested` (0: the machine's cores),
+// at most one per task, at least 1; 1 when the rows are enough for the passes over them to
+// take the threads (PassThreads), so that tasks side by side never hold several tasks'
+// per-row copies and Jacobians at once on large data.
+inline int TaskThreads(int tasks, int rows, int requested) {
+  if (PassThreads(rows, requested) > 1) return 1;
   const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   return std::max(1, std::min(requested > 0 ? requested : cores, tasks));
 }

@@ -13,6 +13,9 @@
 namespace flexbench::identify {
 namespace {
 
+// The most the screened candidates' columns take at once (more candidates: more passes).
+constexpr double kScreenColumnBytes = 64.0 * (1 << 20);
+
 bool Contains(const std::vector<int>& v, int x) {
   return std::find(v.begin(), v.end(), x) != v.end();
 }
@@ -35,6 +38,20 @@ std::string KeyWith(const std::string& key, int i) {
   return out;
 }
 
+// The kept screens of candidates `screened` as trials, best BIC first.
+std::vector<Trial> SortedTrials(const std::vector<int>& screened,
+                                std::vector<SelectionMemo::Screen>* screens) {
+  std::vector<Trial> trials;
+  for (size_t i = 0; i < screened.size(); ++i) {
+    if ((*screens)[i].kept) trials.push_back({screened[i], std::move((*screens)[i].fit)});
+  }
+  std::stable_sort(trials.begin(), trials.end(), [](const Trial& a, const Trial& b) {
+    if (a.fit.bic != b.fit.bic) return a.fit.bic < b.fit.bic;
+    return a.fit.num_params < b.fit.num_params;
+  });
+  return trials;
+}
+
 // Screened fits of every pool candidate beside `cur`, best BIC first. Each candidate's screen
 // on its own, side by side, those the memo has taken from there.
 std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
@@ -52,21 +69,31 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
       todo.push_back(i);
     }
   }
-  if (!todo.empty()) {
-    const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
-    const Projector proj(J_cur);
-    const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+  if (todo.empty()) return SortedTrials(screened, &screens);
+  const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+  const Projector proj(J_cur);
+  const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+  // The candidates' columns in batches of at most kScreenColumnBytes (a candidate's columns do
+  // not depend on which others are computed with it).
+  const double column_bytes = sizeof(double) * static_cast<double>(cur.num_residuals);
+  for (size_t begin = 0; begin < todo.size();) {
     std::vector<int> cs;
-    for (int i : todo) cs.push_back(screened[i]);
-    // A candidate's columns do not depend on which others are computed with it.
+    double bytes = 0.0;
+    for (size_t i = begin; i < todo.size(); ++i) {
+      const double more = column_bytes * ctx.em.candidates()[screened[todo[i]]].num_params;
+      if (!cs.empty() && bytes + more > kScreenColumnBytes) break;
+      cs.push_back(screened[todo[i]]);
+      bytes += more;
+    }
     const std::vector<Eigen::MatrixXd> Jc =
         CandidateJacobians(ctx.em, ctx.data, ctx.loads, cur, cs, ctx.opt);
-    const int threads = TaskThreads(static_cast<int>(todo.size()), ctx.opt.threads);
+    const int threads = TaskThreads(static_cast<int>(cs.size()),
+                                    static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
     IdentifyOptions screen = TaskOptions(ctx.opt, threads);
     screen.max_iterations = 4;
-    ForEachTask(static_cast<int>(todo.size()), threads, [&](int j) {
+    ForEachTask(static_cast<int>(cs.size()), threads, [&](int j) {
       const int c = cs[j];
-      SelectionMemo::Screen& out = screens[todo[j]];
+      SelectionMemo::Screen& out = screens[todo[begin + j]];
       double rel = 0.0;
       const Eigen::MatrixXd B = ObservableBasis(Jc[j], proj, ctx.opt.rank_tol, &rel);
       // Never more unknowns than residuals.
@@ -76,16 +103,9 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
       }
       if (ctx.memo) ctx.memo->screens.Put(KeyWith(key, c), out);
     });
+    begin += cs.size();
   }
-  std::vector<Trial> trials;
-  for (int i = 0; i < n; ++i) {
-    if (screens[i].kept) trials.push_back({screened[i], std::move(screens[i].fit)});
-  }
-  std::stable_sort(trials.begin(), trials.end(), [](const Trial& a, const Trial& b) {
-    if (a.fit.bic != b.fit.bic) return a.fit.bic < b.fit.bic;
-    return a.fit.num_params < b.fit.num_params;
-  });
-  return trials;
+  return SortedTrials(screened, &screens);
 }
 
 // A screened trial refitted in full, the earlier effects it pushes past their bounds dropped
@@ -132,7 +152,8 @@ int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
     if ((*trials)[k].fit.bic - cur.bic > -ctx.opt.bic_threshold) break;
     tried.push_back(k);
   }
-  const int threads = TaskThreads(static_cast<int>(tried.size()), ctx.opt.threads);
+  const int threads = TaskThreads(static_cast<int>(tried.size()),
+                                  static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
   const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
   const SelectionContext task_ctx{ctx.em,   ctx.data, ctx.loads, ctx.folds,
                                   task_opt, ctx.log,  nullptr,   ctx.memo};
@@ -174,7 +195,7 @@ Fit BackwardStep(const SelectionContext& ctx, Fit cur, double* cv_cur) {
     double best_bic = std::numeric_limits<double>::infinity();
     // Each removal refitted on its own, side by side; the first lowest BIC wins.
     const int n = static_cast<int>(cur.active.size()) - 1;
-    const int threads = TaskThreads(n, ctx.opt.threads);
+    const int threads = TaskThreads(n, static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
     const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
     std::vector<Fit> without(n);
     const std::string key = ctx.memo ? SelectionMemo::Key(cur) : std::string();

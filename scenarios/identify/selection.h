@@ -60,10 +60,10 @@ class SelectionMemo {
     std::vector<std::string> out;  // its own bound violations
     double cv = 0.0;
   };
-  Table<Screen> screens;    // Key(cur) + candidate
-  Table<Refit> refits;      // Key(screened fit) + candidate
-  Table<Fit> withouts;      // Key(fit) + index of the effect removed
-  Table<double> held_out;   // Key(fit)
+  Table<Screen> screens;   // Key(cur) + candidate
+  Table<Refit> refits;     // Key(screened fit) + candidate
+  Table<Fit> withouts;     // Key(fit) + index of the effect removed
+  Table<double> held_out;  // Key(fit)
 };
 
 struct SelectionContext {

@@ -6,7 +6,6 @@
 // issue-8 selection), for the ratio. BM_Predict is one augmented forward kinematics.
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true; quote medians.
 #include <benchmark/benchmark.h>
-
 #include <malloc.h>
 #include <sys/resource.h>
 
@@ -23,7 +22,6 @@
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
-
 
 // A counting heap for the peak-memory counters: every malloc family call of the process (Eigen
 // allocates through malloc, the standard library through operator new, which calls malloc)
@@ -313,7 +311,6 @@ BENCHMARK(BM_IdentifyPointCsv)
     ->UseRealTime()
     ->MeasureProcessCPUTime();
 
-
 // The closed loop at real-robot scale: humanoid_upper (19 actuated joints), a tracker of
 // unknown pose sees a marker on each hand (unknown offsets on their links) over 300 random
 // postures, 0.2 mm noise per axis: 600 rows. The truth (the effect model itself; the scenarios
@@ -372,10 +369,9 @@ Humanoid& HumanoidSetup() {
   tracker.name = "tracker";
   h.data.frames = {tracker};
   h.data.sets = {"calibration"};
-  const lie::SE3 T_base_tracker(
-      Eigen::AngleAxisd(M_PI + 0.05, Vec3::UnitZ()).toRotationMatrix() *
-          Eigen::AngleAxisd(0.03, Vec3::UnitX()).toRotationMatrix(),
-      Vec3(2.5, 0.04, 1.6));
+  const lie::SE3 T_base_tracker(Eigen::AngleAxisd(M_PI + 0.05, Vec3::UnitZ()).toRotationMatrix() *
+                                    Eigen::AngleAxisd(0.03, Vec3::UnitX()).toRotationMatrix(),
+                                Vec3(2.5, 0.04, 1.6));
   const Vec3 d_true[3] = {Vec3::Zero(), Vec3(0.012, -0.014, 0.008), Vec3(-0.007, 0.009, 0.004)};
   std::mt19937_64 rng(35);
   std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -383,7 +379,8 @@ Humanoid& HumanoidSetup() {
   const auto range = [](const std::string& j) -> std::pair<double, double> {
     const std::string b = j.rfind("l_", 0) == 0 ? j.substr(2) : j;
     if (b == "shoulder_pitch") return {-110, 0};
-    if (b == "shoulder_roll") return j == b ? std::make_pair(-45.0, 10.0) : std::make_pair(-10.0, 45.0);
+    if (b == "shoulder_roll")
+      return j == b ? std::make_pair(-45.0, 10.0) : std::make_pair(-10.0, 45.0);
     if (b == "shoulder_yaw") return {-45, 45};
     if (b == "elbow") return {-100, 0};
     if (b == "forearm_roll") return {-60, 60};
@@ -409,7 +406,8 @@ Humanoid& HumanoidSetup() {
   }
   h.loads = ComputeLoads(*h.em, h.data);
   RegisterFrames(*h.em, h.loads, &h.data);
-  for (size_t c = 0; c < h.em->candidates().size(); ++c) h.candidates.push_back(static_cast<int>(c));
+  for (size_t c = 0; c < h.em->candidates().size(); ++c)
+    h.candidates.push_back(static_cast<int>(c));
   return h;
 }
 
@@ -431,7 +429,6 @@ void BM_IdentifyHumanoid(benchmark::State& state) {
     noise_ratio = NoiseRatio(r.after);
     alternatives = static_cast<int>(r.alternatives.size());
     stopped = r.stopped_by;
-    if (std::getenv("BENCH_LOG")) for (const auto& l : r.steps) std::fprintf(stderr, "%s\n", l.c_str());
   }
   state.counters["rows"] = h.data.rows.size();
   state.counters["candidates"] = h.candidates.size();
@@ -468,7 +465,7 @@ void BM_IdentifyRowsMemory(benchmark::State& state) {
       state.ResumeTiming();
       const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
       IdentifyOptions opt;
-      opt.threads = 2;
+      opt.threads = static_cast<int>(state.range(1));
       const IdentifyResult r = Identify(*s.em, s.data, loads, s.candidates, opt);
       found = r.effects.size();
       state.PauseTiming();
@@ -482,10 +479,10 @@ void BM_IdentifyRowsMemory(benchmark::State& state) {
   state.counters["data_B_per_row"] = data_bytes / rows;
   state.counters["maxrss_growth_B_per_row"] = rss / rows;
 }
+// Args: rows, threads.
 BENCHMARK(BM_IdentifyRowsMemory)
-    ->Arg(1000)
-    ->Arg(10000)
-    ->Arg(100000)
+    ->ArgNames({"rows", "threads"})
+    ->ArgsProduct({{1000, 10000, 100000}, {1, 2}})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1)
     ->UseRealTime()
