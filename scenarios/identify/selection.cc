@@ -101,7 +101,7 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
         out.fit = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[j], r_cur, screen);
         out.kept = std::isfinite(out.fit.bic);
       }
-      if (ctx.memo) ctx.memo->screens.Put(KeyWith(key, c), out);
+      if (ctx.memo) ctx.memo->screens.Put(KeyWith(key, c), out, SelectionMemo::Bytes(out.fit));
     });
     begin += cs.size();
   }
@@ -136,7 +136,12 @@ Refit RefitTrial(const SelectionContext& ctx, const Trial& t) {
   }
   r.out = BoundViolations(ctx.em, r.fit);
   if (r.out.empty()) r.cv = CvError(ctx, r.fit);
-  if (ctx.memo) ctx.memo->refits.Put(key, r);
+  if (ctx.memo) {
+    size_t bytes = SelectionMemo::Bytes(r.fit);
+    for (const std::string& line : r.log) bytes += sizeof(line) + line.size();
+    for (const std::string& line : r.out) bytes += sizeof(line) + line.size();
+    ctx.memo->refits.Put(key, r, bytes);
+  }
   return r;
 }
 
@@ -202,7 +207,9 @@ Fit BackwardStep(const SelectionContext& ctx, Fit cur, double* cv_cur) {
     ForEachTask(n, threads, [&](int e) {
       if (ctx.memo && ctx.memo->withouts.Find(KeyWith(key, e), &without[e])) return;
       without[e] = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, task_opt);
-      if (ctx.memo) ctx.memo->withouts.Put(KeyWith(key, e), without[e]);
+      if (ctx.memo) {
+        ctx.memo->withouts.Put(KeyWith(key, e), without[e], SelectionMemo::Bytes(without[e]));
+      }
     });
     for (int e = 0; e < n; ++e) {
       if (without[e].bic < best_bic) {
@@ -277,8 +284,16 @@ double CvError(const SelectionContext& ctx, const Fit& fit) {
   double cv = 0.0;
   if (ctx.memo && ctx.memo->held_out.Find(key, &cv)) return cv;
   cv = CrossValidate(ctx.em, ctx.data, ctx.loads, ctx.folds, fit, ctx.opt);
-  if (ctx.memo) ctx.memo->held_out.Put(key, cv);
+  if (ctx.memo) ctx.memo->held_out.Put(key, cv, sizeof(cv));
   return cv;
+}
+
+size_t SelectionMemo::Bytes(const Fit& fit) {
+  size_t doubles = fit.theta.size() + 3 * fit.group_points.size() + 12 * fit.T_base_frames.size() +
+                   3 * fit.marker_offsets.size();
+  for (const Eigen::MatrixXd& B : fit.basis) doubles += B.size();
+  return sizeof(Fit) + sizeof(double) * doubles + sizeof(int) * fit.active.size() +
+         sizeof(Eigen::MatrixXd) * fit.basis.size();
 }
 
 std::string SelectionMemo::Key(const Fit& fit) {

@@ -11,6 +11,7 @@
 // back when it leaves. At the end, a chosen effect is swapped for another candidate when the
 // swap lowers BIC by more than `ambiguity_bic` without raising the held-out error.
 #pragma once
+#include <atomic>
 #include <mutex>
 #include <string>
 #include <unordered_map>
@@ -27,12 +28,19 @@ namespace flexbench::identify {
 // refits, removals and held-out errors are the same bits. Safe for tasks side by side.
 class SelectionMemo {
  public:
+  // The most the memo holds (keys and values): beyond, results are computed and not kept (the
+  // chosen selection's rounds, which the alternatives retrace, come first).
+  static constexpr size_t kMaxBytes = size_t{256} << 20;
+
   // The exact state of a fit (effects, bases, parameters, nuisance states), as bytes.
   static std::string Key(const Fit& fit);
+  // What a copy of `fit` takes.
+  static size_t Bytes(const Fit& fit);
 
   template <typename V>
   class Table {
    public:
+    explicit Table(std::atomic<size_t>* bytes) : bytes_(bytes) {}
     bool Find(const std::string& key, V* out) const {
       std::lock_guard<std::mutex> lock(mutex_);
       const auto it = map_.find(key);
@@ -40,12 +48,19 @@ class SelectionMemo {
       *out = it->second;
       return true;
     }
-    void Put(const std::string& key, const V& v) {
+    // Keeps v (of `value_bytes`) unless the memo is full.
+    void Put(const std::string& key, const V& v, size_t value_bytes) {
+      const size_t b = key.size() + value_bytes;
+      if (bytes_->fetch_add(b) + b > kMaxBytes) {
+        bytes_->fetch_sub(b);
+        return;
+      }
       std::lock_guard<std::mutex> lock(mutex_);
       map_.emplace(key, v);
     }
 
    private:
+    std::atomic<size_t>* bytes_;
     mutable std::mutex mutex_;
     std::unordered_map<std::string, V> map_;
   };
@@ -60,10 +75,11 @@ class SelectionMemo {
     std::vector<std::string> out;  // its own bound violations
     double cv = 0.0;
   };
-  Table<Screen> screens;   // Key(cur) + candidate
-  Table<Refit> refits;     // Key(screened fit) + candidate
-  Table<Fit> withouts;     // Key(fit) + index of the effect removed
-  Table<double> held_out;  // Key(fit)
+  std::atomic<size_t> bytes{0};    // held by all tables
+  Table<Screen> screens{&bytes};   // Key(cur) + candidate
+  Table<Refit> refits{&bytes};     // Key(screened fit) + candidate
+  Table<Fit> withouts{&bytes};     // Key(fit) + index of the effect removed
+  Table<double> held_out{&bytes};  // Key(fit)
 };
 
 struct SelectionContext {

@@ -287,7 +287,9 @@ void BM_IdentifyPointCsv(benchmark::State& state) {
   std::vector<int> candidates(em.candidates().size());
   for (size_t i = 0; i < candidates.size(); ++i) candidates[i] = static_cast<int>(i);
   size_t found = 0;
+  double heap = 0.0;
   for (auto _ : state) {
+    const PeakMemory peak;
     DataSet data;
     ReadCalibrationCsv(path, chain.q_joints, &data);
     const std::vector<ConfigLoads> loads = ComputeLoads(em, data);
@@ -296,16 +298,19 @@ void BM_IdentifyPointCsv(benchmark::State& state) {
     const IdentifyResult r = Identify(em, data, loads, candidates, opt);
     found = r.effects.size();
     benchmark::DoNotOptimize(found);
+    heap = peak.HeapBytes();
   }
   std::filesystem::remove(path);
   state.counters["effects_found"] = found;
   state.counters["candidates"] = candidates.size();
+  state.counters["peak_heap_B_per_row"] = heap / rows;
   state.counters["threads"] = PassThreads(rows, static_cast<int>(state.range(1)));
 }
 // Args: rows, threads of the row passes (1; 0: one per core). Wall time (what a user waits)
 // and the whole process's CPU time (all threads).
 BENCHMARK(BM_IdentifyPointCsv)
     ->ArgsProduct({{1000, 4000, 10000}, {1, 0}})
+    ->Args({100000, 0})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1)
     ->UseRealTime()
