@@ -247,8 +247,7 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
   std::vector<double> cvs(n, res->cv_before);
   ForEachTask(n, threads, [&](int i) {
     std::vector<std::string> quiet;
-    const SelectionContext alt_ctx{ctx.em,   ctx.data, ctx.loads, ctx.folds,
-                                   task_opt, &quiet,   nullptr,   ctx.memo};
+    const SelectionContext alt_ctx = TaskContext(ctx, task_opt, &quiet);
     // No swap step: an alternative needs to be found, not polished.
     alts[i] = SelectEffects(alt_ctx, res->before, rests[i], true, &cvs[i], false);
   });

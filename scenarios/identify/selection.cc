@@ -160,8 +160,7 @@ int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
   const int threads = TaskThreads(static_cast<int>(tried.size()),
                                   static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
   const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
-  const SelectionContext task_ctx{ctx.em,   ctx.data, ctx.loads, ctx.folds,
-                                  task_opt, ctx.log,  nullptr,   ctx.memo};
+  const SelectionContext task_ctx = TaskContext(ctx, task_opt, ctx.log);
   std::vector<Refit> refits(tried.size());
   ForEachTask(static_cast<int>(tried.size()), threads,
               [&](int i) { refits[i] = RefitTrial(task_ctx, (*trials)[tried[i]]); });
@@ -276,6 +275,11 @@ std::vector<std::string> BoundViolations(const EffectModel& em, const Fit& fit) 
     off += cand.num_params;
   }
   return out;
+}
+
+SelectionContext TaskContext(const SelectionContext& ctx, const IdentifyOptions& opt,
+                             std::vector<std::string>* log) {
+  return SelectionContext{ctx.em, ctx.data, ctx.loads, ctx.folds, opt, log, nullptr, ctx.memo};
 }
 
 double CvError(const SelectionContext& ctx, const Fit& fit) {

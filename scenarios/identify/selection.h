@@ -93,6 +93,11 @@ struct SelectionContext {
   SelectionMemo* memo = nullptr;  // null: every step computed
 };
 
+// `ctx` for a task of its own: options `opt` (TaskOptions), log `log`, no cap to report; the
+// data, folds and memo shared.
+SelectionContext TaskContext(const SelectionContext& ctx, const IdentifyOptions& opt,
+                             std::vector<std::string>* log);
+
 // ", held-out A -> B sigma^2" (the mean squared held-out residual in units of the stated
 // noise), or "" without cross-validation.
 std::string HeldOutChange(const SelectionContext& ctx, double from, double to);
