@@ -148,14 +148,20 @@ void FittedEffects(const EffectModel& em, const DataSet& data,
                    const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt,
                    const Fit& cur, IdentifyResult* res) {
   const Eigen::VectorXd sd = res->theta_cov.diagonal().cwiseMax(0).cwiseSqrt();
-  std::vector<double> gain;
+  // Each effect's removal refitted on its own, side by side.
+  const int n = static_cast<int>(cur.active.size());
+  const int threads = TaskThreads(n, static_cast<int>(data.rows.size()), opt.threads);
+  const IdentifyOptions task_opt = TaskOptions(opt, threads);
+  std::vector<double> gain(n);
+  ForEachTask(n, threads, [&](int e) {
+    gain[e] = std::max(0.0, FitWithout(em, data, loads, cur, e, task_opt).rss - cur.rss);
+  });
   double total = 0.0;
   int off = 0;
   for (size_t e = 0; e < cur.active.size(); ++e) {
     const int c = cur.active[e];
     const int np = em.candidates()[c].num_params;
-    gain.push_back(std::max(0.0, FitWithout(em, data, loads, cur, e, opt).rss - cur.rss));
-    total += gain.back();
+    total += gain[e];
     FittedEffect fe;
     fe.candidate = c;
     fe.name = em.candidates()[c].Name();
