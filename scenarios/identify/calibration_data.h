@@ -36,14 +36,15 @@ namespace flexbench::identify {
 // The largest calibration CSV read (bigger is bad input, refused before reading).
 constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 
-// Memory the identification takes per calibration row (the Observation, its copies, the fit's
-// residual and Jacobian rows), and the most one file's rows may take. Measured with `identify`
-// on planar3 (3 joints): 2 x 20,000 rows peak at 0.39 GB, 2 x 60,000 rows at 0.93 GB, about
-// 7 KB a row; the estimate (2 KB + 2 KB a joint) rounds that up and grows with the joints. A
-// file whose line count times CalibrationBytesPerRow exceeds the budget is refused before any
-// row is read ("N rows need about X GB; the limit is Y GB").
-constexpr std::uintmax_t kCalibrationBytesPerRow = 2048;
-constexpr std::uintmax_t kCalibrationBytesPerJoint = 2048;
+// Memory the identification takes per calibration row (the Observation, its loads, the loads
+// at the corrected angles, a fold's copy, the fit's residual and Jacobian rows), and the most one
+// file's rows may take. Measured (bench_identify, peak heap on 100,000 point rows): planar3 (3
+// joints, the CSV read, loads and identification) 3.6 KB a row, rover_arm (8 joints) 6.0 KB;
+// the estimate (3 KB + 0.6 KB a joint) is 1.3 times both and grows with the joints. A file
+// whose line count times CalibrationBytesPerRow exceeds the budget is refused before any row
+// is read ("N rows need about X GB; the limit is Y GB").
+constexpr std::uintmax_t kCalibrationBytesPerRow = 3072;
+constexpr std::uintmax_t kCalibrationBytesPerJoint = 614;
 constexpr std::uintmax_t kMaxCalibrationMemoryBytes = 2000000000;
 std::uintmax_t CalibrationBytesPerRow(size_t num_joints);
 

@@ -4,6 +4,7 @@
 #include <string>
 #include <unordered_map>
 
+#include "scenarios/identify/parallel.h"
 #include "scenarios/identify/problem.h"
 
 namespace flexbench::identify {
@@ -192,26 +193,36 @@ void CacheFolds(const DataSet& data, const std::vector<ConfigLoads>& loads, Fold
 double CrossValidate(const EffectModel& em, const DataSet& data,
                      const std::vector<ConfigLoads>& loads, const Folds& folds, const Fit& fit,
                      const IdentifyOptions& opt) {
-  double ss = 0.0;
-  int entries = 0;
-  // Each fold starts from the full-data fit, a few steps from its own optimum.
-  IdentifyOptions fold_opt = opt;
+  // Each fold starts from the full-data fit, a few steps from its own optimum. The folds run
+  // side by side when cached (made here, one fold's copy of the rows at a time); their sums
+  // add up in fold order.
+  const int num_folds = static_cast<int>(folds.test_rows.size());
+  const bool cached = folds.cache.size() == folds.test_rows.size();
+  const int threads =
+      cached ? TaskThreads(num_folds, static_cast<int>(data.rows.size()), opt.threads) : 1;
+  IdentifyOptions fold_opt = TaskOptions(opt, threads);
+  const IdentifyOptions test_opt = fold_opt;
   fold_opt.max_iterations = std::min(opt.max_iterations, 8);
-  for (size_t k = 0; k < folds.test_rows.size(); ++k) {
+  const bool nuisance =
+      !data.frames.empty() || std::count(data.offset_unknown.begin(), data.offset_unknown.end(), 1);
+  std::vector<double> fold_ss(num_folds, 0.0);
+  std::vector<int> fold_entries(num_folds, 0);
+  ForEachTask(num_folds, threads, [&](int k) {
     FoldData made;
-    if (folds.cache.size() != folds.test_rows.size()) {
-      made = MakeFoldData(data, loads, folds.test_rows[k]);
-    }
-    const FoldData& f = folds.cache.size() == folds.test_rows.size() ? folds.cache[k] : made;
+    if (!cached) made = MakeFoldData(data, loads, folds.test_rows[k]);
+    const FoldData& f = cached ? folds.cache[k] : made;
     Fit train = fit;
-    const bool nuisance = !data.frames.empty() ||
-                          std::count(data.offset_unknown.begin(), data.offset_unknown.end(), 1);
     if (!fit.active.empty() || nuisance) {
       train = FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt);
     }
-    int n = 0;
-    ss += HeldOutSquares(em, f.test, f.test_loads, fit.active, train.theta, opt, &n, &train);
-    entries += n;
+    fold_ss[k] = HeldOutSquares(em, f.test, f.test_loads, fit.active, train.theta, test_opt,
+                                &fold_entries[k], &train);
+  });
+  double ss = 0.0;
+  int entries = 0;
+  for (int k = 0; k < num_folds; ++k) {
+    ss += fold_ss[k];
+    entries += fold_entries[k];
   }
   return entries > 0 ? ss / entries : 0.0;
 }

@@ -311,6 +311,7 @@ void EffectModel::AddLinkBending() {
   const kinematics::PpoeModel& model = chain_->model;
   const int n = model.num_frames();
   prev_joint_.assign(n, -1);
+  mid_slot_.assign(n, -1);
   kinematics::PpoeData pd(model);
   kinematics::ForwardKinematics(model, pd, Eigen::VectorXd::Zero(model.nq()));
   for (FrameId f = 1; f < n; ++f) {
@@ -323,6 +324,7 @@ void EffectModel::AddLinkBending() {
                         (T_pre.translation() - pd.T_base_frame[p].translation());
     if (link_p.norm() < 0.05) continue;
     prev_joint_[f] = p;
+    mid_slot_[f] = num_mid_++;
     link_dir_.resize(n, Vec3::Zero());
     link_dir_[f] = link_p.normalized();
     AddCandidate(EffectType::kLinkBending, chain_->q_joints[model.frame(f).q_index], -1, f, 1, 1e-7,
@@ -528,10 +530,10 @@ void EffectModel::InitLoads(const Eigen::VectorXd& q, ConfigLoads* L) const {
   L->M_lat_unit = Eigen::Matrix2Xd::Zero(2, model.nq());
   L->lat_a_base = Eigen::Matrix3Xd::Zero(3, model.nq());
   L->lat_b_base = Eigen::Matrix3Xd::Zero(3, model.nq());
-  L->M_mid.assign(n, Vec3::Zero());
-  L->M_mid_unit.assign(n, Vec3::Zero());
+  L->M_mid.assign(num_mid_, Vec3::Zero());
+  L->M_mid_unit.assign(num_mid_, Vec3::Zero());
   L->axis_base = Eigen::Matrix3Xd::Zero(3, model.nq());
-  L->R_mid_T.assign(n, Mat3::Identity());
+  L->R_mid_T.assign(num_mid_, Mat3::Identity());
   // PredictPose's untouched-frame form with every dq zero (q + 0.0 as there, same bits).
   L->q_nominal = q;
   L->T_nominal.assign(n, lie::SE3());
@@ -620,9 +622,10 @@ void EffectModel::MidMoments(const LoadPose& P, const Vec3& g, GravityTerms* t,
     const lie::SE3& Tp = P.pd.T_base_frame[p];
     const Vec3 mid = 0.5 * (Tp.translation() + T_pre.translation());
     // The whole link's subtree about its middle (the near half's own weight barely counts).
-    t->M_mid[f] = Tp.rotation().transpose() * SubtreeMoment(P, frame_body_[p], mid, g);
-    t->M_mid_unit[f] = Tp.rotation().transpose() * UnitMoment(P.p_ee, mid, g);
-    L->R_mid_T[f] = Tp.rotation().transpose();
+    const int slot = mid_slot_[f];
+    t->M_mid[slot] = Tp.rotation().transpose() * SubtreeMoment(P, frame_body_[p], mid, g);
+    t->M_mid_unit[slot] = Tp.rotation().transpose() * UnitMoment(P.p_ee, mid, g);
+    L->R_mid_T[slot] = Tp.rotation().transpose();
   }
 }
 
@@ -646,13 +649,12 @@ void EffectModel::MountLoads(const LoadPose& P, const Vec3& g, GravityTerms* t,
 void EffectModel::GravityLoads(const LoadPose& P, const Vec3& g, GravityTerms* t,
                                ConfigLoads* L) const {
   const int nq = chain_->model.nq();
-  const int n = chain_->model.num_frames();
   t->tau = Eigen::VectorXd::Zero(nq);
   t->tau_unit = Eigen::VectorXd::Zero(nq);
   t->M_lat = Eigen::Matrix2Xd::Zero(2, nq);
   t->M_lat_unit = Eigen::Matrix2Xd::Zero(2, nq);
-  t->M_mid.assign(n, Vec3::Zero());
-  t->M_mid_unit.assign(n, Vec3::Zero());
+  t->M_mid.assign(num_mid_, Vec3::Zero());
+  t->M_mid_unit.assign(num_mid_, Vec3::Zero());
   JointTorques(P, g, t, L);
   MidMoments(P, g, t, L);
   MountLoads(P, g, t, L);
@@ -782,9 +784,10 @@ inline Eigen::Vector2d LateralLoadOf(const ConfigLoads& L, int k, double payload
 // The stiffening spring's reference torque tau0 [N m].
 constexpr double kSpringTau0 = 10.0;
 
-// The moment at link f's middle (start joint axes) with the payload's share.
-inline Vec3 MidMoment(const ConfigLoads& L, FrameId f, double payload, const Vec3& couple) {
-  return L.M_mid[f] + payload * L.M_mid_unit[f] + L.R_mid_T[f] * couple;
+// The moment at a link's middle (start joint axes; `slot`: the link's entry in the loads) with
+// the payload's share.
+inline Vec3 MidMoment(const ConfigLoads& L, int slot, double payload, const Vec3& couple) {
+  return L.M_mid[slot] + payload * L.M_mid_unit[slot] + L.R_mid_T[slot] * couple;
 }
 
 // The part of moment M across the link direction `dir` (the part that bends it).
@@ -866,8 +869,8 @@ inline void EffectModel::AddTerms(const Candidate& c, const Eigen::VectorXd& q,
       ws.tilt[c.frame] += LateralTurn(L, c.q_index, c.frame, t, ct->payload, ct->couple);
       break;
     case EffectType::kLinkBending:
-      ws.bend[c.frame] +=
-          t[0] * Across(MidMoment(L, c.frame, ct->payload, ct->couple), link_dir_[c.frame]);
+      ws.bend[c.frame] += t[0] * Across(MidMoment(L, mid_slot_[c.frame], ct->payload, ct->couple),
+                                        link_dir_[c.frame]);
       break;
     case EffectType::kBaseCompliance:
       // Copies add their compliances (a screened candidate on top of itself): one mount.
@@ -1214,7 +1217,7 @@ void EffectModel::LinkBendingTangent(FrameId f, const ConfigLoads& L, const Work
                                      const Stages& st, Tangent* out) const {
   // T3 = (Rb, mid - Rb mid) T2, Rb = Exp(phi): a base-frame turn about the link's middle.
   const Vec3& dir = link_dir_[f];
-  const Vec3 M = MidMoment(L, f, ws.payload, ws.couple);
+  const Vec3 M = MidMoment(L, mid_slot_[f], ws.payload, ws.couple);
   const Vec3 dphi = ws.T[prev_joint_[f]].rotation() * Load(Vec3(M - M.dot(dir) * dir));
   out[0].w = lie::SO3LeftJacobian(st.phi) * dphi;
   out[0].dp = out[0].w.cross(ws.T[ws.point].translation() - st.mid);

@@ -150,7 +150,9 @@ struct ConfigLoads {
   // Per joint variable: the moment about its anchor of the weight beyond it, about its lateral
   // axes a and b (pre-motion), N m.
   Eigen::Matrix2Xd M_lat;
-  std::vector<Vec3> M_mid;      // per joint frame: moment at its link's middle, start joint axes
+  // Per link that can bend (a joint frame a link's length after the previous joint; the
+  // EffectModel numbers them): the moment at the link's middle, start joint axes.
+  std::vector<Vec3> M_mid;
   Vec3 M_mount = Vec3::Zero();  // about the first joint's anchor, its pre-motion axes
   // The same quantities for 1 kg at the end effector (payload sensitivity).
   Eigen::VectorXd tau_unit;
@@ -162,7 +164,7 @@ struct ConfigLoads {
   Mat3 M_first = Mat3::Zero();
   Eigen::Matrix3Xd axis_base;               // joint axes, base coordinates
   Eigen::Matrix3Xd lat_a_base, lat_b_base;  // joint lateral axes a, b, base coordinates
-  std::vector<Mat3> R_mid_T;                // base -> start-joint axes, per link
+  std::vector<Mat3> R_mid_T;                // base -> start-joint axes, per link that can bend
   Mat3 R_mount_T = Mat3::Identity();
   // For the mount's tilted equilibrium (kinematics::MountTilt), mount axes: the first moment of
   // its load about the pivot, the same of 1 kg at the end effector, the end effector's axes
@@ -411,6 +413,8 @@ class EffectModel {
   std::vector<char> on_path_;          // frames between the base and the point frame
   std::vector<Vec3> tilt_a_, tilt_b_;  // per joint frame: unit normals of its axis
   std::vector<FrameId> prev_joint_;    // per joint frame: the joint at its link's start, or -1
+  std::vector<int> mid_slot_;          // per frame with a prev_joint_: its link's loads entry
+  int num_mid_ = 0;                    // links with a prev_joint_
   std::vector<Vec3> link_dir_;         // that link's direction in the start joint's frame
   // MuJoCo bodies behind each chain frame (-1: none) for loads.
   std::vector<int> frame_body_;

@@ -12,6 +12,7 @@
 #include "scenarios/identify/diagnostics.h"
 #include "scenarios/identify/equivalence.h"
 #include "scenarios/identify/measurement_frames.h"
+#include "scenarios/identify/parallel.h"
 #include "scenarios/identify/problem.h"
 #include "scenarios/identify/selection.h"
 
@@ -151,14 +152,20 @@ void FittedEffects(const EffectModel& em, const DataSet& data,
                    const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt,
                    const Fit& cur, IdentifyResult* res) {
   const Eigen::VectorXd sd = res->theta_cov.diagonal().cwiseMax(0).cwiseSqrt();
-  std::vector<double> gain;
+  // Each effect's removal refitted on its own, side by side.
+  const int n = static_cast<int>(cur.active.size());
+  const int threads = TaskThreads(n, static_cast<int>(data.rows.size()), opt.threads);
+  const IdentifyOptions task_opt = TaskOptions(opt, threads);
+  std::vector<double> gain(n);
+  ForEachTask(n, threads, [&](int e) {
+    gain[e] = std::max(0.0, FitWithout(em, data, loads, cur, e, task_opt).rss - cur.rss);
+  });
   double total = 0.0;
   int off = 0;
   for (size_t e = 0; e < cur.active.size(); ++e) {
     const int c = cur.active[e];
     const int np = em.candidates()[c].num_params;
-    gain.push_back(std::max(0.0, FitWithout(em, data, loads, cur, e, opt).rss - cur.rss));
-    total += gain.back();
+    total += gain[e];
     FittedEffect fe;
     fe.candidate = c;
     fe.name = em.candidates()[c].Name();
@@ -217,12 +224,15 @@ Fit FollowFinding(const SelectionContext& ctx, const std::vector<int>& candidate
   return SelectEffects(ctx, cur, pool, true, cv);
 }
 
-// For each chosen effect, the best selection without it (cross-validation only).
+// For each chosen effect, the best selection without it (cross-validation only). The
+// selections are independent: they run side by side, and are reported in the chosen order.
 void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candidates,
                       IdentifyResult* res) {
   if (!ctx.opt.cross_validation) return;
   std::vector<int> pool = Pool(ctx.em, candidates, false, false);
   for (const std::string& u : res->unlocked) pool.push_back(ctx.em.FindCandidate(u));
+  std::vector<int> banned_list;
+  std::vector<std::vector<int>> rests;
   for (int banned : res->after.active) {
     if (ctx.em.candidates()[banned].generic_geometry) continue;
     // A wider family of the same kind (the generic error curve beside a transmission error)
@@ -237,17 +247,29 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
       }
       rest.push_back(c);
     }
+    banned_list.push_back(banned);
+    rests.push_back(std::move(rest));
+  }
+  const int n = static_cast<int>(banned_list.size());
+  const int threads = TaskThreads(n, static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
+  const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
+  std::vector<Fit> alts(n);
+  std::vector<double> cvs(n, res->cv_before);
+  ForEachTask(n, threads, [&](int i) {
     std::vector<std::string> quiet;
-    const SelectionContext alt_ctx{ctx.em, ctx.data, ctx.loads, ctx.folds, ctx.opt, &quiet};
-    double cv = res->cv_before;
+    const SelectionContext alt_ctx = TaskContext(ctx, task_opt, &quiet);
     // No swap step: an alternative needs to be found, not polished.
-    const Fit alt = SelectEffects(alt_ctx, res->before, rest, true, &cv, false);
+    alts[i] = SelectEffects(alt_ctx, res->before, rests[i], true, &cvs[i], false);
+  });
+  for (int i = 0; i < n; ++i) {
+    const Fit& alt = alts[i];
+    const double cv = cvs[i];
     Alternative a;
-    a.banned = ctx.em.candidates()[banned].Name();
+    a.banned = ctx.em.candidates()[banned_list[i]].Name();
     a.cv = cv;
     for (int c : alt.active) a.effects.push_back(ctx.em.candidates()[c].Name());
     std::string names;
-    for (const auto& n : a.effects) names += (names.empty() ? "" : " + ") + n;
+    for (const auto& name : a.effects) names += (names.empty() ? "" : " + ") + name;
     const bool close = !alt.active.empty() && cv < (1.0 + ctx.opt.ambiguity_cv) * res->cv_after;
     if (close) res->attribution_unique = false;
     res->steps.push_back(Fmt("without %s: %s reach held-out %.4g sigma^2 (chosen %.4g)%s",
@@ -320,13 +342,34 @@ Fit RefitAtCorrectedLoads(const EffectModel& em, const DataSet& data, Fit fit,
 
 }  // namespace
 
+namespace {
+
+// Whether the rows' loads keep their nominal poses (ConfigLoads::T_nominal, a pose per frame on
+// the way to the points: most of a row's loads): while they take at most
+// kNominalPoseCacheBytes in all. Beyond, PredictPose computes them (the same bits, slower).
+bool CacheNominalPoses(const EffectModel& em, const DataSet& data) {
+  const double bytes = static_cast<double>(data.rows.size()) * sizeof(lie::SE3) *
+                       static_cast<double>(em.chain().num_frames());
+  return bytes <= kNominalPoseCacheBytes;
+}
+
+// `L` with its motion signs and, unless cached, without its nominal poses.
+ConfigLoads Stored(ConfigLoads L, const Observation& o, bool cache) {
+  L.motion_sign = o.motion_sign;
+  if (!cache) {
+    L.T_nominal = std::vector<lie::SE3>();
+    L.q_nominal = Eigen::VectorXd();
+  }
+  return L;
+}
+
+}  // namespace
+
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data) {
   std::vector<ConfigLoads> loads;
   loads.reserve(data.rows.size());
-  for (const Observation& o : data.rows) {
-    loads.push_back(em.Loads(o.q));
-    loads.back().motion_sign = o.motion_sign;
-  }
+  const bool cache = CacheNominalPoses(em, data);
+  for (const Observation& o : data.rows) loads.push_back(Stored(em.Loads(o.q), o, cache));
   return loads;
 }
 
@@ -336,9 +379,9 @@ std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data
   if (!em.LoadsShift(active)) return ComputeLoads(em, data);
   std::vector<ConfigLoads> loads;
   loads.reserve(data.rows.size());
+  const bool cache = CacheNominalPoses(em, data);
   for (const Observation& o : data.rows) {
-    loads.push_back(em.LoadsFor(o.q, active, theta.data()));
-    loads.back().motion_sign = o.motion_sign;
+    loads.push_back(Stored(em.LoadsFor(o.q, active, theta.data()), o, cache));
   }
   return loads;
 }
@@ -395,7 +438,8 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
                      " (set cross_validation: false, or another folds_by)");
   }
   bool capped = false, out_of_time = false;
-  SelectionContext ctx{em, data, loads, folds, opt, &res.steps, &capped};
+  SelectionMemo memo;
+  SelectionContext ctx{em, data, loads, folds, opt, &res.steps, &capped, &memo};
   ctx.out_of_time = &out_of_time;
   double cv = CvError(ctx, res.before);
   res.cv_before = cv;

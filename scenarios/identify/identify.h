@@ -261,6 +261,10 @@ inline constexpr double kFarAboveNoise = 100.0;
 // The fit's RMS residual in units of the stated noise (sqrt(rss / dof)).
 double NoiseRatio(const Fit& fit);
 
+// The most the rows' cached nominal poses may take (ComputeLoads): beyond, a row's loads keep
+// none and predictions compute them.
+inline constexpr double kNominalPoseCacheBytes = 16.0 * (1 << 20);
+
 // Precomputed per-row loads for a data set, the arm at its readings.
 std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data);
 // The same for predictions of (active, theta): the arm where its joint corrections put it

@@ -4,6 +4,7 @@
 // number of threads: same seed, same bytes.
 #pragma once
 #include <algorithm>
+#include <atomic>
 #include <exception>
 #include <system_error>
 #include <thread>
@@ -50,6 +51,53 @@ void ForEachRowChunk(int rows, int threads, Fn&& fn) {
     }
   }
   chunk(0);
+  for (std::thread& t : pool) t.join();
+  for (const std::exception_ptr& e : error) {
+    if (e) std::rethrow_exception(e);
+  }
+}
+
+// Threads for `tasks` independent tasks over `rows` rows: `requested` (0: the machine's cores),
+// at most one per task, at least 1; 1 when the rows are enough for the passes over them to
+// take the threads (PassThreads), so that tasks side by side never hold several tasks'
+// per-row copies and Jacobians at once on large data.
+inline int TaskThreads(int tasks, int rows, int requested) {
+  if (PassThreads(rows, requested) > 1) return 1;
+  const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  return std::max(1, std::min(requested > 0 ? requested : cores, tasks));
+}
+
+// Calls fn(i) for every i in [0, tasks), `threads` at once, each thread taking the next task
+// when it is done (tasks of uneven cost: whole selections, folds). Each task writes only its
+// own result slot, so the results do not depend on the number of threads. An exception is
+// rethrown here after all tasks have ended, the lowest task's first.
+template <typename Fn>
+void ForEachTask(int tasks, int threads, Fn&& fn) {
+  if (threads <= 1 || tasks <= 1) {
+    for (int i = 0; i < tasks; ++i) fn(i);
+    return;
+  }
+  std::vector<std::exception_ptr> error(tasks);
+  std::atomic<int> next{0};
+  const auto worker = [&] {
+    for (int i = next++; i < tasks; i = next++) {
+      try {
+        fn(i);
+      } catch (...) {
+        error[i] = std::current_exception();
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  pool.reserve(threads - 1);
+  for (int k = 1; k < threads; ++k) {
+    try {
+      pool.emplace_back(worker);
+    } catch (const std::system_error&) {
+      break;  // no thread to be had: the others take its tasks
+    }
+  }
+  worker();
   for (std::thread& t : pool) t.join();
   for (const std::exception_ptr& e : error) {
     if (e) std::rethrow_exception(e);

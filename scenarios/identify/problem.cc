@@ -31,6 +31,12 @@ double Bic(double rss, int n, int k) {
   return n * std::log(std::max(rss, 1e-300) / n) + k * std::log(static_cast<double>(n));
 }
 
+IdentifyOptions TaskOptions(const IdentifyOptions& opt, int threads) {
+  IdentifyOptions out = opt;
+  if (threads > 1) out.threads = 1;
+  return out;
+}
+
 int RowDim(const Observation& o) {
   switch (o.type) {
     case ObservationType::kPose:
@@ -285,8 +291,10 @@ void RowTangentMap(const Observation& o, const lie::SE3& T, const Mat3& R_base_m
 }  // namespace
 
 Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
-                                        const std::vector<int>& cs) const {
+                                        const std::vector<int>& cs,
+                                        std::vector<lie::SE3>* poses) const {
   Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), NumTheta(em_, cs));
+  if (poses) poses->resize(data_.rows.size());
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
   const lie::SE3 T_base_cam =
@@ -299,6 +307,7 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
       const Observation& o = data_.rows[i];
       const lie::SE3 T =
           em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data(), o.point);
+      if (poses) (*poses)[i] = T;
       if (!d_marker.empty() && o.type != ObservationType::kPixel) {
         // The marker turns with its frame: d p += w x (R d).
         const Vec3 lever = T.rotation() * d_marker[o.point];
@@ -385,11 +394,12 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
   }
 }
 
-void Problem::OffsetColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
+void Problem::OffsetColumns(const Eigen::VectorXd& x, const std::vector<lie::SE3>& poses,
+                            Eigen::MatrixXd* J) const {
   if (num_offsets_ == 0) return;
-  const Eigen::VectorXd theta = Theta(x);
-  std::vector<lie::SE3> T;
-  Poses(theta, &T);
+  std::vector<lie::SE3> predicted;
+  if (poses.empty()) Poses(Theta(x), &predicted);
+  const std::vector<lie::SE3>& T = poses.empty() ? predicted : poses;
   for (size_t i = 0; i < data_.rows.size(); ++i) {
     const int col = offset_col(data_.rows[i].point);
     if (col < 0 || data_.rows[i].type == ObservationType::kPixel) continue;
@@ -405,8 +415,11 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   for (int c : active_) {
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
+  // The tangent pass predicts every row's pose (the same operations as Poses): the offsets'
+  // columns take them from there.
+  std::vector<lie::SE3> poses;
   const Eigen::MatrixXd D =
-      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(x, theta, analytic);
+      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(x, theta, analytic, &poses);
   int col = 0, t = 0, d = 0;
   for (size_t e = 0; e < active_.size(); ++e) {
     const Eigen::MatrixXd& B = basis_[e];
@@ -421,7 +434,7 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   }
   PointColumns(x, &J);
   FrameColumns(x, &J);
-  OffsetColumns(x, &J);
+  OffsetColumns(x, poses, &J);
   return J;
 }
 
@@ -436,7 +449,7 @@ Eigen::MatrixXd Problem::NumericJacobian(const Eigen::VectorXd& x) const {
   }
   PointColumns(x, &J);
   FrameColumns(x, &J);
-  OffsetColumns(x, &J);
+  OffsetColumns(x, {}, &J);
   return J;
 }
 

@@ -27,6 +27,10 @@ std::string Fmt(const char* format, ...) __attribute__((format(printf, 1, 2)));
 // BIC = N ln(RSS / N) + k ln N.
 double Bic(double rss, int n, int k);
 
+// `opt` for one of several tasks run at once on `threads` threads (parallel.h ForEachTask):
+// its row passes on one thread then (the same bits: a pass's result does not depend on it).
+IdentifyOptions TaskOptions(const IdentifyOptions& opt, int threads);
+
 // Residual entries of one row: 3 (point, group), 6 (pose), 2 (pixel).
 int RowDim(const Observation& o);
 
@@ -99,14 +103,18 @@ class Problem {
                             int col, int t, Eigen::MatrixXd* J) const;
   // Analytic d residuals / d theta for the full parameters of candidates `cs` (concatenated),
   // at theta of the active effects; the distance rows are zero.
+  // `poses` (optional): each row's predicted pose, which the pass computes anyway.
   Eigen::MatrixXd TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
-                                 const std::vector<int>& cs) const;
+                                 const std::vector<int>& cs,
+                                 std::vector<lie::SE3>* poses = nullptr) const;
   // The group-point and distance columns (exact) into J.
   void PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
   // The frame-pose columns of the rows measured in frames and of the priors (exact) into J.
   void FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
-  // The unknown marker offsets' columns (exact) into J.
-  void OffsetColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
+  // The unknown marker offsets' columns (exact) into J; `poses`: the rows' predicted poses at
+  // x (empty: predicted here).
+  void OffsetColumns(const Eigen::VectorXd& x, const std::vector<lie::SE3>& poses,
+                     Eigen::MatrixXd* J) const;
 
   const EffectModel& em_;
   const DataSet& data_;

@@ -7,10 +7,14 @@
 #include <limits>
 
 #include "scenarios/identify/equivalence.h"
+#include "scenarios/identify/parallel.h"
 #include "scenarios/identify/problem.h"
 
 namespace flexbench::identify {
 namespace {
+
+// The most the screened candidates' columns take at once (more candidates: more passes).
+constexpr double kScreenColumnBytes = 64.0 * (1 << 20);
 
 bool Contains(const std::vector<int>& v, int x) {
   return std::find(v.begin(), v.end(), x) != v.end();
@@ -27,30 +31,19 @@ struct Trial {
   Fit fit;
 };
 
-// Screened fits of every pool candidate beside `cur`, best BIC first.
-std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
-                                    const std::vector<int>& pool) {
-  const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
-  const Projector proj(J_cur);
-  const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
-  IdentifyOptions screen = ctx.opt;
-  screen.max_iterations = 4;
-  std::vector<int> screened;
-  for (int c : pool) {
-    if (!Contains(cur.active, c)) screened.push_back(c);
-  }
-  const std::vector<Eigen::MatrixXd> Jc =
-      CandidateJacobians(ctx.em, ctx.data, ctx.loads, cur, screened, ctx.opt);
+// `key` with index i appended.
+std::string KeyWith(const std::string& key, int i) {
+  std::string out = key;
+  out.append(reinterpret_cast<const char*>(&i), sizeof(i));
+  return out;
+}
+
+// The kept screens of candidates `screened` as trials, best BIC first.
+std::vector<Trial> SortedTrials(const std::vector<int>& screened,
+                                std::vector<SelectionMemo::Screen>* screens) {
   std::vector<Trial> trials;
   for (size_t i = 0; i < screened.size(); ++i) {
-    const int c = screened[i];
-    double rel = 0.0;
-    const Eigen::MatrixXd B = ObservableBasis(Jc[i], proj, ctx.opt.rank_tol, &rel);
-    if (B.cols() == 0) continue;
-    // Never more unknowns than residuals.
-    if (cur.num_params + B.cols() >= cur.num_residuals) continue;
-    Fit f = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[i], r_cur, screen);
-    if (std::isfinite(f.bic)) trials.push_back({c, std::move(f)});
+    if ((*screens)[i].kept) trials.push_back({screened[i], std::move((*screens)[i].fit)});
   }
   std::stable_sort(trials.begin(), trials.end(), [](const Trial& a, const Trial& b) {
     if (a.fit.bic != b.fit.bic) return a.fit.bic < b.fit.bic;
@@ -59,42 +52,130 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
   return trials;
 }
 
+// Screened fits of every pool candidate beside `cur`, best BIC first. Each candidate's screen
+// on its own, side by side, those the memo has taken from there.
+std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
+                                    const std::vector<int>& pool) {
+  std::vector<int> screened;
+  for (int c : pool) {
+    if (!Contains(cur.active, c)) screened.push_back(c);
+  }
+  const int n = static_cast<int>(screened.size());
+  const std::string key = ctx.memo ? SelectionMemo::Key(cur) : std::string();
+  std::vector<SelectionMemo::Screen> screens(n);
+  std::vector<int> todo;  // indices into screened
+  for (int i = 0; i < n; ++i) {
+    if (!ctx.memo || !ctx.memo->screens.Find(KeyWith(key, screened[i]), &screens[i])) {
+      todo.push_back(i);
+    }
+  }
+  if (todo.empty()) return SortedTrials(screened, &screens);
+  const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+  const Projector proj(J_cur);
+  const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
+  // The candidates' columns in batches of at most kScreenColumnBytes (a candidate's columns do
+  // not depend on which others are computed with it).
+  const double column_bytes = sizeof(double) * static_cast<double>(cur.num_residuals);
+  for (size_t begin = 0; begin < todo.size();) {
+    std::vector<int> cs;
+    double bytes = 0.0;
+    for (size_t i = begin; i < todo.size(); ++i) {
+      const double more = column_bytes * ctx.em.candidates()[screened[todo[i]]].num_params;
+      if (!cs.empty() && bytes + more > kScreenColumnBytes) break;
+      cs.push_back(screened[todo[i]]);
+      bytes += more;
+    }
+    const std::vector<Eigen::MatrixXd> Jc =
+        CandidateJacobians(ctx.em, ctx.data, ctx.loads, cur, cs, ctx.opt);
+    const int threads = TaskThreads(static_cast<int>(cs.size()),
+                                    static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
+    IdentifyOptions screen = TaskOptions(ctx.opt, threads);
+    screen.max_iterations = 4;
+    ForEachTask(static_cast<int>(cs.size()), threads, [&](int j) {
+      const int c = cs[j];
+      SelectionMemo::Screen& out = screens[todo[begin + j]];
+      double rel = 0.0;
+      const Eigen::MatrixXd B = ObservableBasis(Jc[j], proj, ctx.opt.rank_tol, &rel);
+      // Never more unknowns than residuals.
+      if (B.cols() > 0 && cur.num_params + B.cols() < cur.num_residuals) {
+        out.fit = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[j], r_cur, screen);
+        out.kept = std::isfinite(out.fit.bic);
+      }
+      if (ctx.memo) ctx.memo->screens.Put(KeyWith(key, c), out, SelectionMemo::Bytes(out.fit));
+    });
+    begin += cs.size();
+  }
+  return SortedTrials(screened, &screens);
+}
+
+// A screened trial refitted in full, the earlier effects it pushes past their bounds dropped
+// (with the log lines that say so), its own bound violations and its held-out error.
+using Refit = SelectionMemo::Refit;
+Refit RefitTrial(const SelectionContext& ctx, const Trial& t) {
+  Refit r;
+  const std::string key = ctx.memo ? KeyWith(SelectionMemo::Key(t.fit), t.c) : std::string();
+  if (ctx.memo && ctx.memo->refits.Find(key, &r)) return r;
+  r.fit = FitEffects(ctx.em, ctx.data, ctx.loads, t.fit.active, t.fit.basis, t.fit.theta, ctx.opt);
+  const std::string name = ctx.em.candidates()[t.c].Name();
+  // An earlier effect pushed past its bound by the new one is made redundant by it: it
+  // leaves (the backward step's job, done here so the bound never sees it).
+  for (size_t e = 0; e + 1 < r.fit.active.size();) {
+    Fit one = r.fit;
+    one.active = {r.fit.active[e]};
+    int off = 0;
+    for (size_t k = 0; k < e; ++k) off += ctx.em.candidates()[r.fit.active[k]].num_params;
+    one.theta = r.fit.theta.segment(off, ctx.em.candidates()[r.fit.active[e]].num_params);
+    if (BoundViolations(ctx.em, one).empty()) {
+      ++e;
+      continue;
+    }
+    r.log.push_back("with " + name + ", " + ctx.em.candidates()[r.fit.active[e]].Name() +
+                    " leaves (pushed outside its physical bounds)");
+    r.fit = FitWithout(ctx.em, ctx.data, ctx.loads, r.fit, e, ctx.opt);
+    e = 0;
+  }
+  r.out = BoundViolations(ctx.em, r.fit);
+  if (r.out.empty()) r.cv = CvError(ctx, r.fit);
+  if (ctx.memo) {
+    size_t bytes = SelectionMemo::Bytes(r.fit);
+    for (const std::string& line : r.log) bytes += sizeof(line) + line.size();
+    for (const std::string& line : r.out) bytes += sizeof(line) + line.size();
+    ctx.memo->refits.Put(key, r, bytes);
+  }
+  return r;
+}
+
 // The best of the screened trials that passes BIC, bounds and held-out error; -1 when none.
+// The trials BIC lets through are refitted side by side, then judged in BIC order.
 int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
               std::vector<Trial>* trials, double* cv_best) {
   int best = -1;
   *cv_best = std::numeric_limits<double>::infinity();
-  int tried = 0;
-  for (size_t k = 0; k < trials->size() && tried < ctx.opt.cv_trials; ++k) {
+  std::vector<size_t> tried;
+  for (size_t k = 0; k < trials->size() && static_cast<int>(tried.size()) < ctx.opt.cv_trials;
+       ++k) {
+    if ((*trials)[k].fit.bic - cur.bic > -ctx.opt.bic_threshold) break;
+    tried.push_back(k);
+  }
+  const int threads = TaskThreads(static_cast<int>(tried.size()),
+                                  static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
+  const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
+  const SelectionContext task_ctx = TaskContext(ctx, task_opt, ctx.log);
+  std::vector<Refit> refits(tried.size());
+  ForEachTask(static_cast<int>(tried.size()), threads,
+              [&](int i) { refits[i] = RefitTrial(task_ctx, (*trials)[tried[i]]); });
+  for (size_t i = 0; i < tried.size(); ++i) {
+    const size_t k = tried[i];
     Trial& t = (*trials)[k];
-    if (t.fit.bic - cur.bic > -ctx.opt.bic_threshold) break;
-    ++tried;
-    t.fit =
-        FitEffects(ctx.em, ctx.data, ctx.loads, t.fit.active, t.fit.basis, t.fit.theta, ctx.opt);
+    Refit& r = refits[i];
+    t.fit = std::move(r.fit);
+    ctx.log->insert(ctx.log->end(), r.log.begin(), r.log.end());
     const std::string name = ctx.em.candidates()[t.c].Name();
-    // An earlier effect pushed past its bound by the new one is made redundant by it: it
-    // leaves (the backward step's job, done here so the bound never sees it).
-    for (size_t e = 0; e + 1 < t.fit.active.size();) {
-      Fit one = t.fit;
-      one.active = {t.fit.active[e]};
-      int off = 0;
-      for (size_t k = 0; k < e; ++k) off += ctx.em.candidates()[t.fit.active[k]].num_params;
-      one.theta = t.fit.theta.segment(off, ctx.em.candidates()[t.fit.active[e]].num_params);
-      if (BoundViolations(ctx.em, one).empty()) {
-        ++e;
-        continue;
-      }
-      ctx.log->push_back("with " + name + ", " + ctx.em.candidates()[t.fit.active[e]].Name() +
-                         " leaves (pushed outside its physical bounds)");
-      t.fit = FitWithout(ctx.em, ctx.data, ctx.loads, t.fit, e, ctx.opt);
-      e = 0;
-    }
-    const std::vector<std::string> out = BoundViolations(ctx.em, t.fit);
-    if (!out.empty()) {
-      ctx.log->push_back("reject " + name + ": outside its physical bounds (" + out[0] + ")");
+    if (!r.out.empty()) {
+      ctx.log->push_back("reject " + name + ": outside its physical bounds (" + r.out[0] + ")");
       continue;
     }
-    const double cv = CvError(ctx, t.fit);
+    const double cv = r.cv;
     if (!CvLower(ctx.opt, cv, cv_cur)) {
       ctx.log->push_back(
           Fmt("not kept %s: BIC %.1f -> %.1f but held-out error %.4g -> %.4g "
@@ -116,9 +197,23 @@ Fit BackwardStep(const SelectionContext& ctx, Fit cur, double* cv_cur) {
     size_t worst = 0;
     Fit best_without;
     double best_bic = std::numeric_limits<double>::infinity();
-    for (size_t e = 0; e + 1 < cur.active.size(); ++e) {
-      Fit w = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, ctx.opt);
-      if (w.bic < best_bic) best_bic = w.bic, best_without = std::move(w), worst = e;
+    // Each removal refitted on its own, side by side; the first lowest BIC wins.
+    const int n = static_cast<int>(cur.active.size()) - 1;
+    const int threads = TaskThreads(n, static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
+    const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
+    std::vector<Fit> without(n);
+    const std::string key = ctx.memo ? SelectionMemo::Key(cur) : std::string();
+    ForEachTask(n, threads, [&](int e) {
+      if (ctx.memo && ctx.memo->withouts.Find(KeyWith(key, e), &without[e])) return;
+      without[e] = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, task_opt);
+      if (ctx.memo) {
+        ctx.memo->withouts.Put(KeyWith(key, e), without[e], SelectionMemo::Bytes(without[e]));
+      }
+    });
+    for (int e = 0; e < n; ++e) {
+      if (without[e].bic < best_bic) {
+        best_bic = without[e].bic, best_without = std::move(without[e]), worst = e;
+      }
     }
     if (!std::isfinite(best_bic) || best_bic - cur.bic >= ctx.opt.bic_threshold) break;
     const double cv = CvError(ctx, best_without);
@@ -182,9 +277,55 @@ std::vector<std::string> BoundViolations(const EffectModel& em, const Fit& fit) 
   return out;
 }
 
+SelectionContext TaskContext(const SelectionContext& ctx, const IdentifyOptions& opt,
+                             std::vector<std::string>* log) {
+  return SelectionContext{ctx.em, ctx.data, ctx.loads, ctx.folds, opt, log, nullptr, ctx.memo};
+}
+
 double CvError(const SelectionContext& ctx, const Fit& fit) {
   if (!ctx.opt.cross_validation) return std::nan("");
-  return CrossValidate(ctx.em, ctx.data, ctx.loads, ctx.folds, fit, ctx.opt);
+  const std::string key = ctx.memo ? SelectionMemo::Key(fit) : std::string();
+  double cv = 0.0;
+  if (ctx.memo && ctx.memo->held_out.Find(key, &cv)) return cv;
+  cv = CrossValidate(ctx.em, ctx.data, ctx.loads, ctx.folds, fit, ctx.opt);
+  if (ctx.memo) ctx.memo->held_out.Put(key, cv, sizeof(cv));
+  return cv;
+}
+
+size_t SelectionMemo::Bytes(const Fit& fit) {
+  size_t doubles = fit.theta.size() + 3 * fit.group_points.size() + 12 * fit.T_base_frames.size() +
+                   3 * fit.marker_offsets.size();
+  for (const Eigen::MatrixXd& B : fit.basis) doubles += B.size();
+  return sizeof(Fit) + sizeof(double) * doubles + sizeof(int) * fit.active.size() +
+         sizeof(Eigen::MatrixXd) * fit.basis.size();
+}
+
+std::string SelectionMemo::Key(const Fit& fit) {
+  std::string k;
+  const auto add = [&k](const void* p, size_t bytes) {
+    k.append(static_cast<const char*>(p), bytes);
+  };
+  const auto add_int = [&add](long v) { add(&v, sizeof(v)); };
+  add_int(static_cast<long>(fit.active.size()));
+  add(fit.active.data(), sizeof(int) * fit.active.size());
+  add_int(static_cast<long>(fit.basis.size()));
+  for (const Eigen::MatrixXd& B : fit.basis) {
+    add_int(B.rows());
+    add_int(B.cols());
+    add(B.data(), sizeof(double) * B.size());
+  }
+  add_int(fit.theta.size());
+  add(fit.theta.data(), sizeof(double) * fit.theta.size());
+  add_int(static_cast<long>(fit.group_points.size()));
+  for (const Vec3& p : fit.group_points) add(p.data(), sizeof(double) * 3);
+  add_int(static_cast<long>(fit.T_base_frames.size()));
+  for (const lie::SE3& T : fit.T_base_frames) {
+    add(T.rotation().data(), sizeof(double) * 9);
+    add(T.translation().data(), sizeof(double) * 3);
+  }
+  add_int(static_cast<long>(fit.marker_offsets.size()));
+  for (const Vec3& d : fit.marker_offsets) add(d.data(), sizeof(double) * 3);
+  return k;
 }
 
 Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::vector<int>& pool,

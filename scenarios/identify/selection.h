@@ -11,14 +11,77 @@
 // back when it leaves. At the end, a chosen effect is swapped for another candidate when the
 // swap lowers BIC by more than `ambiguity_bic` without raising the held-out error.
 #pragma once
+#include <atomic>
 #include <chrono>
+#include <mutex>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/identify.h"
 
 namespace flexbench::identify {
+
+// The selection's steps by their exact inputs, for one data set, its loads, folds and options:
+// the alternatives (a selection per chosen effect, each with one candidate banned) retrace the
+// chosen selection's rounds until the banned effect would enter, and those rounds' screens,
+// refits, removals and held-out errors are the same bits. Safe for tasks side by side.
+class SelectionMemo {
+ public:
+  // The most the memo holds (keys and values): beyond, results are computed and not kept (the
+  // chosen selection's rounds, which the alternatives retrace, come first).
+  static constexpr size_t kMaxBytes = size_t{256} << 20;
+
+  // The exact state of a fit (effects, bases, parameters, nuisance states), as bytes.
+  static std::string Key(const Fit& fit);
+  // What a copy of `fit` takes.
+  static size_t Bytes(const Fit& fit);
+
+  template <typename V>
+  class Table {
+   public:
+    explicit Table(std::atomic<size_t>* bytes) : bytes_(bytes) {}
+    bool Find(const std::string& key, V* out) const {
+      std::lock_guard<std::mutex> lock(mutex_);
+      const auto it = map_.find(key);
+      if (it == map_.end()) return false;
+      *out = it->second;
+      return true;
+    }
+    // Keeps v (of `value_bytes`) unless the memo is full.
+    void Put(const std::string& key, const V& v, size_t value_bytes) {
+      const size_t b = key.size() + value_bytes;
+      if (bytes_->fetch_add(b) + b > kMaxBytes) {
+        bytes_->fetch_sub(b);
+        return;
+      }
+      std::lock_guard<std::mutex> lock(mutex_);
+      map_.emplace(key, v);
+    }
+
+   private:
+    std::atomic<size_t>* bytes_;
+    mutable std::mutex mutex_;
+    std::unordered_map<std::string, V> map_;
+  };
+
+  struct Screen {
+    bool kept = false;
+    Fit fit;
+  };
+  struct Refit {
+    Fit fit;
+    std::vector<std::string> log;  // earlier effects it pushed past their bounds
+    std::vector<std::string> out;  // its own bound violations
+    double cv = 0.0;
+  };
+  std::atomic<size_t> bytes{0};    // held by all tables
+  Table<Screen> screens{&bytes};   // Key(cur) + candidate
+  Table<Refit> refits{&bytes};     // Key(screened fit) + candidate
+  Table<Fit> withouts{&bytes};     // Key(fit) + index of the effect removed
+  Table<double> held_out{&bytes};  // Key(fit)
+};
 
 struct SelectionContext {
   const EffectModel& em;
@@ -28,13 +91,20 @@ struct SelectionContext {
   const IdentifyOptions& opt;
   std::vector<std::string>* log;
   bool* capped = nullptr;  // set when max_effects stopped a selection the data would continue
-  // When the selection started, for IdentifyOptions::time_budget_s; set when it ran out.
+  SelectionMemo* memo = nullptr;  // null: every step computed
+  // When the selection started, for IdentifyOptions::time_budget_s; set when it ran out (null:
+  // no budget, as in a task of its own: the alternatives re-run selections beyond it).
   std::chrono::steady_clock::time_point started = std::chrono::steady_clock::now();
   bool* out_of_time = nullptr;
 };
 
 // Whether the time budget has run out (logged once, with what it stops).
 bool OutOfTime(const SelectionContext& ctx, const char* stops);
+
+// `ctx` for a task of its own: options `opt` (TaskOptions), log `log`, no cap or budget to
+// report; the data, folds and memo shared.
+SelectionContext TaskContext(const SelectionContext& ctx, const IdentifyOptions& opt,
+                             std::vector<std::string>* log);
 
 // ", held-out A -> B sigma^2" (the mean squared held-out residual in units of the stated
 // noise), or "" without cross-validation.

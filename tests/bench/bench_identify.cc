@@ -6,7 +6,10 @@
 // issue-8 selection), for the ratio. BM_Predict is one augmented forward kinematics.
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true; quote medians.
 #include <benchmark/benchmark.h>
+#include <malloc.h>
+#include <sys/resource.h>
 
+#include <atomic>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -14,13 +17,78 @@
 
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/identify.h"
+#include "scenarios/identify/measurement_frames.h"
 #include "scenarios/identify/parallel.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
 
+// A counting heap for the peak-memory counters: every malloc family call of the process (Eigen
+// allocates through malloc, the standard library through operator new, which calls malloc)
+// passes through these wrappers of glibc's own functions; the bytes in use and their peak are
+// counted by malloc_usable_size.
+extern "C" {
+void* __libc_malloc(size_t);
+void* __libc_calloc(size_t, size_t);
+void* __libc_realloc(void*, size_t);
+void* __libc_memalign(size_t, size_t);
+void __libc_free(void*);
+}
+namespace {
+std::atomic<long> heap_in_use{0};
+std::atomic<long> heap_peak{0};
+void* Counted(void* p) {
+  if (!p) return p;
+  const long now =
+      heap_in_use.fetch_add(static_cast<long>(malloc_usable_size(p))) + malloc_usable_size(p);
+  long peak = heap_peak.load();
+  while (now > peak && !heap_peak.compare_exchange_weak(peak, now)) {
+  }
+  return p;
+}
+void Uncount(void* p) {
+  if (p) heap_in_use.fetch_sub(static_cast<long>(malloc_usable_size(p)));
+}
+}  // namespace
+extern "C" {
+void* malloc(size_t n) noexcept { return Counted(__libc_malloc(n)); }
+void* calloc(size_t n, size_t m) noexcept { return Counted(__libc_calloc(n, m)); }
+void free(void* p) noexcept {
+  Uncount(p);
+  __libc_free(p);
+}
+void* realloc(void* p, size_t n) noexcept {
+  Uncount(p);
+  return Counted(__libc_realloc(p, n));
+}
+void* memalign(size_t a, size_t n) noexcept { return Counted(__libc_memalign(a, n)); }
+void* aligned_alloc(size_t a, size_t n) noexcept { return Counted(__libc_memalign(a, n)); }
+int posix_memalign(void** out, size_t a, size_t n) noexcept {
+  *out = Counted(__libc_memalign(a, n));
+  return *out ? 0 : 12;  // ENOMEM
+}
+}
+
 namespace flexbench::identify {
 namespace {
+
+// Peak heap bytes above the level at construction, while it lives; and the process's peak
+// resident set's growth (getrusage; 0 unless this run set a new peak).
+class PeakMemory {
+ public:
+  PeakMemory() : base_(heap_in_use.load()), rss_kb_(MaxRssKb()) { heap_peak.store(base_); }
+  double HeapBytes() const { return static_cast<double>(heap_peak.load() - base_); }
+  double RssBytes() const { return 1024.0 * static_cast<double>(MaxRssKb() - rss_kb_); }
+
+ private:
+  static long MaxRssKb() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return u.ru_maxrss;
+  }
+  long base_;
+  long rss_kb_;
+};
 
 struct Setup {
   sim::MjModelPtr m;
@@ -243,7 +311,9 @@ void BM_IdentifyPointCsv(benchmark::State& state) {
   std::vector<int> candidates(em.candidates().size());
   for (size_t i = 0; i < candidates.size(); ++i) candidates[i] = static_cast<int>(i);
   size_t found = 0;
+  double heap = 0.0;
   for (auto _ : state) {
+    const PeakMemory peak;
     DataSet data;
     ReadCalibrationCsv(path, chain.q_joints, &data);
     const std::vector<ConfigLoads> loads = ComputeLoads(em, data);
@@ -252,16 +322,196 @@ void BM_IdentifyPointCsv(benchmark::State& state) {
     const IdentifyResult r = Identify(em, data, loads, candidates, opt);
     found = r.effects.size();
     benchmark::DoNotOptimize(found);
+    heap = peak.HeapBytes();
   }
   std::filesystem::remove(path);
   state.counters["effects_found"] = found;
   state.counters["candidates"] = candidates.size();
+  state.counters["peak_heap_B_per_row"] = heap / rows;
   state.counters["threads"] = PassThreads(rows, static_cast<int>(state.range(1)));
 }
 // Args: rows, threads of the row passes (1; 0: one per core). Wall time (what a user waits)
 // and the whole process's CPU time (all threads).
 BENCHMARK(BM_IdentifyPointCsv)
     ->ArgsProduct({{1000, 4000, 10000}, {1, 0}})
+    ->Args({100000, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1)
+    ->UseRealTime()
+    ->MeasureProcessCPUTime();
+
+// The closed loop at real-robot scale: humanoid_upper (19 actuated joints), a tracker of
+// unknown pose sees a marker on each hand (unknown offsets on their links) over 300 random
+// postures, 0.2 mm noise per axis: 600 rows. The truth (the effect model itself; the scenarios
+// check physics-made data) has a joint-origin error at every joint (0.5-2 mm, 0.1-0.5 deg,
+// drawn from a fixed seed) and gear compliance at both shoulders' pitch and both elbows, so the
+// data warrant 30 or more effects. Every candidate of the model is offered, as the CLI does.
+struct Humanoid {
+  sim::MjModelPtr m;
+  sim::DeclaredChain chain;
+  std::unique_ptr<EffectModel> em;
+  DataSet data;
+  std::vector<ConfigLoads> loads;
+  std::vector<int> candidates;
+  int truth_effects = 0;
+};
+
+// The truth's active effects and their parameters: joint origins everywhere, gear compliance
+// at the shoulders' pitch and the elbows.
+void HumanoidTruth(const EffectModel& em, std::vector<int>* active, std::vector<double>* theta) {
+  std::mt19937_64 rng(34);
+  std::uniform_real_distribution<double> mm(0.5e-3, 2e-3), deg(0.1, 0.5), sign(-1.0, 1.0);
+  const auto draw = [&](double mag) { return sign(rng) < 0 ? -mag : mag; };
+  for (size_t c = 0; c < em.candidates().size(); ++c) {
+    if (em.candidates()[c].type != EffectType::kJointOrigin) continue;
+    active->push_back(static_cast<int>(c));
+    Vec3 t(sign(rng), sign(rng), sign(rng)), w(sign(rng), sign(rng), sign(rng));
+    t *= draw(mm(rng)) / t.norm();
+    w *= draw(deg(rng)) * M_PI / 180.0 / w.norm();
+    for (int k = 0; k < 3; ++k) theta->push_back(t[k]);
+    for (int k = 0; k < 3; ++k) theta->push_back(w[k]);
+  }
+  for (const char* j : {"shoulder_pitch", "l_shoulder_pitch", "elbow", "l_elbow"}) {
+    active->push_back(em.FindCandidate(std::string("joint_compliance@") + j));
+    theta->push_back(-1e-3);  // a gear of 1000 N m/rad
+  }
+}
+
+Humanoid& HumanoidSetup() {
+  static Humanoid h;
+  if (h.em) return h;
+  const std::string dir = std::string(FLEXBENCH_SOURCE_DIR) + "/models/";
+  h.m = sim::LoadModel(dir + "humanoid_upper.xml");
+  const sim::DeclaredModel d = sim::LoadDeclaredModel(dir + "humanoid_upper.declared.yaml");
+  h.chain = sim::BuildDeclaredChain(h.m.get(), d);
+  const std::vector<kinematics::FrameId> markers = {h.chain.ObservedFrame("right_marker"),
+                                                    h.chain.ObservedFrame("left_marker")};
+  h.em = std::make_unique<EffectModel>(h.m.get(), h.chain, h.chain.end_effector, "", markers,
+                                       /*gravity_tilt=*/true);
+  std::vector<int> truth;
+  std::vector<double> theta;
+  HumanoidTruth(*h.em, &truth, &theta);
+  h.truth_effects = static_cast<int>(truth.size());
+  h.data.points = {d.end_effector, "right_marker", "left_marker"};
+  h.data.offset_unknown = {0, 1, 1};
+  MeasurementFrame tracker;
+  tracker.name = "tracker";
+  h.data.frames = {tracker};
+  h.data.sets = {"calibration"};
+  const lie::SE3 T_base_tracker(Eigen::AngleAxisd(M_PI + 0.05, Vec3::UnitZ()).toRotationMatrix() *
+                                    Eigen::AngleAxisd(0.03, Vec3::UnitX()).toRotationMatrix(),
+                                Vec3(2.5, 0.04, 1.6));
+  const Vec3 d_true[3] = {Vec3::Zero(), Vec3(0.012, -0.014, 0.008), Vec3(-0.007, 0.009, 0.004)};
+  std::mt19937_64 rng(35);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, 2e-4);
+  const auto range = [](const std::string& j) -> std::pair<double, double> {
+    const std::string b = j.rfind("l_", 0) == 0 ? j.substr(2) : j;
+    if (b == "shoulder_pitch") return {-110, 0};
+    if (b == "shoulder_roll")
+      return j == b ? std::make_pair(-45.0, 10.0) : std::make_pair(-10.0, 45.0);
+    if (b == "shoulder_yaw") return {-45, 45};
+    if (b == "elbow") return {-100, 0};
+    if (b == "forearm_roll") return {-60, 60};
+    return {-30, 30};
+  };
+  EffectModel::Workspace ws = h.em->MakeWorkspace();
+  for (int posture = 0; posture < 300; ++posture) {
+    Eigen::VectorXd q(h.chain.model.nq());
+    for (int k = 0; k < q.size(); ++k) {
+      const auto [lo, hi] = range(h.chain.q_joints[k]);
+      q[k] = (lo + (hi - lo) * u(rng)) * M_PI / 180.0;
+    }
+    const ConfigLoads L = h.em->Loads(q);
+    for (int point = 1; point <= 2; ++point) {
+      Observation o;
+      o.q = q;
+      o.frame = 0;
+      o.point = point;
+      const Vec3 p_base = h.em->PredictPose(q, L, truth, theta.data(), ws, point) * d_true[point];
+      o.p_frame = T_base_tracker.Inverse() * p_base + Vec3(noise(rng), noise(rng), noise(rng));
+      h.data.rows.push_back(o);
+    }
+  }
+  h.loads = ComputeLoads(*h.em, h.data);
+  RegisterFrames(*h.em, h.loads, &h.data);
+  for (size_t c = 0; c < h.em->candidates().size(); ++c)
+    h.candidates.push_back(static_cast<int>(c));
+  return h;
+}
+
+// Arg 0: cross-validation (1, the default) or not (0); arg 1: max_effects (-1: no cap).
+void BM_IdentifyHumanoid(benchmark::State& state) {
+  Humanoid& h = HumanoidSetup();
+  IdentifyOptions opt;
+  opt.cross_validation = state.range(0) != 0;
+  opt.max_effects = static_cast<int>(state.range(1));
+  opt.point_std_m = 2e-4;
+  opt.threads = 2;
+  size_t found = 0;
+  double noise_ratio = 0.0;
+  int alternatives = 0;
+  std::string stopped;
+  for (auto _ : state) {
+    const IdentifyResult r = Identify(*h.em, h.data, h.loads, h.candidates, opt);
+    found = r.after.active.size();
+    noise_ratio = NoiseRatio(r.after);
+    alternatives = static_cast<int>(r.alternatives.size());
+    stopped = r.stopped_by;
+  }
+  state.counters["rows"] = h.data.rows.size();
+  state.counters["candidates"] = h.candidates.size();
+  state.counters["truth_effects"] = h.truth_effects;
+  state.counters["effects_found"] = found;
+  state.counters["alternatives"] = alternatives;
+  state.counters["rms_over_noise"] = noise_ratio;
+  state.SetLabel("stopped_by " + stopped);
+}
+BENCHMARK(BM_IdentifyHumanoid)
+    ->ArgNames({"cv", "max_effects"})
+    ->Args({1, 8})
+    ->Args({0, 8})
+    ->Args({1, -1})
+    ->Args({0, -1})
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->UseRealTime()
+    ->MeasureProcessCPUTime();
+
+// Point rows at scale (rover_arm, 30 candidates, two effects in the data): the whole
+// identification's time and its peak heap above what the data itself holds, per row.
+void BM_IdentifyRowsMemory(benchmark::State& state) {
+  const int rows = static_cast<int>(state.range(0));
+  double heap = 0.0, rss = 0.0, data_bytes = 0.0;
+  size_t found = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    const PeakMemory all;
+    {
+      Setup s;
+      FillRover(s, rows);
+      data_bytes = all.HeapBytes();
+      state.ResumeTiming();
+      const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
+      IdentifyOptions opt;
+      opt.threads = static_cast<int>(state.range(1));
+      const IdentifyResult r = Identify(*s.em, s.data, loads, s.candidates, opt);
+      found = r.effects.size();
+      state.PauseTiming();
+    }
+    heap = all.HeapBytes();
+    rss = all.RssBytes();
+    state.ResumeTiming();
+  }
+  state.counters["effects_found"] = found;
+  state.counters["peak_heap_B_per_row"] = heap / rows;
+  state.counters["data_B_per_row"] = data_bytes / rows;
+  state.counters["maxrss_growth_B_per_row"] = rss / rows;
+}
+// Args: rows, threads.
+BENCHMARK(BM_IdentifyRowsMemory)
+    ->ArgNames({"rows", "threads"})
+    ->ArgsProduct({{1000, 10000, 100000}, {1, 2}})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1)
     ->UseRealTime()
