@@ -364,16 +364,32 @@ void EffectModel::AddLateralCompliance() {
     const FrameId f = model.joint_frame(k);
     if (!on_path_[f] || model.frame(f).joint.type != kinematics::JointType::kRevolute) continue;
     const std::string& name = chain_->q_joints[k];
+    const std::string candidate =
+        std::string(ToString(EffectType::kLateralCompliance)) + "@" + name;
     if (chain_->IsCoupled(k)) {
-      skipped_.push_back({std::string(ToString(EffectType::kLateralCompliance)) + "@" + name,
-                          "'" + name +
-                              "' is a coupled joint: its angle follows a linkage, which has no "
-                              "bearing of its own to bend (lateral compliance of its drivers is "
-                              "offered)"});
+      skipped_.push_back({candidate, "'" + name +
+                                         "' is a coupled joint: its angle follows a linkage, which "
+                                         "has no bearing of its own to bend (lateral compliance of "
+                                         "its drivers is offered)"});
+      continue;
+    }
+    if (TiltsWithMount(f)) {
+      skipped_.push_back(
+          {candidate,
+           "'" + name + "' is the first joint on the arm's mount: its housing tilting is " +
+               "the mount tilting, base_compliance@" + Untyped(model.frame(mount_).name)});
       continue;
     }
     AddCandidate(EffectType::kLateralCompliance, name, k, f, 2, 1e-7, "rad/Nm").after_named = true;
   }
+}
+
+bool EffectModel::TiltsWithMount(FrameId f) const {
+  if (mount_ == kinematics::kBaseFrame) return false;
+  const kinematics::PpoeModel& model = chain_->model;
+  FrameId g = f;
+  while (g > mount_ && (g == f || model.frame(g).q_index < 0)) g = model.frame(g).parent;
+  return g == mount_ && (g == f || model.frame(g).q_index < 0);
 }
 
 // Families that enter only when the residual diagnostics point at their joint; after the others,

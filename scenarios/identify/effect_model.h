@@ -63,8 +63,9 @@
 // c > 0. The fit leaves every sign free.
 // Coupled joints (sim::DeclaredChain::couplings) are joint variables like the actuated ones, with
 // their own candidates (their own offset is the linkage's assembly offset: a parameter of its
-// own), but no lateral compliance: a linkage's joint has no bearing of its own to bend
-// (EffectModel::skipped() lists it). A joint-level correction of a driver (offset, compliance,
+// own), but no lateral compliance: a linkage's joint has no bearing of its own to bend. Nor has
+// the first joint on a compliant mount one (its housing tilting is base_compliance);
+// EffectModel::skipped() lists both. A joint-level correction of a driver (offset, compliance,
 // backlash, periodic errors) moves the joints it drives as well, as the driver's true angle
 // drives the linkage.
 // tau_J is the gravity torque the joint carries (MuJoCo masses, nominal configuration), M the
@@ -328,6 +329,9 @@ class EffectModel {
   void AddToolOffsets();
   void AddChainWide(const std::string& camera);
   void AddLateralCompliance();
+  // Whether joint frame f is the mount or the first joint below it: its lateral turn is then
+  // the mount's tilt (base_compliance), about the same point within the mount's offset.
+  bool TiltsWithMount(FrameId f) const;
   void AddEvidenceFamilies();
   void AddJointOrigins();
   void FindCoupledDrivers();  // drives_coupled_

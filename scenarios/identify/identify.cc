@@ -454,7 +454,9 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   const std::vector<int> after_named = Pool(em, candidates, false, false, true);
   if (!after_named.empty()) {
     res.steps.push_back("beyond the named effects: lateral joint compliance");
-    cur = SelectEffects(ctx, cur, after_named, false, &cv);
+    // Backward steps: a named effect that stood in for one of them may leave (no swap step,
+    // which would trade named effects for them).
+    cur = SelectEffects(ctx, cur, after_named, true, &cv, /*swap=*/false);
   }
   const std::vector<int> generic = Pool(em, candidates, false, true);
   // Always tried: a cap limits what forward selection adds, never whether the joint origins are
