@@ -619,7 +619,11 @@ class JointOriginEffect : public Effect {
         throw InputError(where_key + ": " + s.model_name + " has no joint named '" + joint + "'");
       }
       const int b = m->jnt_bodyid[j];
-      if (m->body_jntadr[b] != j) {
+      // J's lateral hinges come before it, at its anchor: they turn inside the frame the origin
+      // error moves, as identification's lateral_compliance@J does after joint_origin@J.
+      int first = m->body_jntadr[b];
+      while (first < j && LateralHingeOf(m, first) == j) ++first;
+      if (first != j) {
         throw InputError(where_key + ": joint '" + joint + "' is not the first joint of body '" +
                          ObjectName(m, mjOBJ_BODY, b) + "' (its origin sits between two joints)");
       }
