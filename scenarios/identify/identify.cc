@@ -441,6 +441,13 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   SelectionMemo memo;
   SelectionContext ctx{em, data, loads, folds, opt, &res.steps, &capped, &memo};
   ctx.out_of_time = &out_of_time;
+  size_t emitted = 0;
+  const std::function<void()> flush = [&] {
+    for (; emitted < res.steps.size(); ++emitted) {
+      if (opt.on_step) opt.on_step(res.steps[emitted]);
+    }
+  };
+  ctx.flush = &flush;
   double cv = CvError(ctx, res.before);
   res.cv_before = cv;
   if (opt.cross_validation) {
@@ -449,14 +456,17 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
             "error %.4g sigma^2 (mean squared residual in units of the stated noise)",
             res.num_folds, folds.by.c_str(), cv));
   }
+  flush();
   Fit cur = SelectEffects(ctx, res.before, Pool(em, candidates, false, false), true, &cv);
   cur = FollowFinding(ctx, candidates, std::move(cur), &cv, &res);
+  flush();
   const std::vector<int> after_named = Pool(em, candidates, false, false, true);
   if (!after_named.empty()) {
     res.steps.push_back("beyond the named effects: lateral joint compliance");
     // Backward steps: a named effect that stood in for one of them may leave (no swap step,
     // which would trade named effects for them).
     cur = SelectEffects(ctx, cur, after_named, true, &cv, /*swap=*/false);
+    flush();
   }
   const std::vector<int> generic = Pool(em, candidates, false, true);
   // Always tried: a cap limits what forward selection adds, never whether the joint origins are
@@ -480,6 +490,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
     }
   }
   cur = PreferSimpler(ctx, candidates, std::move(cur), &cv);
+  flush();
   // The selection ran on the loads at the readings; the chosen model's values are refitted on
   // the loads where its own joint corrections put the arm, and analysed there.
   std::vector<ConfigLoads> shifted;
@@ -496,7 +507,9 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
     res.steps.push_back(std::string("diagnostics after: ") + res.finding.message +
                         (res.finding.significant ? " (significant)" : ""));
   }
+  flush();
   FindAlternatives(ctx, candidates, &res);
+  flush();
   FindEquivalents(em, data, final_loads, cur, candidates, opt, &res);
   FindSimplerEquivalents(em, data, final_loads, cur, candidates, opt, &res);
   for (const EquivalenceSet& s : res.equivalence) {
@@ -504,9 +517,11 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
       res.steps.push_back("equivalent on this data (named by all): " + s.name);
     }
   }
+  flush();
   FindUnidentifiable(em, data, final_loads, cur, candidates, opt, &res);
   Report(em, data, final_loads, opt, &res);
   res.frame_cov = FrameCovariances(em, data, final_loads, cur, opt, &res.marker_offset_cov);
+  flush();
   return res;
 }
 

@@ -23,6 +23,7 @@
 //   report (here)                   covariance, near-singular directions, shares, verdict
 #pragma once
 #include <Eigen/Core>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -129,6 +130,10 @@ struct IdentifyOptions {
   // reported as a cap is (stopped_by "time_budget"). With a budget the result depends on the
   // machine's speed: the same seed no longer gives the same bytes.
   double time_budget_s = 0.0;
+  // Called with each line of the selection log (IdentifyResult::steps) soon after it is written:
+  // after every selection round and stage, so a long identification shows its progress. Null:
+  // none.
+  std::function<void(const std::string&)> on_step;
   int max_iterations = 50;  // Levenberg-Marquardt
   // Threads of a pass over the rows (0: one per core; parallel.h); any number, the same bits.
   int threads = 0;

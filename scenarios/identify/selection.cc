@@ -423,6 +423,7 @@ Fit SelectEffects(const SelectionContext& ctx, const Fit& start, const std::vect
     cur = t.fit;
     *cv = cv_best;
     if (backward) cur = BackwardStep(ctx, std::move(cur), cv);
+    if (ctx.flush) (*ctx.flush)();
   }
   if (backward && swap) cur = SwapStep(ctx, std::move(cur), pool, cv);
   return cur;

@@ -13,6 +13,7 @@
 #pragma once
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <mutex>
 #include <string>
 #include <unordered_map>
@@ -96,6 +97,8 @@ struct SelectionContext {
   // no budget, as in a task of its own: the alternatives re-run selections beyond it).
   std::chrono::steady_clock::time_point started = std::chrono::steady_clock::now();
   bool* out_of_time = nullptr;
+  // Hands the log's new lines to IdentifyOptions::on_step (null: a task's own log, kept).
+  const std::function<void()>* flush = nullptr;
 };
 
 // Whether the time budget has run out (logged once, with what it stops).

@@ -194,10 +194,12 @@ class ClosedLoopKind : public ScenarioKind {
     ctx.log("identify: " + std::to_string(sets.cal.rows.size()) + " calibration rows, " +
             std::to_string(candidates_.size()) + " candidate effects");
     const Clock::time_point t1 = Clock::now();
+    // The selection log as it is written: a long identification shows where it is.
+    identify::IdentifyOptions opt = opt_;
+    opt.on_step = [&ctx](const std::string& s) { ctx.log("  " + s); };
     identify::IdentifyResult res =
-        identify::Identify(*em_, sets.cal, sets.cal_loads, candidates_, opt_);
+        identify::Identify(*em_, sets.cal, sets.cal_loads, candidates_, opt);
     (*ctx.timing)["identify_s"] = seconds_since(t1);
-    for (const std::string& s : res.steps) ctx.log("  " + s);
     const Scored sc = Score(ctx, &sets, &res);
     Json& m = (*ctx.summary)["metrics"];
     ScoreNames(res, &m);

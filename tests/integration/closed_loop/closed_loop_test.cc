@@ -309,7 +309,18 @@ TEST(Identify, FindsAnOffsetAndAGearComplianceFromPoints) {
   std::mt19937_64 rng(11);
   const DataSet d = PointData(*f.em, truth, theta, 80, 1e-4, rng);
   const auto loads = ComputeLoads(*f.em, d);
-  const IdentifyResult r = Identify(*f.em, d, loads, AllCandidates(*f.em), IdentifyOptions{});
+  // The selection log reaches on_step as it is written, every line once, in order; the first
+  // line arrives before the first effect is added.
+  IdentifyOptions opt;
+  std::vector<std::string> streamed;
+  size_t before_first_add = 0;
+  opt.on_step = [&](const std::string& line) {
+    if (line.rfind("add ", 0) == 0 && before_first_add == 0) before_first_add = streamed.size();
+    streamed.push_back(line);
+  };
+  const IdentifyResult r = Identify(*f.em, d, loads, AllCandidates(*f.em), opt);
+  EXPECT_EQ(streamed, r.steps);
+  EXPECT_GT(before_first_add, 0u);
   std::vector<std::string> found;
   for (const auto& e : r.effects) found.push_back(e.name);
   std::sort(found.begin(), found.end());
