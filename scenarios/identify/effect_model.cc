@@ -1038,19 +1038,49 @@ Vec3 Load(const Vec3& load) { return Vec3(Load(load.x()), Load(load.y()), Load(l
 
 }  // namespace
 
-bool EffectModel::OnBentLink(FrameId f, const std::vector<int>& active, bool at_bend) const {
+int EffectModel::BendsOnLink(FrameId f, const std::vector<int>& active, bool at_bend) const {
   const kinematics::PpoeModel& model = chain_->model;
-  bool on = false;
+  int count = 0;
   ForEachEffect(active, nullptr, [&](int i, const double*) {
     const Candidate& b = candidates_[i];
-    if (on || b.type != EffectType::kLinkBending) return;
-    if (at_bend && b.frame == f) on = true;
+    if (b.type != EffectType::kLinkBending) return;
+    bool on = at_bend && b.frame == f;
     for (FrameId g = model.frame(b.frame).parent; g > 0 && g != prev_joint_[b.frame];
          g = model.frame(g).parent) {
-      if (g == f) on = true;
+      on = on || g == f;
     }
+    count += on;
   });
-  return on;
+  return count;
+}
+
+FrameId EffectModel::PivotBend(FrameId f, const Workspace& ws) const {
+  // Frame ids grow away from the base, so on the path a frame's ancestors have smaller ids.
+  for (FrameId g = ws.point; g >= f && g > 0; g = chain_->model.frame(g).parent) {
+    if (prev_joint_[g] >= 0 && prev_joint_[g] < f && !ws.bend[g].isZero()) return g;
+  }
+  return -1;
+}
+
+void EffectModel::ThroughBend(FrameId f, FrameId b, const Workspace& ws, int n,
+                              Tangent* out) const {
+  // The point P = Rb X + (I - Rb) mid, X where it would be unbent, mid = (t_prev + t_2b) / 2
+  // the link's middle, t_2b frame b's origin before the bend; Rb = Exp(phi) does not depend on
+  // the parameter (phi turns with the previous joint's frame, above f). The parameter moves X
+  // and t_2b rigidly with one twist (world rate w): dX, and d t_2b = dX - w x (X - t_2b).
+  const Stages& st = ws.stages[b];
+  const Mat3 Rb = lie::SO3Exp(st.phi);
+  const Vec3& P = ws.T[ws.point].translation();
+  const Vec3 X = Rb.transpose() * (P - st.mid) + st.mid;
+  const Vec3& t_2b = st.T2.translation();
+  for (int k = 0; k < n; ++k) {
+    const Vec3 w = out[k].w;
+    // Below b (f above it) the tangent saw the bent point; at b its stage is before the bend.
+    const Vec3 dX = f == b ? out[k].dp : Vec3(out[k].dp + w.cross(X - P));
+    const Vec3 d_mid = 0.5 * (dX - w.cross(X - t_2b));
+    out[k].dp = Rb * dX + d_mid - Rb * d_mid;
+    out[k].w = Rb * w;
+  }
 }
 
 bool EffectModel::HasTangent(int c, const std::vector<int>& active) const {
@@ -1064,10 +1094,10 @@ bool EffectModel::HasTangent(int c, const std::vector<int>& active) const {
     case EffectType::kLinkLength:
     case EffectType::kLinkOffset:
     case EffectType::kJointOrigin:
-      // Before the bend of f: the pivot of a bend at f or around it moves with the parameter.
-      return !OnBentLink(cand.frame, active, true);
+      // Before the bend of f: the pivot of one bend at f or around it (ThroughBend).
+      return BendsOnLink(cand.frame, active, true) <= 1;
     case EffectType::kBaseCompliance:
-      return !OnBentLink(cand.frame, active, false);
+      return BendsOnLink(cand.frame, active, false) == 0;
     case EffectType::kJointOffset:
     case EffectType::kJointCompliance:
     case EffectType::kBacklash:
@@ -1264,7 +1294,7 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
   // The point in the coordinates of T5 (before the joint moves), T4 and T2.
   const Vec3& y5 = ws.y[f];
   const Vec3 y4 = st.R_tilt * y5;
-  const Vec3 y2 = st.R_mount * y4;  // no bend at f here (HasTangent)
+  const Vec3 y2 = st.R_mount * y4;  // at a bent frame: the point before the bend
   switch (c.type) {
     case EffectType::kJointOffset:
     case EffectType::kJointCompliance:
@@ -1309,6 +1339,11 @@ void EffectModel::CandidateTangents(const Candidate& c, const Eigen::VectorXd& q
     case EffectType::kCameraOffset:
     case EffectType::kGravityTilt:
       break;  // HasTangent is false
+  }
+  if (c.type == EffectType::kLinkLength || c.type == EffectType::kLinkOffset ||
+      c.type == EffectType::kJointOrigin) {
+    const FrameId b = PivotBend(f, ws);
+    if (b >= 0) ThroughBend(f, b, ws, c.num_params, out);
   }
 }
 

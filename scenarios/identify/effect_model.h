@@ -372,9 +372,15 @@ class EffectModel {
   // variable k under the loads L with the payload's share.
   Vec3 LateralTurn(const ConfigLoads& L, int k, FrameId f, const double* kappa, double payload,
                    const Vec3& couple) const;
-  // Whether frame f lies on a link that an active link_bending turns: the bend's pivot (the
+  // How many active link_bendings turn a link that frame f lies on: the bend's pivot (the
   // link's middle) moves when f's translation does (`at_bend`: f's own bend counts too).
-  bool OnBentLink(FrameId f, const std::vector<int>& active, bool at_bend) const;
+  int BendsOnLink(FrameId f, const std::vector<int>& active, bool at_bend) const;
+  // The path frame whose nonzero bend's pivot moves with frame f (f itself or a frame below it
+  // on f's link), -1 when none.
+  FrameId PivotBend(FrameId f, const Workspace& ws) const;
+  // out[0, n): tangents of a parameter at frame f taken with the bend at frame b held rigid,
+  // made exact: the bend turns about the link's middle, which moves by half as much.
+  void ThroughBend(FrameId f, FrameId b, const Workspace& ws, int n, Tangent* out) const;
   Stages FrameStages(FrameId f, const Workspace& ws) const;
   // Whether ChainPoses takes frame f's touched-frame step.
   bool Touched(FrameId f, const Workspace& ws) const;

@@ -88,6 +88,20 @@ void RandomActive(const EffectModel& em, std::mt19937_64& rng, std::vector<int>*
   *theta = Eigen::Map<const Eigen::VectorXd>(t.data(), t.size());
 }
 
+// Whether `cand` moves a translation or origin at a frame whose own link bending is active
+// (the bend's pivot moves with it).
+bool BentAt(const EffectModel& em, const std::vector<int>& active, const Candidate& cand) {
+  if (cand.type != EffectType::kLinkLength && cand.type != EffectType::kLinkOffset &&
+      cand.type != EffectType::kJointOrigin) {
+    return false;
+  }
+  for (int a : active) {
+    const Candidate& b = em.candidates()[a];
+    if (b.type == EffectType::kLinkBending && b.frame == cand.frame) return true;
+  }
+  return false;
+}
+
 bool Near(const Vec3& a, const Vec3& b) { return (a - b).norm() <= kTol * (1.0 + b.norm()); }
 
 class TangentTest : public ::testing::TestWithParam<std::string> {};
@@ -98,7 +112,7 @@ TEST_P(TangentTest, PoseTangentsEqualCentralDifferences) {
   std::mt19937_64 rng(21);
   std::uniform_real_distribution<double> u(-1.5, 1.5);
   EffectModel::Workspace ws = em.MakeWorkspace();
-  int covered = 0, queried = 0;
+  int covered = 0, queried = 0, bent = 0;
   for (int trial = 0; trial < 12; ++trial) {
     Eigen::VectorXd q(em.chain().nq());
     for (int k = 0; k < q.size(); ++k) q[k] = u(rng);
@@ -111,6 +125,7 @@ TEST_P(TangentTest, PoseTangentsEqualCentralDifferences) {
       if (!em.HasTangent(static_cast<int>(c), active)) continue;
       ++covered;
       const Candidate& cand = em.candidates()[c];
+      if (BentAt(em, active, cand)) ++bent;
       std::vector<EffectModel::Tangent> tangent(cand.num_params);
       const lie::SE3 T =
           em.PoseTangents(q, L, active, theta.data(), {static_cast<int>(c)}, ws, tangent.data());
@@ -140,8 +155,10 @@ TEST_P(TangentTest, PoseTangentsEqualCentralDifferences) {
       }
     }
   }
-  // Not vacuous: most queries are analytic (thermal, payload and bent links' translations not).
+  // Not vacuous: most queries are analytic (thermal and payload not), bent links' translations
+  // and origins among them.
   EXPECT_GT(covered, queried * 3 / 4) << covered << " of " << queried;
+  EXPECT_GT(bent, 0);
 }
 
 // Rows of every kind, at random configurations, observed with a camera in front of the arm.
