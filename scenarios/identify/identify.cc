@@ -224,16 +224,20 @@ Fit FollowFinding(const SelectionContext& ctx, const std::vector<int>& candidate
   return SelectEffects(ctx, cur, pool, true, cv);
 }
 
-// For each chosen effect, the best selection without it (cross-validation only). The
-// selections are independent: they run side by side, and are reported in the chosen order.
+// For each chosen effect, the best model without it (cross-validation only): the chosen model
+// with it removed and refitted from the others' values, then forward selection from there over
+// the named candidates with it banned. When the removal alone keeps the held-out error within
+// ambiguity_cv, nothing is searched: the data does not single the effect out beyond noise. The
+// alternatives are independent: they run side by side, and are reported in the chosen order.
 void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candidates,
-                      IdentifyResult* res) {
+                      const Fit& chosen, IdentifyResult* res) {
   if (!ctx.opt.cross_validation) return;
   std::vector<int> pool = Pool(ctx.em, candidates, false, false);
   for (const std::string& u : res->unlocked) pool.push_back(ctx.em.FindCandidate(u));
-  std::vector<int> banned_list;
+  std::vector<size_t> banned_list;  // index into chosen.active
   std::vector<std::vector<int>> rests;
-  for (int banned : res->after.active) {
+  for (size_t e = 0; e < chosen.active.size(); ++e) {
+    const int banned = chosen.active[e];
     if (ctx.em.candidates()[banned].generic_geometry) continue;
     // A wider family of the same kind (the generic error curve beside a transmission error)
     // reproduces it by construction: no competing cause.
@@ -247,34 +251,46 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
       }
       rest.push_back(c);
     }
-    banned_list.push_back(banned);
+    banned_list.push_back(e);
     rests.push_back(std::move(rest));
   }
+  const double close_cv = (1.0 + ctx.opt.ambiguity_cv) * res->cv_after;
   const int n = static_cast<int>(banned_list.size());
   const int threads = TaskThreads(n, static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
   const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
   std::vector<Fit> alts(n);
-  std::vector<double> cvs(n, res->cv_before);
+  std::vector<double> cvs(n);
+  std::vector<int> kept(n);  // chosen effects the alternative keeps (the first of its list)
   ForEachTask(n, threads, [&](int i) {
     std::vector<std::string> quiet;
     const SelectionContext alt_ctx = TaskContext(ctx, task_opt, &quiet);
-    // No swap step: an alternative needs to be found, not polished.
-    alts[i] = SelectEffects(alt_ctx, res->before, rests[i], true, &cvs[i], false);
+    const Fit start = FitWithout(ctx.em, ctx.data, ctx.loads, chosen, banned_list[i], task_opt);
+    cvs[i] = CvError(alt_ctx, start);
+    kept[i] = static_cast<int>(start.active.size());
+    alts[i] = start;
+    if (!start.active.empty() && cvs[i] < close_cv) return;
+    // Forward steps only: the others were chosen beside the banned effect; a replacement is
+    // what is looked for (no swap step either: found, not polished).
+    alts[i] = SelectEffects(alt_ctx, start, rests[i], false, &cvs[i], false);
   });
   for (int i = 0; i < n; ++i) {
     const Fit& alt = alts[i];
     const double cv = cvs[i];
     Alternative a;
-    a.banned = ctx.em.candidates()[banned_list[i]].Name();
+    a.banned = ctx.em.candidates()[chosen.active[banned_list[i]]].Name();
     a.cv = cv;
-    for (int c : alt.active) a.effects.push_back(ctx.em.candidates()[c].Name());
-    std::string names;
-    for (const auto& name : a.effects) names += (names.empty() ? "" : " + ") + name;
-    const bool close = !alt.active.empty() && cv < (1.0 + ctx.opt.ambiguity_cv) * res->cv_after;
+    std::string added;
+    for (size_t k = 0; k < alt.active.size(); ++k) {
+      a.effects.push_back(ctx.em.candidates()[alt.active[k]].Name());
+      if (static_cast<int>(k) >= kept[i]) added += (added.empty() ? "" : " + ") + a.effects.back();
+    }
+    const bool close = !alt.active.empty() && cv < close_cv;
     if (close) res->attribution_unique = false;
     res->steps.push_back(Fmt("without %s: %s reach held-out %.4g sigma^2 (chosen %.4g)%s",
-                             a.banned.c_str(), names.empty() ? "nothing" : names.c_str(), cv,
-                             res->cv_after,
+                             a.banned.c_str(),
+                             added.empty() ? "the other chosen effects"
+                                           : ("the others + " + added).c_str(),
+                             cv, res->cv_after,
                              close ? ": as good, the cause is not singled out" : ""));
     res->alternatives.push_back(std::move(a));
   }
@@ -494,6 +510,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   // The selection ran on the loads at the readings; the chosen model's values are refitted on
   // the loads where its own joint corrections put the arm, and analysed there.
   std::vector<ConfigLoads> shifted;
+  const Fit chosen = cur;  // at the loads the selection used, where the alternatives start
   cur = RefitAtCorrectedLoads(em, data, std::move(cur), opt, &shifted);
   const std::vector<ConfigLoads>& final_loads = shifted.empty() ? loads : shifted;
   res.after = cur;
@@ -508,7 +525,7 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
                         (res.finding.significant ? " (significant)" : ""));
   }
   flush();
-  FindAlternatives(ctx, candidates, &res);
+  FindAlternatives(ctx, candidates, chosen, &res);
   flush();
   FindEquivalents(em, data, final_loads, cur, candidates, opt, &res);
   FindSimplerEquivalents(em, data, final_loads, cur, candidates, opt, &res);
