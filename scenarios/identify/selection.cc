@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <limits>
 
+#include <Eigen/Cholesky>
+
 #include "scenarios/identify/equivalence.h"
 #include "scenarios/identify/parallel.h"
 #include "scenarios/identify/problem.h"
@@ -191,28 +193,66 @@ int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
   return best;
 }
 
+// Whether removing each of `fit`'s effects but the last could pass BIC's test: the sum of
+// squares rises by its linearised increase (the Schur complement of the others, a_e^T
+// Sigma_ee^-1 a_e with Sigma = (J^T J)^-1 at the fit, one factorisation for all) or by as little
+// as half of it, which leaves room for the model's curvature. Those that could are refitted.
+std::vector<char> MayDrop(const SelectionContext& ctx, const Fit& cur) {
+  const int n = static_cast<int>(cur.active.size()) - 1;
+  std::vector<char> may(n, 1);
+  const Problem pr(ctx.em, ctx.data, ctx.loads, cur.active, cur.basis, ctx.opt);
+  const Eigen::VectorXd x = StateOf(pr, cur);
+  const Eigen::MatrixXd J = pr.Jacobian(x);
+  Eigen::MatrixXd A = J.transpose() * J;
+  // Scaled to unit diagonal: the unknowns' units differ by orders of magnitude.
+  const Eigen::VectorXd d = A.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+  A = d.asDiagonal() * A * d.asDiagonal();
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
+  if (ldlt.info() != Eigen::Success) return may;
+  const Eigen::MatrixXd Sigma = ldlt.solve(Eigen::MatrixXd::Identity(A.rows(), A.cols()));
+  if (!Sigma.allFinite()) return may;
+  for (int e = 0, off = 0; e < n; ++e) {
+    const int m = static_cast<int>(pr.basis(e).cols());
+    const Eigen::VectorXd a = x.segment(off, m).cwiseQuotient(d.segment(off, m));
+    const Eigen::LDLT<Eigen::MatrixXd> S(Sigma.block(off, off, m, m));
+    const double rise = a.dot(S.solve(a));
+    off += m;
+    if (S.info() != Eigen::Success || !std::isfinite(rise) || rise < 0.0) continue;
+    may[e] = Bic(cur.rss + 0.5 * rise, cur.num_residuals, cur.num_params - m) - cur.bic <
+             ctx.opt.bic_threshold;
+  }
+  return may;
+}
+
 // Drops earlier effects (all but the last) that neither BIC nor the held-out error needs.
 Fit BackwardStep(const SelectionContext& ctx, Fit cur, double* cv_cur) {
   while (cur.active.size() > 1) {
     size_t worst = 0;
     Fit best_without;
     double best_bic = std::numeric_limits<double>::infinity();
-    // Each removal refitted on its own, side by side; the first lowest BIC wins.
-    const int n = static_cast<int>(cur.active.size()) - 1;
+    // Each removal that may pass refitted on its own, side by side; the first lowest BIC wins.
+    const std::vector<char> may = MayDrop(ctx, cur);
+    std::vector<int> tried;
+    for (size_t e = 0; e < may.size(); ++e) {
+      if (may[e]) tried.push_back(static_cast<int>(e));
+    }
+    if (tried.empty()) break;
+    const int n = static_cast<int>(tried.size());
     const int threads = TaskThreads(n, static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
     const IdentifyOptions task_opt = TaskOptions(ctx.opt, threads);
     std::vector<Fit> without(n);
     const std::string key = ctx.memo ? SelectionMemo::Key(cur) : std::string();
-    ForEachTask(n, threads, [&](int e) {
-      if (ctx.memo && ctx.memo->withouts.Find(KeyWith(key, e), &without[e])) return;
-      without[e] = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, task_opt);
+    ForEachTask(n, threads, [&](int i) {
+      const int e = tried[i];
+      if (ctx.memo && ctx.memo->withouts.Find(KeyWith(key, e), &without[i])) return;
+      without[i] = FitWithout(ctx.em, ctx.data, ctx.loads, cur, e, task_opt);
       if (ctx.memo) {
-        ctx.memo->withouts.Put(KeyWith(key, e), without[e], SelectionMemo::Bytes(without[e]));
+        ctx.memo->withouts.Put(KeyWith(key, e), without[i], SelectionMemo::Bytes(without[i]));
       }
     });
-    for (int e = 0; e < n; ++e) {
-      if (without[e].bic < best_bic) {
-        best_bic = without[e].bic, best_without = std::move(without[e]), worst = e;
+    for (int i = 0; i < n; ++i) {
+      if (without[i].bic < best_bic) {
+        best_bic = without[i].bic, best_without = std::move(without[i]), worst = tried[i];
       }
     }
     if (!std::isfinite(best_bic) || best_bic - cur.bic >= ctx.opt.bic_threshold) break;
