@@ -500,9 +500,17 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
               "kept: the cap, not the data, ends the selection",
               opt.max_effects));
       capped = true;
-    } else {
+    } else if (block.active.size() > cur.active.size()) {
       cur = std::move(block);
       cv = cv_block;
+      // The block changes what is left: a named effect that stood in for geometry may go, one
+      // the geometry hid may now lower the held-out error (no swap step: that would trade
+      // named effects for joint origins).
+      res.steps.push_back("after the complete geometry: the named effects again");
+      std::vector<int> again = Pool(em, candidates, false, false);
+      for (const std::string& u : res.unlocked) again.push_back(em.FindCandidate(u));
+      again.insert(again.end(), after_named.begin(), after_named.end());
+      cur = SelectEffects(ctx, cur, again, true, &cv, /*swap=*/false);
     }
   }
   cur = PreferSimpler(ctx, candidates, std::move(cur), &cv);
