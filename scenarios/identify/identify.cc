@@ -286,11 +286,12 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
     }
     const bool close = !alt.active.empty() && cv < close_cv;
     if (close) res->attribution_unique = false;
+    const std::string what = alt.active.empty() ? "nothing"
+                             : kept[i] == 0     ? added
+                             : added.empty()    ? "the other chosen effects"
+                                                : "the others + " + added;
     res->steps.push_back(Fmt("without %s: %s reach held-out %.4g sigma^2 (chosen %.4g)%s",
-                             a.banned.c_str(),
-                             added.empty() ? "the other chosen effects"
-                                           : ("the others + " + added).c_str(),
-                             cv, res->cv_after,
+                             a.banned.c_str(), what.c_str(), cv, res->cv_after,
                              close ? ": as good, the cause is not singled out" : ""));
     res->alternatives.push_back(std::move(a));
   }

@@ -1,12 +1,11 @@
 #include "scenarios/identify/selection.h"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
 #include <limits>
-
-#include <Eigen/Cholesky>
 
 #include "scenarios/identify/equivalence.h"
 #include "scenarios/identify/parallel.h"
