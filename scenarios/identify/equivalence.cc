@@ -83,6 +83,27 @@ std::vector<Eigen::MatrixXd> CandidateJacobians(const EffectModel& em, const Dat
   return pr.CandidateColumns(StateOf(pr, fit), cs);
 }
 
+void ForEachCandidateJacobian(const EffectModel& em, const DataSet& data,
+                              const std::vector<ConfigLoads>& loads, const Fit& fit,
+                              const std::vector<int>& cs, const IdentifyOptions& opt,
+                              double max_bytes,
+                              const std::function<void(size_t, const Eigen::MatrixXd&)>& fn) {
+  const double column_bytes = sizeof(double) * static_cast<double>(fit.num_residuals);
+  for (size_t begin = 0; begin < cs.size();) {
+    std::vector<int> batch;
+    double bytes = 0.0;
+    for (size_t i = begin; i < cs.size(); ++i) {
+      const double more = column_bytes * em.candidates()[cs[i]].num_params;
+      if (!batch.empty() && bytes + more > max_bytes) break;
+      batch.push_back(cs[i]);
+      bytes += more;
+    }
+    const std::vector<Eigen::MatrixXd> J = CandidateJacobians(em, data, loads, fit, batch, opt);
+    for (size_t j = 0; j < batch.size(); ++j) fn(begin + j, J[j]);
+    begin += batch.size();
+  }
+}
+
 namespace {
 
 // `fit` without its e-th effect, the others at their values (no refit).
@@ -149,6 +170,7 @@ void FindEquivalents(const EffectModel& em, const DataSet& data,
     set.members.push_back(Member(em, ce, Re, d));
     const bool generic = em.candidates()[ce].generic_geometry;
     if (d.norm() > 0) {
+      std::vector<int> cs;
       for (int c : candidates) {
         if (c == ce || std::find(fit.active.begin(), fit.active.end(), c) != fit.active.end()) {
           continue;
@@ -167,11 +189,18 @@ void FindEquivalents(const EffectModel& em, const DataSet& data,
              em.candidates()[c].type == EffectType::kJointErrorCurve)) {
           continue;
         }
-        const Eigen::MatrixXd Rc = proj.Apply(CandidateJacobian(em, data, loads, rest, c, opt));
-        if (!(Rc.norm() > 0)) continue;
-        const Eigen::VectorXd pd = Rc * Rc.colPivHouseholderQr().solve(d);
-        if (pd.norm() / d.norm() > opt.ambiguity_cos) set.members.push_back(Member(em, c, Rc, d));
+        cs.push_back(c);
       }
+      // Their columns a batch at a time (each candidate's are the same bits alone).
+      ForEachCandidateJacobian(em, data, loads, rest, cs, opt, kCandidateColumnBytes,
+                               [&](size_t i, const Eigen::MatrixXd& Jc) {
+                                 const Eigen::MatrixXd Rc = proj.Apply(Jc);
+                                 if (!(Rc.norm() > 0)) return;
+                                 const Eigen::VectorXd pd = Rc * Rc.colPivHouseholderQr().solve(d);
+                                 if (pd.norm() / d.norm() > opt.ambiguity_cos) {
+                                   set.members.push_back(Member(em, cs[i], Rc, d));
+                                 }
+                               });
     }
     std::string name;
     std::vector<std::string> names;
@@ -265,25 +294,31 @@ void FindUnidentifiable(const EffectModel& em, const DataSet& data,
                         const std::vector<int>& candidates, const IdentifyOptions& opt,
                         IdentifyResult* result) {
   const Projector proj(FitJacobian(em, data, loads, fit, opt));
+  std::vector<int> cs;
   for (int c : candidates) {
     if (std::find(fit.active.begin(), fit.active.end(), c) != fit.active.end()) continue;
     bool member = false;
     for (const EquivalenceSet& s : result->equivalence) {
       for (const EquivalentMember& m : s.members) member = member || m.candidate == c;
     }
-    if (member) continue;
-    double rel = 0.0;
-    const Eigen::MatrixXd B =
-        ObservableBasis(CandidateJacobian(em, data, loads, fit, c, opt), proj, opt.rank_tol, &rel);
-    if (B.cols() > 0) continue;
-    result->unidentifiable.push_back(em.candidates()[c].Name());
-    char line[256];
-    std::snprintf(line, sizeof(line),
-                  "%s: unidentifiable (%.2g of its sensitivity lies outside the chosen effects "
-                  "and group points)",
-                  em.candidates()[c].Name().c_str(), rel);
-    result->steps.push_back(line);
+    if (!member) cs.push_back(c);
   }
+  // Their columns a batch at a time (each candidate's are the same bits alone).
+  ForEachCandidateJacobian(
+      em, data, loads, fit, cs, opt, kCandidateColumnBytes,
+      [&](size_t i, const Eigen::MatrixXd& Jc) {
+        const int c = cs[i];
+        double rel = 0.0;
+        const Eigen::MatrixXd B = ObservableBasis(Jc, proj, opt.rank_tol, &rel);
+        if (B.cols() > 0) return;
+        result->unidentifiable.push_back(em.candidates()[c].Name());
+        char line[256];
+        std::snprintf(line, sizeof(line),
+                      "%s: unidentifiable (%.2g of its sensitivity lies outside the chosen effects "
+                      "and group points)",
+                      em.candidates()[c].Name().c_str(), rel);
+        result->steps.push_back(line);
+      });
 }
 
 }  // namespace flexbench::identify

@@ -14,6 +14,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <Eigen/QR>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -52,6 +53,16 @@ std::vector<Eigen::MatrixXd> CandidateJacobians(const EffectModel& em, const Dat
                                                 const std::vector<ConfigLoads>& loads,
                                                 const Fit& fit, const std::vector<int>& cs,
                                                 const IdentifyOptions& opt);
+// The same handed to fn(i, columns of cs[i]) in order, computed in batches of at most
+// `max_bytes` of columns (one pass over the rows per batch), so memory does not grow with the
+// number of candidates times the rows.
+void ForEachCandidateJacobian(const EffectModel& em, const DataSet& data,
+                              const std::vector<ConfigLoads>& loads, const Fit& fit,
+                              const std::vector<int>& cs, const IdentifyOptions& opt,
+                              double max_bytes,
+                              const std::function<void(size_t, const Eigen::MatrixXd&)>& fn);
+// The most candidates' columns take at once (more candidates: more passes).
+inline constexpr double kCandidateColumnBytes = 64.0 * (1 << 20);
 
 // Equivalence sets of the chosen effects of `fit` among `candidates`; fills
 // result->equivalence and result->indistinguishable, and the effects' display names.

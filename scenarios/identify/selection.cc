@@ -14,9 +14,6 @@
 namespace flexbench::identify {
 namespace {
 
-// The most the screened candidates' columns take at once (more candidates: more passes).
-constexpr double kScreenColumnBytes = 64.0 * (1 << 20);
-
 bool Contains(const std::vector<int>& v, int x) {
   return std::find(v.begin(), v.end(), x) != v.end();
 }
@@ -74,7 +71,7 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
   const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
   const Projector proj(J_cur);
   const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
-  // The candidates' columns in batches of at most kScreenColumnBytes (a candidate's columns do
+  // The candidates' columns in batches of at most kCandidateColumnBytes (a candidate's columns do
   // not depend on which others are computed with it).
   const double column_bytes = sizeof(double) * static_cast<double>(cur.num_residuals);
   for (size_t begin = 0; begin < todo.size();) {
@@ -82,7 +79,7 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
     double bytes = 0.0;
     for (size_t i = begin; i < todo.size(); ++i) {
       const double more = column_bytes * ctx.em.candidates()[screened[todo[i]]].num_params;
-      if (!cs.empty() && bytes + more > kScreenColumnBytes) break;
+      if (!cs.empty() && bytes + more > kCandidateColumnBytes) break;
       cs.push_back(screened[todo[i]]);
       bytes += more;
     }
