@@ -482,7 +482,7 @@ std::string FormatCalibrationCsv(const DataSet& data, const std::vector<std::str
       for (int k = 0; k < 3; ++k) out += ",", put(p[k]);
     }
     if (type == ObservationType::kPose) {
-      const Eigen::Quaterniond qt(o.frame >= 0 ? o.R_frame : o.R_base);
+      const Eigen::Quaterniond qt(o.frame >= 0 ? o.R_frame.get() : o.R_base.get());
       for (double v : {qt.w(), qt.x(), qt.y(), qt.z()}) out += ",", put(v);
     }
     if (type == ObservationType::kPixel) out += ",", put(o.uv[0]), out += ",", put(o.uv[1]);

@@ -84,7 +84,7 @@ Vec3 MeasuredPoint(const Observation& o, const std::vector<lie::SE3>& T_base_fra
   return o.frame < 0 ? o.p_base : T_base_frame[o.frame] * o.p_frame;
 }
 Mat3 MeasuredRotation(const Observation& o, const std::vector<lie::SE3>& T_base_frame) {
-  return o.frame < 0 ? o.R_base : T_base_frame[o.frame].rotation() * o.R_frame;
+  return o.frame < 0 ? o.R_base.get() : T_base_frame[o.frame].rotation() * o.R_frame.get();
 }
 
 // The marker's point: the predicted frame's origin moved by the marker's fitted offset, if any.
@@ -383,7 +383,7 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
     // Log(Exp(-a) Exp(r)) = r - Jl^-1(r) a to first order.
     const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active_, theta.data(), ws, o.point);
     const Vec3 r = lie::SO3Log(MeasuredRotation(o, T_base_frame).transpose() * T.rotation());
-    J->block<3, 6>(offset_[i] + 3, col) = -lie::SO3LeftJacobianInverse(r) * o.R_frame.transpose() *
+    J->block<3, 6>(offset_[i] + 3, col) = -lie::SO3LeftJacobianInverse(r) * o.R_frame.get().transpose() *
                                           J_tangent_xi[o.frame].bottomRows<3>() /
                                           opt_.rotation_std_rad;
   }
