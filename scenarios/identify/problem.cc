@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
+#include <stdexcept>
 
 #include "estimators/lie/so3.h"
 #include "scenarios/identify/parallel.h"
@@ -103,8 +104,11 @@ Vec6 PriorStd(const MeasurementFrame& f) {
 
 Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                  const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
-                 const IdentifyOptions& opt)
-    : em_(em), data_(data), loads_(loads), active_(active), opt_(opt) {
+                 const IdentifyOptions& opt, const std::vector<int>* rows)
+    : em_(em), data_(data), loads_(loads), rows_(rows), active_(active), opt_(opt) {
+  if (rows && !data.groups.empty()) {
+    throw std::invalid_argument("Problem: a row subset of data with groups needs Subset");
+  }
   basis_.resize(active.size());
   for (size_t e = 0; e < active.size(); ++e) {
     const int np = em.candidates()[active[e]].num_params;
@@ -113,11 +117,11 @@ Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<C
     num_alpha_ += static_cast<int>(basis_[e].cols());
     num_theta_ += np;
   }
-  offset_.reserve(data.rows.size());
+  offset_.reserve(num_rows());
   int o = 0;
-  for (const Observation& r : data.rows) {
+  for (size_t i = 0; i < num_rows(); ++i) {
     offset_.push_back(o);
-    o += RowDim(r);
+    o += RowDim(row(i));
   }
   rows_dim_ = o;
   prior_row_.assign(data.frames.size(), -1);
@@ -178,16 +182,16 @@ Eigen::VectorXd Problem::Alpha(const Eigen::VectorXd& theta) const {
 }
 
 int Problem::threads() const {
-  return PassThreads(static_cast<int>(data_.rows.size()), opt_.threads);
+  return PassThreads(static_cast<int>(num_rows()), opt_.threads);
 }
 
 void Problem::Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) const {
-  T->resize(data_.rows.size());
-  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+  T->resize(num_rows());
+  ForEachRowChunk(static_cast<int>(num_rows()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int r = begin; r < end; ++r) {
-      const Observation& o = data_.rows[r];
-      (*T)[r] = em_.PredictPose(o.q, loads_[r], active_, theta.data(), ws, o.point);
+      const Observation& o = row(r);
+      (*T)[r] = em_.PredictPose(o.q, loads(r), active_, theta.data(), ws, o.point);
     }
   });
 }
@@ -200,11 +204,11 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
   const auto group_point = [&](int g) -> Vec3 { return x.segment<3>(num_alpha_ + 3 * g); };
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
-  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+  ForEachRowChunk(static_cast<int>(num_rows()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int i = begin; i < end; ++i) {
-      const Observation& o = data_.rows[i];
-      const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws, o.point);
+      const Observation& o = row(i);
+      const lie::SE3 T = em_.PredictPose(o.q, loads(i), active, theta.data(), ws, o.point);
       const int k = offset_[i];
       const Vec3 p = MarkerPoint(T, d_marker, o.point);
       switch (o.type) {
@@ -294,19 +298,19 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
                                         const std::vector<int>& cs,
                                         std::vector<lie::SE3>* poses) const {
   Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), NumTheta(em_, cs));
-  if (poses) poses->resize(data_.rows.size());
+  if (poses) poses->resize(num_rows());
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
-  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+  ForEachRowChunk(static_cast<int>(num_rows()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     std::vector<EffectModel::Tangent> tangent(D.cols());
     RowMap G(3, 6);
     for (int i = begin; i < end; ++i) {
-      const Observation& o = data_.rows[i];
+      const Observation& o = row(i);
       const lie::SE3 T =
-          em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data(), o.point);
+          em_.PoseTangents(o.q, loads(i), active_, theta.data(), cs, ws, tangent.data(), o.point);
       if (poses) (*poses)[i] = T;
       if (!d_marker.empty() && o.type != ObservationType::kPixel) {
         // The marker turns with its frame: d p += w x (R d).
@@ -341,9 +345,9 @@ void Problem::NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::Vector
 }
 
 void Problem::PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
-  for (size_t r = 0; r < data_.rows.size(); ++r) {
-    if (data_.rows[r].type == ObservationType::kGroup) {
-      J->block<3, 3>(offset_[r], num_alpha_ + 3 * data_.rows[r].group) =
+  for (size_t r = 0; r < num_rows(); ++r) {
+    if (row(r).type == ObservationType::kGroup) {
+      J->block<3, 3>(offset_[r], num_alpha_ + 3 * row(r).group) =
           -Mat3::Identity() / opt_.point_std_m;
     }
   }
@@ -368,8 +372,8 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
   }
   const Eigen::VectorXd theta = Theta(x);
   EffectModel::Workspace ws = em_.MakeWorkspace();
-  for (size_t i = 0; i < data_.rows.size(); ++i) {
-    const Observation& o = data_.rows[i];
+  for (size_t i = 0; i < num_rows(); ++i) {
+    const Observation& o = row(i);
     if (o.frame < 0) continue;
     // The measured point T_base_frame Exp(d) p_frame moves by R (d_rho - [p_frame]x d_theta),
     // d = Jr(xi) d_xi; the residual is prediction minus measurement.
@@ -381,7 +385,7 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
     if (o.type != ObservationType::kPose) continue;
     // The measured orientation R R_frame turns to R_meas Exp(R_frame^T d_theta), and
     // Log(Exp(-a) Exp(r)) = r - Jl^-1(r) a to first order.
-    const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active_, theta.data(), ws, o.point);
+    const lie::SE3 T = em_.PredictPose(o.q, loads(i), active_, theta.data(), ws, o.point);
     const Vec3 r = lie::SO3Log(MeasuredRotation(o, T_base_frame).transpose() * T.rotation());
     J->block<3, 6>(offset_[i] + 3, col) = -lie::SO3LeftJacobianInverse(r) * o.R_frame.get().transpose() *
                                           J_tangent_xi[o.frame].bottomRows<3>() /
@@ -400,9 +404,9 @@ void Problem::OffsetColumns(const Eigen::VectorXd& x, const std::vector<lie::SE3
   std::vector<lie::SE3> predicted;
   if (poses.empty()) Poses(Theta(x), &predicted);
   const std::vector<lie::SE3>& T = poses.empty() ? predicted : poses;
-  for (size_t i = 0; i < data_.rows.size(); ++i) {
-    const int col = offset_col(data_.rows[i].point);
-    if (col < 0 || data_.rows[i].type == ObservationType::kPixel) continue;
+  for (size_t i = 0; i < num_rows(); ++i) {
+    const int col = offset_col(row(i).point);
+    if (col < 0 || row(i).type == ObservationType::kPixel) continue;
     // p = T d: d p / d d = R (a pose row's orientation does not depend on it).
     J->block<3, 3>(offset_[i], col) = T[i].rotation() / opt_.point_std_m;
   }
@@ -543,8 +547,9 @@ Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
 
 Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
-               const Eigen::VectorXd& init, const IdentifyOptions& opt) {
-  const Problem pr(em, data, loads, active, basis, opt);
+               const Eigen::VectorXd& init, const IdentifyOptions& opt,
+               const std::vector<int>* rows) {
+  const Problem pr(em, data, loads, active, basis, opt, rows);
   const int G = static_cast<int>(data.groups.size());
   const int nt = pr.num_theta();
   Eigen::VectorXd theta0 = Eigen::VectorXd::Zero(nt);

@@ -44,9 +44,11 @@ lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vecto
 class Problem {
  public:
   // `basis`: per active effect its B_e (num_params x m_e); empty: identity for all.
+  // `rows`: the rows of `data` (and `loads`) it fits, read in place (a cross-validation fold's
+  // rows, not copied); null: all. Only for data without groups (a subset renumbers them).
   Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
           const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
-          const IdentifyOptions& opt);
+          const IdentifyOptions& opt, const std::vector<int>* rows = nullptr);
 
   int num_alpha() const { return num_alpha_; }
   int num_theta() const { return num_theta_; }
@@ -69,6 +71,10 @@ class Problem {
   // Each marker's offset at state x (zero where declared); empty when none is unknown.
   std::vector<Vec3> MarkerOffsets(const Eigen::VectorXd& x) const;
   int row_offset(size_t r) const { return offset_[r]; }
+  // The rows it fits: the i-th one and its loads.
+  size_t num_rows() const { return rows_ ? rows_->size() : data_.rows.size(); }
+  const Observation& row(size_t i) const { return data_.rows[RowIndex(i)]; }
+  const ConfigLoads& loads(size_t i) const { return loads_[RowIndex(i)]; }
   const Eigen::MatrixXd& basis(size_t e) const { return basis_[e]; }
   const DataSet& data() const { return data_; }
 
@@ -96,6 +102,7 @@ class Problem {
 
  private:
   int threads() const;  // for a pass over the rows (parallel.h)
+  size_t RowIndex(size_t i) const { return rows_ ? static_cast<size_t>((*rows_)[i]) : i; }
   Eigen::VectorXd ResidualsAt(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                               const std::vector<int>& active) const;
   // Central-difference columns of active effect e (its alpha directions) into J.
@@ -119,6 +126,7 @@ class Problem {
   const EffectModel& em_;
   const DataSet& data_;
   const std::vector<ConfigLoads>& loads_;
+  const std::vector<int>* rows_;
   std::vector<int> active_;
   std::vector<Eigen::MatrixXd> basis_;
   const IdentifyOptions& opt_;
@@ -143,10 +151,12 @@ Fit MakeFit(const Problem& pr, const std::vector<int>& active, const Eigen::Vect
             double rss);
 
 // Fits `active` (in the directions of `basis`, empty = all) plus the group points by
-// Levenberg-Marquardt from `init` (theta; may be empty or shorter).
+// Levenberg-Marquardt from `init` (theta; may be empty or shorter), on the rows `rows` of `data`
+// (null: all; as Problem's).
 Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
-               const Eigen::VectorXd& init, const IdentifyOptions& options);
+               const Eigen::VectorXd& init, const IdentifyOptions& options,
+               const std::vector<int>* rows = nullptr);
 
 // Screening (issue 21: a screening fit per candidate was most of identifying 10,000 rows): c
 // added to `fit` by Levenberg-Marquardt's first step from fit's state with the columns
