@@ -295,9 +295,17 @@ void RowTangentMap(const Observation& o, const lie::SE3& T, const Mat3& R_base_m
 }  // namespace
 
 Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
-                                        const std::vector<int>& cs,
-                                        std::vector<lie::SE3>* poses) const {
+                                        const std::vector<int>& cs) const {
   Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), NumTheta(em_, cs));
+  std::vector<double*> cols(D.cols());
+  for (Eigen::Index k = 0; k < D.cols(); ++k) cols[k] = D.col(k).data();
+  TangentColumns(x, theta, cs, cols);
+  return D;
+}
+
+void Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                             const std::vector<int>& cs, const std::vector<double*>& cols,
+                             std::vector<lie::SE3>* poses) const {
   if (poses) poses->resize(num_rows());
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
@@ -305,7 +313,7 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
       data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
   ForEachRowChunk(static_cast<int>(num_rows()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
-    std::vector<EffectModel::Tangent> tangent(D.cols());
+    std::vector<EffectModel::Tangent> tangent(cols.size());
     RowMap G(3, 6);
     for (int i = begin; i < end; ++i) {
       const Observation& o = row(i);
@@ -320,16 +328,15 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
       const Mat3 R_base_meas =
           o.type == ObservationType::kPose ? MeasuredRotation(o, T_base_frame) : Mat3::Identity();
       RowTangentMap(o, T, R_base_meas, data_.camera, T_base_cam, opt_, &G);
-      for (Eigen::Index k = 0; k < D.cols(); ++k) {
+      for (size_t k = 0; k < cols.size(); ++k) {
         // Through a fixed-size vector: Eigen picks its summation order by the destination's
         // alignment, and a column must not depend on which others are computed with it.
         Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> dr =
             G.leftCols<3>() * tangent[k].w + G.rightCols<3>() * tangent[k].dp;
-        D.block(offset_[i], k, G.rows(), 1) = dr;
+        Eigen::Map<Eigen::VectorXd>(cols[k] + offset_[i], G.rows()) = dr;
       }
     }
   });
-  return D;
 }
 
 void Problem::NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta, size_t e,
@@ -419,15 +426,40 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   for (int c : active_) {
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
+  // An effect fitted in all its directions takes its tangent columns straight into J (no copy
+  // of them in D); the others go through D and their basis.
+  const std::vector<char> direct = DirectColumns();
+  int reduced = 0;
+  for (size_t e = 0; e < active_.size(); ++e) {
+    if (em_.HasTangent(active_[e], active_) && !direct[e]) reduced += basis_[e].rows();
+  }
+  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), reduced);
+  std::vector<double*> cols;
+  int col = 0, d = 0;
+  for (size_t e = 0; e < active_.size(); ++e) {
+    if (!em_.HasTangent(active_[e], active_)) {
+      col += static_cast<int>(basis_[e].cols());
+      continue;
+    }
+    for (Eigen::Index k = 0; k < basis_[e].rows(); ++k) {
+      cols.push_back(direct[e] ? J.col(col + k).data() : D.col(d++).data());
+    }
+    col += static_cast<int>(basis_[e].cols());
+  }
   // The tangent pass predicts every row's pose (the same operations as Poses): the offsets'
   // columns take them from there.
   std::vector<lie::SE3> poses;
-  const Eigen::MatrixXd D =
-      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(x, theta, analytic, &poses);
-  int col = 0, t = 0, d = 0;
+  if (!analytic.empty()) {
+    TangentColumns(x, theta, analytic, cols, num_offsets_ > 0 ? &poses : nullptr);
+  }
+  int t = 0;
+  col = 0, d = 0;
   for (size_t e = 0; e < active_.size(); ++e) {
     const Eigen::MatrixXd& B = basis_[e];
-    if (em_.HasTangent(active_[e], active_)) {
+    if (em_.HasTangent(active_[e], active_) && direct[e]) {
+      // Adding +0 turns -0 into +0 as the product with the identity did: the same bits.
+      J.middleCols(col, B.cols()).array() += 0.0;
+    } else if (em_.HasTangent(active_[e], active_)) {
       J.middleCols(col, B.cols()).noalias() = D.middleCols(d, B.rows()) * B;
       d += static_cast<int>(B.rows());
     } else {
@@ -440,6 +472,19 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   FrameColumns(x, &J);
   OffsetColumns(x, poses, &J);
   return J;
+}
+
+std::vector<char> Problem::DirectColumns() const {
+  std::vector<char> direct(active_.size(), 0);
+  for (size_t e = 0; e < active_.size(); ++e) {
+    const Eigen::MatrixXd& B = basis_[e];
+    // Eigen multiplies coefficient by coefficient below this size (EIGEN_GEMM_TO_COEFFBASED_
+    // THRESHOLD), which keeps a -0 the identity's product elsewhere turns into +0.
+    const bool gemm = num_residuals() + 2 * B.cols() >= 20;
+    direct[e] = gemm && B.rows() == B.cols() &&
+                B == Eigen::MatrixXd::Identity(B.rows(), B.cols());
+  }
+  return direct;
 }
 
 Eigen::MatrixXd Problem::NumericJacobian(const Eigen::VectorXd& x) const {
@@ -469,19 +514,17 @@ std::vector<Eigen::MatrixXd> Problem::CandidateColumns(const Eigen::VectorXd& x,
   for (int c : cs) {
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
-  const Eigen::MatrixXd D =
-      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(x, Theta(x), analytic);
-  std::vector<Eigen::MatrixXd> out;
-  out.reserve(cs.size());
-  int d = 0;
-  for (int c : cs) {
-    if (em_.HasTangent(c, active_)) {
-      const int np = em_.candidates()[c].num_params;
-      out.push_back(D.middleCols(d, np));
-      d += np;
-    } else {
-      out.push_back(NumericCandidateColumns(x, c));
-    }
+  // The analytic columns go straight into their candidate's matrix (no copy of them all).
+  std::vector<Eigen::MatrixXd> out(cs.size());
+  std::vector<double*> cols;
+  for (size_t i = 0; i < cs.size(); ++i) {
+    if (!em_.HasTangent(cs[i], active_)) continue;
+    out[i] = Eigen::MatrixXd::Zero(num_residuals(), em_.candidates()[cs[i]].num_params);
+    for (Eigen::Index k = 0; k < out[i].cols(); ++k) cols.push_back(out[i].col(k).data());
+  }
+  if (!analytic.empty()) TangentColumns(x, Theta(x), analytic, cols);
+  for (size_t i = 0; i < cs.size(); ++i) {
+    if (!em_.HasTangent(cs[i], active_)) out[i] = NumericCandidateColumns(x, cs[i]);
   }
   return out;
 }

@@ -109,11 +109,19 @@ class Problem {
   void NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta, size_t e,
                             int col, int t, Eigen::MatrixXd* J) const;
   // Analytic d residuals / d theta for the full parameters of candidates `cs` (concatenated),
-  // at theta of the active effects; the distance rows are zero.
+  // at theta of the active effects, into the columns `cols` (one per parameter, num_residuals()
+  // entries each, zero beforehand; the distance rows stay zero): where the caller keeps them,
+  // so that no second copy of the columns is made.
   // `poses` (optional): each row's predicted pose, which the pass computes anyway.
+  void TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                      const std::vector<int>& cs, const std::vector<double*>& cols,
+                      std::vector<lie::SE3>* poses = nullptr) const;
+  // The same into one matrix (the parameters' columns in order).
   Eigen::MatrixXd TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
-                                 const std::vector<int>& cs,
-                                 std::vector<lie::SE3>* poses = nullptr) const;
+                                 const std::vector<int>& cs) const;
+  // Per active effect: whether its analytic columns go straight into the Jacobian (its basis is
+  // the identity, so the product with it would only copy them).
+  std::vector<char> DirectColumns() const;
   // The group-point and distance columns (exact) into J.
   void PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
   // The frame-pose columns of the rows measured in frames and of the priors (exact) into J.
