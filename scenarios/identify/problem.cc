@@ -305,17 +305,19 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
 
 void Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                              const std::vector<int>& cs, const std::vector<double*>& cols,
-                             std::vector<lie::SE3>* poses) const {
+                             std::vector<lie::SE3>* poses, int row_begin, int row_end,
+                             int base) const {
+  if (row_end < 0) row_end = static_cast<int>(num_rows());
   if (poses) poses->resize(num_rows());
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
-  ForEachRowChunk(static_cast<int>(num_rows()), threads(), [&](int begin, int end) {
+  ForEachRowChunk(row_end - row_begin, threads(), [&](int chunk_begin, int chunk_end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     std::vector<EffectModel::Tangent> tangent(cols.size());
     RowMap G(3, 6);
-    for (int i = begin; i < end; ++i) {
+    for (int i = row_begin + chunk_begin; i < row_begin + chunk_end; ++i) {
       const Observation& o = row(i);
       const lie::SE3 T =
           em_.PoseTangents(o.q, loads(i), active_, theta.data(), cs, ws, tangent.data(), o.point);
@@ -333,7 +335,7 @@ void Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& th
         // alignment, and a column must not depend on which others are computed with it.
         Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> dr =
             G.leftCols<3>() * tangent[k].w + G.rightCols<3>() * tangent[k].dp;
-        Eigen::Map<Eigen::VectorXd>(cols[k] + offset_[i], G.rows()) = dr;
+        Eigen::Map<Eigen::VectorXd>(cols[k] + offset_[i] - base, G.rows()) = dr;
       }
     }
   });
@@ -427,42 +429,21 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
   // An effect fitted in all its directions takes its tangent columns straight into J (no copy
-  // of them in D); the others go through D and their basis.
+  // of them); the others go through their full-parameter columns and their basis.
   const std::vector<char> direct = DirectColumns();
-  int reduced = 0;
-  for (size_t e = 0; e < active_.size(); ++e) {
-    if (em_.HasTangent(active_[e], active_) && !direct[e]) reduced += basis_[e].rows();
-  }
-  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), reduced);
-  std::vector<double*> cols;
-  int col = 0, d = 0;
-  for (size_t e = 0; e < active_.size(); ++e) {
-    if (!em_.HasTangent(active_[e], active_)) {
-      col += static_cast<int>(basis_[e].cols());
-      continue;
-    }
-    for (Eigen::Index k = 0; k < basis_[e].rows(); ++k) {
-      cols.push_back(direct[e] ? J.col(col + k).data() : D.col(d++).data());
-    }
-    col += static_cast<int>(basis_[e].cols());
-  }
   // The tangent pass predicts every row's pose (the same operations as Poses): the offsets'
   // columns take them from there.
   std::vector<lie::SE3> poses;
   if (!analytic.empty()) {
-    TangentColumns(x, theta, analytic, cols, num_offsets_ > 0 ? &poses : nullptr);
+    ReducedColumns(x, theta, analytic, direct, num_offsets_ > 0 ? &poses : nullptr, &J);
   }
-  int t = 0;
-  col = 0, d = 0;
+  int col = 0, t = 0;
   for (size_t e = 0; e < active_.size(); ++e) {
     const Eigen::MatrixXd& B = basis_[e];
     if (em_.HasTangent(active_[e], active_) && direct[e]) {
       // Adding +0 turns -0 into +0 as the product with the identity did: the same bits.
       J.middleCols(col, B.cols()).array() += 0.0;
-    } else if (em_.HasTangent(active_[e], active_)) {
-      J.middleCols(col, B.cols()).noalias() = D.middleCols(d, B.rows()) * B;
-      d += static_cast<int>(B.rows());
-    } else {
+    } else if (!em_.HasTangent(active_[e], active_)) {
       NumericEffectColumns(x, theta, e, col, t, &J);
     }
     col += static_cast<int>(B.cols());
@@ -472,6 +453,45 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   FrameColumns(x, &J);
   OffsetColumns(x, poses, &J);
   return J;
+}
+
+void Problem::ReducedColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                             const std::vector<int>& analytic, const std::vector<char>& direct,
+                             std::vector<lie::SE3>* poses, Eigen::MatrixXd* J) const {
+  int reduced = 0;
+  for (size_t e = 0; e < active_.size(); ++e) {
+    if (em_.HasTangent(active_[e], active_) && !direct[e]) reduced += basis_[e].rows();
+  }
+  // Blocks of kBlockRows rows (the last takes the rest), or all rows at once when that is one
+  // block: then the product spans the distance and prior rows too, as Eigen sized it before.
+  constexpr int kBlockRows = 16384;
+  const int n = static_cast<int>(num_rows());
+  const bool whole = reduced == 0 || n < 2 * kBlockRows;
+  for (int begin = 0; begin < n;) {
+    const int end = whole || n - begin < 2 * kBlockRows ? n : begin + kBlockRows;
+    const int r0 = whole ? 0 : offset_[begin];
+    const int r1 = whole ? num_residuals() : (end < n ? offset_[end] : rows_dim_);
+    Eigen::MatrixXd D = Eigen::MatrixXd::Zero(r1 - r0, reduced);
+    std::vector<double*> cols;
+    int col = 0, d = 0;
+    for (size_t e = 0; e < active_.size(); ++e) {
+      for (Eigen::Index k = 0; em_.HasTangent(active_[e], active_) && k < basis_[e].rows(); ++k) {
+        cols.push_back(direct[e] ? J->col(col + k).data() + r0 : D.col(d++).data());
+      }
+      col += static_cast<int>(basis_[e].cols());
+    }
+    TangentColumns(x, theta, analytic, cols, poses, begin, end, r0);
+    col = 0, d = 0;
+    for (size_t e = 0; e < active_.size(); ++e) {
+      const Eigen::MatrixXd& B = basis_[e];
+      if (em_.HasTangent(active_[e], active_) && !direct[e]) {
+        J->block(r0, col, r1 - r0, B.cols()).noalias() = D.middleCols(d, B.rows()) * B;
+        d += static_cast<int>(B.rows());
+      }
+      col += static_cast<int>(B.cols());
+    }
+    begin = end;
+  }
 }
 
 std::vector<char> Problem::DirectColumns() const {

@@ -113,15 +113,24 @@ class Problem {
   // entries each, zero beforehand; the distance rows stay zero): where the caller keeps them,
   // so that no second copy of the columns is made.
   // `poses` (optional): each row's predicted pose, which the pass computes anyway.
+  // Of the rows [row_begin, row_end) only (row_end -1: all), their entries at their residual
+  // offset less `base` (a block of rows in a buffer of its own).
   void TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                       const std::vector<int>& cs, const std::vector<double*>& cols,
-                      std::vector<lie::SE3>* poses = nullptr) const;
+                      std::vector<lie::SE3>* poses = nullptr, int row_begin = 0,
+                      int row_end = -1, int base = 0) const;
   // The same into one matrix (the parameters' columns in order).
   Eigen::MatrixXd TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                                  const std::vector<int>& cs) const;
   // Per active effect: whether its analytic columns go straight into the Jacobian (its basis is
   // the identity, so the product with it would only copy them).
   std::vector<char> DirectColumns() const;
+  // The analytic columns of effects with a reduced basis into J, a block of rows at a time
+  // through a buffer of that block's full-parameter columns (D B per block: no copy of all the
+  // rows' columns); `poses` as TangentColumns'.
+  void ReducedColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                      const std::vector<int>& analytic, const std::vector<char>& direct,
+                      std::vector<lie::SE3>* poses, Eigen::MatrixXd* J) const;
   // The group-point and distance columns (exact) into J.
   void PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
   // The frame-pose columns of the rows measured in frames and of the priors (exact) into J.

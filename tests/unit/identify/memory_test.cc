@@ -3,6 +3,7 @@
 // instead of copying every row and its loads once per fold.
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <fstream>
 #include <random>
 
@@ -105,6 +106,39 @@ TEST(IdentifyMemory, CrossValidationCopiesNoRow) {
   EXPECT_LT(per_row, 200.0) << "cross-validation's peak heap per row";
   RecordProperty("cross_validation_peak_heap_B_per_row", std::to_string(per_row));
   std::printf("cross-validation peak heap: %.0f B a row\n", per_row);
+}
+
+TEST(IdentifyMemory, AJacobianInBlocksOfRowsHasTheBitsOfOneProduct) {
+  // Beyond 32,768 rows the columns of an effect with a reduced basis are multiplied by it a
+  // block of rows at a time; each half of the rows on its own is one product.
+  const int rows = 40000;
+  const auto p = MakePlanar(rows);
+  const std::vector<int> active = {p->em->FindCandidate("joint_offset@joint1"),
+                                   p->em->FindCandidate("joint_origin@joint2")};
+  Eigen::MatrixXd B(6, 3);
+  B << 1, 0, 0.5, 0, 1, -0.25, 0.3, 0, 0, 0, 0.7, 0, -0.2, 0, 1, 0, 0.1, 0.4;
+  const std::vector<Eigen::MatrixXd> basis = {Eigen::MatrixXd(), B};
+  IdentifyOptions opt;
+  opt.threads = 2;
+  const Problem all(*p->em, p->data, p->loads, active, basis, opt);
+  Eigen::VectorXd x(all.num_params());
+  x << 0.004, 1e-3, -2e-3, 5e-4;
+  const Eigen::MatrixXd J = all.Jacobian(x);
+  std::vector<int> first, second;
+  for (int r = 0; r < rows; ++r) (r < rows / 2 ? first : second).push_back(r);
+  int at = 0;
+  for (const std::vector<int>* half : {&first, &second}) {
+    const Problem pr(*p->em, p->data, p->loads, active, basis, opt, half);
+    const Eigen::MatrixXd Jh = pr.Jacobian(x);
+    ASSERT_EQ(Jh.cols(), J.cols());
+    for (Eigen::Index c = 0; c < J.cols(); ++c) {
+      EXPECT_EQ(std::memcmp(Jh.col(c).data(), J.col(c).data() + at, sizeof(double) * Jh.rows()),
+                0)
+          << "column " << c << " of rows from " << at / 3;
+    }
+    at += static_cast<int>(Jh.rows());
+  }
+  EXPECT_GT(J.col(1).norm(), 0.0);
 }
 
 }  // namespace
