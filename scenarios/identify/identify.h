@@ -90,7 +90,7 @@ struct Observation {
   // -1: none given): rows of one posture (two markers seen at once) share their readings'
   // errors, so cross-validation keeps them together.
   int pose = -1;
-  int point = 0;               // the measured frame: index into DataSet::points (EffectModel::points())
+  int point = 0;  // the measured frame: index into DataSet::points (EffectModel::points())
   Vec3 p_base = Vec3::Zero();  // kPoint, kPose: measured point, base frame
   RowRotation R_base;          // kPose: measured orientation of the point frame
   Vec3 p_frame = Vec3::Zero();

@@ -181,9 +181,7 @@ Eigen::VectorXd Problem::Alpha(const Eigen::VectorXd& theta) const {
   return alpha;
 }
 
-int Problem::threads() const {
-  return PassThreads(static_cast<int>(num_rows()), opt_.threads);
-}
+int Problem::threads() const { return PassThreads(static_cast<int>(num_rows()), opt_.threads); }
 
 void Problem::Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) const {
   T->resize(num_rows());
@@ -396,9 +394,9 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
     // Log(Exp(-a) Exp(r)) = r - Jl^-1(r) a to first order.
     const lie::SE3 T = em_.PredictPose(o.q, loads(i), active_, theta.data(), ws, o.point);
     const Vec3 r = lie::SO3Log(MeasuredRotation(o, T_base_frame).transpose() * T.rotation());
-    J->block<3, 6>(offset_[i] + 3, col) = -lie::SO3LeftJacobianInverse(r) * o.R_frame.get().transpose() *
-                                          J_tangent_xi[o.frame].bottomRows<3>() /
-                                          opt_.rotation_std_rad;
+    J->block<3, 6>(offset_[i] + 3, col) =
+        -lie::SO3LeftJacobianInverse(r) * o.R_frame.get().transpose() *
+        J_tangent_xi[o.frame].bottomRows<3>() / opt_.rotation_std_rad;
   }
   for (size_t f = 0; f < data_.frames.size(); ++f) {
     if (prior_row_[f] < 0) continue;
@@ -501,8 +499,7 @@ std::vector<char> Problem::DirectColumns() const {
     // Eigen multiplies coefficient by coefficient below this size (EIGEN_GEMM_TO_COEFFBASED_
     // THRESHOLD), which keeps a -0 the identity's product elsewhere turns into +0.
     const bool gemm = num_residuals() + 2 * B.cols() >= 20;
-    direct[e] = gemm && B.rows() == B.cols() &&
-                B == Eigen::MatrixXd::Identity(B.rows(), B.cols());
+    direct[e] = gemm && B.rows() == B.cols() && B == Eigen::MatrixXd::Identity(B.rows(), B.cols());
   }
   return direct;
 }

@@ -117,8 +117,8 @@ class Problem {
   // offset less `base` (a block of rows in a buffer of its own).
   void TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                       const std::vector<int>& cs, const std::vector<double*>& cols,
-                      std::vector<lie::SE3>* poses = nullptr, int row_begin = 0,
-                      int row_end = -1, int base = 0) const;
+                      std::vector<lie::SE3>* poses = nullptr, int row_begin = 0, int row_end = -1,
+                      int base = 0) const;
   // The same into one matrix (the parameters' columns in order).
   Eigen::MatrixXd TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                                  const std::vector<int>& cs) const;

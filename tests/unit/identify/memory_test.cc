@@ -71,14 +71,15 @@ TEST(IdentifyMemory, AFoldReadInPlaceFitsTheSameBitsAsItsCopy) {
   ASSERT_GE(folds.test_rows.size(), 2u);
   std::vector<int> train;
   for (size_t r = 0; r < p->data.rows.size(); ++r) {
-    if (!std::binary_search(folds.test_rows[0].begin(), folds.test_rows[0].end(), static_cast<int>(r))) {
+    if (!std::binary_search(folds.test_rows[0].begin(), folds.test_rows[0].end(),
+                            static_cast<int>(r))) {
       train.push_back(static_cast<int>(r));
     }
   }
   std::vector<ConfigLoads> train_loads;
   for (int r : train) train_loads.push_back(p->loads[r]);
-  const Fit copied = FitEffects(*p->em, Subset(p->data, train), train_loads, active, {},
-                                Eigen::VectorXd(), opt);
+  const Fit copied =
+      FitEffects(*p->em, Subset(p->data, train), train_loads, active, {}, Eigen::VectorXd(), opt);
   const Fit in_place =
       FitEffects(*p->em, p->data, p->loads, active, {}, Eigen::VectorXd(), opt, &train);
   ASSERT_EQ(copied.theta.size(), in_place.theta.size());
@@ -132,8 +133,7 @@ TEST(IdentifyMemory, AJacobianInBlocksOfRowsHasTheBitsOfOneProduct) {
     const Eigen::MatrixXd Jh = pr.Jacobian(x);
     ASSERT_EQ(Jh.cols(), J.cols());
     for (Eigen::Index c = 0; c < J.cols(); ++c) {
-      EXPECT_EQ(std::memcmp(Jh.col(c).data(), J.col(c).data() + at, sizeof(double) * Jh.rows()),
-                0)
+      EXPECT_EQ(std::memcmp(Jh.col(c).data(), J.col(c).data() + at, sizeof(double) * Jh.rows()), 0)
           << "column " << c << " of rows from " << at / 3;
     }
     at += static_cast<int>(Jh.rows());
