@@ -89,8 +89,8 @@ std::string Gigabytes(double bytes) {
 }
 
 // Refuses a file whose rows would need more than kMaxCalibrationMemoryBytes, before any is read:
-// the byte cap alone lets a file of a million short rows take gigabytes.
-void CheckRowMemory(const std::string& path, size_t num_joints) {
+// the byte cap alone lets a file of a million short rows take gigabytes. Returns its lines.
+std::uintmax_t CheckRowMemory(const std::string& path, size_t num_joints) {
   const std::uintmax_t rows = CountLines(path);
   const double need =
       static_cast<double>(rows) * static_cast<double>(CalibrationBytesPerRow(num_joints));
@@ -100,6 +100,7 @@ void CheckRowMemory(const std::string& path, size_t num_joints) {
                      Gigabytes(static_cast<double>(kMaxCalibrationMemoryBytes)) +
                      " (split the data or thin it)");
   }
+  return rows;
 }
 
 // The data lines of a CSV file: blank lines and '#' comments skipped, cells trimmed.
@@ -108,7 +109,7 @@ class CsvLines {
   // `num_joints`: the joint columns a row holds, for the memory estimate (CheckRowMemory).
   CsvLines(const std::string& path, size_t num_joints) : path_(CapForMessage(path)) {
     CheckInputFile(path, kMaxCalibrationCsvBytes);
-    CheckRowMemory(path, num_joints);
+    lines_ = CheckRowMemory(path, num_joints);
     in_.open(path, std::ios::binary);
     if (!in_) throw InputError(path_ + ": cannot open");
   }
@@ -127,11 +128,14 @@ class CsvLines {
   }
   // "<file>:<line>" of the last line returned.
   std::string Where() const { return path_ + ":" + std::to_string(line_no_); }
+  // Lines of the file: at most its data rows plus one (the header).
+  std::uintmax_t lines() const { return lines_; }
 
  private:
   std::ifstream in_;
   std::string path_;
   int line_no_ = 0;
+  std::uintmax_t lines_ = 0;
 };
 
 // Group labels are global: rows with one label share one fixed point whatever their set. A
@@ -412,6 +416,9 @@ void ReadCalibrationCsv(const std::string& path, const std::vector<std::string>&
   const std::string hdr = csv.Where();
   CsvColumns cols = ParseHeader(header, hdr, joints, is_coupled);
   CheckColumns(hdr, joints, is_coupled, *data, cols);
+  // Room for every line at once: a vector grown by doubling holds up to twice its rows, and
+  // both the old and the new block while it moves.
+  data->rows.reserve(data->rows.size() + static_cast<size_t>(csv.lines()));
   int rows = 0;
   std::vector<std::string> cells;
   while (csv.Next(&cells)) {
@@ -482,7 +489,7 @@ std::string FormatCalibrationCsv(const DataSet& data, const std::vector<std::str
       for (int k = 0; k < 3; ++k) out += ",", put(p[k]);
     }
     if (type == ObservationType::kPose) {
-      const Eigen::Quaterniond qt(o.frame >= 0 ? o.R_frame : o.R_base);
+      const Eigen::Quaterniond qt(o.frame >= 0 ? o.R_frame.get() : o.R_base.get());
       for (double v : {qt.w(), qt.x(), qt.y(), qt.z()}) out += ",", put(v);
     }
     if (type == ObservationType::kPixel) out += ",", put(o.uv[0]), out += ",", put(o.uv[1]);

@@ -37,14 +37,15 @@ namespace flexbench::identify {
 constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 
 // Memory the identification takes per calibration row (the Observation, its loads, the loads
-// at the corrected angles, a fold's copy, the fit's residual and Jacobian rows), and the most one
-// file's rows may take. Measured (bench_identify, peak heap on 100,000 point rows): planar3 (3
-// joints, the CSV read, loads and identification) 3.6 KB a row, rover_arm (8 joints) 6.0 KB;
-// the estimate (3 KB + 0.6 KB a joint) is 1.3 times both and grows with the joints. A file
+// at the corrected angles, the fits' residual and Jacobian rows, the screening's projections of
+// candidate columns), and the most one file's rows may take. Measured (bench_identify, peak
+// heap on 100,000 point rows): planar3 (3 joints, the CSV read, loads and identification) 2.7
+// KB a row (2.5 KB on 1,000,000), rover_arm (8 joints, two effects: the loads twice) 6.9 KB;
+// the estimate (0.27 KB + 1.09 KB a joint) is 1.3 times both and grows with the joints. A file
 // whose line count times CalibrationBytesPerRow exceeds the budget is refused before any row
 // is read ("N rows need about X GB; the limit is Y GB").
-constexpr std::uintmax_t kCalibrationBytesPerRow = 3072;
-constexpr std::uintmax_t kCalibrationBytesPerJoint = 614;
+constexpr std::uintmax_t kCalibrationBytesPerRow = 272;
+constexpr std::uintmax_t kCalibrationBytesPerJoint = 1088;
 constexpr std::uintmax_t kMaxCalibrationMemoryBytes = 2000000000;
 std::uintmax_t CalibrationBytesPerRow(size_t num_joints);
 

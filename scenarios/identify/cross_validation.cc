@@ -122,8 +122,8 @@ std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
 double HeldOutSquares(const EffectModel& em, const DataSet& data,
                       const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
                       const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries,
-                      const Fit* nuisance) {
-  const Problem pr(em, data, loads, active, {}, opt);
+                      const Fit* nuisance, const std::vector<int>* rows) {
+  const Problem pr(em, data, loads, active, {}, opt, rows);
   Eigen::VectorXd x(pr.num_params());
   x.head(pr.num_alpha()) = theta;
   SetFrameStates(pr, nuisance ? *nuisance : Fit(), &x);
@@ -148,17 +148,20 @@ double HeldOutSquares(const EffectModel& em, const DataSet& data,
 
 namespace {
 
+// Rows without groups are read in place: a group renumbering is all a subset would add.
+bool InPlace(const DataSet& data) { return data.groups.empty(); }
+
 FoldData MakeFoldData(const DataSet& data, const std::vector<ConfigLoads>& loads,
                       const std::vector<int>& test) {
   std::vector<char> in_test(data.rows.size(), 0);
   for (int r : test) in_test[r] = 1;
-  std::vector<int> train;
-  for (size_t r = 0; r < data.rows.size(); ++r) {
-    if (!in_test[r]) train.push_back(static_cast<int>(r));
-  }
   FoldData f;
-  f.train = Subset(data, train);
-  f.train_loads = SubsetLoads(loads, train);
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    if (!in_test[r]) f.train_rows.push_back(static_cast<int>(r));
+  }
+  if (InPlace(data)) return f;
+  f.train = Subset(data, f.train_rows);
+  f.train_loads = SubsetLoads(loads, f.train_rows);
   f.test = Subset(data, test);
   f.test_loads = SubsetLoads(loads, test);
   return f;
@@ -181,9 +184,12 @@ size_t HeapBytes(const ConfigLoads& L) {
 void CacheFolds(const DataSet& data, const std::vector<ConfigLoads>& loads, Folds* folds,
                 size_t max_bytes) {
   folds->cache.clear();
-  size_t row_bytes = sizeof(Observation) + sizeof(ConfigLoads);
-  if (!loads.empty()) row_bytes += HeapBytes(loads.front());
-  if (!data.rows.empty()) row_bytes += sizeof(double) * data.rows.front().q.size();
+  size_t row_bytes = sizeof(int);
+  if (!InPlace(data)) {
+    row_bytes += sizeof(Observation) + sizeof(ConfigLoads);
+    if (!loads.empty()) row_bytes += HeapBytes(loads.front());
+    if (!data.rows.empty()) row_bytes += sizeof(double) * data.rows.front().q.size();
+  }
   if (row_bytes * data.rows.size() * folds->test_rows.size() > max_bytes) return;
   for (const std::vector<int>& test : folds->test_rows) {
     folds->cache.push_back(MakeFoldData(data, loads, test));
@@ -211,12 +217,18 @@ double CrossValidate(const EffectModel& em, const DataSet& data,
     FoldData made;
     if (!cached) made = MakeFoldData(data, loads, folds.test_rows[k]);
     const FoldData& f = cached ? folds.cache[k] : made;
+    const bool in_place = InPlace(data);
     Fit train = fit;
     if (!fit.active.empty() || nuisance) {
-      train = FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta, fold_opt);
+      train = in_place ? FitEffects(em, data, loads, fit.active, fit.basis, fit.theta, fold_opt,
+                                    &f.train_rows)
+                       : FitEffects(em, f.train, f.train_loads, fit.active, fit.basis, fit.theta,
+                                    fold_opt);
     }
-    fold_ss[k] = HeldOutSquares(em, f.test, f.test_loads, fit.active, train.theta, test_opt,
-                                &fold_entries[k], &train);
+    fold_ss[k] = in_place ? HeldOutSquares(em, data, loads, fit.active, train.theta, test_opt,
+                                           &fold_entries[k], &train, &folds.test_rows[k])
+                          : HeldOutSquares(em, f.test, f.test_loads, fit.active, train.theta,
+                                           test_opt, &fold_entries[k], &train);
   });
   double ss = 0.0;
   int entries = 0;

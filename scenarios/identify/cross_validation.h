@@ -15,10 +15,13 @@
 
 namespace flexbench::identify {
 
-// One fold's rows as data sets of their own (Subset, SubsetLoads).
+// One fold's training rows. Data with groups: the fold's rows as data sets of their own
+// (Subset, SubsetLoads: the groups renumbered). Without: those stay empty and the fits read the
+// rows in place (train_rows; the test rows are Folds::test_rows), a copy of no row.
 struct FoldData {
   DataSet train, test;
   std::vector<ConfigLoads> train_loads, test_loads;
+  std::vector<int> train_rows;
 };
 
 struct Folds {
@@ -28,9 +31,9 @@ struct Folds {
   std::vector<FoldData> cache;
 };
 
-// Fills `folds->cache` when the copies take at most `max_bytes` (every row is copied once per
-// fold): a selection cross-validates dozens of models on the same folds (issue 21: the copies
-// were a tenth of identifying 10,000 rows).
+// Fills `folds->cache` when it takes at most `max_bytes` (with groups every row is copied once
+// per fold; without, a row index per fold): a selection cross-validates dozens of models on the
+// same folds (the copies were a tenth of identifying 10,000 rows).
 void CacheFolds(const DataSet& data, const std::vector<ConfigLoads>& loads, Folds* folds,
                 size_t max_bytes = size_t{128} << 20);
 
@@ -46,11 +49,11 @@ std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
 // Sum of squared whitened residuals of `data` under (active, theta), group points at the mean
 // of their rows' predictions, measurement frames and marker offsets at `nuisance`'s (fitted on
 // the other folds; null: at their references), priors left out; `*entries` the number of
-// residual entries.
+// residual entries. `rows`: the rows of `data` scored (null: all; as Problem's).
 double HeldOutSquares(const EffectModel& em, const DataSet& data,
                       const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
                       const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries,
-                      const Fit* nuisance = nullptr);
+                      const Fit* nuisance = nullptr, const std::vector<int>* rows = nullptr);
 
 // Mean squared whitened residual over the held-out folds of `fit`'s model, each fold's
 // parameters fitted on the other folds (starting from `fit`'s values, its bases kept).

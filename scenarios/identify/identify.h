@@ -24,6 +24,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -49,26 +50,54 @@ struct MeasurementFrame {
   std::string where;           // where it was declared ("<file>:<line>"), for messages
 };
 
+// A pose row's measured orientation, held apart from the row so that point rows (most rows of a
+// large data set) carry 8 bytes for it instead of a matrix: the identity until set.
+class RowRotation {
+ public:
+  RowRotation() = default;
+  RowRotation(const RowRotation& o) { *this = o; }
+  RowRotation(RowRotation&&) = default;
+  RowRotation& operator=(const RowRotation& o) {
+    R_ = o.R_ ? std::make_unique<Mat3>(*o.R_) : nullptr;
+    return *this;
+  }
+  RowRotation& operator=(RowRotation&&) = default;
+  RowRotation& operator=(const Mat3& R) {
+    R_ = std::make_unique<Mat3>(R);
+    return *this;
+  }
+  const Mat3& get() const { return R_ ? *R_ : Identity(); }
+  void setIdentity() { R_.reset(); }
+
+ private:
+  static const Mat3& Identity() {
+    static const Mat3 I = Mat3::Identity();
+    return I;
+  }
+  std::unique_ptr<Mat3> R_;  // null: the identity
+};
+
 struct Observation {
   Eigen::VectorXd q;  // declared joint order
   ObservationType type = ObservationType::kPoint;
-  int group = -1;                  // kGroup: index into DataSet::groups
-  Vec3 p_base = Vec3::Zero();      // kPoint, kPose: measured point, base frame
-  Mat3 R_base = Mat3::Identity();  // kPose: measured orientation of the point frame
+  int group = -1;  // kGroup: index into DataSet::groups
   // kPoint, kPose measured in DataSet::frames[frame] (>= 0; -1: in the base frame, p_base and
-  // R_base): the point and orientation in that frame. InBase maps them to p_base, R_base.
+  // R_base): the point and orientation in that frame, p_frame and R_frame. InBase maps them to
+  // p_base, R_base.
   int frame = -1;
-  Vec3 p_frame = Vec3::Zero();
-  Mat3 R_frame = Mat3::Identity();
-  Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // kPixel: the point seen by DataSet::camera
-  Eigen::VectorXd motion_sign;  // optional, per joint: +1/-1 last motion direction, 0 unknown
-  int set = 0;                  // index into DataSet::sets (a placement, a session)
+  int set = 0;  // index into DataSet::sets (a placement, a session)
   // The posture the row was measured in (index into DataSet::poses, the CSV's `pose` labels;
   // -1: none given): rows of one posture (two markers seen at once) share their readings'
   // errors, so cross-validation keeps them together.
   int pose = -1;
-  int point = 0;      // the measured frame: index into DataSet::points (EffectModel::points())
-  std::string where;  // "<file>:<line>" for messages
+  int point = 0;  // the measured frame: index into DataSet::points (EffectModel::points())
+  Vec3 p_base = Vec3::Zero();  // kPoint, kPose: measured point, base frame
+  RowRotation R_base;          // kPose: measured orientation of the point frame
+  Vec3 p_frame = Vec3::Zero();
+  RowRotation R_frame;
+  Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // kPixel: the point seen by DataSet::camera
+  Eigen::VectorXd motion_sign;  // optional, per joint: +1/-1 last motion direction, 0 unknown
+  std::string where;            // "<file>:<line>" for messages
 };
 
 struct GroupDistance {

@@ -124,7 +124,7 @@ DataSet InBase(const DataSet& data, const std::vector<lie::SE3>& T_base_frames) 
     if (o.frame < 0) continue;
     const lie::SE3& T = T_base_frames.at(o.frame);
     o.p_base = T * o.p_frame;
-    o.R_base = T.rotation() * o.R_frame;
+    o.R_base = T.rotation() * o.R_frame.get();
     o.frame = -1;
   }
   return d;

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
+#include <stdexcept>
 
 #include "estimators/lie/so3.h"
 #include "scenarios/identify/parallel.h"
@@ -84,7 +85,7 @@ Vec3 MeasuredPoint(const Observation& o, const std::vector<lie::SE3>& T_base_fra
   return o.frame < 0 ? o.p_base : T_base_frame[o.frame] * o.p_frame;
 }
 Mat3 MeasuredRotation(const Observation& o, const std::vector<lie::SE3>& T_base_frame) {
-  return o.frame < 0 ? o.R_base : T_base_frame[o.frame].rotation() * o.R_frame;
+  return o.frame < 0 ? o.R_base.get() : T_base_frame[o.frame].rotation() * o.R_frame.get();
 }
 
 // The marker's point: the predicted frame's origin moved by the marker's fitted offset, if any.
@@ -103,8 +104,11 @@ Vec6 PriorStd(const MeasurementFrame& f) {
 
 Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                  const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
-                 const IdentifyOptions& opt)
-    : em_(em), data_(data), loads_(loads), active_(active), opt_(opt) {
+                 const IdentifyOptions& opt, const std::vector<int>* rows)
+    : em_(em), data_(data), loads_(loads), rows_(rows), active_(active), opt_(opt) {
+  if (rows && !data.groups.empty()) {
+    throw std::invalid_argument("Problem: a row subset of data with groups needs Subset");
+  }
   basis_.resize(active.size());
   for (size_t e = 0; e < active.size(); ++e) {
     const int np = em.candidates()[active[e]].num_params;
@@ -113,11 +117,11 @@ Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<C
     num_alpha_ += static_cast<int>(basis_[e].cols());
     num_theta_ += np;
   }
-  offset_.reserve(data.rows.size());
+  offset_.reserve(num_rows());
   int o = 0;
-  for (const Observation& r : data.rows) {
+  for (size_t i = 0; i < num_rows(); ++i) {
     offset_.push_back(o);
-    o += RowDim(r);
+    o += RowDim(row(i));
   }
   rows_dim_ = o;
   prior_row_.assign(data.frames.size(), -1);
@@ -177,17 +181,15 @@ Eigen::VectorXd Problem::Alpha(const Eigen::VectorXd& theta) const {
   return alpha;
 }
 
-int Problem::threads() const {
-  return PassThreads(static_cast<int>(data_.rows.size()), opt_.threads);
-}
+int Problem::threads() const { return PassThreads(static_cast<int>(num_rows()), opt_.threads); }
 
 void Problem::Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) const {
-  T->resize(data_.rows.size());
-  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+  T->resize(num_rows());
+  ForEachRowChunk(static_cast<int>(num_rows()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int r = begin; r < end; ++r) {
-      const Observation& o = data_.rows[r];
-      (*T)[r] = em_.PredictPose(o.q, loads_[r], active_, theta.data(), ws, o.point);
+      const Observation& o = row(r);
+      (*T)[r] = em_.PredictPose(o.q, loads(r), active_, theta.data(), ws, o.point);
     }
   });
 }
@@ -200,11 +202,11 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
   const auto group_point = [&](int g) -> Vec3 { return x.segment<3>(num_alpha_ + 3 * g); };
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
-  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+  ForEachRowChunk(static_cast<int>(num_rows()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int i = begin; i < end; ++i) {
-      const Observation& o = data_.rows[i];
-      const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active, theta.data(), ws, o.point);
+      const Observation& o = row(i);
+      const lie::SE3 T = em_.PredictPose(o.q, loads(i), active, theta.data(), ws, o.point);
       const int k = offset_[i];
       const Vec3 p = MarkerPoint(T, d_marker, o.point);
       switch (o.type) {
@@ -291,22 +293,32 @@ void RowTangentMap(const Observation& o, const lie::SE3& T, const Mat3& R_base_m
 }  // namespace
 
 Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
-                                        const std::vector<int>& cs,
-                                        std::vector<lie::SE3>* poses) const {
+                                        const std::vector<int>& cs) const {
   Eigen::MatrixXd D = Eigen::MatrixXd::Zero(num_residuals(), NumTheta(em_, cs));
-  if (poses) poses->resize(data_.rows.size());
+  std::vector<double*> cols(D.cols());
+  for (Eigen::Index k = 0; k < D.cols(); ++k) cols[k] = D.col(k).data();
+  TangentColumns(x, theta, cs, cols);
+  return D;
+}
+
+void Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                             const std::vector<int>& cs, const std::vector<double*>& cols,
+                             std::vector<lie::SE3>* poses, int row_begin, int row_end,
+                             int base) const {
+  if (row_end < 0) row_end = static_cast<int>(num_rows());
+  if (poses) poses->resize(num_rows());
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
-  ForEachRowChunk(static_cast<int>(data_.rows.size()), threads(), [&](int begin, int end) {
+  ForEachRowChunk(row_end - row_begin, threads(), [&](int chunk_begin, int chunk_end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
-    std::vector<EffectModel::Tangent> tangent(D.cols());
+    std::vector<EffectModel::Tangent> tangent(cols.size());
     RowMap G(3, 6);
-    for (int i = begin; i < end; ++i) {
-      const Observation& o = data_.rows[i];
+    for (int i = row_begin + chunk_begin; i < row_begin + chunk_end; ++i) {
+      const Observation& o = row(i);
       const lie::SE3 T =
-          em_.PoseTangents(o.q, loads_[i], active_, theta.data(), cs, ws, tangent.data(), o.point);
+          em_.PoseTangents(o.q, loads(i), active_, theta.data(), cs, ws, tangent.data(), o.point);
       if (poses) (*poses)[i] = T;
       if (!d_marker.empty() && o.type != ObservationType::kPixel) {
         // The marker turns with its frame: d p += w x (R d).
@@ -316,16 +328,15 @@ Eigen::MatrixXd Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::V
       const Mat3 R_base_meas =
           o.type == ObservationType::kPose ? MeasuredRotation(o, T_base_frame) : Mat3::Identity();
       RowTangentMap(o, T, R_base_meas, data_.camera, T_base_cam, opt_, &G);
-      for (Eigen::Index k = 0; k < D.cols(); ++k) {
+      for (size_t k = 0; k < cols.size(); ++k) {
         // Through a fixed-size vector: Eigen picks its summation order by the destination's
         // alignment, and a column must not depend on which others are computed with it.
         Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> dr =
             G.leftCols<3>() * tangent[k].w + G.rightCols<3>() * tangent[k].dp;
-        D.block(offset_[i], k, G.rows(), 1) = dr;
+        Eigen::Map<Eigen::VectorXd>(cols[k] + offset_[i] - base, G.rows()) = dr;
       }
     }
   });
-  return D;
 }
 
 void Problem::NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta, size_t e,
@@ -341,9 +352,9 @@ void Problem::NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::Vector
 }
 
 void Problem::PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
-  for (size_t r = 0; r < data_.rows.size(); ++r) {
-    if (data_.rows[r].type == ObservationType::kGroup) {
-      J->block<3, 3>(offset_[r], num_alpha_ + 3 * data_.rows[r].group) =
+  for (size_t r = 0; r < num_rows(); ++r) {
+    if (row(r).type == ObservationType::kGroup) {
+      J->block<3, 3>(offset_[r], num_alpha_ + 3 * row(r).group) =
           -Mat3::Identity() / opt_.point_std_m;
     }
   }
@@ -368,8 +379,8 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
   }
   const Eigen::VectorXd theta = Theta(x);
   EffectModel::Workspace ws = em_.MakeWorkspace();
-  for (size_t i = 0; i < data_.rows.size(); ++i) {
-    const Observation& o = data_.rows[i];
+  for (size_t i = 0; i < num_rows(); ++i) {
+    const Observation& o = row(i);
     if (o.frame < 0) continue;
     // The measured point T_base_frame Exp(d) p_frame moves by R (d_rho - [p_frame]x d_theta),
     // d = Jr(xi) d_xi; the residual is prediction minus measurement.
@@ -381,11 +392,11 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
     if (o.type != ObservationType::kPose) continue;
     // The measured orientation R R_frame turns to R_meas Exp(R_frame^T d_theta), and
     // Log(Exp(-a) Exp(r)) = r - Jl^-1(r) a to first order.
-    const lie::SE3 T = em_.PredictPose(o.q, loads_[i], active_, theta.data(), ws, o.point);
+    const lie::SE3 T = em_.PredictPose(o.q, loads(i), active_, theta.data(), ws, o.point);
     const Vec3 r = lie::SO3Log(MeasuredRotation(o, T_base_frame).transpose() * T.rotation());
-    J->block<3, 6>(offset_[i] + 3, col) = -lie::SO3LeftJacobianInverse(r) * o.R_frame.transpose() *
-                                          J_tangent_xi[o.frame].bottomRows<3>() /
-                                          opt_.rotation_std_rad;
+    J->block<3, 6>(offset_[i] + 3, col) =
+        -lie::SO3LeftJacobianInverse(r) * o.R_frame.get().transpose() *
+        J_tangent_xi[o.frame].bottomRows<3>() / opt_.rotation_std_rad;
   }
   for (size_t f = 0; f < data_.frames.size(); ++f) {
     if (prior_row_[f] < 0) continue;
@@ -400,9 +411,9 @@ void Problem::OffsetColumns(const Eigen::VectorXd& x, const std::vector<lie::SE3
   std::vector<lie::SE3> predicted;
   if (poses.empty()) Poses(Theta(x), &predicted);
   const std::vector<lie::SE3>& T = poses.empty() ? predicted : poses;
-  for (size_t i = 0; i < data_.rows.size(); ++i) {
-    const int col = offset_col(data_.rows[i].point);
-    if (col < 0 || data_.rows[i].type == ObservationType::kPixel) continue;
+  for (size_t i = 0; i < num_rows(); ++i) {
+    const int col = offset_col(row(i).point);
+    if (col < 0 || row(i).type == ObservationType::kPixel) continue;
     // p = T d: d p / d d = R (a pose row's orientation does not depend on it).
     J->block<3, 3>(offset_[i], col) = T[i].rotation() / opt_.point_std_m;
   }
@@ -415,18 +426,22 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   for (int c : active_) {
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
+  // An effect fitted in all its directions takes its tangent columns straight into J (no copy
+  // of them); the others go through their full-parameter columns and their basis.
+  const std::vector<char> direct = DirectColumns();
   // The tangent pass predicts every row's pose (the same operations as Poses): the offsets'
   // columns take them from there.
   std::vector<lie::SE3> poses;
-  const Eigen::MatrixXd D =
-      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(x, theta, analytic, &poses);
-  int col = 0, t = 0, d = 0;
+  if (!analytic.empty()) {
+    ReducedColumns(x, theta, analytic, direct, num_offsets_ > 0 ? &poses : nullptr, &J);
+  }
+  int col = 0, t = 0;
   for (size_t e = 0; e < active_.size(); ++e) {
     const Eigen::MatrixXd& B = basis_[e];
-    if (em_.HasTangent(active_[e], active_)) {
-      J.middleCols(col, B.cols()).noalias() = D.middleCols(d, B.rows()) * B;
-      d += static_cast<int>(B.rows());
-    } else {
+    if (em_.HasTangent(active_[e], active_) && direct[e]) {
+      // Adding +0 turns -0 into +0 as the product with the identity did: the same bits.
+      J.middleCols(col, B.cols()).array() += 0.0;
+    } else if (!em_.HasTangent(active_[e], active_)) {
       NumericEffectColumns(x, theta, e, col, t, &J);
     }
     col += static_cast<int>(B.cols());
@@ -436,6 +451,57 @@ Eigen::MatrixXd Problem::Jacobian(const Eigen::VectorXd& x) const {
   FrameColumns(x, &J);
   OffsetColumns(x, poses, &J);
   return J;
+}
+
+void Problem::ReducedColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                             const std::vector<int>& analytic, const std::vector<char>& direct,
+                             std::vector<lie::SE3>* poses, Eigen::MatrixXd* J) const {
+  int reduced = 0;
+  for (size_t e = 0; e < active_.size(); ++e) {
+    if (em_.HasTangent(active_[e], active_) && !direct[e]) reduced += basis_[e].rows();
+  }
+  // Blocks of kBlockRows rows (the last takes the rest), or all rows at once when that is one
+  // block: then the product spans the distance and prior rows too, as Eigen sized it before.
+  constexpr int kBlockRows = 16384;
+  const int n = static_cast<int>(num_rows());
+  const bool whole = reduced == 0 || n < 2 * kBlockRows;
+  for (int begin = 0; begin < n;) {
+    const int end = whole || n - begin < 2 * kBlockRows ? n : begin + kBlockRows;
+    const int r0 = whole ? 0 : offset_[begin];
+    const int r1 = whole ? num_residuals() : (end < n ? offset_[end] : rows_dim_);
+    Eigen::MatrixXd D = Eigen::MatrixXd::Zero(r1 - r0, reduced);
+    std::vector<double*> cols;
+    int col = 0, d = 0;
+    for (size_t e = 0; e < active_.size(); ++e) {
+      for (Eigen::Index k = 0; em_.HasTangent(active_[e], active_) && k < basis_[e].rows(); ++k) {
+        cols.push_back(direct[e] ? J->col(col + k).data() + r0 : D.col(d++).data());
+      }
+      col += static_cast<int>(basis_[e].cols());
+    }
+    TangentColumns(x, theta, analytic, cols, poses, begin, end, r0);
+    col = 0, d = 0;
+    for (size_t e = 0; e < active_.size(); ++e) {
+      const Eigen::MatrixXd& B = basis_[e];
+      if (em_.HasTangent(active_[e], active_) && !direct[e]) {
+        J->block(r0, col, r1 - r0, B.cols()).noalias() = D.middleCols(d, B.rows()) * B;
+        d += static_cast<int>(B.rows());
+      }
+      col += static_cast<int>(B.cols());
+    }
+    begin = end;
+  }
+}
+
+std::vector<char> Problem::DirectColumns() const {
+  std::vector<char> direct(active_.size(), 0);
+  for (size_t e = 0; e < active_.size(); ++e) {
+    const Eigen::MatrixXd& B = basis_[e];
+    // Eigen multiplies coefficient by coefficient below this size (EIGEN_GEMM_TO_COEFFBASED_
+    // THRESHOLD), which keeps a -0 the identity's product elsewhere turns into +0.
+    const bool gemm = num_residuals() + 2 * B.cols() >= 20;
+    direct[e] = gemm && B.rows() == B.cols() && B == Eigen::MatrixXd::Identity(B.rows(), B.cols());
+  }
+  return direct;
 }
 
 Eigen::MatrixXd Problem::NumericJacobian(const Eigen::VectorXd& x) const {
@@ -465,19 +531,17 @@ std::vector<Eigen::MatrixXd> Problem::CandidateColumns(const Eigen::VectorXd& x,
   for (int c : cs) {
     if (em_.HasTangent(c, active_)) analytic.push_back(c);
   }
-  const Eigen::MatrixXd D =
-      analytic.empty() ? Eigen::MatrixXd() : TangentColumns(x, Theta(x), analytic);
-  std::vector<Eigen::MatrixXd> out;
-  out.reserve(cs.size());
-  int d = 0;
-  for (int c : cs) {
-    if (em_.HasTangent(c, active_)) {
-      const int np = em_.candidates()[c].num_params;
-      out.push_back(D.middleCols(d, np));
-      d += np;
-    } else {
-      out.push_back(NumericCandidateColumns(x, c));
-    }
+  // The analytic columns go straight into their candidate's matrix (no copy of them all).
+  std::vector<Eigen::MatrixXd> out(cs.size());
+  std::vector<double*> cols;
+  for (size_t i = 0; i < cs.size(); ++i) {
+    if (!em_.HasTangent(cs[i], active_)) continue;
+    out[i] = Eigen::MatrixXd::Zero(num_residuals(), em_.candidates()[cs[i]].num_params);
+    for (Eigen::Index k = 0; k < out[i].cols(); ++k) cols.push_back(out[i].col(k).data());
+  }
+  if (!analytic.empty()) TangentColumns(x, Theta(x), analytic, cols);
+  for (size_t i = 0; i < cs.size(); ++i) {
+    if (!em_.HasTangent(cs[i], active_)) out[i] = NumericCandidateColumns(x, cs[i]);
   }
   return out;
 }
@@ -543,8 +607,9 @@ Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
 
 Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
-               const Eigen::VectorXd& init, const IdentifyOptions& opt) {
-  const Problem pr(em, data, loads, active, basis, opt);
+               const Eigen::VectorXd& init, const IdentifyOptions& opt,
+               const std::vector<int>* rows) {
+  const Problem pr(em, data, loads, active, basis, opt, rows);
   const int G = static_cast<int>(data.groups.size());
   const int nt = pr.num_theta();
   Eigen::VectorXd theta0 = Eigen::VectorXd::Zero(nt);

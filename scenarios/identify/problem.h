@@ -44,9 +44,11 @@ lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vecto
 class Problem {
  public:
   // `basis`: per active effect its B_e (num_params x m_e); empty: identity for all.
+  // `rows`: the rows of `data` (and `loads`) it fits, read in place (a cross-validation fold's
+  // rows, not copied); null: all. Only for data without groups (a subset renumbers them).
   Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
           const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
-          const IdentifyOptions& opt);
+          const IdentifyOptions& opt, const std::vector<int>* rows = nullptr);
 
   int num_alpha() const { return num_alpha_; }
   int num_theta() const { return num_theta_; }
@@ -69,6 +71,10 @@ class Problem {
   // Each marker's offset at state x (zero where declared); empty when none is unknown.
   std::vector<Vec3> MarkerOffsets(const Eigen::VectorXd& x) const;
   int row_offset(size_t r) const { return offset_[r]; }
+  // The rows it fits: the i-th one and its loads.
+  size_t num_rows() const { return rows_ ? rows_->size() : data_.rows.size(); }
+  const Observation& row(size_t i) const { return data_.rows[RowIndex(i)]; }
+  const ConfigLoads& loads(size_t i) const { return loads_[RowIndex(i)]; }
   const Eigen::MatrixXd& basis(size_t e) const { return basis_[e]; }
   const DataSet& data() const { return data_; }
 
@@ -96,17 +102,35 @@ class Problem {
 
  private:
   int threads() const;  // for a pass over the rows (parallel.h)
+  size_t RowIndex(size_t i) const { return rows_ ? static_cast<size_t>((*rows_)[i]) : i; }
   Eigen::VectorXd ResidualsAt(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
                               const std::vector<int>& active) const;
   // Central-difference columns of active effect e (its alpha directions) into J.
   void NumericEffectColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta, size_t e,
                             int col, int t, Eigen::MatrixXd* J) const;
   // Analytic d residuals / d theta for the full parameters of candidates `cs` (concatenated),
-  // at theta of the active effects; the distance rows are zero.
+  // at theta of the active effects, into the columns `cols` (one per parameter, num_residuals()
+  // entries each, zero beforehand; the distance rows stay zero): where the caller keeps them,
+  // so that no second copy of the columns is made.
   // `poses` (optional): each row's predicted pose, which the pass computes anyway.
+  // Of the rows [row_begin, row_end) only (row_end -1: all), their entries at their residual
+  // offset less `base` (a block of rows in a buffer of its own).
+  void TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                      const std::vector<int>& cs, const std::vector<double*>& cols,
+                      std::vector<lie::SE3>* poses = nullptr, int row_begin = 0, int row_end = -1,
+                      int base = 0) const;
+  // The same into one matrix (the parameters' columns in order).
   Eigen::MatrixXd TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
-                                 const std::vector<int>& cs,
-                                 std::vector<lie::SE3>* poses = nullptr) const;
+                                 const std::vector<int>& cs) const;
+  // Per active effect: whether its analytic columns go straight into the Jacobian (its basis is
+  // the identity, so the product with it would only copy them).
+  std::vector<char> DirectColumns() const;
+  // The analytic columns of effects with a reduced basis into J, a block of rows at a time
+  // through a buffer of that block's full-parameter columns (D B per block: no copy of all the
+  // rows' columns); `poses` as TangentColumns'.
+  void ReducedColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& theta,
+                      const std::vector<int>& analytic, const std::vector<char>& direct,
+                      std::vector<lie::SE3>* poses, Eigen::MatrixXd* J) const;
   // The group-point and distance columns (exact) into J.
   void PointColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const;
   // The frame-pose columns of the rows measured in frames and of the priors (exact) into J.
@@ -119,6 +143,7 @@ class Problem {
   const EffectModel& em_;
   const DataSet& data_;
   const std::vector<ConfigLoads>& loads_;
+  const std::vector<int>* rows_;
   std::vector<int> active_;
   std::vector<Eigen::MatrixXd> basis_;
   const IdentifyOptions& opt_;
@@ -143,10 +168,12 @@ Fit MakeFit(const Problem& pr, const std::vector<int>& active, const Eigen::Vect
             double rss);
 
 // Fits `active` (in the directions of `basis`, empty = all) plus the group points by
-// Levenberg-Marquardt from `init` (theta; may be empty or shorter).
+// Levenberg-Marquardt from `init` (theta; may be empty or shorter), on the rows `rows` of `data`
+// (null: all; as Problem's).
 Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
-               const Eigen::VectorXd& init, const IdentifyOptions& options);
+               const Eigen::VectorXd& init, const IdentifyOptions& options,
+               const std::vector<int>* rows = nullptr);
 
 // Screening (issue 21: a screening fit per candidate was most of identifying 10,000 rows): c
 // added to `fit` by Levenberg-Marquardt's first step from fit's state with the columns

@@ -6,10 +6,7 @@
 // issue-8 selection), for the ratio. BM_Predict is one augmented forward kinematics.
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true; quote medians.
 #include <benchmark/benchmark.h>
-#include <malloc.h>
-#include <sys/resource.h>
 
-#include <atomic>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -23,73 +20,12 @@
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
-
-// A counting heap for the peak-memory counters: every malloc family call of the process (Eigen
-// allocates through malloc, the standard library through operator new, which calls malloc)
-// passes through these wrappers of glibc's own functions; the bytes in use and their peak are
-// counted by malloc_usable_size.
-extern "C" {
-void* __libc_malloc(size_t);
-void* __libc_calloc(size_t, size_t);
-void* __libc_realloc(void*, size_t);
-void* __libc_memalign(size_t, size_t);
-void __libc_free(void*);
-}
-namespace {
-std::atomic<long> heap_in_use{0};
-std::atomic<long> heap_peak{0};
-void* Counted(void* p) {
-  if (!p) return p;
-  const long now =
-      heap_in_use.fetch_add(static_cast<long>(malloc_usable_size(p))) + malloc_usable_size(p);
-  long peak = heap_peak.load();
-  while (now > peak && !heap_peak.compare_exchange_weak(peak, now)) {
-  }
-  return p;
-}
-void Uncount(void* p) {
-  if (p) heap_in_use.fetch_sub(static_cast<long>(malloc_usable_size(p)));
-}
-}  // namespace
-extern "C" {
-void* malloc(size_t n) noexcept { return Counted(__libc_malloc(n)); }
-void* calloc(size_t n, size_t m) noexcept { return Counted(__libc_calloc(n, m)); }
-void free(void* p) noexcept {
-  Uncount(p);
-  __libc_free(p);
-}
-void* realloc(void* p, size_t n) noexcept {
-  Uncount(p);
-  return Counted(__libc_realloc(p, n));
-}
-void* memalign(size_t a, size_t n) noexcept { return Counted(__libc_memalign(a, n)); }
-void* aligned_alloc(size_t a, size_t n) noexcept { return Counted(__libc_memalign(a, n)); }
-int posix_memalign(void** out, size_t a, size_t n) noexcept {
-  *out = Counted(__libc_memalign(a, n));
-  return *out ? 0 : 12;  // ENOMEM
-}
-}
+#include "tests/unit/identify/counting_heap.h"
 
 namespace flexbench::identify {
 namespace {
 
-// Peak heap bytes above the level at construction, while it lives; and the process's peak
-// resident set's growth (getrusage; 0 unless this run set a new peak).
-class PeakMemory {
- public:
-  PeakMemory() : base_(heap_in_use.load()), rss_kb_(MaxRssKb()) { heap_peak.store(base_); }
-  double HeapBytes() const { return static_cast<double>(heap_peak.load() - base_); }
-  double RssBytes() const { return 1024.0 * static_cast<double>(MaxRssKb() - rss_kb_); }
-
- private:
-  static long MaxRssKb() {
-    rusage u{};
-    getrusage(RUSAGE_SELF, &u);
-    return u.ru_maxrss;
-  }
-  long base_;
-  long rss_kb_;
-};
+using testing::PeakMemory;
 
 struct Setup {
   sim::MjModelPtr m;
@@ -336,6 +272,7 @@ void BM_IdentifyPointCsv(benchmark::State& state) {
 BENCHMARK(BM_IdentifyPointCsv)
     ->ArgsProduct({{1000, 4000, 10000}, {1, 0}})
     ->Args({100000, 0})
+    ->Args({1000000, 0})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1)
     ->UseRealTime()

@@ -822,7 +822,8 @@ TEST_F(CalibrationCsv, ReadsGroupsSetsAndPoints) {
   DataSet q;
   ReadCalibrationCsv(Write("j1,j2,x,y,z,qw,qx,qy,qz\n0,0,1,2,3,0,0,0,1\n"), {"j1", "j2"}, &q);
   EXPECT_EQ(q.rows[0].type, ObservationType::kPose);
-  EXPECT_TRUE(q.rows[0].R_base.isApprox(Eigen::Vector3d(-1, -1, 1).asDiagonal().toDenseMatrix()));
+  EXPECT_TRUE(
+      q.rows[0].R_base.get().isApprox(Eigen::Vector3d(-1, -1, 1).asDiagonal().toDenseMatrix()));
 }
 
 TEST_F(CalibrationCsv, APoseColumnLabelsPostures) {

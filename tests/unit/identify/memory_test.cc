@@ -1,0 +1,145 @@
+// Identification's memory per row: a point row carries no pose row's matrices, and
+// cross-validation reads its folds' rows in place (the same bits as fitting copies of them)
+// instead of copying every row and its loads once per fold.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <fstream>
+#include <random>
+
+#include "scenarios/identify/calibration_data.h"
+#include "scenarios/identify/cross_validation.h"
+#include "scenarios/identify/identify.h"
+#include "scenarios/identify/problem.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "sim/mujoco_model.h"
+#include "tests/common/planar_rows.h"
+#include "tests/common/test_util.h"
+#include "tests/unit/identify/counting_heap.h"  // test_identify's malloc counts its bytes
+
+namespace flexbench::identify {
+namespace {
+
+// planar3 with point rows made by MuJoCo's kinematics (a 0.3 deg offset at joint2), read from
+// a CSV as the CLI reads them.
+struct Planar {
+  sim::MjModelPtr m;
+  sim::DeclaredChain chain;
+  std::unique_ptr<EffectModel> em;
+  DataSet data;
+  std::vector<ConfigLoads> loads;
+};
+
+std::unique_ptr<Planar> MakePlanar(int rows) {
+  auto p = std::make_unique<Planar>();
+  const sim::DeclaredModel d =
+      sim::LoadDeclaredModel(testing::SourceDir() + "/models/planar3.declared.yaml");
+  p->m = sim::LoadModel(d.model_path);
+  p->chain = sim::BuildDeclaredChain(p->m.get(), d);
+  p->em = std::make_unique<EffectModel>(p->m.get(), p->chain, p->chain.end_effector);
+  testing::TempDir dir;
+  const std::string path = (dir.path() / "points.csv").string();
+  std::mt19937_64 rng(7);
+  std::ofstream(path) << testing::kPlanarHeader
+                      << testing::PlanarRows(rows, rng, 1e-4, {0.0, 0.005, 0.0});
+  ReadCalibrationCsv(path, p->chain.q_joints, &p->data);
+  p->loads = ComputeLoads(*p->em, p->data);
+  return p;
+}
+
+TEST(IdentifyMemory, APointRowHoldsNoRotationMatrix) {
+  // Two 3x3 matrices (144 B) made a row 304 B; pose rows keep theirs behind a pointer.
+  EXPECT_LE(sizeof(Observation), 192u);
+  Observation point;
+  EXPECT_EQ(point.R_base.get(), Mat3::Identity());
+  Observation pose;
+  pose.R_base = Mat3(Eigen::AngleAxisd(0.3, Vec3::UnitZ()).toRotationMatrix());
+  const Observation copy = pose;  // a deep copy: the copy's matrix is its own
+  pose.R_base.setIdentity();
+  EXPECT_NEAR(copy.R_base.get()(0, 1), -std::sin(0.3), 1e-15);
+  EXPECT_EQ(pose.R_base.get(), Mat3::Identity());
+}
+
+TEST(IdentifyMemory, AFoldReadInPlaceFitsTheSameBitsAsItsCopy) {
+  const auto p = MakePlanar(600);
+  const std::vector<int> active = {p->em->FindCandidate("joint_offset@joint2"),
+                                   p->em->FindCandidate("joint_compliance@joint2")};
+  IdentifyOptions opt;
+  opt.threads = 1;
+  const Folds folds = MakeFolds(p->data);
+  ASSERT_GE(folds.test_rows.size(), 2u);
+  std::vector<int> train;
+  for (size_t r = 0; r < p->data.rows.size(); ++r) {
+    if (!std::binary_search(folds.test_rows[0].begin(), folds.test_rows[0].end(),
+                            static_cast<int>(r))) {
+      train.push_back(static_cast<int>(r));
+    }
+  }
+  std::vector<ConfigLoads> train_loads;
+  for (int r : train) train_loads.push_back(p->loads[r]);
+  const Fit copied =
+      FitEffects(*p->em, Subset(p->data, train), train_loads, active, {}, Eigen::VectorXd(), opt);
+  const Fit in_place =
+      FitEffects(*p->em, p->data, p->loads, active, {}, Eigen::VectorXd(), opt, &train);
+  ASSERT_EQ(copied.theta.size(), in_place.theta.size());
+  for (int k = 0; k < copied.theta.size(); ++k) EXPECT_EQ(copied.theta[k], in_place.theta[k]);
+  EXPECT_EQ(copied.rss, in_place.rss);
+  EXPECT_EQ(copied.num_residuals, in_place.num_residuals);
+  EXPECT_GT(in_place.theta[0], 0.004);  // the planted 0.005 rad, seen through the noise
+}
+
+TEST(IdentifyMemory, CrossValidationCopiesNoRow) {
+  // Copies of the rows and their loads took about 1.5 KB a row per fold on planar3; what is
+  // left is the fold fit's own residuals and Jacobian (a few doubles a row per parameter).
+  const int rows = 4000;
+  const auto p = MakePlanar(rows);
+  const std::vector<int> active = {p->em->FindCandidate("joint_offset@joint2")};
+  IdentifyOptions opt;
+  opt.threads = 1;
+  const Fit fit = FitEffects(*p->em, p->data, p->loads, active, Eigen::VectorXd(), opt);
+  const Folds folds = MakeFolds(p->data);
+  double cv = 0.0;
+  const testing::PeakMemory peak;
+  cv = CrossValidate(*p->em, p->data, p->loads, folds, fit, opt);
+  const double per_row = peak.HeapBytes() / rows;
+  EXPECT_GT(cv, 0.0);
+  EXPECT_LT(per_row, 200.0) << "cross-validation's peak heap per row";
+  RecordProperty("cross_validation_peak_heap_B_per_row", std::to_string(per_row));
+  std::printf("cross-validation peak heap: %.0f B a row\n", per_row);
+}
+
+TEST(IdentifyMemory, AJacobianInBlocksOfRowsHasTheBitsOfOneProduct) {
+  // Beyond 32,768 rows the columns of an effect with a reduced basis are multiplied by it a
+  // block of rows at a time; each half of the rows on its own is one product.
+  const int rows = 40000;
+  const auto p = MakePlanar(rows);
+  const std::vector<int> active = {p->em->FindCandidate("joint_offset@joint1"),
+                                   p->em->FindCandidate("joint_origin@joint2")};
+  Eigen::MatrixXd B(6, 3);
+  B << 1, 0, 0.5, 0, 1, -0.25, 0.3, 0, 0, 0, 0.7, 0, -0.2, 0, 1, 0, 0.1, 0.4;
+  const std::vector<Eigen::MatrixXd> basis = {Eigen::MatrixXd(), B};
+  IdentifyOptions opt;
+  opt.threads = 2;
+  const Problem all(*p->em, p->data, p->loads, active, basis, opt);
+  Eigen::VectorXd x(all.num_params());
+  x << 0.004, 1e-3, -2e-3, 5e-4;
+  const Eigen::MatrixXd J = all.Jacobian(x);
+  std::vector<int> first, second;
+  for (int r = 0; r < rows; ++r) (r < rows / 2 ? first : second).push_back(r);
+  int at = 0;
+  for (const std::vector<int>* half : {&first, &second}) {
+    const Problem pr(*p->em, p->data, p->loads, active, basis, opt, half);
+    const Eigen::MatrixXd Jh = pr.Jacobian(x);
+    ASSERT_EQ(Jh.cols(), J.cols());
+    for (Eigen::Index c = 0; c < J.cols(); ++c) {
+      EXPECT_EQ(std::memcmp(Jh.col(c).data(), J.col(c).data() + at, sizeof(double) * Jh.rows()), 0)
+          << "column " << c << " of rows from " << at / 3;
+    }
+    at += static_cast<int>(Jh.rows());
+  }
+  EXPECT_GT(J.col(1).norm(), 0.0);
+}
+
+}  // namespace
+}  // namespace flexbench::identify
