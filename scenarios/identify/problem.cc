@@ -605,6 +605,29 @@ Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
   return x;
 }
 
+std::vector<double> RemovalRises(const Problem& pr, const Fit& fit) {
+  std::vector<double> rises(fit.active.size(), std::nan(""));
+  const Eigen::VectorXd x = StateOf(pr, fit);
+  const Eigen::MatrixXd J = pr.Jacobian(x);
+  Eigen::MatrixXd A = J.transpose() * J;
+  // Scaled to unit diagonal: the unknowns' units differ by orders of magnitude.
+  const Eigen::VectorXd d = A.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+  A = d.asDiagonal() * A * d.asDiagonal();
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
+  if (ldlt.info() != Eigen::Success) return rises;
+  const Eigen::MatrixXd Sigma = ldlt.solve(Eigen::MatrixXd::Identity(A.rows(), A.cols()));
+  if (!Sigma.allFinite()) return rises;
+  for (size_t e = 0, off = 0; e < fit.active.size(); ++e) {
+    const int m = static_cast<int>(pr.basis(e).cols());
+    const Eigen::VectorXd a = x.segment(off, m).cwiseQuotient(d.segment(off, m));
+    const Eigen::LDLT<Eigen::MatrixXd> S(Sigma.block(off, off, m, m));
+    const double rise = a.dot(S.solve(a));
+    off += m;
+    if (S.info() == Eigen::Success && std::isfinite(rise) && rise >= 0.0) rises[e] = rise;
+  }
+  return rises;
+}
+
 Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
                const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
                const Eigen::VectorXd& init, const IdentifyOptions& opt,

@@ -167,6 +167,12 @@ Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit);
 Fit MakeFit(const Problem& pr, const std::vector<int>& active, const Eigen::VectorXd& x,
             double rss);
 
+// For each effect of `fit` (a fit of `pr`'s effects, at its optimum), the linearised rise of the
+// sum of squares when it is removed and the other unknowns refitted: a_e^T Sigma_ee^-1 a_e,
+// Sigma = (J^T J)^-1 at the fit (the Schur complement of the others; one factorisation for
+// all). NaN where the information is singular.
+std::vector<double> RemovalRises(const Problem& pr, const Fit& fit);
+
 // Fits `active` (in the directions of `basis`, empty = all) plus the group points by
 // Levenberg-Marquardt from `init` (theta; may be empty or shorter), on the rows `rows` of `data`
 // (null: all; as Problem's).

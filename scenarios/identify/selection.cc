@@ -189,32 +189,17 @@ int PickTrial(const SelectionContext& ctx, const Fit& cur, double cv_cur,
   return best;
 }
 
-// Whether removing each of `fit`'s effects but the last could pass BIC's test: the sum of
-// squares rises by its linearised increase (the Schur complement of the others, a_e^T
-// Sigma_ee^-1 a_e with Sigma = (J^T J)^-1 at the fit, one factorisation for all) or by as little
-// as half of it, which leaves room for the model's curvature. Those that could are refitted.
+// Whether removing each of `cur`'s effects but the last could pass BIC's test: the sum of
+// squares rises by its linearised rise (RemovalRises) or by as little as half of it, which
+// leaves room for the model's curvature. Those that could are refitted.
 std::vector<char> MayDrop(const SelectionContext& ctx, const Fit& cur) {
-  const int n = static_cast<int>(cur.active.size()) - 1;
-  std::vector<char> may(n, 1);
   const Problem pr(ctx.em, ctx.data, ctx.loads, cur.active, cur.basis, ctx.opt);
-  const Eigen::VectorXd x = StateOf(pr, cur);
-  const Eigen::MatrixXd J = pr.Jacobian(x);
-  Eigen::MatrixXd A = J.transpose() * J;
-  // Scaled to unit diagonal: the unknowns' units differ by orders of magnitude.
-  const Eigen::VectorXd d = A.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
-  A = d.asDiagonal() * A * d.asDiagonal();
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
-  if (ldlt.info() != Eigen::Success) return may;
-  const Eigen::MatrixXd Sigma = ldlt.solve(Eigen::MatrixXd::Identity(A.rows(), A.cols()));
-  if (!Sigma.allFinite()) return may;
-  for (int e = 0, off = 0; e < n; ++e) {
+  const std::vector<double> rises = RemovalRises(pr, cur);
+  std::vector<char> may(cur.active.size() - 1, 1);
+  for (size_t e = 0; e < may.size(); ++e) {
+    if (!std::isfinite(rises[e])) continue;
     const int m = static_cast<int>(pr.basis(e).cols());
-    const Eigen::VectorXd a = x.segment(off, m).cwiseQuotient(d.segment(off, m));
-    const Eigen::LDLT<Eigen::MatrixXd> S(Sigma.block(off, off, m, m));
-    const double rise = a.dot(S.solve(a));
-    off += m;
-    if (S.info() != Eigen::Success || !std::isfinite(rise) || rise < 0.0) continue;
-    may[e] = Bic(cur.rss + 0.5 * rise, cur.num_residuals, cur.num_params - m) - cur.bic <
+    may[e] = Bic(cur.rss + 0.5 * rises[e], cur.num_residuals, cur.num_params - m) - cur.bic <
              ctx.opt.bic_threshold;
   }
   return may;
