@@ -100,9 +100,4 @@ struct PoseReading {
 using Measurement = std::variant<JointReading, ImuReading, OrientationReading, PixelPoint,
                                  TagCorners, PlaneContact, PositionReading, PoseReading>;
 
-// Timestamp of any measurement.
-inline double TimeOf(const Measurement& z) {
-  return std::visit([](const auto& m) { return m.t; }, z);
-}
-
 }  // namespace flexbench::estimators

@@ -26,11 +26,6 @@ struct Degradation {
   // point of the region of interest (the whole frame unless the caller gives one).
   double occlusion_probability = 0.0;
   double occlusion_size_px = 0.0;
-
-  bool IsIdentity() const {
-    return noise_std == 0.0 && blur_sigma_px == 0.0 && gain == 1.0 && offset == 0.0 &&
-           occlusion_probability == 0.0;
-  }
 };
 
 // An axis-aligned pixel rectangle [x0, x1) x [y0, y1).

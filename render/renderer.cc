@@ -79,11 +79,6 @@ Renderer::~Renderer() {
   mjv_freeScene(&impl_->scene);
 }
 
-void Renderer::UploadTexture(int tex_id) {
-  EnsureGlContext();
-  mjr_uploadTexture(model_, &impl_->context, tex_id);
-}
-
 void Renderer::Draw(mjData* d, int cam_id) {
   EnsureGlContext();
   mjr_setBuffer(mjFB_OFFSCREEN, &impl_->context);

@@ -17,8 +17,8 @@ enum class RenderMode { kQuality, kFast };
 // Parses "quality" / "fast"; throws InputError naming `key` otherwise.
 RenderMode ParseRenderMode(const std::string& text, const std::string& key);
 
-// Renders one model. The model must outlive the renderer; textures changed after construction
-// (e.g. by ApplyTagTextures) need UploadTexture. Frame size is the model's offwidth/offheight.
+// Renders one model. The model must outlive the renderer, and its textures (ApplyTagTextures) are
+// final when it is constructed. Frame size is the model's offwidth/offheight.
 class Renderer {
  public:
   Renderer(const mjModel* m, RenderMode mode);
@@ -34,8 +34,6 @@ class Renderer {
   void RenderRgbInto(mjData* d, int cam_id, Image* rgb);
   // Grayscale (BT.601, as ToGray) straight from the readback: one pass, no RGB copy.
   void RenderGrayInto(mjData* d, int cam_id, Image* gray);
-
-  void UploadTexture(int tex_id);
 
   int width() const { return width_; }
   int height() const { return height_; }

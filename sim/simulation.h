@@ -131,7 +131,6 @@ class Simulation {
   // ---- Effect state read by sensors.
   double EncoderOffset(int joint_id) const { return setup_.encoder_offset.at(joint_id); }
   ImuBiasSpec ImuBias(const std::string& site) const;
-  bool Released(int joint_id) const { return setup_.released.at(joint_id) != 0; }
 
  private:
   void ComputeStaticForces(const std::vector<int>& free_dofs, const Eigen::VectorXd& x,

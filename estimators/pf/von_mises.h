@@ -231,8 +231,7 @@ class VonMises {
   double LogNormaliser() const { return log_norm_; }
   // E[cos(x - theta0)] = A1(kappa).
   double MeanResultantLength() const { return BesselRatioA1(kappa_); }
-  // Circular variance 1 - A1(kappa) and circular standard deviation sqrt(-2 log A1(kappa)).
-  double CircularVariance() const { return 1.0 - MeanResultantLength(); }
+  // Circular standard deviation sqrt(-2 log A1(kappa)).
   double CircularStd() const;
 
   // x ~ vM(kappa, theta0), wrapped to [-pi, pi).

@@ -128,7 +128,6 @@ class ErrorStats {
   double last_lateral() const { return lateral_.back(); }
   double last_rot_deg() const { return rot_deg_.back(); }
   double last_nees() const { return nees_.back(); }
-  int last_dof() const { return dof_.back(); }
   const MismatchTest& mismatch() const { return mismatch_; }
 
  private:

@@ -92,7 +92,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
         sim::BuildDeclaredChain(sim_->nominal_model(), declared_));
     camera_id_ = sim::CameraId(sim_->model(), camera_, model_path_);
     chain_->ObservedFrame(camera_);
-    tags_ = render::ApplyTagTextures(const_cast<mjModel*>(sim_->model()));
+    tags_ = render::ApplyTagTextures(sim_->mutable_model());
     if (TagFrames(*chain_).empty()) {
       throw InputError(declared_.file + ": no tag geom of " + model_path_ +
                        " is among the observed frames");

@@ -167,7 +167,7 @@ class TagFusionKind : public ScenarioKind {
         sim::BuildDeclaredChain(sim_->nominal_model(), declared_));
     camera_id_ = sim::CameraId(sim_->model(), camera_, model_path_);
     chain_->ObservedFrame(camera_);
-    tags_ = render::ApplyTagTextures(const_cast<mjModel*>(sim_->model()));
+    tags_ = render::ApplyTagTextures(sim_->mutable_model());
     for (const auto& tag : tags_) {
       const std::string geom = sim::ObjectName(sim_->model(), mjOBJ_GEOM, tag.geom_id);
       for (const auto& [name, frame] : chain_->observed) {

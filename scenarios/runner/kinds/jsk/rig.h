@@ -51,7 +51,7 @@ std::unique_ptr<estimators::Estimator> MakeLabelled(const Rig& rig, const Estima
                                                     std::uint64_t seed);
 
 inline double Deg(double rad) { return rad * 180.0 / M_PI; }
-// Wrapped difference a - b in (-pi, pi].
+// Wrapped difference a - b in [-pi, pi] (std::remainder: a difference of exactly -pi stays -pi).
 inline double AngleError(double a, double b) { return std::remainder(a - b, 2.0 * M_PI); }
 
 }  // namespace flexbench::scenarios::jsk
