@@ -72,7 +72,9 @@ inline double WrapAngle(double a) {
   constexpr double kTwoPi = 2.0 * M_PI;
   double w = std::fmod(a + M_PI, kTwoPi);
   if (w < 0.0) w += kTwoPi;
-  return w - M_PI;
+  // Just below -pi, fmod gives -ulp and -ulp + 2 pi rounds up to 2 pi: that +pi is -pi.
+  const double r = w - M_PI;
+  return r >= M_PI ? -M_PI : r;
 }
 
 }  // namespace flexbench

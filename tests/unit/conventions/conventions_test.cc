@@ -192,11 +192,9 @@ TEST(Conventions, WrapAngleRange) {
   for (int i = 0; i < 10000; ++i) ExpectWrapped(u(rng));
 }
 
-// KNOWN ISSUE in conventions.h (not owned by this suite; reported): for the double just below
-// -pi, fmod(a + pi, 2 pi) = -ulp(pi) and -ulp + 2 pi rounds up to 2 pi, so WrapAngle returns +pi,
-// outside [-pi, pi). A fix: map a result of +pi to -pi (`return r >= M_PI ? -M_PI : r;` with
-// r = w - M_PI). Enable this test with that fix.
-TEST(Conventions, DISABLED_WrapAngleJustBelowMinusPi) {
+// For the double just below -pi, fmod(a + pi, 2 pi) = -ulp(pi), and -ulp + 2 pi rounds up to
+// 2 pi: without its last line WrapAngle returns +pi, outside [-pi, pi).
+TEST(Conventions, WrapAngleJustBelowMinusPi) {
   ExpectWrapped(std::nextafter(-M_PI, -10.0));
 }
 
