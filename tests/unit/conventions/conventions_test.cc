@@ -194,9 +194,7 @@ TEST(Conventions, WrapAngleRange) {
 
 // For the double just below -pi, fmod(a + pi, 2 pi) = -ulp(pi), and -ulp + 2 pi rounds up to
 // 2 pi: without its last line WrapAngle returns +pi, outside [-pi, pi).
-TEST(Conventions, WrapAngleJustBelowMinusPi) {
-  ExpectWrapped(std::nextafter(-M_PI, -10.0));
-}
+TEST(Conventions, WrapAngleJustBelowMinusPi) { ExpectWrapped(std::nextafter(-M_PI, -10.0)); }
 
 }  // namespace
 }  // namespace flexbench
