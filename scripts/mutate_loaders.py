@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-# Mutation testing of flexbench's loaders (issue 21): scenario YAML, declared-model YAML,
+# Mutation testing of flexbench's loaders: scenario YAML, declared-model YAML,
 # calibration CSV (point and group formats), a closed_loop scenario (inline declared block, group
 # distances), a MUKCa folder (../shared/data/mukca) and MJCF are
 # mutated (byte flips, cuts, inserted tokens, duplicated or dropped lines, absurd numbers) and

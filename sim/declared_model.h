@@ -24,7 +24,7 @@
 //     ee:                           #   closed_loop's unknown_marker_offsets)
 //       offset_m: [dx, dy, dz]
 //       covariance: [9 numbers]     # optional, m^2
-//   coupled:                        # joints driven by others, never read (issue 20)
+//   coupled:                        # joints driven by others, never read
 //     torso_pitch_3: {torso_pitch_1: -1, torso_pitch_2: -1}   # q = sum_j c_j q_j
 //     wrist_follower: mjcf          # the MJCF's <equality><joint> on it (a polynomial of one
 //                                   # driver: q = a0 + a1 x + ... + a4 x^4, angles from qpos0)

@@ -2,7 +2,7 @@
 // outside its vertex list (negative, or >= the number of vertices), mj_loadXML reads and
 // writes out of bounds and frees a pointer it never allocated (valgrind, ASan; in the normal
 // build it aborts with "free(): invalid next size" or, by luck, returns its "vertex index out
-// of range" error). Found by the mjcf fuzz target (issue 19); the input is in
+// of range" error). Found by the mjcf fuzz target; the input is in
 // tests/fuzz/regressions/mjcf/. The same happens for OBJ and MSH mesh files. These checks run
 // before MuJoCo sees the model and turn such meshes into an InputError: one line naming the
 // file, the mesh and the line.

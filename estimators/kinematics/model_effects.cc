@@ -613,7 +613,7 @@ void EffectiveChain::Update(const Eigen::Ref<const Eigen::VectorXd>& q_read) {
   if (sources_vary_ && e.uncertainty.thermal != 0.0)
     ForwardKinematics(*declared_, nominal_, q_read);
   // The kinematic joint terms first (offset, periodic error): the weight acts where the arm
-  // is, at the corrected angles, so the loads are taken there (issue 15: a 0.4 deg encoder
+  // is, at the corrected angles, so the loads are taken there (a 0.4 deg encoder
   // offset at j2 moves the centre of mass, and a compliant mount's tilt with it, by ~1% of the
   // tilt; 39-69 um at a raised hand). identify::EffectModel::LoadsFor does the same.
   for (int k = 0; k < declared_->nq(); ++k) {

@@ -1,5 +1,5 @@
 // Weighted quantiles of particle angles about their circular mean, for the particle filter's
-// per-joint 95% intervals, without sorting every particle (issue 18).
+// per-joint 95% intervals, without sorting every particle.
 #pragma once
 
 #include <array>

@@ -1,4 +1,4 @@
-// The particle filter summary's weight and resultant loops (issue 18): branch-free and in fixed
+// The particle filter summary's weight and resultant loops: branch-free and in fixed
 // lanes, so they vectorise in the AVX2 clone and give the same bits in the baseline. With libm's
 // exp and a plain running sum they were a sixth of a summary.
 #pragma once

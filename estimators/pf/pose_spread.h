@@ -1,5 +1,5 @@
 // The particles' end-effector spread about the estimate's pose, for the particle filter's
-// summary (issue 18): computed on the batch kinematics' columns, block by block, with no
+// summary: computed on the batch kinematics' columns, block by block, with no
 // per-particle SE3 object and no libm call, so the loops vectorise. The per-particle SE3::Log it
 // replaces was half the cost of a summary.
 #pragma once

@@ -59,7 +59,7 @@ void Keep(ResidualFinding candidate, ResidualFinding* best) {
 // One joint's residual along its own direction, row by row: z (the residual's projection on the
 // direction a small turn of the joint moves the marker, in radians), its weight, the joint's
 // angle and its gravity torque. Only the rows whose marker the joint moves: a marker on another
-// branch of a tree (issue 20) says nothing about this joint, and counted with zero weight it
+// branch of a tree says nothing about this joint, and counted with zero weight it
 // shrank the residual variance and inflated the statistic.
 struct JointSamples {
   std::vector<double> z, w, q, tau;

@@ -231,7 +231,7 @@ bool EffectModel::AboveEveryPoint(FrameId f) const {
 // The arm's mount, where a compliant base tilts: the first frame with a declared source ahead of
 // the first joint (the declared model says the base is uncertain there), else the first joint's
 // anchor (frame axes before the joint turns). On a tree with several measured points the mount
-// carries them all: a frame above every point (issue 20: one hand's shoulder is no mount of the
+// carries them all: a frame above every point (one hand's shoulder is no mount of the
 // other hand; two arms on a fixed torso have none).
 void EffectModel::FindMount() {
   const kinematics::PpoeModel& model = chain_->model;
@@ -1010,7 +1010,7 @@ void EffectModel::ClearTerms(const std::vector<int>& active, Workspace& ws) cons
   });
 }
 
-// Analytic derivatives of PredictPose (issue 21: finite differences re-predicted every row twice
+// Analytic derivatives of PredictPose (finite differences re-predicted every row twice
 // per parameter). PredictPose's step of frame f is T1 = T_parent (R_p, t), T2 = T1 Exp(origin),
 // T3 = Bend T2, T4 = T3 Exp(mount), T5 = T4 Exp(tilt), T_f = T5 Exp(zeta (q + dq)). A parameter
 // acting at one stage moves the frames below it rigidly (they are that stage's pose times

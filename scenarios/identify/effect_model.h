@@ -176,8 +176,8 @@ struct ConfigLoads {
   Vec3 g_mount = Vec3::Zero();
   // Per joint: the sign of its last motion (+1, -1; 0 unknown), from the data.
   Eigen::VectorXd motion_sign;
-  // The chain's poses at `q_nominal` without effects, per frame on the predicted path (issue 21,
-  // identify on 10,000 rows): PredictPose copies the frames before the first one its effects
+  // The chain's poses at `q_nominal` without effects, per frame on the predicted path (for
+  // identification on many rows): PredictPose copies the frames before the first one its effects
   // touch instead of recomputing them (the same operations, the same bits). Empty: not cached.
   Eigen::VectorXd q_nominal;
   std::vector<lie::SE3> T_nominal;
@@ -192,7 +192,7 @@ class EffectModel {
  public:
   // `point_frame`: the chain frame whose origin is predicted (the end effector). `camera`: the
   // name of a camera that observes it in pixels ("" for none), for the camera_offset candidate.
-  // `more_points`: further measured frames (markers on other branches of a tree, issue 20); the
+  // `more_points`: further measured frames (markers on other branches of a tree); the
   // candidates then cover every joint on the way to any of them, each point gets its tool
   // link_offset, and a prediction names its point (index into points(), 0: point_frame).
   // `gravity_tilt`: add the gravity_tilt candidate (last, so the others keep their indices).
@@ -226,7 +226,7 @@ class EffectModel {
   ConfigLoads Loads(const Eigen::VectorXd& q) const;
   // The loads of the arm standing at q_load, for predictions at reading q (the nominal poses
   // cached at q). The weight acts where the arm is: at the reading corrected by the joint-level
-  // kinematic effects (issue 15: a 0.4 deg encoder offset at j2 moves the centre of mass, and
+  // kinematic effects (a 0.4 deg encoder offset at j2 moves the centre of mass, and
   // the compliant mount's tilt with it, by ~1% of the tilt: 39-69 um at a raised hand).
   ConfigLoads Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load) const;
   // The joint-level kinematic correction of `active` at reading q (offsets, periodic errors):

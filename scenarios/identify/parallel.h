@@ -1,4 +1,4 @@
-// Row passes of the identification on several threads (issue 21: 10,000 point rows). A pass
+// Row passes of the identification on several threads (10,000 point rows). A pass
 // (residuals, Jacobian columns, poses) predicts each row from that row alone and writes the
 // row's own slots, so splitting the rows into contiguous chunks gives the same bits for any
 // number of threads: same seed, same bytes.

@@ -181,7 +181,7 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
                const Eigen::VectorXd& init, const IdentifyOptions& options,
                const std::vector<int>* rows = nullptr);
 
-// Screening (issue 21: a screening fit per candidate was most of identifying 10,000 rows): c
+// Screening (a screening fit per candidate was most of identifying 10,000 rows): c
 // added to `fit` by Levenberg-Marquardt's first step from fit's state with the columns
 // already computed (J_fit: fit's Jacobian at its state, J_c: c's full-parameter columns there,
 // r_fit: fit's residuals), scored by one residual pass. Where that step does not lower the sum

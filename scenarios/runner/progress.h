@@ -1,4 +1,4 @@
-// Progress of a long run on stderr (issue 17): on a terminal one updating line (stage k/n,
+// Progress of a long run on stderr: on a terminal one updating line (stage k/n,
 // elapsed, ETA); in a log (CI) a plain line at most every `log_period_s`; nothing for runs
 // shorter than `quiet_below_s`, and nothing at all with --quiet.
 #pragma once

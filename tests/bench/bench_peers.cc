@@ -1,5 +1,5 @@
 // flexbench against the reference implementations a user already has, in one binary and one
-// run, on the same models and configurations (issue 18):
+// run, on the same models and configurations:
 //  - FK (mean) vs MuJoCo's mj_kinematics + reading the end-effector pose: rover_arm (the 8
 //    joints of its declared chain: arm and mast) and humanoid_upper (19: both arms, neck, finger).
 //  - FrameJacobian vs mj_jacSite (after mj_kinematics + mj_comPos, as MuJoCo needs).

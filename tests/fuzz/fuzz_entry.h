@@ -1,4 +1,4 @@
-// Fuzz entry points (issue 19): one function per loader that feeds arbitrary bytes through the
+// Fuzz entry points: one function per loader that feeds arbitrary bytes through the
 // real reader, the way `flexbench` reads a user's file. Each returns normally on success
 // (nullopt) or on an InputError (its message: the runner's exit 2), and lets anything else
 // escape, so that libFuzzer (tests/fuzz/fuzz_main.cc) or the replay test

@@ -1,3 +1,3 @@
-// Stands in for <mujoco/mjmodel.h> on the include path of estimators/ and its unit tests (issue 22):
+// Stands in for <mujoco/mjmodel.h> on the include path of estimators/ and its unit tests:
 // estimators see typed measurements and their declared model only (docs/design.md, section 3).
 #error "estimators/ must not include <mujoco/mjmodel.h>: convert in the scenario layer instead"

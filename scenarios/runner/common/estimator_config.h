@@ -107,7 +107,7 @@ class MismatchTest {
 };
 
 // Accumulates per-configuration errors of one estimator and writes its metrics, with a running
-// model-mismatch test over its NEES (issue 15: every kind that scores estimators reports it).
+// model-mismatch test over its NEES (every kind that scores estimators reports it).
 class ErrorStats {
  public:
   explicit ErrorStats(int mismatch_window = 10) : mismatch_(mismatch_window) {}

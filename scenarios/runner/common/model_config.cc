@@ -13,7 +13,7 @@ sim::DeclaredModel ReadModelAndDeclared(const ConfigNode& root, std::string* mod
                              : sim::LoadDeclaredModel(declared.ResolvePath(declared.AsString()));
   if (declared.IsMap()) {
     // An inline block describes the scenario's model: its own `model:` must name that file
-    // (issue 21: another model there was ignored without a word).
+    // (another model there was ignored without a word).
     std::error_code ec;
     // (A scenario model that is missing is reported when it is loaded, naming its own key.)
     if (!std::filesystem::equivalent(d.model_path, *model_path, ec) && !ec) {

@@ -1,4 +1,4 @@
-// Tracker data simulated from the truth (issue 20): an external tracker (motion capture, a laser
+// Tracker data simulated from the truth: an external tracker (motion capture, a laser
 // tracker) set up near a nominal pose sees markers on the robot over random postures. The truth
 // (MuJoCo with its effects) settles under gravity at each commanded posture (sim::Simulation's
 // static equilibrium); a row is the encoder readings and one marker's position in the tracker

@@ -1,5 +1,5 @@
-// Wall time of a pipeline's stages summed over a run, for summary.json's "timing" (issue 18:
-// the throughput a user of a whole scenario sees, not a kernel in isolation). Timing is the one
+// Wall time of a pipeline's stages summed over a run, for summary.json's "timing" (the
+// throughput a user of a whole scenario sees, not a kernel in isolation). Timing is the one
 // part of a result that is not the same bytes at the same seed, so it never enters the metrics.
 #pragma once
 

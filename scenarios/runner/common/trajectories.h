@@ -1,4 +1,4 @@
-// Trajectories in the TUM format that evo and most SLAM tools read (issue 17): one pose a line,
+// Trajectories in the TUM format that evo and most SLAM tools read: one pose a line,
 // "timestamp tx ty tz qx qy qz qw", space separated, metres and seconds, written with 17
 // significant digits so that a reader recomputes the scenario's own errors from the files. The
 // TUM format has no covariance, so each estimator's is written beside it.

@@ -1,4 +1,4 @@
-// closed_loop: from measured data to the effect the declared model lacks (issue 8).
+// closed_loop: from measured data to the effect the declared model lacks.
 // Residual of the declared model on a calibration set -> stepwise selection of candidate
 // effects (scenarios/identify) -> fitted, augmented declared model -> error before and after on
 // the calibration and on a separate validation set, NEES before and after, PNGs.
@@ -107,7 +107,7 @@ Source ParseSource(const ConfigNode& n, bool tracker) {
         const std::vector<ConfigNode> it = e.Items();
         if (it.size() != 3) e.Fail("expected [group_a, group_b, metres]");
         const double m = it[2].AsDouble();
-        // As MUKCa's socket_distance_m (issue 21: a negative distance was fitted silently).
+        // As MUKCa's socket_distance_m (a negative distance was fitted silently).
         if (!(std::isfinite(m) && m > 0.0 && m <= 10.0)) {
           it[2].Fail("a distance must be > 0 and at most 10 m");
         }

@@ -1,4 +1,4 @@
-// closed_loop_estimators (issue 15): the whole loop on one robot. The truth carries effects the
+// closed_loop_estimators: the whole loop on one robot. The truth carries effects the
 // declared model lacks.
 //   (a) The estimators track the end effector along a trajectory (AprilTags rendered, detected
 //       by libapriltag, fused with the encoders) with the declared model: error and NEES, and a

@@ -1,4 +1,4 @@
-// mismatch_matrix: every estimator against every undeclared effect (issue 8). For each column
+// mismatch_matrix: every estimator against every undeclared effect. For each column
 // the truth carries one effect (or none) the declared model knows nothing of; at the same random
 // configurations each estimator fuses the encoders and a tracked end-effector point and is
 // scored against the settled truth. Writes matrix.csv (one row per estimator and effect: errors,

@@ -1,4 +1,4 @@
-// Closing the loop (issue 8): the augmented kinematics against MuJoCo, identification of known
+// Closing the loop: the augmented kinematics against MuJoCo, identification of known
 // effects from synthetic data, unidentifiable and indistinguishable candidates, bad CSV input,
 // and the MUKCa real-data scenario (skipped when ../shared/data/mukca is absent).
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// The guard that keeps the closed loop honest (issue 14): for every effect type a closed_loop
+// The guard that keeps the closed loop honest: for every effect type a closed_loop
 // scenario plants in its truth, the same scenario with that type taken out of the candidate
 // library must not claim to have explained the data, and must not make the validation error
 // worse. A library that lacks the cause has to say so, not name a wrong one.

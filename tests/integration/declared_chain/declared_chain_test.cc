@@ -291,7 +291,7 @@ TEST(DeclaredModelFile, RangesAndTheModelPathAreChecked) {
       << e;
 }
 
-// The writer next to the reader (issue 22): every model's declared file, with what closed_loop
+// The writer next to the reader: every model's declared file, with what closed_loop
 // adds (identified effects, an equivalence set, a source with both an axis std and a full
 // covariance) and a coupling, comes back from EmitDeclaredModel through LoadDeclaredModel: bit
 // for bit with every digit, to the digits asked for otherwise.

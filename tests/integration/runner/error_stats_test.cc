@@ -1,4 +1,4 @@
-// ErrorStats' NEES and its running mismatch test (issue 15) against draws whose covariance is
+// ErrorStats' NEES and its running mismatch test against draws whose covariance is
 // known: errors drawn from the stated covariance keep the 6-DoF and position NEES at their
 // dof and rarely flag; errors twice the stated size flag almost always, and early. With a term
 // shared by every step of a run (a fitted parameter's error), the bounds that account for it

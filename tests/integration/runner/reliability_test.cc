@@ -27,7 +27,7 @@ std::string RunCmd(const fs::path& scenario, const fs::path& out, const std::str
          " </dev/null";
 }
 
-// --set KEY=VALUE on `run` (issue 17): the value is used and recorded; a wrong path or type is
+// --set KEY=VALUE on `run`: the value is used and recorded; a wrong path or type is
 // bad input naming the override, with nothing written.
 TEST(Reliability, SetOverridesAKeyAndIsRecordedOrNamed) {
   const fs::path dir = fs::temp_directory_path() / ("flexbench_set_" + std::to_string(getpid()));
@@ -62,7 +62,7 @@ TEST(Reliability, SetOverridesAKeyAndIsRecordedOrNamed) {
   fs::remove_all(dir);
 }
 
-// --quiet (issue 17): a successful run says nothing; without it the run logs what it did.
+// --quiet: a successful run says nothing; without it the run logs what it did.
 TEST(Reliability, QuietRunPrintsNothingButErrors) {
   TempDir tmp;
   const fs::path s = tmp.path() / "smoke.yaml";
@@ -234,7 +234,7 @@ TEST(Reliability, ScenarioNameCannotLeaveTheOutputFolder) {
   EXPECT_NE(r.err.find("key 'scenario': must be a plain name"), std::string::npos) << r.err;
 }
 
-// A closed_loop scenario on a user's CSV with an inline declared block (issue 21).
+// A closed_loop scenario on a user's CSV with an inline declared block.
 std::string ClosedLoopYaml(const fs::path& dir, const std::string& declared_model,
                            const std::string& distances) {
   std::string csv = "joint1,joint2,joint3,group\n";

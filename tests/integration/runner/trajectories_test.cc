@@ -1,4 +1,4 @@
-// TUM trajectories (issue 17): written for the truth and every estimator of a tag-fusion run,
+// TUM trajectories: written for the truth and every estimator of a tag-fusion run,
 // read back as evo would, and the scenario's own position error recomputed from the files.
 #include "scenarios/runner/common/trajectories.h"
 
@@ -43,7 +43,7 @@ std::vector<Row> ReadTum(const fs::path& path) {
   return rows;
 }
 
-// summary.json's throughput (issue 18): every stage timed, and the pipeline's rate is the count
+// summary.json's throughput: every stage timed, and the pipeline's rate is the count
 // over the stages' summed time.
 void ExpectPipelineTiming(const nlohmann::json& timing, const std::string& unit,
                           const std::vector<std::string>& stages, int count) {

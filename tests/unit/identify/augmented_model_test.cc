@@ -1,4 +1,4 @@
-// The augmented declared model is the estimators' model (issue 15): for every candidate effect
+// The augmented declared model is the estimators' model: for every candidate effect
 // of the identification, a declared model carrying it as an identified effect predicts the end
 // effector exactly as the identification's own model does (1e-9), with loads from the declared
 // masses instead of MuJoCo's; every registered estimator predicts with it; bad effects are

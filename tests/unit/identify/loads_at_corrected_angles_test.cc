@@ -1,4 +1,4 @@
-// Where the weight acts (issue 15, NEES after the loop): the truth's arm stands at its true
+// Where the weight acts (NEES after the loop): the truth's arm stands at its true
 // joint angles, the reading plus the encoder's offset, and its weight there tilts the compliant
 // mount. The identification's model, at the truth's parameter values, must reproduce MuJoCo's
 // static equilibrium (sim::Simulation::Settle, which shares no code with it) with the loads taken

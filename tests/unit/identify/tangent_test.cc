@@ -1,4 +1,4 @@
-// The analytic derivatives of the augmented kinematics (issue 21: identification's Jacobians
+// The analytic derivatives of the augmented kinematics (identification's Jacobians
 // were central differences, each column re-predicting every row twice) equal central differences
 // of PredictPose, for every candidate they cover, at random configurations and random sets of
 // active effects of realistic size; and the identification problem's Jacobian and candidate

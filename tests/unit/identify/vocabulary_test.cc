@@ -1,4 +1,4 @@
-// One vocabulary for effects (issue 22): a truth effect that identification can find carries the
+// One vocabulary for effects: a truth effect that identification can find carries the
 // name identification reports for it, so a scenario's `truth.effects` and `expected:` speak the
 // same words; the effects identification has no family for are listed here by name, so a new
 // truth effect must take a side. Former names are still read and build the same truth.

@@ -1,4 +1,4 @@
-// The identified parameters' uncertainty as PPOE sources (ModelEffects::Uncertainty, issue 15)
+// The identified parameters' uncertainty as PPOE sources (ModelEffects::Uncertainty)
 // against Monte Carlo: draw every parameter from N(value, std^2), apply the drawn effects with
 // EffectiveChain (no uncertainty, no declared sources) and compare the sample covariance of
 // Log(T_nominal^-1 T_drawn) at the end effector with the covariance EffectiveChain's sources

@@ -1,5 +1,5 @@
 // WeightedCircularQuantiles against the sorted definition it replaces (the particle filter's
-// 95% intervals before issue 18): every particle's deviation through atan2, all sorted, the
+// 95% intervals used to be): every particle's deviation through atan2, all sorted, the
 // midpoint walk. Concentrated, broad and wrapped clouds, heavy and negligible weights, ties,
 // far outliers and tiny particle counts. WeightedCircularTailQuantiles (the summary's fast path)
 // against the same definition, per seed, with bands that hold the quantiles and bands that miss.

@@ -210,7 +210,7 @@ TEST_P(ConvergenceTest, AllSensorsRecoverDeflectedAngles) {
 INSTANTIATE_TEST_SUITE_P(Proposals, ConvergenceTest,
                          ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate));
 
-// The summary's means and 95% intervals (issue 18: no sort, bands guessed from the circular
+// The summary's means and 95% intervals (no sort, bands guessed from the circular
 // std) against their definitions on the raw particles: [PF eq. 5], and the weighted 2.5% / 97.5%
 // quantiles of the sorted deviations (midpoint walk), from the diffuse start to convergence, per
 // seed, with and without the position readings.

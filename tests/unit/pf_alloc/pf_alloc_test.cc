@@ -160,7 +160,7 @@ TEST_P(NoAllocationTest, EstimatorInterfaceDoesNotAllocate) {
   EXPECT_TRUE(std::isfinite(sink));
 }
 
-// Identified effects (issue 15) cost no allocation either: the corrected model is updated in
+// Identified effects cost no allocation either: the corrected model is updated in
 // place at every joint reading (kinematics::EffectiveChain), the particle filter refolds its
 // batch kinematics, fk and the EKF add the readings' noise to their prior.
 TEST_P(NoAllocationTest, EstimatorsWithIdentifiedEffectsDoNotAllocate) {

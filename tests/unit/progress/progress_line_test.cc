@@ -1,4 +1,4 @@
-// ProgressLine (issue 17): what a long run prints on a terminal and in a log, with a fake clock.
+// ProgressLine: what a long run prints on a terminal and in a log, with a fake clock.
 #include <gtest/gtest.h>
 
 #include <vector>
