@@ -21,6 +21,7 @@
 #include "sim/declared_chain.h"
 #include "sim/mujoco_model.h"
 #include "sim/simulation.h"
+#include "tests/common/test_arms.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::identify {
@@ -28,25 +29,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr char kArm3[] = R"(
-<mujoco model="arm3">
-  <compiler angle="radian" autolimits="true"/>
-  <worldbody>
-    <body name="base" pos="0 0 0.1">
-      <joint name="j1" axis="0 0 1"/>
-      <geom type="cylinder" size="0.05 0.05" mass="2"/>
-      <body name="upper" pos="0 0 0.1">
-        <joint name="j2" axis="0 1 0"/>
-        <geom type="capsule" fromto="0 0 0 0.4 0 0" size="0.03" mass="3"/>
-        <body name="fore" pos="0.4 0 0">
-          <joint name="j3" axis="0 1 0"/>
-          <geom type="capsule" fromto="0 0 0 0.35 0 0" size="0.025" mass="2"/>
-          <site name="ee" pos="0.35 0 0.02"/>
-        </body>
-      </body>
-    </body>
-  </worldbody>
-</mujoco>)";
+const std::string kArm3 = testing::Arm3Mjcf();
 
 // j2 and j3 turn about one axis line: their offsets cannot be told apart by any data.
 constexpr char kTwinJoints[] = R"(
@@ -75,7 +58,7 @@ struct Fixture {
   std::unique_ptr<EffectModel> em;
 };
 
-Fixture Make(const char* xml, const std::vector<std::string>& joints) {
+Fixture Make(const std::string& xml, const std::vector<std::string>& joints) {
   Fixture f;
   f.m = sim::LoadModelFromString(xml, "inline.xml");
   sim::DeclaredModel d;

@@ -21,6 +21,7 @@
 #include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
 #include "sim/simulation.h"
+#include "tests/common/test_arms.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench {
@@ -301,38 +302,12 @@ TEST_F(Export, CompliancesBecomeGearAnnotationsAndTheRestIsNamed) {
   EXPECT_NE(u.err.find("c.urdf"), std::string::npos) << u.err;
 }
 
-// A 3-joint arm with position servos, for the truth's gear springs.
-constexpr char kServoArm[] = R"(
-<mujoco model="servo3">
-  <compiler angle="radian" autolimits="true"/>
-  <worldbody>
-    <body name="base" pos="0 0 0.1">
-      <joint name="j1" axis="0 0 1"/>
-      <geom type="cylinder" size="0.05 0.05" mass="2"/>
-      <body name="upper" pos="0 0 0.1">
-        <joint name="j2" axis="0 1 0"/>
-        <geom type="capsule" fromto="0 0 0 0.4 0 0" size="0.03" mass="3"/>
-        <body name="fore" pos="0.4 0 0">
-          <joint name="j3" axis="0 1 0"/>
-          <geom type="capsule" fromto="0 0 0 0.35 0 0" size="0.025" mass="2"/>
-          <site name="ee" pos="0.35 0 0.02"/>
-        </body>
-      </body>
-    </body>
-  </worldbody>
-  <actuator>
-    <position name="a1" joint="j1" kp="2000"/>
-    <position name="a2" joint="j2" kp="2000"/>
-    <position name="a3" joint="j3" kp="2000"/>
-  </actuator>
-</mujoco>)";
-
 // Where MJCF holds a load-driven effect (a gear compliance, as the truth's annotation), the
 // truth settled with the exported file deflects as the calibrated chain predicts: the chain
 // takes the torque at the reading, MuJoCo at the deflected posture, so they agree to second
 // order (a few percent of the deflection), not to 1e-9.
 TEST_F(Export, TheTruthReadsTheExportedGearSpringsAndSagsAsTheChainPredicts) {
-  testing::WriteFile(dir_ / "servo3.xml", kServoArm);
+  testing::WriteFile(dir_ / "servo3.xml", testing::Arm3Mjcf(/*servos=*/true));
   testing::WriteFile(dir_ / "s.yaml",
                      "model: servo3.xml\nactuated_joints: [j1, j2, j3]\n"
                      "end_effector: ee\nidentified_effects:\n"
