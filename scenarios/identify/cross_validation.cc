@@ -111,18 +111,10 @@ DataSet Subset(const DataSet& data, const std::vector<int>& rows) {
   return s;
 }
 
-std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
-                                     const std::vector<int>& rows) {
-  std::vector<ConfigLoads> s;
-  s.reserve(rows.size());
-  for (int r : rows) s.push_back(loads[r]);
-  return s;
-}
-
-double HeldOutSquares(const EffectModel& em, const DataSet& data,
-                      const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
-                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries,
-                      const Fit* nuisance, const std::vector<int>* rows) {
+double HeldOutSquares(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                      const std::vector<int>& active, const Eigen::VectorXd& theta,
+                      const IdentifyOptions& opt, int* entries, const Fit* nuisance,
+                      const std::vector<int>* rows) {
   const Problem pr(em, data, loads, active, {}, opt, rows);
   Eigen::VectorXd x(pr.num_params());
   x.head(pr.num_alpha()) = theta;
@@ -151,8 +143,7 @@ namespace {
 // Rows without groups are read in place: a group renumbering is all a subset would add.
 bool InPlace(const DataSet& data) { return data.groups.empty(); }
 
-FoldData MakeFoldData(const DataSet& data, const std::vector<ConfigLoads>& loads,
-                      const std::vector<int>& test) {
+FoldData MakeFoldData(const DataSet& data, const RowLoads& loads, const std::vector<int>& test) {
   std::vector<char> in_test(data.rows.size(), 0);
   for (int r : test) in_test[r] = 1;
   FoldData f;
@@ -161,33 +152,20 @@ FoldData MakeFoldData(const DataSet& data, const std::vector<ConfigLoads>& loads
   }
   if (InPlace(data)) return f;
   f.train = Subset(data, f.train_rows);
-  f.train_loads = SubsetLoads(loads, f.train_rows);
+  f.train_loads = loads.Subset(f.train, f.train_rows);
   f.test = Subset(data, test);
-  f.test_loads = SubsetLoads(loads, test);
+  f.test_loads = loads.Subset(f.test, test);
   return f;
-}
-
-size_t HeapBytes(const ConfigLoads& L) {
-  size_t gravity = 0;  // the gravity_tilt candidate's loads
-  for (const GravityTerms& h : L.horizontal) {
-    gravity += sizeof(GravityTerms) + sizeof(double) * (h.tau.size() + h.tau_unit.size()) +
-               sizeof(Vec3) * (h.M_mid.size() + h.M_mid_unit.size());
-  }
-  return sizeof(double) * (L.tau.size() + L.tau_unit.size() + L.axis_base.size() +
-                           L.motion_sign.size() + L.q_nominal.size()) +
-         sizeof(Vec3) * (L.M_mid.size() + L.M_mid_unit.size()) + sizeof(Mat3) * L.R_mid_T.size() +
-         sizeof(lie::SE3) * L.T_nominal.size() + gravity;
 }
 
 }  // namespace
 
-void CacheFolds(const DataSet& data, const std::vector<ConfigLoads>& loads, Folds* folds,
-                size_t max_bytes) {
+void CacheFolds(const DataSet& data, const RowLoads& loads, Folds* folds, size_t max_bytes) {
   folds->cache.clear();
   size_t row_bytes = sizeof(int);
   if (!InPlace(data)) {
-    row_bytes += sizeof(Observation) + sizeof(ConfigLoads);
-    if (!loads.empty()) row_bytes += HeapBytes(loads.front());
+    row_bytes += sizeof(Observation);
+    if (loads.num_kept() > 0) row_bytes += LoadsBytes(loads.kept(0));
     if (!data.rows.empty()) row_bytes += sizeof(double) * data.rows.front().q.size();
   }
   if (row_bytes * data.rows.size() * folds->test_rows.size() > max_bytes) return;
@@ -196,9 +174,8 @@ void CacheFolds(const DataSet& data, const std::vector<ConfigLoads>& loads, Fold
   }
 }
 
-double CrossValidate(const EffectModel& em, const DataSet& data,
-                     const std::vector<ConfigLoads>& loads, const Folds& folds, const Fit& fit,
-                     const IdentifyOptions& opt) {
+double CrossValidate(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                     const Folds& folds, const Fit& fit, const IdentifyOptions& opt) {
   // Each fold starts from the full-data fit, a few steps from its own optimum. The folds run
   // side by side when cached (made here, one fold's copy of the rows at a time); their sums
   // add up in fold order.

@@ -16,11 +16,11 @@
 namespace flexbench::identify {
 
 // One fold's training rows. Data with groups: the fold's rows as data sets of their own
-// (Subset, SubsetLoads: the groups renumbered). Without: those stay empty and the fits read the
-// rows in place (train_rows; the test rows are Folds::test_rows), a copy of no row.
+// (Subset, RowLoads::Subset: the groups renumbered). Without: those stay empty and the fits read
+// the rows in place (train_rows; the test rows are Folds::test_rows), a copy of no row.
 struct FoldData {
   DataSet train, test;
-  std::vector<ConfigLoads> train_loads, test_loads;
+  RowLoads train_loads, test_loads;
   std::vector<int> train_rows;
 };
 
@@ -34,7 +34,7 @@ struct Folds {
 // Fills `folds->cache` when it takes at most `max_bytes` (with groups every row is copied once
 // per fold; without, a row index per fold): a selection cross-validates dozens of models on the
 // same folds (the copies were a tenth of identifying 10,000 rows).
-void CacheFolds(const DataSet& data, const std::vector<ConfigLoads>& loads, Folds* folds,
+void CacheFolds(const DataSet& data, const RowLoads& loads, Folds* folds,
                 size_t max_bytes = size_t{128} << 20);
 
 // `by`: "auto" (as above) or "set", "group", "row" (fewer than two folds then: none).
@@ -43,22 +43,19 @@ Folds MakeFolds(const DataSet& data, const std::string& by = "auto");
 // The rows `rows` of `data` as a data set of their own (groups, sets and distances renumbered,
 // distances only between groups that keep rows). `loads` likewise, when given.
 DataSet Subset(const DataSet& data, const std::vector<int>& rows);
-std::vector<ConfigLoads> SubsetLoads(const std::vector<ConfigLoads>& loads,
-                                     const std::vector<int>& rows);
 
 // Sum of squared whitened residuals of `data` under (active, theta), group points at the mean
 // of their rows' predictions, measurement frames and marker offsets at `nuisance`'s (fitted on
 // the other folds; null: at their references), priors left out; `*entries` the number of
 // residual entries. `rows`: the rows of `data` scored (null: all; as Problem's).
-double HeldOutSquares(const EffectModel& em, const DataSet& data,
-                      const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
-                      const Eigen::VectorXd& theta, const IdentifyOptions& opt, int* entries,
-                      const Fit* nuisance = nullptr, const std::vector<int>* rows = nullptr);
+double HeldOutSquares(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                      const std::vector<int>& active, const Eigen::VectorXd& theta,
+                      const IdentifyOptions& opt, int* entries, const Fit* nuisance = nullptr,
+                      const std::vector<int>* rows = nullptr);
 
 // Mean squared whitened residual over the held-out folds of `fit`'s model, each fold's
 // parameters fitted on the other folds (starting from `fit`'s values, its bases kept).
-double CrossValidate(const EffectModel& em, const DataSet& data,
-                     const std::vector<ConfigLoads>& loads, const Folds& folds, const Fit& fit,
-                     const IdentifyOptions& opt);
+double CrossValidate(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                     const Folds& folds, const Fit& fit, const IdentifyOptions& opt);
 
 }  // namespace flexbench::identify

@@ -69,7 +69,7 @@ struct JointSamples {
 struct ResidualContext {
   const EffectModel& em;
   const DataSet& data;
-  const std::vector<ConfigLoads>& loads;
+  const RowLoads& loads;
   const Fit& fit;
   const IdentifyOptions& opt;
   const Problem& pr;
@@ -85,8 +85,9 @@ JointSamples SampleJoint(const ResidualContext& c, int k, EffectModel::Workspace
     qp[k] += h;
     qm[k] -= h;
     const int pt = c.data.rows[r].point;
-    const Vec3 s = (c.em.Predict(qp, c.loads[r], c.fit.active, c.fit.theta.data(), ws, pt) -
-                    c.em.Predict(qm, c.loads[r], c.fit.active, c.fit.theta.data(), ws, pt)) /
+    const ConfigLoads& L = c.loads.At(r, c.data.rows[r], ws);
+    const Vec3 s = (c.em.Predict(qp, L, c.fit.active, c.fit.theta.data(), ws, pt) -
+                    c.em.Predict(qm, L, c.fit.active, c.fit.theta.data(), ws, pt)) /
                    (2 * h * c.opt.point_std_m);
     const Vec3 e = c.res.segment<3>(c.pr.row_offset(r));
     const double s2 = s.squaredNorm();
@@ -94,7 +95,7 @@ JointSamples SampleJoint(const ResidualContext& c, int k, EffectModel::Workspace
     out.z.push_back(s.dot(e) / s2);
     out.w.push_back(s2);
     out.q.push_back(c.data.rows[r].q[k]);
-    out.tau.push_back(c.loads[r].tau.size() > k ? c.loads[r].tau[k] : 0.0);
+    out.tau.push_back(L.tau.size() > k ? L.tau[k] : 0.0);
   }
   return out;
 }
@@ -308,7 +309,7 @@ std::string FindingMessage(const ResidualFinding& best) {
 // Per joint: the residual against its angle (periodic) and its load; then against the row
 // order (drift) and the set; the most significant structure is the finding.
 ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data,
-                                      const std::vector<ConfigLoads>& loads, const Fit& fit,
+                                      const RowLoads& loads, const Fit& fit,
                                       const IdentifyOptions& opt) {
   ResidualFinding best;
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);

@@ -20,7 +20,7 @@
 namespace flexbench::identify {
 
 ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data,
-                                      const std::vector<ConfigLoads>& loads, const Fit& fit,
+                                      const RowLoads& loads, const Fit& fit,
                                       const IdentifyOptions& opt);
 
 // The candidates of `candidates` that a significant finding points to (needs_evidence families

@@ -537,7 +537,7 @@ struct EffectModel::LoadPose {
   Vec3 p_w_base, g_base, p_ee;
 };
 
-void EffectModel::InitLoads(const Eigen::VectorXd& q, ConfigLoads* L) const {
+void EffectModel::InitLoads(const Eigen::VectorXd& q, bool nominal_poses, ConfigLoads* L) const {
   const kinematics::PpoeModel& model = chain_->model;
   const int n = model.num_frames();
   L->tau = Eigen::VectorXd::Zero(model.nq());
@@ -550,6 +550,11 @@ void EffectModel::InitLoads(const Eigen::VectorXd& q, ConfigLoads* L) const {
   L->M_mid_unit.assign(num_mid_, Vec3::Zero());
   L->axis_base = Eigen::Matrix3Xd::Zero(3, model.nq());
   L->R_mid_T.assign(num_mid_, Mat3::Identity());
+  if (!nominal_poses) {
+    L->q_nominal.resize(0);
+    L->T_nominal.clear();
+    return;
+  }
   // PredictPose's untouched-frame form with every dq zero (q + 0.0 as there, same bits).
   L->q_nominal = q;
   L->T_nominal.assign(n, lie::SE3());
@@ -561,10 +566,8 @@ void EffectModel::InitLoads(const Eigen::VectorXd& q, ConfigLoads* L) const {
   }
 }
 
-void EffectModel::StandAt(const Eigen::VectorXd& q_load, LoadPose* P) const {
+void EffectModel::StandAt(const Eigen::VectorXd& q_load, mjData* d, LoadPose* P) const {
   kinematics::ForwardKinematics(chain_->model, P->pd, q_load);
-  if (!d_) d_ = sim::MakeData(m_);
-  mjData* d = d_.get();
   mju_copy(d->qpos, m_->qpos0, m_->nq);
   chain_->WriteQpos(q_load, d->qpos);
   mj_kinematics(m_, d);
@@ -678,32 +681,68 @@ void EffectModel::GravityLoads(const LoadPose& P, const Vec3& g, GravityTerms* t
   t->M_first = -lie::Skew(g) * P.pd.T_base_frame[point_frame_].rotation();
 }
 
-ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load) const {
-  ConfigLoads L;
-  InitLoads(q, &L);
-  if (!has_masses_) return L;
-  LoadPose P(chain_->model);
-  StandAt(q_load, &P);
+struct EffectModel::LoadScratch {
+  explicit LoadScratch(const kinematics::PpoeModel& model) : P(model) {}
+  LoadPose P;
   GravityTerms t;
-  GravityLoads(P, P.g_base, &t, &L);
-  L.tau = std::move(t.tau);
-  L.tau_unit = std::move(t.tau_unit);
-  L.M_lat = std::move(t.M_lat);
-  L.M_lat_unit = std::move(t.M_lat_unit);
-  L.M_mid = std::move(t.M_mid);
-  L.M_mid_unit = std::move(t.M_mid_unit);
-  L.M_mount = t.M_mount;
-  L.M_mount_unit = t.M_mount_unit;
-  L.g_mount = t.g_mount;
-  L.M_first = t.M_first;
+  sim::MjDataPtr d;
+};
+
+void EffectModel::FillLoads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load,
+                            bool nominal_poses, LoadScratch* s, ConfigLoads* L) const {
+  InitLoads(q, nominal_poses, L);
+  if (!has_masses_) return;
+  if (!s->d) s->d = sim::MakeData(m_);
+  LoadPose& P = s->P;
+  StandAt(q_load, s->d.get(), &P);
+  GravityTerms& t = s->t;
+  GravityLoads(P, P.g_base, &t, L);
+  // Swapped, not moved: the zeroed buffers go to the scratch for the next call.
+  L->tau.swap(t.tau);
+  L->tau_unit.swap(t.tau_unit);
+  L->M_lat.swap(t.M_lat);
+  L->M_lat_unit.swap(t.M_lat_unit);
+  L->M_mid.swap(t.M_mid);
+  L->M_mid_unit.swap(t.M_mid_unit);
+  L->M_mount = t.M_mount;
+  L->M_mount_unit = t.M_mount_unit;
+  L->g_mount = t.g_mount;
+  L->M_first = t.M_first;
   if (gravity_tilt_ >= 0) {
     Vec3 a1, a2;
     kinematics::GravityTiltAxes(P.g_base, &a1, &a2);
-    L.horizontal.resize(2);
-    GravityLoads(P, a1.cross(P.g_base), &L.horizontal[0], &L);
-    GravityLoads(P, a2.cross(P.g_base), &L.horizontal[1], &L);
+    L->horizontal.resize(2);
+    GravityLoads(P, a1.cross(P.g_base), &L->horizontal[0], L);
+    GravityLoads(P, a2.cross(P.g_base), &L->horizontal[1], L);
   }
+}
+
+ConfigLoads EffectModel::Loads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load) const {
+  ConfigLoads L;
+  LoadScratch s(chain_->model);
+  s.d = std::move(d_);
+  FillLoads(q, q_load, true, &s, &L);
+  d_ = std::move(s.d);
   return L;
+}
+
+EffectModel::LoadScratch* EffectModel::ScratchOf(Workspace& ws) const {
+  if (!ws.load_scratch) {
+    ws.load_scratch = std::unique_ptr<LoadScratch, void (*)(LoadScratch*)>(
+        new LoadScratch(chain_->model), [](LoadScratch* p) { delete p; });
+  }
+  return ws.load_scratch.get();
+}
+
+ConfigLoads& EffectModel::LoadsFor(const Eigen::VectorXd& q, const std::vector<int>& active,
+                                   const double* theta, Workspace& ws) const {
+  LoadScratch* s = ScratchOf(ws);
+  if (!LoadsShift(active)) {
+    FillLoads(q, q, false, s, &ws.row_loads);
+  } else {
+    FillLoads(q, q + ReadingShift(q, active, theta), false, s, &ws.row_loads);
+  }
+  return ws.row_loads;
 }
 
 const ConfigLoads& EffectModel::TiltedLoads(const ConfigLoads& L, const std::vector<int>& active,

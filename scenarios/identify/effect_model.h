@@ -250,6 +250,7 @@ class EffectModel {
     Mat3 R_mount = Mat3::Identity(), R_tilt = Mat3::Identity();
     Vec3 phi = Vec3::Zero(), mid = Vec3::Zero();
   };
+  struct LoadScratch;  // Workspace::load_scratch (effect_model.cc)
   struct Workspace {
     Eigen::VectorXd dq;
     std::vector<double> dlen;
@@ -273,8 +274,17 @@ class EffectModel {
     Eigen::Matrix2d mount_J = Eigen::Matrix2d::Zero();
     FrameId point = -1;  // the predicted point frame of the current call
     ConfigLoads tilted;  // TiltedLoads' result where a gravity tilt is active
+    // RowLoads: a row's loads computed in a pass, and their scratch (the arm's poses, its own
+    // MuJoCo data, the gravity terms), kept between rows so that the next allocates nothing.
+    ConfigLoads row_loads;
+    std::unique_ptr<LoadScratch, void (*)(LoadScratch*)> load_scratch{nullptr, nullptr};
   };
   Workspace MakeWorkspace() const;
+  // LoadsFor(q, active, theta) into ws.row_loads without the nominal poses (a prediction computes
+  // them), on ws's own MuJoCo data: for a pass over rows whose loads are not kept (RowLoads), on
+  // any thread.
+  ConfigLoads& LoadsFor(const Eigen::VectorXd& q, const std::vector<int>& active,
+                        const double* theta, Workspace& ws) const;
 
   // Position of the point frame in the base frame, with effects `active` (indices into
   // candidates()) at parameters `theta` (concatenated in that order).
@@ -358,8 +368,12 @@ class EffectModel {
   // a under gravity g; the gravity-linear loads under g into t, the geometry into L, per
   // joint torque, link middle and mount.
   struct LoadPose;
-  void InitLoads(const Eigen::VectorXd& q, ConfigLoads* L) const;
-  void StandAt(const Eigen::VectorXd& q_load, LoadPose* P) const;
+  void InitLoads(const Eigen::VectorXd& q, bool nominal_poses, ConfigLoads* L) const;
+  void StandAt(const Eigen::VectorXd& q_load, mjData* d, LoadPose* P) const;
+  // Loads(q, q_load) into L through the scratch `s` (its buffers reused).
+  void FillLoads(const Eigen::VectorXd& q, const Eigen::VectorXd& q_load, bool nominal_poses,
+                 LoadScratch* s, ConfigLoads* L) const;
+  LoadScratch* ScratchOf(Workspace& ws) const;
   Vec3 SubtreeCom(const LoadPose& P, int b) const;
   Vec3 SubtreeMoment(const LoadPose& P, int b, const Vec3& a, const Vec3& g) const;
   void GravityLoads(const LoadPose& P, const Vec3& g, GravityTerms* t, ConfigLoads* L) const;

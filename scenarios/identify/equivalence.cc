@@ -54,39 +54,35 @@ Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj
   return B;
 }
 
-Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data,
-                            const std::vector<ConfigLoads>& loads, const Fit& fit,
-                            const IdentifyOptions& opt) {
+Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                            const Fit& fit, const IdentifyOptions& opt) {
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);
   return pr.Jacobian(StateOf(pr, fit));
 }
 
-Eigen::VectorXd FitResiduals(const EffectModel& em, const DataSet& data,
-                             const std::vector<ConfigLoads>& loads, const Fit& fit,
-                             const IdentifyOptions& opt) {
+Eigen::VectorXd FitResiduals(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                             const Fit& fit, const IdentifyOptions& opt) {
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);
   return pr.Residuals(StateOf(pr, fit));
 }
 
-Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data,
-                                  const std::vector<ConfigLoads>& loads, const Fit& fit, int c,
-                                  const IdentifyOptions& opt) {
+Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                                  const Fit& fit, int c, const IdentifyOptions& opt) {
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);
   return pr.CandidateColumns(StateOf(pr, fit), c);
 }
 
 std::vector<Eigen::MatrixXd> CandidateJacobians(const EffectModel& em, const DataSet& data,
-                                                const std::vector<ConfigLoads>& loads,
-                                                const Fit& fit, const std::vector<int>& cs,
+                                                const RowLoads& loads, const Fit& fit,
+                                                const std::vector<int>& cs,
                                                 const IdentifyOptions& opt) {
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);
   return pr.CandidateColumns(StateOf(pr, fit), cs);
 }
 
-void ForEachCandidateJacobian(const EffectModel& em, const DataSet& data,
-                              const std::vector<ConfigLoads>& loads, const Fit& fit,
-                              const std::vector<int>& cs, const IdentifyOptions& opt,
-                              double max_bytes,
+void ForEachCandidateJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                              const Fit& fit, const std::vector<int>& cs,
+                              const IdentifyOptions& opt, double max_bytes,
                               const std::function<void(size_t, const Eigen::MatrixXd&)>& fn) {
   const double column_bytes = sizeof(double) * static_cast<double>(fit.num_residuals);
   for (size_t begin = 0; begin < cs.size();) {
@@ -153,9 +149,8 @@ EquivalentMember Member(const EffectModel& em, int c, const Eigen::MatrixXd& R,
 
 }  // namespace
 
-void FindEquivalents(const EffectModel& em, const DataSet& data,
-                     const std::vector<ConfigLoads>& loads, const Fit& fit,
-                     const std::vector<int>& candidates, const IdentifyOptions& opt,
+void FindEquivalents(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                     const Fit& fit, const std::vector<int>& candidates, const IdentifyOptions& opt,
                      IdentifyResult* result) {
   for (size_t e = 0; e < fit.active.size(); ++e) {
     const int ce = fit.active[e];
@@ -215,8 +210,8 @@ void FindEquivalents(const EffectModel& em, const DataSet& data,
 }
 
 std::vector<SimplerEquivalent> SimplerEquivalents(const EffectModel& em, const DataSet& data,
-                                                  const std::vector<ConfigLoads>& loads,
-                                                  const Fit& fit, const IdentifyOptions& opt) {
+                                                  const RowLoads& loads, const Fit& fit,
+                                                  const IdentifyOptions& opt) {
   std::vector<SimplerEquivalent> out;
   const int k = static_cast<int>(fit.active.size());
   if (k < 2 || k > 10) return out;
@@ -265,10 +260,9 @@ std::vector<SimplerEquivalent> SimplerEquivalents(const EffectModel& em, const D
   return out;
 }
 
-void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
-                            const std::vector<ConfigLoads>& loads, const Fit& fit,
-                            const std::vector<int>& candidates, const IdentifyOptions& opt,
-                            IdentifyResult* result) {
+void FindSimplerEquivalents(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                            const Fit& fit, const std::vector<int>& candidates,
+                            const IdentifyOptions& opt, IdentifyResult* result) {
   for (const SimplerEquivalent& se : SimplerEquivalents(em, data, loads, fit, opt)) {
     const Candidate& cand = em.candidates()[se.candidate];
     std::string names;
@@ -289,10 +283,9 @@ void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
   }
 }
 
-void FindUnidentifiable(const EffectModel& em, const DataSet& data,
-                        const std::vector<ConfigLoads>& loads, const Fit& fit,
-                        const std::vector<int>& candidates, const IdentifyOptions& opt,
-                        IdentifyResult* result) {
+void FindUnidentifiable(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                        const Fit& fit, const std::vector<int>& candidates,
+                        const IdentifyOptions& opt, IdentifyResult* result) {
   const Projector proj(FitJacobian(em, data, loads, fit, opt));
   std::vector<int> cs;
   for (int c : candidates) {

@@ -38,45 +38,39 @@ Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj
                                 double* rel);
 
 // The Jacobian of `fit`'s unknowns at its state, and the sensitivity of candidate c there.
-Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data,
-                            const std::vector<ConfigLoads>& loads, const Fit& fit,
-                            const IdentifyOptions& opt);
+Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                            const Fit& fit, const IdentifyOptions& opt);
 // Its whitened residuals there.
-Eigen::VectorXd FitResiduals(const EffectModel& em, const DataSet& data,
-                             const std::vector<ConfigLoads>& loads, const Fit& fit,
-                             const IdentifyOptions& opt);
-Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data,
-                                  const std::vector<ConfigLoads>& loads, const Fit& fit, int c,
-                                  const IdentifyOptions& opt);
+Eigen::VectorXd FitResiduals(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                             const Fit& fit, const IdentifyOptions& opt);
+Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                                  const Fit& fit, int c, const IdentifyOptions& opt);
 // CandidateJacobian for each of `cs`, the analytic ones in one pass over the rows.
 std::vector<Eigen::MatrixXd> CandidateJacobians(const EffectModel& em, const DataSet& data,
-                                                const std::vector<ConfigLoads>& loads,
-                                                const Fit& fit, const std::vector<int>& cs,
+                                                const RowLoads& loads, const Fit& fit,
+                                                const std::vector<int>& cs,
                                                 const IdentifyOptions& opt);
 // The same handed to fn(i, columns of cs[i]) in order, computed in batches of at most
 // `max_bytes` of columns (one pass over the rows per batch), so memory does not grow with the
 // number of candidates times the rows.
-void ForEachCandidateJacobian(const EffectModel& em, const DataSet& data,
-                              const std::vector<ConfigLoads>& loads, const Fit& fit,
-                              const std::vector<int>& cs, const IdentifyOptions& opt,
-                              double max_bytes,
+void ForEachCandidateJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                              const Fit& fit, const std::vector<int>& cs,
+                              const IdentifyOptions& opt, double max_bytes,
                               const std::function<void(size_t, const Eigen::MatrixXd&)>& fn);
 // The most candidates' columns take at once (more candidates: more passes).
 inline constexpr double kCandidateColumnBytes = 64.0 * (1 << 20);
 
 // Equivalence sets of the chosen effects of `fit` among `candidates`; fills
 // result->equivalence and result->indistinguishable, and the effects' display names.
-void FindEquivalents(const EffectModel& em, const DataSet& data,
-                     const std::vector<ConfigLoads>& loads, const Fit& fit,
-                     const std::vector<int>& candidates, const IdentifyOptions& opt,
+void FindEquivalents(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                     const Fit& fit, const std::vector<int>& candidates, const IdentifyOptions& opt,
                      IdentifyResult* result);
 
 // Candidates (of `candidates`, not chosen, in no equivalence set) with no observable direction
 // given `fit`: result->unidentifiable.
-void FindUnidentifiable(const EffectModel& em, const DataSet& data,
-                        const std::vector<ConfigLoads>& loads, const Fit& fit,
-                        const std::vector<int>& candidates, const IdentifyOptions& opt,
-                        IdentifyResult* result);
+void FindUnidentifiable(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                        const Fit& fit, const std::vector<int>& candidates,
+                        const IdentifyOptions& opt, IdentifyResult* result);
 
 // Several chosen effects that together make the correction of one simpler candidate of the
 // whole library (fewer parameters; in the candidate list or not): e.g. a translation plus a
@@ -88,11 +82,10 @@ struct SimplerEquivalent {
   int candidate = -1;        // the simpler candidate making the same correction
 };
 std::vector<SimplerEquivalent> SimplerEquivalents(const EffectModel& em, const DataSet& data,
-                                                  const std::vector<ConfigLoads>& loads,
-                                                  const Fit& fit, const IdentifyOptions& opt);
-void FindSimplerEquivalents(const EffectModel& em, const DataSet& data,
-                            const std::vector<ConfigLoads>& loads, const Fit& fit,
-                            const std::vector<int>& candidates, const IdentifyOptions& opt,
-                            IdentifyResult* result);
+                                                  const RowLoads& loads, const Fit& fit,
+                                                  const IdentifyOptions& opt);
+void FindSimplerEquivalents(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                            const Fit& fit, const std::vector<int>& candidates,
+                            const IdentifyOptions& opt, IdentifyResult* result);
 
 }  // namespace flexbench::identify

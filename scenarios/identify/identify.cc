@@ -127,9 +127,9 @@ void ThetaCovariance(const Problem& pr, const Fit& cur, const Information& inf,
 
 // How much the effects' corrections overlap once the group points are projected out: |sum|^2
 // over the sum of |each|^2 (1: independent).
-double EffectOverlap(const EffectModel& em, const DataSet& data,
-                     const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt,
-                     const Problem& pr, const Fit& cur, const Eigen::MatrixXd& J) {
+double EffectOverlap(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                     const IdentifyOptions& opt, const Problem& pr, const Fit& cur,
+                     const Eigen::MatrixXd& J) {
   Fit groups_only = cur;
   groups_only.active.clear();
   groups_only.basis.clear();
@@ -148,9 +148,8 @@ double EffectOverlap(const EffectModel& em, const DataSet& data,
 }
 
 // Each effect's values, stds (or its equivalence set's) and share of the RSS gain.
-void FittedEffects(const EffectModel& em, const DataSet& data,
-                   const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt,
-                   const Fit& cur, IdentifyResult* res) {
+void FittedEffects(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                   const IdentifyOptions& opt, const Fit& cur, IdentifyResult* res) {
   const Eigen::VectorXd sd = res->theta_cov.diagonal().cwiseMax(0).cwiseSqrt();
   // Each effect's removal refitted on its own, side by side.
   const int n = static_cast<int>(cur.active.size());
@@ -192,7 +191,7 @@ void FittedEffects(const EffectModel& em, const DataSet& data,
 // Covariance of the fitted parameters (pseudo-inverse of the normalised information; a near
 // singular direction is reported, never hidden behind a clamped variance), correlations,
 // condition number and each effect's share of the removed sum of squares.
-void Report(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+void Report(const EffectModel& em, const DataSet& data, const RowLoads& loads,
             const IdentifyOptions& opt, IdentifyResult* res) {
   const Fit& cur = res->after;
   if (cur.theta.size() == 0) return;
@@ -340,8 +339,8 @@ Fit PreferSimpler(const SelectionContext& ctx, const std::vector<int>& candidate
 // (EffectModel::LoadsFor), until those corrections settle (they move the loads by ~1%, so one
 // or two passes); `*loads` those loads, left empty when the model does not shift them.
 Fit RefitAtCorrectedLoads(const EffectModel& em, const DataSet& data, Fit fit,
-                          const IdentifyOptions& opt, std::vector<ConfigLoads>* loads) {
-  loads->clear();
+                          const IdentifyOptions& opt, RowLoads* loads) {
+  *loads = RowLoads();
   if (!em.LoadsShift(fit.active)) return fit;
   Eigen::VectorXd theta_used;
   for (int pass = 0; pass < 4; ++pass) {
@@ -382,47 +381,84 @@ ConfigLoads Stored(ConfigLoads L, const Observation& o, bool cache) {
 
 }  // namespace
 
-std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data) {
-  std::vector<ConfigLoads> loads;
-  loads.reserve(data.rows.size());
-  const bool cache = CacheNominalPoses(em, data);
-  for (const Observation& o : data.rows) loads.push_back(Stored(em.Loads(o.q), o, cache));
-  return loads;
-}
-
-std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data,
-                                      const std::vector<int>& active,
-                                      const Eigen::VectorXd& theta) {
-  if (!em.LoadsShift(active)) return ComputeLoads(em, data);
-  std::vector<ConfigLoads> loads;
-  loads.reserve(data.rows.size());
-  const bool cache = CacheNominalPoses(em, data);
-  for (const Observation& o : data.rows) {
-    loads.push_back(Stored(em.LoadsFor(o.q, active, theta.data()), o, cache));
+size_t LoadsBytes(const ConfigLoads& L) {
+  size_t gravity = 0;  // the gravity_tilt candidate's loads
+  for (const GravityTerms& h : L.horizontal) {
+    gravity += sizeof(GravityTerms) + sizeof(double) * (h.tau.size() + h.tau_unit.size()) +
+               sizeof(Vec3) * (h.M_mid.size() + h.M_mid_unit.size()) +
+               sizeof(double) * (h.M_lat.size() + h.M_lat_unit.size());
   }
-  return loads;
+  return sizeof(ConfigLoads) +
+         sizeof(double) * (L.tau.size() + L.tau_unit.size() + L.M_lat.size() + L.M_lat_unit.size() +
+                           L.axis_base.size() + L.lat_a_base.size() + L.lat_b_base.size() +
+                           L.motion_sign.size() + L.q_nominal.size()) +
+         sizeof(Vec3) * (L.M_mid.size() + L.M_mid_unit.size()) + sizeof(Mat3) * L.R_mid_T.size() +
+         sizeof(lie::SE3) * L.T_nominal.size() + gravity;
 }
 
-std::vector<Vec3> PredictAll(const EffectModel& em, const DataSet& data,
-                             const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
-                             const Eigen::VectorXd& theta) {
+RowLoads::RowLoads(std::vector<ConfigLoads> loads) : kept_(std::move(loads)), size_(kept_.size()) {}
+
+RowLoads::RowLoads(const EffectModel& em, const DataSet& data, std::vector<int> active,
+                   Eigen::VectorXd theta, double max_bytes)
+    : em_(&em),
+      active_(std::move(active)),
+      theta_(std::move(theta)),
+      max_bytes_(max_bytes),
+      size_(data.rows.size()) {
+  if (!em.LoadsShift(active_)) active_.clear();
+  const bool cache = CacheNominalPoses(em, data);
+  double bytes = 0.0;
+  for (const Observation& o : data.rows) {
+    ConfigLoads L = Stored(em.LoadsFor(o.q, active_, theta_.data()), o, cache);
+    const double row_bytes = static_cast<double>(LoadsBytes(L));
+    bytes += row_bytes;
+    if (bytes > max_bytes_) break;
+    // Reserved once: a vector's doubling would take up to twice the budget for a moment.
+    if (kept_.empty()) kept_.reserve(std::min(size_, static_cast<size_t>(max_bytes_ / row_bytes)));
+    kept_.push_back(std::move(L));
+  }
+}
+
+const ConfigLoads& RowLoads::Compute(const Observation& o, EffectModel::Workspace& ws) const {
+  ConfigLoads& L = em_->LoadsFor(o.q, active_, theta_.data(), ws);
+  L.motion_sign = o.motion_sign;
+  return L;
+}
+
+RowLoads RowLoads::Subset(const DataSet& subset, const std::vector<int>& rows) const {
+  if (em_) return RowLoads(*em_, subset, active_, theta_, max_bytes_);
+  std::vector<ConfigLoads> s;
+  s.reserve(rows.size());
+  for (int r : rows) s.push_back(kept_[r]);
+  return RowLoads(std::move(s));
+}
+
+RowLoads ComputeLoads(const EffectModel& em, const DataSet& data) { return RowLoads(em, data); }
+
+RowLoads ComputeLoads(const EffectModel& em, const DataSet& data, const std::vector<int>& active,
+                      const Eigen::VectorXd& theta) {
+  return RowLoads(em, data, active, theta);
+}
+
+std::vector<Vec3> PredictAll(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                             const std::vector<int>& active, const Eigen::VectorXd& theta) {
   std::vector<Vec3> p(data.rows.size());
   EffectModel::Workspace ws = em.MakeWorkspace();
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    p[r] = em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws, data.rows[r].point);
+    p[r] = em.Predict(data.rows[r].q, loads.At(r, data.rows[r], ws), active, theta.data(), ws,
+                      data.rows[r].point);
   }
   return p;
 }
 
-Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+Fit FitEffects(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                const std::vector<int>& active, const Eigen::VectorXd& init,
                const IdentifyOptions& opt) {
   return FitEffects(em, data, loads, active, {}, init, opt);
 }
 
-IdentifyResult Identify(const EffectModel& em, const DataSet& data,
-                        const std::vector<ConfigLoads>& loads, const std::vector<int>& candidates,
-                        const IdentifyOptions& opt) {
+IdentifyResult Identify(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                        const std::vector<int>& candidates, const IdentifyOptions& opt) {
   IdentifyResult res;
   res.before = FitEffects(em, data, loads, {}, Eigen::VectorXd(), opt);
   if (res.before.num_residuals <= res.before.num_params) {
@@ -518,10 +554,10 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   flush();
   // The selection ran on the loads at the readings; the chosen model's values are refitted on
   // the loads where its own joint corrections put the arm, and analysed there.
-  std::vector<ConfigLoads> shifted;
+  RowLoads shifted;
   const Fit chosen = cur;  // at the loads the selection used, where the alternatives start
   cur = RefitAtCorrectedLoads(em, data, std::move(cur), opt, &shifted);
-  const std::vector<ConfigLoads>& final_loads = shifted.empty() ? loads : shifted;
+  const RowLoads& final_loads = shifted.empty() ? loads : shifted;
   res.after = cur;
   res.cv_after = cv;
   res.stopped_by = out_of_time            ? "time_budget"
@@ -551,8 +587,8 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data,
   return res;
 }
 
-std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data_in,
-                              const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt) {
+std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data_in, const RowLoads& loads,
+                              const IdentifyOptions& opt) {
   std::vector<int> out;
   if (!(opt.outlier_iqr > 0) || data_in.rows.empty()) return out;
   // Rows in measurement frames against the frames' reference poses (a registration).
@@ -643,8 +679,7 @@ std::string Verdict(const IdentifyResult& res, double val_before, double val_aft
 }
 
 std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet& data,
-                                           const std::vector<ConfigLoads>& loads,
-                                           const std::vector<int>& active,
+                                           const RowLoads& loads, const std::vector<int>& active,
                                            const Eigen::VectorXd& theta) {
   std::vector<Eigen::Vector2d> uv(data.rows.size(), Eigen::Vector2d::Zero());
   if (!data.camera.present) return uv;
@@ -652,9 +687,9 @@ std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet&
   EffectModel::Workspace ws = em.MakeWorkspace();
   for (size_t r = 0; r < data.rows.size(); ++r) {
     if (data.rows[r].type != ObservationType::kPixel) continue;
-    uv[r] =
-        Project(data.camera, T_base_cam,
-                em.Predict(data.rows[r].q, loads[r], active, theta.data(), ws, data.rows[r].point));
+    uv[r] = Project(data.camera, T_base_cam,
+                    em.Predict(data.rows[r].q, loads.At(r, data.rows[r], ws), active, theta.data(),
+                               ws, data.rows[r].point));
   }
   return uv;
 }

@@ -132,6 +132,49 @@ struct DataSet {
   std::vector<char> offset_unknown;
 };
 
+// The most the rows' cached nominal poses may take (ComputeLoads): beyond, a row's loads keep
+// none and predictions compute them.
+inline constexpr double kNominalPoseCacheBytes = 16.0 * (1 << 20);
+// The most the rows' kept loads may take (RowLoads): beyond, a pass computes a row's loads
+// where it needs them.
+inline constexpr double kLoadsCacheBytes = 32.0 * (1 << 20);
+
+// Heap and struct bytes of one row's loads.
+size_t LoadsBytes(const ConfigLoads& L);
+
+// The rows' loads for the predictions of (active, theta) (EffectModel::LoadsFor at each row's
+// readings, with its motion signs). The first rows' are kept, as many as kLoadsCacheBytes hold;
+// a pass computes the others' where it needs them, into its workspace (the same bits, more
+// time: the loads were ~1.3 KB a row on planar3, most of identification's memory per row).
+class RowLoads {
+ public:
+  RowLoads() = default;
+  // Every row's loads as given, all kept.
+  explicit RowLoads(std::vector<ConfigLoads> loads);
+  RowLoads(const EffectModel& em, const DataSet& data, std::vector<int> active = {},
+           Eigen::VectorXd theta = Eigen::VectorXd(), double max_bytes = kLoadsCacheBytes);
+
+  size_t size() const { return size_; }
+  bool empty() const { return size_ == 0; }
+  size_t num_kept() const { return kept_.size(); }
+  const ConfigLoads& kept(size_t r) const { return kept_[r]; }
+  // Row r's loads (o: its observation): kept, or computed into ws.row_loads.
+  const ConfigLoads& At(size_t r, const Observation& o, EffectModel::Workspace& ws) const {
+    return r < kept_.size() ? kept_[r] : Compute(o, ws);
+  }
+  // The loads of `subset` (the rows `rows` of the data these are of).
+  RowLoads Subset(const DataSet& subset, const std::vector<int>& rows) const;
+
+ private:
+  const ConfigLoads& Compute(const Observation& o, EffectModel::Workspace& ws) const;
+  const EffectModel* em_ = nullptr;  // null: every row kept
+  std::vector<int> active_;
+  Eigen::VectorXd theta_;
+  double max_bytes_ = kLoadsCacheBytes;
+  std::vector<ConfigLoads> kept_;
+  size_t size_ = 0;
+};
+
 struct IdentifyOptions {
   bool cross_validation = true;    // selection checked on held-out folds (cross_validation.h)
   std::string folds_by = "auto";   // "auto", or insist on "set", "group" or "row" folds
@@ -269,8 +312,8 @@ struct IdentifyResult {
 // Rows whose declared-model error lies beyond Q3 + opt.outlier_iqr IQR of all rows' (and above
 // ten times the stated noise): errors to the coordinate-wise median of their group, to their
 // measured point, or in pixels, each kind on its own. Sorted row indices; none when k = 0.
-std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data,
-                              const std::vector<ConfigLoads>& loads, const IdentifyOptions& opt);
+std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                              const IdentifyOptions& opt);
 
 // `data` without the rows `drop` (sorted), groups and sets kept as they are.
 DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop);
@@ -295,39 +338,32 @@ inline constexpr double kFarAboveNoise = 100.0;
 // The fit's RMS residual in units of the stated noise (sqrt(rss / dof)).
 double NoiseRatio(const Fit& fit);
 
-// The most the rows' cached nominal poses may take (ComputeLoads): beyond, a row's loads keep
-// none and predictions compute them.
-inline constexpr double kNominalPoseCacheBytes = 16.0 * (1 << 20);
-
 // Precomputed per-row loads for a data set, the arm at its readings.
-std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data);
+RowLoads ComputeLoads(const EffectModel& em, const DataSet& data);
 // The same for predictions of (active, theta): the arm where its joint corrections put it
 // (EffectModel::LoadsFor); what a fitted model's predictions (validation, residuals) use.
-std::vector<ConfigLoads> ComputeLoads(const EffectModel& em, const DataSet& data,
-                                      const std::vector<int>& active, const Eigen::VectorXd& theta);
+RowLoads ComputeLoads(const EffectModel& em, const DataSet& data, const std::vector<int>& active,
+                      const Eigen::VectorXd& theta);
 
 // Fits `active` (all directions, plus group points) by Levenberg-Marquardt from `init` (theta;
 // may be empty). problem.h has the form with fitted directions.
-Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+Fit FitEffects(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                const std::vector<int>& active, const Eigen::VectorXd& init,
                const IdentifyOptions& options);
 
 // The staged identification over `candidates` (indices into em.candidates()). Throws
 // InputError when the data has fewer residuals than unknowns, or cross-validation is asked for
 // and the data has fewer than two folds.
-IdentifyResult Identify(const EffectModel& em, const DataSet& data,
-                        const std::vector<ConfigLoads>& loads, const std::vector<int>& candidates,
-                        const IdentifyOptions& options);
+IdentifyResult Identify(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                        const std::vector<int>& candidates, const IdentifyOptions& options);
 
 // Per-row end-effector points of a model with `active` at `theta`.
-std::vector<Vec3> PredictAll(const EffectModel& em, const DataSet& data,
-                             const std::vector<ConfigLoads>& loads, const std::vector<int>& active,
-                             const Eigen::VectorXd& theta);
+std::vector<Vec3> PredictAll(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                             const std::vector<int>& active, const Eigen::VectorXd& theta);
 
 // Per-row predicted pixel of pixel rows (zero for other rows), with an active camera_offset.
 std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet& data,
-                                           const std::vector<ConfigLoads>& loads,
-                                           const std::vector<int>& active,
+                                           const RowLoads& loads, const std::vector<int>& active,
                                            const Eigen::VectorXd& theta);
 
 // Mean point of each group's rows (zero for a group without rows).

@@ -92,7 +92,7 @@ std::vector<lie::SE3> ReferencePoses(const DataSet& data) {
   return T;
 }
 
-void RegisterFrames(const EffectModel& em, const std::vector<ConfigLoads>& loads, DataSet* data) {
+void RegisterFrames(const EffectModel& em, const RowLoads& loads, DataSet* data) {
   const std::vector<Vec3> p_pred = PredictAll(em, *data, loads, {}, Eigen::VectorXd());
   for (size_t f = 0; f < data->frames.size(); ++f) {
     MeasurementFrame& frame = data->frames[f];
@@ -131,7 +131,7 @@ DataSet InBase(const DataSet& data, const std::vector<lie::SE3>& T_base_frames) 
 }
 
 std::vector<Mat6> FrameCovariances(const EffectModel& em, const DataSet& data,
-                                   const std::vector<ConfigLoads>& loads, const Fit& fit,
+                                   const RowLoads& loads, const Fit& fit,
                                    const IdentifyOptions& opt, std::vector<Mat3>* offset_cov) {
   std::vector<Mat6> cov;
   const bool offsets = std::count(data.offset_unknown.begin(), data.offset_unknown.end(), 1) > 0;
@@ -166,15 +166,15 @@ std::vector<Mat6> FrameCovariances(const EffectModel& em, const DataSet& data,
   return cov;
 }
 
-std::vector<Vec3> PredictMarkers(const EffectModel& em, const DataSet& data,
-                                 const std::vector<ConfigLoads>& loads, const Fit& fit) {
+std::vector<Vec3> PredictMarkers(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                                 const Fit& fit) {
   std::vector<Vec3> p = PredictAll(em, data, loads, fit.active, fit.theta);
   if (fit.marker_offsets.empty()) return p;
   EffectModel::Workspace ws = em.MakeWorkspace();
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Observation& o = data.rows[r];
     if (o.type == ObservationType::kPixel) continue;
-    p[r] = em.PredictPose(o.q, loads[r], fit.active, fit.theta.data(), ws, o.point) *
+    p[r] = em.PredictPose(o.q, loads.At(r, o, ws), fit.active, fit.theta.data(), ws, o.point) *
            fit.marker_offsets[o.point];
   }
   return p;

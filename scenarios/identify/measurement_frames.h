@@ -35,7 +35,7 @@ void CheckFramesUsed(const DataSet& data, const std::string& what);
 // scale) of its rows' measured points onto the declared model's predictions (loads: the
 // data's). The effects are then fitted jointly with the frame from there. Throws InputError
 // when a frame has fewer than 3 rows or their points lie on a line.
-void RegisterFrames(const EffectModel& em, const std::vector<ConfigLoads>& loads, DataSet* data);
+void RegisterFrames(const EffectModel& em, const RowLoads& loads, DataSet* data);
 
 // Each frame's T_ref (the state before any fit).
 std::vector<lie::SE3> ReferencePoses(const DataSet& data);
@@ -50,12 +50,12 @@ DataSet InBase(const DataSet& data, const std::vector<lie::SE3>& T_base_frames);
 // residual variance rss / (N - k), as the effects' covariance (identify.cc Report).
 // `offset_cov` (optional): likewise each marker's offset (zero where declared).
 std::vector<Mat6> FrameCovariances(const EffectModel& em, const DataSet& data,
-                                   const std::vector<ConfigLoads>& loads, const Fit& fit,
+                                   const RowLoads& loads, const Fit& fit,
                                    const IdentifyOptions& opt,
                                    std::vector<Mat3>* offset_cov = nullptr);
 
 // PredictAll of `fit`'s model with its marker offsets: each row's marker in the base frame.
-std::vector<Vec3> PredictMarkers(const EffectModel& em, const DataSet& data,
-                                 const std::vector<ConfigLoads>& loads, const Fit& fit);
+std::vector<Vec3> PredictMarkers(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                                 const Fit& fit);
 
 }  // namespace flexbench::identify

@@ -102,7 +102,7 @@ Vec6 PriorStd(const MeasurementFrame& f) {
 
 }  // namespace
 
-Problem::Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+Problem::Problem(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                  const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
                  const IdentifyOptions& opt, const std::vector<int>* rows)
     : em_(em), data_(data), loads_(loads), rows_(rows), active_(active), opt_(opt) {
@@ -189,7 +189,7 @@ void Problem::Poses(const Eigen::VectorXd& theta, std::vector<lie::SE3>* T) cons
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int r = begin; r < end; ++r) {
       const Observation& o = row(r);
-      (*T)[r] = em_.PredictPose(o.q, loads(r), active_, theta.data(), ws, o.point);
+      (*T)[r] = em_.PredictPose(o.q, loads(r, ws), active_, theta.data(), ws, o.point);
     }
   });
 }
@@ -206,7 +206,7 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int i = begin; i < end; ++i) {
       const Observation& o = row(i);
-      const lie::SE3 T = em_.PredictPose(o.q, loads(i), active, theta.data(), ws, o.point);
+      const lie::SE3 T = em_.PredictPose(o.q, loads(i, ws), active, theta.data(), ws, o.point);
       const int k = offset_[i];
       const Vec3 p = MarkerPoint(T, d_marker, o.point);
       switch (o.type) {
@@ -317,8 +317,8 @@ void Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& th
     RowMap G(3, 6);
     for (int i = row_begin + chunk_begin; i < row_begin + chunk_end; ++i) {
       const Observation& o = row(i);
-      const lie::SE3 T =
-          em_.PoseTangents(o.q, loads(i), active_, theta.data(), cs, ws, tangent.data(), o.point);
+      const lie::SE3 T = em_.PoseTangents(o.q, loads(i, ws), active_, theta.data(), cs, ws,
+                                          tangent.data(), o.point);
       if (poses) (*poses)[i] = T;
       if (!d_marker.empty() && o.type != ObservationType::kPixel) {
         // The marker turns with its frame: d p += w x (R d).
@@ -392,7 +392,7 @@ void Problem::FrameColumns(const Eigen::VectorXd& x, Eigen::MatrixXd* J) const {
     if (o.type != ObservationType::kPose) continue;
     // The measured orientation R R_frame turns to R_meas Exp(R_frame^T d_theta), and
     // Log(Exp(-a) Exp(r)) = r - Jl^-1(r) a to first order.
-    const lie::SE3 T = em_.PredictPose(o.q, loads(i), active_, theta.data(), ws, o.point);
+    const lie::SE3 T = em_.PredictPose(o.q, loads(i, ws), active_, theta.data(), ws, o.point);
     const Vec3 r = lie::SO3Log(MeasuredRotation(o, T_base_frame).transpose() * T.rotation());
     J->block<3, 6>(offset_[i] + 3, col) =
         -lie::SO3LeftJacobianInverse(r) * o.R_frame.get().transpose() *
@@ -628,7 +628,7 @@ std::vector<double> RemovalRises(const Problem& pr, const Fit& fit) {
   return rises;
 }
 
-Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+Fit FitEffects(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
                const Eigen::VectorXd& init, const IdentifyOptions& opt,
                const std::vector<int>* rows) {
@@ -684,8 +684,8 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
   return MakeFit(pr, active, x, rss);
 }
 
-Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-               const Fit& fit, int c, const Eigen::MatrixXd& basis_c, const Eigen::MatrixXd& J_fit,
+Fit ScreenWith(const EffectModel& em, const DataSet& data, const RowLoads& loads, const Fit& fit,
+               int c, const Eigen::MatrixXd& basis_c, const Eigen::MatrixXd& J_fit,
                const Eigen::MatrixXd& J_c, const Eigen::VectorXd& r_fit,
                const IdentifyOptions& opt) {
   std::vector<int> act = fit.active;
@@ -722,8 +722,8 @@ Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<Con
   return FitWith(em, data, loads, fit, c, basis_c, opt);
 }
 
-Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-               const Fit& fit, size_t e, const IdentifyOptions& opt) {
+Fit FitWithout(const EffectModel& em, const DataSet& data, const RowLoads& loads, const Fit& fit,
+               size_t e, const IdentifyOptions& opt) {
   std::vector<int> rest;
   std::vector<Eigen::MatrixXd> basis;
   std::vector<double> init;
@@ -741,8 +741,8 @@ Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<Con
                     Eigen::Map<const Eigen::VectorXd>(init.data(), init.size()), opt);
 }
 
-Fit FitWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-            const Fit& fit, int c, const Eigen::MatrixXd& basis_c, const IdentifyOptions& opt) {
+Fit FitWith(const EffectModel& em, const DataSet& data, const RowLoads& loads, const Fit& fit,
+            int c, const Eigen::MatrixXd& basis_c, const IdentifyOptions& opt) {
   std::vector<int> act = fit.active;
   act.push_back(c);
   std::vector<Eigen::MatrixXd> basis = fit.basis;

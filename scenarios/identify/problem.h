@@ -46,7 +46,7 @@ class Problem {
   // `basis`: per active effect its B_e (num_params x m_e); empty: identity for all.
   // `rows`: the rows of `data` (and `loads`) it fits, read in place (a cross-validation fold's
   // rows, not copied); null: all. Only for data without groups (a subset renumbers them).
-  Problem(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+  Problem(const EffectModel& em, const DataSet& data, const RowLoads& loads,
           const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
           const IdentifyOptions& opt, const std::vector<int>* rows = nullptr);
 
@@ -74,7 +74,10 @@ class Problem {
   // The rows it fits: the i-th one and its loads.
   size_t num_rows() const { return rows_ ? rows_->size() : data_.rows.size(); }
   const Observation& row(size_t i) const { return data_.rows[RowIndex(i)]; }
-  const ConfigLoads& loads(size_t i) const { return loads_[RowIndex(i)]; }
+  // (Computed into ws when RowLoads keeps none for it.)
+  const ConfigLoads& loads(size_t i, EffectModel::Workspace& ws) const {
+    return loads_.At(RowIndex(i), row(i), ws);
+  }
   const Eigen::MatrixXd& basis(size_t e) const { return basis_[e]; }
   const DataSet& data() const { return data_; }
 
@@ -142,7 +145,7 @@ class Problem {
 
   const EffectModel& em_;
   const DataSet& data_;
-  const std::vector<ConfigLoads>& loads_;
+  const RowLoads& loads_;
   const std::vector<int>* rows_;
   std::vector<int> active_;
   std::vector<Eigen::MatrixXd> basis_;
@@ -176,7 +179,7 @@ std::vector<double> RemovalRises(const Problem& pr, const Fit& fit);
 // Fits `active` (in the directions of `basis`, empty = all) plus the group points by
 // Levenberg-Marquardt from `init` (theta; may be empty or shorter), on the rows `rows` of `data`
 // (null: all; as Problem's).
-Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
+Fit FitEffects(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                const std::vector<int>& active, const std::vector<Eigen::MatrixXd>& basis,
                const Eigen::VectorXd& init, const IdentifyOptions& options,
                const std::vector<int>* rows = nullptr);
@@ -186,17 +189,17 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const std::vector<Con
 // already computed (J_fit: fit's Jacobian at its state, J_c: c's full-parameter columns there,
 // r_fit: fit's residuals), scored by one residual pass. Where that step does not lower the sum
 // of squares, FitWith from zero instead.
-Fit ScreenWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-               const Fit& fit, int c, const Eigen::MatrixXd& basis_c, const Eigen::MatrixXd& J_fit,
+Fit ScreenWith(const EffectModel& em, const DataSet& data, const RowLoads& loads, const Fit& fit,
+               int c, const Eigen::MatrixXd& basis_c, const Eigen::MatrixXd& J_fit,
                const Eigen::MatrixXd& J_c, const Eigen::VectorXd& r_fit,
                const IdentifyOptions& opt);
 
 // The same fit with `fit`'s e-th effect removed (the others start from their values).
-Fit FitWithout(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-               const Fit& fit, size_t e, const IdentifyOptions& opt);
+Fit FitWithout(const EffectModel& em, const DataSet& data, const RowLoads& loads, const Fit& fit,
+               size_t e, const IdentifyOptions& opt);
 
 // The same fit with candidate c added in the directions `basis_c` (from zero).
-Fit FitWith(const EffectModel& em, const DataSet& data, const std::vector<ConfigLoads>& loads,
-            const Fit& fit, int c, const Eigen::MatrixXd& basis_c, const IdentifyOptions& opt);
+Fit FitWith(const EffectModel& em, const DataSet& data, const RowLoads& loads, const Fit& fit,
+            int c, const Eigen::MatrixXd& basis_c, const IdentifyOptions& opt);
 
 }  // namespace flexbench::identify

@@ -87,7 +87,7 @@ class SelectionMemo {
 struct SelectionContext {
   const EffectModel& em;
   const DataSet& data;
-  const std::vector<ConfigLoads>& loads;
+  const RowLoads& loads;
   const Folds& folds;
   const IdentifyOptions& opt;
   std::vector<std::string>* log;

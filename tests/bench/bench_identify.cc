@@ -78,7 +78,7 @@ void BM_Identify(benchmark::State& state) {
   IdentifyOptions opt;
   opt.cross_validation = state.range(0) != 0;
   for (auto _ : state) {
-    const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
+    const RowLoads loads = ComputeLoads(*s.em, s.data);
     const IdentifyResult r = Identify(*s.em, s.data, loads, s.candidates, opt);
     found = r.effects.size();
     benchmark::DoNotOptimize(found);
@@ -104,7 +104,7 @@ void BM_IdentifyLateralFamily(benchmark::State& state) {
   }
   size_t found = 0;
   for (auto _ : state) {
-    const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
+    const RowLoads loads = ComputeLoads(*s.em, s.data);
     const IdentifyResult r = Identify(*s.em, s.data, loads, candidates, IdentifyOptions());
     found = r.effects.size();
     benchmark::DoNotOptimize(found);
@@ -182,7 +182,7 @@ void BM_IdentifyRows(benchmark::State& state) {
   FillRover(s, static_cast<int>(state.range(0)));
   size_t found = 0;
   for (auto _ : state) {
-    const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
+    const RowLoads loads = ComputeLoads(*s.em, s.data);
     const IdentifyResult r = Identify(*s.em, s.data, loads, s.candidates, IdentifyOptions{});
     found = r.effects.size();
     benchmark::DoNotOptimize(found);
@@ -253,7 +253,7 @@ void BM_IdentifyPointCsv(benchmark::State& state) {
     const PeakMemory peak;
     DataSet data;
     ReadCalibrationCsv(path, chain.q_joints, &data);
-    const std::vector<ConfigLoads> loads = ComputeLoads(em, data);
+    const RowLoads loads = ComputeLoads(em, data);
     IdentifyOptions opt;
     opt.threads = static_cast<int>(state.range(1));
     const IdentifyResult r = Identify(em, data, loads, candidates, opt);
@@ -289,7 +289,7 @@ struct Humanoid {
   sim::DeclaredChain chain;
   std::unique_ptr<EffectModel> em;
   DataSet data;
-  std::vector<ConfigLoads> loads;
+  RowLoads loads;
   std::vector<int> candidates;
   int truth_effects = 0;
 };
@@ -430,7 +430,7 @@ void BM_IdentifyRowsMemory(benchmark::State& state) {
       FillRover(s, rows);
       data_bytes = all.HeapBytes();
       state.ResumeTiming();
-      const std::vector<ConfigLoads> loads = ComputeLoads(*s.em, s.data);
+      const RowLoads loads = ComputeLoads(*s.em, s.data);
       IdentifyOptions opt;
       opt.threads = static_cast<int>(state.range(1));
       const IdentifyResult r = Identify(*s.em, s.data, loads, s.candidates, opt);

@@ -395,13 +395,13 @@ class ClosedLoopKind : public ScenarioKind {
   // The calibration and validation sets and their loads (nominal model), as identified.
   struct Sets {
     DataSet cal, val;
-    std::vector<identify::ConfigLoads> cal_loads, val_loads;
+    identify::RowLoads cal_loads, val_loads;
   };
 
   // Row errors and marker predictions before (declared model) and after (augmented), with the
   // loads after.
   struct Scored {
-    std::vector<identify::ConfigLoads> cal_loads_after, val_loads_after;
+    identify::RowLoads cal_loads_after, val_loads_after;
     std::vector<double> cal_before, cal_after, val_before, val_after;
     std::vector<Vec3> cal_p0, cal_p1, val_p0, val_p1;
   };
@@ -423,9 +423,10 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   // Row errors of d before or after the fit, and the marker predictions.
-  std::pair<std::vector<double>, std::vector<Vec3>> Errors(
-      const DataSet& d, const std::vector<identify::ConfigLoads>& L,
-      const identify::IdentifyResult& res, bool after) const {
+  std::pair<std::vector<double>, std::vector<Vec3>> Errors(const DataSet& d,
+                                                           const identify::RowLoads& L,
+                                                           const identify::IdentifyResult& res,
+                                                           bool after) const {
     const std::vector<int> act = after ? res.after.active : std::vector<int>{};
     const Eigen::VectorXd th = after ? res.after.theta : Eigen::VectorXd();
     // Rows in a measurement frame against it at the fit's pose (the same distance as in it).
@@ -1026,7 +1027,7 @@ class ClosedLoopKind : public ScenarioKind {
   // n^2); otherwise the stated point noise. With `res` (the augmented model) also the fitted
   // parameters' covariance through the identification's model, by central differences of the
   // residuals (so the group mean's share is exact).
-  std::vector<Mat3> RowNoise(const DataSet& d, const std::vector<identify::ConfigLoads>& L,
+  std::vector<Mat3> RowNoise(const DataSet& d, const identify::RowLoads& L,
                              const identify::IdentifyResult* res) const {
     std::vector<Mat3> out(d.rows.size(), opt_.point_std_m * opt_.point_std_m * Mat3::Identity());
     if (reading_std_rad_ > 0.0) out = AgainstGroupMeans(d, ReadingNoise(d));
@@ -1038,7 +1039,7 @@ class ClosedLoopKind : public ScenarioKind {
 
   // The residuals of the augmented model at `theta` (socket rows against their group's mean,
   // point rows against their measured point in the base frame; pixel rows: the point alone).
-  std::vector<Vec3> Residuals(const DataSet& d, const std::vector<identify::ConfigLoads>& L,
+  std::vector<Vec3> Residuals(const DataSet& d, const identify::RowLoads& L,
                               const identify::IdentifyResult& res,
                               const Eigen::VectorXd& theta) const {
     std::vector<Vec3> q = identify::PredictAll(*em_, d, L, res.after.active, theta);
@@ -1054,8 +1055,7 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   // Per row, d residual / d theta by central differences (one standard deviation wide).
-  std::vector<Mat3x> ResidualJacobians(const DataSet& d,
-                                       const std::vector<identify::ConfigLoads>& L,
+  std::vector<Mat3x> ResidualJacobians(const DataSet& d, const identify::RowLoads& L,
                                        const identify::IdentifyResult& res) const {
     const Eigen::VectorXd& theta = res.after.theta;
     const int np = static_cast<int>(theta.size());
@@ -1082,8 +1082,7 @@ class ClosedLoopKind : public ScenarioKind {
   // lacks) is left to the sources, which are sized on the validation rows (SourceScale): grown
   // by rss / expected here as well, it covered the same misfit twice, and the shared-term bound
   // then hid it from the sources. *rss_ratio reports it.
-  Eigen::MatrixXd ReadingNoiseCovariance(const DataSet& cal,
-                                         const std::vector<identify::ConfigLoads>& L,
+  Eigen::MatrixXd ReadingNoiseCovariance(const DataSet& cal, const identify::RowLoads& L,
                                          const identify::IdentifyResult& res,
                                          double* rss_ratio) const {
     const std::vector<Mat3x> J = ResidualJacobians(cal, L, res);
@@ -1109,8 +1108,7 @@ class ClosedLoopKind : public ScenarioKind {
 
   // With the readings' noise stated, the fitted effects' covariance and standard deviations
   // become the fit's under that noise (ReadingNoiseCovariance).
-  void UseReadingNoiseCovariance(RunContext& ctx, const DataSet& cal,
-                                 const std::vector<identify::ConfigLoads>& L,
+  void UseReadingNoiseCovariance(RunContext& ctx, const DataSet& cal, const identify::RowLoads& L,
                                  identify::IdentifyResult* res) const {
     if (res->after.theta.size() == 0) return;
     double rss_ratio = 1.0;
@@ -1201,7 +1199,7 @@ class ClosedLoopKind : public ScenarioKind {
 
   // Rows far off under the declared model are listed and left out (identify.h FindOutliers).
   void RejectOutliers(RunContext& ctx, const Source& src, const std::string& what, DataSet* d,
-                      std::vector<identify::ConfigLoads>* loads, Json* rejected) const {
+                      identify::RowLoads* loads, Json* rejected) const {
     const std::vector<int> out = identify::FindOutliers(*em_, *d, *loads, opt_);
     if (out.empty()) return;
     if (out.size() >= d->rows.size()) {
@@ -1214,16 +1212,16 @@ class ClosedLoopKind : public ScenarioKind {
     ctx.log(what + ": " + std::to_string(out.size()) + " row(s) rejected as outliers, first " +
             rejected->back().get<std::string>());
     *d = identify::WithoutRows(*d, out);
-    std::vector<identify::ConfigLoads> kept;
+    std::vector<int> kept;
     size_t k = 0;
     for (size_t r = 0; r < loads->size(); ++r) {
       if (k < out.size() && out[k] == static_cast<int>(r)) {
         ++k;
         continue;
       }
-      kept.push_back((*loads)[r]);
+      kept.push_back(static_cast<int>(r));
     }
-    *loads = std::move(kept);
+    *loads = loads->Subset(*d, kept);
   }
 
   // Cross-validation by set needs every set to hold more than one row.
@@ -1278,8 +1276,7 @@ class ClosedLoopKind : public ScenarioKind {
   // Every declared measurement frame is used by calibration rows; those without a guess start
   // at a registration of their points (identify/measurement_frames.h); validation rows share
   // the calibration's frames.
-  void PrepareFrames(const std::vector<identify::ConfigLoads>& cal_loads, DataSet* cal,
-                     DataSet* val) const {
+  void PrepareFrames(const identify::RowLoads& cal_loads, DataSet* cal, DataSet* val) const {
     if (frames_.empty()) return;
     identify::CheckFramesUsed(*cal, "calibration");
     identify::RegisterFrames(*em_, cal_loads, cal);
@@ -1425,7 +1422,7 @@ class ClosedLoopKind : public ScenarioKind {
   // The upper 95% bound of the rows' mean NEES without sources when their errors are the
   // readings' noise and the fitted parameters' error, which every row shares (SharedNeesBounds;
   // G_r = J_r Sigma^(1/2), J_r the residual's Jacobian in the parameters).
-  double SharedNeesUpperBound(const DataSet& d, const std::vector<identify::ConfigLoads>& L,
+  double SharedNeesUpperBound(const DataSet& d, const identify::RowLoads& L,
                               const identify::IdentifyResult& res,
                               const std::vector<Mat3>& noise) const {
     std::vector<SharedNeesStep> steps;
@@ -1526,20 +1523,21 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   void WriteResiduals(RunContext& ctx, const DataSet& d, const std::vector<double>& before,
-                      const std::vector<double>& after,
-                      const std::vector<identify::ConfigLoads>& loads, const std::vector<Vec3>& p,
-                      const std::string& name) const {
+                      const std::vector<double>& after, const identify::RowLoads& loads,
+                      const std::vector<Vec3>& p, const std::string& name) const {
     std::ostringstream c;
     c << "row,set,group,where,err_before_m,err_after_m,reach_m,max_abs_tau_Nm,x_m,y_m,z_m\n";
     kinematics::PpoeData pd(chain_->model);
+    identify::EffectModel::Workspace ws = em_->MakeWorkspace();
     for (size_t r = 0; r < d.rows.size(); ++r) {
       kinematics::ForwardKinematics(chain_->model, pd, d.rows[r].q);
       const double reach = pd.T_base_frame[chain_->end_effector].translation().norm();
+      const identify::ConfigLoads& L = loads.At(r, d.rows[r], ws);
       c << r << "," << d.sets[d.rows[r].set] << ","
         << (d.rows[r].type == identify::ObservationType::kGroup ? d.groups[d.rows[r].group] : "")
         << "," << d.rows[r].where << "," << Num(before[r]) << "," << Num(after[r]) << ","
-        << Num(reach) << "," << Num(loads[r].tau.size() ? loads[r].tau.cwiseAbs().maxCoeff() : 0.0)
-        << "," << Num(p[r].x()) << "," << Num(p[r].y()) << "," << Num(p[r].z()) << "\n";
+        << Num(reach) << "," << Num(L.tau.size() ? L.tau.cwiseAbs().maxCoeff() : 0.0) << ","
+        << Num(p[r].x()) << "," << Num(p[r].y()) << "," << Num(p[r].z()) << "\n";
     }
     WriteFileAtomic(ctx.out->File(name + "_residuals.csv"), c.str());
   }
@@ -1547,7 +1545,7 @@ class ClosedLoopKind : public ScenarioKind {
   // Residual before and after against the quantity that exposed the first chosen effect.
   void Plot(RunContext& ctx, const identify::IdentifyResult& res, const DataSet& d,
             const std::vector<double>& before, const std::vector<double>& after,
-            const std::vector<identify::ConfigLoads>& loads) const {
+            const identify::RowLoads& loads) const {
     std::string xl = "row";
     std::vector<double> x(d.rows.size());
     for (size_t r = 0; r < x.size(); ++r) x[r] = r;
@@ -1571,13 +1569,17 @@ class ClosedLoopKind : public ScenarioKind {
       if (c.q_index >= 0 && (c.type == identify::EffectType::kJointCompliance ||
                              c.type == identify::EffectType::kBacklash)) {
         xl = "gravity torque at " + c.location + " [N m]";
-        for (size_t r = 0; r < x.size(); ++r) x[r] = loads[r].tau[c.q_index];
+        identify::EffectModel::Workspace ws = em_->MakeWorkspace();
+        for (size_t r = 0; r < x.size(); ++r) x[r] = loads.At(r, d.rows[r], ws).tau[c.q_index];
       } else if (q_index >= 0) {
         xl = chain_->q_joints[q_index] + " [deg] (main effect: " + res.effects[main].name + ")";
         for (size_t r = 0; r < x.size(); ++r) x[r] = d.rows[r].q[q_index] / kDeg;
       } else if (c.type == identify::EffectType::kBaseCompliance) {
         xl = "moment at the mount, |M_xy| [N m]";
-        for (size_t r = 0; r < x.size(); ++r) x[r] = loads[r].M_mount.head<2>().norm();
+        identify::EffectModel::Workspace ws = em_->MakeWorkspace();
+        for (size_t r = 0; r < x.size(); ++r) {
+          x[r] = loads.At(r, d.rows[r], ws).M_mount.head<2>().norm();
+        }
       } else {
         xl = "reach [m]";
         kinematics::PpoeData pd(chain_->model);

@@ -486,7 +486,7 @@ TEST(Identify, AnEffectOutsideTheLibraryIsReportedNotMisnamed) {
   EXPECT_EQ(r.finding.variable, "j3") << log;
   EXPECT_EQ(r.finding.cycles, 2) << log;
   EXPECT_NEAR(r.finding.size, 0.08, 0.03) << log;
-  const auto error = [&](const DataSet& d, const std::vector<ConfigLoads>& L, const Fit& fit) {
+  const auto error = [&](const DataSet& d, const RowLoads& L, const Fit& fit) {
     return ConsistencyError(d, RowErrors(d, PredictAll(*f.em, d, L, fit.active, fit.theta)));
   };
   const double before = error(val, val_loads, r.before);

@@ -28,7 +28,7 @@ struct Planar {
   sim::DeclaredChain chain;
   std::unique_ptr<EffectModel> em;
   DataSet data;
-  std::vector<ConfigLoads> loads;
+  RowLoads loads;
 };
 
 std::unique_ptr<Planar> MakePlanar(int rows) {
@@ -76,10 +76,10 @@ TEST(IdentifyMemory, AFoldReadInPlaceFitsTheSameBitsAsItsCopy) {
       train.push_back(static_cast<int>(r));
     }
   }
-  std::vector<ConfigLoads> train_loads;
-  for (int r : train) train_loads.push_back(p->loads[r]);
+  const DataSet train_data = Subset(p->data, train);
+  const RowLoads train_loads = p->loads.Subset(train_data, train);
   const Fit copied =
-      FitEffects(*p->em, Subset(p->data, train), train_loads, active, {}, Eigen::VectorXd(), opt);
+      FitEffects(*p->em, train_data, train_loads, active, {}, Eigen::VectorXd(), opt);
   const Fit in_place =
       FitEffects(*p->em, p->data, p->loads, active, {}, Eigen::VectorXd(), opt, &train);
   ASSERT_EQ(copied.theta.size(), in_place.theta.size());
@@ -139,6 +139,15 @@ TEST(IdentifyMemory, AJacobianInBlocksOfRowsHasTheBitsOfOneProduct) {
     at += static_cast<int>(Jh.rows());
   }
   EXPECT_GT(J.col(1).norm(), 0.0);
+}
+
+TEST(IdentifyMemory, UnkeptLoadsTakeNoMemoryPerRow) {
+  const auto p = MakePlanar(4000);
+  const testing::PeakMemory peak;
+  const RowLoads none(*p->em, p->data, {}, Eigen::VectorXd(), 0.0);
+  EXPECT_LT(peak.HeapBytes(), 64.0 * 1024) << "loads kept for none of 4000 rows";
+  const RowLoads all = ComputeLoads(*p->em, p->data);
+  EXPECT_GT(peak.HeapBytes() / 4000, 400.0) << "planar3's kept loads (the measure is live)";
 }
 
 }  // namespace

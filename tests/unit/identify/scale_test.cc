@@ -63,11 +63,55 @@ bool SameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
 }
 
+TEST(IdentifyScale, LoadsComputedInAPassGiveTheBitsOfKeptOnes) {
+  // Beyond kLoadsCacheBytes a pass computes a row's loads on its thread's own MuJoCo data:
+  // identification and the augmented model's predictions are the bits of kept loads.
+  const std::unique_ptr<Rig> rig = MakeRig("rover_arm");
+  const EffectModel& em = *rig->em;
+  const DataSet d = RoverRows(em, 160);
+  const RowLoads kept = ComputeLoads(em, d);
+  ASSERT_EQ(kept.num_kept(), d.rows.size());
+  const RowLoads none(em, d, {}, Eigen::VectorXd(), 0.0);
+  const RowLoads half(em, d, {}, Eigen::VectorXd(),
+                      80.5 * static_cast<double>(LoadsBytes(kept.kept(0))));
+  EXPECT_EQ(none.num_kept(), 0u);
+  EXPECT_EQ(half.num_kept(), 80u);
+  std::vector<int> candidates;
+  for (size_t c = 0; c < em.candidates().size() && candidates.size() < 30; ++c) {
+    candidates.push_back(static_cast<int>(c));
+  }
+  IdentifyOptions opt;
+  opt.threads = 2;
+  const IdentifyResult a = Identify(em, d, kept, candidates, opt);
+  ASSERT_FALSE(a.effects.empty());
+  for (const RowLoads* loads : {&none, &half}) {
+    const IdentifyResult b = Identify(em, d, *loads, candidates, opt);
+    EXPECT_EQ(a.after.active, b.after.active);
+    EXPECT_TRUE(SameBits(a.after.theta, b.after.theta));
+    EXPECT_EQ(a.after.rss, b.after.rss);
+    EXPECT_EQ(a.cv_after, b.cv_after);
+    EXPECT_EQ(a.steps, b.steps);
+  }
+  // The loads where the fit's own corrections put the arm (EffectModel::LoadsShift).
+  ASSERT_TRUE(em.LoadsShift(a.after.active));
+  const RowLoads shifted = ComputeLoads(em, d, a.after.active, a.after.theta);
+  const RowLoads shifted_none(em, d, a.after.active, a.after.theta, 0.0);
+  const auto p = PredictAll(em, d, shifted, a.after.active, a.after.theta);
+  const auto q = PredictAll(em, d, shifted_none, a.after.active, a.after.theta);
+  const auto at_readings = PredictAll(em, d, kept, a.after.active, a.after.theta);
+  bool moved = false;
+  for (size_t r = 0; r < p.size(); ++r) {
+    EXPECT_EQ(p[r], q[r]) << "row " << r;
+    moved = moved || p[r] != at_readings[r];
+  }
+  EXPECT_TRUE(moved) << "the shifted loads differ from the loads at the readings";
+}
+
 TEST(IdentifyScale, TasksSideBySideGiveTheSameBitsAsOneThread) {
   const std::unique_ptr<Rig> rig = MakeRig("rover_arm");
   const EffectModel& em = *rig->em;
   const DataSet d = RoverRows(em, 160);
-  const std::vector<ConfigLoads> loads = ComputeLoads(em, d);
+  const RowLoads loads = ComputeLoads(em, d);
   std::vector<int> candidates;
   for (size_t c = 0; c < em.candidates().size() && candidates.size() < 30; ++c) {
     candidates.push_back(static_cast<int>(c));

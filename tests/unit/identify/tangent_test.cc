@@ -199,7 +199,7 @@ TEST_P(TangentTest, ProblemJacobianEqualsCentralDifferences) {
   const EffectModel& em = *rig->em;
   std::mt19937_64 rng(7);
   const DataSet d = MixedRows(em, rng);
-  const std::vector<ConfigLoads> loads = ComputeLoads(em, d);
+  const RowLoads loads = ComputeLoads(em, d);
   IdentifyOptions opt;
   opt.point_std_m = 1e-3;
   opt.rotation_std_rad = 1e-3;
