@@ -36,16 +36,17 @@ namespace flexbench::identify {
 // The largest calibration CSV read (bigger is bad input, refused before reading).
 constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 
-// Memory the identification takes per calibration row (the Observation, its loads, the loads
-// at the corrected angles, the fits' residual and Jacobian rows, the screening's projections of
-// candidate columns), and the most one file's rows may take. Measured (bench_identify, peak
-// heap on 100,000 point rows): planar3 (3 joints, the CSV read, loads and identification) 2.7
-// KB a row (2.5 KB on 1,000,000), rover_arm (8 joints, two effects: the loads twice) 6.9 KB;
-// the estimate (0.27 KB + 1.09 KB a joint) is 1.3 times both and grows with the joints. A file
-// whose line count times CalibrationBytesPerRow exceeds the budget is refused before any row
-// is read ("N rows need about X GB; the limit is Y GB").
-constexpr std::uintmax_t kCalibrationBytesPerRow = 272;
-constexpr std::uintmax_t kCalibrationBytesPerJoint = 1088;
+// Memory the identification takes per calibration row (the Observation, the residual vectors,
+// the fits' and screening's Jacobian rows; the loads are kept only up to kLoadsCacheBytes and
+// whole Jacobians only below 32,768 rows), and the most one file's rows may take. Measured:
+// `flexbench identify` on 1,000,000 planar3 point rows (3 joints) peaks at 1.17 GB resident
+// (bench_identify's peak heap: 0.75 KB a row); rover_arm (8 joints) at 100,000 rows 2.8 KB a
+// row of heap, 1.4 of it the fixed budgets (candidate columns, loads). The estimate (1 KB +
+// 0.19 KB a joint) is 1.37 times the 3-joint figure and grows with the joints as rover_arm's.
+// A file whose line count times CalibrationBytesPerRow exceeds the budget is refused before
+// any row is read ("N rows need about X GB; the limit is Y GB").
+constexpr std::uintmax_t kCalibrationBytesPerRow = 1024;
+constexpr std::uintmax_t kCalibrationBytesPerJoint = 192;
 constexpr std::uintmax_t kMaxCalibrationMemoryBytes = 2000000000;
 std::uintmax_t CalibrationBytesPerRow(size_t num_joints);
 

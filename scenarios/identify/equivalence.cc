@@ -27,6 +27,12 @@ Eigen::MatrixXd Projector::Apply(const Eigen::MatrixXd& M) const {
   return M - Q_ * (Q_.transpose() * M);
 }
 
+void Projector::ApplyInPlace(Eigen::MatrixXd* M) const {
+  if (Q_.cols() == 0) return;
+  const Eigen::MatrixXd QtM = Q_.transpose() * *M;
+  M->noalias() -= Q_ * QtM;
+}
+
 Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj, double tol,
                                 double* rel) {
   const int np = static_cast<int>(Jc.cols());
@@ -36,14 +42,27 @@ Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj
     const double n = Jc.col(k).norm();
     scale[k] = n > 0 ? 1.0 / n : 0.0;
   }
-  const Eigen::MatrixXd Js = Jc * scale.asDiagonal();
-  const Eigen::MatrixXd Rs = proj.Apply(Js);
+  Eigen::MatrixXd Js, Rs, G;
+  if (Jc.rows() < 2 * Problem::kRowBlock) {
+    Js = Jc * scale.asDiagonal();
+    Rs = proj.Apply(Js);
+  } else {
+    // Many rows: one copy of the columns, projected in place and reduced to its triangular
+    // factor (the same singular values and directions); |Js v| from the Gram matrix.
+    Rs = Jc * scale.asDiagonal();
+    G = scale.asDiagonal() * (Jc.transpose() * Jc) * scale.asDiagonal();
+    proj.ApplyInPlace(&Rs);
+    Eigen::HouseholderQR<Eigen::Ref<Eigen::MatrixXd>> qr(Rs);
+    Rs = Eigen::MatrixXd(qr.matrixQR()
+                             .topRows(std::min<Eigen::Index>(np, Rs.rows()))
+                             .triangularView<Eigen::Upper>());
+  }
   const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Rs, Eigen::ComputeThinV);
   std::vector<Eigen::VectorXd> keep;
   double best = 0.0;
   for (int i = 0; i < svd.singularValues().size(); ++i) {
     const Eigen::VectorXd v = svd.matrixV().col(i);
-    const double full = (Js * v).norm();
+    const double full = G.size() > 0 ? std::sqrt(std::max(0.0, v.dot(G * v))) : (Js * v).norm();
     const double r = full > 0 ? svd.singularValues()[i] / full : 0.0;
     best = std::max(best, r);
     if (r > tol) keep.push_back((scale.asDiagonal() * v).normalized());
@@ -52,6 +71,35 @@ Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj
   Eigen::MatrixXd B(np, keep.size());
   for (size_t i = 0; i < keep.size(); ++i) B.col(i) = keep[i];
   return B;
+}
+
+Eigen::MatrixXd CandidateBasis(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                               const Fit& fit, int c, const IdentifyOptions& opt, double* rel) {
+  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
+  const Eigen::VectorXd x = StateOf(pr, fit);
+  const int p = pr.num_params();
+  const int k = p + em.candidates()[c].num_params;
+  Eigen::MatrixXd J_fit, J_c, R;
+  pr.ForEachRowBlock([&](const Problem& block, int at) {
+    if (&block == &pr) {
+      J_fit = pr.Jacobian(x);
+      J_c = pr.CandidateColumns(x, c);
+      return;
+    }
+    const Eigen::MatrixXd Jb = block.Jacobian(x);
+    const Eigen::MatrixXd Jcb = block.CandidateColumns(x, c);
+    const int m = at == 0 ? static_cast<int>(Jb.rows()) : block.rows_dim();  // priors: once
+    Eigen::MatrixXd M(R.rows() + m, k);
+    M << R, Jb.topRows(m), Jcb.topRows(m);
+    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(M);
+    R = qr.matrixQR().topRows(std::min<Eigen::Index>(k, M.rows()));
+    R.triangularView<Eigen::StrictlyLower>().setZero();
+  });
+  if (R.size() > 0) {
+    J_fit = R.leftCols(p);
+    J_c = R.rightCols(k - p);
+  }
+  return ObservableBasis(J_c, Projector(J_fit), opt.rank_tol, rel);
 }
 
 Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,

@@ -27,6 +27,7 @@ class Projector {
  public:
   explicit Projector(const Eigen::MatrixXd& J_fit);
   Eigen::MatrixXd Apply(const Eigen::MatrixXd& M) const;
+  void ApplyInPlace(Eigen::MatrixXd* M) const;  // the same without a copy of M
 
  private:
   Eigen::MatrixXd Q_;  // orthonormal basis of span(J_fit)
@@ -36,6 +37,13 @@ class Projector {
 // when nothing is observable). `*rel`: the largest |R v| / |Jc v| over the directions tried.
 Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj, double tol,
                                 double* rel);
+
+// ObservableBasis of candidate c beside `fit`'s unknowns, at fit's state. With many rows the
+// two Jacobians are never held whole: the triangular factor R of [J_fit J_c], accumulated over
+// row blocks (Problem::ForEachRowBlock; [J_fit J_c] = Q R, so R has their norms, projections
+// and singular values), stands for them.
+Eigen::MatrixXd CandidateBasis(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                               const Fit& fit, int c, const IdentifyOptions& opt, double* rel);
 
 // The Jacobian of `fit`'s unknowns at its state, and the sensitivity of candidate c there.
 Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,

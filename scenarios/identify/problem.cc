@@ -460,13 +460,12 @@ void Problem::ReducedColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& th
   for (size_t e = 0; e < active_.size(); ++e) {
     if (em_.HasTangent(active_[e], active_) && !direct[e]) reduced += basis_[e].rows();
   }
-  // Blocks of kBlockRows rows (the last takes the rest), or all rows at once when that is one
+  // Blocks of kRowBlock rows (the last takes the rest), or all rows at once when that is one
   // block: then the product spans the distance and prior rows too, as Eigen sized it before.
-  constexpr int kBlockRows = 16384;
   const int n = static_cast<int>(num_rows());
-  const bool whole = reduced == 0 || n < 2 * kBlockRows;
+  const bool whole = reduced == 0 || n < 2 * kRowBlock;
   for (int begin = 0; begin < n;) {
-    const int end = whole || n - begin < 2 * kBlockRows ? n : begin + kBlockRows;
+    const int end = whole || n - begin < 2 * kRowBlock ? n : begin + kRowBlock;
     const int r0 = whole ? 0 : offset_[begin];
     const int r1 = whole ? num_residuals() : (end < n ? offset_[end] : rows_dim_);
     Eigen::MatrixXd D = Eigen::MatrixXd::Zero(r1 - r0, reduced);
@@ -605,11 +604,53 @@ Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
   return x;
 }
 
+void Problem::ForEachRowBlock(const std::function<void(const Problem&, int)>& fn) const {
+  const int n = static_cast<int>(num_rows());
+  if (n < 2 * kRowBlock || !data_.groups.empty()) {
+    fn(*this, 0);
+    return;
+  }
+  std::vector<int> rows;
+  for (int begin = 0; begin < n;) {
+    const int end = n - begin < 2 * kRowBlock ? n : begin + kRowBlock;
+    rows.clear();
+    for (int i = begin; i < end; ++i) rows.push_back(static_cast<int>(RowIndex(i)));
+    const Problem block(em_, data_, loads_, active_, basis_, opt_, &rows);
+    fn(block, offset_[begin]);
+    begin = end;
+  }
+}
+
+void NormalEquations(const Problem& pr, const Eigen::VectorXd& x, const Eigen::VectorXd* r,
+                     Eigen::MatrixXd* A, Eigen::VectorXd* g) {
+  const int n = pr.num_params();
+  pr.ForEachRowBlock([&](const Problem& block, int at) {
+    const Eigen::MatrixXd J = block.Jacobian(x);
+    if (&block == &pr) {
+      *A = J.transpose() * J;
+      if (r) *g = J.transpose() * *r;
+      return;
+    }
+    if (A->rows() != n) {
+      A->setZero(n, n);
+      if (r) g->setZero(n);
+    }
+    const int d = block.rows_dim();
+    A->noalias() += J.topRows(d).transpose() * J.topRows(d);
+    if (r) g->noalias() += J.topRows(d).transpose() * r->segment(at, d);
+    const int priors = static_cast<int>(J.rows()) - d;
+    if (at == 0 && priors > 0) {
+      A->noalias() += J.bottomRows(priors).transpose() * J.bottomRows(priors);
+      if (r) g->noalias() += J.bottomRows(priors).transpose() * r->tail(priors);
+    }
+  });
+}
+
 std::vector<double> RemovalRises(const Problem& pr, const Fit& fit) {
   std::vector<double> rises(fit.active.size(), std::nan(""));
   const Eigen::VectorXd x = StateOf(pr, fit);
-  const Eigen::MatrixXd J = pr.Jacobian(x);
-  Eigen::MatrixXd A = J.transpose() * J;
+  Eigen::MatrixXd A;
+  NormalEquations(pr, x, nullptr, &A, nullptr);
   // Scaled to unit diagonal: the unknowns' units differ by orders of magnitude.
   const Eigen::VectorXd d = A.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
   A = d.asDiagonal() * A * d.asDiagonal();
@@ -653,9 +694,9 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const RowLoads& loads
   double rss = r.squaredNorm();
   double lambda = 1e-3;
   for (int it = 0; it < opt.max_iterations; ++it) {
-    const Eigen::MatrixXd J = pr.Jacobian(x);
-    const Eigen::MatrixXd A = J.transpose() * J;
-    const Eigen::VectorXd g = J.transpose() * r;
+    Eigen::MatrixXd A;
+    Eigen::VectorXd g;
+    NormalEquations(pr, x, &r, &A, &g);
     bool improved = false;
     for (int tries = 0; tries < 12; ++tries) {
       Eigen::MatrixXd Ad = A;
@@ -705,14 +746,37 @@ Fit ScreenWith(const EffectModel& em, const DataSet& data, const RowLoads& loads
     x.segment<3>(pr.num_alpha() + 3 * g) = fit.group_points[g];
   }
   SetFrameStates(pr, fit, &x);
-  Eigen::MatrixXd J(J_fit.rows(), n);
-  J << J_fit.leftCols(na), J_c * basis_c, J_fit.rightCols(n - na - m);
   // A Gauss-Newton step, undamped: a candidate nearly equivalent to a chosen effect (a link's
   // bending beside its joint's compliance) moves along a narrow valley that a damped step
   // (Levenberg-Marquardt's first) barely enters. ObservableBasis keeps such directions well
   // enough apart (rank_tol) for the normal equations.
-  const Eigen::MatrixXd A = J.transpose() * J;
-  const Eigen::VectorXd g = J.transpose() * r_fit;
+  Eigen::MatrixXd A;
+  Eigen::VectorXd g;
+  if (J_fit.rows() < 2 * Problem::kRowBlock) {
+    Eigen::MatrixXd J(J_fit.rows(), n);
+    J << J_fit.leftCols(na), J_c * basis_c, J_fit.rightCols(n - na - m);
+    A = J.transpose() * J;
+    g = J.transpose() * r_fit;
+  } else {
+    // Many rows: the products of the columns one screen per thread would otherwise copy whole
+    // (fit's columns, then c's in its basis, then the rest: the unknowns' order).
+    const int nf = static_cast<int>(J_fit.cols());
+    std::vector<int> at(nf);
+    for (int k = 0; k < nf; ++k) at[k] = k < na ? k : k + m;
+    const Eigen::MatrixXd FF = J_fit.transpose() * J_fit;
+    const Eigen::MatrixXd FC = (J_fit.transpose() * J_c) * basis_c;
+    const Eigen::VectorXd Fr = J_fit.transpose() * r_fit;
+    A.resize(n, n);
+    g.resize(n);
+    A.block(na, na, m, m) = basis_c.transpose() * (J_c.transpose() * J_c) * basis_c;
+    g.segment(na, m) = basis_c.transpose() * (J_c.transpose() * r_fit);
+    for (int i = 0; i < nf; ++i) {
+      g[at[i]] = Fr[i];
+      A.block(at[i], na, 1, m) = FC.row(i);
+      A.block(na, at[i], m, 1) = FC.row(i).transpose();
+      for (int j = 0; j < nf; ++j) A(at[i], at[j]) = FF(i, j);
+    }
+  }
   const Eigen::VectorXd dx = -A.ldlt().solve(g);
   if (dx.allFinite()) {
     const Eigen::VectorXd xn = x + dx;

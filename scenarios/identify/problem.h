@@ -11,6 +11,7 @@
 // residual xi_f / std (6 entries after the distances).
 #pragma once
 #include <Eigen/Core>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -71,6 +72,15 @@ class Problem {
   // Each marker's offset at state x (zero where declared); empty when none is unknown.
   std::vector<Vec3> MarkerOffsets(const Eigen::VectorXd& x) const;
   int row_offset(size_t r) const { return offset_[r]; }
+  // Residual entries of the rows (the distances and priors follow them).
+  int rows_dim() const { return rows_dim_; }
+  // The rows in blocks, for passes whose memory must not grow with the rows: fn(block, at) with
+  // `block` this problem on kRowBlock consecutive rows (the last block takes the rest) and `at`
+  // the residual offset of its first row here; the first block's residuals end with the
+  // priors. One call fn(*this, 0) while the rows are fewer than two blocks or the data has
+  // groups (a block would renumber them): then what fn computes has the bits of one pass.
+  static constexpr int kRowBlock = 16384;
+  void ForEachRowBlock(const std::function<void(const Problem& block, int at)>& fn) const;
   // The rows it fits: the i-th one and its loads.
   size_t num_rows() const { return rows_ ? rows_->size() : data_.rows.size(); }
   const Observation& row(size_t i) const { return data_.rows[RowIndex(i)]; }
@@ -169,6 +179,11 @@ Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit);
 // The fit of `pr`'s effects `active` at state x with sum of squares rss.
 Fit MakeFit(const Problem& pr, const std::vector<int>& active, const Eigen::VectorXd& x,
             double rss);
+
+// J^T J of `pr` at x and, with r (its residuals there), J^T r: from one Jacobian, or summed over
+// row blocks (ForEachRowBlock) when the rows are many, so that no Jacobian of every row is held.
+void NormalEquations(const Problem& pr, const Eigen::VectorXd& x, const Eigen::VectorXd* r,
+                     Eigen::MatrixXd* A, Eigen::VectorXd* g);
 
 // For each effect of `fit` (a fit of `pr`'s effects, at its optimum), the linearised rise of the
 // sum of squares when it is removed and the other unknowns refitted: a_e^T Sigma_ee^-1 a_e,

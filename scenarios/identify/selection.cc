@@ -356,11 +356,8 @@ Fit AddGeometryBlock(const SelectionContext& ctx, const Fit& start, const std::v
   int added = 0;
   for (int c : pool) {
     if (Contains(block.active, c)) continue;
-    const Projector proj(FitJacobian(ctx.em, ctx.data, ctx.loads, block, ctx.opt));
     double rel = 0.0;
-    const Eigen::MatrixXd B =
-        ObservableBasis(CandidateJacobian(ctx.em, ctx.data, ctx.loads, block, c, ctx.opt), proj,
-                        ctx.opt.rank_tol, &rel);
+    const Eigen::MatrixXd B = CandidateBasis(ctx.em, ctx.data, ctx.loads, block, c, ctx.opt, &rel);
     if (B.cols() == 0 || block.num_params + B.cols() >= block.num_residuals) continue;
     block.active.push_back(c);
     block.basis.push_back(B);

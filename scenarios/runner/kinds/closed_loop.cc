@@ -193,6 +193,13 @@ class ClosedLoopKind : public ScenarioKind {
     (*ctx.timing)["data_s"] = seconds_since(t0);
     ctx.log("identify: " + std::to_string(sets.cal.rows.size()) + " calibration rows, " +
             std::to_string(candidates_.size()) + " candidate effects");
+    if (sets.cal_loads.num_kept() < sets.cal_loads.size()) {
+      ctx.log("identify: the loads of " + std::to_string(sets.cal_loads.num_kept()) + " of " +
+              std::to_string(sets.cal_loads.size()) + " rows kept (" +
+              std::to_string(static_cast<int>(identify::kLoadsCacheBytes / (1 << 20))) +
+              " MB); the others are computed in each pass over the rows (the "
+              "same results, more time)");
+    }
     const Clock::time_point t1 = Clock::now();
     // The selection log as it is written: a long identification shows where it is.
     identify::IdentifyOptions opt = opt_;

@@ -1,14 +1,19 @@
-// Identification's memory per row: a point row carries no pose row's matrices, and
+// Identification's memory per row: a point row carries no pose row's matrices;
 // cross-validation reads its folds' rows in place (the same bits as fitting copies of them)
-// instead of copying every row and its loads once per fold.
+// instead of copying every row and its loads once per fold; loads beyond a budget are not kept;
+// with many rows the normal equations, observable bases and screening steps come from row
+// blocks and products of columns, not from whole Jacobians copied (the same results to
+// rounding).
 #include <gtest/gtest.h>
 
+#include <Eigen/SVD>
 #include <cstring>
 #include <fstream>
 #include <random>
 
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/cross_validation.h"
+#include "scenarios/identify/equivalence.h"
 #include "scenarios/identify/identify.h"
 #include "scenarios/identify/problem.h"
 #include "sim/declared_chain.h"
@@ -148,6 +153,76 @@ TEST(IdentifyMemory, UnkeptLoadsTakeNoMemoryPerRow) {
   EXPECT_LT(peak.HeapBytes(), 64.0 * 1024) << "loads kept for none of 4000 rows";
   const RowLoads all = ComputeLoads(*p->em, p->data);
   EXPECT_GT(peak.HeapBytes() / 4000, 400.0) << "planar3's kept loads (the measure is live)";
+}
+
+TEST(IdentifyMemory, RowBlocksGiveTheNormalEquationsAndBasesOfWholeJacobians) {
+  // Beyond two blocks of rows the Levenberg-Marquardt normal equations are summed over blocks
+  // and a candidate's observable basis comes from the triangular factor of [J_fit J_c]: the
+  // whole Jacobians' results to rounding, without holding either for every row.
+  const int rows = 2 * Problem::kRowBlock + 5000;
+  const auto p = MakePlanar(rows);
+  const std::vector<int> active = {p->em->FindCandidate("joint_offset@joint2")};
+  IdentifyOptions opt;
+  opt.threads = 2;
+  const Fit fit = FitEffects(*p->em, p->data, p->loads, active, Eigen::VectorXd(), opt);
+  EXPECT_NEAR(fit.theta[0], 0.005, 1e-4);  // the planted offset, fitted on the blocks
+  const Problem pr(*p->em, p->data, p->loads, fit.active, fit.basis, opt);
+  const Eigen::VectorXd x = StateOf(pr, fit);
+  const Eigen::VectorXd r = pr.Residuals(x);
+  const Eigen::MatrixXd J = pr.Jacobian(x);
+  Eigen::MatrixXd A;
+  Eigen::VectorXd g;
+  NormalEquations(pr, x, &r, &A, &g);
+  const Eigen::MatrixXd A_whole = J.transpose() * J;
+  const Eigen::VectorXd g_whole = J.transpose() * r;
+  EXPECT_LT((A - A_whole).norm(), 1e-12 * A_whole.norm());
+  EXPECT_LT((g - g_whole).norm(), 1e-9 * g_whole.norm() + 1e-12 * J.norm() * r.norm());
+  int checked = 0;
+  for (const char* name : {"joint_origin@joint2", "joint_origin@joint3", "joint_offset@joint1"}) {
+    const int c = p->em->FindCandidate(name);
+    ASSERT_GE(c, 0) << name;
+    ++checked;
+    double rel = 0.0, rel_whole = 0.0;
+    const Eigen::MatrixXd B = CandidateBasis(*p->em, p->data, p->loads, fit, c, opt, &rel);
+    const Eigen::MatrixXd B_whole =
+        ObservableBasis(CandidateJacobian(*p->em, p->data, p->loads, fit, c, opt), Projector(J),
+                        opt.rank_tol, &rel_whole);
+    ASSERT_EQ(B.cols(), B_whole.cols()) << name;
+    EXPECT_NEAR(rel, rel_whole, 1e-9) << name;
+    // Both against the SVD of the whole projected columns (ObservableBasis on few rows).
+    const Eigen::MatrixXd Jc = CandidateJacobian(*p->em, p->data, p->loads, fit, c, opt);
+    Eigen::VectorXd scale(Jc.cols());
+    for (Eigen::Index k = 0; k < Jc.cols(); ++k) scale[k] = 1.0 / Jc.col(k).norm();
+    const Eigen::MatrixXd Js = Jc * scale.asDiagonal();
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Projector(J).Apply(Js), Eigen::ComputeThinV);
+    double rel_svd = 0.0;
+    for (Eigen::Index i = 0; i < svd.singularValues().size(); ++i) {
+      rel_svd = std::max(rel_svd, svd.singularValues()[i] / (Js * svd.matrixV().col(i)).norm());
+    }
+    EXPECT_NEAR(rel_whole, rel_svd, 1e-9) << name;
+    // The same directions (each up to its sign).
+    for (Eigen::Index k = 0; k < B.cols(); ++k) {
+      EXPECT_NEAR(std::abs(B.col(k).dot(B_whole.col(k))), 1.0, 1e-6) << name << " " << k;
+    }
+    EXPECT_GT(B.cols(), 0) << name;
+  }
+  EXPECT_EQ(checked, 3);
+  // Screening's Gauss-Newton step from the columns' products lands where the full fit does.
+  const Fit wrong =
+      FitEffects(*p->em, p->data, p->loads, {p->em->FindCandidate("joint_offset@joint1")},
+                 Eigen::VectorXd(), opt);
+  const int c = p->em->FindCandidate("joint_offset@joint2");
+  const Eigen::MatrixXd B = Eigen::MatrixXd::Identity(1, 1);
+  const Fit screened = ScreenWith(*p->em, p->data, p->loads, wrong, c, B,
+                                  FitJacobian(*p->em, p->data, p->loads, wrong, opt),
+                                  CandidateJacobian(*p->em, p->data, p->loads, wrong, c, opt),
+                                  FitResiduals(*p->em, p->data, p->loads, wrong, opt), opt);
+  const Fit full = FitWith(*p->em, p->data, p->loads, wrong, c, B, opt);
+  ASSERT_EQ(screened.theta.size(), 2);
+  EXPECT_NEAR(screened.theta[1], 0.005, 1e-4);
+  EXPECT_NEAR(screened.theta[0], full.theta[0], 1e-6);
+  EXPECT_NEAR(screened.theta[1], full.theta[1], 1e-6);
+  EXPECT_LT(screened.rss, wrong.rss);
 }
 
 }  // namespace
