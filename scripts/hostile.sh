@@ -259,7 +259,7 @@ ${3:-seeds: [1]}
 EOF
 }
 
-# === Issue 35 (round 3) ======================================================================
+# === Round 3 ==========================================================================
 
 # 1. Folders beside --out that look like temporaries are the user's unless marked as ours.
 fresh i35_01_old_sibling_kept
@@ -643,7 +643,7 @@ attack i35_18_one_row_message 2 "1line noerr~rows.with.rows" -- "$FB" identify -
 fresh i35_18_unknown_subcommand
 attack i35_18_unknown_subcommand 2 "1line err~frobnicate noerr~subcommand.is.required" -- "$FB" frobnicate
 
-# === Issue 21 (round 1) ======================================================================
+# === Round 1 ==========================================================================
 
 fresh i21_out_with_user_files
 smoke_yaml "$D/s.yaml"

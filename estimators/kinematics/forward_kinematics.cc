@@ -237,14 +237,10 @@ namespace internal {
 // The baseline: two-lane (SSE2) transports. The 4-wide vector code compiled for plain x86-64 ran
 // ~840 ns (GCC splits every operation in two and lowers the lane shuffles through memory), the
 // scalar transports ~600 ns; the two-lane transport does each element's operations in the
-// vector lane's order, so both paths give the same bits (tests/unit/kinematics, lie). Issue 18
-// (baseline <= 550 ns on 7 DoF, bits kept): bench_kinematics, CPU time, medians of 5
-// repetitions in 3 runs interleaved with the previous binary (2026-11-27, load average 2.8-4.9
-// from other work on the 2 cores): this path 519-524 ns against 601-604, 0.86x, and 1.10x the
-// x86-64-v3 path of the same runs (470-492; previously 505-511); the scalar transports with this
-// file's other changes measured 582-607 in an earlier such run. Besides the transports: the
-// joints' sincos four frames at a time
-// (lie::internal::SinCos4) and no memset of the base frame's covariance per call.
+// vector lane's order, so both paths give the same bits (tests/unit/kinematics, lie). It runs
+// about 1.1x the x86-64-v3 path (bench_kinematics BM_ForwardKinematicsCov2Baseline; the
+// scalar transports were slower still). Besides the transports: the joints' sincos four frames
+// at a time (lie::internal::SinCos4) and no memset of the base frame's covariance per call.
 void ForwardKinematicsWithCovarianceBaseline(const PpoeModel& model, PpoeData& data,
                                              const Eigen::Ref<const Eigen::VectorXd>& q,
                                              lie::CompoundOrder order) {

@@ -1,4 +1,4 @@
-// Speed of identification (issues 8, 14): 200 configurations of rover_arm with measured
+// Speed of identification: 200 configurations of rover_arm with measured
 // end-effector points in 4 sets, 30 candidate effects, two of them in the data (a gear
 // compliance at j2, an encoder offset at j3). BM_Identify runs every stage (loads, selection
 // cross-validated over the 4 sets, diagnostics, alternatives, equivalence sets, covariance,
@@ -128,7 +128,7 @@ void BM_Predict(benchmark::State& state) {
 }
 BENCHMARK(BM_Predict);
 
-// Issue 21 ("point-format CSVs scale badly"): reading a point-format CSV of N rows (the file
+// Reading a point-format CSV of N rows (the file
 // is written once, outside the timing). Linear: about 1 us a row.
 // Arg 1: a `set` label of its own on every row (labels are looked up once a row).
 void ReadPointCsv(benchmark::State& state, bool set_per_row) {
@@ -199,19 +199,12 @@ BENCHMARK(BM_IdentifyRows)
     ->Iterations(1)
     ->Complexity();
 
-// Issue 21's case as the CLI runs it: `flexbench identify` on a point-format CSV of N rows
+// Identification as the CLI runs it: `flexbench identify` on a point-format CSV of N rows
 // (planar3, every candidate, a planted joint offset; the file is written outside the timing):
-// the CSV read, the loads and the whole identification. The issue measured 1,000 rows 3.6 s,
-// 4,000 rows 44 s, 8,000 rows 99 s; target 10,000 rows under 5 s: met (2026-11-26, medians of
-// 3, machine idle): 1,000 rows 0.29 s, 4,000 1.25 s, 10,000 3.20 s on one thread; 10,000 2.03 s
-// wall (3.32 s CPU) on two. Interleaved with the binary before screening by one Gauss-Newton
-// step (ScreenWith), the fold cache and the threads: 10,000 rows 7.53 -> 3.52 s on one thread
-// (0.47). The history: Medians of 3, CPU time, 2 cores shared (load ~4), both builds in one
-// session: with every Jacobian column by central differences 1,000 rows 1.29 s, 4,000 5.35 s,
-// 10,000 13.7 s; with the analytic columns (EffectModel::PoseTangents) 0.69 s, 2.94 s, 7.07 s
-// (1.9x; callgrind on 1,000 rows 145 -> 75 G instructions). What remains is the screening's
-// Levenberg-Marquardt itself: 43% residual passes (PredictPose per row), 47% one PoseTangents pass
-// per Jacobian (its chain 11%, the point's walk up the frames 15%, the tangents 7%).
+// the CSV read, the loads and the whole identification, with its peak heap per row. Targets:
+// 10,000 rows under 5 s; at most 1 KB a row, and 1,000,000 rows within 2 GB. From 100,000 rows
+// on, most rows' loads are computed in every pass (RowLoads) and the fits work on row blocks.
+// The figures are in the README's performance table.
 void BM_IdentifyPointCsv(benchmark::State& state) {
   const int rows = static_cast<int>(state.range(0));
   const std::string dir = std::string(FLEXBENCH_SOURCE_DIR) + "/models/";

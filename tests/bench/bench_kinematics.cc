@@ -55,9 +55,7 @@ void BM_ForwardKinematicsCov2(benchmark::State& state) {
 
 // The path a CPU without AVX2 runs (two-lane SSE2 transports, same bits), timed on this CPU;
 // the target is <= 550 ns on 7 DoF. Its ratio to BM_ForwardKinematicsCov2 in the same run
-// is the cost of having no AVX2. 2026-11-27, medians of 5 repetitions, 3 runs interleaved with
-// the previous binary, load average 2.8-4.9: 7 DoF 519-524 ns (previous 601-604, 0.86x), 1.10x
-// BM_ForwardKinematicsCov2/7 (470-492); 27 DoF 1826-1841 (previous 2121-2161).
+// is the cost of having no AVX2 (figures: the README's performance table).
 void BM_ForwardKinematicsCov2Baseline(benchmark::State& state) {
   Fixture f(static_cast<int>(state.range(0)));
   for (auto _ : state) {
@@ -97,12 +95,9 @@ ModelEffects ThreeLoadDrivenEffects(const PpoeModel& model) {
   return e;
 }
 
-// Baseline in the same run: BM_ForwardKinematicsCov2/7 (the target: at most 2x).
-// Medians of 5 repetitions, one run (2026-11-26, CPU time): 976 ns against 513 ns, 1.90x;
-// BM_EffectiveChainUpdate/7 463 ns. The code before (its binary run right after): 1225 against
-// 509 ns, 2.41x, update 720 ns. The update now takes the loads from each subtree's first moment
-// in its own frame (no base poses) and the mount's rotation from MountTilt's own sines and
-// cosines. On this shared 2-core machine, interleaved runs gave 1.90-1.91x.
+// Baseline in the same run: BM_ForwardKinematicsCov2/7 (the target: at most 2x). What keeps the
+// update cheap: the loads come from each subtree's first moment in its own frame (no base
+// poses), the mount's rotation from MountTilt's own sines and cosines.
 void BM_AugmentedForwardKinematicsCov2(benchmark::State& state) {
   Fixture f(static_cast<int>(state.range(0)));
   const ModelEffects effects = ThreeLoadDrivenEffects(f.model);

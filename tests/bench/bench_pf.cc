@@ -7,12 +7,8 @@
 // kinematics alone.
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true.
 //
-// Issue 18 (the estimate at most 0.25x of a step), medians of 5 repetitions in one run, CPU time,
-// this 2-core machine shared with other work (load average 3.5-4):
-//   BM_PfStep/2048 255-257 us, BM_Summary/2048 59.0-61.1 us: 0.231-0.238 in 5 runs of 5 (was 78
-//   us, 0.31; 137 us, 0.55 before that). One longer run of every size gave 64.2 / 247 = 0.26.
-//   BM_PfStepWithEstimate (us) N = 256 40.5, 512 76.8, 1024 146, 2048 288, 4096 568, 8192 1160
-//   (BM_PfStep 29.9, 63.2, 125, 247, 506, 1015).
+// Target for the estimate (BM_Summary): at most 0.25x of a step (BM_PfStep) in the same run; the
+// measured figures are in the README's performance table.
 // Where BM_Summary/2048 goes (perf): about half the particles are negligible (w < 1e-14) after
 // a reading, and the summary now skips them (KeptParticles): the end-effector logs about a
 // quarter, the four joints' band passes, gathers and band sorts about half, the weights and

@@ -1,4 +1,4 @@
-// Issue 16: what the sweep machinery costs per run. A local sweep of 16 runs of the contact
+// What the sweep machinery costs per run. A local sweep of 16 runs of the contact
 // scenario (~60 ms of work each) with one worker, against the same 16 runs as 16 `flexbench
 // run` processes in a shell loop (what a user without sweeps writes). Counters: wall time per
 // run, the runs' own time (summary.json timing.total_s) and the difference, the overhead.

@@ -143,7 +143,7 @@ TEST(EffectModel, WithoutEffectsItIsMujocosKinematics) {
   }
 }
 
-// Issue 21 (identify on 10,000 rows): the loads cache the effect-free chain poses at their q;
+// The loads cache the effect-free chain poses at their q;
 // a prediction with the cache is bit-identical to one without, for every candidate alone and in
 // pairs, and a prediction at another q (the diagnostics' perturbed readings) ignores the cache.
 TEST(EffectModel, CachedNominalPosesGiveTheSameBits) {
@@ -198,7 +198,7 @@ TEST(EffectModel, CachedNominalPosesGiveTheSameBits) {
   }
 }
 
-// Issue 21 (identify on 10,000 rows): the row passes run on several threads, each row in its
+// The row passes run on several threads, each row in its
 // own slots, so the whole identification (selection, cross-validation, alternatives, reports)
 // gives the same bits on 1, 2 or 3 threads. 1,600 point rows in 4 sets: 3 threads' worth at
 // the chunk floor, folds of 1,200 training rows (2 threads); three effect types as candidates
@@ -244,7 +244,7 @@ TEST(Identify, ThreadsGiveTheSameBits) {
   }
 }
 
-// Issue 21: screening scores a candidate by one Gauss-Newton step from the current fit with
+// Screening scores a candidate by one Gauss-Newton step from the current fit with
 // the columns at hand, instead of a Levenberg-Marquardt fit from zero. For every candidate the
 // step reaches the full fit's sum of squares (that of FitWith run to convergence) to within
 // 1e-4 of it (on the data of the true effect, whose RSS falls 100-fold, and on the others), and
@@ -844,7 +844,7 @@ TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
             std::string::npos);
 }
 
-// Issue 21: Excel's byte-order mark, absurd values, groups that span sets, socket distances.
+// Excel's byte-order mark, absurd values, groups that span sets, socket distances.
 TEST_F(CalibrationCsv, ByteOrderMarkIsNotPartOfTheFirstColumn) {
   DataSet d;
   ReadCalibrationCsv(Write("\xEF\xBB\xBFj1,j2,x,y,z\n0.1,0.2,1,2,3\n"), {"j1", "j2"}, &d);

@@ -1,4 +1,4 @@
-// Issue 20 item 4: coupled joints, declared once. A palletizer-like arm: j4 keeps the tool level,
+// Coupled joints, declared once. A palletizer-like arm: j4 keeps the tool level,
 // q4 = -q2 - q3 (a parallel linkage; `coupled:` in the declared file), and j5 counter-turns the
 // yaw, q5 = -q1 (the MJCF's own <equality><joint>, `coupled: {j5: mjcf}`). Only j1-j3 are read.
 //

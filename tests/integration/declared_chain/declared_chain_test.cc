@@ -262,7 +262,7 @@ TEST(DeclaredModelFile, FormatErrorsNameFileLineAndKey) {
   }
 }
 
-// Issue 21: absurd standard deviations (NaN metrics later) and a model path naming nothing.
+// Absurd standard deviations (NaN metrics later) and a model path naming nothing.
 TEST(DeclaredModelFile, RangesAndTheModelPathAreChecked) {
   testing::TempDir tmp;
   const auto path = tmp.path() / "x.declared.yaml";

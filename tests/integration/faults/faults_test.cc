@@ -1,4 +1,4 @@
-// Issue 19, item 4: faults mid-run. `flexbench run` and `flexbench sweep` are killed with
+// Faults mid-run. `flexbench run` and `flexbench sweep` are killed with
 // SIGKILL at random points (a fixed seed draws the times); the output is then either absent or
 // a complete result, never a partial one, and the next run leaves no temporary folder behind.
 // A killed sweep, resumed, ends with the same sweep.csv as an uninterrupted one. A full disk

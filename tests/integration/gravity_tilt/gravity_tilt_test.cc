@@ -1,4 +1,4 @@
-// Issue 20 item 5: the gravity direction (a base mounted tilted) as an identification candidate.
+// The gravity direction (a base mounted tilted) as an identification candidate.
 // The truth is MuJoCo: the rover arm with an undeclared gear elasticity at j2, its model's
 // gravity turned 1.5-3 deg about a random horizontal axis (Eigen's AngleAxis, not the code under
 // test), settled at random commands by sim::Simulation's statics; a tracker at an unknown pose

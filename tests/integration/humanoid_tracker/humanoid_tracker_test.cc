@@ -1,4 +1,4 @@
-// Issue 20 item 3: tracker rows simulated from the truth (runner/common/simulated_tracker.h) and
+// Tracker rows simulated from the truth (runner/common/simulated_tracker.h) and
 // the closed_loop_humanoid_tracker scenario's bad input.
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-// Issue 21, "nothing lost, nothing hangs": the README's Reliability promises through the CLI.
+// "Nothing lost, nothing hangs": the README's Reliability promises through the CLI.
 // Exit codes (0 ok, 2 bad input, 3 gate failed, 1 internal), one line on stderr for an error,
 // echoed values capped, results moved into place whole, nothing removed that is not a result.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Issue 16: a sweep on a real Slurm. The fixture starts a single-node cluster (munged,
+// A sweep on a real Slurm. The fixture starts a single-node cluster (munged,
 // slurmctld, slurmd from Debian's packages) inside the test's temporary folder and stops it at
 // the end; the sweep's tasks are scheduled by Slurm itself. When a daemon cannot start, the test
 // fails with the daemon's log line; it never skips.

@@ -1,4 +1,4 @@
-// Issue 16: `flexbench sweep` through the CLI. Deterministic whatever the worker count or the
+// `flexbench sweep` through the CLI. Deterministic whatever the worker count or the
 // order runs finished in, resumable, shards + collect equal to one local run, a failing run
 // recorded while the sweep goes on, statistical gates with exit 3, bad input exit 2 in one line.
 #include <gtest/gtest.h>

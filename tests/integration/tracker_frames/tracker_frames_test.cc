@@ -1,4 +1,4 @@
-// Issue 20: points measured by an external tracker at an unknown (or roughly known) pose. The
+// Points measured by an external tracker at an unknown (or roughly known) pose. The
 // truth is MuJoCo: the rover arm with an undeclared gear elasticity at j2, settled at random
 // commands (sim::Simulation, not the identification's kinematics); its end-effector points are
 // mapped into a tracker frame a few cm and deg off the base and given noise. Identification fits

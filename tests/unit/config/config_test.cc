@@ -183,7 +183,7 @@ TEST(Gates, EvaluatesNumbersBooleansAndRelativeThresholds) {
   EXPECT_FALSE(EvaluateGates(gates, summary, &all)[1]["passed"].get<bool>());
 }
 
-// Issue 21: inputs that yaml-cpp accepts silently or turns into internal errors.
+// Inputs that yaml-cpp accepts silently or turns into internal errors.
 TEST(ConfigNode, NonUtf8TextIsBadInputNamingLineAndKey) {
   const std::string e = ErrorOf(
       [] { ConfigNode::LoadString("scenario: x\ndescription: caf\xe9 au lait\n", "f.yaml"); });

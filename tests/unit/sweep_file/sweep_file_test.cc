@@ -1,4 +1,4 @@
-// Issue 16: sweep files. Expansion into points and runs, statistic expressions, and every bad
+// Sweep files. Expansion into points and runs, statistic expressions, and every bad
 // input of the file as one InputError naming file and line.
 #include "scenarios/sweep/sweep_file.h"
 

@@ -1,4 +1,4 @@
-// Issue 16: the statistics a sweep reports. The Wilson interval against published values, the
+// The statistics a sweep reports. The Wilson interval against published values, the
 // bootstrap interval against its stated 95% coverage by Monte Carlo, same data same bytes.
 #include <gtest/gtest.h>
 
