@@ -39,10 +39,10 @@ constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 // Memory the identification takes per calibration row (the Observation, the residual vectors,
 // the fits' and screening's Jacobian rows; the loads are kept only up to kLoadsCacheBytes and
 // whole Jacobians only below 32,768 rows), and the most one file's rows may take. Measured:
-// `flexbench identify` on 1,000,000 planar3 point rows (3 joints) peaks at 1.17 GB resident
-// (bench_identify's peak heap: 0.75 KB a row); rover_arm (8 joints) at 100,000 rows 2.8 KB a
+// `flexbench identify` on 1,000,000 planar3 point rows (3 joints) peaks at 1.18 GB resident
+// (bench_identify's peak heap: 0.86 KB a row); rover_arm (8 joints) at 100,000 rows 2.8 KB a
 // row of heap, 1.4 of it the fixed budgets (candidate columns, loads). The estimate (1 KB +
-// 0.19 KB a joint) is 1.37 times the 3-joint figure and grows with the joints as rover_arm's.
+// 0.19 KB a joint) is 1.36 times the 3-joint figure and grows with the joints as rover_arm's.
 // A file whose line count times CalibrationBytesPerRow exceeds the budget is refused before
 // any row is read ("N rows need about X GB; the limit is Y GB").
 constexpr std::uintmax_t kCalibrationBytesPerRow = 1024;

@@ -137,7 +137,7 @@ struct DataSet {
 inline constexpr double kNominalPoseCacheBytes = 16.0 * (1 << 20);
 // The most the rows' kept loads may take (RowLoads): beyond, a pass computes a row's loads
 // where it needs them.
-inline constexpr double kLoadsCacheBytes = 32.0 * (1 << 20);
+inline constexpr double kLoadsCacheBytes = 128.0 * (1 << 20);
 
 // Heap and struct bytes of one row's loads.
 size_t LoadsBytes(const ConfigLoads& L);
