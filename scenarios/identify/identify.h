@@ -145,7 +145,8 @@ size_t LoadsBytes(const ConfigLoads& L);
 // The rows' loads for the predictions of (active, theta) (EffectModel::LoadsFor at each row's
 // readings, with its motion signs). The first rows' are kept, as many as kLoadsCacheBytes hold;
 // a pass computes the others' where it needs them, into its workspace (the same bits, more
-// time: the loads were ~1.3 KB a row on planar3, most of identification's memory per row).
+// time; a row's loads take ~1.3 KB on planar3, otherwise the largest part of identification's
+// memory per row).
 class RowLoads {
  public:
   RowLoads() = default;
