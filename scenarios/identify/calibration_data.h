@@ -36,17 +36,15 @@ namespace flexbench::identify {
 // The largest calibration CSV read (bigger is bad input, refused before reading).
 constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 
-// Memory the identification takes per calibration row (the Observation, the residual vectors,
-// the fits' and screening's Jacobian rows; the loads are kept only up to kLoadsCacheBytes and
-// whole Jacobians only below 32,768 rows), and the most one file's rows may take. Measured:
-// `flexbench identify` on 1,000,000 planar3 point rows (3 joints) peaks at 1.18 GB resident
-// (bench_identify's peak heap: 0.86 KB a row); rover_arm (8 joints) at 100,000 rows 2.8 KB a
-// row of heap, 1.4 of it the fixed budgets (candidate columns, loads). The estimate (1 KB +
-// 0.19 KB a joint) is 1.36 times the 3-joint figure and grows with the joints as rover_arm's.
-// A file whose line count times CalibrationBytesPerRow exceeds the budget is refused before
-// any row is read ("N rows need about X GB; the limit is Y GB").
-constexpr std::uintmax_t kCalibrationBytesPerRow = 1024;
-constexpr std::uintmax_t kCalibrationBytesPerJoint = 192;
+// Memory the identification takes per calibration row, and the most one file's rows may take.
+// The estimate (0.27 KB + 1.09 KB a joint) covers every case measured: planar3 (3 joints)
+// peaks at 0.86 KB a row of heap on 1,000,000 point rows with one offset planted, but with
+// joint-origin errors planted (the complete-geometry block kept, a dozen fitted unknowns) its
+// resident set passed 2.15 GB on 1,000,000 rows, and the screening and equivalence stages still
+// hold N x p matrices whole. A file whose line count times CalibrationBytesPerRow exceeds the
+// budget is refused before any row is read ("N rows need about X GB; the limit is Y GB").
+constexpr std::uintmax_t kCalibrationBytesPerRow = 272;
+constexpr std::uintmax_t kCalibrationBytesPerJoint = 1088;
 constexpr std::uintmax_t kMaxCalibrationMemoryBytes = 2000000000;
 std::uintmax_t CalibrationBytesPerRow(size_t num_joints);
 
