@@ -3,6 +3,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include "scenarios/identify/problem.h"
 
@@ -43,7 +44,7 @@ Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj
     scale[k] = n > 0 ? 1.0 / n : 0.0;
   }
   Eigen::MatrixXd Js, Rs, G;
-  if (Jc.rows() < 2 * Problem::kRowBlock) {
+  if (Jc.rows() < 2 * kRowBlock) {
     Js = Jc * scale.asDiagonal();
     Rs = proj.Apply(Js);
   } else {
@@ -73,33 +74,122 @@ Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj
   return B;
 }
 
-Eigen::MatrixXd CandidateBasis(const EffectModel& em, const DataSet& data, const RowLoads& loads,
-                               const Fit& fit, int c, const IdentifyOptions& opt, double* rel) {
+Eigen::MatrixXd StackedColumns(const Problem& pr,
+                               const std::function<Eigen::MatrixXd(const Problem& block)>& cols,
+                               bool* compressed) {
+  Eigen::MatrixXd R;
+  if (compressed) *compressed = pr.InRowBlocks();
+  pr.ForEachRowBlock([&](const Problem& block, int at) {
+    Eigen::MatrixXd C = cols(block);
+    if (&block == &pr) {
+      R = std::move(C);
+      return;
+    }
+    const Eigen::Index k = C.cols();
+    const Eigen::Index m = at == 0 ? C.rows() : block.rows_dim();  // priors: once
+    Eigen::MatrixXd M(R.rows() + m, k);
+    M.topRows(R.rows()) = R;
+    M.bottomRows(m) = C.topRows(m);
+    C.resize(0, 0);
+    Eigen::HouseholderQR<Eigen::Ref<Eigen::MatrixXd>> qr(M);
+    R = M.topRows(std::min(k, M.rows())).triangularView<Eigen::Upper>();
+  });
+  return R;
+}
+
+namespace {
+
+// cs split into batches of at most kCandidateColumnBytes of columns with `base` columns
+// beside each (at least one candidate a batch); a column has `entries` doubles.
+std::vector<std::vector<int>> Batches(const EffectModel& em, const std::vector<int>& cs, int base,
+                                      double entries) {
+  const double column_bytes = sizeof(double) * entries;
+  std::vector<std::vector<int>> out;
+  double bytes = 0.0;
+  for (int c : cs) {
+    const double more = column_bytes * em.candidates()[c].num_params;
+    if (out.empty() || (out.back().size() > 0 && bytes + more > kCandidateColumnBytes)) {
+      out.emplace_back();
+      bytes = column_bytes * base;
+    }
+    out.back().push_back(c);
+    bytes += more;
+  }
+  if (out.empty()) out.emplace_back();
+  return out;
+}
+
+// The columns of each of `cs` in R, one after the other from column `at` on.
+std::vector<Eigen::MatrixXd> Split(const Eigen::MatrixXd& R, int at, const std::vector<int>& cs,
+                                   const EffectModel& em) {
+  std::vector<Eigen::MatrixXd> out;
+  for (int c : cs) {
+    const int w = em.candidates()[c].num_params;
+    out.emplace_back(R.middleCols(at, w));
+    at += w;
+  }
+  return out;
+}
+
+}  // namespace
+
+void ForEachColumnBatch(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                        const Fit& fit, const std::vector<int>& fixed, const std::vector<int>& cs,
+                        bool residuals, const IdentifyOptions& opt,
+                        const std::function<void(const ColumnBatch&)>& fn) {
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);
   const Eigen::VectorXd x = StateOf(pr, fit);
   const int p = pr.num_params();
-  const int k = p + em.candidates()[c].num_params;
-  Eigen::MatrixXd J_fit, J_c, R;
-  pr.ForEachRowBlock([&](const Problem& block, int at) {
-    if (&block == &pr) {
-      J_fit = pr.Jacobian(x);
-      J_c = pr.CandidateColumns(x, c);
-      return;
+  const int base = p + (residuals ? 1 : 0) + NumTheta(em, fixed);
+  ColumnBatch cb;
+  cb.rows = pr.num_residuals();
+  cb.compressed = pr.InRowBlocks();
+  if (!cb.compressed) {
+    // Few rows: the fit's columns once, the candidates' a batch at a time (each candidate's
+    // are the same bits alone).
+    cb.fit = pr.Jacobian(x);
+    if (residuals) cb.r = pr.Residuals(x);
+    cb.fixed = pr.CandidateColumns(x, fixed);
+    for (const std::vector<int>& batch : Batches(em, cs, 0, cb.rows)) {
+      cb.batch = pr.CandidateColumns(x, batch);
+      fn(cb);
+      cb.begin += batch.size();
     }
-    const Eigen::MatrixXd Jb = block.Jacobian(x);
-    const Eigen::MatrixXd Jcb = block.CandidateColumns(x, c);
-    const int m = at == 0 ? static_cast<int>(Jb.rows()) : block.rows_dim();  // priors: once
-    Eigen::MatrixXd M(R.rows() + m, k);
-    M << R, Jb.topRows(m), Jcb.topRows(m);
-    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(M);
-    R = qr.matrixQR().topRows(std::min<Eigen::Index>(k, M.rows()));
-    R.triangularView<Eigen::StrictlyLower>().setZero();
-  });
-  if (R.size() > 0) {
-    J_fit = R.leftCols(p);
-    J_c = R.rightCols(k - p);
+    return;
   }
-  return ObservableBasis(J_c, Projector(J_fit), opt.rank_tol, rel);
+  // A block's share of the residual entries (its last block up to two blocks' rows).
+  const double entries =
+      static_cast<double>(cb.rows) * 2.0 * opt.row_block / static_cast<double>(pr.num_rows());
+  for (const std::vector<int>& batch : Batches(em, cs, base, entries)) {
+    std::vector<int> all = fixed;
+    all.insert(all.end(), batch.begin(), batch.end());
+    const Eigen::MatrixXd R = StackedColumns(pr, [&](const Problem& block) {
+      Eigen::MatrixXd C(block.num_residuals(), base + NumTheta(em, batch));
+      C.leftCols(p) = block.Jacobian(x);
+      if (residuals) C.col(p) = block.Residuals(x);
+      int at = base - NumTheta(em, fixed);
+      for (Eigen::MatrixXd& Jc : block.CandidateColumns(x, all)) {
+        C.middleCols(at, Jc.cols()) = Jc;
+        at += static_cast<int>(Jc.cols());
+      }
+      return C;
+    });
+    cb.fit = R.leftCols(p);
+    if (residuals) cb.r = R.col(p);
+    cb.fixed = Split(R, base - NumTheta(em, fixed), fixed, em);
+    cb.batch = Split(R, base, batch, em);
+    fn(cb);
+    cb.begin += batch.size();
+  }
+}
+
+Eigen::MatrixXd CandidateBasis(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                               const Fit& fit, int c, const IdentifyOptions& opt, double* rel) {
+  Eigen::MatrixXd B;
+  ForEachColumnBatch(em, data, loads, fit, {c}, {}, false, opt, [&](const ColumnBatch& cb) {
+    B = ObservableBasis(cb.fixed[0], Projector(cb.fit), opt.rank_tol, rel);
+  });
+  return B;
 }
 
 Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
@@ -118,34 +208,6 @@ Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data, co
                                   const Fit& fit, int c, const IdentifyOptions& opt) {
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);
   return pr.CandidateColumns(StateOf(pr, fit), c);
-}
-
-std::vector<Eigen::MatrixXd> CandidateJacobians(const EffectModel& em, const DataSet& data,
-                                                const RowLoads& loads, const Fit& fit,
-                                                const std::vector<int>& cs,
-                                                const IdentifyOptions& opt) {
-  const Problem pr(em, data, loads, fit.active, fit.basis, opt);
-  return pr.CandidateColumns(StateOf(pr, fit), cs);
-}
-
-void ForEachCandidateJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
-                              const Fit& fit, const std::vector<int>& cs,
-                              const IdentifyOptions& opt, double max_bytes,
-                              const std::function<void(size_t, const Eigen::MatrixXd&)>& fn) {
-  const double column_bytes = sizeof(double) * static_cast<double>(fit.num_residuals);
-  for (size_t begin = 0; begin < cs.size();) {
-    std::vector<int> batch;
-    double bytes = 0.0;
-    for (size_t i = begin; i < cs.size(); ++i) {
-      const double more = column_bytes * em.candidates()[cs[i]].num_params;
-      if (!batch.empty() && bytes + more > max_bytes) break;
-      batch.push_back(cs[i]);
-      bytes += more;
-    }
-    const std::vector<Eigen::MatrixXd> J = CandidateJacobians(em, data, loads, fit, batch, opt);
-    for (size_t j = 0; j < batch.size(); ++j) fn(begin + j, J[j]);
-    begin += batch.size();
-  }
 }
 
 namespace {
@@ -195,6 +257,34 @@ EquivalentMember Member(const EffectModel& em, int c, const Eigen::MatrixXd& R,
   return m;
 }
 
+// The candidates an equivalence set of chosen effect ce may name.
+std::vector<int> Rivals(const EffectModel& em, const Fit& fit, int ce,
+                        const std::vector<int>& candidates) {
+  std::vector<int> cs;
+  const bool generic = em.candidates()[ce].generic_geometry;
+  for (int c : candidates) {
+    if (c == ce || std::find(fit.active.begin(), fit.active.end(), c) != fit.active.end()) {
+      continue;
+    }
+    // A full joint-origin recalibration can make any geometric correction at its joint;
+    // naming it beside every geometric finding says nothing.
+    if (em.candidates()[c].generic_geometry && !generic) continue;
+    // A lateral compliance (chosen after the named effects) beside a named effect: where its
+    // axis is the axis of the joint before it through the same point, it is that joint's
+    // compliance by construction, not a competing cause.
+    if (em.candidates()[c].after_named && !em.candidates()[ce].after_named) continue;
+    // Likewise the wider families that need evidence (a stiffening spring contains the
+    // linear one, the error curve the transmission error) beside a narrower chosen one.
+    if (em.candidates()[c].needs_evidence &&
+        (!em.candidates()[ce].needs_evidence ||
+         em.candidates()[c].type == EffectType::kJointErrorCurve)) {
+      continue;
+    }
+    cs.push_back(c);
+  }
+  return cs;
+}
+
 }  // namespace
 
 void FindEquivalents(const EffectModel& em, const DataSet& data, const RowLoads& loads,
@@ -204,47 +294,29 @@ void FindEquivalents(const EffectModel& em, const DataSet& data, const RowLoads&
     const int ce = fit.active[e];
     Eigen::VectorXd theta_e;
     const Fit rest = Remove(em, fit, e, &theta_e);
-    const Projector proj(FitJacobian(em, data, loads, rest, opt));
-    const Eigen::MatrixXd Re = proj.Apply(CandidateJacobian(em, data, loads, rest, ce, opt));
-    const Eigen::VectorXd d = Re * theta_e;
     EquivalenceSet set;
     set.effect = static_cast<int>(e);
-    set.correction_rms = std::sqrt(d.squaredNorm() / std::max<Eigen::Index>(1, d.size()));
-    set.members.push_back(Member(em, ce, Re, d));
-    const bool generic = em.candidates()[ce].generic_geometry;
-    if (d.norm() > 0) {
-      std::vector<int> cs;
-      for (int c : candidates) {
-        if (c == ce || std::find(fit.active.begin(), fit.active.end(), c) != fit.active.end()) {
-          continue;
-        }
-        // A full joint-origin recalibration can make any geometric correction at its joint;
-        // naming it beside every geometric finding says nothing.
-        if (em.candidates()[c].generic_geometry && !generic) continue;
-        // A lateral compliance (chosen after the named effects) beside a named effect: where its
-        // axis is the axis of the joint before it through the same point, it is that joint's
-        // compliance by construction, not a competing cause.
-        if (em.candidates()[c].after_named && !em.candidates()[ce].after_named) continue;
-        // Likewise the wider families that need evidence (a stiffening spring contains the
-        // linear one, the error curve the transmission error) beside a narrower chosen one.
-        if (em.candidates()[c].needs_evidence &&
-            (!em.candidates()[ce].needs_evidence ||
-             em.candidates()[c].type == EffectType::kJointErrorCurve)) {
-          continue;
-        }
-        cs.push_back(c);
+    const std::vector<int> cs = Rivals(em, fit, ce, candidates);
+    // The effect's correction with the rest projected out (every batch has it: in row blocks
+    // each batch's R is a basis of its own), and the rivals' columns that reproduce it.
+    ForEachColumnBatch(em, data, loads, rest, {ce}, cs, false, opt, [&](const ColumnBatch& cb) {
+      const Projector proj(cb.fit);
+      const Eigen::MatrixXd Re = proj.Apply(cb.fixed[0]);
+      const Eigen::VectorXd d = Re * theta_e;
+      if (set.members.empty()) {
+        set.correction_rms = std::sqrt(d.squaredNorm() / std::max(1, cb.rows));
+        set.members.push_back(Member(em, ce, Re, d));
       }
-      // Their columns a batch at a time (each candidate's are the same bits alone).
-      ForEachCandidateJacobian(em, data, loads, rest, cs, opt, kCandidateColumnBytes,
-                               [&](size_t i, const Eigen::MatrixXd& Jc) {
-                                 const Eigen::MatrixXd Rc = proj.Apply(Jc);
-                                 if (!(Rc.norm() > 0)) return;
-                                 const Eigen::VectorXd pd = Rc * Rc.colPivHouseholderQr().solve(d);
-                                 if (pd.norm() / d.norm() > opt.ambiguity_cos) {
-                                   set.members.push_back(Member(em, cs[i], Rc, d));
-                                 }
-                               });
-    }
+      if (!(d.norm() > 0)) return;
+      for (size_t i = 0; i < cb.batch.size(); ++i) {
+        const Eigen::MatrixXd Rc = proj.Apply(cb.batch[i]);
+        if (!(Rc.norm() > 0)) continue;
+        const Eigen::VectorXd pd = Rc * Rc.colPivHouseholderQr().solve(d);
+        if (pd.norm() / d.norm() > opt.ambiguity_cos) {
+          set.members.push_back(Member(em, cs[cb.begin + i], Rc, d));
+        }
+      }
+    });
     std::string name;
     std::vector<std::string> names;
     for (const EquivalentMember& m : set.members) {
@@ -267,44 +339,50 @@ std::vector<SimplerEquivalent> SimplerEquivalents(const EffectModel& em, const D
   groups_only.active.clear();
   groups_only.basis.clear();
   groups_only.theta.resize(0);
-  const Projector proj(FitJacobian(em, data, loads, groups_only, opt));
-  // Each chosen effect's correction (group points projected out).
-  std::vector<Eigen::VectorXd> d(k);
-  std::vector<int> np(k);
-  for (int e = 0, off = 0; e < k; ++e) {
-    const int c = fit.active[e];
-    np[e] = em.candidates()[c].num_params;
-    d[e] = proj.Apply(CandidateJacobian(em, data, loads, groups_only, c, opt)) *
-           fit.theta.segment(off, np[e]);
-    off += np[e];
-  }
+  std::vector<int> cs;
   for (size_t c = 0; c < em.candidates().size(); ++c) {
     const Candidate& cand = em.candidates()[c];
     if (cand.generic_geometry || cand.type == EffectType::kCameraOffset) continue;
     if (std::find(fit.active.begin(), fit.active.end(), static_cast<int>(c)) != fit.active.end()) {
       continue;
     }
-    const Eigen::MatrixXd Rc =
-        proj.Apply(CandidateJacobian(em, data, loads, groups_only, static_cast<int>(c), opt));
-    if (!(Rc.norm() > 0)) continue;
-    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Rc);
-    for (int mask = 1; mask < (1 << k); ++mask) {
-      if (__builtin_popcount(mask) < 2) continue;
-      Eigen::VectorXd sum = Eigen::VectorXd::Zero(d[0].size());
-      int params = 0;
-      SimplerEquivalent se;
-      se.candidate = static_cast<int>(c);
-      for (int e = 0; e < k; ++e) {
-        if (!(mask & (1 << e))) continue;
-        sum += d[e];
-        params += np[e];
-        se.effects.push_back(e);
-      }
-      if (cand.num_params >= params || !(sum.norm() > 0)) continue;
-      const Eigen::VectorXd pd = Rc * qr.solve(sum);
-      if (pd.norm() / sum.norm() > opt.ambiguity_cos) out.push_back(se);
-    }
+    cs.push_back(static_cast<int>(c));
   }
+  ForEachColumnBatch(em, data, loads, groups_only, fit.active, cs, false, opt,
+                     [&](const ColumnBatch& cb) {
+                       const Projector proj(cb.fit);
+                       // Each chosen effect's correction (group points projected out).
+                       std::vector<Eigen::VectorXd> d(k);
+                       std::vector<int> np(k);
+                       for (int e = 0, off = 0; e < k; ++e) {
+                         np[e] = em.candidates()[fit.active[e]].num_params;
+                         d[e] = proj.Apply(cb.fixed[e]) * fit.theta.segment(off, np[e]);
+                         off += np[e];
+                       }
+                       for (size_t i = 0; i < cb.batch.size(); ++i) {
+                         const int c = cs[cb.begin + i];
+                         const Candidate& cand = em.candidates()[c];
+                         const Eigen::MatrixXd Rc = proj.Apply(cb.batch[i]);
+                         if (!(Rc.norm() > 0)) continue;
+                         const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Rc);
+                         for (int mask = 1; mask < (1 << k); ++mask) {
+                           if (__builtin_popcount(mask) < 2) continue;
+                           Eigen::VectorXd sum = Eigen::VectorXd::Zero(d[0].size());
+                           int params = 0;
+                           SimplerEquivalent se;
+                           se.candidate = c;
+                           for (int e = 0; e < k; ++e) {
+                             if (!(mask & (1 << e))) continue;
+                             sum += d[e];
+                             params += np[e];
+                             se.effects.push_back(e);
+                           }
+                           if (cand.num_params >= params || !(sum.norm() > 0)) continue;
+                           const Eigen::VectorXd pd = Rc * qr.solve(sum);
+                           if (pd.norm() / sum.norm() > opt.ambiguity_cos) out.push_back(se);
+                         }
+                       }
+                     });
   return out;
 }
 
@@ -334,7 +412,6 @@ void FindSimplerEquivalents(const EffectModel& em, const DataSet& data, const Ro
 void FindUnidentifiable(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                         const Fit& fit, const std::vector<int>& candidates,
                         const IdentifyOptions& opt, IdentifyResult* result) {
-  const Projector proj(FitJacobian(em, data, loads, fit, opt));
   std::vector<int> cs;
   for (int c : candidates) {
     if (std::find(fit.active.begin(), fit.active.end(), c) != fit.active.end()) continue;
@@ -344,22 +421,23 @@ void FindUnidentifiable(const EffectModel& em, const DataSet& data, const RowLoa
     }
     if (!member) cs.push_back(c);
   }
-  // Their columns a batch at a time (each candidate's are the same bits alone).
-  ForEachCandidateJacobian(
-      em, data, loads, fit, cs, opt, kCandidateColumnBytes,
-      [&](size_t i, const Eigen::MatrixXd& Jc) {
-        const int c = cs[i];
-        double rel = 0.0;
-        const Eigen::MatrixXd B = ObservableBasis(Jc, proj, opt.rank_tol, &rel);
-        if (B.cols() > 0) return;
-        result->unidentifiable.push_back(em.candidates()[c].Name());
-        char line[256];
-        std::snprintf(line, sizeof(line),
-                      "%s: unidentifiable (%.2g of its sensitivity lies outside the chosen effects "
-                      "and group points)",
-                      em.candidates()[c].Name().c_str(), rel);
-        result->steps.push_back(line);
-      });
+  std::unique_ptr<Projector> proj;
+  ForEachColumnBatch(em, data, loads, fit, {}, cs, false, opt, [&](const ColumnBatch& cb) {
+    if (!proj || cb.compressed) proj = std::make_unique<Projector>(cb.fit);
+    for (size_t i = 0; i < cb.batch.size(); ++i) {
+      const int c = cs[cb.begin + i];
+      double rel = 0.0;
+      const Eigen::MatrixXd B = ObservableBasis(cb.batch[i], *proj, opt.rank_tol, &rel);
+      if (B.cols() > 0) continue;
+      result->unidentifiable.push_back(em.candidates()[c].Name());
+      char line[256];
+      std::snprintf(line, sizeof(line),
+                    "%s: unidentifiable (%.2g of its sensitivity lies outside the chosen effects "
+                    "and group points)",
+                    em.candidates()[c].Name().c_str(), rel);
+      result->steps.push_back(line);
+    }
+  });
 }
 
 }  // namespace flexbench::identify

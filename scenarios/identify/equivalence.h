@@ -22,6 +22,8 @@
 
 namespace flexbench::identify {
 
+class Problem;
+
 // Projection onto the complement of span(J_fit); J_fit may have no columns.
 class Projector {
  public:
@@ -38,35 +40,51 @@ class Projector {
 Eigen::MatrixXd ObservableBasis(const Eigen::MatrixXd& Jc, const Projector& proj, double tol,
                                 double* rel);
 
-// ObservableBasis of candidate c beside `fit`'s unknowns, at fit's state. With many rows the
-// two Jacobians are never held whole: the triangular factor R of [J_fit J_c], accumulated over
-// row blocks (Problem::ForEachRowBlock; [J_fit J_c] = Q R, so R has their norms, projections
-// and singular values), stands for them.
+// The columns that cols(block) gives for each row block of `pr` (Problem::ForEachRowBlock),
+// stacked: C itself while pr is not in row blocks, else the triangular factor R of C = Q R,
+// accumulated block by block. R has C's inner products (R^T R = C^T C), so its norms,
+// projections and singular values, without C ever being held for every row. `*compressed`
+// (optional): whether R it is.
+Eigen::MatrixXd StackedColumns(const Problem& pr,
+                               const std::function<Eigen::MatrixXd(const Problem& block)>& cols,
+                               bool* compressed = nullptr);
+
+// Columns for the stages that compare candidates with a fit: the fit's Jacobian at its state,
+// its residuals there, the columns of some candidates always and of a batch of others. Whole,
+// or (with many rows) the parts of StackedColumns' R of [J_fit r J_fixed J_batch] — the same
+// products, so the same projections, bases and equivalences to rounding.
+struct ColumnBatch {
+  Eigen::MatrixXd fit;                 // J_fit
+  Eigen::VectorXd r;                   // the residuals (when asked for)
+  std::vector<Eigen::MatrixXd> fixed;  // of each `fixed` candidate
+  std::vector<Eigen::MatrixXd> batch;  // of cs[begin], cs[begin + 1], ...
+  size_t begin = 0;
+  int rows = 0;             // residual entries the columns stand for
+  bool compressed = false;  // R's parts (fit, fixed: new in each batch), not the columns
+};
+// fn for each batch of `cs` (at least once, with an empty batch when cs is): at most
+// kCandidateColumnBytes of columns a batch, so memory grows neither with the candidates nor
+// (in row blocks) with the rows.
+void ForEachColumnBatch(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                        const Fit& fit, const std::vector<int>& fixed, const std::vector<int>& cs,
+                        bool residuals, const IdentifyOptions& opt,
+                        const std::function<void(const ColumnBatch&)>& fn);
+// The most columns a batch takes at once (more candidates: more passes over the rows).
+inline constexpr double kCandidateColumnBytes = 64.0 * (1 << 20);
+
+// ObservableBasis of candidate c beside `fit`'s unknowns, at fit's state (from its
+// ColumnBatch: with many rows, the triangular factor of [J_fit J_c]).
 Eigen::MatrixXd CandidateBasis(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                                const Fit& fit, int c, const IdentifyOptions& opt, double* rel);
 
-// The Jacobian of `fit`'s unknowns at its state, and the sensitivity of candidate c there.
+// The Jacobian of `fit`'s unknowns at its state, its whitened residuals there, and the
+// sensitivity of candidate c there, whole (the references the batches are tested against).
 Eigen::MatrixXd FitJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                             const Fit& fit, const IdentifyOptions& opt);
-// Its whitened residuals there.
 Eigen::VectorXd FitResiduals(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                              const Fit& fit, const IdentifyOptions& opt);
 Eigen::MatrixXd CandidateJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
                                   const Fit& fit, int c, const IdentifyOptions& opt);
-// CandidateJacobian for each of `cs`, the analytic ones in one pass over the rows.
-std::vector<Eigen::MatrixXd> CandidateJacobians(const EffectModel& em, const DataSet& data,
-                                                const RowLoads& loads, const Fit& fit,
-                                                const std::vector<int>& cs,
-                                                const IdentifyOptions& opt);
-// The same handed to fn(i, columns of cs[i]) in order, computed in batches of at most
-// `max_bytes` of columns (one pass over the rows per batch), so memory does not grow with the
-// number of candidates times the rows.
-void ForEachCandidateJacobian(const EffectModel& em, const DataSet& data, const RowLoads& loads,
-                              const Fit& fit, const std::vector<int>& cs,
-                              const IdentifyOptions& opt, double max_bytes,
-                              const std::function<void(size_t, const Eigen::MatrixXd&)>& fn);
-// The most candidates' columns take at once (more candidates: more passes).
-inline constexpr double kCandidateColumnBytes = 64.0 * (1 << 20);
 
 // Equivalence sets of the chosen effects of `fit` among `candidates`; fills
 // result->equivalence and result->indistinguishable, and the effects' display names.

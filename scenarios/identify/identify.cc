@@ -6,6 +6,7 @@
 #include <cstdarg>
 #include <cstdio>
 #include <limits>
+#include <memory>
 
 #include "estimators/error.h"
 #include "scenarios/identify/cross_validation.h"
@@ -64,9 +65,8 @@ struct Information {
   Eigen::MatrixXd pinv;  // of In
 };
 
-Information InvertInformation(const EffectModel& em, const Fit& cur, const Eigen::MatrixXd& J,
+Information InvertInformation(const EffectModel& em, const Fit& cur, const Eigen::MatrixXd& info,
                               const IdentifyOptions& opt, IdentifyResult* res) {
-  const Eigen::MatrixXd info = J.transpose() * J;
   Information out;
   out.d = info.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
   const Eigen::MatrixXd In = out.d.asDiagonal() * info * out.d.asDiagonal();
@@ -126,23 +126,41 @@ void ThetaCovariance(const Problem& pr, const Fit& cur, const Information& inf,
 }
 
 // How much the effects' corrections overlap once the group points are projected out: |sum|^2
-// over the sum of |each|^2 (1: independent).
+// over the sum of |each|^2 (1: independent). From the stacked columns [J_groups d_1 .. d_k]
+// (each effect's correction d_e = J_e alpha_e), so in row blocks from their triangular factor.
 double EffectOverlap(const EffectModel& em, const DataSet& data, const RowLoads& loads,
-                     const IdentifyOptions& opt, const Problem& pr, const Fit& cur,
-                     const Eigen::MatrixXd& J) {
+                     const IdentifyOptions& opt, const Problem& pr, const Fit& cur) {
   Fit groups_only = cur;
   groups_only.active.clear();
   groups_only.basis.clear();
   groups_only.theta.resize(0);
-  const Projector proj(FitJacobian(em, data, loads, groups_only, opt));
-  Eigen::VectorXd sum = Eigen::VectorXd::Zero(J.rows());
+  const Problem pg(em, data, loads, groups_only.active, groups_only.basis, opt);
+  const Eigen::VectorXd xg = StateOf(pg, groups_only);
+  const Eigen::VectorXd x = StateOf(pr, cur);
+  const int ng = pg.num_params();
+  const int k = static_cast<int>(cur.active.size());
+  const Eigen::MatrixXd C = StackedColumns(pg, [&](const Problem& block) {
+    std::unique_ptr<Problem> rows;  // cur's problem on the block's rows
+    if (&block != &pg) {
+      rows = std::make_unique<Problem>(em, data, loads, cur.active, cur.basis, opt, block.rows());
+    }
+    const Eigen::MatrixXd J = (rows ? *rows : pr).Jacobian(x);
+    Eigen::MatrixXd out(J.rows(), ng + k);
+    out.leftCols(ng) = block.Jacobian(xg);
+    for (int e = 0, a = 0; e < k; ++e) {
+      const int m = static_cast<int>(cur.basis[e].cols());
+      out.col(ng + e) = J.middleCols(a, m) * x.segment(a, m);
+      a += m;
+    }
+    return out;
+  });
+  const Projector proj(C.leftCols(ng));
+  Eigen::VectorXd sum = Eigen::VectorXd::Zero(C.rows());
   double parts = 0.0;
-  for (size_t e = 0, a = 0; e < cur.active.size(); ++e) {
-    const int m = static_cast<int>(cur.basis[e].cols());
-    const Eigen::VectorXd d = proj.Apply(J.middleCols(a, m) * StateOf(pr, cur).segment(a, m));
+  for (int e = 0; e < k; ++e) {
+    const Eigen::VectorXd d = proj.Apply(C.col(ng + e));
     sum += d;
     parts += d.squaredNorm();
-    a += m;
   }
   return parts > 0 ? sum.squaredNorm() / parts : 1.0;
 }
@@ -196,10 +214,11 @@ void Report(const EffectModel& em, const DataSet& data, const RowLoads& loads,
   const Fit& cur = res->after;
   if (cur.theta.size() == 0) return;
   const Problem pr(em, data, loads, cur.active, cur.basis, opt);
-  const Eigen::MatrixXd J = pr.Jacobian(StateOf(pr, cur));
-  const Information inf = InvertInformation(em, cur, J, opt, res);
+  Eigen::MatrixXd info;
+  NormalEquations(pr, StateOf(pr, cur), nullptr, &info, nullptr);
+  const Information inf = InvertInformation(em, cur, info, opt, res);
   ThetaCovariance(pr, cur, inf, res);
-  res->overlap = EffectOverlap(em, data, loads, opt, pr, cur, J);
+  res->overlap = EffectOverlap(em, data, loads, opt, pr, cur);
   FittedEffects(em, data, loads, opt, cur, res);
 }
 

@@ -176,6 +176,9 @@ class RowLoads {
   size_t size_ = 0;
 };
 
+// Rows a pass over many rows takes at a time (Problem::ForEachRowBlock).
+inline constexpr int kRowBlock = 16384;
+
 struct IdentifyOptions {
   bool cross_validation = true;    // selection checked on held-out folds (cross_validation.h)
   std::string folds_by = "auto";   // "auto", or insist on "set", "group" or "row" folds
@@ -210,6 +213,10 @@ struct IdentifyOptions {
   int max_iterations = 50;  // Levenberg-Marquardt
   // Threads of a pass over the rows (0: one per core; parallel.h); any number, the same bits.
   int threads = 0;
+  // From two blocks of this many rows on, passes go by row blocks, so that their memory is
+  // bounded by a block's, not by the rows (the same results to rounding; tests make it small to
+  // check the block paths against whole ones).
+  int row_block = kRowBlock;
 };
 
 struct FittedEffect {

@@ -137,8 +137,8 @@ std::vector<Mat6> FrameCovariances(const EffectModel& em, const DataSet& data,
   const bool offsets = std::count(data.offset_unknown.begin(), data.offset_unknown.end(), 1) > 0;
   if (data.frames.empty() && !offsets) return cov;
   const Problem pr(em, data, loads, fit.active, fit.basis, opt);
-  const Eigen::MatrixXd J = pr.Jacobian(StateOf(pr, fit));
-  const Eigen::MatrixXd info = J.transpose() * J;
+  Eigen::MatrixXd info;
+  NormalEquations(pr, StateOf(pr, fit), nullptr, &info, nullptr);
   // Pseudo-inverse of the normalised information (as Report): a direction the data does not
   // determine adds nothing instead of an arbitrary variance.
   const Eigen::VectorXd s = info.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();

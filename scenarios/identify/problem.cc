@@ -460,12 +460,12 @@ void Problem::ReducedColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& th
   for (size_t e = 0; e < active_.size(); ++e) {
     if (em_.HasTangent(active_[e], active_) && !direct[e]) reduced += basis_[e].rows();
   }
-  // Blocks of kRowBlock rows (the last takes the rest), or all rows at once when that is one
+  // Blocks of opt.row_block rows (the last takes the rest), or all rows at once when that is one
   // block: then the product spans the distance and prior rows too, as Eigen sized it before.
   const int n = static_cast<int>(num_rows());
-  const bool whole = reduced == 0 || n < 2 * kRowBlock;
+  const bool whole = reduced == 0 || n < 2 * opt_.row_block;
   for (int begin = 0; begin < n;) {
-    const int end = whole || n - begin < 2 * kRowBlock ? n : begin + kRowBlock;
+    const int end = whole || n - begin < 2 * opt_.row_block ? n : begin + opt_.row_block;
     const int r0 = whole ? 0 : offset_[begin];
     const int r1 = whole ? num_residuals() : (end < n ? offset_[end] : rows_dim_);
     Eigen::MatrixXd D = Eigen::MatrixXd::Zero(r1 - r0, reduced);
@@ -604,15 +604,19 @@ Eigen::VectorXd StateOf(const Problem& pr, const Fit& fit) {
   return x;
 }
 
+bool Problem::InRowBlocks() const {
+  return num_rows() >= 2 * static_cast<size_t>(opt_.row_block) && data_.groups.empty();
+}
+
 void Problem::ForEachRowBlock(const std::function<void(const Problem&, int)>& fn) const {
   const int n = static_cast<int>(num_rows());
-  if (n < 2 * kRowBlock || !data_.groups.empty()) {
+  if (!InRowBlocks()) {
     fn(*this, 0);
     return;
   }
   std::vector<int> rows;
   for (int begin = 0; begin < n;) {
-    const int end = n - begin < 2 * kRowBlock ? n : begin + kRowBlock;
+    const int end = n - begin < 2 * opt_.row_block ? n : begin + opt_.row_block;
     rows.clear();
     for (int i = begin; i < end; ++i) rows.push_back(static_cast<int>(RowIndex(i)));
     const Problem block(em_, data_, loads_, active_, basis_, opt_, &rows);
@@ -752,7 +756,7 @@ Fit ScreenWith(const EffectModel& em, const DataSet& data, const RowLoads& loads
   // enough apart (rank_tol) for the normal equations.
   Eigen::MatrixXd A;
   Eigen::VectorXd g;
-  if (J_fit.rows() < 2 * Problem::kRowBlock) {
+  if (J_fit.rows() < 2 * opt.row_block) {
     Eigen::MatrixXd J(J_fit.rows(), n);
     J << J_fit.leftCols(na), J_c * basis_c, J_fit.rightCols(n - na - m);
     A = J.transpose() * J;

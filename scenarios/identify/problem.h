@@ -75,12 +75,15 @@ class Problem {
   // Residual entries of the rows (the distances and priors follow them).
   int rows_dim() const { return rows_dim_; }
   // The rows in blocks, for passes whose memory must not grow with the rows: fn(block, at) with
-  // `block` this problem on kRowBlock consecutive rows (the last block takes the rest) and `at`
+  // `block` this problem on opt.row_block consecutive rows (the last block takes the rest) and `at`
   // the residual offset of its first row here; the first block's residuals end with the
   // priors. One call fn(*this, 0) while the rows are fewer than two blocks or the data has
   // groups (a block would renumber them): then what fn computes has the bits of one pass.
-  static constexpr int kRowBlock = 16384;
   void ForEachRowBlock(const std::function<void(const Problem& block, int at)>& fn) const;
+  // Whether ForEachRowBlock hands out blocks (else the problem whole).
+  bool InRowBlocks() const;
+  // Its rows in `data` (null: all), for another problem on the same rows.
+  const std::vector<int>* rows() const { return rows_; }
   // The rows it fits: the i-th one and its loads.
   size_t num_rows() const { return rows_ ? rows_->size() : data_.rows.size(); }
   const Observation& row(size_t i) const { return data_.rows[RowIndex(i)]; }
@@ -202,7 +205,8 @@ Fit FitEffects(const EffectModel& em, const DataSet& data, const RowLoads& loads
 // Screening (a screening fit per candidate was most of identifying 10,000 rows): c
 // added to `fit` by Levenberg-Marquardt's first step from fit's state with the columns
 // already computed (J_fit: fit's Jacobian at its state, J_c: c's full-parameter columns there,
-// r_fit: fit's residuals), scored by one residual pass. Where that step does not lower the sum
+// r_fit: fit's residuals; or the parts of their triangular factor, which have the same products),
+// scored by one residual pass. Where that step does not lower the sum
 // of squares, FitWith from zero instead.
 Fit ScreenWith(const EffectModel& em, const DataSet& data, const RowLoads& loads, const Fit& fit,
                int c, const Eigen::MatrixXd& basis_c, const Eigen::MatrixXd& J_fit,

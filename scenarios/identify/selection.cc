@@ -6,6 +6,7 @@
 #include <cstdarg>
 #include <cstdio>
 #include <limits>
+#include <memory>
 
 #include "scenarios/identify/equivalence.h"
 #include "scenarios/identify/parallel.h"
@@ -68,41 +69,33 @@ std::vector<Trial> ScreenCandidates(const SelectionContext& ctx, const Fit& cur,
     }
   }
   if (todo.empty()) return SortedTrials(screened, &screens);
-  const Eigen::MatrixXd J_cur = FitJacobian(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
-  const Projector proj(J_cur);
-  const Eigen::VectorXd r_cur = FitResiduals(ctx.em, ctx.data, ctx.loads, cur, ctx.opt);
-  // The candidates' columns in batches of at most kCandidateColumnBytes (a candidate's columns do
-  // not depend on which others are computed with it).
-  const double column_bytes = sizeof(double) * static_cast<double>(cur.num_residuals);
-  for (size_t begin = 0; begin < todo.size();) {
-    std::vector<int> cs;
-    double bytes = 0.0;
-    for (size_t i = begin; i < todo.size(); ++i) {
-      const double more = column_bytes * ctx.em.candidates()[screened[todo[i]]].num_params;
-      if (!cs.empty() && bytes + more > kCandidateColumnBytes) break;
-      cs.push_back(screened[todo[i]]);
-      bytes += more;
-    }
-    const std::vector<Eigen::MatrixXd> Jc =
-        CandidateJacobians(ctx.em, ctx.data, ctx.loads, cur, cs, ctx.opt);
-    const int threads = TaskThreads(static_cast<int>(cs.size()),
-                                    static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
-    IdentifyOptions screen = TaskOptions(ctx.opt, threads);
-    screen.max_iterations = 4;
-    ForEachTask(static_cast<int>(cs.size()), threads, [&](int j) {
-      const int c = cs[j];
-      SelectionMemo::Screen& out = screens[todo[begin + j]];
-      double rel = 0.0;
-      const Eigen::MatrixXd B = ObservableBasis(Jc[j], proj, ctx.opt.rank_tol, &rel);
-      // Never more unknowns than residuals.
-      if (B.cols() > 0 && cur.num_params + B.cols() < cur.num_residuals) {
-        out.fit = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, J_cur, Jc[j], r_cur, screen);
-        out.kept = std::isfinite(out.fit.bic);
-      }
-      if (ctx.memo) ctx.memo->screens.Put(KeyWith(key, c), out, SelectionMemo::Bytes(out.fit));
-    });
-    begin += cs.size();
-  }
+  std::vector<int> cs;
+  for (int i : todo) cs.push_back(screened[i]);
+  // The fit's columns and residuals beside the candidates', a batch at a time; in row blocks
+  // their triangular factor, whose products the screening step needs and no more.
+  std::unique_ptr<Projector> proj;
+  ForEachColumnBatch(
+      ctx.em, ctx.data, ctx.loads, cur, {}, cs, true, ctx.opt, [&](const ColumnBatch& cb) {
+        if (!proj || cb.compressed) proj = std::make_unique<Projector>(cb.fit);
+        const int n_batch = static_cast<int>(cb.batch.size());
+        const int threads =
+            TaskThreads(n_batch, static_cast<int>(ctx.data.rows.size()), ctx.opt.threads);
+        IdentifyOptions screen = TaskOptions(ctx.opt, threads);
+        screen.max_iterations = 4;
+        ForEachTask(n_batch, threads, [&](int j) {
+          const int c = cs[cb.begin + j];
+          SelectionMemo::Screen& out = screens[todo[cb.begin + j]];
+          double rel = 0.0;
+          const Eigen::MatrixXd B = ObservableBasis(cb.batch[j], *proj, ctx.opt.rank_tol, &rel);
+          // Never more unknowns than residuals.
+          if (B.cols() > 0 && cur.num_params + B.cols() < cur.num_residuals) {
+            out.fit = ScreenWith(ctx.em, ctx.data, ctx.loads, cur, c, B, cb.fit, cb.batch[j], cb.r,
+                                 screen);
+            out.kept = std::isfinite(out.fit.bic);
+          }
+          if (ctx.memo) ctx.memo->screens.Put(KeyWith(key, c), out, SelectionMemo::Bytes(out.fit));
+        });
+      });
   return SortedTrials(screened, &screens);
 }
 

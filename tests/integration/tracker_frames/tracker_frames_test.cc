@@ -327,6 +327,47 @@ TEST(MarkerOffset, UnknownOffsetIsFittedWithTheTrackerAndTheGear) {
   EXPECT_EQ(declared_picks_tool, kSeeds);  // without the nuisance the offset is an "effect"
 }
 
+// With many rows every stage goes by blocks of rows (normal equations, screening, equivalences,
+// covariances: from the triangular factor of their columns). With the tracker's pose and the
+// marker's offset among the unknowns, small blocks find what the rows whole do.
+TEST(TrackerFrame, RowBlocksFitWhatTheWholeRowsDo) {
+  auto rig = MakeRig();
+  std::mt19937_64 rng(91);
+  const lie::SE3 T_true = TruePose(3);
+  DataSet cal = TrackerData(*rig, T_true, 90, rng, Vec3(0.02, -0.01, 0.015));
+  cal.points = {"ee"};
+  cal.offset_unknown = {1};
+  const auto loads = ComputeLoads(*rig->em, cal);
+  RegisterFrames(*rig->em, loads, &cal);
+  IdentifyOptions opt;
+  opt.point_std_m = kNoise;
+  const IdentifyResult whole = Identify(*rig->em, cal, loads, NamedCandidates(*rig->em), opt);
+  opt.row_block = 20;  // four blocks
+  ASSERT_TRUE(Problem(*rig->em, cal, loads, {}, {}, opt).InRowBlocks());
+  const IdentifyResult blocks = Identify(*rig->em, cal, loads, NamedCandidates(*rig->em), opt);
+  ASSERT_EQ(Names(blocks), Names(whole));
+  ASSERT_FALSE(Names(whole).empty());
+  EXPECT_LT((blocks.after.theta - whole.after.theta).norm(), 1e-8 * whole.after.theta.norm());
+  const Vec6 d_pose =
+      (whole.after.T_base_frames[0].Inverse() * blocks.after.T_base_frames[0]).Log();
+  EXPECT_LT(d_pose.norm(), 1e-9);
+  EXPECT_LT((blocks.after.marker_offsets[0] - whole.after.marker_offsets[0]).norm(), 1e-9);
+  EXPECT_LT((blocks.frame_cov[0] - whole.frame_cov[0]).norm(), 1e-6 * whole.frame_cov[0].norm());
+  EXPECT_LT((blocks.marker_offset_cov[0] - whole.marker_offset_cov[0]).norm(),
+            1e-6 * whole.marker_offset_cov[0].norm());
+  EXPECT_LT((blocks.theta_cov - whole.theta_cov).norm(), 1e-6 * whole.theta_cov.norm());
+  EXPECT_EQ(blocks.unidentifiable, whole.unidentifiable);
+  EXPECT_NE(std::count(whole.unidentifiable.begin(), whole.unidentifiable.end(), "link_offset@ee"),
+            0);
+  EXPECT_NEAR(blocks.overlap, whole.overlap, 1e-9);
+  ASSERT_EQ(blocks.equivalence.size(), whole.equivalence.size());
+  for (size_t e = 0; e < whole.equivalence.size(); ++e) {
+    EXPECT_EQ(blocks.equivalence[e].name, whole.equivalence[e].name);
+  }
+  std::printf("found %s; %zu unidentifiable\n", Names(whole)[0].c_str(),
+              whole.unidentifiable.size());
+}
+
 // A rough guess (5 cm and 5 deg off the truth) instead of the registration as the start.
 TEST(TrackerFrame, ARoughGuessStartsTheSameJointFit) {
   auto rig = MakeRig();

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/SVD>
+#include <array>
 #include <cstring>
 #include <fstream>
 #include <random>
@@ -36,7 +37,8 @@ struct Planar {
   RowLoads loads;
 };
 
-std::unique_ptr<Planar> MakePlanar(int rows) {
+std::unique_ptr<Planar> MakePlanar(int rows,
+                                   const std::array<double, 3>& offsets = {0.0, 0.005, 0.0}) {
   auto p = std::make_unique<Planar>();
   const sim::DeclaredModel d =
       sim::LoadDeclaredModel(testing::SourceDir() + "/models/planar3.declared.yaml");
@@ -46,8 +48,7 @@ std::unique_ptr<Planar> MakePlanar(int rows) {
   testing::TempDir dir;
   const std::string path = (dir.path() / "points.csv").string();
   std::mt19937_64 rng(7);
-  std::ofstream(path) << testing::kPlanarHeader
-                      << testing::PlanarRows(rows, rng, 1e-4, {0.0, 0.005, 0.0});
+  std::ofstream(path) << testing::kPlanarHeader << testing::PlanarRows(rows, rng, 1e-4, offsets);
   ReadCalibrationCsv(path, p->chain.q_joints, &p->data);
   p->loads = ComputeLoads(*p->em, p->data);
   return p;
@@ -115,9 +116,9 @@ TEST(IdentifyMemory, CrossValidationCopiesNoRow) {
 }
 
 TEST(IdentifyMemory, AJacobianInBlocksOfRowsHasTheBitsOfOneProduct) {
-  // Beyond 32,768 rows the columns of an effect with a reduced basis are multiplied by it a
-  // block of rows at a time; each half of the rows on its own is one product.
-  const int rows = 40000;
+  // From two blocks of rows on, the columns of an effect with a reduced basis are multiplied by
+  // it a block of rows at a time; each half of the rows on its own is one product.
+  const int rows = 4000;
   const auto p = MakePlanar(rows);
   const std::vector<int> active = {p->em->FindCandidate("joint_offset@joint1"),
                                    p->em->FindCandidate("joint_origin@joint2")};
@@ -126,6 +127,7 @@ TEST(IdentifyMemory, AJacobianInBlocksOfRowsHasTheBitsOfOneProduct) {
   const std::vector<Eigen::MatrixXd> basis = {Eigen::MatrixXd(), B};
   IdentifyOptions opt;
   opt.threads = 2;
+  opt.row_block = 1500;
   const Problem all(*p->em, p->data, p->loads, active, basis, opt);
   Eigen::VectorXd x(all.num_params());
   x << 0.004, 1e-3, -2e-3, 5e-4;
@@ -156,14 +158,15 @@ TEST(IdentifyMemory, UnkeptLoadsTakeNoMemoryPerRow) {
 }
 
 TEST(IdentifyMemory, RowBlocksGiveTheNormalEquationsAndBasesOfWholeJacobians) {
-  // Beyond two blocks of rows the Levenberg-Marquardt normal equations are summed over blocks
+  // From two blocks of rows on, the Levenberg-Marquardt normal equations are summed over blocks
   // and a candidate's observable basis comes from the triangular factor of [J_fit J_c]: the
   // whole Jacobians' results to rounding, without holding either for every row.
-  const int rows = 2 * Problem::kRowBlock + 5000;
-  const auto p = MakePlanar(rows);
-  const std::vector<int> active = {p->em->FindCandidate("joint_offset@joint2")};
   IdentifyOptions opt;
   opt.threads = 2;
+  opt.row_block = 1000;
+  const int rows = 2 * opt.row_block + 700;
+  const auto p = MakePlanar(rows);
+  const std::vector<int> active = {p->em->FindCandidate("joint_offset@joint2")};
   const Fit fit = FitEffects(*p->em, p->data, p->loads, active, Eigen::VectorXd(), opt);
   EXPECT_NEAR(fit.theta[0], 0.005, 1e-4);  // the planted offset, fitted on the blocks
   const Problem pr(*p->em, p->data, p->loads, fit.active, fit.basis, opt);
@@ -223,6 +226,53 @@ TEST(IdentifyMemory, RowBlocksGiveTheNormalEquationsAndBasesOfWholeJacobians) {
   EXPECT_NEAR(screened.theta[0], full.theta[0], 1e-6);
   EXPECT_NEAR(screened.theta[1], full.theta[1], 1e-6);
   EXPECT_LT(screened.rss, wrong.rss);
+}
+
+TEST(IdentifyMemory, RowBlocksIdentifyWhatTheWholeRowsDo) {
+  // Every stage in blocks of rows (screening, equivalences, unidentifiable and simpler
+  // candidates, covariances, overlap: each from the triangular factor of its columns) against
+  // the same stages on the rows whole: the same findings, and the same numbers to rounding.
+  const auto p = MakePlanar(1200, {0.004, 0.005, -0.003});
+  std::vector<int> all(p->em->candidates().size());
+  for (size_t c = 0; c < all.size(); ++c) all[c] = static_cast<int>(c);
+  IdentifyOptions opt;
+  opt.threads = 2;
+  const IdentifyResult whole = Identify(*p->em, p->data, p->loads, all, opt);
+  opt.row_block = 100;  // twelve blocks
+  EXPECT_TRUE(Problem(*p->em, p->data, p->loads, {}, {}, opt).InRowBlocks());
+  const IdentifyResult blocks = Identify(*p->em, p->data, p->loads, all, opt);
+  const auto names = [&](const Fit& f) {
+    std::vector<std::string> out;
+    for (int c : f.active) out.push_back(p->em->candidates()[c].Name());
+    return out;
+  };
+  ASSERT_EQ(names(blocks.after), names(whole.after));
+  ASSERT_FALSE(whole.after.active.empty());
+  EXPECT_LT((blocks.after.theta - whole.after.theta).norm(), 1e-8 * whole.after.theta.norm());
+  ASSERT_EQ(blocks.equivalence.size(), whole.equivalence.size());
+  for (size_t e = 0; e < whole.equivalence.size(); ++e) {
+    EXPECT_EQ(blocks.equivalence[e].name, whole.equivalence[e].name);
+    EXPECT_NEAR(blocks.equivalence[e].correction_rms, whole.equivalence[e].correction_rms,
+                1e-8 * whole.equivalence[e].correction_rms);
+    ASSERT_EQ(blocks.equivalence[e].members[0].value.size(),
+              whole.equivalence[e].members[0].value.size());
+    for (size_t k = 0; k < whole.equivalence[e].members[0].value.size(); ++k) {
+      EXPECT_NEAR(blocks.equivalence[e].members[0].value[k],
+                  whole.equivalence[e].members[0].value[k], 1e-8);
+    }
+  }
+  EXPECT_EQ(blocks.unidentifiable, whole.unidentifiable);
+  EXPECT_EQ(blocks.simpler, whole.simpler);
+  EXPECT_EQ(blocks.stopped_by, whole.stopped_by);
+  EXPECT_NEAR(blocks.overlap, whole.overlap, 1e-9);
+  EXPECT_NEAR(blocks.condition_number, whole.condition_number, 1e-6 * whole.condition_number);
+  EXPECT_LT((blocks.theta_cov - whole.theta_cov).norm(), 1e-6 * whole.theta_cov.norm());
+  EXPECT_NEAR(blocks.cv_after, whole.cv_after, 1e-9 * whole.cv_after);
+  // What the stages found, so that the comparison has something to compare.
+  std::printf("chosen %zu, unidentifiable %zu, simpler %zu, overlap %.4f\n",
+              whole.after.active.size(), whole.unidentifiable.size(), whole.simpler.size(),
+              whole.overlap);
+  for (const EquivalenceSet& s : whole.equivalence) std::printf("  %s\n", s.name.c_str());
 }
 
 }  // namespace
