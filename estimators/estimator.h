@@ -50,6 +50,13 @@ struct CameraSetup {
 
 struct ImuSetup {
   FrameId frame = -1;  // the IMU's frame in the declared model
+  // Its orientation filter (imu/imu_orientations.h), for the estimators that turn its raw
+  // readings (ImuReading) into orientations: Madgwick's gain (rad/s), and its orientation in the
+  // base frame at its first reading when known (a calibrated yaw; otherwise the first
+  // accelerometer reading's, yaw 0 about the base's vertical).
+  double filter_beta = 0.05;
+  bool has_initial = false;
+  Quat q_base_frame_initial = Quat::Identity();
 };
 
 struct EstimatorSetup {

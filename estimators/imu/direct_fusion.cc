@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "estimators/error.h"
+#include "estimators/imu/imu_orientations.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/pf/bingham.h"
 
@@ -77,6 +78,7 @@ class DirectFusion : public Estimator {
     }
     q_enc_ = Eigen::VectorXd::Zero(model_.nq());
     q_ = q_enc_;
+    imu_ = std::make_unique<imu::ImuOrientations>(setup.imus);
     Reset();
   }
 
@@ -84,6 +86,7 @@ class DirectFusion : public Estimator {
     belief_ = Belief{};
     has_enc_ = false;
     for (Link& l : links_) l.has_reading = false;
+    imu_->Reset();
   }
 
   void Predict(double t) override { belief_.t = t; }
@@ -101,6 +104,12 @@ class DirectFusion : public Estimator {
       belief_.t = j->t;
       Recompute();
       return UpdateStatus::kAccepted;
+    }
+    if (const auto* r = std::get_if<ImuReading>(&z)) {
+      // Its filter's orientation, as if it had come as an OrientationReading.
+      const UpdateStatus s = imu_->Feed(*r);
+      if (s != UpdateStatus::kAccepted) return s;
+      return Update(imu_->Take(r->imu));
     }
     if (const auto* o = std::get_if<OrientationReading>(&z)) {
       for (Link& l : links_) {
@@ -185,6 +194,7 @@ class DirectFusion : public Estimator {
   Eigen::VectorXd q_;
   bool has_enc_ = false;
   Belief belief_;
+  std::unique_ptr<imu::ImuOrientations> imu_;  // the IMUs' filters, fed with raw readings
 };
 
 }  // namespace

@@ -3,9 +3,9 @@
 //
 // For each IMU (setup.imus) the joint it measures is the nearest joint at or above its frame
 // (link2_pitch_joint for the IMU on link2). Per step:
-//   1. the IMU orientation arrives as an OrientationReading (the scenario runs a Madgwick filter
-//      on the raw data, estimators/imu/madgwick.h) and is turned into the orientation of the
-//      joint's link with the mounting rotation of the declared model;
+//   1. the IMU orientation, from its raw readings (ImuReading, through one Madgwick filter per IMU:
+//      imu_orientations.h) or given as an OrientationReading, is turned into the orientation of
+//      the joint's link with the mounting rotation of the declared model;
 //   2.-4. CancelYaw (euler.h): Euler angles in the chosen order ('xyz' or 'yxz'), yaw := 0,
 //      recomposed;
 //   5. the parent link's orientation gets the same treatment (another IMU's link when the parent

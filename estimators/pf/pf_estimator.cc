@@ -1,5 +1,6 @@
 #include "estimators/pf/pf_estimator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -117,12 +118,30 @@ PfEstimator::PfEstimator(const EstimatorSetup& setup, const Variant& variant)
   setup.params.CheckAllUsed(name_);
   kin_ = std::make_unique<kinematics::EffectiveChain>(*setup.model, setup.effects);
   filter_ = std::make_unique<pf::ParticleFilter>(kin_->model(), config, setup.seed);
+  if (!config.orientation_frames.empty()) {
+    imu_ = std::make_unique<imu::ImuOrientations>(setup.imus);
+    for (const ImuSetup& s : setup.imus) {
+      imu_used_.push_back(std::count(config.orientation_frames.begin(),
+                                     config.orientation_frames.end(), s.frame) > 0);
+    }
+  }
   if (setup.effects != nullptr && !setup.effects->uncertainty.empty() && setup.end_effector >= 0) {
     bare_ = std::make_unique<kinematics::PpoeModel>(*setup.model);
     for (FrameId f = 1; f < bare_->num_frames(); ++f) bare_->SetSourceCovariance(f, Mat6::Zero());
     param_kin_ = std::make_unique<kinematics::EffectiveChain>(*bare_, setup.effects);
     param_data_ = std::make_unique<kinematics::PpoeData>(*bare_);
   }
+}
+
+UpdateStatus PfEstimator::UpdateJoints(const JointReading& j) {
+  const int n = static_cast<int>(j.q.size());
+  if (!kin_->active() || n != kin_->declared().nq() || !j.q.allFinite()) {
+    return ToUpdateStatus(filter_->UpdateReference(j.q.data(), n));  // it checks them
+  }
+  kin_->Update(j.q);
+  if (kin_->varies()) filter_->SetModel(kin_->model());
+  if (param_kin_) ParameterCovariance(j.q);
+  return ToUpdateStatus(filter_->UpdateReference(kin_->q().data(), n));
 }
 
 // The identified parameters' covariance at the end effector, at reading q (no allocation).
@@ -138,25 +157,40 @@ void PfEstimator::Reset() {
   param_cov_.setZero();
   has_t_ = false;
   t_ = 0.0;
+  if (imu_) imu_->Reset();
+  joints_in_step_ = false;
 }
 
 void PfEstimator::Predict(double t) {
   if (has_t_ && !(t > t_)) return;
+  if (has_t_ && !joints_in_step_) ApplyImuTerms();
+  joints_in_step_ = false;
   filter_->Predict();
   has_t_ = true;
   t_ = t;
 }
 
+void PfEstimator::ApplyImuTerms() {
+  if (!imu_) return;
+  for (int k = 0; k < imu_->size(); ++k) {
+    if (!imu_used_[k] || !imu_->ready(k) || !imu_->fresh(k)) continue;
+    const OrientationReading o = imu_->Take(k);
+    const UpdateStatus s = ToUpdateStatus(filter_->UpdateOrientation(o.frame, o.q_base_frame));
+    if (s != UpdateStatus::kAccepted && s != UpdateStatus::kIgnored) ++imu_terms_rejected_;
+  }
+}
+
 UpdateStatus PfEstimator::Update(const Measurement& z) {
   if (const auto* j = std::get_if<JointReading>(&z)) {
-    const int n = static_cast<int>(j->q.size());
-    if (!kin_->active() || n != kin_->declared().nq() || !j->q.allFinite()) {
-      return ToUpdateStatus(filter_->UpdateReference(j->q.data(), n));  // it checks them
-    }
-    kin_->Update(j->q);
-    if (kin_->varies()) filter_->SetModel(kin_->model());
-    if (param_kin_) ParameterCovariance(j->q);
-    return ToUpdateStatus(filter_->UpdateReference(kin_->q().data(), n));
+    const UpdateStatus s = UpdateJoints(*j);
+    joints_in_step_ = true;
+    ApplyImuTerms();
+    return s;
+  }
+  if (const auto* r = std::get_if<ImuReading>(&z)) {
+    if (!imu_) return UpdateStatus::kIgnored;
+    const UpdateStatus s = imu_->Feed(*r);
+    return s == UpdateStatus::kAccepted && !imu_used_[r->imu] ? UpdateStatus::kIgnored : s;
   }
   if (const auto* o = std::get_if<OrientationReading>(&z)) {
     return ToUpdateStatus(filter_->UpdateOrientation(o->frame, o->q_base_frame));

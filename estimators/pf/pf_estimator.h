@@ -11,13 +11,19 @@
 // Measurements:
 //   JointReading        -> reference angles u (its `std` is not used: kappa_w is the model of
 //                          "the actual joint is close to the reference", [PF eq. 28])
+//   ImuReading          -> its IMU's orientation filter (imu/imu_orientations.h: one Madgwick
+//                          filter per IMU of the set-up), if the filter uses IMUs (else
+//                          kIgnored); the orientation enters at the step's JointReading
 //   OrientationReading  -> Bingham term of its frame, if that frame is an orientation frame
 //   PositionReading     -> Gaussian term with R_w = diag(ee_variance), if its frame is in F_P (the
 //                          reading's own cov is not used: R_w is the paper's hyperparameter)
-//   anything else       -> kIgnored. IMUs reach the filter as OrientationReading: the scenario
-//                          runs one Madgwick filter per IMU (estimators/imu/madgwick.h) on the
-//                          raw gyro/accelerometer data and sends its orientation once per step,
-//                          as in the paper's Fig. 5 (one Bingham term per IMU per step).
+//   anything else       -> kIgnored.
+//
+// A step, as the paper's Fig. 5: Predict(t) opens it; the IMU readings up to t, in any number,
+// only run their filters; the JointReading weighs the particles by the reference angles, then by
+// one Bingham term per IMU used that had readings since the last term, in the set-up's order.
+// A step without JointReading gets its IMU terms when the next step opens. (One term per raw
+// reading would multiply the terms' weight by the IMU rate over the step rate.)
 //
 // Parameters (all optional; Params holds numbers, flags are 0 or 1):
 //   particles (2048), kappa_w (15), kappa_v (5), kappa_0 (0.1)          Table I, [PF eq. 29]
@@ -43,6 +49,7 @@
 #include <memory>
 
 #include "estimators/estimator.h"
+#include "estimators/imu/imu_orientations.h"
 #include "estimators/pf/particle_filter.h"
 
 namespace flexbench::estimators {
@@ -64,9 +71,14 @@ class PfEstimator : public Estimator {
 
   const pf::ParticleFilter& filter() const { return *filter_; }
   const pf::ParticleFilterConfig& config() const { return filter_->config(); }
+  // IMU orientation terms the filter refused (non-finite or not unit) since it was made.
+  int imu_terms_rejected() const { return imu_terms_rejected_; }
 
  private:
   void ParameterCovariance(const Eigen::VectorXd& q);
+  UpdateStatus UpdateJoints(const JointReading& j);
+  // The Bingham term of each IMU used with readings since its last term (set-up order).
+  void ApplyImuTerms();
 
   std::string name_;
   // The declared model with its identified effects at the last joint reading; the particles
@@ -75,6 +87,11 @@ class PfEstimator : public Estimator {
   std::unique_ptr<pf::ParticleFilter> filter_;
   bool has_t_ = false;
   double t_ = 0.0;
+  // The IMUs' orientation filters (none when the filter uses no IMU) and which IMUs enter.
+  std::unique_ptr<imu::ImuOrientations> imu_;
+  std::vector<char> imu_used_;
+  bool joints_in_step_ = false;
+  int imu_terms_rejected_ = 0;
   // The identified effects' uncertainty (their stds), which the particles, living in joint
   // angles, cannot carry: the declared model without its PPOE sources, with the effects, at the
   // last reading; its end-effector covariance is added to the particles' (ParameterCovariance).

@@ -388,9 +388,25 @@ std::unique_ptr<PyEstimator> MakePyEstimator(const std::string& name,
   setup.effects = model->chain().effects_or_null();
   setup.end_effector = model->chain().end_effector;
   std::vector<ConfigOverride> overrides;
+  double imu_beta = estimators::ImuSetup{}.filter_beta;
+  std::vector<Quat> imu_initial;
   for (const auto& [key_obj, value] : kwargs) {
     const std::string key = Utf8(key_obj, "a parameter name");
-    if (key == "seed") {
+    if (key == "imu_beta") {
+      if (!py::isinstance<py::float_>(value) && !py::isinstance<py::int_>(value)) {
+        throw ValueErrorMessage("imu_beta: expected a number > 0");
+      }
+      imu_beta = value.cast<double>();
+      if (!(imu_beta > 0.0) || !std::isfinite(imu_beta)) {
+        throw ValueErrorMessage("imu_beta: expected a finite number > 0");
+      }
+    } else if (key == "imu_initial") {
+      for (const auto& q : ListArg(value, "imu_initial")) {
+        const Vec4 v = ReadFixedVector<4>(q, "imu_initial");
+        if (!(v.norm() > 0.0)) throw ValueErrorMessage("imu_initial: a quaternion of norm 0");
+        imu_initial.push_back(QuatFromWxyz(v.data()));
+      }
+    } else if (key == "seed") {
       if (!py::isinstance<py::int_>(value) || value.cast<long long>() < 0) {
         throw ValueErrorMessage("seed: expected an int >= 0");
       }
@@ -413,6 +429,18 @@ std::unique_ptr<PyEstimator> MakePyEstimator(const std::string& name,
       }
       overrides.push_back(
           {"estimators." + name + "." + key, YamlText(value, "parameter '" + key + "'")});
+    }
+  }
+  if (!imu_initial.empty() && imu_initial.size() != setup.imus.size()) {
+    throw ValueErrorMessage("imu_initial: " + std::to_string(imu_initial.size()) +
+                            " orientations for " + std::to_string(setup.imus.size()) +
+                            " imu_frames");
+  }
+  for (size_t k = 0; k < setup.imus.size(); ++k) {
+    setup.imus[k].filter_beta = imu_beta;
+    if (k < imu_initial.size()) {
+      setup.imus[k].has_initial = true;
+      setup.imus[k].q_base_frame_initial = imu_initial[k];
     }
   }
   if (overrides.empty()) overrides.push_back({"estimators." + name, "{}"});
@@ -637,7 +665,12 @@ void BindReadingUpdates(EstimatorClass& cls) {
             z.accel = ReadFixedVector<3>(accel, "accel");
             return self.Update(z);
           },
-          py::arg("t"), py::arg("gyro"), py::arg("accel"), py::arg("imu") = 0)
+          py::arg("t"), py::arg("gyro"), py::arg("accel"), py::arg("imu") = 0,
+          "A raw IMU reading of imu_frames[imu]: gyro (rad/s) and accelerometer (m/s^2, +g up at "
+          "rest), in the sensor frame. The estimators that use IMU orientations (pf_encoders_imu, "
+          "pf_all, pf_bingham_*, direct_fusion_*) run it through that IMU's Madgwick filter; the "
+          "particle filters weigh the orientation at the step's update_joints (one term per IMU "
+          "per step). The others return 'ignored'.")
       .def(
           "update_orientation",
           [](PyEstimator& self, double t, const py::object& frame, const py::object& wxyz) {
@@ -784,10 +817,13 @@ void BindEstimator(py::module_& m) {
 void BindEstimatorRegistry(py::module_& m) {
   m.def("make_estimator", &MakePyEstimator, py::arg("name"), py::arg("model"),
         "make_estimator(name, model, *, seed=0, estimate_in=None, camera_frames=(), "
-        "imu_frames=(), **params): an estimator of the registry by name with its scenario-file "
-        "parameters (numbers or lists of numbers). seed, estimate_in (an observed frame), "
-        "camera_frames (MuJoCo cameras among the observed frames, intrinsics from the model) "
-        "and imu_frames are the set-up a scenario kind would give it.");
+        "imu_frames=(), imu_beta=0.05, imu_initial=None, **params): an estimator of the "
+        "registry by name with its scenario-file parameters (numbers or lists of numbers). "
+        "seed, estimate_in (an observed frame), camera_frames (MuJoCo cameras among the "
+        "observed frames, intrinsics from the model) and imu_frames are the set-up a scenario "
+        "kind would give it; imu_beta is the IMUs' Madgwick gain (rad/s), imu_initial one "
+        "[w, x, y, z] orientation in the base frame per IMU at its first reading (else the "
+        "first accelerometer reading's, yaw 0).");
 
   m.def("estimator_names", [] {
     std::vector<std::string> names;

@@ -344,3 +344,27 @@ def test_garbage_never_crashes(model, ref):
                 pass
     # Still alive and still right.
     assert np.array_equal(model.fk_cov(q)[1].ravel(), ref["fk_cov2_S"])
+
+
+def test_raw_imu_readings_reach_the_estimators_that_use_them(model):
+    # pf_encoders_imu and direct fusion run each IMU's Madgwick filter on update_imu; the EKF has
+    # no use for them. A bad IMU index or filter option is a ValueError.
+    up = [0.0, 0.0, 9.81]
+    pf = flexbench.make_estimator("pf_encoders_imu", model, imu_frames=["ee"], particles=64,
+                                  imu_beta=0.1)
+    ekf = flexbench.make_estimator("ppoe_ekf", model, imu_frames=["ee"])
+    assert ekf.update_imu(0.0, [0.0, 0.0, 0.0], up) == "ignored"
+    assert pf.update_imu(0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]) == "rejected_outside"  # no "up"
+    assert pf.update_imu(0.0, [0.0, 0.0, 0.0], up) == "accepted"
+    assert pf.update_imu(0.005, [0.0, 0.0, 0.1], up) == "accepted"
+    assert pf.update_imu(0.001, [0.0, 0.0, 0.1], up) == "rejected_outside"  # back in time
+    assert pf.update_imu(0.01, [math.nan, 0.0, 0.0], up) == "rejected_non_finite"
+    with pytest.raises(ValueError, match="IMU 1"):
+        pf.update_imu(0.01, [0.0, 0.0, 0.0], up, imu=1)
+    with pytest.raises(ValueError, match="imu_beta"):
+        flexbench.make_estimator("pf_encoders_imu", model, imu_frames=["ee"], imu_beta=0.0)
+    with pytest.raises(ValueError, match="imu_initial"):
+        flexbench.make_estimator("pf_encoders_imu", model, imu_frames=["ee"],
+                                 imu_initial=[[1, 0, 0, 0], [1, 0, 0, 0]])
+    flexbench.make_estimator("pf_encoders_imu", model, imu_frames=["ee"],
+                             imu_initial=[[1.0, 0.0, 0.0, 0.0]])

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "estimators/error.h"
+#include "estimators/imu/imu_orientations.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "tests/unit/pf/pf_test_models.h"
 
@@ -77,6 +78,56 @@ TEST(DirectFusion, XyzFailsAtGimbalLock) {
   // against a wrong parent.
   EXPECT_GT(std::abs(a(1) - q(1)), 0.05);
   EXPECT_GT(std::abs(a(2) - q(2)), 0.05);
+}
+
+// Raw IMU readings run through the estimator's own Madgwick filters give the belief their
+// orientations give as OrientationReadings (the same bits), and the fused angles follow the IMUs.
+TEST(DirectFusion, RawImuReadingsGiveTheBeliefOfTheirOrientations) {
+  Rig rig;
+  rig.setup.imus[0].has_initial = true;
+  rig.setup.imus[1].has_initial = true;
+  Eigen::VectorXd q(4);
+  q << 0.2, 0.6, -0.4, 0.0;
+  kinematics::PpoeData data(rig.arm.model);
+  kinematics::ForwardKinematics(rig.arm.model, data, q);
+  const FrameId frames[2] = {rig.arm.imu2, rig.arm.imu3};
+  // The filters start at the true orientations less the yaw the fusion cancels anyway.
+  for (int k = 0; k < 2; ++k) {
+    rig.setup.imus[k].q_base_frame_initial = Quat(data.T_base_frame[frames[k]].rotation());
+  }
+  auto raw = MakeDirectFusionYxz(rig.setup);
+  auto given = MakeDirectFusionYxz(rig.setup);
+  imu::ImuOrientations outside(rig.setup.imus);
+  JointReading enc;
+  enc.q = q;
+  enc.q(1) += 0.1;  // encoders off: the fused pitch angles come from the IMUs
+  enc.q(2) -= 0.1;
+  enc.std = JointVector::Zero(4);
+  for (int i = 1; i <= 200; ++i) {
+    for (int k = 0; k < 2; ++k) {
+      ImuReading z;
+      z.t = 0.005 * i;
+      z.imu = k;
+      z.gyro = Vec3(0.01, -0.02, 0.005);  // a small bias
+      z.accel = data.T_base_frame[frames[k]].rotation().transpose() * Vec3(0.0, 0.0, 9.81);
+      ASSERT_EQ(raw->Update(z), UpdateStatus::kAccepted);
+      ASSERT_EQ(outside.Feed(z), UpdateStatus::kAccepted);
+      ASSERT_EQ(given->Update(outside.Take(k)), UpdateStatus::kAccepted);
+    }
+    if (i % 2 == 0) {
+      enc.t = 0.005 * i;
+      ASSERT_EQ(raw->Update(enc), UpdateStatus::kAccepted);
+      ASSERT_EQ(given->Update(enc), UpdateStatus::kAccepted);
+    }
+    const Belief a = raw->Estimate(), b = given->Estimate();
+    ASSERT_EQ(a.has_joints, b.has_joints);
+    if (!a.has_joints) continue;
+    ASSERT_TRUE(a.q == b.q) << "reading " << i;
+    ASSERT_TRUE(a.cov == b.cov) << "reading " << i;
+  }
+  const JointVector fused = raw->Estimate().q;
+  EXPECT_NEAR(fused(1), q(1), 0.01);
+  EXPECT_NEAR(fused(2), q(2), 0.01);
 }
 
 TEST(DirectFusion, BadInput) {

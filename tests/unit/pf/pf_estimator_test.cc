@@ -7,7 +7,9 @@
 
 #include "estimators/error.h"
 #include "estimators/estimator.h"
+#include "estimators/imu/imu_orientations.h"
 #include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/lie/so3.h"
 #include "tests/unit/pf/pf_test_models.h"
 
 namespace flexbench::estimators {
@@ -116,7 +118,8 @@ TEST(PfEstimator, MeasurementsReachTheFilter) {
     p.frame = rig.arm.grasp;
     p.p_base = data.T_base_frame[rig.arm.grasp].translation();
     EXPECT_EQ(est->Update(p), UpdateStatus::kAccepted);
-    EXPECT_EQ(est->Update(ImuReading{}), UpdateStatus::kIgnored);
+    // A first IMU reading of zero specific force: no "up" to start its filter from.
+    EXPECT_EQ(est->Update(ImuReading{}), UpdateStatus::kRejectedOutside);
     OrientationReading bad;
     bad.frame = rig.arm.imu2;
     bad.q_base_frame = Quat(1.5, 0.0, 0.0, 0.0);
@@ -135,6 +138,83 @@ TEST(PfEstimator, MeasurementsReachTheFilter) {
   const Belief again = est->Estimate();
   est->Predict(19);
   EXPECT_EQ(est->Estimate().q(0), again.q(0));
+}
+
+// Raw IMU readings reach the particle filter through its own Madgwick filters: the bits of the
+// orientations of the same filters run outside and given as OrientationReadings after the step's
+// joint reading, with either proposal. A step without joint reading gets its terms when the next
+// step opens. The terms move the belief (against pf_encoders on the same readings).
+TEST(PfEstimator, RawImuReadingsGiveTheBitsOfTheirFiltersOrientations) {
+  Rig rig;
+  const auto q_at = [](double t) {
+    Eigen::VectorXd q(4);
+    q << 0.3 * std::sin(t), 0.5 + 0.3 * std::sin(0.7 * t), 0.4 + 0.2 * std::cos(t), 0.1;
+    return q;
+  };
+  kinematics::PpoeData data(rig.arm.model);
+  const auto R_at = [&](double t, FrameId f) {
+    kinematics::ForwardKinematics(rig.arm.model, data, q_at(t));
+    return Mat3(data.T_base_frame[f].rotation());
+  };
+  const FrameId frames[2] = {rig.arm.imu2, rig.arm.imu3};
+  for (int conjugate : {0, 1}) {
+    EstimatorSetup setup =
+        rig.Setup({{"particles", {256}}, {"conjugate_proposal", {1.0 * conjugate}}});
+    setup.imus[0].filter_beta = 0.08;
+    setup.imus[1].has_initial = true;
+    setup.imus[1].q_base_frame_initial = Quat(R_at(0.0, frames[1]));
+    auto raw = MakeEstimator("pf_encoders_imu", setup);
+    auto given = MakeEstimator("pf_encoders_imu", setup);
+    auto none = MakeEstimator("pf_encoders", setup);
+    imu::ImuOrientations outside(setup.imus);
+    const double dt = 0.005;
+    int reading = 0;
+    bool pending = false;  // `given` owes the terms of a step without joint reading
+    for (int step = 1; step <= 40; ++step) {
+      const double t_step = 0.1 * step;
+      for (; (reading + 1) * dt <= t_step + 1e-12; ++reading) {
+        const double t = (reading + 1) * dt;
+        for (int k = 0; k < 2; ++k) {
+          const Mat3 R = R_at(t, frames[k]);
+          ImuReading z;
+          z.t = t;
+          z.imu = k;
+          z.gyro = lie::SO3Log(R_at(t - dt, frames[k]).transpose() * R) / dt;
+          z.accel = R.transpose() * Vec3(0.0, 0.0, 9.81);
+          ASSERT_EQ(raw->Update(z), UpdateStatus::kAccepted);
+          EXPECT_EQ(none->Update(z), UpdateStatus::kIgnored);
+          outside.Feed(z);
+        }
+      }
+      if (pending) {
+        for (int k = 0; k < 2; ++k) {
+          ASSERT_EQ(given->Update(outside.Take(k)), UpdateStatus::kAccepted);
+        }
+        pending = false;
+      }
+      for (Estimator* e : {raw.get(), given.get(), none.get()}) e->Predict(t_step);
+      if (step == 20) {
+        pending = true;
+        continue;
+      }
+      JointReading j;
+      j.t = t_step;
+      j.q = q_at(t_step);
+      j.q(1) += 0.05;
+      j.q(2) -= 0.05;
+      for (Estimator* e : {raw.get(), given.get(), none.get()}) {
+        ASSERT_EQ(e->Update(j), UpdateStatus::kAccepted);
+      }
+      for (int k = 0; k < 2; ++k) {
+        if (outside.fresh(k)) ASSERT_EQ(given->Update(outside.Take(k)), UpdateStatus::kAccepted);
+      }
+      const Belief a = raw->Estimate(), b = given->Estimate();
+      ASSERT_TRUE(a.q == b.q) << "step " << step << " conjugate " << conjugate;
+      ASSERT_TRUE(a.cov == b.cov) << "step " << step;
+    }
+    const Eigen::VectorXd d = raw->Estimate().q - none->Estimate().q;
+    EXPECT_GT(d.cwiseAbs().maxCoeff(), 0.01) << "the IMU terms moved the estimate";
+  }
 }
 
 // On an augmented model whose identified offset of joint 1 has a standard deviation, the belief's

@@ -4,36 +4,10 @@
 #include <cmath>
 
 #include "estimators/error.h"
+#include "estimators/imu/imu_orientations.h"
 #include "scenarios/runner/common/pose.h"
 
 namespace flexbench::scenarios::jsk {
-
-ImuPipeline::ImuPipeline(const std::vector<std::string>& sites, double beta)
-    : sites_(sites), last_t_(sites.size(), 0.0), started_(sites.size(), false) {
-  for (size_t k = 0; k < sites.size(); ++k) filters_.emplace_back(beta);
-}
-
-void ImuPipeline::Feed(const sim::ImuReading& r, const Rig& rig, bool init_truth) {
-  const auto it = std::find(sites_.begin(), sites_.end(), r.site);
-  if (it == sites_.end()) return;
-  const size_t k = it - sites_.begin();
-  if (!started_[k]) {
-    if (init_truth) {
-      filters_[k].Reset(Quat(rig.sim->SitePose(r.site).linear()));
-    } else {
-      filters_[k].InitFromAccel(r.accel);
-    }
-    started_[k] = true;
-    last_t_[k] = r.t;
-    return;
-  }
-  filters_[k].Update(r.gyro, r.accel, r.t - last_t_[k]);
-  last_t_[k] = r.t;
-}
-
-bool ImuPipeline::Ready() const {
-  return std::all_of(started_.begin(), started_.end(), [](bool b) { return b; });
-}
 
 DynamicOptions ParseDynamicOptions(const ConfigNode& root) {
   DynamicOptions o;
@@ -49,12 +23,34 @@ DynamicOptions ParseDynamicOptions(const ConfigNode& root) {
   return o;
 }
 
+namespace {
+
+// The IMU readings of every snapshot through the filters the estimators run, for the snapshots'
+// own orientations (diagnostics: the yaw drift).
+void FilterOrientations(const Rig& rig, std::vector<Snapshot>* snaps) {
+  imu::ImuOrientations filters(rig.setup.imus);
+  for (Snapshot& s : *snaps) {
+    for (const estimators::ImuReading& z : s.imu_raw) filters.Feed(z);
+    for (int k = 0; k < filters.size(); ++k) {
+      estimators::OrientationReading o = filters.Take(k);
+      o.t = s.t;
+      s.imus.push_back(o);
+    }
+  }
+}
+
+}  // namespace
+
 std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
                                       sim::SensorSuite& sensors, const DynamicOptions& options,
                                       const RunContext& ctx) {
   sim::Simulation& sim = *rig.sim;
   const int nq = rig.nq();
-  ImuPipeline imus(rig.imu_sites, options.madgwick_beta);
+  for (estimators::ImuSetup& imu : rig.setup.imus) {
+    imu.filter_beta = options.madgwick_beta;
+    imu.has_initial = false;
+  }
+  std::vector<char> started(rig.imu_sites.size(), 0);
   sim.SetCommand(rig.ToActuators(trajectory.AtTime(0.0)));
   sim.Settle();
   const double t0 = sim.time();
@@ -64,6 +60,7 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
   Eigen::VectorXd encoders = Eigen::VectorXd::Constant(nq, std::nan(""));
   std::vector<Snapshot> snaps;
   std::vector<sim::SensorReading> readings;
+  std::vector<estimators::ImuReading> imu_raw;
   int next_tick = 1;  // the first snapshot after one filter period
   const int total_ticks = static_cast<int>(std::floor(duration / period + 1e-9));
   while (sim.time() - t0 < duration - 1e-9) {
@@ -74,7 +71,16 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
     sensors.Poll(sim, &readings);
     for (const sim::SensorReading& r : readings) {
       if (const auto* imu = std::get_if<sim::ImuReading>(&r)) {
-        imus.Feed(*imu, rig, options.madgwick_init_truth);
+        const auto it = std::find(rig.imu_sites.begin(), rig.imu_sites.end(), imu->site);
+        if (it == rig.imu_sites.end()) continue;
+        const size_t k = it - rig.imu_sites.begin();
+        if (!started[k] && options.madgwick_init_truth) {
+          rig.setup.imus[k].has_initial = true;
+          rig.setup.imus[k].q_base_frame_initial = Quat(sim.SitePose(imu->site).linear());
+        }
+        started[k] = 1;
+        imu_raw.push_back(*imu);
+        imu_raw.back().imu = static_cast<int>(k);
       } else if (const auto* enc = std::get_if<sim::EncoderReading>(&r)) {
         for (int k = 0; k < nq; ++k) {
           if (rig.chain->q_joints[k] == enc->joint)
@@ -85,7 +91,7 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
     const double t = sim.time() - t0;
     if (t + 1e-9 < next_tick * period) continue;
     ++next_tick;
-    if (!encoders.allFinite() || !imus.Ready()) {
+    if (!encoders.allFinite() || std::count(started.begin(), started.end(), 0) > 0) {
       throw InputError(
           "jsk scenario: the sensors must include an encoder for every declared "
           "joint and every IMU, sampled at least at the filter rate");
@@ -97,12 +103,8 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
     s.joints.t = t;
     s.joints.q = encoders;
     s.joints.std = estimators::JointVector::Zero(nq);
+    s.imu_raw.swap(imu_raw);
     for (size_t k = 0; k < rig.imu_frames.size(); ++k) {
-      estimators::OrientationReading o;
-      o.t = t;
-      o.frame = rig.imu_frames[k];
-      o.q_base_frame = imus.Orientation(static_cast<int>(k));
-      s.imus.push_back(o);
       s.imu_true.push_back(Quat(sim.SitePose(rig.imu_sites[k]).linear()));
     }
     const std::string ee = rig.declared.end_effector;
@@ -110,6 +112,7 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
     snaps.push_back(std::move(s));
     ctx.progress("simulation", static_cast<int>(snaps.size()), total_ticks);
   }
+  FilterOrientations(rig, &snaps);
   return snaps;
 }
 
@@ -118,9 +121,9 @@ Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vecto
   TracedRun r(rig, spec, seed);
   for (size_t i = 0; i < snaps.size(); ++i) {
     const Snapshot& s = snaps[i];
+    for (const estimators::ImuReading& z : s.imu_raw) r.Count(r.est->Update(z));
     r.est->Predict(s.t);
     r.Count(r.est->Update(s.joints));
-    for (const auto& o : s.imus) r.Count(r.est->Update(o));
     if (with_position) {
       estimators::PositionReading p;
       p.t = s.t;

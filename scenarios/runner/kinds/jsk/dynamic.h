@@ -1,6 +1,8 @@
 // Dynamic runs: the truth moved along the trajectory by its servos (sim::Simulation::Step), the
-// sensors polled at their rates, one Madgwick filter per IMU, and snapshots at the filter rate.
-// Every estimator later sees the same snapshots.
+// sensors polled at their rates, and snapshots at the filter rate. Every estimator later sees the
+// same snapshots: the raw IMU readings since the last one (each estimator that uses IMUs runs
+// its own Madgwick filter per IMU on them, estimators/imu/imu_orientations.h), then the step,
+// then the encoders.
 //
 //   filter_rate_hz: 10
 //   madgwick: {beta: 0.05, init: accel}   # init: accel (yaw 0) or truth (a calibrated yaw)
@@ -11,7 +13,6 @@
 #include <string>
 #include <vector>
 
-#include "estimators/imu/madgwick.h"
 #include "estimators/measurement.h"
 #include "scenarios/runner/kinds/jsk/rig.h"
 #include "scenarios/runner/kinds/jsk/trace.h"
@@ -27,36 +28,22 @@ struct DynamicOptions {
 };
 DynamicOptions ParseDynamicOptions(const ConfigNode& root);
 
-// One Madgwick filter per IMU site, fed with the simulation's IMU readings.
-class ImuPipeline {
- public:
-  ImuPipeline(const std::vector<std::string>& sites, double beta);
-  // init_truth: start from the true orientation (a calibrated yaw); else from the first
-  // accelerometer reading (yaw 0 about the vertical).
-  void Feed(const sim::ImuReading& r, const Rig& rig, bool init_truth);
-  bool Ready() const;
-  const Quat& Orientation(int k) const { return filters_[k].orientation(); }
-
- private:
-  std::vector<std::string> sites_;
-  std::vector<imu::Madgwick> filters_;
-  std::vector<double> last_t_;
-  std::vector<bool> started_;
-};
-
 struct Snapshot {
   double t = 0.0;
   int segment = 0;                                   // waypoint being approached or held
   Eigen::VectorXd reference;                         // commanded angles (declared order)
   Eigen::VectorXd link;                              // true link-side angles (declared order)
   estimators::JointReading joints;                   // latest encoder readings
-  std::vector<estimators::OrientationReading> imus;  // Madgwick orientations
+  std::vector<estimators::ImuReading> imu_raw;       // IMU readings since the last snapshot
+  std::vector<estimators::OrientationReading> imus;  // the IMUs' filters' orientations here
   lie::SE3 T_true;                                   // the end effector (declared) in the world
   std::vector<Quat> imu_true;                        // true IMU orientations (for diagnostics)
 };
 
 // Settles the truth at the first waypoint, then steps through the trajectory. The sensor list
-// must give an encoder for every declared joint and every IMU (InputError otherwise).
+// must give an encoder for every declared joint and every IMU (InputError otherwise). Sets the
+// IMUs' filter options in rig.setup (with madgwick init: truth, each IMU's true orientation at
+// its first reading).
 std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
                                       sim::SensorSuite& sensors, const DynamicOptions& options,
                                       const RunContext& ctx);
