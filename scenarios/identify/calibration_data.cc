@@ -17,70 +17,16 @@
 
 #include "estimators/error.h"
 #include "sim/config.h"
+#include "sim/csv.h"
 
 namespace flexbench::identify {
 namespace {
-
-std::string Trim(const std::string& s) {
-  const size_t a = s.find_first_not_of(" \t\r");
-  if (a == std::string::npos) return "";
-  const size_t b = s.find_last_not_of(" \t\r");
-  return s.substr(a, b - a + 1);
-}
-
-std::vector<std::string> SplitCsv(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  std::string cell;
-  while (std::getline(ss, cell, ',')) out.push_back(Trim(cell));
-  if (!line.empty() && line.back() == ',') out.push_back("");
-  return out;
-}
 
 // Largest magnitudes accepted: far beyond any arm (joint readings in rad or m, points in m,
 // pixels), small enough that squares and sums of them stay finite.
 constexpr double kMaxJoint = 1e3;
 constexpr double kMaxCoordinate = 1e3;
 constexpr double kMaxPixel = 1e6;
-
-double ParseNumber(const std::string& cell, const std::string& where, const std::string& col,
-                   double max_abs = std::numeric_limits<double>::infinity()) {
-  if (cell.empty()) throw InputError(where + ": column '" + CapForMessage(col) + "' is empty");
-  errno = 0;
-  char* end = nullptr;
-  const double v = std::strtod(cell.c_str(), &end);
-  if (end == cell.c_str() || *end != '\0' || errno == ERANGE) {
-    throw InputError(where + ": column '" + CapForMessage(col) + "': '" + CapForMessage(cell) +
-                     "' is not a number");
-  }
-  if (!std::isfinite(v)) {
-    throw InputError(where + ": column '" + CapForMessage(col) + "' is " + CapForMessage(cell));
-  }
-  if (std::abs(v) > max_abs) {
-    char lim[32];
-    std::snprintf(lim, sizeof(lim), "%g", max_abs);
-    throw InputError(where + ": column '" + CapForMessage(col) + "': " + CapForMessage(cell) +
-                     " is out of range (|value| <= " + lim + ")");
-  }
-  return v;
-}
-
-// Lines of `path` (a last line without '\n' counts): an upper bound of its data rows, found
-// without keeping any of it.
-std::uintmax_t CountLines(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::vector<char> buffer(1 << 20);
-  std::uintmax_t lines = 0;
-  char last = '\n';
-  while (in) {
-    in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
-    const std::streamsize n = in.gcount();
-    if (n <= 0) break;
-    lines += static_cast<std::uintmax_t>(std::count(buffer.data(), buffer.data() + n, '\n'));
-    last = buffer[static_cast<size_t>(n) - 1];
-  }
-  return lines + (last != '\n' ? 1 : 0);
-}
 
 std::string Gigabytes(double bytes) {
   char b[32];
@@ -91,7 +37,7 @@ std::string Gigabytes(double bytes) {
 // Refuses a file whose rows would need more than kMaxCalibrationMemoryBytes, before any is read:
 // the byte cap alone lets a file of a million short rows take gigabytes. Returns its lines.
 std::uintmax_t CheckRowMemory(const std::string& path, size_t num_joints) {
-  const std::uintmax_t rows = CountLines(path);
+  const std::uintmax_t rows = sim::CountLines(path);
   const double need =
       static_cast<double>(rows) * static_cast<double>(CalibrationBytesPerRow(num_joints));
   if (need > static_cast<double>(kMaxCalibrationMemoryBytes)) {
@@ -103,39 +49,25 @@ std::uintmax_t CheckRowMemory(const std::string& path, size_t num_joints) {
   return rows;
 }
 
-// The data lines of a CSV file: blank lines and '#' comments skipped, cells trimmed.
+// The data lines of a calibration CSV (sim::CsvLines), opened once the memory its rows would
+// take to identify was checked (CheckRowMemory).
 class CsvLines {
  public:
-  // `num_joints`: the joint columns a row holds, for the memory estimate (CheckRowMemory).
-  CsvLines(const std::string& path, size_t num_joints) : path_(CapForMessage(path)) {
-    CheckInputFile(path, kMaxCalibrationCsvBytes);
-    lines_ = CheckRowMemory(path, num_joints);
-    in_.open(path, std::ios::binary);
-    if (!in_) throw InputError(path_ + ": cannot open");
-  }
-  bool Next(std::vector<std::string>* cells) {
-    std::string line;
-    while (std::getline(in_, line)) {
-      ++line_no_;
-      // Excel's "CSV UTF-8" starts with a byte-order mark: not part of the first column's name.
-      if (line_no_ == 1 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
-      const std::string t = Trim(line);
-      if (t.empty() || t[0] == '#') continue;
-      *cells = SplitCsv(t);
-      return true;
-    }
-    return false;
-  }
-  // "<file>:<line>" of the last line returned.
-  std::string Where() const { return path_ + ":" + std::to_string(line_no_); }
+  // `num_joints`: the joint columns a row holds, for the memory estimate.
+  CsvLines(const std::string& path, size_t num_joints)
+      : lines_(CheckRows(path, num_joints)), csv_(path, kMaxCalibrationCsvBytes) {}
+  bool Next(std::vector<std::string>* cells) { return csv_.Next(cells); }
+  std::string Where() const { return csv_.Where(); }
   // Lines of the file: at most its data rows plus one (the header).
   std::uintmax_t lines() const { return lines_; }
 
  private:
-  std::ifstream in_;
-  std::string path_;
-  int line_no_ = 0;
-  std::uintmax_t lines_ = 0;
+  static std::uintmax_t CheckRows(const std::string& path, size_t num_joints) {
+    CheckInputFile(path, kMaxCalibrationCsvBytes);
+    return CheckRowMemory(path, num_joints);
+  }
+  std::uintmax_t lines_;
+  sim::CsvLines csv_;
 };
 
 // Group labels are global: rows with one label share one fixed point whatever their set. A
@@ -349,13 +281,13 @@ Observation ParseRow(const std::vector<std::string>& cells, const std::string& w
     // A coupled joint's entry is set from its drivers by the caller (ApplyCouplings).
     o.q[j] = cols.joint_col[j] < 0
                  ? 0.0
-                 : ParseNumber(cells[cols.joint_col[j]], where, joints[j], kMaxJoint);
+                 : sim::ParseCsvNumber(cells[cols.joint_col[j]], where, joints[j], kMaxJoint);
   }
   if (std::any_of(cols.motion_col.begin(), cols.motion_col.end(), [](int c) { return c >= 0; })) {
     o.motion_sign = Eigen::VectorXd::Zero(joints.size());
     for (size_t j = 0; j < joints.size(); ++j) {
       if (cols.motion_col[j] < 0) continue;
-      const double v = ParseNumber(cells[cols.motion_col[j]], where, "motion_" + joints[j]);
+      const double v = sim::ParseCsvNumber(cells[cols.motion_col[j]], where, "motion_" + joints[j]);
       if (v != -1.0 && v != 0.0 && v != 1.0) {
         throw InputError(where + ": column 'motion_" + joints[j] + "' must be -1, 0 or 1");
       }
@@ -366,14 +298,14 @@ Observation ParseRow(const std::vector<std::string>& cells, const std::string& w
     o.type = ObservationType::kPoint;
     const char* names[3] = {"x", "y", "z"};
     for (int k = 0; k < 3; ++k) {
-      o.p_base[k] = ParseNumber(cells[cols.xyz_col[k]], where, names[k], kMaxCoordinate);
+      o.p_base[k] = sim::ParseCsvNumber(cells[cols.xyz_col[k]], where, names[k], kMaxCoordinate);
     }
     if (cols.num_quat == 4) {
       o.type = ObservationType::kPose;
-      const Eigen::Quaterniond qt(ParseNumber(cells[cols.quat_col[0]], where, "qw"),
-                                  ParseNumber(cells[cols.quat_col[1]], where, "qx"),
-                                  ParseNumber(cells[cols.quat_col[2]], where, "qy"),
-                                  ParseNumber(cells[cols.quat_col[3]], where, "qz"));
+      const Eigen::Quaterniond qt(sim::ParseCsvNumber(cells[cols.quat_col[0]], where, "qw"),
+                                  sim::ParseCsvNumber(cells[cols.quat_col[1]], where, "qx"),
+                                  sim::ParseCsvNumber(cells[cols.quat_col[2]], where, "qy"),
+                                  sim::ParseCsvNumber(cells[cols.quat_col[3]], where, "qz"));
       if (std::abs(qt.norm() - 1.0) > 1e-3) {
         throw InputError(where + ": quaternion (qw, qx, qy, qz) is not of unit length");
       }
@@ -381,8 +313,8 @@ Observation ParseRow(const std::vector<std::string>& cells, const std::string& w
     }
   } else if (cols.has_uv) {
     o.type = ObservationType::kPixel;
-    o.uv = Eigen::Vector2d(ParseNumber(cells[cols.uv_col[0]], where, "u", kMaxPixel),
-                           ParseNumber(cells[cols.uv_col[1]], where, "v", kMaxPixel));
+    o.uv = Eigen::Vector2d(sim::ParseCsvNumber(cells[cols.uv_col[0]], where, "u", kMaxPixel),
+                           sim::ParseCsvNumber(cells[cols.uv_col[1]], where, "v", kMaxPixel));
   } else {
     if (cells[cols.group_col].empty()) throw InputError(where + ": column 'group' is empty");
     o.type = ObservationType::kGroup;
@@ -527,7 +459,7 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
       o.where = where;
       o.q.resize(num_joints);
       for (int j = 0; j < num_joints; ++j) {
-        o.q[j] = ParseNumber(cells[j], where, "joint " + std::to_string(j + 1), kMaxJoint);
+        o.q[j] = sim::ParseCsvNumber(cells[j], where, "joint " + std::to_string(j + 1), kMaxJoint);
       }
       o.type = ObservationType::kGroup;
       o.group = groups[h];
