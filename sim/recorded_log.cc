@@ -1,0 +1,253 @@
+#include "sim/recorded_log.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "estimators/error.h"
+#include "sim/config.h"
+#include "sim/csv.h"
+
+namespace flexbench::sim {
+namespace {
+
+// Rows, duplicates, gaps and the median step of a stream whose rows of each sensor are `t`
+// (already checked not to go backwards).
+StreamStats Stats(const std::string& file, double offset,
+                  const std::vector<std::vector<double>>& t) {
+  StreamStats s;
+  s.file = file;
+  s.clock_offset_s = offset;
+  std::vector<double> steps;
+  bool any = false;
+  for (const std::vector<double>& ts : t) {
+    s.rows += static_cast<int>(ts.size());
+    if (ts.empty()) continue;
+    s.t_first = any ? std::min(s.t_first, ts.front()) : ts.front();
+    s.t_last = any ? std::max(s.t_last, ts.back()) : ts.back();
+    any = true;
+    for (size_t i = 1; i < ts.size(); ++i) {
+      if (ts[i] == ts[i - 1]) {
+        ++s.duplicates;
+      } else {
+        steps.push_back(ts[i] - ts[i - 1]);
+      }
+    }
+  }
+  if (steps.empty()) return s;
+  std::vector<double> sorted = steps;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  s.median_dt_s = sorted[sorted.size() / 2];
+  for (double d : steps) s.gaps += d > 2.0 * s.median_dt_s;
+  return s;
+}
+
+// `v` in the fewest digits that read back as v.
+std::string Shortest(double v) {
+  char b[40];
+  for (int digits = 15; digits <= 17; ++digits) {
+    std::snprintf(b, sizeof(b), "%.*g", digits, v);
+    if (std::strtod(b, nullptr) == v) break;
+  }
+  return b;
+}
+
+// The time of a row on the log's clock: its t_s cell plus the stream's clock offset. The cell
+// may not be before `*last` (the sensor's previous row's cell), which it then becomes.
+double RowTime(const std::string& cell, const std::string& where, double offset, double* last,
+               bool has_last) {
+  const double t = ParseCsvNumber(cell, where, "t_s");
+  if (has_last && t < *last) {
+    throw InputError(where + ": column 't_s': " + Shortest(t) + " is before the previous row's " +
+                     Shortest(*last) + " (times may not go backwards)");
+  }
+  *last = t;
+  return t + offset;
+}
+
+void ReadJoints(const ConfigNode& node, RecordedLog* log) {
+  const std::string file = node.ResolvePath(node.GetString("file"));
+  const double offset = node.GetDouble("clock_offset_s", 0.0);
+  CsvLines csv(file, kMaxLogStreamBytes);
+  std::vector<std::string> header;
+  if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
+  const std::string hdr = csv.Where();
+  if (header[0] != "t_s") {
+    throw InputError(hdr + ": column 1 is '" + CapForMessage(header[0]) + "', expected 't_s'");
+  }
+  for (size_t c = 1; c < header.size(); ++c) {
+    const std::string& h = header[c];
+    const bool rad = h.size() > 4 && h.compare(h.size() - 4, 4, "_rad") == 0;
+    const bool m = h.size() > 2 && h.compare(h.size() - 2, 2, "_m") == 0;
+    if (!rad && !m) {
+      throw InputError(hdr + ": column '" + CapForMessage(h) +
+                       "': expected <joint>_rad or <joint>_m (the unit in the name)");
+    }
+    const std::string joint = h.substr(0, h.size() - (rad ? 4 : 2));
+    if (std::count(log->joints.begin(), log->joints.end(), joint) > 0) {
+      throw InputError(hdr + ": joint '" + CapForMessage(joint) + "' has two columns");
+    }
+    log->joints.push_back(joint);
+    log->joint_is_slide.push_back(!rad);
+  }
+  if (log->joints.empty()) throw InputError(hdr + ": no joint column after 't_s'");
+  std::vector<std::string> cells;
+  double last = 0.0;
+  while (csv.Next(&cells)) {
+    const std::string where = csv.Where();
+    if (cells.size() != header.size()) {
+      throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
+                       std::to_string(header.size()));
+    }
+    log->joint_t.push_back(RowTime(cells[0], where, offset, &last, !log->joint_t.empty()));
+    for (size_t c = 1; c < cells.size(); ++c) {
+      log->joint_q.push_back(ParseCsvNumber(cells[c], where, header[c], 1e3));
+    }
+  }
+  if (log->joint_t.empty()) throw InputError(CapForMessage(file) + ": no data rows");
+  log->joint_stats = Stats(file, offset, {log->joint_t});
+}
+
+void ReadImuSensors(const ConfigNode& sensors, RecordedLog* log) {
+  for (const std::string& name : sensors.Keys()) {
+    const ConfigNode s = sensors.Child(name);
+    LogImu imu;
+    imu.name = name;
+    imu.frame = s.GetString("frame");
+    if (const auto q = s.Optional("initial_wxyz")) {
+      const std::vector<double> v = q->AsDoubleList();
+      const Eigen::Vector4d w(v.size() == 4 ? v[0] : 0.0, v.size() == 4 ? v[1] : 0.0,
+                              v.size() == 4 ? v[2] : 0.0, v.size() == 4 ? v[3] : 0.0);
+      if (v.size() != 4 || !w.allFinite() || !(w.norm() > 0.0)) {
+        q->Fail("expected [w, x, y, z], finite and not zero");
+      }
+      imu.has_initial = true;
+      imu.q_base_frame_initial = Quat(w[0], w[1], w[2], w[3]).normalized();
+    }
+    log->imus.push_back(imu);
+  }
+  if (log->imus.empty()) sensors.Fail("names no sensor");
+}
+
+void ReadImu(const ConfigNode& node, RecordedLog* log) {
+  const std::string file = node.ResolvePath(node.GetString("file"));
+  const double offset = node.GetDouble("clock_offset_s", 0.0);
+  ReadImuSensors(node.Child("sensors"), log);
+  CsvLines csv(file, kMaxLogStreamBytes);
+  std::vector<std::string> header;
+  if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
+  static const std::vector<std::string> kHeader = {"t_s",      "sensor",  "gx_rad_s", "gy_rad_s",
+                                                   "gz_rad_s", "ax_m_s2", "ay_m_s2",  "az_m_s2"};
+  for (size_t c = 0; c < kHeader.size(); ++c) {
+    const std::string got = c < header.size() ? header[c] : "";
+    if (got != kHeader[c] || header.size() != kHeader.size()) {
+      std::string want;
+      for (const std::string& h : kHeader) want += (want.empty() ? "" : ",") + h;
+      throw InputError(csv.Where() + ": the header must be " + want + " (column " +
+                       std::to_string(c + 1) + " is '" + CapForMessage(got) + "')");
+    }
+  }
+  std::vector<std::vector<double>> times(log->imus.size());
+  std::vector<double> last(log->imus.size(), 0.0);
+  std::vector<std::string> cells;
+  while (csv.Next(&cells)) {
+    const std::string where = csv.Where();
+    if (cells.size() != kHeader.size()) {
+      throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
+                       std::to_string(kHeader.size()));
+    }
+    int k = -1;
+    std::string names;
+    for (size_t i = 0; i < log->imus.size(); ++i) {
+      if (log->imus[i].name == cells[1]) k = static_cast<int>(i);
+      names += (names.empty() ? "" : ", ") + log->imus[i].name;
+    }
+    if (k < 0) {
+      throw InputError(where + ": column 'sensor': '" + CapForMessage(cells[1]) +
+                       "' is not a sensor of the log's imu.sensors (" + names + ")");
+    }
+    std::vector<double>& ts = times[k];
+    estimators::ImuReading z;
+    z.imu = k;
+    z.t = RowTime(cells[0], where, offset, &last[k], !ts.empty());
+    for (int a = 0; a < 3; ++a) {
+      z.gyro[a] = ParseCsvNumber(cells[2 + a], where, kHeader[2 + a], 1e3);
+      z.accel[a] = ParseCsvNumber(cells[5 + a], where, kHeader[5 + a], 1e4);
+    }
+    ts.push_back(z.t);
+    log->imu.push_back(z);
+  }
+  log->imu_stats = Stats(file, offset, times);
+}
+
+void ReadTruth(const ConfigNode& node, RecordedLog* log) {
+  const std::string file = node.ResolvePath(node.GetString("file"));
+  log->truth_frame = node.GetString("frame");
+  CheckInputFile(file, kMaxLogStreamBytes);
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw InputError(CapForMessage(file) + ": cannot open");
+  static const char* kNames[8] = {"t", "x", "y", "z", "qx", "qy", "qz", "qw"};
+  std::string line;
+  for (int line_no = 1; std::getline(in, line); ++line_no) {
+    const std::string t = TrimBlanks(line);
+    if (t.empty() || t[0] == '#') continue;
+    const std::string where = CapForMessage(file) + ":" + std::to_string(line_no);
+    std::istringstream ss(t);
+    std::vector<std::string> cells;
+    for (std::string cell; ss >> cell;) cells.push_back(cell);
+    if (cells.size() != 8) {
+      throw InputError(where + ": " + std::to_string(cells.size()) +
+                       " values, expected 8 (t x y z qx qy qz qw)");
+    }
+    double v[8];
+    for (int i = 0; i < 8; ++i) v[i] = ParseCsvNumber(cells[i], where, kNames[i], 1e6);
+    if (!log->truth_t.empty() && v[0] < log->truth_t.back()) {
+      throw InputError(where +
+                       ": column 't': the time is before the previous line's (times may "
+                       "not go backwards)");
+    }
+    const Quat q(v[7], v[4], v[5], v[6]);
+    if (!(q.norm() > 0.0)) throw InputError(where + ": the quaternion is zero");
+    log->truth_t.push_back(v[0]);
+    log->truth.emplace_back(q.normalized().toRotationMatrix(), Vec3(v[1], v[2], v[3]));
+  }
+  log->truth_stats = Stats(file, 0.0, {log->truth_t});
+}
+
+}  // namespace
+
+RecordedLog ReadRecordedLog(const std::string& dir) {
+  RecordedLog log;
+  log.dir = dir;
+  const ConfigNode root = ConfigNode::LoadFile(dir + "/log.yaml");
+  log.robot = root.GetString("robot", "");
+  log.declared_path = root.ResolvePath(root.GetString("declared"));
+  ReadJoints(root.Child("joints"), &log);
+  if (const auto imu = root.Optional("imu")) ReadImu(*imu, &log);
+  if (const auto truth = root.Optional("truth")) ReadTruth(*truth, &log);
+  root.CheckNoUnknownKeys();
+  return log;
+}
+
+bool TruthAt(const RecordedLog& log, double t, lie::SE3* T) {
+  const std::vector<double>& ts = log.truth_t;
+  if (ts.empty() || t < ts.front() || t > ts.back()) return false;
+  const size_t i = std::upper_bound(ts.begin(), ts.end(), t) - ts.begin();
+  if (i == ts.size()) {
+    *T = log.truth.back();
+    return true;
+  }
+  const size_t a = i - 1;
+  const double span = ts[i] - ts[a];
+  const double s = span > 0.0 ? (t - ts[a]) / span : 0.0;
+  const Quat qa(log.truth[a].rotation()), qb(log.truth[i].rotation());
+  *T = lie::SE3(qa.slerp(s, qb).toRotationMatrix(),
+                (1.0 - s) * log.truth[a].translation() + s * log.truth[i].translation());
+  return true;
+}
+
+}  // namespace flexbench::sim

@@ -1,0 +1,78 @@
+// A recorded robot log: a folder with one file per sensor stream and a log.yaml that says what
+// they are (README, "Bring your own recorded log"). As in the EuRoC / ASL layout, one CSV per
+// stream with its time first; unlike it, one folder, times in seconds, and several IMUs in one
+// file told apart by a `sensor` column.
+//
+//   log.yaml    robot: jsk_arm                         # a label
+//               declared: ../models/jsk_arm.declared.yaml   # relative to the folder
+//               joints: {file: joints.csv, clock_offset_s: 0}
+//               imu: {file: imu.csv, clock_offset_s: 0,     # optional
+//                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0]}}}
+//               truth: {file: truth.tum, frame: grasp_point}  # optional
+//   joints.csv  t_s, then one column per joint: <joint>_rad (<joint>_m for a slide)
+//   imu.csv     t_s, sensor, gx_rad_s, gy_rad_s, gz_rad_s, ax_m_s2, ay_m_s2, az_m_s2 (sensor
+//               frame; specific force, +g up at rest)
+//   truth.tum   TUM lines "t x y z qx qy qz qw": the frame's pose in the base frame (m, s)
+//
+// A stream's clock_offset_s is added to its times. Within a stream (an IMU sensor's rows) times
+// never go backwards; equal times are kept and counted as duplicates, steps longer than twice
+// the median step as gaps. Bad input is one InputError naming the file, the line and the column.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "estimators/conventions.h"
+#include "estimators/lie/se3.h"
+#include "estimators/measurement.h"
+
+namespace flexbench::sim {
+
+// The largest stream file read.
+constexpr std::uintmax_t kMaxLogStreamBytes = 512u << 20;
+
+struct StreamStats {
+  std::string file;  // empty: the stream is absent
+  int rows = 0;
+  int duplicates = 0;  // rows at the time of the row before (of the same sensor)
+  int gaps = 0;        // steps longer than twice the median step
+  double t_first = 0.0, t_last = 0.0, median_dt_s = 0.0;  // on the log's clock
+  double clock_offset_s = 0.0;
+};
+
+struct LogImu {
+  std::string name;   // imu.csv's `sensor`
+  std::string frame;  // an observed frame of the declared model
+  bool has_initial = false;
+  Quat q_base_frame_initial = Quat::Identity();  // at its first reading, when known
+};
+
+struct RecordedLog {
+  std::string dir;
+  std::string robot;
+  std::string declared_path;  // resolved against the folder
+  // joints.csv: the joints in its column order, whether each is a slide (_m), its rows.
+  std::vector<std::string> joints;
+  std::vector<char> joint_is_slide;
+  std::vector<double> joint_t;
+  std::vector<double> joint_q;  // row-major, joints.size() a row
+  // imu.csv: the sensors of log.yaml and every reading (`imu` indexes imus), in file order.
+  std::vector<LogImu> imus;
+  std::vector<estimators::ImuReading> imu;
+  // truth.tum (optional).
+  std::string truth_frame;
+  std::vector<double> truth_t;
+  std::vector<lie::SE3> truth;
+  StreamStats joint_stats, imu_stats, truth_stats;
+
+  const double* q(size_t row) const { return joint_q.data() + row * joints.size(); }
+};
+
+// Reads DIR/log.yaml and the streams it names (InputError on bad input).
+RecordedLog ReadRecordedLog(const std::string& dir);
+
+// The truth pose at time t: linear in position, slerp in rotation between the rows around it.
+// False (T untouched) outside the truth's span or without truth.
+bool TruthAt(const RecordedLog& log, double t, lie::SE3* T);
+
+}  // namespace flexbench::sim

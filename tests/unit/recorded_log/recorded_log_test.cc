@@ -1,0 +1,148 @@
+// The recorded-log folder (sim/recorded_log.h): streams read with their clocks' offsets, counts of
+// duplicated times and gaps, the truth interpolated between its rows; every bad input one
+// InputError naming the file, the line and the column.
+#include "sim/recorded_log.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <string>
+
+#include "estimators/error.h"
+#include "tests/common/test_util.h"
+
+namespace flexbench::sim {
+namespace {
+
+struct Files {
+  std::string log_yaml =
+      "robot: jsk_arm\n"
+      "declared: models/arm.declared.yaml\n"
+      "joints: {file: joints.csv, clock_offset_s: 0.5}\n"
+      "imu:\n"
+      "  file: imu.csv\n"
+      "  sensors:\n"
+      "    imu2: {frame: imu_link2, initial_wxyz: [2, 0, 0, 0]}\n"
+      "    imu3: {frame: imu_link3}\n"
+      "truth: {file: truth.tum, frame: grasp_point}\n";
+  std::string joints =
+      "t_s,shoulder_rad,elbow_rad,slide_m\n"
+      "# a comment\n"
+      "0.00,0.1,0.2,0.01\n"
+      "0.01,0.1,0.2,0.01\n"
+      "0.01,0.1,0.2,0.01\n"  // a duplicated time
+      "0.02,0.1,0.25,0.01\n"
+      "0.05,0.1,0.3,0.01\n";  // a gap
+  std::string imu =
+      "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n"
+      "0.000,imu2,0.1,0,0,0,0,9.81\n"
+      "0.001,imu3,0,0.2,0,0,0,9.81\n"
+      "0.005,imu2,0.1,0,0,0,0,9.81\n"
+      "0.004,imu3,0,0.2,0,0,0,9.81\n";  // each sensor's own times only go forward
+  std::string truth =
+      "# t x y z qx qy qz qw\n"
+      "1.0 0 0 0 0 0 0 1\n"
+      "2.0 1 2 3 0 0 0.70710678118654746 0.70710678118654757\n";
+
+  void Write(const std::filesystem::path& dir) const {
+    std::ofstream(dir / "log.yaml") << log_yaml;
+    std::ofstream(dir / "joints.csv") << joints;
+    std::ofstream(dir / "imu.csv") << imu;
+    std::ofstream(dir / "truth.tum") << truth;
+  }
+};
+
+TEST(RecordedLog, ReadsTheStreamsWithTheirClocksAndCounts) {
+  testing::TempDir dir;
+  Files().Write(dir.path());
+  const RecordedLog log = ReadRecordedLog(dir.path().string());
+  EXPECT_EQ(log.robot, "jsk_arm");
+  EXPECT_EQ(log.declared_path, (dir.path() / "models/arm.declared.yaml").string());
+  ASSERT_EQ(log.joints, (std::vector<std::string>{"shoulder", "elbow", "slide"}));
+  EXPECT_EQ(log.joint_is_slide, (std::vector<char>{0, 0, 1}));
+  ASSERT_EQ(log.joint_t.size(), 5u);
+  EXPECT_DOUBLE_EQ(log.joint_t[0], 0.5);  // the clock offset
+  EXPECT_DOUBLE_EQ(log.q(3)[1], 0.25);
+  EXPECT_EQ(log.joint_stats.rows, 5);
+  EXPECT_EQ(log.joint_stats.duplicates, 1);
+  EXPECT_EQ(log.joint_stats.gaps, 1);
+  EXPECT_NEAR(log.joint_stats.median_dt_s, 0.01, 1e-12);
+  ASSERT_EQ(log.imus.size(), 2u);
+  EXPECT_TRUE(log.imus[0].has_initial);
+  EXPECT_DOUBLE_EQ(log.imus[0].q_base_frame_initial.w(), 1.0);  // normalised
+  EXPECT_FALSE(log.imus[1].has_initial);
+  EXPECT_EQ(log.imus[1].frame, "imu_link3");
+  ASSERT_EQ(log.imu.size(), 4u);
+  EXPECT_EQ(log.imu[1].imu, 1);
+  EXPECT_DOUBLE_EQ(log.imu[1].gyro.y(), 0.2);
+  EXPECT_DOUBLE_EQ(log.imu[3].t, 0.004);
+  EXPECT_EQ(log.imu_stats.duplicates, 0);
+  lie::SE3 T;
+  ASSERT_TRUE(TruthAt(log, 1.5, &T));
+  EXPECT_LT((T.translation() - Vec3(0.5, 1.0, 1.5)).norm(), 1e-12);
+  EXPECT_NEAR(Quat(T.rotation()).angularDistance(Quat(Eigen::AngleAxisd(M_PI / 4, Vec3::UnitZ()))),
+              0.0, 1e-12);
+  EXPECT_FALSE(TruthAt(log, 2.5, &T));
+  EXPECT_FALSE(TruthAt(log, 0.5, &T));
+}
+
+struct BadCase {
+  const char* name;
+  std::string Files::*file;
+  std::string content;
+  std::string expect;  // in the message
+};
+
+TEST(RecordedLog, BadInputIsOneLineNamingTheFileLineAndColumn) {
+  const std::vector<BadCase> cases = {
+      {"time column", &Files::joints, "time,shoulder_rad\n0,1\n",
+       "joints.csv:1: column 1 is 'time'"},
+      {"unit", &Files::joints, "t_s,shoulder\n0,1\n", "joints.csv:1: column 'shoulder': expected"},
+      {"twice", &Files::joints, "t_s,a_rad,a_rad\n0,1,1\n", "joints.csv:1: joint 'a' has two"},
+      {"not a number", &Files::joints, "t_s,a_rad\n0,abc\n", "joints.csv:2: column 'a_rad': 'abc'"},
+      {"nan", &Files::joints, "t_s,a_rad\n0,nan\n", "joints.csv:2: column 'a_rad' is nan"},
+      {"columns", &Files::joints, "t_s,a_rad\n0,1,2\n", "joints.csv:2: 3 columns"},
+      {"backwards", &Files::joints, "t_s,a_rad\n0.2,1\n0.1,1\n",
+       "joints.csv:3: column 't_s': 0.1 is before the previous row's 0.2"},
+      {"no rows", &Files::joints, "t_s,a_rad\n", "joints.csv: no data rows"},
+      {"imu header", &Files::imu, "t_s,sensor,gx,gy,gz,ax,ay,az\n",
+       "imu.csv:1: the header must be"},
+      {"sensor", &Files::imu,
+       "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n0,imu9,0,0,0,0,0,9.8\n",
+       "imu.csv:2: column 'sensor': 'imu9' is not a sensor of the log's imu.sensors (imu2, imu3)"},
+      {"imu backwards", &Files::imu,
+       "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n1,imu2,0,0,0,0,0,9.8\n"
+       "0.5,imu2,0,0,0,0,0,9.8\n",
+       "imu.csv:3: column 't_s': 0.5 is before"},
+      {"imu inf", &Files::imu,
+       "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n1,imu2,inf,0,0,0,0,9.8\n",
+       "imu.csv:2: column 'gx_rad_s' is inf"},
+      {"truth values", &Files::truth, "1 2 3\n", "truth.tum:1: 3 values, expected 8"},
+      {"truth quaternion", &Files::truth, "1 0 0 0 0 0 0 0\n",
+       "truth.tum:1: the quaternion is zero"},
+      {"unknown key", &Files::log_yaml, "declared: a.yaml\njoints: {file: joints.csv}\nspeed: 3\n",
+       "log.yaml:3: unknown key 'speed'"},
+      {"initial", &Files::log_yaml,
+       "declared: a.yaml\njoints: {file: joints.csv}\nimu: {file: imu.csv, sensors: {imu2: "
+       "{frame: f, initial_wxyz: [0, 0, 0, 0]}}}\n",
+       "expected [w, x, y, z], finite and not zero"},
+  };
+  for (const BadCase& c : cases) {
+    testing::TempDir dir;
+    Files f;
+    f.*(c.file) = c.content;
+    f.Write(dir.path());
+    try {
+      ReadRecordedLog(dir.path().string());
+      ADD_FAILURE() << c.name << ": no error";
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(c.expect), std::string::npos) << c.name << ": " << msg;
+      EXPECT_EQ(msg.find('\n'), std::string::npos) << c.name << ": one line";
+    }
+  }
+}
+
+}  // namespace
+}  // namespace flexbench::sim
