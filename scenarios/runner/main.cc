@@ -9,6 +9,7 @@
 #include "estimators/error.h"
 #include "scenarios/runner/export_command.h"
 #include "scenarios/runner/inspect.h"
+#include "scenarios/runner/replay_command.h"
 #include "scenarios/runner/report.h"
 #include "scenarios/runner/runner.h"
 #include "scenarios/sweep/sweep_command.h"
@@ -27,6 +28,7 @@ struct Options {
   flexbench::scenarios::IdentifyCliOptions id;
   flexbench::scenarios::sweep::SweepCliOptions sw;
   flexbench::scenarios::ExportCliOptions ex;
+  flexbench::scenarios::ReplayCliOptions rp;
   bool no_wait = false;
   // The --out options, to tell `--out ''` from no --out (both leave the string empty).
   std::vector<std::pair<CLI::Option*, const std::string*>> outs;
@@ -125,6 +127,32 @@ CLI::App* AddExport(CLI::App& app, Options& o) {
   return cmd;
 }
 
+// replay: a recorded log folder through the estimators.
+CLI::App* AddReplay(CLI::App& app, Options& o) {
+  flexbench::scenarios::ReplayCliOptions& rp = o.rp;
+  CLI::App* cmd = app.add_subcommand(
+      "replay", "run estimators over a recorded log folder (joints, IMUs, truth)");
+  cmd->add_option("log", rp.log, "log folder (holds log.yaml)")->required();
+  cmd->add_option("--declared", rp.declared,
+                  "declared model instead of log.yaml's (e.g. a declared_augmented.yaml)");
+  cmd->add_option("--estimators", rp.estimators,
+                  "estimators by registry name (default: fk ppoe_ekf)")
+      ->delimiter(',');
+  cmd->add_option(
+      "--step-hz", rp.step_hz,
+      "estimator steps per second, each at the latest joint row (default 0: every row)");
+  o.outs.emplace_back(
+      cmd->add_option("--out", rp.out_dir, "output folder (default: out/replay/<log folder>)"),
+      &rp.out_dir);
+  cmd->add_flag("--check-gates", rp.check_gates, "exit 3 when a gate fails (with --set gates)");
+  cmd->add_flag("--quiet", rp.quiet, "no progress and no informational lines");
+  cmd->add_option("--set", rp.set, "override a replay key: KEY=VALUE (repeatable)")
+      ->allow_extra_args(false);
+  cmd->add_flag("--force", rp.force,
+                "let --out replace an existing folder that is not a flexbench result");
+  return cmd;
+}
+
 CLI::App* AddSweep(CLI::App& app, Options& o) {
   flexbench::scenarios::sweep::SweepCliOptions& sw = o.sw;
   CLI::App* sweep_cmd = app.add_subcommand(
@@ -205,6 +233,7 @@ int Main(int argc, char** argv) {
   CLI::App* identify_cmd = AddIdentify(app, o);
   CLI::App* sweep_cmd = AddSweep(app, o);
   CLI::App* export_cmd = AddExport(app, o);
+  CLI::App* replay_cmd = AddReplay(app, o);
   CLI::App* report_cmd = app.add_subcommand(
       "report", "write report.html in a run's or a sweep's result folder (again)");
   report_cmd
@@ -231,6 +260,7 @@ int Main(int argc, char** argv) {
   o.run.command = command;
   o.id.command = command;
   o.sw.command = command;
+  o.rp.command = command;
   if (*report_cmd) return flexbench::scenarios::ReportCommand(o.report_dir);
   if (*run_cmd) return flexbench::scenarios::RunScenario(o.run);
   if (*sweep_cmd) {
@@ -240,6 +270,7 @@ int Main(int argc, char** argv) {
   }
   if (*inspect_cmd) return flexbench::scenarios::InspectCommand(o.inspect_path);
   if (*export_cmd) return flexbench::scenarios::ExportCommand(o.ex);
+  if (*replay_cmd) return flexbench::scenarios::ReplayCommand(o.rp);
   if (*identify_cmd) {
     if (o.id.out_dir.empty()) o.id.out_dir = "out/identify";
     return flexbench::scenarios::IdentifyCommand(o.id);

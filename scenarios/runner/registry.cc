@@ -38,6 +38,7 @@ const std::vector<KindEntry>& ScenarioKinds() {
        MakeClosedLoopEstimatorsKind},
       {"mismatch_matrix", "every estimator against every undeclared effect: error and NEES",
        MakeMismatchMatrixKind},
+      {"replay", "a recorded log (joints, IMUs, truth) through the estimators", MakeReplayKind},
   };
   return kinds;
 }

@@ -122,7 +122,16 @@ void CheckMetricsFinite(const Json& j, const std::string& path) {
   }
 }
 
-// Runs a loaded scenario. `inputs` are files the run reads (never replaced by --out).
+std::string OneLine(std::string m) {
+  while (!m.empty() && (m.back() == '\n' || m.back() == ' ')) m.pop_back();
+  for (char& c : m) {
+    if (c == '\n' || c == '\r') c = ' ';
+  }
+  return CapForMessage(m, 1000);
+}
+
+}  // namespace
+
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
               const std::vector<fs::path>& inputs) {
   const auto t_start = std::chrono::steady_clock::now();
@@ -203,16 +212,6 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   if (options.check_gates && !all_passed) return kExitGateFailed;
   return kExitOk;
 }
-
-std::string OneLine(std::string m) {
-  while (!m.empty() && (m.back() == '\n' || m.back() == ' ')) m.pop_back();
-  for (char& c : m) {
-    if (c == '\n' || c == '\r') c = ' ';
-  }
-  return CapForMessage(m, 1000);
-}
-
-}  // namespace
 
 int ReportError(const std::exception& e) {
   if (dynamic_cast<const InputError*>(&e)) {

@@ -2,9 +2,12 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
+
+#include "sim/config.h"
 
 namespace flexbench::scenarios {
 
@@ -29,6 +32,12 @@ struct RunOptions {
 
 // Runs one scenario; prints one line on stderr for bad input. Returns an exit code.
 int RunScenario(const RunOptions& options);
+
+// Runs a scenario loaded or built in memory (a command's own, as identify's and replay's):
+// `shown_path` is what messages call it, `inputs` the files it reads (never replaced by --out).
+// Returns an exit code; bad input is thrown (InputError).
+int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
+              const std::vector<std::filesystem::path>& inputs);
 
 struct IdentifyCliOptions {
   std::string model;  // optional: must be the model the declared file names

@@ -21,5 +21,6 @@ std::unique_ptr<ScenarioKind> MakeJskParticleSweepKind();
 std::unique_ptr<ScenarioKind> MakeClosedLoopKind();
 std::unique_ptr<ScenarioKind> MakeClosedLoopEstimatorsKind();
 std::unique_ptr<ScenarioKind> MakeMismatchMatrixKind();
+std::unique_ptr<ScenarioKind> MakeReplayKind();
 
 }  // namespace flexbench::scenarios

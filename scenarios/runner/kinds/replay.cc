@@ -1,0 +1,223 @@
+// A recorded log (sim/recorded_log.h: joints, IMUs, the truth) replayed through the estimators,
+// as a simulated run is: the same estimators, TUM trajectories, metrics and gates.
+//
+//   kind: replay
+//   log: logs/jsk_arm          # the log folder (relative to this file); its log.yaml names the
+//                              # declared model
+//   declared: my_arm.declared.yaml   # optional: another declared model (an augmented one)
+//   step_hz: 0                 # 0: an estimator step at each joints.csv row; else a step at
+//                              # the latest row at or before each tick of this rate, at its time
+//   estimators: {fk: {}, pf_encoders_imu: {particles: 2048}}
+//
+// A step: the IMU readings up to its time (in time order), Predict, the joint reading, the
+// estimate. Joint angles are the declared model's joint variables (zero at its zero), matched to
+// the declared joints by column name. Metrics per estimator, against truth.tum interpolated at
+// the steps inside its span (when the log has one): ErrorStats' position and rotation errors,
+// NEES, steps_scored, rejected_readings. Scenario metrics: steps, duration_s, and per stream
+// rows, duplicates, gaps, median_dt_s, clock_offset_s; a stream without time overlap with the
+// joints is warned about and counted (streams_without_overlap).
+#include <algorithm>
+#include <numeric>
+#include <optional>
+
+#include "estimators/error.h"
+#include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/trajectories.h"
+#include "scenarios/runner/kinds/kinds.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "sim/mujoco_model.h"
+#include "sim/recorded_log.h"
+
+namespace flexbench::scenarios {
+namespace {
+
+class ReplayKind : public ScenarioKind {
+ public:
+  void Configure(const ConfigNode& root) override {
+    log_ = sim::ReadRecordedLog(root.ResolvePath(root.GetString("log")));
+    const std::string log_yaml = log_.dir + "/log.yaml";
+    const auto declared = root.Optional("declared");
+    declared_ = sim::LoadDeclaredModel(declared ? root.ResolvePath(declared->AsString())
+                                                : log_.declared_path);
+    model_ = sim::LoadModel(declared_.model_path);
+    chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(model_.get(), declared_));
+    MapJoints();
+    setup_.model = &chain_->model;
+    setup_.effects = chain_->effects_or_null();
+    setup_.end_effector = chain_->end_effector;
+    for (const sim::LogImu& imu : log_.imus) {
+      estimators::ImuSetup s;
+      s.frame = chain_->ObservedFrame(imu.frame);
+      s.has_initial = imu.has_initial;
+      s.q_base_frame_initial = imu.q_base_frame_initial;
+      setup_.imus.push_back(s);
+    }
+    if (!log_.truth_t.empty() && log_.truth_frame != declared_.end_effector) {
+      throw InputError(log_yaml + ": truth.frame '" + log_.truth_frame +
+                       "': the estimators estimate the declared end effector '" +
+                       declared_.end_effector + "'");
+    }
+    step_hz_ = root.GetDouble("step_hz", 0.0);
+    if (!(step_hz_ >= 0.0) || !std::isfinite(step_hz_)) {
+      root.Child("step_hz").Fail("must be 0 (a step per joint row) or a rate > 0 in Hz");
+    }
+    specs_ = ParseEstimators(root.Child("estimators"), EstimatorLabels::kAllowed);
+    for (const EstimatorSpec& e : specs_) Make(e, 0);  // bad parameters fail before any work
+  }
+
+  void Run(RunContext& ctx) override {
+    WriteStreamMetrics(ctx);
+    const std::vector<Step> steps = Steps();
+    const std::vector<size_t> imu_order = ImuTimeOrder();
+    TrajectoryRecorder recorder;
+    Json& all = (*ctx.summary)["estimators"];
+    for (size_t e = 0; e < specs_.size(); ++e) {
+      const bool first = e == 0;
+      ErrorStats stats;
+      int rejected = 0;
+      const auto count = [&](estimators::UpdateStatus s) {
+        rejected +=
+            s != estimators::UpdateStatus::kAccepted && s != estimators::UpdateStatus::kIgnored;
+      };
+      const std::unique_ptr<estimators::Estimator> est = Make(specs_[e], ctx.seed);
+      estimators::JointReading j;
+      j.q.resize(chain_->model.nq());
+      j.std = estimators::JointVector::Zero(chain_->model.nq());
+      size_t next_imu = 0;
+      for (size_t s = 0; s < steps.size(); ++s) {
+        const Step& step = steps[s];
+        for (; next_imu < imu_order.size() && log_.imu[imu_order[next_imu]].t <= step.t;
+             ++next_imu) {
+          count(est->Update(log_.imu[imu_order[next_imu]]));
+        }
+        est->Predict(step.t);
+        j.t = step.t;
+        for (int k = 0; k < j.q.size(); ++k) j.q[k] = log_.q(step.row)[column_[k]];
+        count(est->Update(j));
+        const estimators::Belief b = est->Estimate();
+        lie::SE3 T_true;
+        if (sim::TruthAt(log_, step.t, &T_true)) {
+          stats.Add(b.T_base_ee, b.cov, T_true);
+          if (first) recorder.AddTruth(step.t, T_true);
+        }
+        recorder.Add(specs_[e].label, step.t, b.T_base_ee, b.cov);
+        if (s % 256 == 0 || s + 1 == steps.size()) {
+          ctx.progress(specs_[e].label, static_cast<int>(s + 1), static_cast<int>(steps.size()));
+        }
+      }
+      Json& m = all[specs_[e].label]["metrics"];
+      if (stats.count() > 0) stats.WriteMetrics(&m);
+      m["steps_scored"] = stats.count();
+      m["rejected_readings"] = rejected;
+    }
+    (*ctx.summary)["metrics"]["steps"] = static_cast<int>(steps.size());
+    recorder.Write(*ctx.out, declared_.base);
+  }
+
+ private:
+  struct Step {
+    double t;
+    size_t row;  // the joint row it reads
+  };
+
+  // column_[k]: the joints.csv column of declared joint k; every column a declared joint.
+  void MapJoints() {
+    const std::string where = log_.joint_stats.file + ":1";
+    for (const std::string& j : chain_->q_joints) {
+      const auto it = std::find(log_.joints.begin(), log_.joints.end(), j);
+      if (it == log_.joints.end()) {
+        throw InputError(where + ": no column for declared joint '" + j + "' (" + j +
+                         "_rad, or _m for a slide)");
+      }
+      column_.push_back(static_cast<int>(it - log_.joints.begin()));
+    }
+    for (const std::string& c : log_.joints) {
+      if (std::find(chain_->q_joints.begin(), chain_->q_joints.end(), c) ==
+          chain_->q_joints.end()) {
+        throw InputError(where + ": column '" + c + "': " + declared_.file +
+                         " declares no joint of that name");
+      }
+    }
+  }
+
+  std::vector<Step> Steps() const {
+    std::vector<Step> steps;
+    const std::vector<double>& t = log_.joint_t;
+    if (step_hz_ == 0.0) {
+      for (size_t r = 0; r < t.size(); ++r) steps.push_back({t[r], r});
+      return steps;
+    }
+    // Each tick takes the latest row at or before it (1 ns of slack for times written in
+    // decimals), at that row's time; a row no tick reaches again is not stepped twice.
+    size_t row = 0;
+    for (long k = 0;; ++k) {
+      const double tk = t.front() + static_cast<double>(k) / step_hz_;
+      if (tk > t.back() + 1e-9) break;
+      while (row + 1 < t.size() && t[row + 1] <= tk + 1e-9) ++row;
+      if (steps.empty() || steps.back().row != row) steps.push_back({t[row], row});
+    }
+    return steps;
+  }
+
+  // The IMU readings in time order (a sensor's own order where times are equal).
+  std::vector<size_t> ImuTimeOrder() const {
+    std::vector<size_t> order(log_.imu.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](size_t a, size_t b) { return log_.imu[a].t < log_.imu[b].t; });
+    return order;
+  }
+
+  void WriteStreamMetrics(const RunContext& ctx) const {
+    Json& m = (*ctx.summary)["metrics"];
+    m["duration_s"] = log_.joint_stats.t_last - log_.joint_stats.t_first;
+    int without_overlap = 0;
+    const auto stream = [&](const char* name, const sim::StreamStats& s) {
+      if (s.file.empty()) return;
+      Json& j = m["streams"][name];
+      j["rows"] = s.rows;
+      j["duplicates"] = s.duplicates;
+      j["gaps"] = s.gaps;
+      j["median_dt_s"] = s.median_dt_s;
+      j["clock_offset_s"] = s.clock_offset_s;
+      if (s.rows > 0 &&
+          (s.t_last < log_.joint_stats.t_first || s.t_first > log_.joint_stats.t_last)) {
+        ++without_overlap;
+        ctx.log(std::string("warning: ") + s.file + " has no time in common with the joints");
+      }
+    };
+    stream("joints", log_.joint_stats);
+    stream("imu", log_.imu_stats);
+    stream("truth", log_.truth_stats);
+    m["streams_without_overlap"] = without_overlap;
+  }
+
+  std::unique_ptr<estimators::Estimator> Make(const EstimatorSpec& e, std::uint64_t seed) const {
+    estimators::EstimatorSetup s = setup_;
+    s.params = e.params;
+    s.seed = seed;
+    try {
+      return estimators::MakeEstimator(e.name, s);
+    } catch (const InputError& err) {
+      const std::string what = err.what();
+      if (e.where.empty() || what.rfind(e.where, 0) == 0) throw;
+      throw InputError(e.where + ": " + what);
+    }
+  }
+
+  sim::RecordedLog log_;
+  sim::DeclaredModel declared_;
+  sim::MjModelPtr model_;
+  std::unique_ptr<sim::DeclaredChain> chain_;
+  std::vector<int> column_;
+  estimators::EstimatorSetup setup_;
+  double step_hz_ = 0.0;
+  std::vector<EstimatorSpec> specs_;
+};
+
+}  // namespace
+
+std::unique_ptr<ScenarioKind> MakeReplayKind() { return std::make_unique<ReplayKind>(); }
+
+}  // namespace flexbench::scenarios

@@ -1,0 +1,201 @@
+// `kind: replay`: a recorded log folder through the estimators. The log is written here from the
+// declared jsk_arm's kinematics along a smooth motion (encoders with an offset at the pitch
+// joints, two IMUs whose gyro and accelerometer readings follow the links' orientations, the
+// grasp point's truth), not by the code under test. Direct fusion reads the pitch angles off
+// the raw IMU readings where fk is off by the offset; the same seed gives the same bytes; bad
+// logs are one line and exit 2.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/lie/so3.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "sim/mujoco_model.h"
+#include "tests/common/test_util.h"
+
+namespace flexbench {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::CommandResult;
+using testing::RunCommand;
+
+std::string Num(double v) {
+  char b[40];
+  std::snprintf(b, sizeof(b), "%.17g", v);
+  return b;
+}
+
+// `duration` seconds of jsk_arm: joints at 100 Hz, each IMU at 200 Hz, the truth at 100 Hz. The
+// two pitch joints' encoders read 0.05 rad off (a calibration error the IMUs can see).
+void WriteLog(const fs::path& dir, double duration) {
+  const std::string declared_path = testing::SourceDir() + "/models/jsk_arm.declared.yaml";
+  const sim::DeclaredModel declared = sim::LoadDeclaredModel(declared_path);
+  const sim::MjModelPtr m = sim::LoadModel(declared.model_path);
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), declared);
+  const int nq = chain.model.nq();
+  const auto q_at = [&](double t) {
+    Eigen::VectorXd q(nq);
+    for (int k = 0; k < nq; ++k) q[k] = 0.2 * (k + 1) + 0.4 * std::sin((0.5 + 0.3 * k) * t);
+    return q;
+  };
+  kinematics::PpoeData data(chain.model);
+  const auto pose = [&](double t, kinematics::FrameId f) {
+    kinematics::ForwardKinematics(chain.model, data, q_at(t));
+    return data.T_base_frame[f];
+  };
+  std::string joints = "t_s";
+  for (const std::string& j : chain.q_joints) joints += "," + j + "_rad";
+  joints += "\n";
+  std::string truth = "# t x y z qx qy qz qw\n";
+  for (int i = 0; i * 0.01 <= duration + 1e-9; ++i) {
+    const double t = i * 0.01;
+    const Eigen::VectorXd q = q_at(t);
+    joints += Num(t);
+    for (int k = 0; k < nq; ++k) {
+      const bool pitch = chain.q_joints[k].find("pitch") != std::string::npos;
+      joints += "," + Num(q[k] + (pitch ? 0.05 : 0.0));
+    }
+    joints += "\n";
+    const lie::SE3 T = pose(t, chain.end_effector);
+    const Quat r(T.rotation());
+    truth += Num(t) + " " + Num(T.translation().x()) + " " + Num(T.translation().y()) + " " +
+             Num(T.translation().z()) + " " + Num(r.x()) + " " + Num(r.y()) + " " + Num(r.z()) +
+             " " + Num(r.w()) + "\n";
+  }
+  std::string imu = "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n";
+  const char* sites[2] = {"imu_link2", "imu_link3"};
+  for (int i = 1; i * 0.005 <= duration + 1e-9; ++i) {
+    const double t = i * 0.005;
+    for (int k = 0; k < 2; ++k) {
+      const kinematics::FrameId f = chain.ObservedFrame(sites[k]);
+      const Mat3 R = pose(t, f).rotation();
+      const Vec3 w = lie::SO3Log(pose(t - 0.005, f).rotation().transpose() * R) / 0.005;
+      const Vec3 a = R.transpose() * Vec3(0.0, 0.0, 9.81);
+      imu += Num(t) + ",imu" + std::to_string(k + 2);
+      for (int c = 0; c < 3; ++c) imu += "," + Num(w[c]);
+      for (int c = 0; c < 3; ++c) imu += "," + Num(a[c]);
+      imu += "\n";
+    }
+  }
+  testing::WriteFile(dir / "joints.csv", joints);
+  testing::WriteFile(dir / "imu.csv", imu);
+  testing::WriteFile(dir / "truth.tum", truth);
+  testing::WriteFile(dir / "log.yaml",
+                     "robot: jsk_arm\ndeclared: " + declared_path +
+                         "\njoints: {file: joints.csv}\n"
+                         "imu: {file: imu.csv, sensors: {imu2: {frame: imu_link2}, imu3: "
+                         "{frame: imu_link3}}}\n"
+                         "truth: {file: truth.tum, frame: grasp_point}\n");
+}
+
+std::string Scenario(const fs::path& log) {
+  return "scenario: replay_test\nkind: replay\nseed: 4\nlog: " + log.string() +
+         "\nstep_hz: 10\nestimators:\n  fk: {}\n  pf_encoders_imu: {particles: 512}\n  "
+         "direct_fusion_yxz: {}\n";
+}
+
+CommandResult RunReplay(const fs::path& scenario, const fs::path& out) {
+  return RunCommand(testing::Flexbench() + " run " + scenario.string() + " --out " + out.string() +
+                    " --quiet");
+}
+
+TEST(Replay, ALogRunsThroughTheEstimatorsWithTheSameBytesEachTime) {
+  testing::TempDir tmp;
+  WriteLog(tmp.path() / "log", 6.0);
+  testing::WriteFile(tmp.path() / "replay.yaml", Scenario(tmp.path() / "log"));
+  const CommandResult r = RunReplay(tmp.path() / "replay.yaml", tmp.path() / "out");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json s =
+      nlohmann::json::parse(testing::ReadFile(tmp.path() / "out" / "summary.json"));
+  const nlohmann::json& m = s["metrics"];
+  EXPECT_EQ(m["steps"], 61);
+  EXPECT_EQ(m["streams"]["joints"]["rows"], 601);
+  EXPECT_EQ(m["streams"]["imu"]["rows"], 2 * 1200);
+  EXPECT_EQ(m["streams"]["imu"]["gaps"], 0);
+  EXPECT_EQ(m["streams_without_overlap"], 0);
+  const nlohmann::json& fk = s["estimators"]["fk"]["metrics"];
+  EXPECT_EQ(fk["steps_scored"], 61);
+  EXPECT_GT(fk["pos_err_mean_m"].get<double>(), 0.02);  // the encoders' offset
+  const nlohmann::json& pf = s["estimators"]["pf_encoders_imu"]["metrics"];
+  EXPECT_EQ(pf["steps_scored"], 61);
+  EXPECT_EQ(pf["rejected_readings"], 0);
+  EXPECT_LT(pf["pos_err_mean_m"].get<double>(), 0.05);
+  // The pitch angles read off the raw IMU readings (through Madgwick's filters) instead of the
+  // offset encoders: the IMU stream reaches the estimators in the right frames and order.
+  const nlohmann::json& fusion = s["estimators"]["direct_fusion_yxz"]["metrics"];
+  EXPECT_LT(fusion["pos_err_mean_m"].get<double>(), 0.003);
+  std::printf(
+      "mean position error on the replayed log: fk %.4f m, direct_fusion_yxz %.4f m, "
+      "pf_encoders_imu %.4f m\n",
+      fk["pos_err_mean_m"].get<double>(), fusion["pos_err_mean_m"].get<double>(),
+      pf["pos_err_mean_m"].get<double>());
+  const fs::path tum = tmp.path() / "out" / "trajectories" / "world" / "pf_encoders_imu.tum";
+  ASSERT_TRUE(fs::exists(tum));
+  ASSERT_EQ(RunReplay(tmp.path() / "replay.yaml", tmp.path() / "again").exit_code, 0);
+  EXPECT_EQ(testing::ReadFile(tum), testing::ReadFile(tmp.path() / "again" / "trajectories" /
+                                                      "world" / "pf_encoders_imu.tum"));
+}
+
+TEST(Replay, ABadLogIsOneLineAndExitTwo) {
+  const struct {
+    const char* file;
+    std::string from, to, expect;
+  } cases[] = {
+      {"joints.csv", "link2_pitch_joint_rad", "link9_rad",
+       "joints.csv:1: no column for declared joint 'link2_pitch_joint'"},
+      {"log.yaml", "frame: imu_link3", "frame: nowhere", "nowhere"},
+      {"log.yaml", "frame: grasp_point", "frame: imu_link2", "truth.frame 'imu_link2'"},
+      {"imu.csv", "0.01,imu3", "0.01,imu7", "imu.csv:5: column 'sensor': 'imu7'"},
+  };
+  for (const auto& c : cases) {
+    testing::TempDir tmp;
+    WriteLog(tmp.path() / "log", 0.1);
+    const fs::path f = tmp.path() / "log" / c.file;
+    std::string text = testing::ReadFile(f);
+    const size_t at = text.find(c.from);
+    ASSERT_NE(at, std::string::npos) << c.from;
+    text.replace(at, c.from.size(), c.to);
+    testing::WriteFile(f, text);
+    testing::WriteFile(tmp.path() / "replay.yaml", Scenario(tmp.path() / "log"));
+    const CommandResult r = RunReplay(tmp.path() / "replay.yaml", tmp.path() / "out");
+    EXPECT_EQ(r.exit_code, 2) << c.expect << ": " << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_NE(r.err.find(c.expect), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(tmp.path() / "out"));
+  }
+}
+
+// `flexbench replay LOG`: the same run from the command line; a bad option is one line naming
+// it; the log folder is never an output, even with --force.
+TEST(Replay, TheCommandRunsALogAndNeverReplacesIt) {
+  testing::TempDir tmp;
+  const fs::path log = tmp.path() / "log";
+  WriteLog(log, 2.0);
+  const std::string fb = testing::Flexbench() + " replay " + log.string();
+  const CommandResult r = RunCommand(fb + " --estimators fk,direct_fusion_yxz --step-hz 10 --out " +
+                                     (tmp.path() / "out").string() + " --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json s =
+      nlohmann::json::parse(testing::ReadFile(tmp.path() / "out" / "summary.json"));
+  EXPECT_EQ(s["metrics"]["steps"], 21);
+  EXPECT_LT(s["estimators"]["direct_fusion_yxz"]["metrics"]["pos_err_mean_m"].get<double>(), 0.003);
+  const CommandResult bad =
+      RunCommand(fb + " --estimators fk,nope --out " + (tmp.path() / "bad").string());
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(std::count(bad.err.begin(), bad.err.end(), '\n'), 1) << bad.err;
+  EXPECT_NE(bad.err.find("--estimators: unknown estimator 'nope'"), std::string::npos) << bad.err;
+  const std::string joints = testing::ReadFile(log / "joints.csv");
+  const CommandResult onto = RunCommand(fb + " --out " + log.string() + " --force");
+  EXPECT_EQ(onto.exit_code, 2) << onto.err;
+  EXPECT_EQ(testing::ReadFile(log / "joints.csv"), joints);
+  EXPECT_TRUE(fs::exists(log / "log.yaml"));
+}
+
+}  // namespace
+}  // namespace flexbench
