@@ -416,10 +416,10 @@ fresh i35_10_yaml_15MiB_list
   printf '0]\n'
 } >"$D/big.yaml"
 attack i35_10_yaml_15MiB_list 2 "1line err~big.yaml fast:10" -- "$FB" run big.yaml --out o
-fresh i35_10_csv_1M_rows
-point_csv "$D/cal.csv" 1000000
+fresh i35_10_csv_1500k_rows
+point_csv "$D/cal.csv" 1500000
 point_csv "$D/val.csv" 30
-attack i35_10_csv_1M_rows 2 "1line err~cal.csv fast:10" -- "$FB" identify --declared "$DECLARED" \
+attack i35_10_csv_1500k_rows 2 "1line err~cal.csv fast:10" -- "$FB" identify --declared "$DECLARED" \
   --calibration cal.csv --validation val.csv --out o
 fresh i35_10_report_300MB_summary
 mkdir -p "$D/r"

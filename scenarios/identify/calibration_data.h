@@ -36,15 +36,17 @@ namespace flexbench::identify {
 // The largest calibration CSV read (bigger is bad input, refused before reading).
 constexpr std::uintmax_t kMaxCalibrationCsvBytes = 512u << 20;
 
-// Memory the identification takes per calibration row, and the most one file's rows may take.
-// The estimate (0.27 KB + 1.09 KB a joint) covers every case measured: planar3 (3 joints)
-// peaks at 0.86 KB a row of heap on 1,000,000 point rows with one offset planted, but with
-// joint-origin errors planted (the complete-geometry block kept, a dozen fitted unknowns) its
-// resident set passed 2.15 GB on 1,000,000 rows, and the screening and equivalence stages still
-// hold N x p matrices whole. A file whose line count times CalibrationBytesPerRow exceeds the
-// budget is refused before any row is read ("N rows need about X GB; the limit is Y GB").
-constexpr std::uintmax_t kCalibrationBytesPerRow = 272;
-constexpr std::uintmax_t kCalibrationBytesPerJoint = 1088;
+// Memory the identification takes per calibration row (the Observation, the residual vectors;
+// the loads are kept only up to kLoadsCacheBytes, and from two row blocks on no stage holds a
+// Jacobian of every row), and the most one file's rows may take. Measured on 1,000,000 planar3
+// point rows (3 joints): one offset planted, `flexbench identify` 1.18 GB resident; joint-origin
+// errors planted (the complete-geometry block kept, 7 effects), 1.22 GB resident (0.66 KB a row
+// of heap). The estimate (1 KB + 0.19 KB a joint: 1.6 KB a row for 3 joints) is 1.3 times the
+// larger, and grows with the joints as rover_arm's (8 joints) figures do. A file whose line
+// count times CalibrationBytesPerRow exceeds the budget is refused before any row is read ("N
+// rows need about X GB; the limit is Y GB").
+constexpr std::uintmax_t kCalibrationBytesPerRow = 1024;
+constexpr std::uintmax_t kCalibrationBytesPerJoint = 192;
 constexpr std::uintmax_t kMaxCalibrationMemoryBytes = 2000000000;
 std::uintmax_t CalibrationBytesPerRow(size_t num_joints);
 

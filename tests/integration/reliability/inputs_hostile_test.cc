@@ -205,13 +205,14 @@ TEST_F(InputFiles, DeeplyNestedYamlIsRefused) {
   EXPECT_NE(LastLine(r.err).find("nested more than 64 deep"), std::string::npos) << r.err;
 }
 
-// A million calibration rows under the 512 MiB cap: refused with the memory they would take.
+// 1.5 million calibration rows under the 512 MiB cap: refused with the memory they would take
+// (a million are identified within the 2 GB).
 TEST_F(InputFiles, CalibrationCsvTooManyRowsForMemoryIsRefused) {
   for (const char* name : {"cal.csv", "val.csv"}) {
     std::ofstream f(Path(name));
     f << "joint1,joint2,joint3,x,y,z\n";
     char row[128];
-    for (int i = 0; i < 1000000; ++i) {
+    for (int i = 0; i < 1500000; ++i) {
       std::snprintf(row, sizeof(row), "%.4f,%.4f,0.1,0.3,%.4f,0.1\n", 1e-6 * i, -1e-6 * i,
                     name[0] == 'c' ? 1e-7 * i : 2e-7 * i);
       f << row;
@@ -221,7 +222,7 @@ TEST_F(InputFiles, CalibrationCsvTooManyRowsForMemoryIsRefused) {
       Fb("identify --declared " + SourceDir() + "/models/planar3.declared.yaml --calibration " +
          Path("cal.csv").string() + " --validation " + Path("val.csv").string() + " --out " +
          Path("out").string());
-  ExpectBadInput(r, "cal.csv: 1000001 rows need about ");
+  ExpectBadInput(r, "cal.csv: 1500001 rows need about ");
   EXPECT_NE(LastLine(r.err).find("the limit is"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(Path("out")));
 }
