@@ -6,16 +6,10 @@
 // logs are one line and exit 2.
 #include <gtest/gtest.h>
 
-#include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
-#include "estimators/kinematics/forward_kinematics.h"
-#include "estimators/lie/so3.h"
-#include "sim/declared_chain.h"
-#include "sim/declared_model.h"
-#include "sim/mujoco_model.h"
+#include "tests/common/jsk_log.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench {
@@ -24,75 +18,6 @@ namespace {
 namespace fs = std::filesystem;
 using testing::CommandResult;
 using testing::RunCommand;
-
-std::string Num(double v) {
-  char b[40];
-  std::snprintf(b, sizeof(b), "%.17g", v);
-  return b;
-}
-
-// `duration` seconds of jsk_arm: joints at 100 Hz, each IMU at 200 Hz, the truth at 100 Hz. The
-// two pitch joints' encoders read 0.05 rad off (a calibration error the IMUs can see).
-void WriteLog(const fs::path& dir, double duration) {
-  const std::string declared_path = testing::SourceDir() + "/models/jsk_arm.declared.yaml";
-  const sim::DeclaredModel declared = sim::LoadDeclaredModel(declared_path);
-  const sim::MjModelPtr m = sim::LoadModel(declared.model_path);
-  const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), declared);
-  const int nq = chain.model.nq();
-  const auto q_at = [&](double t) {
-    Eigen::VectorXd q(nq);
-    for (int k = 0; k < nq; ++k) q[k] = 0.2 * (k + 1) + 0.4 * std::sin((0.5 + 0.3 * k) * t);
-    return q;
-  };
-  kinematics::PpoeData data(chain.model);
-  const auto pose = [&](double t, kinematics::FrameId f) {
-    kinematics::ForwardKinematics(chain.model, data, q_at(t));
-    return data.T_base_frame[f];
-  };
-  std::string joints = "t_s";
-  for (const std::string& j : chain.q_joints) joints += "," + j + "_rad";
-  joints += "\n";
-  std::string truth = "# t x y z qx qy qz qw\n";
-  for (int i = 0; i * 0.01 <= duration + 1e-9; ++i) {
-    const double t = i * 0.01;
-    const Eigen::VectorXd q = q_at(t);
-    joints += Num(t);
-    for (int k = 0; k < nq; ++k) {
-      const bool pitch = chain.q_joints[k].find("pitch") != std::string::npos;
-      joints += "," + Num(q[k] + (pitch ? 0.05 : 0.0));
-    }
-    joints += "\n";
-    const lie::SE3 T = pose(t, chain.end_effector);
-    const Quat r(T.rotation());
-    truth += Num(t) + " " + Num(T.translation().x()) + " " + Num(T.translation().y()) + " " +
-             Num(T.translation().z()) + " " + Num(r.x()) + " " + Num(r.y()) + " " + Num(r.z()) +
-             " " + Num(r.w()) + "\n";
-  }
-  std::string imu = "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n";
-  const char* sites[2] = {"imu_link2", "imu_link3"};
-  for (int i = 1; i * 0.005 <= duration + 1e-9; ++i) {
-    const double t = i * 0.005;
-    for (int k = 0; k < 2; ++k) {
-      const kinematics::FrameId f = chain.ObservedFrame(sites[k]);
-      const Mat3 R = pose(t, f).rotation();
-      const Vec3 w = lie::SO3Log(pose(t - 0.005, f).rotation().transpose() * R) / 0.005;
-      const Vec3 a = R.transpose() * Vec3(0.0, 0.0, 9.81);
-      imu += Num(t) + ",imu" + std::to_string(k + 2);
-      for (int c = 0; c < 3; ++c) imu += "," + Num(w[c]);
-      for (int c = 0; c < 3; ++c) imu += "," + Num(a[c]);
-      imu += "\n";
-    }
-  }
-  testing::WriteFile(dir / "joints.csv", joints);
-  testing::WriteFile(dir / "imu.csv", imu);
-  testing::WriteFile(dir / "truth.tum", truth);
-  testing::WriteFile(dir / "log.yaml",
-                     "robot: jsk_arm\ndeclared: " + declared_path +
-                         "\njoints: {file: joints.csv}\n"
-                         "imu: {file: imu.csv, sensors: {imu2: {frame: imu_link2}, imu3: "
-                         "{frame: imu_link3}}}\n"
-                         "truth: {file: truth.tum, frame: grasp_point}\n");
-}
 
 std::string Scenario(const fs::path& log) {
   return "scenario: replay_test\nkind: replay\nseed: 4\nlog: " + log.string() +
@@ -107,7 +32,7 @@ CommandResult RunReplay(const fs::path& scenario, const fs::path& out) {
 
 TEST(Replay, ALogRunsThroughTheEstimatorsWithTheSameBytesEachTime) {
   testing::TempDir tmp;
-  WriteLog(tmp.path() / "log", 6.0);
+  testing::WriteJskLog(tmp.path() / "log", 6.0);
   testing::WriteFile(tmp.path() / "replay.yaml", Scenario(tmp.path() / "log"));
   const CommandResult r = RunReplay(tmp.path() / "replay.yaml", tmp.path() / "out");
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -155,7 +80,7 @@ TEST(Replay, ABadLogIsOneLineAndExitTwo) {
   };
   for (const auto& c : cases) {
     testing::TempDir tmp;
-    WriteLog(tmp.path() / "log", 0.1);
+    testing::WriteJskLog(tmp.path() / "log", 0.1);
     const fs::path f = tmp.path() / "log" / c.file;
     std::string text = testing::ReadFile(f);
     const size_t at = text.find(c.from);
@@ -176,7 +101,7 @@ TEST(Replay, ABadLogIsOneLineAndExitTwo) {
 TEST(Replay, TheCommandRunsALogAndNeverReplacesIt) {
   testing::TempDir tmp;
   const fs::path log = tmp.path() / "log";
-  WriteLog(log, 2.0);
+  testing::WriteJskLog(log, 2.0);
   const std::string fb = testing::Flexbench() + " replay " + log.string();
   const CommandResult r = RunCommand(fb + " --estimators fk,direct_fusion_yxz --step-hz 10 --out " +
                                      (tmp.path() / "out").string() + " --quiet");

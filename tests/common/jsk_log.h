@@ -1,0 +1,88 @@
+// A recorded-log folder (sim/recorded_log.h) of jsk_arm written from its declared kinematics,
+// not by the replay code: a smooth motion of every joint, the encoders (the two pitch joints'
+// `pitch_offset` rad off: a calibration error the IMUs can see) at 100 Hz, two IMUs at 200 Hz
+// whose gyro and accelerometer follow their links' orientations, the grasp point's truth at
+// 100 Hz. For the replay tests and bench_replay.
+#pragma once
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "estimators/kinematics/forward_kinematics.h"
+#include "estimators/lie/so3.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "sim/mujoco_model.h"
+
+namespace flexbench::testing {
+
+inline void WriteJskLog(const std::filesystem::path& dir, double duration,
+                        double pitch_offset = 0.05) {
+  const auto num = [](double v) {
+    char b[40];
+    std::snprintf(b, sizeof(b), "%.17g", v);
+    return std::string(b);
+  };
+  const std::string declared_path =
+      std::string(FLEXBENCH_SOURCE_DIR) + "/models/jsk_arm.declared.yaml";
+  const sim::DeclaredModel declared = sim::LoadDeclaredModel(declared_path);
+  const sim::MjModelPtr m = sim::LoadModel(declared.model_path);
+  const sim::DeclaredChain chain = sim::BuildDeclaredChain(m.get(), declared);
+  const int nq = chain.model.nq();
+  const auto q_at = [&](double t) {
+    Eigen::VectorXd q(nq);
+    for (int k = 0; k < nq; ++k) q[k] = 0.2 * (k + 1) + 0.4 * std::sin((0.5 + 0.3 * k) * t);
+    return q;
+  };
+  kinematics::PpoeData data(chain.model);
+  const auto pose = [&](double t, kinematics::FrameId f) {
+    kinematics::ForwardKinematics(chain.model, data, q_at(t));
+    return data.T_base_frame[f];
+  };
+  std::filesystem::create_directories(dir);
+  std::ofstream joints(dir / "joints.csv"), truth(dir / "truth.tum"), imu(dir / "imu.csv");
+  joints << "t_s";
+  for (const std::string& j : chain.q_joints) joints << "," << j << "_rad";
+  joints << "\n";
+  truth << "# t x y z qx qy qz qw\n";
+  for (int i = 0; i * 0.01 <= duration + 1e-9; ++i) {
+    const double t = i * 0.01;
+    const Eigen::VectorXd q = q_at(t);
+    joints << num(t);
+    for (int k = 0; k < nq; ++k) {
+      const bool pitch = chain.q_joints[k].find("pitch") != std::string::npos;
+      joints << "," << num(q[k] + (pitch ? pitch_offset : 0.0));
+    }
+    joints << "\n";
+    const lie::SE3 T = pose(t, chain.end_effector);
+    const Quat r(T.rotation());
+    truth << num(t) << " " << num(T.translation().x()) << " " << num(T.translation().y()) << " "
+          << num(T.translation().z()) << " " << num(r.x()) << " " << num(r.y()) << " " << num(r.z())
+          << " " << num(r.w()) << "\n";
+  }
+  imu << "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n";
+  const kinematics::FrameId frames[2] = {chain.ObservedFrame("imu_link2"),
+                                         chain.ObservedFrame("imu_link3")};
+  for (int i = 1; i * 0.005 <= duration + 1e-9; ++i) {
+    const double t = i * 0.005;
+    for (int k = 0; k < 2; ++k) {
+      const Mat3 R = pose(t, frames[k]).rotation();
+      const Vec3 w = lie::SO3Log(pose(t - 0.005, frames[k]).rotation().transpose() * R) / 0.005;
+      const Vec3 a = R.transpose() * Vec3(0.0, 0.0, 9.81);
+      imu << num(t) << ",imu" << (k + 2);
+      for (int c = 0; c < 3; ++c) imu << "," << num(w[c]);
+      for (int c = 0; c < 3; ++c) imu << "," << num(a[c]);
+      imu << "\n";
+    }
+  }
+  std::ofstream(dir / "log.yaml") << "robot: jsk_arm\ndeclared: " << declared_path
+                                  << "\njoints: {file: joints.csv}\n"
+                                     "imu: {file: imu.csv, sensors: {imu2: {frame: imu_link2}, "
+                                     "imu3: {frame: imu_link3}}}\n"
+                                     "truth: {file: truth.tum, frame: grasp_point}\n";
+}
+
+}  // namespace flexbench::testing
