@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -126,7 +127,7 @@ void ReadImuSensors(const ConfigNode& sensors, RecordedLog* log) {
         q->Fail("expected [w, x, y, z], finite and not zero");
       }
       imu.has_initial = true;
-      imu.q_base_frame_initial = Quat(w[0], w[1], w[2], w[3]).normalized();
+      imu.q_base_frame_initial = Quat(w[0], w[1], w[2], w[3]);  // the filter normalises it
     }
     log->imus.push_back(imu);
   }
@@ -232,6 +233,114 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   root.CheckNoUnknownKeys();
   return log;
 }
+
+namespace {
+
+std::string Num(double v) {
+  char b[40];
+  std::snprintf(b, sizeof(b), "%.17g", v);
+  return b;
+}
+
+void WriteText(const std::filesystem::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+  if (!out.flush()) throw InputError(CapForMessage(path.string()) + ": cannot write");
+}
+
+std::string LogYaml(const RecordedLog& log) {
+  std::ostringstream y;
+  y << "# A recorded log (flexbench replay reads it).\n";
+  if (!log.robot.empty()) y << "robot: " << log.robot << "\n";
+  y << "declared: " << log.declared_path << "\njoints: {file: joints.csv}\n";
+  if (!log.imus.empty()) {
+    y << "imu:\n  file: imu.csv\n  sensors:\n";
+    for (const LogImu& imu : log.imus) {
+      y << "    " << imu.name << ": {frame: " << imu.frame;
+      if (imu.has_initial) {
+        const Quat& q = imu.q_base_frame_initial;
+        y << ", initial_wxyz: [" << Num(q.w()) << ", " << Num(q.x()) << ", " << Num(q.y()) << ", "
+          << Num(q.z()) << "]";
+      }
+      y << "}\n";
+    }
+  }
+  if (!log.truth_t.empty()) y << "truth: {file: truth.tum, frame: " << log.truth_frame << "}\n";
+  return y.str();
+}
+
+// The files of WriteRecordedLog into the folder `tmp`.
+void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
+                   const std::vector<std::pair<std::string, std::string>>& files);
+
+}  // namespace
+
+void WriteRecordedLog(const RecordedLog& log, const std::string& dir,
+                      const std::vector<std::pair<std::string, std::string>>& files) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::exists(dir, ec)) {
+    throw InputError(CapForMessage(dir) + ": exists; a log is written into a new folder");
+  }
+  const fs::path tmp = dir + ".tmp";
+  if (fs::exists(tmp, ec)) {
+    throw InputError(CapForMessage(tmp.string()) +
+                     ": exists (another log being written?); remove it or name another folder");
+  }
+  fs::create_directories(tmp);
+  try {
+    WriteLogFiles(log, tmp, files);
+  } catch (...) {
+    fs::remove_all(tmp, ec);  // ours alone: it did not exist before
+    throw;
+  }
+  fs::rename(tmp, dir);
+}
+
+namespace {
+
+void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
+                   const std::vector<std::pair<std::string, std::string>>& files) {
+  namespace fs = std::filesystem;
+  for (const auto& [name, text] : files) WriteText(tmp / name, text);
+  std::ostringstream j;
+  j << "t_s";
+  for (size_t k = 0; k < log.joints.size(); ++k) {
+    j << "," << log.joints[k] << (log.joint_is_slide[k] ? "_m" : "_rad");
+  }
+  j << "\n";
+  for (size_t r = 0; r < log.joint_t.size(); ++r) {
+    j << Num(log.joint_t[r]);
+    for (size_t k = 0; k < log.joints.size(); ++k) j << "," << Num(log.q(r)[k]);
+    j << "\n";
+  }
+  WriteText(tmp / "joints.csv", j.str());
+  if (!log.imus.empty()) {
+    std::ostringstream i;
+    i << "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n";
+    for (const estimators::ImuReading& z : log.imu) {
+      i << Num(z.t) << "," << log.imus[z.imu].name;
+      for (int a = 0; a < 3; ++a) i << "," << Num(z.gyro[a]);
+      for (int a = 0; a < 3; ++a) i << "," << Num(z.accel[a]);
+      i << "\n";
+    }
+    WriteText(tmp / "imu.csv", i.str());
+  }
+  if (!log.truth_t.empty()) {
+    std::ostringstream t;
+    t << "# t x y z qx qy qz qw (" << log.truth_frame << " in the base frame; m, s)\n";
+    for (size_t r = 0; r < log.truth_t.size(); ++r) {
+      const Vec3& p = log.truth[r].translation();
+      const Quat q(log.truth[r].rotation());
+      t << Num(log.truth_t[r]) << " " << Num(p.x()) << " " << Num(p.y()) << " " << Num(p.z()) << " "
+        << Num(q.x()) << " " << Num(q.y()) << " " << Num(q.z()) << " " << Num(q.w()) << "\n";
+    }
+    WriteText(tmp / "truth.tum", t.str());
+  }
+  WriteText(tmp / "log.yaml", LogYaml(log));
+}
+
+}  // namespace
 
 bool TruthAt(const RecordedLog& log, double t, lie::SE3* T) {
   const std::vector<double>& ts = log.truth_t;

@@ -20,6 +20,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "estimators/conventions.h"
@@ -70,6 +71,15 @@ struct RecordedLog {
 
 // Reads DIR/log.yaml and the streams it names (InputError on bad input).
 RecordedLog ReadRecordedLog(const std::string& dir);
+
+// Writes `log` into the folder `dir` (which must not exist yet: InputError naming it) in the
+// format ReadRecordedLog reads back into the same numbers (17 significant digits; clock offsets
+// 0, the times as they are): log.yaml with `declared:` as log.declared_path is written, then
+// joints.csv, imu.csv when it has IMUs, truth.tum when it has truth. `files`: further files to
+// write there first (name, text), e.g. the declared model. The folder appears whole or not at
+// all.
+void WriteRecordedLog(const RecordedLog& log, const std::string& dir,
+                      const std::vector<std::pair<std::string, std::string>>& files = {});
 
 // The truth pose at time t: linear in position, slerp in rotation between the rows around it.
 // False (T untouched) outside the truth's span or without truth.

@@ -54,6 +54,9 @@ CLI::App* AddRun(CLI::App& app, Options& o) {
       ->allow_extra_args(false);  // one KEY=VALUE per --set: never the scenario path after it
   run_cmd->add_flag("--force", o.run.force,
                     "let --out replace an existing folder that is not a flexbench result");
+  run_cmd->add_option("--export-log", o.run.export_log,
+                      "also write the run's readings and truth as a recorded-log folder (a new "
+                      "folder) that `flexbench replay` reads");
   return run_cmd;
 }
 

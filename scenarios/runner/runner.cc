@@ -142,6 +142,17 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   std::unique_ptr<ScenarioKind>& kind = prepared.kind;
   const std::vector<GateSpec>& gates = prepared.gates;
 
+  if (!options.export_log.empty()) {
+    if (!kind->ExportsLog()) {
+      throw InputError("--export-log: scenario kind '" + root.GetString("kind") +
+                       "' does not export its readings (the jsk dynamic kinds do)");
+    }
+    std::error_code ec;
+    if (fs::exists(options.export_log, ec)) {
+      throw InputError("--export-log " + CapForMessage(options.export_log) +
+                       ": exists; a log is written into a new folder");
+    }
+  }
   const fs::path out_dir =
       options.out_dir.empty() ? fs::path("out") / name : fs::path(options.out_dir);
   OutputDir out(out_dir, options.force, inputs);
@@ -169,6 +180,7 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   ctx.summary = &summary;
   ctx.timing = &timing;
   ctx.log = info;
+  ctx.export_log = options.export_log;
   ProgressLine::Options progress_options;
   progress_options.terminal = isatty(fileno(stderr));
   progress_options.quiet = options.quiet;

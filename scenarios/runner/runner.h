@@ -25,6 +25,9 @@ struct RunOptions {
   bool force = false;            // --out may replace a folder that is not a previous result
   std::vector<std::string> set;  // --set KEY=VALUE overrides, in order
   bool quiet = false;  // no progress, no informational lines (errors and failed gates remain)
+  // --export-log DIR: the run's sensor readings and truth written as a recorded-log folder
+  // (sim/recorded_log.h), for `flexbench replay`; empty: none.
+  std::string export_log;
   // The command line as typed (shell-quoted), recorded in summary.json and the report; empty
   // (a sweep's run): the equivalent `flexbench run` line is recorded.
   std::string command;

@@ -30,6 +30,9 @@ struct RunContext {
   std::function<void(const std::string&)> log;
   // Progress of long runs (shown on stderr only when it is a terminal).
   std::function<void(const std::string& stage, int done, int total)> progress;
+  // A folder to write the run's readings into as a recorded log (ScenarioKind::ExportsLog);
+  // empty: none.
+  std::string export_log;
 };
 
 class ScenarioKind {
@@ -39,6 +42,8 @@ class ScenarioKind {
   // unknown afterwards). Must validate everything, so that bad input fails before any work.
   virtual void Configure(const ConfigNode& root) = 0;
   virtual void Run(RunContext& ctx) = 0;
+  // Whether Run writes its readings to RunContext::export_log when asked.
+  virtual bool ExportsLog() const { return false; }
 };
 
 struct KindEntry {

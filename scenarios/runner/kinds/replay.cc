@@ -112,7 +112,7 @@ class ReplayKind : public ScenarioKind {
       m["rejected_readings"] = rejected;
     }
     (*ctx.summary)["metrics"]["steps"] = static_cast<int>(steps.size());
-    recorder.Write(*ctx.out, declared_.base);
+    recorder.Write(*ctx.out, "base");  // the coordinates: the declared base frame
   }
 
  private:

@@ -70,7 +70,7 @@ TEST(RecordedLog, ReadsTheStreamsWithTheirClocksAndCounts) {
   EXPECT_NEAR(log.joint_stats.median_dt_s, 0.01, 1e-12);
   ASSERT_EQ(log.imus.size(), 2u);
   EXPECT_TRUE(log.imus[0].has_initial);
-  EXPECT_DOUBLE_EQ(log.imus[0].q_base_frame_initial.w(), 1.0);  // normalised
+  EXPECT_DOUBLE_EQ(log.imus[0].q_base_frame_initial.w(), 2.0);  // as given: the filter normalises
   EXPECT_FALSE(log.imus[1].has_initial);
   EXPECT_EQ(log.imus[1].frame, "imu_link3");
   ASSERT_EQ(log.imu.size(), 4u);

@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 
 #include "estimators/error.h"
 #include "estimators/imu/imu_orientations.h"
 #include "scenarios/runner/common/pose.h"
+#include "sim/recorded_log.h"
 
 namespace flexbench::scenarios::jsk {
 
@@ -114,6 +116,38 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
   }
   FilterOrientations(rig, &snaps);
   return snaps;
+}
+
+void ExportLog(const Rig& rig, const std::vector<Snapshot>& snaps, const std::string& dir) {
+  sim::RecordedLog log;
+  log.robot = std::filesystem::path(rig.declared.model_path).stem().string();
+  log.declared_path = "declared.yaml";
+  const kinematics::PpoeModel& model = rig.chain->model;
+  log.joints = rig.chain->q_joints;
+  for (int k = 0; k < rig.nq(); ++k) {
+    log.joint_is_slide.push_back(model.frame(model.joint_frame(k)).joint.type ==
+                                 kinematics::JointType::kPrismatic);
+  }
+  for (const Snapshot& s : snaps) {
+    log.joint_t.push_back(s.t);
+    for (int k = 0; k < rig.nq(); ++k) log.joint_q.push_back(s.joints.q[k]);
+    log.imu.insert(log.imu.end(), s.imu_raw.begin(), s.imu_raw.end());
+    log.truth_t.push_back(s.t);
+    log.truth.push_back(s.T_true);
+  }
+  for (size_t k = 0; k < rig.imu_sites.size(); ++k) {
+    sim::LogImu imu;
+    imu.name = imu.frame = rig.imu_sites[k];
+    imu.has_initial = rig.setup.imus[k].has_initial;
+    imu.q_base_frame_initial = rig.setup.imus[k].q_base_frame_initial;
+    log.imus.push_back(imu);
+  }
+  log.truth_frame = rig.declared.end_effector;
+  sim::DeclaredModel declared = rig.declared;
+  declared.model_path = std::filesystem::absolute(declared.model_path).lexically_normal().string();
+  sim::WriteRecordedLog(
+      log, dir,
+      {{"declared.yaml", sim::EmitDeclaredModel(declared, "The declared model of the run.", 17)}});
 }
 
 Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vector<Snapshot>& snaps,

@@ -48,6 +48,13 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
                                       sim::SensorSuite& sensors, const DynamicOptions& options,
                                       const RunContext& ctx);
 
+// Writes the snapshots as a recorded-log folder `dir` (sim/recorded_log.h) that `flexbench
+// replay` turns into the estimates RunOnSnapshots makes (the same bits): a joint row per
+// snapshot (its encoder readings), every IMU reading of the snapshots, the end effector's truth
+// at each, the IMUs' initial orientations when the run started them at the truth, and the
+// declared model (declared.yaml).
+void ExportLog(const Rig& rig, const std::vector<Snapshot>& snaps, const std::string& dir);
+
 // Runs an estimator over snapshots; `with_position` adds the end effector's position reading.
 Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vector<Snapshot>& snaps,
                      std::uint64_t seed, bool with_position, const RunContext& ctx, int* rejected);

@@ -42,7 +42,9 @@ void DynamicKind::Configure(const ConfigNode& root) {
 
 std::vector<Snapshot> DynamicKind::Simulate(const RunContext& ctx) {
   sim::SensorSuite sensors = sim::SensorSuite::Parse(*sensors_node_, *rig_.sim, ctx.seed);
-  return SimulateDynamic(rig_, trajectory_, sensors, options_, ctx);
+  std::vector<Snapshot> snaps = SimulateDynamic(rig_, trajectory_, sensors, options_, ctx);
+  if (!ctx.export_log.empty()) ExportLog(rig_, snaps, ctx.export_log);
+  return snaps;
 }
 
 std::vector<Trace> DynamicKind::Estimate(const std::vector<Snapshot>& snaps, const RunContext& ctx,

@@ -57,6 +57,8 @@ class DynamicKind : public ScenarioKind {
   // The rig (with its truth effects), the trajectory in seconds, the dynamic options, burn_in_s,
   // the kind's own keys (ConfigureKind), the sensors and the estimators.
   void Configure(const ConfigNode& root) final;
+  // Simulate writes the snapshots' readings as a recorded log when the run asks for one.
+  bool ExportsLog() const final { return true; }
 
  protected:
   virtual void ConfigureKind(const ConfigNode& /*root*/) {}
