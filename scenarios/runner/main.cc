@@ -144,6 +144,8 @@ CLI::App* AddReplay(CLI::App& app, Options& o) {
   cmd->add_option(
       "--step-hz", rp.step_hz,
       "estimator steps per second, each at the latest joint row (default 0: every row)");
+  cmd->add_flag("--estimate-imu-clock-offset", rp.estimate_imu_clock_offset,
+                "estimate the IMU stream's clock offset against the joints from the data");
   o.outs.emplace_back(
       cmd->add_option("--out", rp.out_dir, "output folder (default: out/replay/<log folder>)"),
       &rp.out_dir);

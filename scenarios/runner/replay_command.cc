@@ -33,7 +33,9 @@ std::string ReplayScenario(const ReplayCliOptions& o) {
   }
   char hz[40];
   std::snprintf(hz, sizeof(hz), "%.17g", o.step_hz);
-  yaml += std::string("step_hz: ") + hz + "\nestimators:\n";
+  yaml += std::string("step_hz: ") + hz + "\n";
+  if (o.estimate_imu_clock_offset) yaml += "imu_clock_offset: estimate\n";
+  yaml += "estimators:\n";
   if (o.estimators.empty()) throw InputError("--estimators: name at least one estimator");
   for (const std::string& e : o.estimators) {
     const auto& reg = estimators::EstimatorRegistry();

@@ -12,7 +12,8 @@ struct ReplayCliOptions {
   std::string declared;  // optional: a declared model instead of log.yaml's
   std::vector<std::string> estimators = {"fk", "ppoe_ekf"};
   double step_hz = 0.0;  // 0: a step per joint row
-  std::string out_dir;   // default: out/replay/<log folder's name>
+  bool estimate_imu_clock_offset = false;
+  std::string out_dir;  // default: out/replay/<log folder's name>
   bool check_gates = false;
   bool force = false;
   bool quiet = false;

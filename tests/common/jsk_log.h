@@ -19,8 +19,9 @@
 
 namespace flexbench::testing {
 
+// `imu_clock_s` is added to the IMU times written (a clock running ahead).
 inline void WriteJskLog(const std::filesystem::path& dir, double duration,
-                        double pitch_offset = 0.05) {
+                        double pitch_offset = 0.05, double imu_clock_s = 0.0) {
   const auto num = [](double v) {
     char b[40];
     std::snprintf(b, sizeof(b), "%.17g", v);
@@ -70,9 +71,13 @@ inline void WriteJskLog(const std::filesystem::path& dir, double duration,
     const double t = i * 0.005;
     for (int k = 0; k < 2; ++k) {
       const Mat3 R = pose(t, frames[k]).rotation();
-      const Vec3 w = lie::SO3Log(pose(t - 0.005, frames[k]).rotation().transpose() * R) / 0.005;
+      // The angular velocity at t (a central difference: a gyro's rate is of its instant).
+      const double h = 1e-5;
+      const Vec3 w = lie::SO3Log(pose(t - h, frames[k]).rotation().transpose() *
+                                 pose(t + h, frames[k]).rotation()) /
+                     (2.0 * h);
       const Vec3 a = R.transpose() * Vec3(0.0, 0.0, 9.81);
-      imu << num(t) << ",imu" << (k + 2);
+      imu << num(t + imu_clock_s) << ",imu" << (k + 2);
       for (int c = 0; c < 3; ++c) imu << "," << num(w[c]);
       for (int c = 0; c < 3; ++c) imu << "," << num(a[c]);
       imu << "\n";

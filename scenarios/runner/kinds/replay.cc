@@ -8,6 +8,8 @@
 //   step_hz: 0                 # 0: an estimator step at each joints.csv row; else a step at
 //                              # the latest row at or before each tick of this rate, at its time
 //   estimators: {fk: {}, pf_encoders_imu: {particles: 2048}}
+//   imu_clock_offset: estimate     # optional: the IMU stream's clock offset against the joints,
+//   clock_offset_range_s: 0.5      # from the data (common/clock_offset.h), within +-range
 //
 // A step: the IMU readings up to its time (in time order), Predict, the joint reading, the
 // estimate. Joint angles are the declared model's joint variables (zero at its zero), matched to
@@ -15,12 +17,17 @@
 // the steps inside its span (when the log has one): ErrorStats' position and rotation errors,
 // NEES, steps_scored, rejected_readings. Scenario metrics: steps, duration_s, and per stream
 // rows, duplicates, gaps, median_dt_s, clock_offset_s; a stream without time overlap with the
-// joints is warned about and counted (streams_without_overlap).
+// joints is warned about and counted (streams_without_overlap); an estimated IMU clock offset
+// (imu_clock_offset_s, its standard error _std_s and the correlation at it), added to the IMU
+// times before the estimators see them.
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <numeric>
 #include <optional>
 
 #include "estimators/error.h"
+#include "scenarios/runner/common/clock_offset.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -62,12 +69,22 @@ class ReplayKind : public ScenarioKind {
     if (!(step_hz_ >= 0.0) || !std::isfinite(step_hz_)) {
       root.Child("step_hz").Fail("must be 0 (a step per joint row) or a rate > 0 in Hz");
     }
+    if (const auto c = root.Optional("imu_clock_offset")) {
+      if (c->AsString() != "estimate") c->Fail("expected 'estimate' (or leave it out)");
+      if (log_.imu.empty()) c->Fail("the log has no IMU readings");
+      estimate_offset_ = true;
+      offset_range_s_ = root.GetDouble("clock_offset_range_s", 0.5);
+      if (!(offset_range_s_ > 0.0 && offset_range_s_ <= 60.0)) {
+        root.Child("clock_offset_range_s").Fail("must be > 0 and at most 60 (seconds)");
+      }
+    }
     specs_ = ParseEstimators(root.Child("estimators"), EstimatorLabels::kAllowed);
     for (const EstimatorSpec& e : specs_) Make(e, 0);  // bad parameters fail before any work
   }
 
   void Run(RunContext& ctx) override {
     WriteStreamMetrics(ctx);
+    if (estimate_offset_) AlignImuClock(ctx);
     const std::vector<Step> steps = Steps();
     const std::vector<size_t> imu_order = ImuTimeOrder();
     TrajectoryRecorder recorder;
@@ -193,6 +210,25 @@ class ReplayKind : public ScenarioKind {
     m["streams_without_overlap"] = without_overlap;
   }
 
+  // Estimates the IMU clock offset and adds it to the IMU times.
+  void AlignImuClock(const RunContext& ctx) {
+    std::vector<kinematics::FrameId> frames;
+    for (const estimators::ImuSetup& s : setup_.imus) frames.push_back(s.frame);
+    const ClockOffset c =
+        EstimateImuClockOffset(log_, chain_->model, column_, frames, offset_range_s_);
+    for (estimators::ImuReading& z : log_.imu) z.t += c.offset_s;
+    Json& m = (*ctx.summary)["metrics"];
+    m["imu_clock_offset_s"] = c.offset_s;
+    if (std::isfinite(c.std_s)) m["imu_clock_offset_std_s"] = c.std_s;
+    m["imu_clock_offset_correlation"] = c.correlation;
+    char line[160];
+    std::snprintf(line, sizeof(line),
+                  "IMU clock offset estimated: %+.4f s +- %.4f s over %d stretches (correlation "
+                  "%.3f), added to the IMU times",
+                  c.offset_s, c.std_s, c.segments, c.correlation);
+    ctx.log(line);
+  }
+
   std::unique_ptr<estimators::Estimator> Make(const EstimatorSpec& e, std::uint64_t seed) const {
     estimators::EstimatorSetup s = setup_;
     s.params = e.params;
@@ -213,6 +249,8 @@ class ReplayKind : public ScenarioKind {
   std::vector<int> column_;
   estimators::EstimatorSetup setup_;
   double step_hz_ = 0.0;
+  bool estimate_offset_ = false;
+  double offset_range_s_ = 0.5;
   std::vector<EstimatorSpec> specs_;
 };
 
