@@ -7,6 +7,7 @@
 #include <numeric>
 #include <random>
 
+#include "estimators/error.h"
 #include "estimators/stats/chi_square.h"
 
 namespace flexbench::scenarios {
@@ -365,6 +366,20 @@ void ErrorStats::WriteMetrics(Json* metrics) const {
     (*metrics)["nees_position_bound_low"] = b.lower;
     (*metrics)["nees_position_bound_high"] = b.upper;
     (*metrics)["nees_position_consistent"] = mean >= b.lower && mean <= b.upper;
+  }
+}
+
+std::unique_ptr<estimators::Estimator> MakeEstimatorOf(const EstimatorSpec& e,
+                                                       estimators::EstimatorSetup setup,
+                                                       std::uint64_t seed) {
+  setup.params = e.params;
+  setup.seed = seed;
+  try {
+    return estimators::MakeEstimator(e.name, setup);
+  } catch (const InputError& err) {
+    const std::string what = err.what();
+    if (e.where.empty() || what.rfind(e.where, 0) == 0) throw;
+    throw InputError(e.where + ": " + what);
   }
 }
 

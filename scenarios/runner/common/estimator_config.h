@@ -40,6 +40,12 @@ enum class EstimatorLabels { kNone, kAllowed };
 std::vector<EstimatorSpec> ParseEstimators(const ConfigNode& node,
                                            EstimatorLabels labels = EstimatorLabels::kNone);
 
+// The estimator of entry `e` on `setup` with e's parameters and `seed`; an InputError about
+// its parameters names the entry's file, line and key.
+std::unique_ptr<estimators::Estimator> MakeEstimatorOf(const EstimatorSpec& e,
+                                                       estimators::EstimatorSetup setup,
+                                                       std::uint64_t seed);
+
 // One estimate's part in a mean NEES whose estimates share part of their error: e = G z + w,
 // z ~ N(0, I) the same at every step (a fitted model parameter's error through the model), w
 // independent, e ~ N(0, P). With W = P - G G^T and P^+ the pseudo-inverse on P's range:

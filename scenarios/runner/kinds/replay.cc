@@ -230,16 +230,7 @@ class ReplayKind : public ScenarioKind {
   }
 
   std::unique_ptr<estimators::Estimator> Make(const EstimatorSpec& e, std::uint64_t seed) const {
-    estimators::EstimatorSetup s = setup_;
-    s.params = e.params;
-    s.seed = seed;
-    try {
-      return estimators::MakeEstimator(e.name, s);
-    } catch (const InputError& err) {
-      const std::string what = err.what();
-      if (e.where.empty() || what.rfind(e.where, 0) == 0) throw;
-      throw InputError(e.where + ": " + what);
-    }
+    return MakeEstimatorOf(e, setup_, seed);
   }
 
   sim::RecordedLog log_;

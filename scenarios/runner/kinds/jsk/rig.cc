@@ -61,16 +61,7 @@ Eigen::VectorXd Rig::LinkAngles() const {
 
 std::unique_ptr<estimators::Estimator> MakeLabelled(const Rig& rig, const EstimatorSpec& e,
                                                     std::uint64_t seed) {
-  estimators::EstimatorSetup s = rig.setup;
-  s.params = e.params;
-  s.seed = seed;
-  try {
-    return estimators::MakeEstimator(e.name, s);
-  } catch (const InputError& err) {
-    const std::string what = err.what();
-    if (e.where.empty() || what.rfind(e.where, 0) == 0) throw;
-    throw InputError(e.where + ": " + what);
-  }
+  return MakeEstimatorOf(e, rig.setup, seed);
 }
 
 }  // namespace flexbench::scenarios::jsk
