@@ -17,6 +17,7 @@
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
+#include "sim/recorded_log.h"
 
 namespace fs = std::filesystem;
 
@@ -229,6 +230,38 @@ std::optional<std::string> Report(const std::uint8_t* data, std::size_t size) {
   return error;
 }
 
+std::optional<std::string> RecordedLog(const std::uint8_t* data, std::size_t size) {
+  const std::string text(reinterpret_cast<const char*>(data), size);
+  std::vector<std::string> parts(3);
+  size_t part = 0, begin = 0;
+  while (part < 3) {
+    const size_t cut = text.find("\n----\n", begin);
+    if (cut == std::string::npos || part == 2) {
+      parts[part] = text.substr(begin);
+      break;
+    }
+    parts[part++] = text.substr(begin, cut + 1 - begin);
+    begin = cut + 6;
+  }
+  const fs::path dir = Work("log");
+  fs::create_directories(dir);
+  const char* names[3] = {"joints.csv", "imu.csv", "truth.tum"};
+  for (int i = 0; i < 3; ++i) {
+    WriteFile(dir / names[i], reinterpret_cast<const std::uint8_t*>(parts[i].data()),
+              parts[i].size());
+  }
+  static const std::string yaml =
+      "declared: a.declared.yaml\njoints: {file: joints.csv, clock_offset_s: 0.1}\n"
+      "imu: {file: imu.csv, sensors: {imu2: {frame: f2}, imu3: {frame: f3, initial_wxyz: "
+      "[1, 0, 0, 0]}}}\ntruth: {file: truth.tum, frame: ee}\n";
+  WriteFile(dir / "log.yaml", reinterpret_cast<const std::uint8_t*>(yaml.data()), yaml.size());
+  return Guard([&] {
+    const sim::RecordedLog log = sim::ReadRecordedLog(dir.string());
+    lie::SE3 T;
+    for (double t : log.joint_t) sim::TruthAt(log, t, &T);
+  });
+}
+
 const std::vector<Target>& Targets() {
   static const std::vector<Target> targets = {
       {"scenario", Scenario},
@@ -240,6 +273,7 @@ const std::vector<Target>& Targets() {
       {"sweep", Sweep},
       {"set", SetOverride, "--set"},
       {"report", Report},
+      {"recorded_log", RecordedLog},
   };
   return targets;
 }

@@ -69,6 +69,11 @@ std::optional<std::string> SetOverride(const std::uint8_t* data, std::size_t siz
 // renders each (reading the JSON, writing report.html).
 std::optional<std::string> Report(const std::uint8_t* data, std::size_t size);
 
+// A recorded-log folder (<work>/log/) through ReadRecordedLog: the bytes split at lines "----"
+// are joints.csv, imu.csv and truth.tum (missing parts: empty files), beside a fixed log.yaml
+// naming them, two IMU sensors (imu2, imu3) and the truth.
+std::optional<std::string> RecordedLog(const std::uint8_t* data, std::size_t size);
+
 // Every target, in the order above.
 const std::vector<Target>& Targets();
 
