@@ -765,6 +765,31 @@ attack i21_scenario_name_escape 2 "1line err~plain.name" -- "$FB" run s.yaml
 # === Found by the fuzz targets (tests/fuzz/regressions/) ===================================
 
 # A number JSON cannot hold (nlohmann's out_of_range 406, not a parse_error).
+# Recorded logs (flexbench replay): a stream that is a device or a pipe, a log whose --out is
+# the log folder itself, an IMU header of another format.
+replay_log() {  # replay_log DIR: the example log with an absolute declared path
+  mkdir -p "$1"
+  cp "$SRC"/scenarios/logs/jsk_flexible_arm/{joints.csv,imu.csv,truth.tum} "$1"/
+  sed "s|^declared: .*|declared: $SRC/models/jsk_arm.declared.yaml|" \
+    "$SRC/scenarios/logs/jsk_flexible_arm/log.yaml" >"$1/log.yaml"
+}
+fresh replay_imu_is_dev_zero
+replay_log "$D/log"
+ln -sf /dev/zero "$D/log/imu.csv"
+attack replay_imu_is_dev_zero 2 "1line err~imu.csv fast:10" -- "$FB" replay log --out o
+fresh replay_joints_is_a_fifo
+replay_log "$D/log"
+rm "$D/log/joints.csv"
+mkfifo "$D/log/joints.csv"
+attack replay_joints_is_a_fifo 2 "1line err~joints.csv fast:10" -- "$FB" replay log --out o
+fresh replay_out_onto_the_log
+replay_log "$D/log"
+attack replay_out_onto_the_log 2 "1line kept:log/joints.csv kept:log/log.yaml" -- \
+  "$FB" replay log --out log --force
+fresh replay_imu_header_of_another_format
+replay_log "$D/log"
+sed -i '1s/.*/timestamp,wx,wy,wz,ax,ay,az/' "$D/log/imu.csv"
+attack replay_imu_header_of_another_format 2 "1line err~imu.csv:1" -- "$FB" replay log --out o
 fresh fuzz_report_number_overflow
 mkdir -p "$D/r"
 echo '{"scenario": "s", "metrics": {"x": 1e999}}' >"$D/r/summary.json"
