@@ -155,6 +155,21 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   }
   const fs::path out_dir =
       options.out_dir.empty() ? fs::path("out") / name : fs::path(options.out_dir);
+  if (!options.export_log.empty()) {
+    const auto normal = [](const fs::path& p) {  // absolute, no "." or "..", no trailing '/'
+      fs::path n = fs::absolute(p).lexically_normal();
+      return n.filename().empty() ? n.parent_path() : n;
+    };
+    const fs::path log = normal(options.export_log), out_abs = normal(out_dir);
+    const auto inside = [](const fs::path& a, const fs::path& b) {  // a at or under b
+      const auto m = std::mismatch(b.begin(), b.end(), a.begin(), a.end());
+      return m.first == b.end();
+    };
+    if (inside(log, out_abs) || inside(out_abs, log)) {
+      throw InputError("--export-log " + CapForMessage(options.export_log) +
+                       ": inside the output folder or holding it; name a folder of its own");
+    }
+  }
   OutputDir out(out_dir, options.force, inputs);
 
   Json summary;

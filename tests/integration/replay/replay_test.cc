@@ -164,6 +164,15 @@ TEST(Replay, AnExportedRunReplaysToTheSameBits) {
   EXPECT_NE(again.err.find("exists"), std::string::npos) << again.err;
   EXPECT_EQ(testing::ReadFile(tmp.path() / "log" / "joints.csv"), joints);
   EXPECT_FALSE(fs::exists(tmp.path() / "live2"));
+  // Nor may the log go inside the output folder (which a run replaces), or hold it.
+  for (const std::string& log :
+       {(tmp.path() / "o3" / "log").string(), tmp.path().string() + "/o4/"}) {
+    const std::string out = log.back() == '/' ? log + "out" : (tmp.path() / "o3").string();
+    const CommandResult inside = RunCommand(testing::Flexbench() + " run " + scenario + " --out " +
+                                            out + " --export-log " + log);
+    EXPECT_EQ(inside.exit_code, 2) << inside.err;
+    EXPECT_NE(inside.err.find("name a folder of its own"), std::string::npos) << inside.err;
+  }
 }
 
 // An IMU clock 37 ms ahead of the encoders' is found from the data (the gyros' angular speed
