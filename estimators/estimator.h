@@ -111,6 +111,10 @@ class Estimator {
   // How many priors or covariances this estimator has repaired (not positive semi-definite
   // beyond rounding) since it was made; scenarios report it next to the update counts.
   virtual int covariance_repairs() const { return 0; }
+  // Readings it accepted but refused later on its own (a particle filter's IMU orientation
+  // term, applied at the step's joint reading, that was not finite or not a unit quaternion)
+  // since it was made; scenarios count them with the readings Update refused.
+  virtual int deferred_rejections() const { return 0; }
 };
 
 struct EstimatorEntry {

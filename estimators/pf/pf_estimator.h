@@ -72,7 +72,7 @@ class PfEstimator : public Estimator {
   const pf::ParticleFilter& filter() const { return *filter_; }
   const pf::ParticleFilterConfig& config() const { return filter_->config(); }
   // IMU orientation terms the filter refused (non-finite or not unit) since it was made.
-  int imu_terms_rejected() const { return imu_terms_rejected_; }
+  int deferred_rejections() const override { return imu_terms_rejected_; }
 
  private:
   void ParameterCovariance(const Eigen::VectorXd& q);

@@ -126,7 +126,7 @@ class ReplayKind : public ScenarioKind {
       Json& m = all[specs_[e].label]["metrics"];
       if (stats.count() > 0) stats.WriteMetrics(&m);
       m["steps_scored"] = stats.count();
-      m["rejected_readings"] = rejected;
+      m["rejected_readings"] = rejected + est->deferred_rejections();
     }
     (*ctx.summary)["metrics"]["steps"] = static_cast<int>(steps.size());
     recorder.Write(*ctx.out, "base");  // the coordinates: the declared base frame

@@ -168,7 +168,7 @@ Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vecto
     r.Record(s.t, s.T_true);
     ctx.progress(spec.label, static_cast<int>(i + 1), static_cast<int>(snaps.size()));
   }
-  *rejected = r.rejected;
+  *rejected = r.rejected + r.est->deferred_rejections();
   return std::move(r.trace);
 }
 
