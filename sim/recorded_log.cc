@@ -47,6 +47,18 @@ StreamStats Stats(const std::string& file, double offset,
   return s;
 }
 
+// Times (s) and clock offsets beyond any recording (a Unix time is 1.7e9 s), so that sums and
+// differences of them stay finite.
+constexpr double kMaxLogTime = 1e12;
+
+double ClockOffset(const ConfigNode& node) {
+  const double offset = node.GetDouble("clock_offset_s", 0.0);
+  if (!(std::abs(offset) <= kMaxLogTime)) {
+    node.Child("clock_offset_s").Fail("must be a finite time in seconds, |offset| <= 1e12");
+  }
+  return offset;
+}
+
 // `v` in the fewest digits that read back as v.
 std::string Shortest(double v) {
   char b[40];
@@ -61,7 +73,7 @@ std::string Shortest(double v) {
 // may not be before `*last` (the sensor's previous row's cell), which it then becomes.
 double RowTime(const std::string& cell, const std::string& where, double offset, double* last,
                bool has_last) {
-  const double t = ParseCsvNumber(cell, where, "t_s");
+  const double t = ParseCsvNumber(cell, where, "t_s", kMaxLogTime);
   if (has_last && t < *last) {
     throw InputError(where + ": column 't_s': " + Shortest(t) + " is before the previous row's " +
                      Shortest(*last) + " (times may not go backwards)");
@@ -72,7 +84,7 @@ double RowTime(const std::string& cell, const std::string& where, double offset,
 
 void ReadJoints(const ConfigNode& node, RecordedLog* log) {
   const std::string file = node.ResolvePath(node.GetString("file"));
-  const double offset = node.GetDouble("clock_offset_s", 0.0);
+  const double offset = ClockOffset(node);
   CsvLines csv(file, kMaxLogStreamBytes);
   std::vector<std::string> header;
   if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
@@ -129,6 +141,10 @@ void ReadImuSensors(const ConfigNode& sensors, RecordedLog* log) {
       imu.has_initial = true;
       imu.q_base_frame_initial = Quat(w[0], w[1], w[2], w[3]);  // the filter normalises it
     }
+    imu.filter_beta = s.GetDouble("filter_beta", imu.filter_beta);
+    if (!(imu.filter_beta > 0.0 && imu.filter_beta < 1e3)) {
+      s.Child("filter_beta").Fail("must be > 0 (Madgwick's gain, rad/s)");
+    }
     log->imus.push_back(imu);
   }
   if (log->imus.empty()) sensors.Fail("names no sensor");
@@ -136,20 +152,23 @@ void ReadImuSensors(const ConfigNode& sensors, RecordedLog* log) {
 
 void ReadImu(const ConfigNode& node, RecordedLog* log) {
   const std::string file = node.ResolvePath(node.GetString("file"));
-  const double offset = node.GetDouble("clock_offset_s", 0.0);
+  const double offset = ClockOffset(node);
   ReadImuSensors(node.Child("sensors"), log);
   CsvLines csv(file, kMaxLogStreamBytes);
   std::vector<std::string> header;
   if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
   static const std::vector<std::string> kHeader = {"t_s",      "sensor",  "gx_rad_s", "gy_rad_s",
                                                    "gz_rad_s", "ax_m_s2", "ay_m_s2",  "az_m_s2"};
+  std::string want;
+  for (const std::string& h : kHeader) want += (want.empty() ? "" : ",") + h;
+  if (header.size() != kHeader.size()) {
+    throw InputError(csv.Where() + ": the header must be " + want + " (it has " +
+                     std::to_string(header.size()) + " columns)");
+  }
   for (size_t c = 0; c < kHeader.size(); ++c) {
-    const std::string got = c < header.size() ? header[c] : "";
-    if (got != kHeader[c] || header.size() != kHeader.size()) {
-      std::string want;
-      for (const std::string& h : kHeader) want += (want.empty() ? "" : ",") + h;
+    if (header[c] != kHeader[c]) {
       throw InputError(csv.Where() + ": the header must be " + want + " (column " +
-                       std::to_string(c + 1) + " is '" + CapForMessage(got) + "')");
+                       std::to_string(c + 1) + " is '" + CapForMessage(header[c]) + "')");
     }
   }
   std::vector<std::vector<double>> times(log->imus.size());
@@ -205,7 +224,7 @@ void ReadTruth(const ConfigNode& node, RecordedLog* log) {
                        " values, expected 8 (t x y z qx qy qz qw)");
     }
     double v[8];
-    for (int i = 0; i < 8; ++i) v[i] = ParseCsvNumber(cells[i], where, kNames[i], 1e6);
+    for (int i = 0; i < 8; ++i) v[i] = ParseCsvNumber(cells[i], where, kNames[i], kMaxLogTime);
     if (!log->truth_t.empty() && v[0] < log->truth_t.back()) {
       throw InputError(where +
                        ": column 't': the time is before the previous line's (times may "
@@ -256,7 +275,8 @@ std::string LogYaml(const RecordedLog& log) {
   if (!log.imus.empty()) {
     y << "imu:\n  file: imu.csv\n  sensors:\n";
     for (const LogImu& imu : log.imus) {
-      y << "    " << imu.name << ": {frame: " << imu.frame;
+      y << "    " << imu.name << ": {frame: " << imu.frame
+        << ", filter_beta: " << Num(imu.filter_beta);
       if (imu.has_initial) {
         const Quat& q = imu.q_base_frame_initial;
         y << ", initial_wxyz: [" << Num(q.w()) << ", " << Num(q.x()) << ", " << Num(q.y()) << ", "
@@ -279,10 +299,12 @@ void WriteRecordedLog(const RecordedLog& log, const std::string& dir,
                       const std::vector<std::pair<std::string, std::string>>& files) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  if (fs::exists(dir, ec)) {
+  fs::path target = fs::absolute(dir).lexically_normal();
+  if (target.filename().empty()) target = target.parent_path();
+  if (fs::exists(target, ec)) {
     throw InputError(CapForMessage(dir) + ": exists; a log is written into a new folder");
   }
-  const fs::path tmp = dir + ".tmp";
+  const fs::path tmp = target.string() + ".tmp";
   if (fs::exists(tmp, ec)) {
     throw InputError(CapForMessage(tmp.string()) +
                      ": exists (another log being written?); remove it or name another folder");
@@ -290,11 +312,12 @@ void WriteRecordedLog(const RecordedLog& log, const std::string& dir,
   fs::create_directories(tmp);
   try {
     WriteLogFiles(log, tmp, files);
-  } catch (...) {
+    fs::rename(tmp, target);
+  } catch (const std::exception& e) {
     fs::remove_all(tmp, ec);  // ours alone: it did not exist before
-    throw;
+    if (dynamic_cast<const InputError*>(&e)) throw;
+    throw InputError(CapForMessage(dir) + ": cannot write the log (" + e.what() + ")");
   }
-  fs::rename(tmp, dir);
 }
 
 namespace {

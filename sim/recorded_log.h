@@ -7,7 +7,8 @@
 //               declared: ../models/jsk_arm.declared.yaml   # relative to the folder
 //               joints: {file: joints.csv, clock_offset_s: 0}
 //               imu: {file: imu.csv, clock_offset_s: 0,     # optional
-//                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0]}}}
+//                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0],
+//                                      filter_beta: 0.05}}}   # Madgwick's gain, rad/s
 //               truth: {file: truth.tum, frame: grasp_point}  # optional
 //   joints.csv  t_s, then one column per joint: <joint>_rad (<joint>_m for a slide)
 //   imu.csv     t_s, sensor, gx_rad_s, gy_rad_s, gz_rad_s, ax_m_s2, ay_m_s2, az_m_s2 (sensor
@@ -24,6 +25,7 @@
 #include <vector>
 
 #include "estimators/conventions.h"
+#include "estimators/estimator.h"
 #include "estimators/lie/se3.h"
 #include "estimators/measurement.h"
 
@@ -45,7 +47,8 @@ struct LogImu {
   std::string name;   // imu.csv's `sensor`
   std::string frame;  // an observed frame of the declared model
   bool has_initial = false;
-  Quat q_base_frame_initial = Quat::Identity();  // at its first reading, when known
+  Quat q_base_frame_initial = Quat::Identity();             // at its first reading, when known
+  double filter_beta = estimators::ImuSetup{}.filter_beta;  // its Madgwick filter's gain
 };
 
 struct RecordedLog {
@@ -74,7 +77,8 @@ RecordedLog ReadRecordedLog(const std::string& dir);
 
 // Writes `log` into the folder `dir` (which must not exist yet: InputError naming it) in the
 // format ReadRecordedLog reads back into the same numbers (17 significant digits; clock offsets
-// 0, the times as they are): log.yaml with `declared:` as log.declared_path is written, then
+// 0, the times as they are; the truth's rotation goes through its quaternion, so to the last
+// digit): log.yaml with `declared:` as log.declared_path is written, then
 // joints.csv, imu.csv when it has IMUs, truth.tum when it has truth. `files`: further files to
 // write there first (name, text), e.g. the declared model. The folder appears whole or not at
 // all.

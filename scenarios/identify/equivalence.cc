@@ -87,6 +87,7 @@ Eigen::MatrixXd StackedColumns(const Problem& pr,
     }
     const Eigen::Index k = C.cols();
     const Eigen::Index m = at == 0 ? C.rows() : block.rows_dim();  // priors: once
+    if (R.cols() != k) R.resize(0, k);                             // the first block
     Eigen::MatrixXd M(R.rows() + m, k);
     M.topRows(R.rows()) = R;
     M.bottomRows(m) = C.topRows(m);

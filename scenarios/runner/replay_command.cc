@@ -14,12 +14,25 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A YAML scalar holding `text` exactly (a JSON string is one).
-std::string Quoted(const std::string& text) { return nlohmann::json(text).dump(); }
+// A YAML scalar holding `text` exactly (a JSON string is one); `what` names it when it is not
+// UTF-8 (YAML text must be).
+std::string Quoted(const std::string& text, const std::string& what) {
+  try {
+    return nlohmann::json(text).dump();
+  } catch (const nlohmann::json::exception&) {
+    throw InputError(what + ": the path is not UTF-8 text; rename it");
+  }
+}
+
+// `path` absolute, without "." or ".." and without a trailing '/'.
+fs::path Normal(const std::string& path) {
+  const fs::path n = fs::absolute(path).lexically_normal();
+  return n.filename().empty() ? n.parent_path() : n;
+}
 
 std::string ReplayScenario(const ReplayCliOptions& o) {
   if (o.log.empty()) throw InputError("LOG: name the log folder");
-  const fs::path log = fs::absolute(o.log).lexically_normal();
+  const fs::path log = Normal(o.log);
   std::error_code ec;
   if (!fs::is_directory(log, ec)) {
     throw InputError(CapForMessage(o.log) + ": not a folder (a recorded log holds log.yaml)");
@@ -27,9 +40,10 @@ std::string ReplayScenario(const ReplayCliOptions& o) {
   if (!(o.step_hz >= 0.0) || !std::isfinite(o.step_hz)) {
     throw InputError("--step-hz: must be 0 (a step per joint row) or a rate > 0 in Hz");
   }
-  std::string yaml = "scenario: replay\nkind: replay\nseed: 0\nlog: " + Quoted(log.string()) + "\n";
+  std::string yaml =
+      "scenario: replay\nkind: replay\nseed: 0\nlog: " + Quoted(log.string(), "LOG") + "\n";
   if (!o.declared.empty()) {
-    yaml += "declared: " + Quoted(fs::absolute(o.declared).lexically_normal().string()) + "\n";
+    yaml += "declared: " + Quoted(Normal(o.declared).string(), "--declared") + "\n";
   }
   char hz[40];
   std::snprintf(hz, sizeof(hz), "%.17g", o.step_hz);
@@ -59,9 +73,7 @@ int ReplayCommand(const ReplayCliOptions& o) {
     for (const std::string& s : o.set) overrides.push_back(ParseOverride(s));
     const ConfigNode root = ConfigNode::LoadString(yaml, "replay command line", overrides);
     RunOptions run;
-    run.out_dir = o.out_dir.empty()
-                      ? "out/replay/" + fs::absolute(o.log).lexically_normal().filename().string()
-                      : o.out_dir;
+    run.out_dir = o.out_dir.empty() ? "out/replay/" + Normal(o.log).filename().string() : o.out_dir;
     run.check_gates = o.check_gates;
     run.force = o.force;
     run.set = o.set;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
@@ -38,10 +39,12 @@ double Correlation(const std::vector<Speeds>& pred, const std::vector<Gyro>& gyr
                    double t0, double t1) {
   double n = 0, sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0;
   for (size_t k = 0; k < pred.size(); ++k) {
-    for (size_t i = 0; i < pred[k].t.size(); ++i) {
-      const double tm = pred[k].t[i];
+    const std::vector<double>& ts = pred[k].t;
+    const size_t end = std::lower_bound(ts.begin(), ts.end(), t1) - ts.begin();
+    for (size_t i = std::lower_bound(ts.begin(), ts.end(), t0) - ts.begin(); i < end; ++i) {
+      const double tm = ts[i];
       double y = 0.0;
-      if (tm < t0 || tm >= t1 || !gyro[k].At(tm + lag, &y)) continue;
+      if (!gyro[k].At(tm + lag, &y)) continue;
       const double x = pred[k].speed[i];
       n += 1;
       sx += x, sy += y, sxx += x * x, syy += y * y, sxy += x * y;
@@ -54,8 +57,10 @@ double Correlation(const std::vector<Speeds>& pred, const std::vector<Gyro>& gyr
 }
 
 // The lag of the largest correlation on `lags`, refined by a parabola; NaN without one.
+// `*at_edge` (optional): whether the largest is at the first or the last lag.
 double PeakLag(const std::vector<Speeds>& pred, const std::vector<Gyro>& gyro,
-               const std::vector<double>& lags, double t0, double t1, double* peak) {
+               const std::vector<double>& lags, double t0, double t1, double* peak,
+               bool* at_edge = nullptr) {
   std::vector<double> c(lags.size());
   size_t best = lags.size();
   for (size_t i = 0; i < lags.size(); ++i) {
@@ -64,6 +69,7 @@ double PeakLag(const std::vector<Speeds>& pred, const std::vector<Gyro>& gyro,
   }
   if (best == lags.size()) return std::nan("");
   *peak = c[best];
+  if (at_edge) *at_edge = best == 0 || best + 1 == lags.size();
   if (best == 0 || best + 1 == lags.size() || !std::isfinite(c[best - 1]) ||
       !std::isfinite(c[best + 1])) {
     return lags[best];
@@ -109,21 +115,32 @@ ClockOffset EstimateImuClockOffset(const sim::RecordedLog& log, const kinematics
   for (double lag = -max_offset_s; lag <= max_offset_s + 1e-12; lag += step) lags.push_back(lag);
   ClockOffset out;
   const double t0 = log.joint_t.front(), t1 = log.joint_t.back() + 1.0;
-  const double lag = PeakLag(pred, gyro, lags, t0, t1, &out.correlation);
+  bool at_edge = false;
+  const double lag = PeakLag(pred, gyro, lags, t0, t1, &out.correlation, &at_edge);
   if (!std::isfinite(lag) || !(out.correlation > 0.5)) {
     throw InputError(log.dir +
                      ": the joints and the IMUs move too little together to estimate "
                      "a clock offset (give clock_offset_s in log.yaml)");
   }
-  out.offset_s = lag;
-  // The spread of the estimate over eight stretches of the log.
+  if (at_edge) {
+    char range[32];
+    std::snprintf(range, sizeof(range), "%g", max_offset_s);
+    throw InputError(log.dir + ": the IMU clock offset lies at the edge of the searched +-" +
+                     range + " s or beyond (widen clock_offset_range_s, or give clock_offset_s)");
+  }
+  // The spread of the estimate over eight stretches of the log, each searched within 20 grid
+  // steps of the whole log's peak.
+  std::vector<double> near;
+  for (double l : lags) {
+    if (std::abs(l - lag) <= 20.0 * step) near.push_back(l);
+  }
   std::vector<double> parts;
   const int kSegments = 8;
   for (int s = 0; s < kSegments; ++s) {
     const double a = t0 + (t1 - 1.0 - t0) * s / kSegments;
     const double b = t0 + (t1 - 1.0 - t0) * (s + 1) / kSegments;
     double peak = 0.0;
-    const double l = PeakLag(pred, gyro, lags, a, b, &peak);
+    const double l = PeakLag(pred, gyro, near, a, b, &peak);
     if (std::isfinite(l) && peak > 0.5) parts.push_back(l);
   }
   out.segments = static_cast<int>(parts.size());

@@ -55,7 +55,12 @@ class ReplayKind : public ScenarioKind {
     setup_.end_effector = chain_->end_effector;
     for (const sim::LogImu& imu : log_.imus) {
       estimators::ImuSetup s;
-      s.frame = chain_->ObservedFrame(imu.frame);
+      try {
+        s.frame = chain_->ObservedFrame(imu.frame);
+      } catch (const InputError& e) {
+        throw InputError(log_yaml + ": imu.sensors." + imu.name + ".frame: " + e.what());
+      }
+      s.filter_beta = imu.filter_beta;
       s.has_initial = imu.has_initial;
       s.q_base_frame_initial = imu.q_base_frame_initial;
       setup_.imus.push_back(s);
@@ -147,7 +152,17 @@ class ReplayKind : public ScenarioKind {
         throw InputError(where + ": no column for declared joint '" + j + "' (" + j +
                          "_rad, or _m for a slide)");
       }
-      column_.push_back(static_cast<int>(it - log_.joints.begin()));
+      const int c = static_cast<int>(it - log_.joints.begin());
+      const kinematics::PpoeModel& model = chain_->model;
+      const int k = static_cast<int>(column_.size());
+      const bool slide =
+          model.frame(model.joint_frame(k)).joint.type == kinematics::JointType::kPrismatic;
+      if (slide != static_cast<bool>(log_.joint_is_slide[c])) {
+        throw InputError(where + ": column '" + j + (log_.joint_is_slide[c] ? "_m" : "_rad") +
+                         "': " + declared_.file + " declares '" + j + "' " +
+                         (slide ? "a slide (" + j + "_m)" : "revolute (" + j + "_rad)"));
+      }
+      column_.push_back(c);
     }
     for (const std::string& c : log_.joints) {
       if (std::find(chain_->q_joints.begin(), chain_->q_joints.end(), c) ==
@@ -165,14 +180,17 @@ class ReplayKind : public ScenarioKind {
       for (size_t r = 0; r < t.size(); ++r) steps.push_back({t[r], r});
       return steps;
     }
-    // Each tick takes the latest row at or before it (1 ns of slack for times written in
-    // decimals), at that row's time; a row no tick reaches again is not stepped twice.
-    size_t row = 0;
-    for (long k = 0;; ++k) {
-      const double tk = t.front() + static_cast<double>(k) / step_hz_;
-      if (tk > t.back() + 1e-9) break;
-      while (row + 1 < t.size() && t[row + 1] <= tk + 1e-9) ++row;
-      if (steps.empty() || steps.back().row != row) steps.push_back({t[row], row});
+    // Each tick k (at t.front() + k / step_hz) takes the latest row at or before it, at that
+    // row's time: row r is stepped when a tick falls in [t_r, t_r+1), or at t_r for the last
+    // row. In ticks, with a thousandth of a tick of slack for times written in decimals.
+    const auto first_tick_at_or_after = [&](double time) {
+      return std::ceil((time - t.front()) * step_hz_ - 1e-3);
+    };
+    for (size_t r = 0; r < t.size(); ++r) {
+      const double k = first_tick_at_or_after(t[r]);
+      const bool served = r + 1 < t.size() ? k < first_tick_at_or_after(t[r + 1])
+                                           : k <= (t[r] - t.front()) * step_hz_ + 1e-3;
+      if (served) steps.push_back({t[r], r});
     }
     return steps;
   }

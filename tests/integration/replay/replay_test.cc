@@ -77,6 +77,10 @@ TEST(Replay, ABadLogIsOneLineAndExitTwo) {
        "joints.csv:1: no column for declared joint 'link2_pitch_joint'"},
       {"log.yaml", "frame: imu_link3", "frame: nowhere", "nowhere"},
       {"log.yaml", "frame: grasp_point", "frame: imu_link2", "truth.frame 'imu_link2'"},
+      {"joints.csv", "gripper_joint_rad", "gripper_joint_m",
+       "column 'gripper_joint_m': " + testing::SourceDir() +
+           "/models/jsk_arm.declared.yaml declares 'gripper_joint' revolute"},
+      {"log.yaml", "frame: imu_link3", "frame: nowhere", "log.yaml: imu.sensors.imu3.frame"},
       {"imu.csv", "0.01,imu3", "0.01,imu7", "imu.csv:5: column 'sensor': 'imu7'"},
   };
   for (const auto& c : cases) {
@@ -124,14 +128,15 @@ TEST(Replay, TheCommandRunsALogAndNeverReplacesIt) {
 }
 
 // A simulated run written as a log (--export-log) and replayed gives every estimator's
-// trajectory and covariances bit for bit: the raw IMU readings, the encoder rows, the steps and
-// the IMUs' initial orientations all cross the files exactly.
+// trajectory and covariances bit for bit: the raw IMU readings, the encoder rows, the steps, the
+// IMUs' initial orientations and their filters' gain (not the default here) all cross the files
+// exactly.
 TEST(Replay, AnExportedRunReplaysToTheSameBits) {
   testing::TempDir tmp;
   const std::string scenario = testing::SourceDir() + "/scenarios/jsk_flexible_arm.yaml";
-  const CommandResult live = RunCommand(testing::Flexbench() + " run " + scenario + " --out " +
-                                        (tmp.path() / "live").string() + " --export-log " +
-                                        (tmp.path() / "log").string() + " --quiet");
+  const CommandResult live = RunCommand(
+      testing::Flexbench() + " run " + scenario + " --out " + (tmp.path() / "live").string() +
+      " --export-log " + (tmp.path() / "log").string() + " --quiet --set madgwick.beta=0.2");
   ASSERT_EQ(live.exit_code, 0) << live.err;
   testing::WriteFile(tmp.path() / "replay.yaml",
                      "scenario: replayed\nkind: replay\nseed: 3\nlog: log\nestimators:\n"
@@ -208,6 +213,15 @@ TEST(Replay, AnImuClockOffsetIsEstimatedFromTheData) {
     EXPECT_LT(std::abs(est + offset), 3.0 * sd + 5e-4);
     EXPECT_LT(err(aligned), 0.003);
     if (offset > 0.0) EXPECT_LT(err(aligned), err(raw));
+    // An offset beyond the range searched is said, never cut to the range's edge.
+    if (offset > 0.0) {
+      const CommandResult narrow =
+          RunCommand(fb + " --estimate-imu-clock-offset --set clock_offset_range_s=0.02 --out " +
+                     (tmp.path() / "narrow").string());
+      EXPECT_EQ(narrow.exit_code, 2);
+      EXPECT_NE(narrow.err.find("at the edge of the searched +-0.02 s"), std::string::npos)
+          << narrow.err;
+    }
   }
 }
 

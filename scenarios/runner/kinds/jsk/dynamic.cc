@@ -140,6 +140,7 @@ void ExportLog(const Rig& rig, const std::vector<Snapshot>& snaps, const std::st
     imu.name = imu.frame = rig.imu_sites[k];
     imu.has_initial = rig.setup.imus[k].has_initial;
     imu.q_base_frame_initial = rig.setup.imus[k].q_base_frame_initial;
+    imu.filter_beta = rig.setup.imus[k].filter_beta;
     log.imus.push_back(imu);
   }
   log.truth_frame = rig.declared.end_effector;
