@@ -790,6 +790,11 @@ fresh replay_imu_header_of_another_format
 replay_log "$D/log"
 sed -i '1s/.*/timestamp,wx,wy,wz,ax,ay,az/' "$D/log/imu.csv"
 attack replay_imu_header_of_another_format 2 "1line err~imu.csv:1" -- "$FB" replay log --out o
+fresh replay_joints_of_100M_short_rows
+replay_log "$D/log"
+{ echo t_s,link1_yaw_joint_rad; yes 0,0 | head -n 100000000; } >"$D/log/joints.csv"
+attack replay_joints_of_100M_short_rows 2 "1line err~joints.csv.*would.need fast:30" -- \
+  "$FB" replay log --out o
 fresh fuzz_report_number_overflow
 mkdir -p "$D/r"
 echo '{"scenario": "s", "metrics": {"x": 1e999}}' >"$D/r/summary.json"

@@ -19,13 +19,14 @@ namespace {
 // Rows, duplicates, gaps and the median step of a stream whose rows of each sensor are `t`
 // (already checked not to go backwards).
 StreamStats Stats(const std::string& file, double offset,
-                  const std::vector<std::vector<double>>& t) {
+                  const std::vector<const std::vector<double>*>& t) {
   StreamStats s;
   s.file = file;
   s.clock_offset_s = offset;
   std::vector<double> steps;
   bool any = false;
-  for (const std::vector<double>& ts : t) {
+  for (const std::vector<double>* sensor : t) {
+    const std::vector<double>& ts = *sensor;
     s.rows += static_cast<int>(ts.size());
     if (ts.empty()) continue;
     s.t_first = any ? std::min(s.t_first, ts.front()) : ts.front();
@@ -40,9 +41,8 @@ StreamStats Stats(const std::string& file, double offset,
     }
   }
   if (steps.empty()) return s;
-  std::vector<double> sorted = steps;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  s.median_dt_s = sorted[sorted.size() / 2];
+  std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+  s.median_dt_s = steps[steps.size() / 2];
   for (double d : steps) s.gaps += d > 2.0 * s.median_dt_s;
   return s;
 }
@@ -57,6 +57,25 @@ double ClockOffset(const ConfigNode& node) {
     node.Child("clock_offset_s").Fail("must be a finite time in seconds, |offset| <= 1e12");
   }
   return offset;
+}
+
+// The most memory a log's rows may take (the streams together), checked from their line counts
+// before a row is read: the byte cap alone lets a file of short rows take gigabytes.
+constexpr double kMaxLogMemoryBytes = 2e9;
+
+// Lines of `file` (at most its rows plus a header), refused when they would take, with the
+// streams read before (`*used` bytes), more than kMaxLogMemoryBytes; `*used` grows by theirs.
+std::uintmax_t CheckRows(const std::string& file, double bytes_per_row, double* used) {
+  const std::uintmax_t lines = CountLines(file);
+  *used += static_cast<double>(lines) * bytes_per_row;
+  if (*used > kMaxLogMemoryBytes) {
+    char gb[64];
+    std::snprintf(gb, sizeof(gb), "%.1f GB; the limit is %.1f GB", *used / 1e9,
+                  kMaxLogMemoryBytes / 1e9);
+    throw InputError(CapForMessage(file) + ": " + std::to_string(lines) +
+                     " rows; the log would need about " + gb + " (split it or thin it)");
+  }
+  return lines;
 }
 
 // `v` in the fewest digits that read back as v.
@@ -82,7 +101,7 @@ double RowTime(const std::string& cell, const std::string& where, double offset,
   return t + offset;
 }
 
-void ReadJoints(const ConfigNode& node, RecordedLog* log) {
+void ReadJoints(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string file = node.ResolvePath(node.GetString("file"));
   const double offset = ClockOffset(node);
   CsvLines csv(file, kMaxLogStreamBytes);
@@ -108,6 +127,10 @@ void ReadJoints(const ConfigNode& node, RecordedLog* log) {
     log->joint_is_slide.push_back(!rad);
   }
   if (log->joints.empty()) throw InputError(hdr + ": no joint column after 't_s'");
+  // A row: its time, its angles, and its step in the statistics.
+  const std::uintmax_t lines = CheckRows(file, 8.0 * (2 + log->joints.size()), used);
+  log->joint_t.reserve(lines);
+  log->joint_q.reserve(lines * log->joints.size());
   std::vector<std::string> cells;
   double last = 0.0;
   while (csv.Next(&cells)) {
@@ -122,7 +145,7 @@ void ReadJoints(const ConfigNode& node, RecordedLog* log) {
     }
   }
   if (log->joint_t.empty()) throw InputError(CapForMessage(file) + ": no data rows");
-  log->joint_stats = Stats(file, offset, {log->joint_t});
+  log->joint_stats = Stats(file, offset, {&log->joint_t});
 }
 
 void ReadImuSensors(const ConfigNode& sensors, RecordedLog* log) {
@@ -150,7 +173,7 @@ void ReadImuSensors(const ConfigNode& sensors, RecordedLog* log) {
   if (log->imus.empty()) sensors.Fail("names no sensor");
 }
 
-void ReadImu(const ConfigNode& node, RecordedLog* log) {
+void ReadImu(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string file = node.ResolvePath(node.GetString("file"));
   const double offset = ClockOffset(node);
   ReadImuSensors(node.Child("sensors"), log);
@@ -171,6 +194,8 @@ void ReadImu(const ConfigNode& node, RecordedLog* log) {
                        std::to_string(c + 1) + " is '" + CapForMessage(header[c]) + "')");
     }
   }
+  // A row: the reading, its time among its sensor's, its step in the statistics.
+  log->imu.reserve(CheckRows(file, sizeof(estimators::ImuReading) + 16.0, used));
   std::vector<std::vector<double>> times(log->imus.size());
   std::vector<double> last(log->imus.size(), 0.0);
   std::vector<std::string> cells;
@@ -201,13 +226,18 @@ void ReadImu(const ConfigNode& node, RecordedLog* log) {
     ts.push_back(z.t);
     log->imu.push_back(z);
   }
-  log->imu_stats = Stats(file, offset, times);
+  std::vector<const std::vector<double>*> sensors;
+  for (const std::vector<double>& ts : times) sensors.push_back(&ts);
+  log->imu_stats = Stats(file, offset, sensors);
 }
 
-void ReadTruth(const ConfigNode& node, RecordedLog* log) {
+void ReadTruth(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string file = node.ResolvePath(node.GetString("file"));
   log->truth_frame = node.GetString("frame");
   CheckInputFile(file, kMaxLogStreamBytes);
+  const std::uintmax_t lines = CheckRows(file, sizeof(lie::SE3) + 16.0, used);
+  log->truth_t.reserve(lines);
+  log->truth.reserve(lines);
   std::ifstream in(file, std::ios::binary);
   if (!in) throw InputError(CapForMessage(file) + ": cannot open");
   static const char* kNames[8] = {"t", "x", "y", "z", "qx", "qy", "qz", "qw"};
@@ -235,7 +265,7 @@ void ReadTruth(const ConfigNode& node, RecordedLog* log) {
     log->truth_t.push_back(v[0]);
     log->truth.emplace_back(q.normalized().toRotationMatrix(), Vec3(v[1], v[2], v[3]));
   }
-  log->truth_stats = Stats(file, 0.0, {log->truth_t});
+  log->truth_stats = Stats(file, 0.0, {&log->truth_t});
 }
 
 }  // namespace
@@ -246,9 +276,10 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   const ConfigNode root = ConfigNode::LoadFile(dir + "/log.yaml");
   log.robot = root.GetString("robot", "");
   log.declared_path = root.ResolvePath(root.GetString("declared"));
-  ReadJoints(root.Child("joints"), &log);
-  if (const auto imu = root.Optional("imu")) ReadImu(*imu, &log);
-  if (const auto truth = root.Optional("truth")) ReadTruth(*truth, &log);
+  double used = 0.0;  // bytes the streams' rows take
+  ReadJoints(root.Child("joints"), &log, &used);
+  if (const auto imu = root.Optional("imu")) ReadImu(*imu, &log, &used);
+  if (const auto truth = root.Optional("truth")) ReadTruth(*truth, &log, &used);
   root.CheckNoUnknownKeys();
   return log;
 }
