@@ -120,9 +120,11 @@ PfEstimator::PfEstimator(const EstimatorSetup& setup, const Variant& variant)
   filter_ = std::make_unique<pf::ParticleFilter>(kin_->model(), config, setup.seed);
   if (!config.orientation_frames.empty()) {
     imu_ = std::make_unique<imu::ImuOrientations>(setup.imus);
-    for (const ImuSetup& s : setup.imus) {
-      imu_used_.push_back(std::count(config.orientation_frames.begin(),
-                                     config.orientation_frames.end(), s.frame) > 0);
+    // The IMUs whose orientations enter, by index (two IMUs may share a frame): the `imus`
+    // parameter's (MakePfConfig checked them), else every one.
+    imu_used_.assign(setup.imus.size(), setup.params.Has("imus") ? 0 : 1);
+    if (setup.params.Has("imus")) {
+      for (double k : setup.params.List("imus", 0)) imu_used_[static_cast<size_t>(k)] = 1;
     }
   }
   if (setup.effects != nullptr && !setup.effects->uncertainty.empty() && setup.end_effector >= 0) {

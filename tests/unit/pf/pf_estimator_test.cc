@@ -217,6 +217,21 @@ TEST(PfEstimator, RawImuReadingsGiveTheBitsOfTheirFiltersOrientations) {
   }
 }
 
+// The IMUs that enter are chosen by index: of two IMUs on one frame, `imus: [0]` takes the
+// first one's readings and ignores the second's.
+TEST(PfEstimator, ImusEnterByIndexNotByFrame) {
+  Rig rig;
+  EstimatorSetup setup = rig.Setup({{"particles", {64}}, {"imus", {0}}});
+  setup.imus = {ImuSetup{rig.arm.imu2}, ImuSetup{rig.arm.imu2}};
+  auto est = MakeEstimator("pf_encoders_imu", setup);
+  ImuReading z;
+  z.accel = Vec3(0.0, 0.0, 9.81);
+  z.imu = 0;
+  EXPECT_EQ(est->Update(z), UpdateStatus::kAccepted);
+  z.imu = 1;
+  EXPECT_EQ(est->Update(z), UpdateStatus::kIgnored);
+}
+
 // On an augmented model whose identified offset of joint 1 has a standard deviation, the belief's
 // covariance is the particles' plus that offset's through the kinematics. The particles are the
 // same bits with and without the std (it changes no kinematics), so the difference is the
