@@ -1,6 +1,5 @@
 #include "estimators/pf/pf_estimator.h"
 
-#include <algorithm>
 #include <cmath>
 #include <sstream>
 
