@@ -273,23 +273,20 @@ void BM_IdentifyPointCsv(benchmark::State& state) { IdentifyPointCsv(state, fals
 // The same rows with joint-origin errors planted too (the memory of a fit with many unknowns).
 void BM_IdentifyPointCsvGeometry(benchmark::State& state) { IdentifyPointCsv(state, true); }
 // Args: rows, threads of the row passes (1; 0: one per core). Wall time (what a user waits)
-// and the whole process's CPU time (all threads).
+// and the whole process's CPU time (all threads), one run each.
+void PointCsvRuns(benchmark::internal::Benchmark* b) {
+  b->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime()->MeasureProcessCPUTime();
+}
 BENCHMARK(BM_IdentifyPointCsv)
     ->ArgsProduct({{1000, 4000, 10000}, {1, 0}})
     ->Args({100000, 0})
     ->Args({1000000, 0})
-    ->Unit(benchmark::kMillisecond)
-    ->Iterations(1)
-    ->UseRealTime()
-    ->MeasureProcessCPUTime();
+    ->Apply(PointCsvRuns);
 BENCHMARK(BM_IdentifyPointCsvGeometry)
     ->Args({10000, 0})
     ->Args({100000, 0})
     ->Args({1000000, 0})
-    ->Unit(benchmark::kMillisecond)
-    ->Iterations(1)
-    ->UseRealTime()
-    ->MeasureProcessCPUTime();
+    ->Apply(PointCsvRuns);
 
 // The closed loop at real-robot scale: humanoid_upper (19 actuated joints), a tracker of
 // unknown pose sees a marker on each hand (unknown offsets on their links) over 300 random
