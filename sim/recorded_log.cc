@@ -413,4 +413,47 @@ bool TruthAt(const RecordedLog& log, double t, lie::SE3* T) {
   return true;
 }
 
+std::vector<int> JointColumns(const RecordedLog& log, const std::vector<std::string>& q_joints,
+                              const std::vector<char>& slide, const std::string& declared_file) {
+  const std::string where = log.joint_stats.file + ":1";
+  std::vector<int> column;
+  for (size_t k = 0; k < q_joints.size(); ++k) {
+    const std::string& j = q_joints[k];
+    const auto it = std::find(log.joints.begin(), log.joints.end(), j);
+    if (it == log.joints.end()) {
+      throw InputError(where + ": no column for declared joint '" + j + "' (" + j +
+                       "_rad, or _m for a slide)");
+    }
+    const int c = static_cast<int>(it - log.joints.begin());
+    if (static_cast<bool>(slide[k]) != static_cast<bool>(log.joint_is_slide[c])) {
+      throw InputError(where + ": column '" + j + (log.joint_is_slide[c] ? "_m" : "_rad") +
+                       "': " + declared_file + " declares '" + j + "' " +
+                       (slide[k] ? "a slide (" + j + "_m)" : "revolute (" + j + "_rad)"));
+    }
+    column.push_back(c);
+  }
+  for (const std::string& c : log.joints) {
+    if (std::find(q_joints.begin(), q_joints.end(), c) == q_joints.end()) {
+      throw InputError(where + ": column '" + c + "': " + declared_file +
+                       " declares no joint of that name");
+    }
+  }
+  return column;
+}
+
+bool JointsAt(const RecordedLog& log, const std::vector<int>& column, double t,
+              Eigen::VectorXd* q) {
+  const std::vector<double>& ts = log.joint_t;
+  if (ts.empty() || t < ts.front() || t > ts.back()) return false;
+  const size_t i = std::upper_bound(ts.begin(), ts.end(), t) - ts.begin();
+  q->resize(static_cast<int>(column.size()));
+  const size_t a = i - 1, b = std::min(i, ts.size() - 1);
+  const double span = ts[b] - ts[a];
+  const double s = span > 0.0 ? (t - ts[a]) / span : 0.0;
+  for (size_t k = 0; k < column.size(); ++k) {
+    (*q)[static_cast<int>(k)] = (1.0 - s) * log.q(a)[column[k]] + s * log.q(b)[column[k]];
+  }
+  return true;
+}
+
 }  // namespace flexbench::sim

@@ -20,6 +20,7 @@
 // the median step as gaps. Bad input is one InputError naming the file, the line and the column.
 #pragma once
 
+#include <Eigen/Core>
 #include <string>
 #include <utility>
 #include <vector>
@@ -84,6 +85,16 @@ RecordedLog ReadRecordedLog(const std::string& dir);
 // all.
 void WriteRecordedLog(const RecordedLog& log, const std::string& dir,
                       const std::vector<std::pair<std::string, std::string>>& files = {});
+
+// The joints.csv column of each declared joint variable (`q_joints`; `slide[k]`: joint k is a
+// slide, read in metres); every column must be one of them. InputError naming joints.csv's
+// header, the column and `declared_file` otherwise.
+std::vector<int> JointColumns(const RecordedLog& log, const std::vector<std::string>& q_joints,
+                              const std::vector<char>& slide, const std::string& declared_file);
+
+// The joint readings at time t in declared order (`column`: JointColumns), linear between the
+// rows around it (a duplicated time: its last row). False (q untouched) outside the joints' span.
+bool JointsAt(const RecordedLog& log, const std::vector<int>& column, double t, Eigen::VectorXd* q);
 
 // The truth pose at time t: linear in position, slerp in rotation between the rows around it.
 // False (T untouched) outside the truth's span or without truth.

@@ -23,12 +23,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <numeric>
 #include <optional>
 
 #include "estimators/error.h"
 #include "scenarios/runner/common/clock_offset.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_replay.h"
 #include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
@@ -38,6 +38,8 @@
 
 namespace flexbench::scenarios {
 namespace {
+
+using estimators::Belief;
 
 class ReplayKind : public ScenarioKind {
  public:
@@ -90,118 +92,47 @@ class ReplayKind : public ScenarioKind {
   void Run(RunContext& ctx) override {
     WriteStreamMetrics(ctx);
     if (estimate_offset_) AlignImuClock(ctx);
-    const std::vector<Step> steps = Steps();
-    const std::vector<size_t> imu_order = ImuTimeOrder();
+    const std::vector<LogStep> steps = LogSteps(log_, step_hz_);
+    const std::vector<size_t> imu_order = ImuTimeOrder(log_);
     TrajectoryRecorder recorder;
     Json& all = (*ctx.summary)["estimators"];
     for (size_t e = 0; e < specs_.size(); ++e) {
       const bool first = e == 0;
+      const std::string& label = specs_[e].label;
       ErrorStats stats;
-      int rejected = 0;
-      const auto count = [&](estimators::UpdateStatus s) {
-        rejected +=
-            s != estimators::UpdateStatus::kAccepted && s != estimators::UpdateStatus::kIgnored;
-      };
       const std::unique_ptr<estimators::Estimator> est = Make(specs_[e], ctx.seed);
-      estimators::JointReading j;
-      j.q.resize(chain_->model.nq());
-      j.std = estimators::JointVector::Zero(chain_->model.nq());
-      size_t next_imu = 0;
-      for (size_t s = 0; s < steps.size(); ++s) {
-        const Step& step = steps[s];
-        for (; next_imu < imu_order.size() && log_.imu[imu_order[next_imu]].t <= step.t;
-             ++next_imu) {
-          count(est->Update(log_.imu[imu_order[next_imu]]));
-        }
-        est->Predict(step.t);
-        j.t = step.t;
-        for (int k = 0; k < j.q.size(); ++k) j.q[k] = log_.q(step.row)[column_[k]];
-        count(est->Update(j));
-        const estimators::Belief b = est->Estimate();
-        lie::SE3 T_true;
-        if (sim::TruthAt(log_, step.t, &T_true)) {
-          stats.Add(b.T_base_ee, b.cov, T_true);
-          if (first) recorder.AddTruth(step.t, T_true);
-        }
-        recorder.Add(specs_[e].label, step.t, b.T_base_ee, b.cov);
-        if (s % 256 == 0 || s + 1 == steps.size()) {
-          ctx.progress(specs_[e].label, static_cast<int>(s + 1), static_cast<int>(steps.size()));
-        }
-      }
-      Json& m = all[specs_[e].label]["metrics"];
+      const int rejected =
+          ReplayLog(log_, column_, steps, imu_order, *est, [&](size_t s, const Belief& b) {
+            const double t = steps[s].t;
+            lie::SE3 T_true;
+            if (sim::TruthAt(log_, t, &T_true)) {
+              stats.Add(b.T_base_ee, b.cov, T_true);
+              if (first) recorder.AddTruth(t, T_true);
+            }
+            recorder.Add(label, t, b.T_base_ee, b.cov);
+            if (s % 256 == 0 || s + 1 == steps.size()) {
+              ctx.progress(label, static_cast<int>(s + 1), static_cast<int>(steps.size()));
+            }
+          });
+      Json& m = all[label]["metrics"];
       if (stats.count() > 0) stats.WriteMetrics(&m);
       m["steps_scored"] = stats.count();
-      m["rejected_readings"] = rejected + est->deferred_rejections();
+      m["rejected_readings"] = rejected;
     }
     (*ctx.summary)["metrics"]["steps"] = static_cast<int>(steps.size());
     recorder.Write(*ctx.out, "base");  // the coordinates: the declared base frame
   }
 
  private:
-  struct Step {
-    double t;
-    size_t row;  // the joint row it reads
-  };
-
   // column_[k]: the joints.csv column of declared joint k; every column a declared joint.
   void MapJoints() {
-    const std::string where = log_.joint_stats.file + ":1";
-    for (const std::string& j : chain_->q_joints) {
-      const auto it = std::find(log_.joints.begin(), log_.joints.end(), j);
-      if (it == log_.joints.end()) {
-        throw InputError(where + ": no column for declared joint '" + j + "' (" + j +
-                         "_rad, or _m for a slide)");
-      }
-      const int c = static_cast<int>(it - log_.joints.begin());
-      const kinematics::PpoeModel& model = chain_->model;
-      const int k = static_cast<int>(column_.size());
-      const bool slide =
-          model.frame(model.joint_frame(k)).joint.type == kinematics::JointType::kPrismatic;
-      if (slide != static_cast<bool>(log_.joint_is_slide[c])) {
-        throw InputError(where + ": column '" + j + (log_.joint_is_slide[c] ? "_m" : "_rad") +
-                         "': " + declared_.file + " declares '" + j + "' " +
-                         (slide ? "a slide (" + j + "_m)" : "revolute (" + j + "_rad)"));
-      }
-      column_.push_back(c);
+    const kinematics::PpoeModel& model = chain_->model;
+    std::vector<char> slide;
+    for (int k = 0; k < model.nq(); ++k) {
+      slide.push_back(model.frame(model.joint_frame(k)).joint.type ==
+                      kinematics::JointType::kPrismatic);
     }
-    for (const std::string& c : log_.joints) {
-      if (std::find(chain_->q_joints.begin(), chain_->q_joints.end(), c) ==
-          chain_->q_joints.end()) {
-        throw InputError(where + ": column '" + c + "': " + declared_.file +
-                         " declares no joint of that name");
-      }
-    }
-  }
-
-  std::vector<Step> Steps() const {
-    std::vector<Step> steps;
-    const std::vector<double>& t = log_.joint_t;
-    if (step_hz_ == 0.0) {
-      for (size_t r = 0; r < t.size(); ++r) steps.push_back({t[r], r});
-      return steps;
-    }
-    // Each tick k (at t.front() + k / step_hz) takes the latest row at or before it, at that
-    // row's time: row r is stepped when a tick falls in [t_r, t_r+1), or at t_r for the last
-    // row. In ticks, with a thousandth of a tick of slack for times written in decimals.
-    const auto first_tick_at_or_after = [&](double time) {
-      return std::ceil((time - t.front()) * step_hz_ - 1e-3);
-    };
-    for (size_t r = 0; r < t.size(); ++r) {
-      const double k = first_tick_at_or_after(t[r]);
-      const bool served = r + 1 < t.size() ? k < first_tick_at_or_after(t[r + 1])
-                                           : k <= (t[r] - t.front()) * step_hz_ + 1e-3;
-      if (served) steps.push_back({t[r], r});
-    }
-    return steps;
-  }
-
-  // The IMU readings in time order (a sensor's own order where times are equal).
-  std::vector<size_t> ImuTimeOrder() const {
-    std::vector<size_t> order(log_.imu.size());
-    std::iota(order.begin(), order.end(), 0);
-    std::stable_sort(order.begin(), order.end(),
-                     [&](size_t a, size_t b) { return log_.imu[a].t < log_.imu[b].t; });
-    return order;
+    column_ = sim::JointColumns(log_, chain_->q_joints, slide, declared_.file);
   }
 
   void WriteStreamMetrics(const RunContext& ctx) const {
