@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -162,6 +163,37 @@ int MarkerIndex(const std::string& cell, const std::string& where, const DataSet
 }
 
 }  // namespace
+
+int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
+                    double t_to, int point, DataSet* data, int time_blocks) {
+  const std::string folder = std::filesystem::path(log.dir).lexically_normal().filename().string();
+  const int set = LabelIndex(&data->sets, folder.empty() ? "log" : folder);
+  const size_t first = data->rows.size();
+  std::vector<double> times;
+  for (size_t r = 0; r < log.truth_t.size(); ++r) {
+    const double t = log.truth_t[r];
+    Observation o;
+    if (t < t_from || t > t_to || !sim::JointsAt(log, column, t, &o.q)) continue;
+    o.type = ObservationType::kPoint;
+    o.set = set;
+    o.point = point;
+    o.p_base = log.truth[r].translation();
+    char where[64];
+    std::snprintf(where, sizeof(where), " t=%.9g", t);
+    o.where = log.truth_stats.file + where;
+    data->rows.push_back(std::move(o));
+    times.push_back(t);
+  }
+  if (times.empty()) return 0;
+  const double t0 = times.front(), span = times.back() - t0;
+  for (size_t i = 0; i < times.size(); ++i) {
+    const int k = span > 0.0 ? std::min(time_blocks - 1,
+                                        static_cast<int>(time_blocks * (times[i] - t0) / span))
+                             : 0;
+    data->rows[first + i].pose = LabelIndex(&data->poses, "span" + std::to_string(k));
+  }
+  return static_cast<int>(times.size());
+}
 
 int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
   for (size_t i = 0; i < labels->size(); ++i) {

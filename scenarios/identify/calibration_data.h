@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "scenarios/identify/identify.h"
+#include "sim/recorded_log.h"
 
 namespace flexbench::identify {
 
@@ -71,6 +72,16 @@ std::string FormatCalibrationCsv(const DataSet& data, const std::vector<std::str
 // header) become groups "<set>/hole_0" and "<set>/hole_1", 0.050 m apart.
 void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_joints,
                         double socket_distance_m, DataSet* data);
+
+// A recorded log's truth.tum (sim/recorded_log.h) read as a tracker's measurements: each of its
+// rows with t_from <= t <= t_to and inside the joints' span becomes a point row of
+// data->points[point] (the log's truth frame) in the base frame, at the joint readings linear
+// between the rows around its time (`column`: sim::JointColumns). Their set is the log's folder,
+// `where` "<truth file> t=<time>", and their `pose` one of `time_blocks` equal spans of their
+// times ("span<k>"): cross-validation then holds out stretches of time, not rows interleaved with
+// their neighbours, which a moving arm makes all but equal. Returns the rows appended.
+int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
+                    double t_to, int point, DataSet* data, int time_blocks = 5);
 
 // Index of `label` in `labels`, appended when new.
 int LabelIndex(std::vector<std::string>* labels, const std::string& label);

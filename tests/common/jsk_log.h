@@ -2,7 +2,7 @@
 // not by the replay code: a smooth motion of every joint, the encoders (the two pitch joints'
 // `pitch_offset` rad off: a calibration error the IMUs can see) at 100 Hz, two IMUs at 200 Hz
 // whose gyro and accelerometer follow their links' orientations, the grasp point's truth at
-// 100 Hz. For the replay tests and bench_replay.
+// 100 Hz. For the replay and closed-loop tests and bench_replay.
 #pragma once
 
 #include <cmath>
@@ -19,9 +19,12 @@
 
 namespace flexbench::testing {
 
-// `imu_clock_s` is added to the IMU times written (a clock running ahead).
+// `imu_clock_s` is added to the IMU times written (a clock running ahead). `truth_lag_s`: the
+// truth is the grasp point where the joints were that long before (a lag no static effect
+// explains: the arm trailing its encoders, as an elastic arm's inertia does).
 inline void WriteJskLog(const std::filesystem::path& dir, double duration,
-                        double pitch_offset = 0.05, double imu_clock_s = 0.0) {
+                        double pitch_offset = 0.05, double imu_clock_s = 0.0,
+                        double truth_lag_s = 0.0) {
   const auto num = [](double v) {
     char b[40];
     std::snprintf(b, sizeof(b), "%.17g", v);
@@ -58,7 +61,7 @@ inline void WriteJskLog(const std::filesystem::path& dir, double duration,
       joints << "," << num(q[k] + (pitch ? pitch_offset : 0.0));
     }
     joints << "\n";
-    const lie::SE3 T = pose(t, chain.end_effector);
+    const lie::SE3 T = pose(t - truth_lag_s, chain.end_effector);
     const Quat r(T.rotation());
     truth << num(t) << " " << num(T.translation().x()) << " " << num(T.translation().y()) << " "
           << num(T.translation().z()) << " " << num(r.x()) << " " << num(r.y()) << " " << num(r.z())

@@ -4,7 +4,47 @@
 #include <cmath>
 #include <numeric>
 
+#include "estimators/error.h"
+
 namespace flexbench::scenarios {
+
+estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
+                                             const sim::DeclaredChain& chain,
+                                             const std::string& end_effector) {
+  const std::string log_yaml = log.dir + "/log.yaml";
+  estimators::EstimatorSetup setup;
+  setup.model = &chain.model;
+  setup.effects = chain.effects_or_null();
+  setup.end_effector = chain.end_effector;
+  for (const sim::LogImu& imu : log.imus) {
+    estimators::ImuSetup s;
+    try {
+      s.frame = chain.ObservedFrame(imu.frame);
+    } catch (const InputError& e) {
+      throw InputError(log_yaml + ": imu.sensors." + imu.name + ".frame: " + e.what());
+    }
+    s.filter_beta = imu.filter_beta;
+    s.has_initial = imu.has_initial;
+    s.q_base_frame_initial = imu.q_base_frame_initial;
+    setup.imus.push_back(s);
+  }
+  if (!log.truth_t.empty() && log.truth_frame != end_effector) {
+    throw InputError(log_yaml + ": truth.frame '" + log.truth_frame +
+                     "': the estimators estimate the declared end effector '" + end_effector + "'");
+  }
+  return setup;
+}
+
+std::vector<int> LogJointColumns(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
+                                 const std::string& declared_file) {
+  const kinematics::PpoeModel& model = chain.model;
+  std::vector<char> slide;
+  for (int k = 0; k < model.nq(); ++k) {
+    slide.push_back(model.frame(model.joint_frame(k)).joint.type ==
+                    kinematics::JointType::kPrismatic);
+  }
+  return sim::JointColumns(log, chain.q_joints, slide, declared_file);
+}
 
 std::vector<LogStep> LogSteps(const sim::RecordedLog& log, double step_hz, double t_from,
                               double t_to) {

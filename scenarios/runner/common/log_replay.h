@@ -8,9 +8,22 @@
 #include <vector>
 
 #include "estimators/estimator.h"
+#include "sim/declared_chain.h"
 #include "sim/recorded_log.h"
 
 namespace flexbench::scenarios {
+
+// What the estimators know of the log on `chain`: its model and identified effects, the end
+// effector, and the log's IMUs at their declared frames (InputError naming log.yaml's key when a
+// frame is not an observed frame of the chain, or when the truth is of another frame than the
+// end effector).
+estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
+                                             const sim::DeclaredChain& chain,
+                                             const std::string& end_effector);
+
+// sim::JointColumns of the chain's joint variables (`declared_file` for messages).
+std::vector<int> LogJointColumns(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
+                                 const std::string& declared_file);
 
 struct LogStep {
   double t;

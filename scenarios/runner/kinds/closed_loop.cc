@@ -12,6 +12,16 @@
 //   simulate: {postures: N, seed: k}   (with `truth.tracker`, runner/common/simulated_tracker.h)
 //     a tracker at a pose drawn about its nominal one sees the truth's markers over N random
 //     settled postures; rows are the encoder readings and the markers in the tracker's frame.
+//   log: {dir: <recorded log folder>, from_s: a, to_s: b}   (sim/recorded_log.h)
+//     a moving arm's log: its truth.tum read as a tracker's points (a measurement) at the joint
+//     readings of their times, in the time span [a, b] (either end optional). Calibration and
+//     validation on one log take spans that do not overlap: the validation is a held-out time
+//     span, never interleaved rows. The held-out span is then replayed (`replay_estimators`,
+//     default fk) under the declared and under the augmented model, each scored against the
+//     truth.tum: metrics heldout_replay.<estimator>.before/after, trajectories under
+//     trajectories/base/heldout_before and heldout_after.
+//   expected_effects: [names]   what a log's truth is known to hold (a demonstration, a test):
+//     scored as for simulated truth (effect_found_correct, effects_named_up_to_equivalence).
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <chrono>
@@ -21,6 +31,7 @@
 #include <fstream>
 #include <iostream>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <optional>
 #include <random>
@@ -37,9 +48,11 @@
 #include "scenarios/identify/identify.h"
 #include "scenarios/identify/measurement_frames.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_replay.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/simulated_tracker.h"
+#include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -57,7 +70,7 @@ using Mat3x = Eigen::Matrix<double, 3, Eigen::Dynamic>;
 constexpr double kDeg = M_PI / 180.0;
 
 struct Source {
-  enum class Type { kMukca, kCsv, kSimulate } type = Type::kCsv;
+  enum class Type { kMukca, kCsv, kSimulate, kLog } type = Type::kCsv;
   std::string path;
   std::vector<std::string> placements;
   double socket_distance_m = 0.05;
@@ -66,6 +79,8 @@ struct Source {
   int per_socket = 20;
   int postures = 0;  // tracker rows: settled postures
   int seed = 0;
+  double from_s = -std::numeric_limits<double>::infinity();  // a log's time span
+  double to_s = std::numeric_limits<double>::infinity();
   std::string where;
   std::string path_where;  // where the file was named (a line, or the --set that named it)
 };
@@ -126,8 +141,17 @@ Source ParseSource(const ConfigNode& n, bool tracker) {
     s.sim_placements = sim->GetInt("placements", 3);
     s.per_socket = sim->GetInt("configurations_per_socket", 20);
     if (s.sim_placements < 1 || s.per_socket < 2) sim->Fail("need placements >= 1 and >= 2 rows");
+  } else if (const auto log = n.Optional("log")) {
+    s.type = Source::Type::kLog;
+    s.path = log->ResolvePath(log->GetString("dir"));
+    s.path_where = log->Child("dir").WhereKey();
+    s.from_s = log->GetDouble("from_s", s.from_s);
+    s.to_s = log->GetDouble("to_s", s.to_s);
+    if (!(s.from_s < s.to_s) || std::isnan(s.from_s) || std::isnan(s.to_s)) {
+      log->Fail("needs from_s < to_s (seconds on the log's clock)");
+    }
   } else {
-    n.Fail("expected one of mukca, csv, simulate");
+    n.Fail("expected one of mukca, csv, simulate, log");
   }
   return s;
 }
@@ -136,6 +160,15 @@ std::string Num(double v) {
   char b[64];
   std::snprintf(b, sizeof(b), "%.6g", v);
   return b;
+}
+
+// A log source's time span, for messages.
+std::string Span(const Source& s) {
+  const bool from = std::isfinite(s.from_s), to = std::isfinite(s.to_s);
+  if (!from && !to) return "the whole log";
+  if (!from) return "t <= " + Num(s.to_s) + " s";
+  if (!to) return "t >= " + Num(s.from_s) + " s";
+  return "[" + Num(s.from_s) + ", " + Num(s.to_s) + "] s";
 }
 
 struct Stats {
@@ -215,6 +248,7 @@ class ClosedLoopKind : public ScenarioKind {
     ScoreNees(ctx, sets, sc, res, &m);
     WriteIdentification(res, &(*ctx.summary)["identification"]);
     Report(ctx, sets, sc, res);
+    if (validation_.type == Source::Type::kLog) ReplayHeldOut(ctx, res, &m);
   }
 
  private:
@@ -364,6 +398,26 @@ class ClosedLoopKind : public ScenarioKind {
       throw InputError(validation_.path_where + ": " + CapForMessage(validation_.path) +
                        " holds the same rows as the calibration file; validate on other data");
     }
+    if (calibration_.type == Source::Type::kLog && validation_.type == Source::Type::kLog &&
+        fs::weakly_canonical(calibration_.path) == fs::weakly_canonical(validation_.path) &&
+        calibration_.from_s <= validation_.to_s && validation_.from_s <= calibration_.to_s) {
+      throw InputError(validation_.where + ": the time span " + Span(validation_) +
+                       " overlaps the calibration's, " + Span(calibration_) +
+                       ", of the same log; validate on a held-out span (from_s, to_s)");
+    }
+    if (validation_.type == Source::Type::kLog) {
+      replay_specs_ =
+          root.Has("replay_estimators")
+              ? ParseEstimators(root.Child("replay_estimators"), EstimatorLabels::kAllowed)
+              : std::vector<EstimatorSpec>{{"fk", {}, "fk", ""}};
+    } else if (root.Has("replay_estimators")) {
+      root.Child("replay_estimators")
+          .Fail("replays a held-out log span: needs validation: {log: ...}");
+    }
+    if (const auto e = root.Optional("expected_effects")) {
+      if (has_truth_) e->Fail("the truth block's `expected` names them already");
+      for (const ConfigNode& n : e->Items()) truth_names_.push_back(n.AsString());
+    }
     for (const Source* s : {&calibration_, &validation_}) {
       if (s->type == Source::Type::kMukca && !fs::exists(s->path)) {
         throw InputError(s->where + ": MUKCa recordings not found at " + s->path +
@@ -468,12 +522,12 @@ class ClosedLoopKind : public ScenarioKind {
   void ScoreNames(const identify::IdentifyResult& res, Json* m) const {
     std::vector<std::string> found;
     for (const auto& e : res.effects) found.push_back(e.name);
-    if (has_truth_) {
+    if (has_truth_ || !truth_names_.empty()) {
       (*m)["truth_effects"] = truth_names_;
       std::set<std::string> a(found.begin(), found.end()),
           b(truth_names_.begin(), truth_names_.end());
       (*m)["effect_found_correct"] = a == b;
-      if (tracker_) ScoreNamesUpToEquivalence(found, m);
+      if (tracker_ || !has_truth_) ScoreNamesUpToEquivalence(found, m);
     }
     (*m)["effects_found"] = found;
   }
@@ -707,6 +761,20 @@ class ClosedLoopKind : public ScenarioKind {
         }
         break;
       }
+      case Source::Type::kLog: {
+        const sim::RecordedLog& log = Log(s);
+        const auto it = std::find(points_.begin(), points_.end(), log.truth_frame);
+        if (it == points_.end()) {
+          throw InputError(log.dir + "/log.yaml: truth.frame '" + log.truth_frame +
+                           "' is neither the end effector nor one of 'markers'");
+        }
+        const int n =
+            identify::AppendLogPoints(log, LogJointColumns(log, *chain_, declared_.file), s.from_s,
+                                      s.to_s, static_cast<int>(it - points_.begin()), &d);
+        ctx.log(what + ": " + std::to_string(n) + " rows of " + log.truth_stats.file + " in " +
+                Span(s));
+        break;
+      }
       case Source::Type::kSimulate: {
         if (tracker_) {
           SimulateTracker(s, ctx, what, &d);
@@ -731,8 +799,21 @@ class ClosedLoopKind : public ScenarioKind {
       }
     }
     if (d.rows.empty()) throw InputError(s.where + ": no " + what + " rows");
-    if (s.type == Source::Type::kSimulate) WriteDataCsv(ctx, d, what);
+    if (s.type == Source::Type::kSimulate || s.type == Source::Type::kLog) {
+      WriteDataCsv(ctx, d, what);
+    }
     return d;
+  }
+
+  // The log a source reads, read once (calibration and validation on one log share it).
+  const sim::RecordedLog& Log(const Source& s) {
+    auto it = logs_.find(s.path);
+    if (it == logs_.end()) it = logs_.emplace(s.path, sim::ReadRecordedLog(s.path)).first;
+    if (it->second.truth_t.empty()) {
+      throw InputError(s.path_where + ": " + it->second.dir +
+                       " has no truth.tum: its tracker points are the rows identification fits");
+    }
+    return it->second;
   }
 
   // The `truth` block: effects, the expected names, and where simulated data come from (sockets
@@ -1487,22 +1568,54 @@ class ClosedLoopKind : public ScenarioKind {
     }
   }
 
-  void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
-    std::ostringstream header;
-    header << "Declared model augmented by flexbench closed_loop: the identified effects with "
-              "their\nfitted parameters, and the PPOE sources scaled by "
-           << Num(source_scale_) << " (what the\nremaining validation residual supports; mean "
-           << "NEES there " << Num(nees_scaled_) << ", 3 is consistent). Verdict: " << verdict_
-           << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the "
-                                         "data about as well, so no cause is singled out)"
-                                       : "")
-           << ".";
+  // The held-out span of the validation log through the replay estimators under the declared
+  // model and under the augmented one (shipped or not: the figures show why).
+  void ReplayHeldOut(RunContext& ctx, const identify::IdentifyResult& res, Json* m) const {
+    const sim::RecordedLog& log = logs_.at(validation_.path);
+    const std::vector<size_t> imu_order = ImuTimeOrder(log);
+    const std::vector<LogStep> steps = LogSteps(log, 0.0, validation_.from_s, validation_.to_s);
+    std::vector<std::string> errors(replay_specs_.size());
+    for (const bool after : {false, true}) {
+      const sim::DeclaredModel model = after ? Augmented(res) : declared_;
+      const sim::DeclaredChain chain = sim::BuildDeclaredChain(mj_.get(), model);
+      const estimators::EstimatorSetup setup = LogEstimatorSetup(log, chain, model.end_effector);
+      const std::vector<int> column = LogJointColumns(log, chain, model.file);
+      TrajectoryRecorder recorder;
+      for (size_t e = 0; e < replay_specs_.size(); ++e) {
+        const std::string& label = replay_specs_[e].label;
+        ErrorStats stats;
+        const auto est = MakeEstimatorOf(replay_specs_[e], setup, ctx.seed);
+        const auto on_step = [&](size_t s, const estimators::Belief& b) {
+          lie::SE3 T_true;
+          if (sim::TruthAt(log, steps[s].t, &T_true)) {
+            stats.Add(b.T_base_ee, b.cov, T_true);
+            if (e == 0) recorder.AddTruth(steps[s].t, T_true);
+          }
+          recorder.Add(label, steps[s].t, b.T_base_ee, b.cov);
+        };
+        const int rejected =
+            ReplayLog(log, column, steps, imu_order, *est, on_step, validation_.from_s);
+        Json& j = (*m)["heldout_replay"][label][after ? "after" : "before"];
+        if (stats.count() > 0) stats.WriteMetrics(&j);
+        j["steps_scored"] = stats.count();
+        j["rejected_readings"] = rejected;
+        errors[e] += (after ? " -> " : "") +
+                     (stats.count() > 0 ? Num(j["pos_err_mean_m"].get<double>()) : "-");
+      }
+      recorder.Write(*ctx.out, "base", after ? "heldout_after" : "heldout_before");
+    }
+    std::string line = "held-out replay (" + std::to_string(steps.size()) + " steps in " +
+                       Span(validation_) + "), mean position error before -> after (m):";
+    for (size_t e = 0; e < errors.size(); ++e) {
+      line += (e ? "; " : " ") + replay_specs_[e].label + " " + errors[e];
+    }
+    ctx.log(line);
+  }
+
+  // The declared model with the fit: its effects, frames and the sources scaled to what remains
+  // (the model file where declared_ has it).
+  sim::DeclaredModel Augmented(const identify::IdentifyResult& res) const {
     sim::DeclaredModel out = declared_;
-    // Relative to the result folder, so the file loads from where it is written.
-    out.model_path = fs::absolute(declared_.model_path)
-                         .lexically_normal()
-                         .lexically_relative(fs::absolute(ctx.out->final_dir()).lexically_normal())
-                         .generic_string();
     for (sim::DeclaredSource& s : out.sources) {
       s.about_axis_rad = std::sqrt(source_scale_) * s.about_axis_rad;
       s.cov = source_scale_ * s.cov;
@@ -1517,6 +1630,25 @@ class ClosedLoopKind : public ScenarioKind {
       AddIdentifiedEffect(std::move(ie), &out.identified_effects);
     }
     AddFittedFrames(res, &out);
+    return out;
+  }
+
+  void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
+    std::ostringstream header;
+    header << "Declared model augmented by flexbench closed_loop: the identified effects with "
+              "their\nfitted parameters, and the PPOE sources scaled by "
+           << Num(source_scale_) << " (what the\nremaining validation residual supports; mean "
+           << "NEES there " << Num(nees_scaled_) << ", 3 is consistent). Verdict: " << verdict_
+           << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the "
+                                         "data about as well, so no cause is singled out)"
+                                       : "")
+           << ".";
+    sim::DeclaredModel out = Augmented(res);
+    // Relative to the result folder, so the file loads from where it is written.
+    out.model_path = fs::absolute(declared_.model_path)
+                         .lexically_normal()
+                         .lexically_relative(fs::absolute(ctx.out->final_dir()).lexically_normal())
+                         .generic_string();
     WriteFileAtomic(ctx.out->File("declared_augmented.yaml"),
                     sim::EmitDeclaredModel(out, header.str()));
   }
@@ -1646,6 +1778,8 @@ class ClosedLoopKind : public ScenarioKind {
   std::vector<std::string> base_not_applied_;  // identified effects of declared_ em_ lacks
   std::vector<std::string> unused_frames_;     // declared_.frames no row is measured in
   std::unique_ptr<sim::Simulation> sim_;
+  std::map<std::string, sim::RecordedLog> logs_;  // by folder (Source::path)
+  std::vector<EstimatorSpec> replay_specs_;       // a held-out log span's replay
   double source_scale_ = 1.0;
   std::string verdict_;
   double nees_scaled_ = 0.0;

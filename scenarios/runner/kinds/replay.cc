@@ -45,33 +45,13 @@ class ReplayKind : public ScenarioKind {
  public:
   void Configure(const ConfigNode& root) override {
     log_ = sim::ReadRecordedLog(root.ResolvePath(root.GetString("log")));
-    const std::string log_yaml = log_.dir + "/log.yaml";
     const auto declared = root.Optional("declared");
     declared_ = sim::LoadDeclaredModel(declared ? root.ResolvePath(declared->AsString())
                                                 : log_.declared_path);
     model_ = sim::LoadModel(declared_.model_path);
     chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(model_.get(), declared_));
-    MapJoints();
-    setup_.model = &chain_->model;
-    setup_.effects = chain_->effects_or_null();
-    setup_.end_effector = chain_->end_effector;
-    for (const sim::LogImu& imu : log_.imus) {
-      estimators::ImuSetup s;
-      try {
-        s.frame = chain_->ObservedFrame(imu.frame);
-      } catch (const InputError& e) {
-        throw InputError(log_yaml + ": imu.sensors." + imu.name + ".frame: " + e.what());
-      }
-      s.filter_beta = imu.filter_beta;
-      s.has_initial = imu.has_initial;
-      s.q_base_frame_initial = imu.q_base_frame_initial;
-      setup_.imus.push_back(s);
-    }
-    if (!log_.truth_t.empty() && log_.truth_frame != declared_.end_effector) {
-      throw InputError(log_yaml + ": truth.frame '" + log_.truth_frame +
-                       "': the estimators estimate the declared end effector '" +
-                       declared_.end_effector + "'");
-    }
+    column_ = LogJointColumns(log_, *chain_, declared_.file);
+    setup_ = LogEstimatorSetup(log_, *chain_, declared_.end_effector);
     step_hz_ = root.GetDouble("step_hz", 0.0);
     if (!(step_hz_ >= 0.0) || !std::isfinite(step_hz_)) {
       root.Child("step_hz").Fail("must be 0 (a step per joint row) or a rate > 0 in Hz");
@@ -124,17 +104,6 @@ class ReplayKind : public ScenarioKind {
   }
 
  private:
-  // column_[k]: the joints.csv column of declared joint k; every column a declared joint.
-  void MapJoints() {
-    const kinematics::PpoeModel& model = chain_->model;
-    std::vector<char> slide;
-    for (int k = 0; k < model.nq(); ++k) {
-      slide.push_back(model.frame(model.joint_frame(k)).joint.type ==
-                      kinematics::JointType::kPrismatic);
-    }
-    column_ = sim::JointColumns(log_, chain_->q_joints, slide, declared_.file);
-  }
-
   void WriteStreamMetrics(const RunContext& ctx) const {
     Json& m = (*ctx.summary)["metrics"];
     m["duration_s"] = log_.joint_stats.t_last - log_.joint_stats.t_first;

@@ -212,7 +212,9 @@ TEST(Replay, AnImuClockOffsetIsEstimatedFromTheData) {
     EXPECT_NEAR(est, -offset, 0.002);
     EXPECT_LT(std::abs(est + offset), 3.0 * sd + 5e-4);
     EXPECT_LT(err(aligned), 0.003);
-    if (offset > 0.0) EXPECT_LT(err(aligned), err(raw));
+    if (offset > 0.0) {
+      EXPECT_LT(err(aligned), err(raw));
+    }
     // An offset beyond the range searched is said, never cut to the range's edge.
     if (offset > 0.0) {
       const CommandResult narrow =
