@@ -165,7 +165,7 @@ int MarkerIndex(const std::string& cell, const std::string& where, const DataSet
 }  // namespace
 
 int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
-                    double t_to, int point, DataSet* data, int time_blocks) {
+                    double t_to, int point, DataSet* data, int frame, int time_blocks) {
   const std::string folder = std::filesystem::path(log.dir).lexically_normal().filename().string();
   const int set = LabelIndex(&data->sets, folder.empty() ? "log" : folder);
   const size_t first = data->rows.size();
@@ -177,7 +177,8 @@ int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column,
     o.type = ObservationType::kPoint;
     o.set = set;
     o.point = point;
-    o.p_base = log.truth[r].translation();
+    o.frame = frame;
+    (frame >= 0 ? o.p_frame : o.p_base) = log.truth[r].translation();
     char where[64];
     std::snprintf(where, sizeof(where), " t=%.9g", t);
     o.where = log.truth_stats.file + where;

@@ -79,9 +79,11 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
 // between the rows around its time (`column`: sim::JointColumns). Their set is the log's folder,
 // `where` "<truth file> t=<time>", and their `pose` one of `time_blocks` equal spans of their
 // times ("span<k>"): cross-validation then holds out stretches of time, not rows interleaved with
-// their neighbours, which a moving arm makes all but equal. Returns the rows appended.
+// their neighbours, which a moving arm makes all but equal. `frame` >= 0: the points are measured
+// in data->frames[frame] (a tracker's own frame), not in the base frame. Returns the rows
+// appended.
 int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
-                    double t_to, int point, DataSet* data, int time_blocks = 5);
+                    double t_to, int point, DataSet* data, int frame = -1, int time_blocks = 5);
 
 // Index of `label` in `labels`, appended when new.
 int LabelIndex(std::vector<std::string>* labels, const std::string& label);

@@ -12,9 +12,10 @@
 //   simulate: {postures: N, seed: k}   (with `truth.tracker`, runner/common/simulated_tracker.h)
 //     a tracker at a pose drawn about its nominal one sees the truth's markers over N random
 //     settled postures; rows are the encoder readings and the markers in the tracker's frame.
-//   log: {dir: <recorded log folder>, from_s: a, to_s: b}   (sim/recorded_log.h)
+//   log: {dir: <recorded log folder>, from_s: a, to_s: b, frame: tracker}   (sim/recorded_log.h)
 //     a moving arm's log: its truth.tum read as a tracker's points (a measurement) at the joint
-//     readings of their times, in the time span [a, b] (either end optional). Calibration and
+//     readings of their times, in the time span [a, b] (either end optional); in the base frame,
+//     or in `frame`, one of `frames` (its pose fitted with the effects). Calibration and
 //     validation on one log take spans that do not overlap: the validation is a held-out time
 //     span, never interleaved rows. The held-out span is then replayed (`replay_estimators`,
 //     default fk) under the declared and under the augmented model, each scored against the
@@ -81,6 +82,7 @@ struct Source {
   int seed = 0;
   double from_s = -std::numeric_limits<double>::infinity();  // a log's time span
   double to_s = std::numeric_limits<double>::infinity();
+  std::string frame;  // a log's points measured in this one of `frames` ("": the base frame)
   std::string where;
   std::string path_where;  // where the file was named (a line, or the --set that named it)
 };
@@ -147,6 +149,7 @@ Source ParseSource(const ConfigNode& n, bool tracker) {
     s.path_where = log->Child("dir").WhereKey();
     s.from_s = log->GetDouble("from_s", s.from_s);
     s.to_s = log->GetDouble("to_s", s.to_s);
+    s.frame = log->GetString("frame", "");
     if (!(s.from_s < s.to_s) || std::isnan(s.from_s) || std::isnan(s.to_s)) {
       log->Fail("needs from_s < to_s (seconds on the log's clock)");
     }
@@ -770,7 +773,8 @@ class ClosedLoopKind : public ScenarioKind {
         }
         const int n =
             identify::AppendLogPoints(log, LogJointColumns(log, *chain_, declared_.file), s.from_s,
-                                      s.to_s, static_cast<int>(it - points_.begin()), &d);
+                                      s.to_s, static_cast<int>(it - points_.begin()), &d,
+                                      LogFrame(s));
         ctx.log(what + ": " + std::to_string(n) + " rows of " + log.truth_stats.file + " in " +
                 Span(s));
         break;
@@ -803,6 +807,16 @@ class ClosedLoopKind : public ScenarioKind {
       WriteDataCsv(ctx, d, what);
     }
     return d;
+  }
+
+  // Index in frames_ of the frame a log source's points are measured in (-1: the base frame).
+  int LogFrame(const Source& s) const {
+    if (s.frame.empty()) return -1;
+    for (size_t f = 0; f < frames_.size(); ++f) {
+      if (frames_[f].name == s.frame) return static_cast<int>(f);
+    }
+    throw InputError(s.where + ": frame '" + s.frame +
+                     "' is not declared in the scenario's 'frames'");
   }
 
   // The log a source reads, read once (calibration and validation on one log share it).
@@ -1575,11 +1589,15 @@ class ClosedLoopKind : public ScenarioKind {
     const std::vector<size_t> imu_order = ImuTimeOrder(log);
     const std::vector<LogStep> steps = LogSteps(log, 0.0, validation_.from_s, validation_.to_s);
     std::vector<std::string> errors(replay_specs_.size());
+    const int frame = LogFrame(validation_);
     for (const bool after : {false, true}) {
       const sim::DeclaredModel model = after ? Augmented(res) : declared_;
       const sim::DeclaredChain chain = sim::BuildDeclaredChain(mj_.get(), model);
       const estimators::EstimatorSetup setup = LogEstimatorSetup(log, chain, model.end_effector);
       const std::vector<int> column = LogJointColumns(log, chain, model.file);
+      // The tracker's points in the base frame at the frame's pose fitted with the model.
+      const lie::SE3 T_base_frame =
+          frame < 0 ? lie::SE3() : (after ? res.after : res.before).T_base_frames[frame];
       TrajectoryRecorder recorder;
       for (size_t e = 0; e < replay_specs_.size(); ++e) {
         const std::string& label = replay_specs_[e].label;
@@ -1588,6 +1606,7 @@ class ClosedLoopKind : public ScenarioKind {
         const auto on_step = [&](size_t s, const estimators::Belief& b) {
           lie::SE3 T_true;
           if (sim::TruthAt(log, steps[s].t, &T_true)) {
+            T_true = T_base_frame * T_true;
             stats.Add(b.T_base_ee, b.cov, T_true);
             if (e == 0) recorder.AddTruth(steps[s].t, T_true);
           }

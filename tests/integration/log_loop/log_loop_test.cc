@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -24,16 +25,19 @@ using testing::RunCommand;
 
 const std::string kModels = std::string(FLEXBENCH_SOURCE_DIR) + "/models/";
 
-// The loop on `log`: calibration up to `split` s, validation (held out) after it.
+// The loop on `log`: calibration up to `split` s, validation (held out) after it; the points in
+// the base frame, or in an unknown tracker frame named `frame`.
 nlohmann::json RunLoop(const fs::path& dir, const fs::path& log, double split,
-                       const std::vector<std::string>& expected) {
+                       const std::vector<std::string>& expected, const std::string& frame = "") {
   std::string names;
   for (const std::string& e : expected) names += (names.empty() ? "" : ", ") + e;
-  char spans[256];
+  const std::string in_frame = frame.empty() ? "" : ", frame: " + frame;
+  char spans[512];
   std::snprintf(spans, sizeof(spans),
-                "calibration: {log: {dir: %s, to_s: %.17g}}\n"
-                "validation: {log: {dir: %s, from_s: %.17g}}\n",
-                log.c_str(), split, log.c_str(), split + 1e-3);
+                "calibration: {log: {dir: %s, to_s: %.17g%s}}\n"
+                "validation: {log: {dir: %s, from_s: %.17g%s}}\n%s",
+                log.c_str(), split, in_frame.c_str(), log.c_str(), split + 1e-3, in_frame.c_str(),
+                frame.empty() ? "" : ("frames: {" + frame + ": {}}\n").c_str());
   testing::WriteFile(dir / "loop.yaml", "scenario: log_loop\nkind: closed_loop\nseed: 1\nmodel: " +
                                             kModels + "jsk_arm.xml\ndeclared: " + kModels +
                                             "jsk_arm.declared.yaml\npoint_std_m: 0.0003\n" + spans +
@@ -128,6 +132,54 @@ TEST(LogLoop, OffsetEncodersInAnIndependentLogAreNamedAndTheHeldOutErrorFalls) {
   EXPECT_TRUE(m["effects_named_up_to_equivalence"].get<bool>());
   EXPECT_LT(HeldOut(m, "after"), 0.5 * HeldOut(m, "before"));
   EXPECT_EQ(m["heldout_replay"]["fk"]["after"]["steps_scored"], 600);
+}
+
+// The same log seen by a tracker at an unknown pose (its truth.tum rewritten in the tracker's
+// frame): the tracker's pose is fitted with the offsets, which are still named, and the held-out
+// span is scored in the base frame at the fitted pose.
+TEST(LogLoop, ALogMeasuredInAnUnknownTrackerFrameIsRegisteredAndTheOffsetsNamed) {
+  testing::TempDir tmp;
+  testing::WriteJskLog(tmp.path() / "log", 20.0, 0.05);
+  const lie::SE3 T_tracker_base(
+      Eigen::AngleAxisd(0.7, Vec3(0.2, -0.3, 0.9).normalized()).toRotationMatrix(),
+      Vec3(1.2, -0.4, 0.3));
+  std::istringstream in(testing::ReadFile(tmp.path() / "log" / "truth.tum"));
+  std::string line, out;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') {
+      out += line + "\n";
+      continue;
+    }
+    double t, x, y, z, qx, qy, qz, qw;
+    ASSERT_EQ(std::sscanf(line.c_str(), "%lf %lf %lf %lf %lf %lf %lf %lf", &t, &x, &y, &z, &qx, &qy,
+                          &qz, &qw),
+              8);
+    const lie::SE3 T =
+        T_tracker_base *
+        lie::SE3(Quat(qw, qx, qy, qz).normalized().toRotationMatrix(), Vec3(x, y, z));
+    const Quat q(T.rotation());
+    char row[256];
+    std::snprintf(row, sizeof(row), "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", t,
+                  T.translation().x(), T.translation().y(), T.translation().z(), q.x(), q.y(),
+                  q.z(), q.w());
+    out += row;
+  }
+  testing::WriteFile(tmp.path() / "log" / "truth.tum", out);
+  const nlohmann::json m =
+      RunLoop(tmp.path(), tmp.path() / "log", 14.0,
+              {"joint_offset@link2_pitch_joint", "joint_offset@link3_pitch_joint"}, "tracker");
+  Print("independent log in an unknown tracker frame, pitch encoders 0.05 rad off", m);
+  EXPECT_TRUE(m["effects_named_up_to_equivalence"].get<bool>());
+  EXPECT_LT(HeldOut(m, "after"), 0.5 * HeldOut(m, "before"));
+  EXPECT_LT(HeldOut(m, "after"), 1e-3);
+  const nlohmann::json frames = nlohmann::json::parse(
+      testing::ReadFile(tmp.path() / "loop" / "summary.json"))["identification"]["frames"];
+  ASSERT_EQ(frames.size(), 1u);
+  const std::vector<double> T = frames[0]["T_base_frame"].get<std::vector<double>>();
+  const lie::SE3 T_base_tracker = T_tracker_base.Inverse();
+  const double moved = (Vec3(T[0], T[1], T[2]) - T_base_tracker.translation()).norm();
+  std::printf("tracker found %.3f mm from its pose\n", 1e3 * moved);
+  EXPECT_LT(moved, 1e-3);
 }
 
 // The truth trails its encoders by 0.05-0.2 s: no effect of the library explains it, and the
