@@ -12,12 +12,11 @@
 #include "estimators/error.h"
 #include "sim/config.h"
 #include "sim/csv.h"
+#include "sim/recorded_log_streams.h"
 
 namespace flexbench::sim {
-namespace {
+namespace log_internal {
 
-// Rows, duplicates, gaps and the median step of a stream whose rows of each sensor are `t`
-// (already checked not to go backwards).
 StreamStats Stats(const std::string& file, double offset,
                   const std::vector<const std::vector<double>*>& t) {
   StreamStats s;
@@ -47,10 +46,6 @@ StreamStats Stats(const std::string& file, double offset,
   return s;
 }
 
-// Times (s) and clock offsets beyond any recording (a Unix time is 1.7e9 s), so that sums and
-// differences of them stay finite.
-constexpr double kMaxLogTime = 1e12;
-
 double ClockOffset(const ConfigNode& node) {
   const double offset = node.GetDouble("clock_offset_s", 0.0);
   if (!(std::abs(offset) <= kMaxLogTime)) {
@@ -63,8 +58,6 @@ double ClockOffset(const ConfigNode& node) {
 // before a row is read: the byte cap alone lets a file of short rows take gigabytes.
 constexpr double kMaxLogMemoryBytes = 2e9;
 
-// Lines of `file` (at most its rows plus a header), refused when they would take, with the
-// streams read before (`*used` bytes), more than kMaxLogMemoryBytes; `*used` grows by theirs.
 std::uintmax_t CheckRows(const std::string& file, double bytes_per_row, double* used) {
   const std::uintmax_t lines = CountLines(file);
   *used += static_cast<double>(lines) * bytes_per_row;
@@ -88,8 +81,6 @@ std::string Shortest(double v) {
   return b;
 }
 
-// The time of a row on the log's clock: its t_s cell plus the stream's clock offset. The cell
-// may not be before `*last` (the sensor's previous row's cell), which it then becomes.
 double RowTime(const std::string& cell, const std::string& where, double offset, double* last,
                bool has_last) {
   const double t = ParseCsvNumber(cell, where, "t_s", kMaxLogTime);
@@ -100,6 +91,27 @@ double RowTime(const std::string& cell, const std::string& where, double offset,
   *last = t;
   return t + offset;
 }
+
+std::string Num(double v) {
+  char b[40];
+  std::snprintf(b, sizeof(b), "%.17g", v);
+  return b;
+}
+
+}  // namespace log_internal
+
+namespace {
+
+using log_internal::CheckRows;
+using log_internal::ClockOffset;
+using log_internal::kMaxLogTime;
+using log_internal::Num;
+using log_internal::ReadCameras;
+using log_internal::ReadTags;
+using log_internal::RowTime;
+using log_internal::Stats;
+using log_internal::TagsCsv;
+using log_internal::TagsYaml;
 
 void ReadJoints(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string file = node.ResolvePath(node.GetString("file"));
@@ -280,17 +292,13 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   ReadJoints(root.Child("joints"), &log, &used);
   if (const auto imu = root.Optional("imu")) ReadImu(*imu, &log, &used);
   if (const auto truth = root.Optional("truth")) ReadTruth(*truth, &log, &used);
+  if (const auto cameras = root.Optional("cameras")) ReadCameras(*cameras, &log);
+  if (const auto tags = root.Optional("tags")) ReadTags(*tags, &log, &used);
   root.CheckNoUnknownKeys();
   return log;
 }
 
 namespace {
-
-std::string Num(double v) {
-  char b[40];
-  std::snprintf(b, sizeof(b), "%.17g", v);
-  return b;
-}
 
 void WriteText(const std::filesystem::path& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary);
@@ -317,6 +325,7 @@ std::string LogYaml(const RecordedLog& log) {
     }
   }
   if (!log.truth_t.empty()) y << "truth: {file: truth.tum, frame: " << log.truth_frame << "}\n";
+  y << TagsYaml(log);
   return y.str();
 }
 
@@ -391,6 +400,7 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
     }
     WriteText(tmp / "truth.tum", t.str());
   }
+  if (!log.tags.empty()) WriteText(tmp / "tags.csv", TagsCsv(log));
   WriteText(tmp / "log.yaml", LogYaml(log));
 }
 

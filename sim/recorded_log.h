@@ -10,10 +10,24 @@
 //                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0],
 //                                      filter_beta: 0.05}}}   # Madgwick's gain, rad/s
 //               truth: {file: truth.tum, frame: grasp_point}  # optional
+//               cameras:                                        # with tags
+//                 cam0: {frame: external_camera, fx: 600, fy: 600, cx: 320, cy: 240,
+//                        width: 640, height: 480}
+//               tags: {file: tags.csv, clock_offset_s: 0, pixel_std_px: 1,
+//                      ids: {20: {frame: tag_gripper, corners_m: [[x, y, z], x 4]}}}
 //   joints.csv  t_s, then one column per joint: <joint>_rad (<joint>_m for a slide)
 //   imu.csv     t_s, sensor, gx_rad_s, gy_rad_s, gz_rad_s, ax_m_s2, ay_m_s2, az_m_s2 (sensor
 //               frame; specific force, +g up at rest)
 //   truth.tum   TUM lines "t x y z qx qy qz qw": the frame's pose in the base frame (m, s)
+//   tags.csv    t_s, camera, tag_id, u0_px, v0_px, ..., u3_px, v3_px: a tag's corners as
+//               libapriltag reports them (its order; pixel centres at +0.5: estimators/camera/
+//               pinhole.h)
+//
+// A camera's frame is an observed frame of the declared model that is its optical frame (x
+// right, y down, z forward); its intrinsics are estimators/camera/pinhole.h's. A tag's
+// corners_m are its four corners in its frame's coordinates, in libapriltag's order (the
+// printed tag's (-1, +1), (+1, +1), (+1, -1), (-1, -1) with x right and y down); `size_m: s`
+// instead says the frame is the tag's own, centred, x right and y down on the printed tag.
 //
 // A stream's clock_offset_s is added to its times. Within a stream (an IMU sensor's rows) times
 // never go backwards; equal times are kept and counted as duplicates, steps longer than twice
@@ -21,10 +35,12 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "estimators/camera/pinhole.h"
 #include "estimators/conventions.h"
 #include "estimators/estimator.h"
 #include "estimators/lie/se3.h"
@@ -52,6 +68,26 @@ struct LogImu {
   double filter_beta = estimators::ImuSetup{}.filter_beta;  // its Madgwick filter's gain
 };
 
+struct LogCamera {
+  std::string name;   // tags.csv's `camera`
+  std::string frame;  // its optical frame: an observed frame of the declared model
+  PinholeCamera intrinsics;
+};
+
+struct LogTag {
+  int id = -1;                    // tags.csv's `tag_id`
+  std::string frame;              // the observed frame it is fixed to
+  std::array<Vec3, 4> corners_m;  // in that frame, libapriltag's corner order
+};
+
+// One tag seen by one camera: indices into RecordedLog::cameras and ::tags.
+struct LogTagRow {
+  double t = 0.0;
+  int camera = 0;
+  int tag = 0;
+  std::array<Eigen::Vector2d, 4> uv;
+};
+
 struct RecordedLog {
   std::string dir;
   std::string robot;
@@ -68,7 +104,12 @@ struct RecordedLog {
   std::string truth_frame;
   std::vector<double> truth_t;
   std::vector<lie::SE3> truth;
-  StreamStats joint_stats, imu_stats, truth_stats;
+  // cameras, tags and tags.csv (optional; every row's camera and tag are declared).
+  std::vector<LogCamera> cameras;
+  std::vector<LogTag> tags;
+  double pixel_std_px = 1.0;  // each corner's, in u and in v
+  std::vector<LogTagRow> tag_rows;
+  StreamStats joint_stats, imu_stats, truth_stats, tag_stats;
 
   const double* q(size_t row) const { return joint_q.data() + row * joints.size(); }
 };

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <string>
 
+#include "estimators/camera/pinhole.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/lie/so3.h"
 #include "sim/declared_chain.h"
@@ -21,10 +22,13 @@ namespace flexbench::testing {
 
 // `imu_clock_s` is added to the IMU times written (a clock running ahead). `truth_lag_s`: the
 // truth is the grasp point where the joints were that long before (a lag no static effect
-// explains: the arm trailing its encoders, as an elastic arm's inertia does).
+// explains: the arm trailing its encoders, as an elastic arm's inertia does). `tags`: the
+// external camera (640 x 480, 45 deg vertical field of view) sees the gripper's 4 cm tag at 10 Hz,
+// its corners projected exactly, written where all four fall on the image (tags.csv; the log's
+// pixel_std_px 1).
 inline void WriteJskLog(const std::filesystem::path& dir, double duration,
                         double pitch_offset = 0.05, double imu_clock_s = 0.0,
-                        double truth_lag_s = 0.0) {
+                        double truth_lag_s = 0.0, bool tags = false) {
   const auto num = [](double v) {
     char b[40];
     std::snprintf(b, sizeof(b), "%.17g", v);
@@ -86,11 +90,40 @@ inline void WriteJskLog(const std::filesystem::path& dir, double duration,
       imu << "\n";
     }
   }
-  std::ofstream(dir / "log.yaml") << "robot: jsk_arm\ndeclared: " << declared_path
-                                  << "\njoints: {file: joints.csv}\n"
-                                     "imu: {file: imu.csv, sensors: {imu2: {frame: imu_link2}, "
-                                     "imu3: {frame: imu_link3}}}\n"
-                                     "truth: {file: truth.tum, frame: grasp_point}\n";
+  std::ofstream yaml(dir / "log.yaml");
+  yaml << "robot: jsk_arm\ndeclared: " << declared_path
+       << "\njoints: {file: joints.csv}\n"
+          "imu: {file: imu.csv, sensors: {imu2: {frame: imu_link2}, imu3: {frame: imu_link3}}}\n"
+          "truth: {file: truth.tum, frame: grasp_point}\n";
+  if (!tags) return;
+  PinholeCamera cam;
+  cam.width = 640;
+  cam.height = 480;
+  cam.fy = cam.fx = 240.0 / std::tan(22.5 * M_PI / 180.0);
+  cam.cx = 320.0;
+  cam.cy = 240.0;
+  yaml
+      << "cameras: {cam0: {frame: external_camera, fx: " << num(cam.fx) << ", fy: " << num(cam.fy)
+      << ", cx: 320, cy: 240, width: 640, height: 480}}\n"
+         "tags: {file: tags.csv, pixel_std_px: 1, ids: {20: {frame: tag_gripper, size_m: 0.04}}}\n";
+  const Vec3 corners[4] = {Vec3(-0.02, 0.02, 0), Vec3(0.02, 0.02, 0), Vec3(0.02, -0.02, 0),
+                           Vec3(-0.02, -0.02, 0)};
+  const kinematics::FrameId camera = chain.ObservedFrame("external_camera");
+  const kinematics::FrameId tag = chain.ObservedFrame("tag_gripper");
+  std::ofstream csv(dir / "tags.csv");
+  csv << "t_s,camera,tag_id,u0_px,v0_px,u1_px,v1_px,u2_px,v2_px,u3_px,v3_px\n";
+  for (int i = 0; i * 0.1 <= duration + 1e-9; ++i) {
+    const double t = i * 0.1;
+    const lie::SE3 T_cam_tag = pose(t - truth_lag_s, camera).Inverse() * pose(t - truth_lag_s, tag);
+    std::string row = num(t) + ",cam0,20";
+    bool seen = true;
+    for (const Vec3& c : corners) {
+      Eigen::Vector2d uv;
+      seen = seen && cam.Project(T_cam_tag * c, &uv) && cam.InImage(uv);
+      row += "," + num(uv.x()) + "," + num(uv.y());
+    }
+    if (seen) csv << row << "\n";
+  }
 }
 
 }  // namespace flexbench::testing

@@ -28,6 +28,13 @@ estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
     s.q_base_frame_initial = imu.q_base_frame_initial;
     setup.imus.push_back(s);
   }
+  for (const sim::LogCamera& cam : log.cameras) {
+    try {
+      setup.cameras.push_back({cam.intrinsics, chain.ObservedFrame(cam.frame)});
+    } catch (const InputError& e) {
+      throw InputError(log_yaml + ": cameras." + cam.name + ".frame: " + e.what());
+    }
+  }
   if (!log.truth_t.empty() && log.truth_frame != end_effector) {
     throw InputError(log_yaml + ": truth.frame '" + log.truth_frame +
                      "': the estimators estimate the declared end effector '" + end_effector + "'");
@@ -35,15 +42,29 @@ estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
   return setup;
 }
 
-std::vector<int> LogJointColumns(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
-                                 const std::string& declared_file) {
+LogIndex IndexLog(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
+                  const std::string& declared_file) {
+  LogIndex index;
   const kinematics::PpoeModel& model = chain.model;
   std::vector<char> slide;
   for (int k = 0; k < model.nq(); ++k) {
     slide.push_back(model.frame(model.joint_frame(k)).joint.type ==
                     kinematics::JointType::kPrismatic);
   }
-  return sim::JointColumns(log, chain.q_joints, slide, declared_file);
+  index.column = sim::JointColumns(log, chain.q_joints, slide, declared_file);
+  for (const sim::LogTag& tag : log.tags) {
+    try {
+      index.tag_frame.push_back(chain.ObservedFrame(tag.frame));
+    } catch (const InputError& e) {
+      throw InputError(log.dir + "/log.yaml: tags.ids." + std::to_string(tag.id) +
+                       ".frame: " + e.what());
+    }
+  }
+  index.tag_order.resize(log.tag_rows.size());
+  std::iota(index.tag_order.begin(), index.tag_order.end(), 0);
+  std::stable_sort(index.tag_order.begin(), index.tag_order.end(),
+                   [&](size_t a, size_t b) { return log.tag_rows[a].t < log.tag_rows[b].t; });
+  return index;
 }
 
 std::vector<LogStep> LogSteps(const sim::RecordedLog& log, double step_hz, double t_from,
@@ -80,20 +101,23 @@ std::vector<size_t> ImuTimeOrder(const sim::RecordedLog& log) {
   return order;
 }
 
-int ReplayLog(const sim::RecordedLog& log, const std::vector<int>& column,
-              const std::vector<LogStep>& steps, const std::vector<size_t>& imu_order,
-              estimators::Estimator& est,
-              const std::function<void(size_t, const estimators::Belief&)>& on_step,
-              double imu_from) {
+int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vector<LogStep>& steps,
+              const std::vector<size_t>& imu_order, estimators::Estimator& est,
+              const std::function<void(size_t, const estimators::Belief&)>& on_step, double from) {
   int rejected = 0;
   const auto count = [&](estimators::UpdateStatus s) {
     rejected += s != estimators::UpdateStatus::kAccepted && s != estimators::UpdateStatus::kIgnored;
   };
+  const std::vector<int>& column = index.column;
+  const std::vector<size_t>& tag_order = index.tag_order;
   estimators::JointReading j;
   j.q.resize(static_cast<int>(column.size()));
   j.std = estimators::JointVector::Zero(static_cast<int>(column.size()));
-  size_t next_imu = 0;
-  while (next_imu < imu_order.size() && log.imu[imu_order[next_imu]].t < imu_from) ++next_imu;
+  estimators::TagCorners corners;
+  corners.cov *= log.pixel_std_px * log.pixel_std_px;
+  size_t next_imu = 0, next_tag = 0;
+  while (next_imu < imu_order.size() && log.imu[imu_order[next_imu]].t < from) ++next_imu;
+  while (next_tag < tag_order.size() && log.tag_rows[tag_order[next_tag]].t < from) ++next_tag;
   for (size_t s = 0; s < steps.size(); ++s) {
     const LogStep& step = steps[s];
     for (; next_imu < imu_order.size() && log.imu[imu_order[next_imu]].t <= step.t; ++next_imu) {
@@ -103,6 +127,18 @@ int ReplayLog(const sim::RecordedLog& log, const std::vector<int>& column,
     j.t = step.t;
     for (int k = 0; k < j.q.size(); ++k) j.q[k] = log.q(step.row)[column[k]];
     count(est.Update(j));
+    for (; next_tag < tag_order.size() && log.tag_rows[tag_order[next_tag]].t <= step.t;
+         ++next_tag) {
+      const sim::LogTagRow& row = log.tag_rows[tag_order[next_tag]];
+      const sim::LogTag& tag = log.tags[row.tag];
+      corners.t = row.t;
+      corners.camera = row.camera;
+      corners.tag_id = tag.id;
+      corners.frame = index.tag_frame[row.tag];
+      corners.p_frame = tag.corners_m;
+      corners.uv = row.uv;
+      count(est.Update(corners));
+    }
     on_step(s, est.Estimate());
   }
   return rejected + est.deferred_rejections();

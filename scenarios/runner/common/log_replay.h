@@ -1,10 +1,12 @@
 // A recorded log (sim/recorded_log.h) through one estimator in time order: the steps the replay
 // kind and the closed loop's held-out replay share. A step: the IMU readings up to its time (in
-// time order), Predict, the joint reading of its row, the estimate.
+// time order), Predict, the joint reading of its row, the tag detections up to its time (after
+// the joint reading, which sets the kinematic prior they correct), the estimate.
 #pragma once
 
 #include <functional>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "estimators/estimator.h"
@@ -14,16 +16,23 @@
 namespace flexbench::scenarios {
 
 // What the estimators know of the log on `chain`: its model and identified effects, the end
-// effector, and the log's IMUs at their declared frames (InputError naming log.yaml's key when a
-// frame is not an observed frame of the chain, or when the truth is of another frame than the
-// end effector).
+// effector, the log's IMUs and cameras at their declared frames (InputError naming log.yaml's
+// key when a frame is not an observed frame of the chain, or when the truth is of another frame
+// than the end effector).
 estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
                                              const sim::DeclaredChain& chain,
                                              const std::string& end_effector);
 
-// sim::JointColumns of the chain's joint variables (`declared_file` for messages).
-std::vector<int> LogJointColumns(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
-                                 const std::string& declared_file);
+// The log's streams bound to a chain.
+struct LogIndex {
+  std::vector<int> column;                     // sim::JointColumns of the chain's joints
+  std::vector<kinematics::FrameId> tag_frame;  // per log tag, its frame on the chain
+  std::vector<size_t> tag_order;               // tags.csv's rows in time order
+};
+
+// InputError naming joints.csv's header or log.yaml's key (`declared_file` for messages).
+LogIndex IndexLog(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
+                  const std::string& declared_file);
 
 struct LogStep {
   double t;
@@ -39,13 +48,12 @@ std::vector<LogStep> LogSteps(const sim::RecordedLog& log, double step_hz,
 // The log's IMU readings in time order (a sensor's own order where times are equal).
 std::vector<size_t> ImuTimeOrder(const sim::RecordedLog& log);
 
-// Runs `est` over `steps` (joint values through `column`: sim::JointColumns; the IMU readings
-// at imu_from and later, through `imu_order`), calling on_step(step index, belief) after each
-// step. Returns the readings the estimator did not accept (rejected now or deferred).
-int ReplayLog(const sim::RecordedLog& log, const std::vector<int>& column,
-              const std::vector<LogStep>& steps, const std::vector<size_t>& imu_order,
-              estimators::Estimator& est,
+// Runs `est` over `steps` (the IMU readings through `imu_order`, the tag detections through
+// `index`; those before `from` left out), calling on_step(step index, belief) after each step.
+// Returns the readings the estimator did not accept (rejected now or deferred).
+int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vector<LogStep>& steps,
+              const std::vector<size_t>& imu_order, estimators::Estimator& est,
               const std::function<void(size_t, const estimators::Belief&)>& on_step,
-              double imu_from = -std::numeric_limits<double>::infinity());
+              double from = -std::numeric_limits<double>::infinity());
 
 }  // namespace flexbench::scenarios

@@ -771,10 +771,9 @@ class ClosedLoopKind : public ScenarioKind {
           throw InputError(log.dir + "/log.yaml: truth.frame '" + log.truth_frame +
                            "' is neither the end effector nor one of 'markers'");
         }
-        const int n =
-            identify::AppendLogPoints(log, LogJointColumns(log, *chain_, declared_.file), s.from_s,
-                                      s.to_s, static_cast<int>(it - points_.begin()), &d,
-                                      LogFrame(s));
+        const int n = identify::AppendLogPoints(
+            log, IndexLog(log, *chain_, declared_.file).column, s.from_s, s.to_s,
+            static_cast<int>(it - points_.begin()), &d, LogFrame(s));
         ctx.log(what + ": " + std::to_string(n) + " rows of " + log.truth_stats.file + " in " +
                 Span(s));
         break;
@@ -1594,7 +1593,7 @@ class ClosedLoopKind : public ScenarioKind {
       const sim::DeclaredModel model = after ? Augmented(res) : declared_;
       const sim::DeclaredChain chain = sim::BuildDeclaredChain(mj_.get(), model);
       const estimators::EstimatorSetup setup = LogEstimatorSetup(log, chain, model.end_effector);
-      const std::vector<int> column = LogJointColumns(log, chain, model.file);
+      const LogIndex index = IndexLog(log, chain, model.file);
       // The tracker's points in the base frame at the frame's pose fitted with the model.
       const lie::SE3 T_base_frame =
           frame < 0 ? lie::SE3() : (after ? res.after : res.before).T_base_frames[frame];
@@ -1613,7 +1612,7 @@ class ClosedLoopKind : public ScenarioKind {
           recorder.Add(label, steps[s].t, b.T_base_ee, b.cov);
         };
         const int rejected =
-            ReplayLog(log, column, steps, imu_order, *est, on_step, validation_.from_s);
+            ReplayLog(log, index, steps, imu_order, *est, on_step, validation_.from_s);
         Json& j = (*m)["heldout_replay"][label][after ? "after" : "before"];
         if (stats.count() > 0) stats.WriteMetrics(&j);
         j["steps_scored"] = stats.count();

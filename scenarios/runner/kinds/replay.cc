@@ -1,5 +1,5 @@
-// A recorded log (sim/recorded_log.h: joints, IMUs, the truth) replayed through the estimators,
-// as a simulated run is: the same estimators, TUM trajectories, metrics and gates.
+// A recorded log (sim/recorded_log.h: joints, IMUs, tag detections, the truth) replayed through the
+// estimators, as a simulated run is: the same estimators, TUM trajectories, metrics and gates.
 //
 //   kind: replay
 //   log: logs/jsk_arm          # the log folder (relative to this file); its log.yaml names the
@@ -11,15 +11,15 @@
 //   imu_clock_offset: estimate     # optional: the IMU stream's clock offset against the joints,
 //   clock_offset_range_s: 0.5      # from the data (common/clock_offset.h), within +-range
 //
-// A step: the IMU readings up to its time (in time order), Predict, the joint reading, the
-// estimate. Joint angles are the declared model's joint variables (zero at its zero), matched to
-// the declared joints by column name. Metrics per estimator, against truth.tum interpolated at
-// the steps inside its span (when the log has one): ErrorStats' position and rotation errors,
-// NEES, steps_scored, rejected_readings. Scenario metrics: steps, duration_s, and per stream
-// rows, duplicates, gaps, median_dt_s, clock_offset_s; a stream without time overlap with the
-// joints is warned about and counted (streams_without_overlap); an estimated IMU clock offset
-// (imu_clock_offset_s, its standard error _std_s and the correlation at it), added to the IMU
-// times before the estimators see them.
+// A step (common/log_replay.h): the IMU readings up to its time (in time order), Predict, the
+// joint reading, the tag detections up to its time, the estimate. Joint angles are the declared
+// model's joint variables (zero at its zero), matched to the declared joints by column name.
+// Metrics per estimator, against truth.tum interpolated at the steps inside its span (when the log
+// has one): ErrorStats' position and rotation errors, NEES, steps_scored, rejected_readings.
+// Scenario metrics: steps, duration_s, and per stream rows, duplicates, gaps, median_dt_s,
+// clock_offset_s; a stream without time overlap with the joints is warned about and counted
+// (streams_without_overlap); an estimated IMU clock offset (imu_clock_offset_s, its standard error
+// _std_s and the correlation at it), added to the IMU times before the estimators see them.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -50,7 +50,7 @@ class ReplayKind : public ScenarioKind {
                                                 : log_.declared_path);
     model_ = sim::LoadModel(declared_.model_path);
     chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(model_.get(), declared_));
-    column_ = LogJointColumns(log_, *chain_, declared_.file);
+    index_ = IndexLog(log_, *chain_, declared_.file);
     setup_ = LogEstimatorSetup(log_, *chain_, declared_.end_effector);
     step_hz_ = root.GetDouble("step_hz", 0.0);
     if (!(step_hz_ >= 0.0) || !std::isfinite(step_hz_)) {
@@ -82,7 +82,7 @@ class ReplayKind : public ScenarioKind {
       ErrorStats stats;
       const std::unique_ptr<estimators::Estimator> est = Make(specs_[e], ctx.seed);
       const int rejected =
-          ReplayLog(log_, column_, steps, imu_order, *est, [&](size_t s, const Belief& b) {
+          ReplayLog(log_, index_, steps, imu_order, *est, [&](size_t s, const Belief& b) {
             const double t = steps[s].t;
             lie::SE3 T_true;
             if (sim::TruthAt(log_, t, &T_true)) {
@@ -125,6 +125,7 @@ class ReplayKind : public ScenarioKind {
     stream("joints", log_.joint_stats);
     stream("imu", log_.imu_stats);
     stream("truth", log_.truth_stats);
+    stream("tags", log_.tag_stats);
     m["streams_without_overlap"] = without_overlap;
   }
 
@@ -133,7 +134,7 @@ class ReplayKind : public ScenarioKind {
     std::vector<kinematics::FrameId> frames;
     for (const estimators::ImuSetup& s : setup_.imus) frames.push_back(s.frame);
     const ClockOffset c =
-        EstimateImuClockOffset(log_, chain_->model, column_, frames, offset_range_s_);
+        EstimateImuClockOffset(log_, chain_->model, index_.column, frames, offset_range_s_);
     for (estimators::ImuReading& z : log_.imu) z.t += c.offset_s;
     Json& m = (*ctx.summary)["metrics"];
     m["imu_clock_offset_s"] = c.offset_s;
@@ -155,7 +156,7 @@ class ReplayKind : public ScenarioKind {
   sim::DeclaredModel declared_;
   sim::MjModelPtr model_;
   std::unique_ptr<sim::DeclaredChain> chain_;
-  std::vector<int> column_;
+  LogIndex index_;
   estimators::EstimatorSetup setup_;
   double step_hz_ = 0.0;
   bool estimate_offset_ = false;

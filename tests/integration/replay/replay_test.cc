@@ -8,7 +8,9 @@
 
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "tests/common/jsk_log.h"
 #include "tests/common/test_util.h"
@@ -82,10 +84,18 @@ TEST(Replay, ABadLogIsOneLineAndExitTwo) {
            "/models/jsk_arm.declared.yaml declares 'gripper_joint' revolute"},
       {"log.yaml", "frame: imu_link3", "frame: nowhere", "log.yaml: imu.sensors.imu3.frame"},
       {"imu.csv", "0.01,imu3", "0.01,imu7", "imu.csv:5: column 'sensor': 'imu7'"},
+      {"tags.csv", ",cam0,20,", ",cam9,20,", "tags.csv:2: column 'camera': 'cam9'"},
+      {"tags.csv", ",cam0,20,", ",cam0,21,",
+       "tags.csv:2: column 'tag_id': 21 is not one of the log's tags.ids"},
+      {"tags.csv", "u3_px", "u3", "tags.csv:1: the header must be t_s,camera,tag_id,"},
+      {"tags.csv", ",cam0,20,", ",cam0,20,nan,", "tags.csv:2: 12 columns, the header has 11"},
+      {"log.yaml", "frame: tag_gripper", "frame: nowhere", "log.yaml: tags.ids.20.frame"},
+      {"log.yaml", "frame: external_camera", "frame: nowhere", "log.yaml: cameras.cam0.frame"},
+      {"log.yaml", "size_m: 0.04", "size_m: -1", "size_m"},
   };
   for (const auto& c : cases) {
     testing::TempDir tmp;
-    testing::WriteJskLog(tmp.path() / "log", 0.1);
+    testing::WriteJskLog(tmp.path() / "log", 3.0, 0.05, 0.0, 0.0, /*tags=*/true);
     const fs::path f = tmp.path() / "log" / c.file;
     std::string text = testing::ReadFile(f);
     const size_t at = text.find(c.from);
@@ -99,6 +109,61 @@ TEST(Replay, ABadLogIsOneLineAndExitTwo) {
     EXPECT_NE(r.err.find(c.expect), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(tmp.path() / "out"));
   }
+}
+
+// Positions of a TUM file by time.
+std::map<double, Vec3> TumPositions(const fs::path& file) {
+  std::map<double, Vec3> out;
+  std::istringstream in(testing::ReadFile(file));
+  for (std::string line; std::getline(in, line);) {
+    double t, x, y, z;
+    if (line.empty() || line[0] == '#') continue;
+    if (std::sscanf(line.c_str(), "%lf %lf %lf %lf", &t, &x, &y, &z) == 4) out[t] = Vec3(x, y, z);
+  }
+  return out;
+}
+
+// Tag detections in a log (tags.csv, cameras and tags in log.yaml) reach the estimators that use
+// them, at the camera and tag frames the log names: at the steps the gripper's tag is seen, the
+// PPOE EKF corrects the offset encoders' kinematic prior across the camera's line of sight,
+// where fk cannot (along it a 4 cm tag 1.2 m away says little).
+TEST(Replay, TagDetectionsInALogCorrectTheOffsetEncoders) {
+  testing::TempDir tmp;
+  testing::WriteJskLog(tmp.path() / "log", 20.0, 0.05, 0.0, 0.0, /*tags=*/true);
+  const CommandResult r = RunCommand(
+      testing::Flexbench() + " replay " + (tmp.path() / "log").string() +
+      " --estimators fk,ppoe_ekf --step-hz 10 --quiet --out " + (tmp.path() / "out").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json s =
+      nlohmann::json::parse(testing::ReadFile(tmp.path() / "out" / "summary.json"));
+  EXPECT_EQ(s["estimators"]["ppoe_ekf"]["metrics"]["rejected_readings"], 0);
+  const fs::path dir = tmp.path() / "out" / "trajectories" / "base";
+  const std::map<double, Vec3> truth = TumPositions(dir / "truth.tum");
+  const std::map<double, Vec3> fk = TumPositions(dir / "fk.tum");
+  const std::map<double, Vec3> ekf = TumPositions(dir / "ppoe_ekf.tum");
+  // The camera's line of sight to the gripper: from the camera's position in jsk_arm.xml.
+  const Vec3 p_camera(0.30, -1.05, 1.10);
+  std::istringstream tags(testing::ReadFile(tmp.path() / "log" / "tags.csv"));
+  std::string line;
+  std::getline(tags, line);
+  int seen = 0;
+  double fk_across = 0.0, ekf_across = 0.0;
+  for (; std::getline(tags, line); ++seen) {
+    const double t = std::stod(line.substr(0, line.find(',')));
+    const auto at = truth.lower_bound(t - 1e-9);
+    ASSERT_NE(at, truth.end());
+    const Vec3 sight = (at->second - p_camera).normalized();
+    const auto across = [&](const Vec3& e) { return (e - e.dot(sight) * sight).norm(); };
+    fk_across += across(fk.at(at->first) - at->second);
+    ekf_across += across(ekf.at(at->first) - at->second);
+  }
+  std::printf(
+      "%d steps with the tag seen; mean position error across the line of sight fk %.2f mm, "
+      "ppoe_ekf %.2f mm\n",
+      seen, 1e3 * fk_across / seen, 1e3 * ekf_across / seen);
+  EXPECT_EQ(s["metrics"]["streams"]["tags"]["rows"], seen);
+  EXPECT_GE(seen, 30);
+  EXPECT_LT(ekf_across, 0.2 * fk_across);
 }
 
 // `flexbench replay LOG`: the same run from the command line; a bad option is one line naming

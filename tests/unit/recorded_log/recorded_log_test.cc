@@ -144,5 +144,54 @@ TEST(RecordedLog, BadInputIsOneLineNamingTheFileLineAndColumn) {
   }
 }
 
+// Cameras, tags and their detections: written, they read back as the same numbers, with the
+// camera and tag of each row, and tags given by size get libapriltag's corner order.
+TEST(RecordedLog, TagDetectionsRoundTrip) {
+  testing::TempDir dir;
+  Files f;
+  f.log_yaml +=
+      "cameras: {cam0: {frame: external_camera, fx: 600.5, fy: 601, cx: 320, cy: 240.25, "
+      "width: 640, height: 480}}\n"
+      "tags: {file: tags.csv, clock_offset_s: 0.5, pixel_std_px: 0.7,\n"
+      "       ids: {20: {frame: tag_gripper, size_m: 0.04}, 3: {frame: tag_base, corners_m: "
+      "[[0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0], [0, 0.1, 0.01]]}}}\n";
+  f.Write(dir.path());
+  std::ofstream(dir.path() / "tags.csv")
+      << "t_s,camera,tag_id,u0_px,v0_px,u1_px,v1_px,u2_px,v2_px,u3_px,v3_px\n"
+         "0.1,cam0,20,1,2,3,4,5,6,7,8\n"
+         "0.1,cam0,3,10.5,20,30,40,50,60,70,80.25\n"
+         "0.2,cam0,20,1,2,3,4,5,6,7,8\n";
+  const RecordedLog log = ReadRecordedLog(dir.path().string());
+  ASSERT_EQ(log.cameras.size(), 1u);
+  EXPECT_DOUBLE_EQ(log.cameras[0].intrinsics.fx, 600.5);
+  ASSERT_EQ(log.tags.size(), 2u);
+  const LogTag& t20 = log.tags[0].id == 20 ? log.tags[0] : log.tags[1];
+  EXPECT_EQ(t20.corners_m[0], Vec3(-0.02, 0.02, 0.0));
+  EXPECT_EQ(t20.corners_m[2], Vec3(0.02, -0.02, 0.0));
+  EXPECT_DOUBLE_EQ(log.pixel_std_px, 0.7);
+  ASSERT_EQ(log.tag_rows.size(), 3u);
+  EXPECT_DOUBLE_EQ(log.tag_rows[1].t, 0.6);  // the clock offset
+  EXPECT_EQ(log.tags[log.tag_rows[1].tag].id, 3);
+  EXPECT_EQ(log.tag_rows[1].uv[3], Eigen::Vector2d(70, 80.25));
+  EXPECT_EQ(log.tag_stats.rows, 3);
+  EXPECT_EQ(log.tag_stats.duplicates, 0);  // two tags at one time: two streams
+  const std::string again = (dir.path() / "again").string();
+  WriteRecordedLog(log, again);
+  const RecordedLog back = ReadRecordedLog(again);
+  ASSERT_EQ(back.tag_rows.size(), 3u);
+  for (size_t r = 0; r < 3; ++r) {
+    EXPECT_EQ(back.tag_rows[r].t, log.tag_rows[r].t);
+    EXPECT_EQ(back.tag_rows[r].camera, log.tag_rows[r].camera);
+    EXPECT_EQ(back.tags[back.tag_rows[r].tag].id, log.tags[log.tag_rows[r].tag].id);
+    for (int k = 0; k < 4; ++k) EXPECT_EQ(back.tag_rows[r].uv[k], log.tag_rows[r].uv[k]);
+  }
+  for (size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(back.tags[i].frame, log.tags[i].frame);
+    for (int k = 0; k < 4; ++k) EXPECT_EQ(back.tags[i].corners_m[k], log.tags[i].corners_m[k]);
+  }
+  EXPECT_EQ(back.cameras[0].intrinsics.cy, 240.25);
+  EXPECT_EQ(back.pixel_std_px, 0.7);
+}
+
 }  // namespace
 }  // namespace flexbench::sim

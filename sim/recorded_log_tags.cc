@@ -1,0 +1,185 @@
+// A recorded log's cameras and tag detections (recorded_log.h): log.yaml's `cameras` and `tags`,
+// tags.csv, and their writers.
+#include <cmath>
+#include <cstdlib>
+#include <functional>
+#include <map>
+#include <sstream>
+
+#include "estimators/error.h"
+#include "sim/csv.h"
+#include "sim/recorded_log_streams.h"
+
+namespace flexbench::sim::log_internal {
+namespace {
+
+const std::vector<std::string>& TagsHeader() {
+  static const std::vector<std::string> h = {"t_s",   "camera", "tag_id", "u0_px", "v0_px", "u1_px",
+                                             "v1_px", "u2_px",  "v2_px",  "u3_px", "v3_px"};
+  return h;
+}
+
+double Positive(const ConfigNode& c, const std::string& key, double max) {
+  const double v = c.GetDouble(key);
+  if (!(v > 0.0 && v <= max)) c.Child(key).Fail("must be > 0 and at most " + Num(max));
+  return v;
+}
+
+LogTag ReadTag(const std::string& key, const ConfigNode& t) {
+  LogTag tag;
+  char* end = nullptr;
+  const long id = std::strtol(key.c_str(), &end, 10);
+  if (key.empty() || *end != '\0' || id < 0 || id > 1000000) {
+    t.Fail("a tag id must be an integer in [0, 1000000], not '" + CapForMessage(key) + "'");
+  }
+  tag.id = static_cast<int>(id);
+  tag.frame = t.GetString("frame");
+  if (t.Has("corners_m") == t.Has("size_m")) t.Fail("needs corners_m or size_m (one of them)");
+  if (t.Has("size_m")) {
+    const double h = 0.5 * Positive(t, "size_m", 10.0);
+    // libapriltag's order on the printed tag, x right and y down.
+    tag.corners_m = {Vec3(-h, h, 0.0), Vec3(h, h, 0.0), Vec3(h, -h, 0.0), Vec3(-h, -h, 0.0)};
+    return tag;
+  }
+  const ConfigNode c = t.Child("corners_m");
+  const std::vector<ConfigNode> corners = c.Items();
+  if (corners.size() != 4) c.Fail("expected four corners [[x, y, z], ...] in metres");
+  for (int k = 0; k < 4; ++k) {
+    const std::vector<double> v = corners[k].AsDoubleList();
+    if (v.size() != 3 || !(std::abs(v[0]) <= 10 && std::abs(v[1]) <= 10 && std::abs(v[2]) <= 10)) {
+      corners[k].Fail("expected [x, y, z] in metres, each within 10 m");
+    }
+    tag.corners_m[k] = Vec3(v[0], v[1], v[2]);
+  }
+  return tag;
+}
+
+template <typename T>
+int IndexOf(const std::vector<T>& items, const std::function<bool(const T&)>& is) {
+  for (size_t i = 0; i < items.size(); ++i) {
+    if (is(items[i])) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+}  // namespace
+
+void ReadCameras(const ConfigNode& node, RecordedLog* log) {
+  for (const std::string& name : node.Keys()) {
+    const ConfigNode c = node.Child(name);
+    LogCamera cam;
+    cam.name = name;
+    cam.frame = c.GetString("frame");
+    cam.intrinsics.fx = Positive(c, "fx", 1e6);
+    cam.intrinsics.fy = Positive(c, "fy", 1e6);
+    cam.intrinsics.cx = c.GetDouble("cx");
+    cam.intrinsics.cy = c.GetDouble("cy");
+    for (const char* k : {"cx", "cy"}) {
+      if (!(std::abs(c.GetDouble(k)) <= 1e6)) c.Child(k).Fail("must be finite, within 1e6 px");
+    }
+    cam.intrinsics.width = c.GetInt("width");
+    cam.intrinsics.height = c.GetInt("height");
+    for (const char* k : {"width", "height"}) {
+      if (!(c.GetInt(k) > 0 && c.GetInt(k) <= 100000)) c.Child(k).Fail("must be in [1, 100000]");
+    }
+    log->cameras.push_back(cam);
+  }
+  if (log->cameras.empty()) node.Fail("names no camera");
+}
+
+void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
+  if (log->cameras.empty()) node.Fail("needs `cameras` (those tags.csv names)");
+  const std::string file = node.ResolvePath(node.GetString("file"));
+  const double offset = ClockOffset(node);
+  if (node.Has("pixel_std_px")) log->pixel_std_px = Positive(node, "pixel_std_px", 1e3);
+  const ConfigNode ids = node.Child("ids");
+  for (const std::string& key : ids.Keys()) log->tags.push_back(ReadTag(key, ids.Child(key)));
+  if (log->tags.empty()) ids.Fail("names no tag");
+  CsvLines csv(file, kMaxLogStreamBytes);
+  std::vector<std::string> header;
+  if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
+  const std::vector<std::string>& want = TagsHeader();
+  std::string names;
+  for (const std::string& h : want) names += (names.empty() ? "" : ",") + h;
+  for (size_t c = 0; c < want.size(); ++c) {
+    if (header.size() != want.size() || header[c] != want[c]) {
+      throw InputError(csv.Where() + ": the header must be " + names + " (column " +
+                       std::to_string(c + 1) + " is '" +
+                       CapForMessage(c < header.size() ? header[c] : "") + "')");
+    }
+  }
+  log->tag_rows.reserve(CheckRows(file, sizeof(LogTagRow) + 16.0, used));
+  // Times per camera and tag: the stream a detector makes of one tag.
+  std::map<std::pair<int, int>, std::vector<double>> times;
+  std::map<std::pair<int, int>, double> last;
+  std::vector<std::string> cells;
+  while (csv.Next(&cells)) {
+    const std::string where = csv.Where();
+    if (cells.size() != want.size()) {
+      throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
+                       std::to_string(want.size()));
+    }
+    LogTagRow row;
+    row.camera =
+        IndexOf<LogCamera>(log->cameras, [&](const LogCamera& c) { return c.name == cells[1]; });
+    if (row.camera < 0) {
+      throw InputError(where + ": column 'camera': '" + CapForMessage(cells[1]) +
+                       "' is not one of the log's cameras");
+    }
+    const double id = ParseCsvNumber(cells[2], where, "tag_id", 1e6);
+    row.tag = IndexOf<LogTag>(log->tags, [&](const LogTag& t) { return t.id == id; });
+    if (row.tag < 0) {
+      throw InputError(where + ": column 'tag_id': " + cells[2] +
+                       " is not one of the log's tags.ids");
+    }
+    const std::pair<int, int> stream(row.camera, row.tag);
+    std::vector<double>& ts = times[stream];
+    row.t = RowTime(cells[0], where, offset, &last[stream], !ts.empty());
+    for (int k = 0; k < 4; ++k) {
+      row.uv[k] = Eigen::Vector2d(ParseCsvNumber(cells[3 + 2 * k], where, want[3 + 2 * k], 1e6),
+                                  ParseCsvNumber(cells[4 + 2 * k], where, want[4 + 2 * k], 1e6));
+    }
+    ts.push_back(row.t);
+    log->tag_rows.push_back(row);
+  }
+  std::vector<const std::vector<double>*> streams;
+  for (const auto& [key, ts] : times) streams.push_back(&ts);
+  log->tag_stats = Stats(file, offset, streams);
+}
+
+std::string TagsYaml(const RecordedLog& log) {
+  if (log.tags.empty()) return "";
+  std::ostringstream y;
+  y << "cameras:\n";
+  for (const LogCamera& c : log.cameras) {
+    const PinholeCamera& k = c.intrinsics;
+    y << "  " << c.name << ": {frame: " << c.frame << ", fx: " << Num(k.fx) << ", fy: " << Num(k.fy)
+      << ", cx: " << Num(k.cx) << ", cy: " << Num(k.cy) << ", width: " << k.width
+      << ", height: " << k.height << "}\n";
+  }
+  y << "tags:\n  file: tags.csv\n  pixel_std_px: " << Num(log.pixel_std_px) << "\n  ids:\n";
+  for (const LogTag& t : log.tags) {
+    y << "    " << t.id << ":\n      frame: " << t.frame << "\n      corners_m: [";
+    for (int k = 0; k < 4; ++k) {
+      const Vec3& p = t.corners_m[k];
+      y << (k ? ", " : "") << "[" << Num(p.x()) << ", " << Num(p.y()) << ", " << Num(p.z()) << "]";
+    }
+    y << "]\n";
+  }
+  return y.str();
+}
+
+std::string TagsCsv(const RecordedLog& log) {
+  std::ostringstream c;
+  const std::vector<std::string>& h = TagsHeader();
+  for (size_t i = 0; i < h.size(); ++i) c << (i ? "," : "") << h[i];
+  c << "\n";
+  for (const LogTagRow& r : log.tag_rows) {
+    c << Num(r.t) << "," << log.cameras[r.camera].name << "," << log.tags[r.tag].id;
+    for (int k = 0; k < 4; ++k) c << "," << Num(r.uv[k].x()) << "," << Num(r.uv[k].y());
+    c << "\n";
+  }
+  return c.str();
+}
+
+}  // namespace flexbench::sim::log_internal
