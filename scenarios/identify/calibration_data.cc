@@ -164,10 +164,39 @@ int MarkerIndex(const std::string& cell, const std::string& where, const DataSet
 
 }  // namespace
 
+namespace {
+
+// The log's set label (its folder's name).
+int LogSet(const sim::RecordedLog& log, DataSet* data) {
+  const std::string folder = std::filesystem::path(log.dir).lexically_normal().filename().string();
+  return LabelIndex(&data->sets, folder.empty() ? "log" : folder);
+}
+
+// Labels the rows from `first` on (their times `times`) with `time_blocks` equal spans of time.
+void LabelTimeSpans(const std::vector<double>& times, size_t first, int time_blocks,
+                    DataSet* data) {
+  if (times.empty()) return;
+  const auto [lo, hi] = std::minmax_element(times.begin(), times.end());
+  const double t0 = *lo, span = *hi - *lo;
+  for (size_t i = 0; i < times.size(); ++i) {
+    const int k = span > 0.0 ? std::min(time_blocks - 1,
+                                        static_cast<int>(time_blocks * (times[i] - t0) / span))
+                             : 0;
+    data->rows[first + i].pose = LabelIndex(&data->poses, "span" + std::to_string(k));
+  }
+}
+
+std::string LogWhere(const std::string& file, double t) {
+  char where[64];
+  std::snprintf(where, sizeof(where), " t=%.9g", t);
+  return file + where;
+}
+
+}  // namespace
+
 int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
                     double t_to, int point, DataSet* data, int frame, int time_blocks) {
-  const std::string folder = std::filesystem::path(log.dir).lexically_normal().filename().string();
-  const int set = LabelIndex(&data->sets, folder.empty() ? "log" : folder);
+  const int set = LogSet(log, data);
   const size_t first = data->rows.size();
   std::vector<double> times;
   for (size_t r = 0; r < log.truth_t.size(); ++r) {
@@ -179,20 +208,38 @@ int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column,
     o.point = point;
     o.frame = frame;
     (frame >= 0 ? o.p_frame : o.p_base) = log.truth[r].translation();
-    char where[64];
-    std::snprintf(where, sizeof(where), " t=%.9g", t);
-    o.where = log.truth_stats.file + where;
+    o.where = LogWhere(log.truth_stats.file, t);
     data->rows.push_back(std::move(o));
     times.push_back(t);
   }
-  if (times.empty()) return 0;
-  const double t0 = times.front(), span = times.back() - t0;
-  for (size_t i = 0; i < times.size(); ++i) {
-    const int k = span > 0.0 ? std::min(time_blocks - 1,
-                                        static_cast<int>(time_blocks * (times[i] - t0) / span))
-                             : 0;
-    data->rows[first + i].pose = LabelIndex(&data->poses, "span" + std::to_string(k));
+  LabelTimeSpans(times, first, time_blocks, data);
+  return static_cast<int>(times.size());
+}
+
+int AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
+                    double t_to, int camera, const std::vector<int>& tag_points, DataSet* data,
+                    int time_blocks) {
+  const int set = LogSet(log, data);
+  const size_t first = data->rows.size();
+  std::vector<double> times;
+  for (const sim::LogTagRow& row : log.tag_rows) {
+    Observation o;
+    if (row.camera != camera || tag_points[row.tag] < 0 || row.t < t_from || row.t > t_to ||
+        !sim::JointsAt(log, column, row.t, &o.q)) {
+      continue;
+    }
+    const auto h = [&](int k) { return Eigen::Vector3d(row.uv[k].x(), row.uv[k].y(), 1.0); };
+    const Eigen::Vector3d centre = h(0).cross(h(2)).cross(h(1).cross(h(3)));
+    if (!(std::abs(centre.z()) > 1e-12)) continue;  // degenerate corners: no centre
+    o.type = ObservationType::kPixel;
+    o.set = set;
+    o.point = tag_points[row.tag];
+    o.uv = centre.head<2>() / centre.z();
+    o.where = LogWhere(log.tag_stats.file, row.t);
+    data->rows.push_back(std::move(o));
+    times.push_back(row.t);
   }
+  LabelTimeSpans(times, first, time_blocks, data);
   return static_cast<int>(times.size());
 }
 

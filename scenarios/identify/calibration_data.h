@@ -85,6 +85,16 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
 int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
                     double t_to, int point, DataSet* data, int frame = -1, int time_blocks = 5);
 
+// A recorded log's tag detections by one fixed camera (log.cameras[camera], the data's
+// DataSet::camera) read as pixel rows: each row of tags.csv in [t_from, t_to] and inside the
+// joints' span whose tag has a point (`tag_points[tag]`: its index in data->points, the tag's
+// frame, whose origin is the tag's centre; -1: not a row) becomes the pixel of that point, the
+// centre libapriltag reports (where the corners' diagonals cross), at the joint readings of its
+// time. Set, `where` and time-span `pose` labels as AppendLogPoints'. Returns the rows appended.
+int AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
+                    double t_to, int camera, const std::vector<int>& tag_points, DataSet* data,
+                    int time_blocks = 5);
+
 // Index of `label` in `labels`, appended when new.
 int LabelIndex(std::vector<std::string>* labels, const std::string& label);
 

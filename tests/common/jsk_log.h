@@ -25,10 +25,11 @@ namespace flexbench::testing {
 // explains: the arm trailing its encoders, as an elastic arm's inertia does). `tags`: the
 // external camera (640 x 480, 45 deg vertical field of view) sees the gripper's 4 cm tag at 10 Hz,
 // its corners projected exactly, written where all four fall on the image (tags.csv; the log's
-// pixel_std_px 1).
+// pixel_std_px 1). `camera_tilt_rad`: the camera is turned that much about its optical x axis
+// from where the declared model has it (a sagged mount).
 inline void WriteJskLog(const std::filesystem::path& dir, double duration,
                         double pitch_offset = 0.05, double imu_clock_s = 0.0,
-                        double truth_lag_s = 0.0, bool tags = false) {
+                        double truth_lag_s = 0.0, bool tags = false, double camera_tilt_rad = 0.0) {
   const auto num = [](double v) {
     char b[40];
     std::snprintf(b, sizeof(b), "%.17g", v);
@@ -114,7 +115,11 @@ inline void WriteJskLog(const std::filesystem::path& dir, double duration,
   csv << "t_s,camera,tag_id,u0_px,v0_px,u1_px,v1_px,u2_px,v2_px,u3_px,v3_px\n";
   for (int i = 0; i * 0.1 <= duration + 1e-9; ++i) {
     const double t = i * 0.1;
-    const lie::SE3 T_cam_tag = pose(t - truth_lag_s, camera).Inverse() * pose(t - truth_lag_s, tag);
+    const lie::SE3 T_base_cam =
+        pose(t - truth_lag_s, camera) *
+        lie::SE3(Eigen::AngleAxisd(camera_tilt_rad, Vec3::UnitX()).toRotationMatrix(),
+                 Vec3::Zero());
+    const lie::SE3 T_cam_tag = T_base_cam.Inverse() * pose(t - truth_lag_s, tag);
     std::string row = num(t) + ",cam0,20";
     bool seen = true;
     for (const Vec3& c : corners) {

@@ -203,6 +203,7 @@ class ClosedLoopKind : public ScenarioKind {
     mj_ = sim::LoadModel(declared_.model_path);
     chain_ = std::make_unique<sim::DeclaredChain>(
         sim::BuildDeclaredChain(mj_.get(), declared_, /*with_couplings=*/true));
+    if (!camera_.present) CameraFromLogs(root);
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
                                                   camera_.present ? camera_.name : "",
                                                   MarkerFrames(), gravity_tilt_);
@@ -225,6 +226,7 @@ class ClosedLoopKind : public ScenarioKind {
     };
     const Clock::time_point t0 = Clock::now();
     LogBaseEffects(ctx);
+    for (const std::string& note : log_notes_) ctx.log(note);
     Sets sets = Collect(ctx);
     (*ctx.timing)["data_s"] = seconds_since(t0);
     ctx.log("identify: " + std::to_string(sets.cal.rows.size()) + " calibration rows, " +
@@ -611,8 +613,13 @@ class ClosedLoopKind : public ScenarioKind {
       (*m)["skipped_candidates"] = skipped;
     }
     (*m)["indistinguishable"] = res.indistinguishable;
-    verdict_ = identify::Verdict(res, (*m)["val_err_before_m"].get<double>(),
-                                 (*m)["val_err_after_m"].get<double>());
+    // Validation rows in pixels alone (a camera's tags) are judged by their pixel error.
+    const bool metres = std::any_of(sets.val.rows.begin(), sets.val.rows.end(), [](const auto& o) {
+      return o.type != identify::ObservationType::kPixel;
+    });
+    const std::string unit = metres ? "_m" : "_px";
+    verdict_ = identify::Verdict(res, (*m)["val_err_before" + unit].get<double>(),
+                                 (*m)["val_err_after" + unit].get<double>());
     (*m)["verdict"] = verdict_;
     (*m)["stopped_by"] = res.stopped_by;
     const double noise_ratio = identify::NoiseRatio(res.after);
@@ -766,6 +773,8 @@ class ClosedLoopKind : public ScenarioKind {
       }
       case Source::Type::kLog: {
         const sim::RecordedLog& log = Log(s);
+        if (camera_.present && !log.tag_rows.empty()) AppendLogPixels(log, s, what, ctx, &d);
+        if (log.truth_t.empty()) break;
         const auto it = std::find(points_.begin(), points_.end(), log.truth_frame);
         if (it == points_.end()) {
           throw InputError(log.dir + "/log.yaml: truth.frame '" + log.truth_frame +
@@ -808,6 +817,77 @@ class ClosedLoopKind : public ScenarioKind {
     return d;
   }
 
+  // The first log source's camera that sees tags, when fixed on the declared model, becomes the
+  // identification's camera (pixel rows of the tags' centres; the camera_offset candidate), and
+  // its tags' frames measured points. Called when the scenario names no camera.
+  void CameraFromLogs(const ConfigNode& root) {
+    for (const Source* s : {&calibration_, &validation_}) {
+      if (s->type != Source::Type::kLog || camera_.present) continue;
+      const sim::RecordedLog& log = Log(*s);
+      if (log.tag_rows.empty()) continue;
+      const sim::LogCamera& cam = log.cameras[log.tag_rows.front().camera];
+      const std::string where = log.dir + "/log.yaml";
+      kinematics::FrameId f = -1;
+      try {
+        f = chain_->ObservedFrame(cam.frame);
+      } catch (const InputError& e) {
+        throw InputError(where + ": cameras." + cam.name + ".frame: " + e.what());
+      }
+      kinematics::PpoeData data(chain_->model);
+      kinematics::ForwardKinematics(chain_->model, data, Eigen::VectorXd::Zero(chain_->model.nq()));
+      const lie::SE3 T_base_cam = data.T_base_frame[f];
+      kinematics::ForwardKinematics(chain_->model, data,
+                                    Eigen::VectorXd::Constant(chain_->model.nq(), 0.5));
+      if ((T_base_cam.Inverse() * data.T_base_frame[f]).Log().norm() > 1e-12) {
+        log_notes_.push_back(
+            "log camera '" + cam.name + "' moves with the joints: its tag " +
+            "detections are no identification rows (pixel rows need a fixed camera)");
+        continue;
+      }
+      camera_.present = true;
+      camera_.name = cam.frame;  // the declared model's name: camera_offset@<frame> applies there
+      camera_.intrinsics = cam.intrinsics;
+      camera_.T_base_cam = T_base_cam;
+      if (!root.Has("pixel_std_px")) opt_.pixel_std_px = log.pixel_std_px;
+      for (const sim::LogTag& tag : log.tags) {
+        const Vec3 centre =
+            0.25 * (tag.corners_m[0] + tag.corners_m[1] + tag.corners_m[2] + tag.corners_m[3]);
+        const bool listed = tag.frame == declared_.end_effector ||
+                            std::any_of(marker_nodes_.begin(), marker_nodes_.end(),
+                                        [&](const auto& m) { return m.first == tag.frame; });
+        if (centre.norm() > 1e-9) {
+          log_notes_.push_back("log tag " + std::to_string(tag.id) + ": its centre is not its " +
+                               "frame's origin; its detections are no identification rows");
+        } else if (!listed) {
+          marker_nodes_.push_back({tag.frame, where + ": tags.ids." + std::to_string(tag.id)});
+        }
+      }
+    }
+  }
+
+  // Pixel rows of a log's tags seen by the identification's camera (CameraFromLogs).
+  void AppendLogPixels(const sim::RecordedLog& log, const Source& s, const std::string& what,
+                       RunContext& ctx, DataSet* d) const {
+    int camera = -1;
+    for (size_t c = 0; c < log.cameras.size(); ++c) {
+      if (log.cameras[c].frame == camera_.name) camera = static_cast<int>(c);
+    }
+    std::vector<int> tag_points;
+    for (const sim::LogTag& tag : log.tags) {
+      const Vec3 centre =
+          0.25 * (tag.corners_m[0] + tag.corners_m[1] + tag.corners_m[2] + tag.corners_m[3]);
+      const auto it = std::find(points_.begin(), points_.end(), tag.frame);
+      tag_points.push_back(centre.norm() <= 1e-9 && it != points_.end()
+                               ? static_cast<int>(it - points_.begin())
+                               : -1);
+    }
+    const int n = identify::AppendLogPixels(log, IndexLog(log, *chain_, declared_.file).column,
+                                            s.from_s, s.to_s, camera, tag_points, d);
+    ctx.log(what + ": " + std::to_string(n) + " tag detections of " + log.tag_stats.file +
+            " by camera '" + camera_.name + "' in " + Span(s) +
+            " (pixel rows of the tags' centres)");
+  }
+
   // Index in frames_ of the frame a log source's points are measured in (-1: the base frame).
   int LogFrame(const Source& s) const {
     if (s.frame.empty()) return -1;
@@ -822,9 +902,9 @@ class ClosedLoopKind : public ScenarioKind {
   const sim::RecordedLog& Log(const Source& s) {
     auto it = logs_.find(s.path);
     if (it == logs_.end()) it = logs_.emplace(s.path, sim::ReadRecordedLog(s.path)).first;
-    if (it->second.truth_t.empty()) {
+    if (it->second.truth_t.empty() && it->second.tag_rows.empty()) {
       throw InputError(s.path_where + ": " + it->second.dir +
-                       " has no truth.tum: its tracker points are the rows identification fits");
+                       " has no truth.tum and no tags.csv: identification fits their rows");
     }
     return it->second;
   }
@@ -1672,11 +1752,26 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   // Simulated rows as the measured data a user brings (`flexbench identify --calibration`).
+  // A CSV holds rows of one type: a log's pixel rows go beside its points, <what>_pixels.csv.
   void WriteDataCsv(RunContext& ctx, const DataSet& d, const std::string& what) const {
     std::vector<std::string> coupled;
     for (const auto& c : chain_->couplings) coupled.push_back(chain_->q_joints[c.q_index]);
-    WriteFileAtomic(ctx.out->File(what + "_data.csv"),
-                    identify::FormatCalibrationCsv(d, chain_->q_joints, coupled));
+    std::vector<int> pixels, others;
+    for (size_t r = 0; r < d.rows.size(); ++r) {
+      (d.rows[r].type == identify::ObservationType::kPixel ? pixels : others)
+          .push_back(static_cast<int>(r));
+    }
+    if (pixels.empty() || others.empty()) {
+      WriteFileAtomic(ctx.out->File(what + "_data.csv"),
+                      identify::FormatCalibrationCsv(d, chain_->q_joints, coupled));
+      return;
+    }
+    WriteFileAtomic(
+        ctx.out->File(what + "_data.csv"),
+        identify::FormatCalibrationCsv(identify::Subset(d, others), chain_->q_joints, coupled));
+    WriteFileAtomic(
+        ctx.out->File(what + "_pixels.csv"),
+        identify::FormatCalibrationCsv(identify::Subset(d, pixels), chain_->q_joints, coupled));
   }
 
   void WriteResiduals(RunContext& ctx, const DataSet& d, const std::vector<double>& before,
@@ -1798,6 +1893,7 @@ class ClosedLoopKind : public ScenarioKind {
   std::unique_ptr<sim::Simulation> sim_;
   std::map<std::string, sim::RecordedLog> logs_;  // by folder (Source::path)
   std::vector<EstimatorSpec> replay_specs_;       // a held-out log span's replay
+  std::vector<std::string> log_notes_;            // said when the run starts
   double source_scale_ = 1.0;
   std::string verdict_;
   double nees_scaled_ = 0.0;
