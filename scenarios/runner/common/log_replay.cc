@@ -103,7 +103,7 @@ std::vector<size_t> ImuTimeOrder(const sim::RecordedLog& log) {
 
 int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vector<LogStep>& steps,
               const std::vector<size_t>& imu_order, estimators::Estimator& est,
-              const std::function<void(size_t, const estimators::Belief&)>& on_step, double from) {
+              const std::function<void(size_t, const estimators::Belief&)>& on_step) {
   int rejected = 0;
   const auto count = [&](estimators::UpdateStatus s) {
     rejected += s != estimators::UpdateStatus::kAccepted && s != estimators::UpdateStatus::kIgnored;
@@ -116,8 +116,6 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
   estimators::TagCorners corners;
   corners.cov *= log.pixel_std_px * log.pixel_std_px;
   size_t next_imu = 0, next_tag = 0;
-  while (next_imu < imu_order.size() && log.imu[imu_order[next_imu]].t < from) ++next_imu;
-  while (next_tag < tag_order.size() && log.tag_rows[tag_order[next_tag]].t < from) ++next_tag;
   for (size_t s = 0; s < steps.size(); ++s) {
     const LogStep& step = steps[s];
     for (; next_imu < imu_order.size() && log.imu[imu_order[next_imu]].t <= step.t; ++next_imu) {

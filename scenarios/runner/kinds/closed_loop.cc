@@ -204,6 +204,7 @@ class ClosedLoopKind : public ScenarioKind {
     chain_ = std::make_unique<sim::DeclaredChain>(
         sim::BuildDeclaredChain(mj_.get(), declared_, /*with_couplings=*/true));
     if (!camera_.present) CameraFromLogs(root);
+    if (validation_.type == Source::Type::kLog) CheckHeldOutReplay();
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
                                                   camera_.present ? camera_.name : "",
                                                   MarkerFrames(), gravity_tilt_);
@@ -211,6 +212,12 @@ class ClosedLoopKind : public ScenarioKind {
     base_not_applied_ = em_->SetBaseEffects(declared_.identified_effects);
     offset_unknown_ = UnknownOffsets();
     SelectCandidates();
+    for (const auto& [name, where] : expected_nodes_) {
+      if (em_->FindCandidate(name) < 0) {
+        throw InputError(where + ": expected_effects: '" + name +
+                         "' is no candidate effect on this chain");
+      }
+    }
     if (has_truth_) {
       sim_ = sim::Simulation::Load(model_path_, effects_);
     }
@@ -253,7 +260,7 @@ class ClosedLoopKind : public ScenarioKind {
     ScoreNees(ctx, sets, sc, res, &m);
     WriteIdentification(res, &(*ctx.summary)["identification"]);
     Report(ctx, sets, sc, res);
-    if (validation_.type == Source::Type::kLog) ReplayHeldOut(ctx, res, &m);
+    if (replay_held_out_) ReplayHeldOut(ctx, res, &m);
   }
 
  private:
@@ -421,7 +428,10 @@ class ClosedLoopKind : public ScenarioKind {
     }
     if (const auto e = root.Optional("expected_effects")) {
       if (has_truth_) e->Fail("the truth block's `expected` names them already");
-      for (const ConfigNode& n : e->Items()) truth_names_.push_back(n.AsString());
+      for (const ConfigNode& n : e->Items()) {
+        truth_names_.push_back(n.AsString());
+        expected_nodes_.push_back({n.AsString(), n.Where()});
+      }
     }
     for (const Source* s : {&calibration_, &validation_}) {
       if (s->type == Source::Type::kMukca && !fs::exists(s->path)) {
@@ -810,7 +820,10 @@ class ClosedLoopKind : public ScenarioKind {
         break;
       }
     }
-    if (d.rows.empty()) throw InputError(s.where + ": no " + what + " rows");
+    if (d.rows.empty()) {
+      throw InputError(s.where + ": no " + what + " rows" +
+                       (s.type == Source::Type::kLog ? " in " + Span(s) + " of " + s.path : ""));
+    }
     if (s.type == Source::Type::kSimulate || s.type == Source::Type::kLog) {
       WriteDataCsv(ctx, d, what);
     }
@@ -1661,12 +1674,36 @@ class ClosedLoopKind : public ScenarioKind {
     }
   }
 
-  // The held-out span of the validation log through the replay estimators under the declared
-  // model and under the augmented one (shipped or not: the figures show why).
+  // Whether the validation log's held-out span can be replayed and scored (its truth is the end
+  // effector's, it has joint rows there), checked before any work: its frames must be on the
+  // chain, the span must hold joint rows; without truth of the end effector it is said and left.
+  void CheckHeldOutReplay() {
+    const sim::RecordedLog& log = Log(validation_);
+    if (log.truth_t.empty() || log.truth_frame != declared_.end_effector) {
+      log_notes_.push_back("held-out replay left out: " + log.dir + " has no truth.tum of the " +
+                           "end effector '" + declared_.end_effector + "' to score it against");
+      return;
+    }
+    LogEstimatorSetup(log, *chain_, declared_.end_effector);
+    if (LogSteps(log, 0.0, validation_.from_s, validation_.to_s).empty()) {
+      throw InputError(validation_.where + ": " + log.dir + " has no joint row in " +
+                       Span(validation_) + ": no held-out span to replay");
+    }
+    replay_held_out_ = true;
+  }
+
+  // The validation log through the replay estimators under the declared model and under the
+  // augmented one (shipped or not: the figures show why), from its start so that filters are
+  // warm, scored on the held-out span alone.
   void ReplayHeldOut(RunContext& ctx, const identify::IdentifyResult& res, Json* m) const {
     const sim::RecordedLog& log = logs_.at(validation_.path);
     const std::vector<size_t> imu_order = ImuTimeOrder(log);
-    const std::vector<LogStep> steps = LogSteps(log, 0.0, validation_.from_s, validation_.to_s);
+    const std::vector<LogStep> steps = LogSteps(log, 0.0);
+    const auto held_out = [&](double t) {
+      return t >= validation_.from_s && t <= validation_.to_s;
+    };
+    int held_out_steps = 0;
+    for (const LogStep& step : steps) held_out_steps += held_out(step.t);
     std::vector<std::string> errors(replay_specs_.size());
     const int frame = LogFrame(validation_);
     for (const bool after : {false, true}) {
@@ -1683,6 +1720,7 @@ class ClosedLoopKind : public ScenarioKind {
         ErrorStats stats;
         const auto est = MakeEstimatorOf(replay_specs_[e], setup, ctx.seed);
         const auto on_step = [&](size_t s, const estimators::Belief& b) {
+          if (!held_out(steps[s].t)) return;
           lie::SE3 T_true;
           if (sim::TruthAt(log, steps[s].t, &T_true)) {
             T_true = T_base_frame * T_true;
@@ -1691,8 +1729,7 @@ class ClosedLoopKind : public ScenarioKind {
           }
           recorder.Add(label, steps[s].t, b.T_base_ee, b.cov);
         };
-        const int rejected =
-            ReplayLog(log, index, steps, imu_order, *est, on_step, validation_.from_s);
+        const int rejected = ReplayLog(log, index, steps, imu_order, *est, on_step);
         Json& j = (*m)["heldout_replay"][label][after ? "after" : "before"];
         if (stats.count() > 0) stats.WriteMetrics(&j);
         j["steps_scored"] = stats.count();
@@ -1702,7 +1739,7 @@ class ClosedLoopKind : public ScenarioKind {
       }
       recorder.Write(*ctx.out, "base", after ? "heldout_after" : "heldout_before");
     }
-    std::string line = "held-out replay (" + std::to_string(steps.size()) + " steps in " +
+    std::string line = "held-out replay (" + std::to_string(held_out_steps) + " steps in " +
                        Span(validation_) + "), mean position error before -> after (m):";
     for (size_t e = 0; e < errors.size(); ++e) {
       line += (e ? "; " : " ") + replay_specs_[e].label + " " + errors[e];
@@ -1874,6 +1911,8 @@ class ClosedLoopKind : public ScenarioKind {
   Source calibration_, validation_;
   sim::EffectList effects_;
   std::vector<std::string> truth_names_;
+  std::vector<std::pair<std::string, std::string>>
+      expected_nodes_;  // expected_effects: name, where
   bool has_truth_ = false;
   std::optional<TrackerTruth> tracker_;          // simulated tracker rows instead of sockets
   int tracker_frame_ = -1;                       // its index in frames_
@@ -1894,6 +1933,7 @@ class ClosedLoopKind : public ScenarioKind {
   std::map<std::string, sim::RecordedLog> logs_;  // by folder (Source::path)
   std::vector<EstimatorSpec> replay_specs_;       // a held-out log span's replay
   std::vector<std::string> log_notes_;            // said when the run starts
+  bool replay_held_out_ = false;                  // CheckHeldOutReplay
   double source_scale_ = 1.0;
   std::string verdict_;
   double nees_scaled_ = 0.0;

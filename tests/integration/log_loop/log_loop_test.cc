@@ -178,8 +178,8 @@ TEST(LogLoop, ALogMeasuredInAnUnknownTrackerFrameIsRegisteredAndTheOffsetsNamed)
   const std::vector<double> T = frames[0]["T_base_frame"].get<std::vector<double>>();
   const lie::SE3 T_base_tracker = T_tracker_base.Inverse();
   const double moved = (Vec3(T[0], T[1], T[2]) - T_base_tracker.translation()).norm();
-  std::printf("tracker found %.3f mm from its pose\n", 1e3 * moved);
-  EXPECT_LT(moved, 1e-3);
+  std::printf("tracker found %.3g um from its pose\n", 1e6 * moved);
+  EXPECT_LT(moved, 1e-6);
 }
 
 // Only a fixed camera's tag detections (no truth.tum): the pixels of the gripper tag's centre
@@ -265,6 +265,12 @@ TEST(LogLoop, OverlappingSpansAndALogWithoutTruthAreRefused) {
                              "calibration's, t <= 3 s, of the same log"),
             std::string::npos)
       << overlap.err;
+  const CommandResult past = run("calibration: {log: {dir: " + log + ", to_s: 3}}\n" +
+                                 "validation: {log: {dir: " + log + ", from_s: 100}}\n");
+  EXPECT_EQ(past.exit_code, 2);
+  EXPECT_NE(past.err.find("bad.yaml:7: " + log + " has no joint row in t >= 100 s"),
+            std::string::npos)
+      << past.err;
   fs::remove(tmp.path() / "log" / "truth.tum");
   std::string yaml = testing::ReadFile(tmp.path() / "log" / "log.yaml");
   yaml = yaml.substr(0, yaml.find("truth:"));
