@@ -7,12 +7,42 @@
 #include "estimators/error.h"
 #include "estimators/imu/imu_orientations.h"
 #include "scenarios/runner/common/pose.h"
+#include "scenarios/runner/common/render_config.h"
+#include "scenarios/runner/common/tag_tracking.h"
+#include "sim/camera.h"
+#include "sim/mujoco_model.h"
 #include "sim/recorded_log.h"
 
 namespace flexbench::scenarios::jsk {
 
-DynamicOptions ParseDynamicOptions(const ConfigNode& root) {
+DynamicOptions ParseDynamicOptions(const ConfigNode& root, Rig& rig) {
   DynamicOptions o;
+  if (const auto c = root.Optional("tag_camera")) {
+    TagCamera tc;
+    tc.camera = c->GetString("camera");
+    tc.pixel_std_px = c->GetDouble("pixel_std_px", tc.pixel_std_px);
+    if (!(tc.pixel_std_px > 0.0 && tc.pixel_std_px <= 100.0)) {
+      c->Child("pixel_std_px").Fail("must be > 0 and at most 100");
+    }
+    tc.mode = ParseRenderMode(root, tc.mode);
+    tc.detector = ParseDetectorSettings(root);
+    tc.cam_id = sim::CameraId(rig.sim->model(), tc.camera, rig.declared.model_path);
+    try {
+      rig.setup.cameras.push_back({sim::CameraIntrinsics(rig.sim->model(), tc.cam_id),
+                                   rig.chain->ObservedFrame(tc.camera)});
+    } catch (const InputError& e) {
+      c->Child("camera").Fail(e.what());
+    }
+    tc.tags = render::ApplyTagTextures(rig.sim->mutable_model());
+    for (const render::TagInModel& tag : tc.tags) {
+      const std::string geom = sim::ObjectName(rig.sim->model(), mjOBJ_GEOM, tag.geom_id);
+      for (const auto& [name, frame] : rig.chain->observed) {
+        if (name == geom) tc.tag_frames[tag.id] = frame;
+      }
+    }
+    if (tc.tag_frames.empty()) c->Fail("no tag of the model is on an observed frame");
+    o.tag_camera = std::move(tc);
+  }
   o.filter_rate_hz = root.GetDouble("filter_rate_hz", o.filter_rate_hz);
   if (!(o.filter_rate_hz > 0.0)) root.Child("filter_rate_hz").Fail("must be > 0");
   if (const auto m = root.Optional("madgwick")) {
@@ -41,6 +71,29 @@ void FilterOrientations(const Rig& rig, std::vector<Snapshot>* snaps) {
   }
 }
 
+// The tag camera rendered and run through libapriltag at the simulation's current state.
+class TagEyes {
+ public:
+  TagEyes(const sim::Simulation& sim, const TagCamera& tc)
+      : tc_(tc), renderer_(sim.model(), tc.mode), detector_(tc.detector) {}
+  std::vector<estimators::TagCorners> Detect(const sim::Simulation& sim, double t) {
+    renderer_.RenderRgbInto(const_cast<mjData*>(sim.data()), tc_.cam_id, &image_);
+    std::vector<estimators::TagCorners> out;
+    for (const estimators::Measurement& m :
+         TagMeasurements(detector_.Detect(image_), tc_.tags, tc_.tag_frames, /*corners=*/true,
+                         tc_.pixel_std_px, t)) {
+      out.push_back(std::get<estimators::TagCorners>(m));
+    }
+    return out;
+  }
+
+ private:
+  const TagCamera& tc_;
+  render::Renderer renderer_;
+  render::TagDetector detector_;
+  render::Image image_;
+};
+
 }  // namespace
 
 std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
@@ -64,6 +117,8 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
   std::vector<sim::SensorReading> readings;
   std::vector<estimators::ImuReading> imu_raw;
   int next_tick = 1;  // the first snapshot after one filter period
+  std::optional<TagEyes> eyes;
+  if (options.tag_camera) eyes.emplace(sim, *options.tag_camera);
   const int total_ticks = static_cast<int>(std::floor(duration / period + 1e-9));
   while (sim.time() - t0 < duration - 1e-9) {
     const double t_next = sim.time() - t0 + dt;
@@ -111,6 +166,7 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
     }
     const std::string ee = rig.declared.end_effector;
     s.T_true = ToSE3(sim.Pose(ee));
+    if (eyes) s.tags = eyes->Detect(sim, t);
     snaps.push_back(std::move(s));
     ctx.progress("simulation", static_cast<int>(snaps.size()), total_ticks);
   }
@@ -118,7 +174,39 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
   return snaps;
 }
 
-void ExportLog(const Rig& rig, const std::vector<Snapshot>& snaps, const std::string& dir) {
+namespace {
+
+// The tag camera, its tags on observed frames and the snapshots' detections, in the log format.
+void AddTags(const Rig& rig, const TagCamera& tc, const std::vector<Snapshot>& snaps,
+             sim::RecordedLog* log) {
+  log->cameras.push_back({tc.camera, tc.camera, rig.setup.cameras[0].intrinsics});
+  log->pixel_std_px = tc.pixel_std_px;
+  std::map<int, int> index;  // tag id -> log->tags
+  for (const render::TagInModel& tag : tc.tags) {
+    if (!tc.tag_frames.count(tag.id)) continue;
+    index[tag.id] = static_cast<int>(log->tags.size());
+    sim::LogTag t;
+    t.id = tag.id;
+    t.frame = sim::ObjectName(rig.sim->model(), mjOBJ_GEOM, tag.geom_id);
+    for (int k = 0; k < 4; ++k) t.corners_m[k] = tag.corners_geom[k];
+    log->tags.push_back(t);
+  }
+  for (const Snapshot& s : snaps) {
+    for (const estimators::TagCorners& z : s.tags) {
+      sim::LogTagRow row;
+      row.t = z.t;
+      row.camera = 0;
+      row.tag = index.at(z.tag_id);
+      for (int k = 0; k < 4; ++k) row.uv[k] = z.uv[k];
+      log->tag_rows.push_back(row);
+    }
+  }
+}
+
+}  // namespace
+
+void ExportLog(const Rig& rig, const DynamicOptions& options, const std::vector<Snapshot>& snaps,
+               const std::string& dir) {
   sim::RecordedLog log;
   log.robot = std::filesystem::path(rig.declared.model_path).stem().string();
   log.declared_path = "declared.yaml";
@@ -144,6 +232,7 @@ void ExportLog(const Rig& rig, const std::vector<Snapshot>& snaps, const std::st
     log.imus.push_back(imu);
   }
   log.truth_frame = rig.declared.end_effector;
+  if (options.tag_camera) AddTags(rig, *options.tag_camera, snaps, &log);
   sim::DeclaredModel declared = rig.declared;
   declared.model_path = std::filesystem::absolute(declared.model_path).lexically_normal().string();
   sim::WriteRecordedLog(
@@ -166,6 +255,7 @@ Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vecto
       p.p_base = s.T_true.translation();
       r.Count(r.est->Update(p));
     }
+    for (const estimators::TagCorners& z : s.tags) r.Count(r.est->Update(z));
     r.Record(s.t, s.T_true);
     ctx.progress(spec.label, static_cast<int>(i + 1), static_cast<int>(snaps.size()));
   }

@@ -7,13 +7,23 @@
 //   filter_rate_hz: 10
 //   madgwick: {beta: 0.05, init: accel}   # init: accel (yaw 0) or truth (a calibrated yaw)
 //   sensors: [...]                        # sim sensors: motor-side encoders and the IMUs
+//   tag_camera: {camera: external_camera, pixel_std_px: 1}   # optional, with the render: and
+//                                         # detector: blocks (common/render_config.h)
+// With a tag camera, each snapshot also renders that camera (OSMesa) and runs libapriltag on the
+// image: the tags on observed frames become TagCorners, which the estimators see after the
+// encoders (the EKFs correct their kinematic prior with them; the particle filters ignore them).
 #pragma once
 
 #include <cstdint>
+#include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "estimators/measurement.h"
+#include "render/renderer.h"
+#include "render/tag_detector.h"
+#include "render/tag_texture.h"
 #include "scenarios/runner/kinds/jsk/rig.h"
 #include "scenarios/runner/kinds/jsk/trace.h"
 #include "scenarios/runner/kinds/jsk/trajectory.h"
@@ -21,12 +31,26 @@
 
 namespace flexbench::scenarios::jsk {
 
+// A camera of the truth that sees the arm's tags.
+struct TagCamera {
+  std::string camera;  // an MJCF camera and an observed frame of the declared model
+  int cam_id = -1;
+  render::RenderMode mode = render::RenderMode::kFast;
+  render::DetectorSettings detector;
+  double pixel_std_px = 1.0;                      // each corner's, in u and v
+  std::vector<render::TagInModel> tags;           // the truth's textured tags
+  std::map<int, kinematics::FrameId> tag_frames;  // those on observed frames, by id
+};
+
 struct DynamicOptions {
   double filter_rate_hz = 10.0;
   double madgwick_beta = 0.05;
   bool madgwick_init_truth = false;
+  std::optional<TagCamera> tag_camera;
 };
-DynamicOptions ParseDynamicOptions(const ConfigNode& root);
+// Reads the options; a tag camera textures the truth's tags and adds the camera to rig.setup
+// (InputError for a camera that is not in the model or not an observed frame).
+DynamicOptions ParseDynamicOptions(const ConfigNode& root, Rig& rig);
 
 struct Snapshot {
   double t = 0.0;
@@ -38,6 +62,7 @@ struct Snapshot {
   std::vector<estimators::OrientationReading> imus;  // the IMUs' filters' orientations here
   lie::SE3 T_true;                                   // the end effector (declared) in the world
   std::vector<Quat> imu_true;                        // true IMU orientations (for diagnostics)
+  std::vector<estimators::TagCorners> tags;          // the tag camera's detections here
 };
 
 // Settles the truth at the first waypoint, then steps through the trajectory. The sensor list
@@ -51,9 +76,10 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
 // Writes the snapshots as a recorded-log folder `dir` (sim/recorded_log.h) that `flexbench
 // replay` turns into the estimates RunOnSnapshots makes (the same bits): a joint row per
 // snapshot (its encoder readings), every IMU reading of the snapshots, the end effector's truth
-// at each, the IMUs' initial orientations when the run started them at the truth, and the
-// declared model (declared.yaml).
-void ExportLog(const Rig& rig, const std::vector<Snapshot>& snaps, const std::string& dir);
+// at each, the IMUs' initial orientations when the run started them at the truth, the tag
+// camera's detections (cameras, tags, tags.csv), and the declared model (declared.yaml).
+void ExportLog(const Rig& rig, const DynamicOptions& options, const std::vector<Snapshot>& snaps,
+               const std::string& dir);
 
 // Runs an estimator over snapshots; `with_position` adds the end effector's position reading.
 Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vector<Snapshot>& snaps,

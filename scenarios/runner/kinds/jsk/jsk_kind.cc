@@ -29,7 +29,7 @@ void SyntheticKind::ConfigureSynthetic(const ConfigNode& root) {
 void DynamicKind::Configure(const ConfigNode& root) {
   rig_ = LoadRig(root, /*with_effects=*/true);
   trajectory_ = ParseTrajectory(root.Child("trajectory"), rig_.nq(), /*dynamic=*/true);
-  options_ = ParseDynamicOptions(root);
+  options_ = ParseDynamicOptions(root, rig_);
   burn_in_s_ = root.GetDouble("burn_in_s", 1.0);
   if (!(burn_in_s_ >= 0.0 && burn_in_s_ < trajectory_.Duration())) {
     FailAt(root, "burn_in_s", "must be in [0, trajectory duration)");
@@ -43,7 +43,7 @@ void DynamicKind::Configure(const ConfigNode& root) {
 std::vector<Snapshot> DynamicKind::Simulate(const RunContext& ctx) {
   sim::SensorSuite sensors = sim::SensorSuite::Parse(*sensors_node_, *rig_.sim, ctx.seed);
   std::vector<Snapshot> snaps = SimulateDynamic(rig_, trajectory_, sensors, options_, ctx);
-  if (!ctx.export_log.empty()) ExportLog(rig_, snaps, ctx.export_log);
+  if (!ctx.export_log.empty()) ExportLog(rig_, options_, snaps, ctx.export_log);
   return snaps;
 }
 
