@@ -202,7 +202,7 @@ class ClosedLoopKind : public ScenarioKind {
     // Model, chain and candidates now: bad names fail before any work.
     mj_ = sim::LoadModel(declared_.model_path);
     chain_ = std::make_unique<sim::DeclaredChain>(
-        sim::BuildDeclaredChain(mj_.get(), declared_, /*with_couplings=*/true));
+        sim::BuildDeclaredChain(mj_.get(), WithTagCentres(), /*with_couplings=*/true));
     if (!camera_.present) CameraFromLogs(root);
     if (validation_.type == Source::Type::kLog) CheckHeldOutReplay();
     em_ = std::make_unique<identify::EffectModel>(mj_.get(), *chain_, chain_->end_effector,
@@ -830,6 +830,34 @@ class ClosedLoopKind : public ScenarioKind {
     return d;
   }
 
+  // The declared model for identification: a log tag whose centre is off its frame's origin
+  // (libapriltag's centre is the tag's, the frame is the model's) moves that frame to the centre
+  // (a marker offset known exactly), so that its pixel rows measure the frame. A frame already
+  // moved, or carrying two tags, keeps its place; their tags give no rows.
+  sim::DeclaredModel WithTagCentres() {
+    sim::DeclaredModel d = declared_;
+    std::map<std::string, Vec3> centre_of;
+    for (const Source* s : {&calibration_, &validation_}) {
+      if (s->type != Source::Type::kLog) continue;
+      for (const sim::LogTag& tag : Log(*s).tags) {
+        const Vec3 centre =
+            0.25 * (tag.corners_m[0] + tag.corners_m[1] + tag.corners_m[2] + tag.corners_m[3]);
+        const auto [it, added] = centre_of.emplace(tag.frame, centre);
+        if (!added && it->second != centre) it->second = Vec3::Constant(std::nan(""));
+      }
+    }
+    for (const auto& [frame, centre] : centre_of) {
+      if (!centre.allFinite() || !d.MarkerOffset(frame).isZero(0.0)) {
+        log_notes_.push_back("log tags on '" + frame + "': their centres are not one point of " +
+                             "the frame (two tags, or a declared marker offset): no pixel rows");
+        continue;
+      }
+      if (!centre.isZero(0.0)) d.marker_offsets.push_back({frame, centre, Mat3::Zero(), ""});
+      centred_tag_frames_.insert(frame);
+    }
+    return d;
+  }
+
   // The first log source's camera that sees tags, when fixed on the declared model, becomes the
   // identification's camera (pixel rows of the tags' centres; the camera_offset candidate), and
   // its tags' frames measured points. Called when the scenario names no camera.
@@ -863,15 +891,10 @@ class ClosedLoopKind : public ScenarioKind {
       camera_.T_base_cam = T_base_cam;
       if (!root.Has("pixel_std_px")) opt_.pixel_std_px = log.pixel_std_px;
       for (const sim::LogTag& tag : log.tags) {
-        const Vec3 centre =
-            0.25 * (tag.corners_m[0] + tag.corners_m[1] + tag.corners_m[2] + tag.corners_m[3]);
         const bool listed = tag.frame == declared_.end_effector ||
                             std::any_of(marker_nodes_.begin(), marker_nodes_.end(),
                                         [&](const auto& m) { return m.first == tag.frame; });
-        if (centre.norm() > 1e-9) {
-          log_notes_.push_back("log tag " + std::to_string(tag.id) + ": its centre is not its " +
-                               "frame's origin; its detections are no identification rows");
-        } else if (!listed) {
+        if (centred_tag_frames_.count(tag.frame) && !listed) {
           marker_nodes_.push_back({tag.frame, where + ": tags.ids." + std::to_string(tag.id)});
         }
       }
@@ -887,10 +910,8 @@ class ClosedLoopKind : public ScenarioKind {
     }
     std::vector<int> tag_points;
     for (const sim::LogTag& tag : log.tags) {
-      const Vec3 centre =
-          0.25 * (tag.corners_m[0] + tag.corners_m[1] + tag.corners_m[2] + tag.corners_m[3]);
       const auto it = std::find(points_.begin(), points_.end(), tag.frame);
-      tag_points.push_back(centre.norm() <= 1e-9 && it != points_.end()
+      tag_points.push_back(centred_tag_frames_.count(tag.frame) && it != points_.end()
                                ? static_cast<int>(it - points_.begin())
                                : -1);
     }
@@ -1803,12 +1824,12 @@ class ClosedLoopKind : public ScenarioKind {
                       identify::FormatCalibrationCsv(d, chain_->q_joints, coupled));
       return;
     }
-    WriteFileAtomic(
-        ctx.out->File(what + "_data.csv"),
-        identify::FormatCalibrationCsv(identify::Subset(d, others), chain_->q_joints, coupled));
-    WriteFileAtomic(
-        ctx.out->File(what + "_pixels.csv"),
-        identify::FormatCalibrationCsv(identify::Subset(d, pixels), chain_->q_joints, coupled));
+    for (const auto& [rows, name] : {std::pair{&others, "_data.csv"}, {&pixels, "_pixels.csv"}}) {
+      DataSet part = identify::Subset(d, *rows);
+      part.poses = d.poses;  // a subset keeps the rows' pose indices, not the labels
+      WriteFileAtomic(ctx.out->File(what + name),
+                      identify::FormatCalibrationCsv(part, chain_->q_joints, coupled));
+    }
   }
 
   void WriteResiduals(RunContext& ctx, const DataSet& d, const std::vector<double>& before,
@@ -1934,6 +1955,7 @@ class ClosedLoopKind : public ScenarioKind {
   std::vector<EstimatorSpec> replay_specs_;       // a held-out log span's replay
   std::vector<std::string> log_notes_;            // said when the run starts
   bool replay_held_out_ = false;                  // CheckHeldOutReplay
+  std::set<std::string> centred_tag_frames_;      // log tag frames at their tags' centres
   double source_scale_ = 1.0;
   std::string verdict_;
   double nees_scaled_ = 0.0;
