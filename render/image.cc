@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "estimators/error.h"
+#include "sim/config.h"
 
 namespace flexbench::render {
 
@@ -23,7 +24,7 @@ Image ToGray(const Image& rgb) {
   return gray;
 }
 
-void WritePng(const Image& image, const std::string& path) {
+std::string EncodePng(const Image& image) {
   const int type = image.channels == 1 ? CV_8UC1 : CV_8UC3;
   const cv::Mat src(image.height, image.width, type, const_cast<std::uint8_t*>(image.data.data()));
   cv::Mat bgr;
@@ -32,8 +33,6 @@ void WritePng(const Image& image, const std::string& path) {
   } else {
     bgr = src;
   }
-  // Encoded in memory and written here: cv::imwrite lets libpng print "libpng error: Write
-  // Error" on stderr when the disk is full (a second line beside ours) and gives no reason.
   std::vector<std::uint8_t> png;
   bool ok = false;
   try {
@@ -41,6 +40,36 @@ void WritePng(const Image& image, const std::string& path) {
   } catch (const cv::Exception&) {
     ok = false;
   }
+  if (!ok) return "";
+  return std::string(png.begin(), png.end());
+}
+
+Image ReadPng(const std::string& path) {
+  cv::Mat m;
+  try {
+    m = cv::imread(path, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception&) {
+    m = cv::Mat();
+  }
+  if (m.empty() || m.depth() != CV_8U || (m.channels() != 1 && m.channels() != 3)) {
+    throw InputError(CapForMessage(path) + ": not an 8-bit gray or RGB PNG image");
+  }
+  Image out{m.cols, m.rows, m.channels(), {}};
+  out.data.resize(static_cast<size_t>(m.cols) * m.rows * m.channels());
+  cv::Mat dst(m.rows, m.cols, m.channels() == 1 ? CV_8UC1 : CV_8UC3, out.data.data());
+  if (m.channels() == 3) {
+    cv::cvtColor(m, dst, cv::COLOR_BGR2RGB);
+  } else {
+    m.copyTo(dst);
+  }
+  return out;
+}
+
+void WritePng(const Image& image, const std::string& path) {
+  // Encoded in memory and written here: cv::imwrite lets libpng print "libpng error: Write
+  // Error" on stderr when the disk is full (a second line beside ours) and gives no reason.
+  const std::string png = EncodePng(image);
+  const bool ok = !png.empty();
   if (!ok) throw InputError(path + ": cannot encode PNG");
   errno = 0;
   std::FILE* f = std::fopen(path.c_str(), "wb");

@@ -26,6 +26,12 @@ Image ToGray(const Image& rgb);
 // flexbench::InputError naming the path when it cannot be written.
 void WritePng(const Image& image, const std::string& path);
 
+// The PNG file's bytes (WritePng's encoding) in memory; empty when it cannot be encoded.
+std::string EncodePng(const Image& image);
+
+// An 8-bit gray or RGB PNG (RGB order). Throws flexbench::InputError naming the path otherwise.
+Image ReadPng(const std::string& path);
+
 // True when all pixels are equal: a frame that rendered nothing (a known silent failure of
 // offscreen GL set-ups).
 bool IsConstant(const Image& image);

@@ -107,6 +107,7 @@ using log_internal::ClockOffset;
 using log_internal::kMaxLogTime;
 using log_internal::Num;
 using log_internal::ReadCameras;
+using log_internal::ReadImages;
 using log_internal::ReadTags;
 using log_internal::RowTime;
 using log_internal::Stats;
@@ -294,6 +295,14 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   if (const auto truth = root.Optional("truth")) ReadTruth(*truth, &log, &used);
   if (const auto cameras = root.Optional("cameras")) ReadCameras(*cameras, &log);
   if (const auto tags = root.Optional("tags")) ReadTags(*tags, &log, &used);
+  if (const auto images = root.Optional("images")) {
+    if (!log.tag_rows.empty() || (root.Has("tags") && root.Child("tags").Has("file"))) {
+      images->Fail("a log has tags.csv or images, not both");
+    }
+    ReadImages(*images, &log);
+  } else if (!log.tags.empty() && !root.Child("tags").Has("file")) {
+    root.Child("tags").Fail("needs `file` (tags.csv), or the log's `images`");
+  }
   root.CheckNoUnknownKeys();
   return log;
 }
@@ -301,6 +310,7 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
 namespace {
 
 void WriteText(const std::filesystem::path& path, const std::string& text) {
+  std::filesystem::create_directories(path.parent_path());
   std::ofstream out(path, std::ios::binary);
   out << text;
   if (!out.flush()) throw InputError(CapForMessage(path.string()) + ": cannot write");
@@ -400,7 +410,7 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
     }
     WriteText(tmp / "truth.tum", t.str());
   }
-  if (!log.tags.empty()) WriteText(tmp / "tags.csv", TagsCsv(log));
+  if (!log.tag_rows.empty()) WriteText(tmp / "tags.csv", TagsCsv(log));
   WriteText(tmp / "log.yaml", LogYaml(log));
 }
 

@@ -15,6 +15,7 @@
 //                        width: 640, height: 480}
 //               tags: {file: tags.csv, clock_offset_s: 0, pixel_std_px: 1,
 //                      ids: {20: {frame: tag_gripper, corners_m: [[x, y, z], x 4]}}}
+//               images: {dir: images, clock_offset_s: 0}    # instead of tags.file
 //   joints.csv  t_s, then one column per joint: <joint>_rad (<joint>_m for a slide)
 //   imu.csv     t_s, sensor, gx_rad_s, gy_rad_s, gz_rad_s, ax_m_s2, ay_m_s2, az_m_s2 (sensor
 //               frame; specific force, +g up at rest)
@@ -22,6 +23,8 @@
 //   tags.csv    t_s, camera, tag_id, u0_px, v0_px, ..., u3_px, v3_px: a tag's corners as
 //               libapriltag reports them (its order; pixel centres at +0.5: estimators/camera/
 //               pinhole.h)
+//   images/<camera>/<t_ns>.png   a camera's frames, named by their time in nanoseconds: the
+//               scenario layer detects their tags (scenarios/runner/common/log_images.h)
 //
 // A camera's frame is an observed frame of the declared model that is its optical frame (x
 // right, y down, z forward); its intrinsics are estimators/camera/pinhole.h's. A tag's
@@ -80,6 +83,13 @@ struct LogTag {
   std::array<Vec3, 4> corners_m;  // in that frame, libapriltag's corner order
 };
 
+// One camera frame of images/: its time (with the stream's clock offset), camera and file.
+struct LogImage {
+  double t = 0.0;
+  int camera = 0;
+  std::string path;
+};
+
 // One tag seen by one camera: indices into RecordedLog::cameras and ::tags.
 struct LogTagRow {
   double t = 0.0;
@@ -109,7 +119,9 @@ struct RecordedLog {
   std::vector<LogTag> tags;
   double pixel_std_px = 1.0;  // each corner's, in u and in v
   std::vector<LogTagRow> tag_rows;
-  StreamStats joint_stats, imu_stats, truth_stats, tag_stats;
+  // images/ (optional, instead of tags.csv): the frames in time order per camera, undetected.
+  std::vector<LogImage> images;
+  StreamStats joint_stats, imu_stats, truth_stats, tag_stats, image_stats;
 
   const double* q(size_t row) const { return joint_q.data() + row * joints.size(); }
 };
@@ -121,9 +133,10 @@ RecordedLog ReadRecordedLog(const std::string& dir);
 // format ReadRecordedLog reads back into the same numbers (17 significant digits; clock offsets
 // 0, the times as they are; the truth's rotation goes through its quaternion, so to the last
 // digit): log.yaml with `declared:` as log.declared_path is written, then
-// joints.csv, imu.csv when it has IMUs, truth.tum when it has truth. `files`: further files to
-// write there first (name, text), e.g. the declared model. The folder appears whole or not at
-// all.
+// joints.csv, imu.csv when it has IMUs, truth.tum when it has truth, tags.csv when it has tag
+// rows. `files`: further files to write there first (name relative to the folder, bytes), e.g.
+// the declared model or images/<camera>/<t_ns>.png (log.yaml then names `images:` when the log
+// has `images` and no tag rows). The folder appears whole or not at all.
 void WriteRecordedLog(const RecordedLog& log, const std::string& dir,
                       const std::vector<std::pair<std::string, std::string>>& files = {});
 

@@ -36,9 +36,10 @@ double RowTime(const std::string& cell, const std::string& where, double offset,
 // 17 significant digits: a number written reads back as itself.
 std::string Num(double v);
 
-// log.yaml's `cameras` and `tags` (recorded_log_tags.cc), tags.csv, and their writers.
+// log.yaml's `cameras`, `tags` and `images` (recorded_log_tags.cc), tags.csv, and their writers.
 void ReadCameras(const ConfigNode& node, RecordedLog* log);
 void ReadTags(const ConfigNode& node, RecordedLog* log, double* used);
+void ReadImages(const ConfigNode& node, RecordedLog* log);
 std::string TagsYaml(const RecordedLog& log);
 std::string TagsCsv(const RecordedLog& log);
 

@@ -1,7 +1,9 @@
 // A recorded log's cameras and tag detections (recorded_log.h): log.yaml's `cameras` and `tags`,
 // tags.csv, and their writers.
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <functional>
 #include <map>
 #include <sstream>
@@ -88,13 +90,14 @@ void ReadCameras(const ConfigNode& node, RecordedLog* log) {
 }
 
 void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
-  if (log->cameras.empty()) node.Fail("needs `cameras` (those tags.csv names)");
-  const std::string file = node.ResolvePath(node.GetString("file"));
-  const double offset = ClockOffset(node);
+  if (log->cameras.empty()) node.Fail("needs `cameras` (those that see the tags)");
   if (node.Has("pixel_std_px")) log->pixel_std_px = Positive(node, "pixel_std_px", 1e3);
   const ConfigNode ids = node.Child("ids");
   for (const std::string& key : ids.Keys()) log->tags.push_back(ReadTag(key, ids.Child(key)));
   if (log->tags.empty()) ids.Fail("names no tag");
+  if (!node.Has("file")) return;  // the log's images hold them
+  const std::string file = node.ResolvePath(node.GetString("file"));
+  const double offset = ClockOffset(node);
   CsvLines csv(file, kMaxLogStreamBytes);
   std::vector<std::string> header;
   if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
@@ -147,6 +150,43 @@ void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
   log->tag_stats = Stats(file, offset, streams);
 }
 
+void ReadImages(const ConfigNode& node, RecordedLog* log) {
+  namespace fs = std::filesystem;
+  if (log->tags.empty()) node.Fail("needs `tags` with their ids (the tags to detect)");
+  const std::string dir = node.ResolvePath(node.GetString("dir"));
+  const double offset = ClockOffset(node);
+  std::vector<std::vector<double>> times(log->cameras.size());
+  for (size_t c = 0; c < log->cameras.size(); ++c) {
+    const fs::path folder = fs::path(dir) / log->cameras[c].name;
+    std::error_code ec;
+    if (!fs::is_directory(folder, ec)) continue;
+    std::vector<LogImage> frames;
+    for (const fs::directory_entry& e : fs::directory_iterator(folder, ec)) {
+      const std::string name = e.path().filename().string();
+      const std::string stem = e.path().stem().string();
+      const bool digits =
+          !stem.empty() && stem.size() <= 18 &&
+          std::all_of(stem.begin(), stem.end(), [](char ch) { return ch >= '0' && ch <= '9'; });
+      if (!e.is_regular_file(ec) || e.path().extension() != ".png" || !digits) {
+        throw InputError(CapForMessage(e.path().string()) +
+                         ": expected <t_ns>.png, the frame's time in nanoseconds");
+      }
+      frames.push_back({1e-9 * static_cast<double>(std::stoll(stem)) + offset, static_cast<int>(c),
+                        e.path().string()});
+    }
+    std::sort(frames.begin(), frames.end(),
+              [](const LogImage& a, const LogImage& b) { return a.t < b.t; });
+    for (const LogImage& f : frames) times[c].push_back(f.t);
+    log->images.insert(log->images.end(), frames.begin(), frames.end());
+  }
+  if (log->images.empty()) {
+    node.Fail("no <camera>/<t_ns>.png under " + CapForMessage(dir) + " for the log's cameras");
+  }
+  std::vector<const std::vector<double>*> streams;
+  for (const std::vector<double>& ts : times) streams.push_back(&ts);
+  log->image_stats = Stats(dir, offset, streams);
+}
+
 std::string TagsYaml(const RecordedLog& log) {
   if (log.tags.empty()) return "";
   std::ostringstream y;
@@ -157,7 +197,9 @@ std::string TagsYaml(const RecordedLog& log) {
       << ", cx: " << Num(k.cx) << ", cy: " << Num(k.cy) << ", width: " << k.width
       << ", height: " << k.height << "}\n";
   }
-  y << "tags:\n  file: tags.csv\n  pixel_std_px: " << Num(log.pixel_std_px) << "\n  ids:\n";
+  y << "tags:\n";
+  if (!log.tag_rows.empty()) y << "  file: tags.csv\n";
+  y << "  pixel_std_px: " << Num(log.pixel_std_px) << "\n  ids:\n";
   for (const LogTag& t : log.tags) {
     y << "    " << t.id << ":\n      frame: " << t.frame << "\n      corners_m: [";
     for (int k = 0; k < 4; ++k) {
@@ -166,6 +208,7 @@ std::string TagsYaml(const RecordedLog& log) {
     }
     y << "]\n";
   }
+  if (log.tag_rows.empty() && !log.images.empty()) y << "images: {dir: images}\n";
   return y.str();
 }
 

@@ -49,8 +49,10 @@
 #include "scenarios/identify/identify.h"
 #include "scenarios/identify/measurement_frames.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_images.h"
 #include "scenarios/runner/common/log_replay.h"
 #include "scenarios/runner/common/model_config.h"
+#include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/simulated_tracker.h"
 #include "scenarios/runner/common/trajectories.h"
@@ -198,6 +200,7 @@ class ClosedLoopKind : public ScenarioKind {
     ParseCamera(root);
     ParseFramesAndMarkers(root);
     if (const auto t = root.Optional("truth")) ReadTruth(*t);
+    detector_ = ParseDetectorSettings(root);
     ParseSources(root);
     // Model, chain and candidates now: bad names fail before any work.
     mj_ = sim::LoadModel(declared_.model_path);
@@ -935,7 +938,10 @@ class ClosedLoopKind : public ScenarioKind {
   // The log a source reads, read once (calibration and validation on one log share it).
   const sim::RecordedLog& Log(const Source& s) {
     auto it = logs_.find(s.path);
-    if (it == logs_.end()) it = logs_.emplace(s.path, sim::ReadRecordedLog(s.path)).first;
+    if (it == logs_.end()) {
+      it = logs_.emplace(s.path, sim::ReadRecordedLog(s.path)).first;
+      DetectLogImages(detector_, &it->second);
+    }
     if (it->second.truth_t.empty() && it->second.tag_rows.empty()) {
       throw InputError(s.path_where + ": " + it->second.dir +
                        " has no truth.tum and no tags.csv: identification fits their rows");
@@ -1952,6 +1958,7 @@ class ClosedLoopKind : public ScenarioKind {
   std::vector<std::string> unused_frames_;     // declared_.frames no row is measured in
   std::unique_ptr<sim::Simulation> sim_;
   std::map<std::string, sim::RecordedLog> logs_;  // by folder (Source::path)
+  render::DetectorSettings detector_;             // for a log's images
   std::vector<EstimatorSpec> replay_specs_;       // a held-out log span's replay
   std::vector<std::string> log_notes_;            // said when the run starts
   bool replay_held_out_ = false;                  // CheckHeldOutReplay

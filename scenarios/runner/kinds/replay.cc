@@ -28,7 +28,9 @@
 #include "estimators/error.h"
 #include "scenarios/runner/common/clock_offset.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_images.h"
 #include "scenarios/runner/common/log_replay.h"
+#include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
@@ -45,6 +47,7 @@ class ReplayKind : public ScenarioKind {
  public:
   void Configure(const ConfigNode& root) override {
     log_ = sim::ReadRecordedLog(root.ResolvePath(root.GetString("log")));
+    other_tags_ = DetectLogImages(ParseDetectorSettings(root), &log_);
     const auto declared = root.Optional("declared");
     declared_ = sim::LoadDeclaredModel(declared ? root.ResolvePath(declared->AsString())
                                                 : log_.declared_path);
@@ -126,6 +129,10 @@ class ReplayKind : public ScenarioKind {
     stream("imu", log_.imu_stats);
     stream("truth", log_.truth_stats);
     stream("tags", log_.tag_stats);
+    if (!log_.images.empty()) {
+      m["streams"]["images"]["rows"] = log_.image_stats.rows;
+      m["streams"]["images"]["tags_not_in_the_log"] = other_tags_;
+    }
     m["streams_without_overlap"] = without_overlap;
   }
 
@@ -157,6 +164,7 @@ class ReplayKind : public ScenarioKind {
   sim::MjModelPtr model_;
   std::unique_ptr<sim::DeclaredChain> chain_;
   LogIndex index_;
+  int other_tags_ = 0;  // detections in the log's images of tags it does not name
   estimators::EstimatorSetup setup_;
   double step_hz_ = 0.0;
   bool estimate_offset_ = false;

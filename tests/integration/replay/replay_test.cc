@@ -167,46 +167,56 @@ TEST(Replay, TagDetectionsInALogCorrectTheOffsetEncoders) {
 }
 
 // With a tag camera (rendered through OSMesa, detected by libapriltag at each filter step), the
-// exported log carries the detections (tags.csv, the camera and the tags' corners in log.yaml)
-// and the PPOE EKF, which corrects its prior with them, replays to the same bits too.
+// exported log carries the detections (tags.csv, the camera and the tags' corners in log.yaml),
+// or with export_images the frames themselves (images/<camera>/<t_ns>.png), which the replay
+// runs through the same detector; either way the PPOE EKF, which corrects its prior with the
+// tags, replays to the same bits.
 TEST(Replay, AnExportedRunWithATagCameraReplaysToTheSameBits) {
-  testing::TempDir tmp;
-  std::string yaml = testing::ReadFile(testing::SourceDir() + "/scenarios/jsk_flexible_arm.yaml");
-  for (size_t at; (at = yaml.find("../models/")) != std::string::npos;) {
-    yaml.replace(at, 10, testing::SourceDir() + "/models/");
-  }
-  const std::string estimators = "estimators:\n  fk: {}\n";
-  ASSERT_NE(yaml.find(estimators), std::string::npos);
-  yaml.replace(yaml.find(estimators), estimators.size(),
-               "tag_camera: {camera: external_camera, pixel_std_px: 0.8}\n" + estimators +
-                   "  ppoe_ekf: {}\n");
-  yaml = yaml.substr(0, yaml.find("gates:"));
-  testing::WriteFile(tmp.path() / "tags.yaml", yaml);
-  const CommandResult live =
-      RunCommand(testing::Flexbench() + " run " + (tmp.path() / "tags.yaml").string() + " --out " +
-                 (tmp.path() / "live").string() + " --export-log " + (tmp.path() / "log").string() +
-                 " --quiet");
-  ASSERT_EQ(live.exit_code, 0) << live.err;
-  const CommandResult replay = RunCommand(
-      testing::Flexbench() + " replay " + (tmp.path() / "log").string() +
-      " --estimators fk,ppoe_ekf --set seed=3 --quiet --out " + (tmp.path() / "replayed").string());
-  ASSERT_EQ(replay.exit_code, 0) << replay.err;
-  const nlohmann::json s =
-      nlohmann::json::parse(testing::ReadFile(tmp.path() / "replayed" / "summary.json"));
-  EXPECT_GE(s["metrics"]["streams"]["tags"]["rows"].get<int>(), 100);
-  for (const char* name : {"fk", "ppoe_ekf"}) {
-    for (const std::string ext : {".tum", ".cov.csv"}) {
-      const fs::path live_file = tmp.path() / "live" / "trajectories" / "base" / (name + ext);
-      const fs::path replayed = tmp.path() / "replayed" / "trajectories" / "base" / (name + ext);
-      ASSERT_TRUE(fs::exists(live_file) && fs::exists(replayed)) << name << ext;
-      EXPECT_EQ(testing::ReadFile(live_file), testing::ReadFile(replayed)) << name << ext;
+  for (const bool images : {false, true}) {
+    testing::TempDir tmp;
+    std::string yaml = testing::ReadFile(testing::SourceDir() + "/scenarios/jsk_flexible_arm.yaml");
+    for (size_t at; (at = yaml.find("../models/")) != std::string::npos;) {
+      yaml.replace(at, 10, testing::SourceDir() + "/models/");
     }
+    const std::string estimators = "estimators:\n  fk: {}\n";
+    ASSERT_NE(yaml.find(estimators), std::string::npos);
+    yaml.replace(yaml.find(estimators), estimators.size(),
+                 "tag_camera: {camera: external_camera, pixel_std_px: 0.8, export_images: " +
+                     std::string(images ? "true" : "false") + "}\n" + estimators +
+                     "  ppoe_ekf: {}\n");
+    yaml = yaml.substr(0, yaml.find("gates:"));
+    testing::WriteFile(tmp.path() / "tags.yaml", yaml);
+    const CommandResult live =
+        RunCommand(testing::Flexbench() + " run " + (tmp.path() / "tags.yaml").string() +
+                   " --out " + (tmp.path() / "live").string() + " --export-log " +
+                   (tmp.path() / "log").string() + " --quiet");
+    ASSERT_EQ(live.exit_code, 0) << live.err;
+    EXPECT_EQ(fs::exists(tmp.path() / "log" / "images"), images);
+    EXPECT_EQ(fs::exists(tmp.path() / "log" / "tags.csv"), !images);
+    const CommandResult replay =
+        RunCommand(testing::Flexbench() + " replay " + (tmp.path() / "log").string() +
+                   " --estimators fk,ppoe_ekf --set seed=3 --quiet --out " +
+                   (tmp.path() / "replayed").string());
+    ASSERT_EQ(replay.exit_code, 0) << replay.err;
+    const nlohmann::json s =
+        nlohmann::json::parse(testing::ReadFile(tmp.path() / "replayed" / "summary.json"));
+    EXPECT_GE(s["metrics"]["streams"]["tags"]["rows"].get<int>(), 100);
+    if (images) EXPECT_EQ(s["metrics"]["streams"]["images"]["rows"], 220);
+    for (const char* name : {"fk", "ppoe_ekf"}) {
+      for (const std::string ext : {".tum", ".cov.csv"}) {
+        const fs::path live_file = tmp.path() / "live" / "trajectories" / "base" / (name + ext);
+        const fs::path replayed = tmp.path() / "replayed" / "trajectories" / "base" / (name + ext);
+        ASSERT_TRUE(fs::exists(live_file) && fs::exists(replayed)) << name << ext;
+        EXPECT_EQ(testing::ReadFile(live_file), testing::ReadFile(replayed)) << name << ext;
+      }
+    }
+    const double fk = s["estimators"]["fk"]["metrics"]["pos_err_mean_m"].get<double>();
+    const double ekf = s["estimators"]["ppoe_ekf"]["metrics"]["pos_err_mean_m"].get<double>();
+    std::printf("%s: %d tag detections; mean position error fk %.2f mm, ppoe_ekf %.2f mm\n",
+                images ? "images" : "tags.csv", s["metrics"]["streams"]["tags"]["rows"].get<int>(),
+                1e3 * fk, 1e3 * ekf);
+    EXPECT_LT(ekf, fk);
   }
-  const double fk = s["estimators"]["fk"]["metrics"]["pos_err_mean_m"].get<double>();
-  const double ekf = s["estimators"]["ppoe_ekf"]["metrics"]["pos_err_mean_m"].get<double>();
-  std::printf("%d tag detections; mean position error fk %.2f mm, ppoe_ekf %.2f mm\n",
-              s["metrics"]["streams"]["tags"]["rows"].get<int>(), 1e3 * fk, 1e3 * ekf);
-  EXPECT_LT(ekf, fk);
 }
 
 // `flexbench replay LOG`: the same run from the command line; a bad option is one line naming

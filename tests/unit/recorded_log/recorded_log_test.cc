@@ -193,5 +193,48 @@ TEST(RecordedLog, TagDetectionsRoundTrip) {
   EXPECT_EQ(back.pixel_std_px, 0.7);
 }
 
+// A camera's frames are files images/<camera>/<t_ns>.png, in time order, with the stream's clock
+// offset; any other name in the folder, or images beside tags.csv, is refused naming it.
+TEST(RecordedLog, ImagesAreNamedByTheirTime) {
+  testing::TempDir dir;
+  Files f;
+  f.log_yaml +=
+      "cameras: {cam0: {frame: external_camera, fx: 600, fy: 600, cx: 320, cy: 240, width: 640, "
+      "height: 480}}\n"
+      "tags: {ids: {20: {frame: tag_gripper, size_m: 0.04}}}\n"
+      "images: {dir: images, clock_offset_s: 1}\n";
+  f.Write(dir.path());
+  std::filesystem::create_directories(dir.path() / "images" / "cam0");
+  for (const char* name : {"250000000.png", "100000000.png"}) {
+    std::ofstream(dir.path() / "images" / "cam0" / name) << "not read here";
+  }
+  const RecordedLog log = ReadRecordedLog(dir.path().string());
+  ASSERT_EQ(log.images.size(), 2u);
+  EXPECT_DOUBLE_EQ(log.images[0].t, 1.1);
+  EXPECT_DOUBLE_EQ(log.images[1].t, 1.25);
+  EXPECT_EQ(log.image_stats.rows, 2);
+  EXPECT_TRUE(log.tag_rows.empty());
+  std::ofstream(dir.path() / "images" / "cam0" / "frame7.png") << "x";
+  try {
+    ReadRecordedLog(dir.path().string());
+    ADD_FAILURE() << "a frame not named by its time was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("frame7.png: expected <t_ns>.png"), std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove(dir.path() / "images" / "cam0" / "frame7.png");
+  f.log_yaml.replace(f.log_yaml.find("tags: {ids"), 10, "tags: {file: tags.csv, ids");
+  f.Write(dir.path());
+  std::ofstream(dir.path() / "tags.csv")
+      << "t_s,camera,tag_id,u0_px,v0_px,u1_px,v1_px,u2_px,v2_px,u3_px,v3_px\n";
+  try {
+    ReadRecordedLog(dir.path().string());
+    ADD_FAILURE() << "tags.csv and images were both read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("tags.csv or images, not both"), std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace flexbench::sim

@@ -6,6 +6,7 @@
 
 #include "estimators/error.h"
 #include "estimators/imu/imu_orientations.h"
+#include "render/image.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/tag_tracking.h"
@@ -21,6 +22,7 @@ DynamicOptions ParseDynamicOptions(const ConfigNode& root, Rig& rig) {
     TagCamera tc;
     tc.camera = c->GetString("camera");
     tc.pixel_std_px = c->GetDouble("pixel_std_px", tc.pixel_std_px);
+    tc.export_images = c->GetBool("export_images", false);
     if (!(tc.pixel_std_px > 0.0 && tc.pixel_std_px <= 100.0)) {
       c->Child("pixel_std_px").Fail("must be > 0 and at most 100");
     }
@@ -76,8 +78,11 @@ class TagEyes {
  public:
   TagEyes(const sim::Simulation& sim, const TagCamera& tc)
       : tc_(tc), renderer_(sim.model(), tc.mode), detector_(tc.detector) {}
-  std::vector<estimators::TagCorners> Detect(const sim::Simulation& sim, double t) {
+  // `png`: the frame, encoded, when the run exports its frames.
+  std::vector<estimators::TagCorners> Detect(const sim::Simulation& sim, double t,
+                                             std::string* png) {
     renderer_.RenderRgbInto(const_cast<mjData*>(sim.data()), tc_.cam_id, &image_);
+    if (tc_.export_images) *png = render::EncodePng(image_);
     std::vector<estimators::TagCorners> out;
     for (const estimators::Measurement& m :
          TagMeasurements(detector_.Detect(image_), tc_.tags, tc_.tag_frames, /*corners=*/true,
@@ -166,7 +171,7 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
     }
     const std::string ee = rig.declared.end_effector;
     s.T_true = ToSE3(sim.Pose(ee));
-    if (eyes) s.tags = eyes->Detect(sim, t);
+    if (eyes) s.tags = eyes->Detect(sim, t, &s.png);
     snaps.push_back(std::move(s));
     ctx.progress("simulation", static_cast<int>(snaps.size()), total_ticks);
   }
@@ -178,7 +183,7 @@ namespace {
 
 // The tag camera, its tags on observed frames and the snapshots' detections, in the log format.
 void AddTags(const Rig& rig, const TagCamera& tc, const std::vector<Snapshot>& snaps,
-             sim::RecordedLog* log) {
+             sim::RecordedLog* log, std::vector<std::pair<std::string, std::string>>* files) {
   log->cameras.push_back({tc.camera, tc.camera, rig.setup.cameras[0].intrinsics});
   log->pixel_std_px = tc.pixel_std_px;
   std::map<int, int> index;  // tag id -> log->tags
@@ -192,6 +197,17 @@ void AddTags(const Rig& rig, const TagCamera& tc, const std::vector<Snapshot>& s
     log->tags.push_back(t);
   }
   for (const Snapshot& s : snaps) {
+    if (tc.export_images) {
+      // The frame's time in whole nanoseconds, not after s.t: read back, its detections come
+      // at or before the snapshot's step, as the live run feeds them.
+      auto t_ns = static_cast<long long>(std::floor(s.t * 1e9));
+      while (1e-9 * static_cast<double>(t_ns) > s.t) --t_ns;
+      const std::string name = "images/" + tc.camera + "/" + std::to_string(t_ns) + ".png";
+      if (s.png.empty()) throw InputError("--export-log: a frame could not be encoded as PNG");
+      log->images.push_back({s.t, 0, name});
+      files->emplace_back(name, s.png);
+      continue;
+    }
     for (const estimators::TagCorners& z : s.tags) {
       sim::LogTagRow row;
       row.t = z.t;
@@ -232,12 +248,13 @@ void ExportLog(const Rig& rig, const DynamicOptions& options, const std::vector<
     log.imus.push_back(imu);
   }
   log.truth_frame = rig.declared.end_effector;
-  if (options.tag_camera) AddTags(rig, *options.tag_camera, snaps, &log);
+  std::vector<std::pair<std::string, std::string>> files;
+  if (options.tag_camera) AddTags(rig, *options.tag_camera, snaps, &log, &files);
   sim::DeclaredModel declared = rig.declared;
   declared.model_path = std::filesystem::absolute(declared.model_path).lexically_normal().string();
-  sim::WriteRecordedLog(
-      log, dir,
-      {{"declared.yaml", sim::EmitDeclaredModel(declared, "The declared model of the run.", 17)}});
+  files.emplace_back("declared.yaml",
+                     sim::EmitDeclaredModel(declared, "The declared model of the run.", 17));
+  sim::WriteRecordedLog(log, dir, files);
 }
 
 Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vector<Snapshot>& snaps,

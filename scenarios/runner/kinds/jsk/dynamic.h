@@ -7,8 +7,9 @@
 //   filter_rate_hz: 10
 //   madgwick: {beta: 0.05, init: accel}   # init: accel (yaw 0) or truth (a calibrated yaw)
 //   sensors: [...]                        # sim sensors: motor-side encoders and the IMUs
-//   tag_camera: {camera: external_camera, pixel_std_px: 1}   # optional, with the render: and
-//                                         # detector: blocks (common/render_config.h)
+//   tag_camera: {camera: external_camera, pixel_std_px: 1, export_images: false}   # optional,
+//                                         # with the render: and detector: blocks
+//                                         # (common/render_config.h)
 // With a tag camera, each snapshot also renders that camera (OSMesa) and runs libapriltag on the
 // image: the tags on observed frames become TagCorners, which the estimators see after the
 // encoders (the EKFs correct their kinematic prior with them; the particle filters ignore them).
@@ -37,8 +38,9 @@ struct TagCamera {
   int cam_id = -1;
   render::RenderMode mode = render::RenderMode::kFast;
   render::DetectorSettings detector;
-  double pixel_std_px = 1.0;                      // each corner's, in u and v
-  std::vector<render::TagInModel> tags;           // the truth's textured tags
+  double pixel_std_px = 1.0;             // each corner's, in u and v
+  bool export_images = false;            // --export-log writes the frames, not their detections
+  std::vector<render::TagInModel> tags;  // the truth's textured tags
   std::map<int, kinematics::FrameId> tag_frames;  // those on observed frames, by id
 };
 
@@ -63,6 +65,7 @@ struct Snapshot {
   lie::SE3 T_true;                                   // the end effector (declared) in the world
   std::vector<Quat> imu_true;                        // true IMU orientations (for diagnostics)
   std::vector<estimators::TagCorners> tags;          // the tag camera's detections here
+  std::string png;  // its frame, encoded (tag_camera.export_images)
 };
 
 // Settles the truth at the first waypoint, then steps through the trajectory. The sensor list
@@ -77,7 +80,8 @@ std::vector<Snapshot> SimulateDynamic(Rig& rig, const Trajectory& trajectory,
 // replay` turns into the estimates RunOnSnapshots makes (the same bits): a joint row per
 // snapshot (its encoder readings), every IMU reading of the snapshots, the end effector's truth
 // at each, the IMUs' initial orientations when the run started them at the truth, the tag
-// camera's detections (cameras, tags, tags.csv), and the declared model (declared.yaml).
+// camera's detections (cameras, tags, tags.csv) or its frames (images/<camera>/<t_ns>.png), and
+// the declared model (declared.yaml).
 void ExportLog(const Rig& rig, const DynamicOptions& options, const std::vector<Snapshot>& snaps,
                const std::string& dir);
 

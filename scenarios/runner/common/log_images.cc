@@ -1,0 +1,34 @@
+#include "scenarios/runner/common/log_images.h"
+
+#include "render/image.h"
+
+namespace flexbench::scenarios {
+
+int DetectLogImages(const render::DetectorSettings& settings, sim::RecordedLog* log) {
+  if (log->images.empty()) return 0;
+  const render::TagDetector detector(settings);
+  int others = 0;
+  for (const sim::LogImage& frame : log->images) {
+    for (const render::TagDetection& d : detector.Detect(render::ReadPng(frame.path)).detections) {
+      int tag = -1;
+      for (size_t k = 0; k < log->tags.size(); ++k) {
+        if (log->tags[k].id == d.id) tag = static_cast<int>(k);
+      }
+      if (tag < 0) {
+        ++others;
+        continue;
+      }
+      sim::LogTagRow row;
+      row.t = frame.t;
+      row.camera = frame.camera;
+      row.tag = tag;
+      row.uv = d.corners;
+      log->tag_rows.push_back(row);
+    }
+  }
+  log->tag_stats = log->image_stats;
+  log->tag_stats.rows = static_cast<int>(log->tag_rows.size());
+  return others;
+}
+
+}  // namespace flexbench::scenarios
