@@ -790,6 +790,27 @@ fresh replay_imu_header_of_another_format
 replay_log "$D/log"
 sed -i '1s/.*/timestamp,wx,wy,wz,ax,ay,az/' "$D/log/imu.csv"
 attack replay_imu_header_of_another_format 2 "1line err~imu.csv:1" -- "$FB" replay log --out o
+# Tag streams: a camera tags.csv names that log.yaml lacks; a frame in images/ not named by its
+# time; a PNG that is not one (the detector's reader must refuse it, not crash).
+replay_tags() {  # replay_tags DIR: the example log with a camera and a tag declared
+  replay_log "$1"
+  printf 'cameras: {cam0: {frame: external_camera, fx: 579, fy: 579, cx: 320, cy: 240, width: 640, height: 480}}\n' >>"$1/log.yaml"
+}
+fresh replay_tags_unknown_camera
+replay_tags "$D/log"
+printf 'tags: {file: tags.csv, ids: {20: {frame: tag_gripper, size_m: 0.04}}}\n' >>"$D/log/log.yaml"
+printf 't_s,camera,tag_id,u0_px,v0_px,u1_px,v1_px,u2_px,v2_px,u3_px,v3_px\n1,cam9,20,1,2,3,4,5,6,7,8\n' >"$D/log/tags.csv"
+attack replay_tags_unknown_camera 2 "1line err~tags.csv:2:.column.'camera'" -- "$FB" replay log --out o
+fresh replay_image_not_named_by_time
+replay_tags "$D/log"
+printf 'tags: {ids: {20: {frame: tag_gripper, size_m: 0.04}}}\nimages: {dir: images}\n' >>"$D/log/log.yaml"
+mkdir -p "$D/log/images/cam0" && echo x >"$D/log/images/cam0/frame1.png"
+attack replay_image_not_named_by_time 2 "1line err~frame1.png:.expected.<t_ns>.png" -- "$FB" replay log --out o
+fresh replay_image_not_a_png
+replay_tags "$D/log"
+printf 'tags: {ids: {20: {frame: tag_gripper, size_m: 0.04}}}\nimages: {dir: images}\n' >>"$D/log/log.yaml"
+mkdir -p "$D/log/images/cam0" && head -c 5000 /dev/urandom >"$D/log/images/cam0/100000000.png"
+attack replay_image_not_a_png 2 "1line err~100000000.png:.not.an.8-bit" -- "$FB" replay log --out o
 fresh replay_joints_of_100M_short_rows
 replay_log "$D/log"
 { echo t_s,link1_yaw_joint_rad; yes 0,0 | head -n 100000000; } >"$D/log/joints.csv"

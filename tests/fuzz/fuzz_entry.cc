@@ -232,11 +232,11 @@ std::optional<std::string> Report(const std::uint8_t* data, std::size_t size) {
 
 std::optional<std::string> RecordedLog(const std::uint8_t* data, std::size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);
-  std::vector<std::string> parts(3);
+  std::vector<std::string> parts(4);
   size_t part = 0, begin = 0;
-  while (part < 3) {
+  while (part < 4) {
     const size_t cut = text.find("\n----\n", begin);
-    if (cut == std::string::npos || part == 2) {
+    if (cut == std::string::npos || part == 3) {
       parts[part] = text.substr(begin);
       break;
     }
@@ -244,21 +244,34 @@ std::optional<std::string> RecordedLog(const std::uint8_t* data, std::size_t siz
     begin = cut + 6;
   }
   const fs::path dir = Work("log");
+  fs::remove_all(dir);
   fs::create_directories(dir);
-  const char* names[3] = {"joints.csv", "imu.csv", "truth.tum"};
-  for (int i = 0; i < 3; ++i) {
+  const char* names[4] = {"joints.csv", "imu.csv", "truth.tum", "tags.csv"};
+  for (int i = 0; i < 4; ++i) {
     WriteFile(dir / names[i], reinterpret_cast<const std::uint8_t*>(parts[i].data()),
               parts[i].size());
   }
-  static const std::string yaml =
-      "declared: a.declared.yaml\njoints: {file: joints.csv, clock_offset_s: 0.1}\n"
-      "imu: {file: imu.csv, sensors: {imu2: {frame: f2}, imu3: {frame: f3, initial_wxyz: "
-      "[1, 0, 0, 0]}}}\ntruth: {file: truth.tum, frame: ee}\n";
+  // A fourth part is tags.csv, seen by one camera, of two tags (one by its size, one by its
+  // corners).
+  const std::string yaml =
+      std::string("declared: a.declared.yaml\njoints: {file: joints.csv, clock_offset_s: 0.1}\n"
+                  "imu: {file: imu.csv, sensors: {imu2: {frame: f2}, imu3: {frame: f3, "
+                  "initial_wxyz: [1, 0, 0, 0]}}}\ntruth: {file: truth.tum, frame: ee}\n") +
+      (parts[3].empty()
+           ? ""
+           : "cameras: {cam0: {frame: c, fx: 500, fy: 500, cx: 320, cy: 240, width: 640, "
+             "height: 480}}\ntags: {file: tags.csv, pixel_std_px: 0.5, ids: {20: {frame: t, "
+             "size_m: 0.04}, 3: {frame: u, corners_m: [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, "
+             "0]]}}}\n");
   WriteFile(dir / "log.yaml", reinterpret_cast<const std::uint8_t*>(yaml.data()), yaml.size());
   return Guard([&] {
     const sim::RecordedLog log = sim::ReadRecordedLog(dir.string());
     lie::SE3 T;
     for (double t : log.joint_t) sim::TruthAt(log, t, &T);
+    std::vector<int> column(log.joints.size());
+    for (size_t k = 0; k < column.size(); ++k) column[k] = static_cast<int>(k);
+    Eigen::VectorXd q;
+    for (const sim::LogTagRow& r : log.tag_rows) sim::JointsAt(log, column, r.t, &q);
   });
 }
 
