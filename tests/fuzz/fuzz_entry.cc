@@ -254,9 +254,10 @@ std::optional<std::string> RecordedLog(const std::uint8_t* data, std::size_t siz
   // A fourth part is tags.csv, seen by one camera, of two tags (one by its size, one by its
   // corners).
   const std::string yaml =
-      std::string("declared: a.declared.yaml\njoints: {file: joints.csv, clock_offset_s: 0.1}\n"
-                  "imu: {file: imu.csv, sensors: {imu2: {frame: f2}, imu3: {frame: f3, "
-                  "initial_wxyz: [1, 0, 0, 0]}}}\ntruth: {file: truth.tum, frame: ee}\n") +
+      std::string(
+          "declared: a.declared.yaml\njoints: {file: joints.csv, clock_offset_s: 0.1}\n"
+          "imu: {file: imu.csv, sensors: {imu2: {frame: f2}, imu3: {frame: f3, "
+          "initial_wxyz: [1, 0, 0, 0]}}}\ntruth: {file: truth.tum, frame: ee}\n") +
       (parts[3].empty()
            ? ""
            : "cameras: {cam0: {frame: c, fx: 500, fy: 500, cx: 320, cy: 240, width: 640, "
