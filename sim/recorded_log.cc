@@ -410,7 +410,7 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
     }
     WriteText(tmp / "truth.tum", t.str());
   }
-  if (!log.tag_rows.empty()) WriteText(tmp / "tags.csv", TagsCsv(log));
+  if (!log.tags.empty() && log.images.empty()) WriteText(tmp / "tags.csv", TagsCsv(log));
   WriteText(tmp / "log.yaml", LogYaml(log));
 }
 

@@ -119,7 +119,8 @@ struct RecordedLog {
   std::vector<LogTag> tags;
   double pixel_std_px = 1.0;  // each corner's, in u and in v
   std::vector<LogTagRow> tag_rows;
-  // images/ (optional, instead of tags.csv): the frames in time order per camera, undetected.
+  // images/ (optional, instead of tags.csv): the frames in time order (cameras in their order at
+  // equal times), undetected.
   std::vector<LogImage> images;
   StreamStats joint_stats, imu_stats, truth_stats, tag_stats, image_stats;
 

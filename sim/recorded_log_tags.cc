@@ -93,7 +93,13 @@ void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
   if (log->cameras.empty()) node.Fail("needs `cameras` (those that see the tags)");
   if (node.Has("pixel_std_px")) log->pixel_std_px = Positive(node, "pixel_std_px", 1e3);
   const ConfigNode ids = node.Child("ids");
-  for (const std::string& key : ids.Keys()) log->tags.push_back(ReadTag(key, ids.Child(key)));
+  for (const std::string& key : ids.Keys()) {
+    const LogTag tag = ReadTag(key, ids.Child(key));
+    for (const LogTag& other : log->tags) {
+      if (other.id == tag.id) ids.Child(key).Fail("tag " + std::to_string(tag.id) + " twice");
+    }
+    log->tags.push_back(tag);
+  }
   if (log->tags.empty()) ids.Fail("names no tag");
   if (!node.Has("file")) return;  // the log's images hold them
   const std::string file = node.ResolvePath(node.GetString("file"));
@@ -155,33 +161,53 @@ void ReadImages(const ConfigNode& node, RecordedLog* log) {
   if (log->tags.empty()) node.Fail("needs `tags` with their ids (the tags to detect)");
   const std::string dir = node.ResolvePath(node.GetString("dir"));
   const double offset = ClockOffset(node);
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) node.Child("dir").Fail("no folder " + CapForMessage(dir));
   std::vector<std::vector<double>> times(log->cameras.size());
-  for (size_t c = 0; c < log->cameras.size(); ++c) {
-    const fs::path folder = fs::path(dir) / log->cameras[c].name;
-    std::error_code ec;
-    if (!fs::is_directory(folder, ec)) continue;
-    std::vector<LogImage> frames;
-    for (const fs::directory_entry& e : fs::directory_iterator(folder, ec)) {
-      const std::string name = e.path().filename().string();
-      const std::string stem = e.path().stem().string();
-      const bool digits =
-          !stem.empty() && stem.size() <= 18 &&
-          std::all_of(stem.begin(), stem.end(), [](char ch) { return ch >= '0' && ch <= '9'; });
-      if (!e.is_regular_file(ec) || e.path().extension() != ".png" || !digits) {
-        throw InputError(CapForMessage(e.path().string()) +
-                         ": expected <t_ns>.png, the frame's time in nanoseconds");
+  try {
+    for (const fs::directory_entry& sub : fs::directory_iterator(dir)) {
+      const std::string name = sub.path().filename().string();
+      const int c = IndexOf<LogCamera>(log->cameras,
+                                       [&](const LogCamera& cam) { return cam.name == name; });
+      if (c < 0 || !sub.is_directory()) {
+        throw InputError(CapForMessage(sub.path().string()) +
+                         ": not a folder named after one of the log's cameras");
       }
-      frames.push_back({1e-9 * static_cast<double>(std::stoll(stem)) + offset, static_cast<int>(c),
-                        e.path().string()});
+      std::vector<LogImage> frames;
+      for (const fs::directory_entry& e : fs::directory_iterator(sub.path())) {
+        const std::string stem = e.path().stem().string();
+        const bool digits = !stem.empty() && stem.size() <= 18 &&
+                            std::all_of(stem.begin(), stem.end(),
+                                        [](char ch) { return ch >= '0' && ch <= '9'; });
+        if (!e.is_regular_file() || e.path().extension() != ".png" || !digits) {
+          throw InputError(CapForMessage(e.path().string()) +
+                           ": expected <t_ns>.png, the frame's time in nanoseconds");
+        }
+        frames.push_back({1e-9 * static_cast<double>(std::stoll(stem)) + offset, c,
+                          e.path().string()});
+      }
+      std::sort(frames.begin(), frames.end(), [](const LogImage& a, const LogImage& b) {
+        return a.t != b.t ? a.t < b.t : a.path < b.path;
+      });
+      for (size_t i = 1; i < frames.size(); ++i) {
+        if (frames[i].t == frames[i - 1].t) {
+          throw InputError(CapForMessage(frames[i].path) + ": the same time as " +
+                           CapForMessage(frames[i - 1].path));
+        }
+      }
+      for (const LogImage& f : frames) times[c].push_back(f.t);
+      log->images.insert(log->images.end(), frames.begin(), frames.end());
     }
-    std::sort(frames.begin(), frames.end(),
-              [](const LogImage& a, const LogImage& b) { return a.t < b.t; });
-    for (const LogImage& f : frames) times[c].push_back(f.t);
-    log->images.insert(log->images.end(), frames.begin(), frames.end());
+  } catch (const fs::filesystem_error& e) {
+    throw InputError(CapForMessage(dir) + ": cannot read the images (" + e.what() + ")");
   }
   if (log->images.empty()) {
     node.Fail("no <camera>/<t_ns>.png under " + CapForMessage(dir) + " for the log's cameras");
   }
+  // In time order, cameras in log.yaml's order at equal times: not the folders' listing order.
+  std::sort(log->images.begin(), log->images.end(), [](const LogImage& a, const LogImage& b) {
+    return a.t != b.t ? a.t < b.t : a.camera < b.camera;
+  });
   std::vector<const std::vector<double>*> streams;
   for (const std::vector<double>& ts : times) streams.push_back(&ts);
   log->image_stats = Stats(dir, offset, streams);
@@ -198,7 +224,7 @@ std::string TagsYaml(const RecordedLog& log) {
       << ", height: " << k.height << "}\n";
   }
   y << "tags:\n";
-  if (!log.tag_rows.empty()) y << "  file: tags.csv\n";
+  if (log.images.empty()) y << "  file: tags.csv\n";
   y << "  pixel_std_px: " << Num(log.pixel_std_px) << "\n  ids:\n";
   for (const LogTag& t : log.tags) {
     y << "    " << t.id << ":\n      frame: " << t.frame << "\n      corners_m: [";
@@ -208,7 +234,7 @@ std::string TagsYaml(const RecordedLog& log) {
     }
     y << "]\n";
   }
-  if (log.tag_rows.empty() && !log.images.empty()) y << "images: {dir: images}\n";
+  if (!log.images.empty()) y << "images: {dir: images}\n";
   return y.str();
 }
 

@@ -1,6 +1,8 @@
 #include "scenarios/runner/common/log_images.h"
 
+#include "estimators/error.h"
 #include "render/image.h"
+#include "sim/config.h"
 
 namespace flexbench::scenarios {
 
@@ -9,7 +11,15 @@ int DetectLogImages(const render::DetectorSettings& settings, sim::RecordedLog* 
   const render::TagDetector detector(settings);
   int others = 0;
   for (const sim::LogImage& frame : log->images) {
-    for (const render::TagDetection& d : detector.Detect(render::ReadPng(frame.path)).detections) {
+    const render::Image image = render::ReadPng(frame.path);
+    const PinholeCamera& cam = log->cameras[frame.camera].intrinsics;
+    if (image.width != cam.width || image.height != cam.height) {
+      throw InputError(CapForMessage(frame.path) + ": " + std::to_string(image.width) + " x " +
+                       std::to_string(image.height) + " pixels; camera '" +
+                       log->cameras[frame.camera].name + "' has " + std::to_string(cam.width) +
+                       " x " + std::to_string(cam.height));
+    }
+    for (const render::TagDetection& d : detector.Detect(image).detections) {
       int tag = -1;
       for (size_t k = 0; k < log->tags.size(); ++k) {
         if (log->tags[k].id == d.id) tag = static_cast<int>(k);

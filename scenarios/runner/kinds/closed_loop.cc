@@ -36,6 +36,7 @@
 #include <map>
 #include <optional>
 #include <random>
+#include <array>
 #include <set>
 #include <sstream>
 #include <tuple>
@@ -833,29 +834,42 @@ class ClosedLoopKind : public ScenarioKind {
     return d;
   }
 
-  // The declared model for identification: a log tag whose centre is off its frame's origin
-  // (libapriltag's centre is the tag's, the frame is the model's) moves that frame to the centre
-  // (a marker offset known exactly), so that its pixel rows measure the frame. A frame already
-  // moved, or carrying two tags, keeps its place; their tags give no rows.
+  // The declared model for identification: a frame that only a log's tag detections measure,
+  // whose tag's centre is off its origin (libapriltag's centre is the tag's, the frame is the
+  // model's), is moved to the centre (a marker offset known exactly), so that the pixel rows
+  // measure the frame. A frame other rows measure (the end effector, the truth's, a marker), one
+  // already moved, one carrying two tags, or a tag whose corners are no parallelogram (the
+  // diagonals' crossing is then not their mean) keeps its place, is said, and gives no rows.
   sim::DeclaredModel WithTagCentres() {
     sim::DeclaredModel d = declared_;
+    std::set<std::string> measured = {declared_.end_effector};
+    for (const auto& m : marker_nodes_) measured.insert(m.first);
     std::map<std::string, Vec3> centre_of;
     for (const Source* s : {&calibration_, &validation_}) {
       if (s->type != Source::Type::kLog) continue;
-      for (const sim::LogTag& tag : Log(*s).tags) {
-        const Vec3 centre =
-            0.25 * (tag.corners_m[0] + tag.corners_m[1] + tag.corners_m[2] + tag.corners_m[3]);
+      const sim::RecordedLog& log = Log(*s);
+      if (!log.truth_t.empty()) measured.insert(log.truth_frame);
+      if (log.tag_rows.empty()) continue;
+      for (const sim::LogTag& tag : log.tags) {
+        const std::array<Vec3, 4>& c = tag.corners_m;
+        const Vec3 centre = 0.25 * (c[0] + c[1] + c[2] + c[3]);
+        const bool parallelogram = (c[0] + c[2] - c[1] - c[3]).norm() <= 1e-9;
         const auto [it, added] = centre_of.emplace(tag.frame, centre);
-        if (!added && it->second != centre) it->second = Vec3::Constant(std::nan(""));
+        if ((!added && it->second != centre) || !parallelogram) {
+          it->second = Vec3::Constant(std::nan(""));
+        }
       }
     }
     for (const auto& [frame, centre] : centre_of) {
-      if (!centre.allFinite() || !d.MarkerOffset(frame).isZero(0.0)) {
-        log_notes_.push_back("log tags on '" + frame + "': their centres are not one point of " +
-                             "the frame (two tags, or a declared marker offset): no pixel rows");
+      const bool move = !centre.isZero(0.0);
+      if (!centre.allFinite() || (move && (!d.MarkerOffset(frame).isZero(0.0) ||
+                                           measured.count(frame)))) {
+        log_notes_.push_back("log tags on '" + frame + "': no pixel rows (two tags on the " +
+                             "frame, corners that are no parallelogram, or a tag centre off a " +
+                             "frame other rows measure or a declared marker offset moves)");
         continue;
       }
-      if (!centre.isZero(0.0)) d.marker_offsets.push_back({frame, centre, Mat3::Zero(), ""});
+      if (move) d.marker_offsets.push_back({frame, centre, Mat3::Zero(), ""});
       centred_tag_frames_.insert(frame);
     }
     return d;
@@ -869,7 +883,12 @@ class ClosedLoopKind : public ScenarioKind {
       if (s->type != Source::Type::kLog || camera_.present) continue;
       const sim::RecordedLog& log = Log(*s);
       if (log.tag_rows.empty()) continue;
-      const sim::LogCamera& cam = log.cameras[log.tag_rows.front().camera];
+      const sim::LogCamera& cam = log.cameras[std::min_element(log.tag_rows.begin(),
+                                                               log.tag_rows.end(),
+                                                               [](const auto& a, const auto& b) {
+                                                                 return a.t < b.t;
+                                                               })
+                                                  ->camera];
       const std::string where = log.dir + "/log.yaml";
       kinematics::FrameId f = -1;
       try {
@@ -944,7 +963,8 @@ class ClosedLoopKind : public ScenarioKind {
     }
     if (it->second.truth_t.empty() && it->second.tag_rows.empty()) {
       throw InputError(s.path_where + ": " + it->second.dir +
-                       " has no truth.tum and no tags.csv: identification fits their rows");
+                       " has no truth.tum and no tag detections (tags.csv or images/): " +
+                       "identification fits their rows");
     }
     return it->second;
   }

@@ -201,7 +201,9 @@ TEST(Replay, AnExportedRunWithATagCameraReplaysToTheSameBits) {
     const nlohmann::json s =
         nlohmann::json::parse(testing::ReadFile(tmp.path() / "replayed" / "summary.json"));
     EXPECT_GE(s["metrics"]["streams"]["tags"]["rows"].get<int>(), 100);
-    if (images) EXPECT_EQ(s["metrics"]["streams"]["images"]["rows"], 220);
+    if (images) {
+      EXPECT_EQ(s["metrics"]["streams"]["images"]["rows"], 220);
+    }
     for (const char* name : {"fk", "ppoe_ekf"}) {
       for (const std::string ext : {".tum", ".cov.csv"}) {
         const fs::path live_file = tmp.path() / "live" / "trajectories" / "base" / (name + ext);

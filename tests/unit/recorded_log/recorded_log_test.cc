@@ -191,6 +191,22 @@ TEST(RecordedLog, TagDetectionsRoundTrip) {
   }
   EXPECT_EQ(back.cameras[0].intrinsics.cy, 240.25);
   EXPECT_EQ(back.pixel_std_px, 0.7);
+  // A camera that saw no tag: its tags.csv is a header, written and read back.
+  RecordedLog unseen = log;
+  unseen.tag_rows.clear();
+  const std::string none = (dir.path() / "none").string();
+  WriteRecordedLog(unseen, none);
+  EXPECT_TRUE(ReadRecordedLog(none).tag_rows.empty());
+  EXPECT_EQ(ReadRecordedLog(none).tags.size(), 2u);
+  // One id twice (20 and 020) is refused.
+  f.log_yaml.replace(f.log_yaml.find("3: {frame: tag_base"), 19, "020: {frame: tag_base");
+  f.Write(dir.path());
+  try {
+    ReadRecordedLog(dir.path().string());
+    ADD_FAILURE() << "a tag id read twice";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("tag 20 twice"), std::string::npos) << e.what();
+  }
 }
 
 // A camera's frames are files images/<camera>/<t_ns>.png, in time order, with the stream's clock
@@ -223,6 +239,16 @@ TEST(RecordedLog, ImagesAreNamedByTheirTime) {
         << e.what();
   }
   std::filesystem::remove(dir.path() / "images" / "cam0" / "frame7.png");
+  std::filesystem::create_directories(dir.path() / "images" / "cam1");
+  try {
+    ReadRecordedLog(dir.path().string());
+    ADD_FAILURE() << "a folder of no camera was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("cam1: not a folder named after one of the log's"),
+              std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove(dir.path() / "images" / "cam1");
   f.log_yaml.replace(f.log_yaml.find("tags: {ids"), 10, "tags: {file: tags.csv, ids");
   f.Write(dir.path());
   std::ofstream(dir.path() / "tags.csv")

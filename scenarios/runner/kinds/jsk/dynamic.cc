@@ -16,6 +16,17 @@
 
 namespace flexbench::scenarios::jsk {
 
+namespace {
+
+bool SameDetection(const render::DetectorSettings& a, const render::DetectorSettings& b) {
+  return a.family == b.family && a.decimate == b.decimate && a.sigma == b.sigma &&
+         a.refine_edges == b.refine_edges && a.min_edge_px == b.min_edge_px &&
+         a.max_view_angle_deg == b.max_view_angle_deg && a.border_margin_px == b.border_margin_px &&
+         a.pixel_noise_std == b.pixel_noise_std;
+}
+
+}  // namespace
+
 DynamicOptions ParseDynamicOptions(const ConfigNode& root, Rig& rig) {
   DynamicOptions o;
   if (const auto c = root.Optional("tag_camera")) {
@@ -28,6 +39,12 @@ DynamicOptions ParseDynamicOptions(const ConfigNode& root, Rig& rig) {
     }
     tc.mode = ParseRenderMode(root, tc.mode);
     tc.detector = ParseDetectorSettings(root);
+    // A log's frames are detected with the replay's own settings (defaults unless its scenario
+    // says otherwise): frames exported under others would replay to other detections.
+    if (tc.export_images && !SameDetection(tc.detector, render::DetectorSettings{})) {
+      c->Child("export_images").Fail(
+          "needs the detector's default settings (a replay detects the frames with its own)");
+    }
     tc.cam_id = sim::CameraId(rig.sim->model(), tc.camera, rig.declared.model_path);
     try {
       rig.setup.cameras.push_back({sim::CameraIntrinsics(rig.sim->model(), tc.cam_id),
