@@ -167,8 +167,8 @@ void ReadImages(const ConfigNode& node, RecordedLog* log) {
   try {
     for (const fs::directory_entry& sub : fs::directory_iterator(dir)) {
       const std::string name = sub.path().filename().string();
-      const int c = IndexOf<LogCamera>(log->cameras,
-                                       [&](const LogCamera& cam) { return cam.name == name; });
+      const int c =
+          IndexOf<LogCamera>(log->cameras, [&](const LogCamera& cam) { return cam.name == name; });
       if (c < 0 || !sub.is_directory()) {
         throw InputError(CapForMessage(sub.path().string()) +
                          ": not a folder named after one of the log's cameras");
@@ -176,15 +176,15 @@ void ReadImages(const ConfigNode& node, RecordedLog* log) {
       std::vector<LogImage> frames;
       for (const fs::directory_entry& e : fs::directory_iterator(sub.path())) {
         const std::string stem = e.path().stem().string();
-        const bool digits = !stem.empty() && stem.size() <= 18 &&
-                            std::all_of(stem.begin(), stem.end(),
-                                        [](char ch) { return ch >= '0' && ch <= '9'; });
+        const bool digits =
+            !stem.empty() && stem.size() <= 18 &&
+            std::all_of(stem.begin(), stem.end(), [](char ch) { return ch >= '0' && ch <= '9'; });
         if (!e.is_regular_file() || e.path().extension() != ".png" || !digits) {
           throw InputError(CapForMessage(e.path().string()) +
                            ": expected <t_ns>.png, the frame's time in nanoseconds");
         }
-        frames.push_back({1e-9 * static_cast<double>(std::stoll(stem)) + offset, c,
-                          e.path().string()});
+        frames.push_back(
+            {1e-9 * static_cast<double>(std::stoll(stem)) + offset, c, e.path().string()});
       }
       std::sort(frames.begin(), frames.end(), [](const LogImage& a, const LogImage& b) {
         return a.t != b.t ? a.t < b.t : a.path < b.path;

@@ -25,6 +25,7 @@
 //     scored as for simulated truth (effect_found_correct, effects_named_up_to_equivalence).
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -36,7 +37,6 @@
 #include <map>
 #include <optional>
 #include <random>
-#include <array>
 #include <set>
 #include <sstream>
 #include <tuple>
@@ -862,8 +862,8 @@ class ClosedLoopKind : public ScenarioKind {
     }
     for (const auto& [frame, centre] : centre_of) {
       const bool move = !centre.isZero(0.0);
-      if (!centre.allFinite() || (move && (!d.MarkerOffset(frame).isZero(0.0) ||
-                                           measured.count(frame)))) {
+      if (!centre.allFinite() ||
+          (move && (!d.MarkerOffset(frame).isZero(0.0) || measured.count(frame)))) {
         log_notes_.push_back("log tags on '" + frame + "': no pixel rows (two tags on the " +
                              "frame, corners that are no parallelogram, or a tag centre off a " +
                              "frame other rows measure or a declared marker offset moves)");
@@ -883,12 +883,10 @@ class ClosedLoopKind : public ScenarioKind {
       if (s->type != Source::Type::kLog || camera_.present) continue;
       const sim::RecordedLog& log = Log(*s);
       if (log.tag_rows.empty()) continue;
-      const sim::LogCamera& cam = log.cameras[std::min_element(log.tag_rows.begin(),
-                                                               log.tag_rows.end(),
-                                                               [](const auto& a, const auto& b) {
-                                                                 return a.t < b.t;
-                                                               })
-                                                  ->camera];
+      const sim::LogCamera& cam =
+          log.cameras[std::min_element(log.tag_rows.begin(), log.tag_rows.end(),
+                                       [](const auto& a, const auto& b) { return a.t < b.t; })
+                          ->camera];
       const std::string where = log.dir + "/log.yaml";
       kinematics::FrameId f = -1;
       try {

@@ -42,8 +42,8 @@ DynamicOptions ParseDynamicOptions(const ConfigNode& root, Rig& rig) {
     // A log's frames are detected with the replay's own settings (defaults unless its scenario
     // says otherwise): frames exported under others would replay to other detections.
     if (tc.export_images && !SameDetection(tc.detector, render::DetectorSettings{})) {
-      c->Child("export_images").Fail(
-          "needs the detector's default settings (a replay detects the frames with its own)");
+      c->Child("export_images")
+          .Fail("needs the detector's default settings (a replay detects the frames with its own)");
     }
     tc.cam_id = sim::CameraId(rig.sim->model(), tc.camera, rig.declared.model_path);
     try {
