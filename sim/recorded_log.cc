@@ -104,9 +104,12 @@ namespace {
 
 using log_internal::CheckRows;
 using log_internal::ClockOffset;
+using log_internal::ContactsCsv;
+using log_internal::ContactsYaml;
 using log_internal::kMaxLogTime;
 using log_internal::Num;
 using log_internal::ReadCameras;
+using log_internal::ReadContacts;
 using log_internal::ReadImages;
 using log_internal::ReadTags;
 using log_internal::RowTime;
@@ -295,6 +298,7 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   if (const auto truth = root.Optional("truth")) ReadTruth(*truth, &log, &used);
   if (const auto cameras = root.Optional("cameras")) ReadCameras(*cameras, &log);
   if (const auto tags = root.Optional("tags")) ReadTags(*tags, &log, &used);
+  if (const auto contacts = root.Optional("contacts")) ReadContacts(*contacts, &log, &used);
   if (const auto images = root.Optional("images")) {
     if (!log.tag_rows.empty() || (root.Has("tags") && root.Child("tags").Has("file"))) {
       images->Fail("a log has tags.csv or images, not both");
@@ -335,7 +339,7 @@ std::string LogYaml(const RecordedLog& log) {
     }
   }
   if (!log.truth_t.empty()) y << "truth: {file: truth.tum, frame: " << log.truth_frame << "}\n";
-  y << TagsYaml(log);
+  y << TagsYaml(log) << ContactsYaml(log);
   return y.str();
 }
 
@@ -411,6 +415,7 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
     WriteText(tmp / "truth.tum", t.str());
   }
   if (!log.tags.empty() && log.images.empty()) WriteText(tmp / "tags.csv", TagsCsv(log));
+  if (!log.planes.empty()) WriteText(tmp / "contacts.csv", ContactsCsv(log));
   WriteText(tmp / "log.yaml", LogYaml(log));
 }
 

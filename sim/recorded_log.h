@@ -16,6 +16,10 @@
 //               tags: {file: tags.csv, clock_offset_s: 0, pixel_std_px: 1,
 //                      ids: {20: {frame: tag_gripper, corners_m: [[x, y, z], x 4]}}}
 //               images: {dir: images, clock_offset_s: 0}    # instead of tags.file
+//               contacts: {file: contacts.csv, clock_offset_s: 0,           # optional
+//                 planes: {table: {T_base_plane: [x, y, z, qw, qx, qy, qz],
+//                                  std_m: 0.001, std_deg: 0.5}},
+//                 points: {tip: {frame: grasp_point, p_frame_m: [0, 0, 0]}}}
 //   joints.csv  t_s, then one column per joint: <joint>_rad (<joint>_m for a slide)
 //   imu.csv     t_s, sensor, gx_rad_s, gy_rad_s, gz_rad_s, ax_m_s2, ay_m_s2, az_m_s2 (sensor
 //               frame; specific force, +g up at rest)
@@ -23,6 +27,10 @@
 //   tags.csv    t_s, camera, tag_id, u0_px, v0_px, ..., u3_px, v3_px: a tag's corners as
 //               libapriltag reports them (its order; pixel centres at +0.5: estimators/camera/
 //               pinhole.h)
+//   contacts.csv  t_s, point, plane, distance_m, std_m: the signed distance of a point on the
+//               arm from a plane along its normal (the plane's z axis; 0 in contact) and the
+//               sensor's standard deviation; the plane's pose is known within std_m / std_deg
+//               (a 6x6 covariance of its tangent [rho; theta], diagonal: PPOE paper sec. V-B)
 //   images/<camera>/<t_ns>.png   a camera's frames, named by their time in nanoseconds: the
 //               scenario layer detects their tags (scenarios/runner/common/log_images.h)
 //
@@ -98,6 +106,27 @@ struct LogTagRow {
   std::array<Eigen::Vector2d, 4> uv;
 };
 
+struct LogPlane {
+  std::string name;  // contacts.csv's `plane`
+  lie::SE3 T_base_plane;
+  Mat6 cov = Mat6::Zero();
+};
+
+struct LogContactPoint {
+  std::string name;   // contacts.csv's `point`
+  std::string frame;  // an observed frame of the declared model
+  Vec3 p_frame = Vec3::Zero();
+};
+
+// One contact reading: indices into RecordedLog::contact_points and ::planes.
+struct LogContactRow {
+  double t = 0.0;
+  int point = 0;
+  int plane = 0;
+  double distance_m = 0.0;
+  double std_m = 0.0;
+};
+
 struct RecordedLog {
   std::string dir;
   std::string robot;
@@ -122,7 +151,11 @@ struct RecordedLog {
   // images/ (optional, instead of tags.csv): the frames in time order (cameras in their order at
   // equal times), undetected.
   std::vector<LogImage> images;
-  StreamStats joint_stats, imu_stats, truth_stats, tag_stats, image_stats;
+  // contacts.csv (optional).
+  std::vector<LogPlane> planes;
+  std::vector<LogContactPoint> contact_points;
+  std::vector<LogContactRow> contacts;
+  StreamStats joint_stats, imu_stats, truth_stats, tag_stats, image_stats, contact_stats;
 
   const double* q(size_t row) const { return joint_q.data() + row * joints.size(); }
 };

@@ -43,4 +43,9 @@ void ReadImages(const ConfigNode& node, RecordedLog* log);
 std::string TagsYaml(const RecordedLog& log);
 std::string TagsCsv(const RecordedLog& log);
 
+// log.yaml's `contacts` and contacts.csv (recorded_log_contacts.cc), and their writers.
+void ReadContacts(const ConfigNode& node, RecordedLog* log, double* used);
+std::string ContactsYaml(const RecordedLog& log);
+std::string ContactsCsv(const RecordedLog& log);
+
 }  // namespace flexbench::sim::log_internal

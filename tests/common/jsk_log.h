@@ -26,10 +26,13 @@ namespace flexbench::testing {
 // external camera (640 x 480, 45 deg vertical field of view) sees the gripper's 4 cm tag at 10 Hz,
 // its corners projected exactly, written where all four fall on the image (tags.csv; the log's
 // pixel_std_px 1). `camera_tilt_rad`: the camera is turned that much about its optical x axis
-// from where the declared model has it (a sagged mount).
+// from where the declared model has it (a sagged mount). `contacts`: a distance sensor reads the
+// grasp point's height over a level plane at z = 0.9 m (known within 1 mm / 0.5 deg) at 10 Hz,
+// exactly, with a stated 0.5 mm (contacts.csv).
 inline void WriteJskLog(const std::filesystem::path& dir, double duration,
                         double pitch_offset = 0.05, double imu_clock_s = 0.0,
-                        double truth_lag_s = 0.0, bool tags = false, double camera_tilt_rad = 0.0) {
+                        double truth_lag_s = 0.0, bool tags = false, double camera_tilt_rad = 0.0,
+                        bool contacts = false) {
   const auto num = [](double v) {
     char b[40];
     std::snprintf(b, sizeof(b), "%.17g", v);
@@ -96,6 +99,17 @@ inline void WriteJskLog(const std::filesystem::path& dir, double duration,
        << "\njoints: {file: joints.csv}\n"
           "imu: {file: imu.csv, sensors: {imu2: {frame: imu_link2}, imu3: {frame: imu_link3}}}\n"
           "truth: {file: truth.tum, frame: grasp_point}\n";
+  if (contacts) {
+    yaml << "contacts: {file: contacts.csv, planes: {table: {T_base_plane: [0, 0, 0.9, 1, 0, 0, "
+            "0], std_m: 0.001, std_deg: 0.5}}, points: {tip: {frame: grasp_point}}}\n";
+    std::ofstream csv(dir / "contacts.csv");
+    csv << "t_s,point,plane,distance_m,std_m\n";
+    for (int i = 0; i * 0.1 <= duration + 1e-9; ++i) {
+      const double t = i * 0.1;
+      csv << num(t) << ",tip,table,"
+          << num(pose(t - truth_lag_s, chain.end_effector).translation().z() - 0.9) << ",0.0005\n";
+    }
+  }
   if (!tags) return;
   PinholeCamera cam;
   cam.width = 640;

@@ -60,6 +60,18 @@ LogIndex IndexLog(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
                        ".frame: " + e.what());
     }
   }
+  for (const sim::LogContactPoint& point : log.contact_points) {
+    try {
+      index.contact_frame.push_back(chain.ObservedFrame(point.frame));
+    } catch (const InputError& e) {
+      throw InputError(log.dir + "/log.yaml: contacts.points." + point.name +
+                       ".frame: " + e.what());
+    }
+  }
+  index.contact_order.resize(log.contacts.size());
+  std::iota(index.contact_order.begin(), index.contact_order.end(), 0);
+  std::stable_sort(index.contact_order.begin(), index.contact_order.end(),
+                   [&](size_t a, size_t b) { return log.contacts[a].t < log.contacts[b].t; });
   index.tag_order.resize(log.tag_rows.size());
   std::iota(index.tag_order.begin(), index.tag_order.end(), 0);
   std::stable_sort(index.tag_order.begin(), index.tag_order.end(),
@@ -115,7 +127,8 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
   j.std = estimators::JointVector::Zero(static_cast<int>(column.size()));
   estimators::TagCorners corners;
   corners.cov *= log.pixel_std_px * log.pixel_std_px;
-  size_t next_imu = 0, next_tag = 0;
+  estimators::PlaneContact contact;
+  size_t next_imu = 0, next_tag = 0, next_contact = 0;
   for (size_t s = 0; s < steps.size(); ++s) {
     const LogStep& step = steps[s];
     for (; next_imu < imu_order.size() && log.imu[imu_order[next_imu]].t <= step.t; ++next_imu) {
@@ -136,6 +149,20 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
       corners.p_frame = tag.corners_m;
       corners.uv = row.uv;
       count(est.Update(corners));
+    }
+    for (; next_contact < index.contact_order.size() &&
+           log.contacts[index.contact_order[next_contact]].t <= step.t;
+         ++next_contact) {
+      const sim::LogContactRow& row = log.contacts[index.contact_order[next_contact]];
+      const sim::LogPlane& plane = log.planes[row.plane];
+      contact.t = row.t;
+      contact.frame = index.contact_frame[row.point];
+      contact.p_frame = log.contact_points[row.point].p_frame;
+      contact.T_base_plane = plane.T_base_plane;
+      contact.plane_cov = plane.cov;
+      contact.distance = row.distance_m;
+      contact.std = row.std_m;
+      count(est.Update(contact));
     }
     on_step(s, est.Estimate());
   }

@@ -1,7 +1,8 @@
 // A recorded log (sim/recorded_log.h) through one estimator in time order: the steps the replay
 // kind and the closed loop's held-out replay share. A step: the IMU readings up to its time (in
-// time order), Predict, the joint reading of its row, the tag detections up to its time (after
-// the joint reading, which sets the kinematic prior they correct), the estimate.
+// time order), Predict, the joint reading of its row, the tag detections and then the contact
+// readings up to its time (after the joint reading, which sets the kinematic prior they
+// correct), the estimate.
 #pragma once
 
 #include <functional>
@@ -25,9 +26,11 @@ estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
 
 // The log's streams bound to a chain.
 struct LogIndex {
-  std::vector<int> column;                     // sim::JointColumns of the chain's joints
-  std::vector<kinematics::FrameId> tag_frame;  // per log tag, its frame on the chain
-  std::vector<size_t> tag_order;               // tags.csv's rows in time order
+  std::vector<int> column;                         // sim::JointColumns of the chain's joints
+  std::vector<kinematics::FrameId> tag_frame;      // per log tag, its frame on the chain
+  std::vector<size_t> tag_order;                   // tags.csv's rows in time order
+  std::vector<kinematics::FrameId> contact_frame;  // per log contact point, its frame
+  std::vector<size_t> contact_order;               // contacts.csv's rows in time order
 };
 
 // InputError naming joints.csv's header or log.yaml's key (`declared_file` for messages).

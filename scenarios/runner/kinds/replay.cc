@@ -129,6 +129,7 @@ class ReplayKind : public ScenarioKind {
     stream("imu", log_.imu_stats);
     stream("truth", log_.truth_stats);
     stream("tags", log_.tag_stats);
+    stream("contacts", log_.contact_stats);
     if (!log_.images.empty()) {
       m["streams"]["images"]["rows"] = log_.image_stats.rows;
       m["streams"]["images"]["tags_not_in_the_log"] = other_tags_;

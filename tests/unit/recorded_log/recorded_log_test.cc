@@ -209,6 +209,39 @@ TEST(RecordedLog, TagDetectionsRoundTrip) {
   }
 }
 
+// Contact readings: planes (pose, its standard deviations as a diagonal covariance), points on
+// frames, and contacts.csv read with the stream's clock offset, then written and read back.
+TEST(RecordedLog, ContactsRoundTrip) {
+  testing::TempDir dir;
+  Files f;
+  f.log_yaml +=
+      "contacts: {file: contacts.csv, clock_offset_s: 0.5, planes: {table: {T_base_plane: [0, "
+      "0, 0.9, 1, 0, 0, 0], std_m: 0.002, std_deg: 0.5}}, points: {tip: {frame: grasp_point, "
+      "p_frame_m: [0, 0, 0.01]}}}\n";
+  f.Write(dir.path());
+  std::ofstream(dir.path() / "contacts.csv")
+      << "t_s,point,plane,distance_m,std_m\n0.1,tip,table,0.003,0.0005\n0.2,tip,table,-0.001,"
+         "0.0005\n";
+  const RecordedLog log = ReadRecordedLog(dir.path().string());
+  ASSERT_EQ(log.contacts.size(), 2u);
+  EXPECT_DOUBLE_EQ(log.contacts[0].t, 0.6);
+  EXPECT_DOUBLE_EQ(log.contacts[1].distance_m, -0.001);
+  EXPECT_DOUBLE_EQ(log.planes[0].cov(0, 0), 0.002 * 0.002);
+  EXPECT_NEAR(log.planes[0].cov(5, 5), std::pow(0.5 * M_PI / 180.0, 2), 1e-18);
+  EXPECT_EQ(log.contact_points[0].p_frame, Vec3(0, 0, 0.01));
+  const std::string again = (dir.path() / "again").string();
+  WriteRecordedLog(log, again);
+  const RecordedLog back = ReadRecordedLog(again);
+  ASSERT_EQ(back.contacts.size(), 2u);
+  for (size_t r = 0; r < 2; ++r) {
+    EXPECT_EQ(back.contacts[r].t, log.contacts[r].t);
+    EXPECT_EQ(back.contacts[r].distance_m, log.contacts[r].distance_m);
+    EXPECT_EQ(back.contacts[r].std_m, log.contacts[r].std_m);
+  }
+  EXPECT_NEAR((back.planes[0].cov - log.planes[0].cov).norm(), 0.0, 1e-18);
+  EXPECT_EQ(back.planes[0].T_base_plane.translation(), log.planes[0].T_base_plane.translation());
+}
+
 // A camera's frames are files images/<camera>/<t_ns>.png, in time order, with the stream's clock
 // offset; any other name in the folder, or images beside tags.csv, is refused naming it.
 TEST(RecordedLog, ImagesAreNamedByTheirTime) {

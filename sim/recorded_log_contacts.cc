@@ -1,0 +1,156 @@
+// A recorded log's contact readings (recorded_log.h): log.yaml's `contacts`, contacts.csv, and
+// their writers.
+#include <Eigen/Geometry>
+#include <cmath>
+#include <map>
+#include <sstream>
+
+#include "estimators/error.h"
+#include "sim/csv.h"
+#include "sim/recorded_log_streams.h"
+
+namespace flexbench::sim::log_internal {
+namespace {
+
+const std::vector<std::string>& ContactsHeader() {
+  static const std::vector<std::string> h = {"t_s", "point", "plane", "distance_m", "std_m"};
+  return h;
+}
+
+constexpr double kDeg = M_PI / 180.0;
+
+LogPlane ReadPlane(const std::string& name, const ConfigNode& p) {
+  LogPlane plane;
+  plane.name = name;
+  const ConfigNode pose = p.Child("T_base_plane");
+  const std::vector<double> v = pose.AsDoubleList();
+  bool ok = v.size() == 7;
+  for (size_t i = 0; ok && i < 7; ++i) ok = std::abs(v[i]) <= 1e3;
+  const Eigen::Quaterniond q(ok ? v[3] : 0.0, ok ? v[4] : 0.0, ok ? v[5] : 0.0, ok ? v[6] : 0.0);
+  if (!ok || std::abs(q.norm() - 1.0) > 1e-6) {
+    pose.Fail("expected [x, y, z, qw, qx, qy, qz] (m, a unit quaternion)");
+  }
+  plane.T_base_plane = lie::SE3(q.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
+  const double std_m = p.GetDouble("std_m", 0.0), std_deg = p.GetDouble("std_deg", 0.0);
+  if (!(std_m >= 0.0 && std_m <= 10.0)) p.Child("std_m").Fail("must be in [0, 10] m");
+  if (!(std_deg >= 0.0 && std_deg <= 180.0)) p.Child("std_deg").Fail("must be in [0, 180] deg");
+  plane.cov.diagonal() << Vec3::Constant(std_m * std_m),
+      Vec3::Constant(std::pow(std_deg * kDeg, 2));
+  return plane;
+}
+
+}  // namespace
+
+void ReadContacts(const ConfigNode& node, RecordedLog* log, double* used) {
+  const std::string file = node.ResolvePath(node.GetString("file"));
+  const double offset = ClockOffset(node);
+  const ConfigNode planes = node.Child("planes");
+  for (const std::string& name : planes.Keys()) {
+    log->planes.push_back(ReadPlane(name, planes.Child(name)));
+  }
+  if (log->planes.empty()) planes.Fail("names no plane");
+  const ConfigNode points = node.Child("points");
+  for (const std::string& name : points.Keys()) {
+    const ConfigNode p = points.Child(name);
+    LogContactPoint point;
+    point.name = name;
+    point.frame = p.GetString("frame");
+    if (const auto at = p.Optional("p_frame_m")) {
+      const std::vector<double> v = at->AsDoubleList();
+      if (v.size() != 3 ||
+          !(std::abs(v[0]) <= 10 && std::abs(v[1]) <= 10 && std::abs(v[2]) <= 10)) {
+        at->Fail("expected [x, y, z] in metres, each within 10 m");
+      }
+      point.p_frame = Vec3(v[0], v[1], v[2]);
+    }
+    log->contact_points.push_back(point);
+  }
+  if (log->contact_points.empty()) points.Fail("names no point");
+  CsvLines csv(file, kMaxLogStreamBytes);
+  std::vector<std::string> header;
+  if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
+  const std::vector<std::string>& want = ContactsHeader();
+  std::string names;
+  for (const std::string& h : want) names += (names.empty() ? "" : ",") + h;
+  for (size_t c = 0; c < want.size(); ++c) {
+    if (header.size() != want.size() || header[c] != want[c]) {
+      throw InputError(csv.Where() + ": the header must be " + names + " (column " +
+                       std::to_string(c + 1) + " is '" +
+                       CapForMessage(c < header.size() ? header[c] : "") + "')");
+    }
+  }
+  log->contacts.reserve(CheckRows(file, sizeof(LogContactRow) + 16.0, used));
+  // Times per point and plane: one sensor's stream.
+  std::map<std::pair<int, int>, std::vector<double>> times;
+  std::map<std::pair<int, int>, double> last;
+  std::vector<std::string> cells;
+  while (csv.Next(&cells)) {
+    const std::string where = csv.Where();
+    if (cells.size() != want.size()) {
+      throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
+                       std::to_string(want.size()));
+    }
+    LogContactRow row;
+    row.point = -1;
+    for (size_t k = 0; k < log->contact_points.size(); ++k) {
+      if (log->contact_points[k].name == cells[1]) row.point = static_cast<int>(k);
+    }
+    if (row.point < 0) {
+      throw InputError(where + ": column 'point': '" + CapForMessage(cells[1]) +
+                       "' is not one of the log's contacts.points");
+    }
+    row.plane = -1;
+    for (size_t k = 0; k < log->planes.size(); ++k) {
+      if (log->planes[k].name == cells[2]) row.plane = static_cast<int>(k);
+    }
+    if (row.plane < 0) {
+      throw InputError(where + ": column 'plane': '" + CapForMessage(cells[2]) +
+                       "' is not one of the log's contacts.planes");
+    }
+    const std::pair<int, int> stream(row.point, row.plane);
+    std::vector<double>& ts = times[stream];
+    row.t = RowTime(cells[0], where, offset, &last[stream], !ts.empty());
+    row.distance_m = ParseCsvNumber(cells[3], where, "distance_m", 1e3);
+    row.std_m = ParseCsvNumber(cells[4], where, "std_m", 1e3);
+    if (!(row.std_m > 0.0)) throw InputError(where + ": column 'std_m' must be > 0");
+    ts.push_back(row.t);
+    log->contacts.push_back(row);
+  }
+  std::vector<const std::vector<double>*> streams;
+  for (const auto& [key, ts] : times) streams.push_back(&ts);
+  log->contact_stats = Stats(file, offset, streams);
+}
+
+std::string ContactsYaml(const RecordedLog& log) {
+  if (log.planes.empty()) return "";
+  std::ostringstream y;
+  y << "contacts:\n  file: contacts.csv\n  planes:\n";
+  for (const LogPlane& p : log.planes) {
+    const Vec3& t = p.T_base_plane.translation();
+    const Eigen::Quaterniond q(p.T_base_plane.rotation());
+    y << "    " << p.name << ": {T_base_plane: [" << Num(t.x()) << ", " << Num(t.y()) << ", "
+      << Num(t.z()) << ", " << Num(q.w()) << ", " << Num(q.x()) << ", " << Num(q.y()) << ", "
+      << Num(q.z()) << "], std_m: " << Num(std::sqrt(p.cov(0, 0)))
+      << ", std_deg: " << Num(std::sqrt(p.cov(3, 3)) / kDeg) << "}\n";
+  }
+  y << "  points:\n";
+  for (const LogContactPoint& p : log.contact_points) {
+    y << "    " << p.name << ": {frame: " << p.frame << ", p_frame_m: [" << Num(p.p_frame.x())
+      << ", " << Num(p.p_frame.y()) << ", " << Num(p.p_frame.z()) << "]}\n";
+  }
+  return y.str();
+}
+
+std::string ContactsCsv(const RecordedLog& log) {
+  std::ostringstream c;
+  const std::vector<std::string>& h = ContactsHeader();
+  for (size_t i = 0; i < h.size(); ++i) c << (i ? "," : "") << h[i];
+  c << "\n";
+  for (const LogContactRow& r : log.contacts) {
+    c << Num(r.t) << "," << log.contact_points[r.point].name << "," << log.planes[r.plane].name
+      << "," << Num(r.distance_m) << "," << Num(r.std_m) << "\n";
+  }
+  return c.str();
+}
+
+}  // namespace flexbench::sim::log_internal
