@@ -98,10 +98,49 @@ std::string Num(double v) {
   return b;
 }
 
+void ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std::string>& want) {
+  std::vector<std::string> header;
+  if (!csv->Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
+  std::string names;
+  for (const std::string& h : want) names += (names.empty() ? "" : ",") + h;
+  if (header.size() != want.size()) {
+    throw InputError(csv->Where() + ": the header must be " + names + " (it has " +
+                     std::to_string(header.size()) + " columns)");
+  }
+  for (size_t c = 0; c < want.size(); ++c) {
+    if (header[c] != want[c]) {
+      throw InputError(csv->Where() + ": the header must be " + names + " (column " +
+                       std::to_string(c + 1) + " is '" + CapForMessage(header[c]) + "')");
+    }
+  }
+}
+
+void CheckRowColumns(const std::vector<std::string>& cells, size_t want, const std::string& where) {
+  if (cells.size() != want) {
+    throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
+                     std::to_string(want));
+  }
+}
+
+double PairedTimes::Take(std::pair<int, int> sensor, const std::string& cell,
+                         const std::string& where, double offset) {
+  std::vector<double>& ts = times_[sensor];
+  const double t = RowTime(cell, where, offset, &last_[sensor], !ts.empty());
+  ts.push_back(t);
+  return t;
+}
+
+StreamStats PairedTimes::Stats(const std::string& file, double offset) const {
+  std::vector<const std::vector<double>*> streams;
+  for (const auto& [sensor, ts] : times_) streams.push_back(&ts);
+  return log_internal::Stats(file, offset, streams);
+}
+
 }  // namespace log_internal
 
 namespace {
 
+using log_internal::CheckRowColumns;
 using log_internal::CheckRows;
 using log_internal::ClockOffset;
 using log_internal::ContactsCsv;
@@ -110,6 +149,7 @@ using log_internal::kMaxLogTime;
 using log_internal::Num;
 using log_internal::ReadCameras;
 using log_internal::ReadContacts;
+using log_internal::ReadHeader;
 using log_internal::ReadImages;
 using log_internal::ReadTags;
 using log_internal::RowTime;
@@ -194,22 +234,9 @@ void ReadImu(const ConfigNode& node, RecordedLog* log, double* used) {
   const double offset = ClockOffset(node);
   ReadImuSensors(node.Child("sensors"), log);
   CsvLines csv(file, kMaxLogStreamBytes);
-  std::vector<std::string> header;
-  if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
   static const std::vector<std::string> kHeader = {"t_s",      "sensor",  "gx_rad_s", "gy_rad_s",
                                                    "gz_rad_s", "ax_m_s2", "ay_m_s2",  "az_m_s2"};
-  std::string want;
-  for (const std::string& h : kHeader) want += (want.empty() ? "" : ",") + h;
-  if (header.size() != kHeader.size()) {
-    throw InputError(csv.Where() + ": the header must be " + want + " (it has " +
-                     std::to_string(header.size()) + " columns)");
-  }
-  for (size_t c = 0; c < kHeader.size(); ++c) {
-    if (header[c] != kHeader[c]) {
-      throw InputError(csv.Where() + ": the header must be " + want + " (column " +
-                       std::to_string(c + 1) + " is '" + CapForMessage(header[c]) + "')");
-    }
-  }
+  ReadHeader(&csv, file, kHeader);
   // A row: the reading, its time among its sensor's, its step in the statistics.
   log->imu.reserve(CheckRows(file, sizeof(estimators::ImuReading) + 16.0, used));
   std::vector<std::vector<double>> times(log->imus.size());
@@ -217,10 +244,7 @@ void ReadImu(const ConfigNode& node, RecordedLog* log, double* used) {
   std::vector<std::string> cells;
   while (csv.Next(&cells)) {
     const std::string where = csv.Where();
-    if (cells.size() != kHeader.size()) {
-      throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
-                       std::to_string(kHeader.size()));
-    }
+    CheckRowColumns(cells, kHeader.size(), where);
     int k = -1;
     std::string names;
     for (size_t i = 0; i < log->imus.size(); ++i) {

@@ -2,7 +2,6 @@
 // their writers.
 #include <Eigen/Geometry>
 #include <cmath>
-#include <map>
 #include <sstream>
 
 #include "estimators/error.h"
@@ -67,58 +66,33 @@ void ReadContacts(const ConfigNode& node, RecordedLog* log, double* used) {
   }
   if (log->contact_points.empty()) points.Fail("names no point");
   CsvLines csv(file, kMaxLogStreamBytes);
-  std::vector<std::string> header;
-  if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
   const std::vector<std::string>& want = ContactsHeader();
-  std::string names;
-  for (const std::string& h : want) names += (names.empty() ? "" : ",") + h;
-  for (size_t c = 0; c < want.size(); ++c) {
-    if (header.size() != want.size() || header[c] != want[c]) {
-      throw InputError(csv.Where() + ": the header must be " + names + " (column " +
-                       std::to_string(c + 1) + " is '" +
-                       CapForMessage(c < header.size() ? header[c] : "") + "')");
-    }
-  }
+  ReadHeader(&csv, file, want);
   log->contacts.reserve(CheckRows(file, sizeof(LogContactRow) + 16.0, used));
-  // Times per point and plane: one sensor's stream.
-  std::map<std::pair<int, int>, std::vector<double>> times;
-  std::map<std::pair<int, int>, double> last;
+  PairedTimes times;  // a point's readings against one plane are a stream of their own
   std::vector<std::string> cells;
   while (csv.Next(&cells)) {
     const std::string where = csv.Where();
-    if (cells.size() != want.size()) {
-      throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
-                       std::to_string(want.size()));
-    }
+    CheckRowColumns(cells, want.size(), where);
     LogContactRow row;
-    row.point = -1;
-    for (size_t k = 0; k < log->contact_points.size(); ++k) {
-      if (log->contact_points[k].name == cells[1]) row.point = static_cast<int>(k);
-    }
+    row.point =
+        IndexOf(log->contact_points, [&](const LogContactPoint& p) { return p.name == cells[1]; });
     if (row.point < 0) {
       throw InputError(where + ": column 'point': '" + CapForMessage(cells[1]) +
                        "' is not one of the log's contacts.points");
     }
-    row.plane = -1;
-    for (size_t k = 0; k < log->planes.size(); ++k) {
-      if (log->planes[k].name == cells[2]) row.plane = static_cast<int>(k);
-    }
+    row.plane = IndexOf(log->planes, [&](const LogPlane& p) { return p.name == cells[2]; });
     if (row.plane < 0) {
       throw InputError(where + ": column 'plane': '" + CapForMessage(cells[2]) +
                        "' is not one of the log's contacts.planes");
     }
-    const std::pair<int, int> stream(row.point, row.plane);
-    std::vector<double>& ts = times[stream];
-    row.t = RowTime(cells[0], where, offset, &last[stream], !ts.empty());
+    row.t = times.Take({row.point, row.plane}, cells[0], where, offset);
     row.distance_m = ParseCsvNumber(cells[3], where, "distance_m", 1e3);
     row.std_m = ParseCsvNumber(cells[4], where, "std_m", 1e3);
     if (!(row.std_m > 0.0)) throw InputError(where + ": column 'std_m' must be > 0");
-    ts.push_back(row.t);
     log->contacts.push_back(row);
   }
-  std::vector<const std::vector<double>*> streams;
-  for (const auto& [key, ts] : times) streams.push_back(&ts);
-  log->contact_stats = Stats(file, offset, streams);
+  log->contact_stats = times.Stats(file, offset);
 }
 
 std::string ContactsYaml(const RecordedLog& log) {

@@ -4,10 +4,13 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sim/config.h"
+#include "sim/csv.h"
 #include "sim/recorded_log.h"
 
 namespace flexbench::sim::log_internal {
@@ -35,6 +38,35 @@ double RowTime(const std::string& cell, const std::string& where, double offset,
 
 // 17 significant digits: a number written reads back as itself.
 std::string Num(double v);
+
+// Reads the stream file's header, which must be `want` exactly (InputError naming its line and
+// the column count or the first column that differs).
+void ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std::string>& want);
+
+// InputError at `where` when a row has another column count than the header's `want`.
+void CheckRowColumns(const std::vector<std::string>& cells, size_t want, const std::string& where);
+
+// The times of a stream several sensors share, each told apart by a pair of indices (a camera
+// and a tag, a point and a plane): RowTime per sensor, and the stream's statistics.
+class PairedTimes {
+ public:
+  double Take(std::pair<int, int> sensor, const std::string& cell, const std::string& where,
+              double offset);
+  StreamStats Stats(const std::string& file, double offset) const;
+
+ private:
+  std::map<std::pair<int, int>, std::vector<double>> times_;
+  std::map<std::pair<int, int>, double> last_;
+};
+
+// Index of the first item `is` holds for, -1 when none.
+template <typename T, typename Pred>
+int IndexOf(const std::vector<T>& items, Pred is) {
+  for (size_t i = 0; i < items.size(); ++i) {
+    if (is(items[i])) return static_cast<int>(i);
+  }
+  return -1;
+}
 
 // log.yaml's `cameras`, `tags` and `images` (recorded_log_tags.cc), tags.csv, and their writers.
 void ReadCameras(const ConfigNode& node, RecordedLog* log);

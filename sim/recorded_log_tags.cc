@@ -4,8 +4,6 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
-#include <functional>
-#include <map>
 #include <sstream>
 
 #include "estimators/error.h"
@@ -56,14 +54,6 @@ LogTag ReadTag(const std::string& key, const ConfigNode& t) {
   return tag;
 }
 
-template <typename T>
-int IndexOf(const std::vector<T>& items, const std::function<bool(const T&)>& is) {
-  for (size_t i = 0; i < items.size(); ++i) {
-    if (is(items[i])) return static_cast<int>(i);
-  }
-  return -1;
-}
-
 }  // namespace
 
 void ReadCameras(const ConfigNode& node, RecordedLog* log) {
@@ -105,55 +95,34 @@ void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string file = node.ResolvePath(node.GetString("file"));
   const double offset = ClockOffset(node);
   CsvLines csv(file, kMaxLogStreamBytes);
-  std::vector<std::string> header;
-  if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
   const std::vector<std::string>& want = TagsHeader();
-  std::string names;
-  for (const std::string& h : want) names += (names.empty() ? "" : ",") + h;
-  for (size_t c = 0; c < want.size(); ++c) {
-    if (header.size() != want.size() || header[c] != want[c]) {
-      throw InputError(csv.Where() + ": the header must be " + names + " (column " +
-                       std::to_string(c + 1) + " is '" +
-                       CapForMessage(c < header.size() ? header[c] : "") + "')");
-    }
-  }
+  ReadHeader(&csv, file, want);
   log->tag_rows.reserve(CheckRows(file, sizeof(LogTagRow) + 16.0, used));
-  // Times per camera and tag: the stream a detector makes of one tag.
-  std::map<std::pair<int, int>, std::vector<double>> times;
-  std::map<std::pair<int, int>, double> last;
+  PairedTimes times;  // a camera's view of one tag is a stream of its own
   std::vector<std::string> cells;
   while (csv.Next(&cells)) {
     const std::string where = csv.Where();
-    if (cells.size() != want.size()) {
-      throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
-                       std::to_string(want.size()));
-    }
+    CheckRowColumns(cells, want.size(), where);
     LogTagRow row;
-    row.camera =
-        IndexOf<LogCamera>(log->cameras, [&](const LogCamera& c) { return c.name == cells[1]; });
+    row.camera = IndexOf(log->cameras, [&](const LogCamera& c) { return c.name == cells[1]; });
     if (row.camera < 0) {
       throw InputError(where + ": column 'camera': '" + CapForMessage(cells[1]) +
                        "' is not one of the log's cameras");
     }
     const double id = ParseCsvNumber(cells[2], where, "tag_id", 1e6);
-    row.tag = IndexOf<LogTag>(log->tags, [&](const LogTag& t) { return t.id == id; });
+    row.tag = IndexOf(log->tags, [&](const LogTag& t) { return t.id == id; });
     if (row.tag < 0) {
       throw InputError(where + ": column 'tag_id': " + cells[2] +
                        " is not one of the log's tags.ids");
     }
-    const std::pair<int, int> stream(row.camera, row.tag);
-    std::vector<double>& ts = times[stream];
-    row.t = RowTime(cells[0], where, offset, &last[stream], !ts.empty());
+    row.t = times.Take({row.camera, row.tag}, cells[0], where, offset);
     for (int k = 0; k < 4; ++k) {
       row.uv[k] = Eigen::Vector2d(ParseCsvNumber(cells[3 + 2 * k], where, want[3 + 2 * k], 1e6),
                                   ParseCsvNumber(cells[4 + 2 * k], where, want[4 + 2 * k], 1e6));
     }
-    ts.push_back(row.t);
     log->tag_rows.push_back(row);
   }
-  std::vector<const std::vector<double>*> streams;
-  for (const auto& [key, ts] : times) streams.push_back(&ts);
-  log->tag_stats = Stats(file, offset, streams);
+  log->tag_stats = times.Stats(file, offset);
 }
 
 void ReadImages(const ConfigNode& node, RecordedLog* log) {

@@ -787,7 +787,10 @@ class ClosedLoopKind : public ScenarioKind {
       }
       case Source::Type::kLog: {
         const sim::RecordedLog& log = Log(s);
-        if (camera_.present && !log.tag_rows.empty()) AppendLogPixels(log, s, what, ctx, &d);
+        const std::vector<int> column = IndexLog(log, *chain_, declared_.file).column;
+        if (camera_.present && !log.tag_rows.empty()) {
+          AppendLogPixels(log, column, s, what, ctx, &d);
+        }
         if (log.truth_t.empty()) break;
         const auto it = std::find(points_.begin(), points_.end(), log.truth_frame);
         if (it == points_.end()) {
@@ -795,8 +798,7 @@ class ClosedLoopKind : public ScenarioKind {
                            "' is neither the end effector nor one of 'markers'");
         }
         const int n = identify::AppendLogPoints(
-            log, IndexLog(log, *chain_, declared_.file).column, s.from_s, s.to_s,
-            static_cast<int>(it - points_.begin()), &d, LogFrame(s));
+            log, column, s.from_s, s.to_s, static_cast<int>(it - points_.begin()), &d, LogFrame(s));
         ctx.log(what + ": " + std::to_string(n) + " rows of " + log.truth_stats.file + " in " +
                 Span(s));
         break;
@@ -922,8 +924,8 @@ class ClosedLoopKind : public ScenarioKind {
   }
 
   // Pixel rows of a log's tags seen by the identification's camera (CameraFromLogs).
-  void AppendLogPixels(const sim::RecordedLog& log, const Source& s, const std::string& what,
-                       RunContext& ctx, DataSet* d) const {
+  void AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column, const Source& s,
+                       const std::string& what, RunContext& ctx, DataSet* d) const {
     int camera = -1;
     for (size_t c = 0; c < log.cameras.size(); ++c) {
       if (log.cameras[c].frame == camera_.name) camera = static_cast<int>(c);
@@ -935,8 +937,7 @@ class ClosedLoopKind : public ScenarioKind {
                                ? static_cast<int>(it - points_.begin())
                                : -1);
     }
-    const int n = identify::AppendLogPixels(log, IndexLog(log, *chain_, declared_.file).column,
-                                            s.from_s, s.to_s, camera, tag_points, d);
+    const int n = identify::AppendLogPixels(log, column, s.from_s, s.to_s, camera, tag_points, d);
     ctx.log(what + ": " + std::to_string(n) + " tag detections of " + log.tag_stats.file +
             " by camera '" + camera_.name + "' in " + Span(s) +
             " (pixel rows of the tags' centres)");
