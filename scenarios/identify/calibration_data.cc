@@ -243,6 +243,29 @@ int AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column,
   return static_cast<int>(times.size());
 }
 
+int AppendLogGravity(const sim::RecordedLog& log, const std::vector<StaticWindow>& windows,
+                     const std::vector<int>& imu_points, DataSet* data, int time_blocks) {
+  const int set = LogSet(log, data);
+  const size_t first = data->rows.size();
+  std::vector<double> times;
+  for (const StaticWindow& w : windows) {
+    if (imu_points[w.sensor] < 0) continue;
+    Observation o;
+    o.type = ObservationType::kGravity;
+    o.q = w.q;
+    o.set = set;
+    o.point = imu_points[w.sensor];
+    o.up() = w.up;
+    char span[64];
+    std::snprintf(span, sizeof(span), " t=%.9g..%.9g", w.t_begin, w.t_end);
+    o.where = log.imu_stats.file + span;
+    data->rows.push_back(std::move(o));
+    times.push_back(0.5 * (w.t_begin + w.t_end));
+  }
+  LabelTimeSpans(times, first, time_blocks, data);
+  return static_cast<int>(times.size());
+}
+
 int LabelIndex(std::vector<std::string>* labels, const std::string& label) {
   for (size_t i = 0; i < labels->size(); ++i) {
     if ((*labels)[i] == label) return static_cast<int>(i);
@@ -258,8 +281,8 @@ struct CsvColumns {
   std::vector<int> joint_col, motion_col;
   int frame_col = -1, marker_col = -1;
   int group_col = -1, set_col = -1, pose_col = -1, xyz_col[3] = {-1, -1, -1},
-      quat_col[4] = {-1, -1, -1, -1}, uv_col[2] = {-1, -1};
-  bool has_xyz = false, has_uv = false;
+      quat_col[4] = {-1, -1, -1, -1}, uv_col[2] = {-1, -1}, up_col[3] = {-1, -1, -1};
+  bool has_xyz = false, has_uv = false, has_up = false;
   int num_quat = 0;
 };
 
@@ -300,6 +323,10 @@ CsvColumns ParseHeader(const std::vector<std::string>& header, const std::string
       if (h == quat[k]) cols.quat_col[k] = static_cast<int>(c), known = true;
     }
     if (h == "u") cols.uv_col[0] = static_cast<int>(c), known = true;
+    const char* up[3] = {"up_x", "up_y", "up_z"};
+    for (int k = 0; k < 3; ++k) {
+      if (h == up[k]) cols.up_col[k] = static_cast<int>(c), known = true;
+    }
     if (h.rfind("motion_", 0) == 0) {
       for (size_t j = 0; j < joints.size(); ++j) {
         if (joints[j] == h.substr(7)) cols.motion_col[j] = static_cast<int>(c), known = true;
@@ -311,7 +338,8 @@ CsvColumns ParseHeader(const std::vector<std::string>& header, const std::string
     if (!known) {
       throw InputError(hdr + ": column '" + CapForMessage(h) +
                        "' is neither an actuated joint of the declared model nor one of group, "
-                       "set, pose, frame, marker, x, y, z, qw, qx, qy, qz, u, v, motion_<joint>");
+                       "set, pose, frame, marker, x, y, z, qw, qx, qy, qz, u, v, up_x, up_y, up_z, "
+                       "motion_<joint>");
     }
   }
   return cols;
@@ -339,10 +367,18 @@ void CheckColumns(const std::string& hdr, const std::vector<std::string>& joints
   if ((cols.uv_col[0] >= 0) != (cols.uv_col[1] >= 0)) {
     throw InputError(hdr + ": u and v go together");
   }
-  if (cols.has_xyz + (cols.group_col >= 0) + cols.has_uv != 1) {
+  const int num_up = (cols.up_col[0] >= 0) + (cols.up_col[1] >= 0) + (cols.up_col[2] >= 0);
+  cols.has_up = num_up == 3;
+  if (num_up != 0 && !cols.has_up) throw InputError(hdr + ": up_x, up_y and up_z go together");
+  if (cols.has_xyz + (cols.group_col >= 0) + cols.has_uv + cols.has_up != 1) {
     throw InputError(hdr +
-                     ": need exactly one of a 'group' column, 'x','y','z' columns or "
-                     "'u','v' columns");
+                     ": need exactly one of a 'group' column, 'x','y','z' columns, "
+                     "'u','v' columns or 'up_x','up_y','up_z' columns");
+  }
+  if (cols.has_up && cols.frame_col >= 0) {
+    throw InputError(hdr +
+                     ": gravity rows (up_x, up_y, up_z) are measured in their marker's "
+                     "frame: no 'frame' column");
   }
   if (cols.has_uv && !data.camera.present) {
     throw InputError(hdr + ": pixel columns need a camera (the scenario's 'camera' key)");
@@ -390,6 +426,15 @@ Observation ParseRow(const std::vector<std::string>& cells, const std::string& w
         throw InputError(where + ": quaternion (qw, qx, qy, qz) is not of unit length");
       }
       o.R_base = qt.normalized().toRotationMatrix();
+    }
+  } else if (cols.has_up) {
+    o.type = ObservationType::kGravity;
+    const char* names[3] = {"up_x", "up_y", "up_z"};
+    for (int k = 0; k < 3; ++k) {
+      o.up()[k] = sim::ParseCsvNumber(cells[cols.up_col[k]], where, names[k], kMaxCoordinate);
+    }
+    if (std::abs(o.up().norm() - 1.0) > 1e-3) {
+      throw InputError(where + ": (up_x, up_y, up_z) is not of unit length");
     }
   } else if (cols.has_uv) {
     o.type = ObservationType::kPixel;
@@ -451,7 +496,8 @@ std::string FormatCalibrationCsv(const DataSet& data, const std::vector<std::str
                                  const std::vector<std::string>& coupled) {
   if (data.rows.empty()) return "";
   const ObservationType type = data.rows[0].type;
-  bool pose = false, motion = false, frame = !data.frames.empty();
+  bool pose = false, motion = false;
+  const bool frame = !data.frames.empty() && type != ObservationType::kGravity;
   for (const Observation& o : data.rows) {
     if (o.type != type) {
       throw InputError(o.where + ": a CSV holds rows of one type (the first row's); this one " +
@@ -477,6 +523,7 @@ std::string FormatCalibrationCsv(const DataSet& data, const std::vector<std::str
   if (xyz) out += ",x,y,z";
   if (type == ObservationType::kPose) out += ",qw,qx,qy,qz";
   if (type == ObservationType::kPixel) out += ",u,v";
+  if (type == ObservationType::kGravity) out += ",up_x,up_y,up_z";
   if (motion) {
     for (int j : cols) out += ",motion_" + joints[j];
   }
@@ -505,6 +552,9 @@ std::string FormatCalibrationCsv(const DataSet& data, const std::vector<std::str
       for (double v : {qt.w(), qt.x(), qt.y(), qt.z()}) out += ",", put(v);
     }
     if (type == ObservationType::kPixel) out += ",", put(o.uv[0]), out += ",", put(o.uv[1]);
+    if (type == ObservationType::kGravity) {
+      for (int k = 0; k < 3; ++k) out += ",", put(o.up()[k]);
+    }
     if (motion) {
       for (int j : cols) out += ",", put(o.motion_sign.size() ? o.motion_sign[j] : 0.0);
     }

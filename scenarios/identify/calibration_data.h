@@ -9,7 +9,9 @@
 //   - `x`, `y`, `z`: the end-effector point measured in the declared base frame (m), with
 //     optionally `qw`, `qx`, `qy`, `qz`: its frame's measured orientation (a full pose), or
 //   - `u`, `v`: the end-effector point seen in pixels by the data set's camera (set
-//     DataSet::camera first; the scenario's `camera` key);
+//     DataSet::camera first; the scenario's `camera` key), or
+//   - `up_x`, `up_y`, `up_z`: the up direction (unit, -g) measured in the marker's frame by a
+//     resting accelerometer or an inclinometer (gravity rows; no `frame` column);
 //   - optional `motion_<joint>`: -1, 0 or +1, the direction the joint last moved in before the
 //     reading (which flank of a backlash it rests on; 0 unknown);
 //   - optional `set`: a label for the placement or session the row belongs to (errors are
@@ -30,6 +32,7 @@
 #include <vector>
 
 #include "scenarios/identify/identify.h"
+#include "scenarios/identify/log_gravity.h"
 #include "sim/recorded_log.h"
 
 namespace flexbench::identify {
@@ -94,6 +97,13 @@ int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column,
 int AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
                     double t_to, int camera, const std::vector<int>& tag_points, DataSet* data,
                     int time_blocks = 5);
+
+// A log's static IMU windows (FindStaticWindows) as gravity rows of the points
+// `imu_points[sensor]` (index into data->points, the IMU's frame; -1: no row): q and up as the
+// window has them, set and time-span `pose` labels (of the windows' mid times) as
+// AppendLogPoints', `where` "<imu file> t=<begin>..<end>". Returns the rows appended.
+int AppendLogGravity(const sim::RecordedLog& log, const std::vector<StaticWindow>& windows,
+                     const std::vector<int>& imu_points, DataSet* data, int time_blocks = 5);
 
 // Index of `label` in `labels`, appended when new.
 int LabelIndex(std::vector<std::string>* labels, const std::string& label);

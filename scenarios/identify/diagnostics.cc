@@ -316,7 +316,7 @@ ResidualFinding FindResidualStructure(const EffectModel& em, const DataSet& data
   const Eigen::VectorXd res = pr.Residuals(StateOf(pr, fit));
   std::vector<int> rows;  // rows with a position residual
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    if (data.rows[r].type != ObservationType::kPixel) rows.push_back(static_cast<int>(r));
+    if (UnitOf(data.rows[r].type) == RowUnit::kMetres) rows.push_back(static_cast<int>(r));
   }
   if (rows.size() < 10) return best;
   const ResidualContext c{em, data, loads, fit, opt, pr, res, rows};

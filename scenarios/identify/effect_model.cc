@@ -185,6 +185,13 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
   AddEvidenceFamilies();
   AddJointOrigins();
   FindCoupledDrivers();
+  {
+    const sim::MjDataPtr d = sim::MakeData(m);
+    mj_kinematics(m, d.get());
+    const Eigen::Map<const Eigen::Matrix<mjtNum, 3, 3, Eigen::RowMajor>> R_w_base(
+        d->xmat + 9 * chain.base_body);
+    g_base_ = R_w_base.transpose() * Vec3(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
+  }
   if (gravity_tilt) {
     AddCandidate(EffectType::kGravityTilt, "base", -1, -1, 2, 1e-6, "rad");
     gravity_tilt_ = static_cast<int>(candidates_.size()) - 1;

@@ -222,6 +222,8 @@ class EffectModel {
   FrameId mount() const { return mount_; }
   const std::vector<FrameId>& points() const { return points_; }
   bool has_masses() const { return has_masses_; }
+  // MuJoCo's gravity in the declared base frame (m/s^2), the base at its qpos0 pose.
+  const Vec3& g_base() const { return g_base_; }
 
   ConfigLoads Loads(const Eigen::VectorXd& q) const;
   // The loads of the arm standing at q_load, for predictions at reading q (the nominal poses
@@ -432,6 +434,7 @@ class EffectModel {
   bool has_masses_ = false;
   std::vector<Candidate> candidates_;
   std::vector<Skipped> skipped_;
+  Vec3 g_base_ = Vec3::Zero();
   int gravity_tilt_ = -1;              // the gravity_tilt candidate, -1 without one
   std::vector<char> drives_coupled_;   // per joint variable: it drives a coupled joint
   std::vector<char> on_path_;          // frames between the base and the point frame

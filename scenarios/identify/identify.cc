@@ -606,6 +606,13 @@ IdentifyResult Identify(const EffectModel& em, const DataSet& data, const RowLoa
   return res;
 }
 
+namespace {
+
+// The angle between two directions (rad; accurate near 0, where acos is not).
+double Angle(const Vec3& a, const Vec3& b) { return std::atan2(a.cross(b).norm(), a.dot(b)); }
+
+}  // namespace
+
 std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data_in, const RowLoads& loads,
                               const IdentifyOptions& opt) {
   std::vector<int> out;
@@ -629,17 +636,29 @@ std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data_in, con
       median[g][a] = v[v.size() / 2];
     }
   }
+  const std::vector<Vec3> up = PredictUps(em, data, loads, {}, Eigen::VectorXd());
   std::vector<double> err(data.rows.size());
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Observation& o = data.rows[r];
-    err[r] = o.type == ObservationType::kGroup   ? (p[r] - median[o.group]).norm()
-             : o.type == ObservationType::kPixel ? (uv[r] - o.uv).norm()
-                                                 : (p[r] - o.p_base).norm();
+    switch (o.type) {
+      case ObservationType::kGroup:
+        err[r] = (p[r] - median[o.group]).norm();
+        break;
+      case ObservationType::kPixel:
+        err[r] = (uv[r] - o.uv).norm();
+        break;
+      case ObservationType::kGravity:
+        err[r] = Angle(up[r], o.up());
+        break;
+      default:
+        err[r] = (p[r] - o.p_base).norm();
+        break;
+    }
   }
-  for (const bool pixels : {false, true}) {
+  for (const RowUnit unit : {RowUnit::kMetres, RowUnit::kPixels, RowUnit::kRadians}) {
     std::vector<double> v;
     for (size_t r = 0; r < data.rows.size(); ++r) {
-      if ((data.rows[r].type == ObservationType::kPixel) == pixels) v.push_back(err[r]);
+      if (UnitOf(data.rows[r].type) == unit) v.push_back(err[r]);
     }
     if (v.size() < 4) continue;
     std::sort(v.begin(), v.end());
@@ -649,10 +668,12 @@ std::vector<int> FindOutliers(const EffectModel& em, const DataSet& data_in, con
       return lo + 1 < v.size() ? v[lo] + (i - lo) * (v[lo + 1] - v[lo]) : v[lo];
     };
     const double q1 = quantile(0.25), q3 = quantile(0.75);
-    const double floor = 10.0 * (pixels ? opt.pixel_std_px : opt.point_std_m);
-    const double limit = std::max(q3 + opt.outlier_iqr * (q3 - q1), floor);
+    const double std = unit == RowUnit::kPixels    ? opt.pixel_std_px
+                       : unit == RowUnit::kRadians ? opt.gravity_std_rad
+                                                   : opt.point_std_m;
+    const double limit = std::max(q3 + opt.outlier_iqr * (q3 - q1), 10.0 * std);
     for (size_t r = 0; r < data.rows.size(); ++r) {
-      if ((data.rows[r].type == ObservationType::kPixel) == pixels && !(err[r] <= limit)) {
+      if (UnitOf(data.rows[r].type) == unit && !(err[r] <= limit)) {
         out.push_back(static_cast<int>(r));
       }
     }
@@ -713,6 +734,22 @@ std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet&
   return uv;
 }
 
+std::vector<Vec3> PredictUps(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                             const std::vector<int>& active, const Eigen::VectorXd& theta) {
+  std::vector<Vec3> up(data.rows.size(), Vec3::Zero());
+  const Vec3 up_base = GravityUp(em, active, theta.data());
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  for (size_t r = 0; r < data.rows.size(); ++r) {
+    const Observation& o = data.rows[r];
+    if (o.type != ObservationType::kGravity) continue;
+    up[r] = em.PredictPose(o.q, loads.At(r, o, ws), active, theta.data(), ws, o.point)
+                .rotation()
+                .transpose() *
+            up_base;
+  }
+  return up;
+}
+
 std::vector<Vec3> GroupMeans(const DataSet& data, const std::vector<Vec3>& points) {
   const int G = static_cast<int>(data.groups.size());
   std::vector<Vec3> mean(G, Vec3::Zero());
@@ -729,7 +766,8 @@ std::vector<Vec3> GroupMeans(const DataSet& data, const std::vector<Vec3>& point
 }
 
 std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& points,
-                              const std::vector<Eigen::Vector2d>& pixels) {
+                              const std::vector<Eigen::Vector2d>& pixels,
+                              const std::vector<Vec3>& ups) {
   const std::vector<Vec3> mean = GroupMeans(data, points);
   std::vector<double> e(data.rows.size());
   for (size_t r = 0; r < data.rows.size(); ++r) {
@@ -740,6 +778,9 @@ std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& poin
         break;
       case ObservationType::kPixel:
         e[r] = pixels.empty() ? std::nan("") : (pixels[r] - o.uv).norm();
+        break;
+      case ObservationType::kGravity:
+        e[r] = ups.empty() ? std::nan("") : Angle(ups[r], o.up());
         break;
       default:  // a row still in a measurement frame has no base-frame point: InBase first
         e[r] = o.frame < 0 ? (points[r] - o.p_base).norm() : std::nan("");
@@ -754,7 +795,7 @@ double ConsistencyError(const DataSet& data, const std::vector<double>& row_erro
   std::vector<double> sum(S, 0.0);
   std::vector<int> count(S, 0);
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    if (data.rows[r].type == ObservationType::kPixel) continue;
+    if (UnitOf(data.rows[r].type) != RowUnit::kMetres) continue;
     sum[data.rows[r].set] += row_errors[r];
     ++count[data.rows[r].set];
   }
@@ -768,11 +809,11 @@ double ConsistencyError(const DataSet& data, const std::vector<double>& row_erro
   return used > 0 ? total / used : 0.0;
 }
 
-double PixelError(const DataSet& data, const std::vector<double>& row_errors) {
+double MeanRowError(const DataSet& data, const std::vector<double>& row_errors, RowUnit unit) {
   double sum = 0.0;
   int n = 0;
   for (size_t r = 0; r < data.rows.size(); ++r) {
-    if (data.rows[r].type != ObservationType::kPixel) continue;
+    if (UnitOf(data.rows[r].type) != unit) continue;
     sum += row_errors[r];
     ++n;
   }

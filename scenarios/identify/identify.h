@@ -5,7 +5,9 @@
 // Observations are rows of joint angles with one of
 //   - a measured point position in the base frame (a tracker, a probe), or
 //   - a group: rows whose end-effector point sits at one unknown fixed point (a ball in a
-//     socket, a fingertip on a mark); pairs of groups may have a known distance.
+//     socket, a fingertip on a mark); pairs of groups may have a known distance, or
+//   - a measured pixel of a point seen by a fixed camera, or
+//   - a measured up direction in a point's frame (gravity rows: an IMU at rest).
 // The unknown group points are nuisance parameters fitted with the effects. Point and pose rows
 // may be measured in an external frame (a tracker, DataSet::frames) whose pose in the base frame
 // is unknown or known with a prior: 6 more nuisance parameters per frame, fitted with the
@@ -34,7 +36,16 @@
 
 namespace flexbench::identify {
 
-enum class ObservationType { kPoint, kGroup, kPose, kPixel };
+enum class ObservationType { kPoint, kGroup, kPose, kPixel, kGravity };
+
+// The unit a row's error is in: metres (point and group rows, a pose row's position), pixels
+// (pixel rows), radians (gravity rows: the angle between the measured and the predicted up).
+enum class RowUnit { kMetres, kPixels, kRadians };
+inline RowUnit UnitOf(ObservationType type) {
+  return type == ObservationType::kPixel     ? RowUnit::kPixels
+         : type == ObservationType::kGravity ? RowUnit::kRadians
+                                             : RowUnit::kMetres;
+}
 
 // An external measuring frame (a laser tracker, a motion-capture system) whose pose in the
 // declared base frame, T_base_frame = T_ref Exp(xi), is fitted with the effects (xi: 6 nuisance
@@ -96,6 +107,12 @@ struct Observation {
   Vec3 p_frame = Vec3::Zero();
   RowRotation R_frame;
   Eigen::Vector2d uv = Eigen::Vector2d::Zero();  // kPixel: the point seen by DataSet::camera
+  // kGravity: the up direction (a unit vector, -g) measured in the point's frame: a resting
+  // accelerometer's mean specific force, normalised. The row compares it with the base frame's
+  // up (MuJoCo's gravity, turned by gravity_tilt) seen from the predicted frame. Held in p_frame
+  // (a gravity row is in no measurement frame; a row stays within 192 bytes).
+  Vec3& up() { return p_frame; }
+  const Vec3& up() const { return p_frame; }
   Eigen::VectorXd motion_sign;  // optional, per joint: +1/-1 last motion direction, 0 unknown
   std::string where;            // "<file>:<line>" for messages
 };
@@ -194,6 +211,7 @@ struct IdentifyOptions {
   double distance_std_m = 1e-4;    // of a known group distance
   double rotation_std_rad = 1e-3;  // of a measured orientation (pose rows)
   double pixel_std_px = 0.5;       // of a pixel (pixel rows)
+  double gravity_std_rad = 1e-3;   // of a measured up direction about each axis normal to it
   double bic_threshold = 10.0;
   double ambiguity_bic = 2.0;
   double ambiguity_cos = 0.999;
@@ -377,17 +395,26 @@ std::vector<Eigen::Vector2d> PredictPixels(const EffectModel& em, const DataSet&
 // Mean point of each group's rows (zero for a group without rows).
 std::vector<Vec3> GroupMeans(const DataSet& data, const std::vector<Vec3>& points);
 
-// Error of each row in its own unit: metres to its measured point (point and pose rows, the
-// position part) or to its group's mean (re-estimated from the rows themselves, as the MUKCa
-// authors score consistency); pixels for pixel rows (`pixels` from PredictPixels).
+// Per-row predicted up direction in the frame of gravity rows (zero for other rows): the base
+// frame's up (GravityUp, with an active gravity_tilt) turned into the predicted frame.
+std::vector<Vec3> PredictUps(const EffectModel& em, const DataSet& data, const RowLoads& loads,
+                             const std::vector<int>& active, const Eigen::VectorXd& theta);
+
+// Error of each row in its own unit (UnitOf): metres to its measured point (point and pose rows,
+// the position part) or to its group's mean (re-estimated from the rows themselves, as the MUKCa
+// authors score consistency); pixels for pixel rows (`pixels` from PredictPixels); radians
+// between the measured and the predicted up for gravity rows (`ups` from PredictUps). A row
+// whose prediction is not given is NaN.
 std::vector<double> RowErrors(const DataSet& data, const std::vector<Vec3>& points,
-                              const std::vector<Eigen::Vector2d>& pixels = {});
+                              const std::vector<Eigen::Vector2d>& pixels = {},
+                              const std::vector<Vec3>& ups = {});
 
 // The MUKCa authors' metric over the rows in metres: per set, the count-weighted mean over its
 // groups of the mean row error; then the mean over sets. 0 when there are no such rows.
 double ConsistencyError(const DataSet& data, const std::vector<double>& row_errors);
 
-// Mean error of the pixel rows (px); 0 when there are none.
-double PixelError(const DataSet& data, const std::vector<double>& row_errors);
+// Mean error of the rows in `unit` (px, rad; metres: prefer ConsistencyError); 0 when there
+// are none.
+double MeanRowError(const DataSet& data, const std::vector<double>& row_errors, RowUnit unit);
 
 }  // namespace flexbench::identify

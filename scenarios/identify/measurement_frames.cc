@@ -173,7 +173,7 @@ std::vector<Vec3> PredictMarkers(const EffectModel& em, const DataSet& data, con
   EffectModel::Workspace ws = em.MakeWorkspace();
   for (size_t r = 0; r < data.rows.size(); ++r) {
     const Observation& o = data.rows[r];
-    if (o.type == ObservationType::kPixel) continue;
+    if (UnitOf(o.type) != RowUnit::kMetres) continue;
     p[r] = em.PredictPose(o.q, loads.At(r, o, ws), fit.active, fit.theta.data(), ws, o.point) *
            fit.marker_offsets[o.point];
   }

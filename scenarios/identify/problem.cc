@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "estimators/kinematics/model_effects.h"
 #include "estimators/lie/so3.h"
 #include "scenarios/identify/parallel.h"
 
@@ -43,6 +44,7 @@ int RowDim(const Observation& o) {
     case ObservationType::kPose:
       return 6;
     case ObservationType::kPixel:
+    case ObservationType::kGravity:
       return 2;
     default:
       return 3;
@@ -68,6 +70,33 @@ lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vecto
   add(em.base_effects(), em.base_theta().data());
   add(active, theta);
   return any ? data.camera.T_base_cam * lie::SE3::Exp(xi) : data.camera.T_base_cam;
+}
+
+Vec3 GravityUp(const EffectModel& em, const std::vector<int>& active, const double* theta) {
+  Eigen::Vector2d phi = Eigen::Vector2d::Zero();
+  bool any = false;
+  const auto add = [&](const std::vector<int>& list, const double* t) {
+    for (int i : list) {
+      const Candidate& c = em.candidates()[i];
+      if (c.type == EffectType::kGravityTilt) {
+        phi += Eigen::Map<const Eigen::Vector2d>(t);
+        any = true;
+      }
+      t += c.num_params;
+    }
+  };
+  add(em.base_effects(), em.base_theta().data());
+  add(active, theta);
+  const Vec3 g = any ? kinematics::TiltedGravity(em.g_base(), phi[0], phi[1]) : em.g_base();
+  return -g.normalized();
+}
+
+Eigen::Matrix<double, 3, 2> NormalPlane(const Vec3& up) {
+  Vec3 a1, a2;
+  kinematics::GravityTiltAxes(-up, &a1, &a2);
+  Eigen::Matrix<double, 3, 2> B;
+  B << a1, a2;
+  return B;
 }
 
 Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& p_base) {
@@ -202,6 +231,8 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
   const auto group_point = [&](int g) -> Vec3 { return x.segment<3>(num_alpha_ + 3 * g); };
   const std::vector<lie::SE3> T_base_frame = FramePoses(x);
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
+  const Vec3 up = GravityUp(em_, active, theta.data());
+  const Eigen::Matrix<double, 3, 2> B = NormalPlane(up);
   ForEachRowChunk(static_cast<int>(num_rows()), threads(), [&](int begin, int end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     for (int i = begin; i < end; ++i) {
@@ -226,6 +257,11 @@ Eigen::VectorXd Problem::ResidualsAt(const Eigen::VectorXd& x, const Eigen::Vect
           // The camera sees the declared point (a marker offset is for point and pose rows).
           r.segment<2>(k) =
               (Project(data_.camera, T_base_cam, T.translation()) - o.uv) / opt_.pixel_std_px;
+          break;
+        case ObservationType::kGravity:
+          // The measured up seen in the base frame against the base's up, in the plane normal
+          // to it (2 entries: the rotation about up is not measured).
+          r.segment<2>(k) = B.transpose() * (T.rotation() * o.up() - up) / opt_.gravity_std_rad;
           break;
       }
     }
@@ -252,11 +288,12 @@ namespace {
 // Whitened residual change of row o, predicted pose T, per unit change (w, d p) of the point
 // frame's pose (d R = [w]x R; columns: w, then d p). A pose row's rotation residual r =
 // Log(R_obs^T R) moves by Jr^-1(r) R^T w (d Exp(r) = Exp(r) [Jr(r) dr]); a pixel by the
-// pinhole's derivative at the camera-frame point (z held at its floor, as Project).
+// pinhole's derivative at the camera-frame point (z held at its floor, as Project); a gravity
+// row's B^T (R u - up) by -B^T [R u]x w (d (R u) = [w]x R u), B = NormalPlane(up).
 using RowMap = Eigen::Matrix<double, Eigen::Dynamic, 6, 0, 6, 6>;
 void RowTangentMap(const Observation& o, const lie::SE3& T, const Mat3& R_base_meas,
-                   const CameraModel& cam, const lie::SE3& T_base_cam, const IdentifyOptions& opt,
-                   RowMap* G) {
+                   const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& up,
+                   const IdentifyOptions& opt, RowMap* G) {
   switch (o.type) {
     case ObservationType::kGroup:
     case ObservationType::kPoint:
@@ -287,6 +324,12 @@ void RowTangentMap(const Observation& o, const lie::SE3& T, const Mat3& R_base_m
       G->rightCols<3>() = dproj * Rt / opt.pixel_std_px;
       break;
     }
+    case ObservationType::kGravity:
+      G->resize(2, 6);
+      G->rightCols<3>().setZero();
+      G->leftCols<3>() =
+          -NormalPlane(up).transpose() * lie::Skew(T.rotation() * o.up()) / opt.gravity_std_rad;
+      break;
   }
 }
 
@@ -311,6 +354,7 @@ void Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& th
   const std::vector<Vec3> d_marker = MarkerOffsets(x);
   const lie::SE3 T_base_cam =
       data_.camera.present ? CameraPose(em_, data_, active_, theta.data()) : lie::SE3();
+  const Vec3 up = GravityUp(em_, active_, theta.data());
   ForEachRowChunk(row_end - row_begin, threads(), [&](int chunk_begin, int chunk_end) {
     EffectModel::Workspace ws = em_.MakeWorkspace();
     std::vector<EffectModel::Tangent> tangent(cols.size());
@@ -320,14 +364,14 @@ void Problem::TangentColumns(const Eigen::VectorXd& x, const Eigen::VectorXd& th
       const lie::SE3 T = em_.PoseTangents(o.q, loads(i, ws), active_, theta.data(), cs, ws,
                                           tangent.data(), o.point);
       if (poses) (*poses)[i] = T;
-      if (!d_marker.empty() && o.type != ObservationType::kPixel) {
+      if (!d_marker.empty() && UnitOf(o.type) == RowUnit::kMetres) {
         // The marker turns with its frame: d p += w x (R d).
         const Vec3 lever = T.rotation() * d_marker[o.point];
         for (EffectModel::Tangent& t : tangent) t.dp += t.w.cross(lever);
       }
       const Mat3 R_base_meas =
           o.type == ObservationType::kPose ? MeasuredRotation(o, T_base_frame) : Mat3::Identity();
-      RowTangentMap(o, T, R_base_meas, data_.camera, T_base_cam, opt_, &G);
+      RowTangentMap(o, T, R_base_meas, data_.camera, T_base_cam, up, opt_, &G);
       for (size_t k = 0; k < cols.size(); ++k) {
         // Through a fixed-size vector: Eigen picks its summation order by the destination's
         // alignment, and a column must not depend on which others are computed with it.
@@ -413,7 +457,7 @@ void Problem::OffsetColumns(const Eigen::VectorXd& x, const std::vector<lie::SE3
   const std::vector<lie::SE3>& T = poses.empty() ? predicted : poses;
   for (size_t i = 0; i < num_rows(); ++i) {
     const int col = offset_col(row(i).point);
-    if (col < 0 || row(i).type == ObservationType::kPixel) continue;
+    if (col < 0 || UnitOf(row(i).type) != RowUnit::kMetres) continue;
     // p = T d: d p / d d = R (a pose row's orientation does not depend on it).
     J->block<3, 3>(offset_[i], col) = T[i].rotation() / opt_.point_std_m;
   }

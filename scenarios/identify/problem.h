@@ -32,11 +32,20 @@ double Bic(double rss, int n, int k);
 // its row passes on one thread then (the same bits: a pass's result does not depend on it).
 IdentifyOptions TaskOptions(const IdentifyOptions& opt, int threads);
 
-// Residual entries of one row: 3 (point, group), 6 (pose), 2 (pixel).
+// Residual entries of one row: 3 (point, group), 6 (pose), 2 (pixel, gravity).
 int RowDim(const Observation& o);
 
 // Pixel of a base-frame point; far off when behind the camera, so a fit never goes there.
 Eigen::Vector2d Project(const CameraModel& cam, const lie::SE3& T_base_cam, const Vec3& p_base);
+
+// The base frame's up direction (a unit vector, -g): MuJoCo's gravity in the base frame
+// (EffectModel::g_base) turned by the gravity_tilt of the declared file and of `active`
+// (kinematics::TiltedGravity), as the loads see it.
+Vec3 GravityUp(const EffectModel& em, const std::vector<int>& active, const double* theta);
+
+// An orthonormal basis (columns) of the plane normal to the unit vector `up`: a gravity row's
+// residual is the measured up's offset from the predicted one in that plane.
+Eigen::Matrix<double, 3, 2> NormalPlane(const Vec3& up);
 
 // The camera with the active camera_offset (if any) applied.
 lie::SE3 CameraPose(const EffectModel& em, const DataSet& data, const std::vector<int>& active,

@@ -38,7 +38,10 @@ const fs::path& Log(const std::string& name, double duration, bool tags = false)
   auto it = logs.find(name);
   if (it == logs.end()) {
     const fs::path dir = WorkDir() / name;
-    flexbench::testing::WriteJskLog(dir, duration, 0.05, 0.0, 0.0, tags);
+    flexbench::testing::JskLogOptions o;
+    o.duration = duration;
+    o.tags = tags;
+    flexbench::testing::WriteJskLog(dir, o);
     it = logs.emplace(name, dir).first;
   }
   return it->second;

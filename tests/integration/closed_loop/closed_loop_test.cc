@@ -759,8 +759,8 @@ TEST(Identify, PosesAndPixelsWithACameraOffset) {
                                   PredictPixels(em, d, loads, {}, Eigen::VectorXd()));
     const auto after = RowErrors(d, PredictAll(em, d, loads, r.after.active, r.after.theta),
                                  PredictPixels(em, d, loads, r.after.active, r.after.theta));
-    EXPECT_GT(PixelError(d, before), 10.0);
-    EXPECT_LT(PixelError(d, after), 0.6);
+    EXPECT_GT(MeanRowError(d, before, RowUnit::kPixels), 10.0);
+    EXPECT_LT(MeanRowError(d, after, RowUnit::kPixels), 0.6);
   }
 }
 
@@ -954,7 +954,13 @@ TEST(IdentifyCommand, CalibrationCsvRoundTrips) {
   std::mt19937_64 rng(5);
   DataSet points = PointData(*f.em, {}, Eigen::VectorXd(), 6, 1e-4, rng);
   DataSet sockets = SocketData(*f.em, {}, Eigen::VectorXd(), 3, rng);
-  for (DataSet* d : {&points, &sockets}) {
+  DataSet gravity = points;  // an IMU at the end effector, at rest
+  for (Observation& o : gravity.rows) {
+    o.type = ObservationType::kGravity;
+    o.p_base.setZero();
+    o.up() = Eigen::Vector3d(std::normal_distribution<double>()(rng), 0.3, 1.0).normalized();
+  }
+  for (DataSet* d : {&points, &sockets, &gravity}) {
     const fs::path p =
         fs::temp_directory_path() / ("flexbench_rt_" + std::to_string(::getpid()) + ".csv");
     testing::WriteFile(p, FormatCalibrationCsv(*d, {"j1", "j2", "j3"}));
@@ -965,6 +971,7 @@ TEST(IdentifyCommand, CalibrationCsvRoundTrips) {
     for (size_t r = 0; r < back.rows.size(); ++r) {
       EXPECT_EQ(back.rows[r].q, d->rows[r].q);
       EXPECT_EQ(back.rows[r].p_base, d->rows[r].p_base);
+      EXPECT_EQ(back.rows[r].up(), d->rows[r].up());
       EXPECT_EQ(back.rows[r].type, d->rows[r].type);
       EXPECT_EQ(back.groups.size(), d->groups.size());
     }

@@ -35,7 +35,9 @@ CommandResult RunReplay(const fs::path& scenario, const fs::path& out) {
 
 TEST(Replay, ALogRunsThroughTheEstimatorsWithTheSameBytesEachTime) {
   testing::TempDir tmp;
-  testing::WriteJskLog(tmp.path() / "log", 6.0);
+  testing::JskLogOptions o;
+  o.duration = 6.0;
+  testing::WriteJskLog(tmp.path() / "log", o);
   testing::WriteFile(tmp.path() / "replay.yaml", Scenario(tmp.path() / "log"));
   const CommandResult r = RunReplay(tmp.path() / "replay.yaml", tmp.path() / "out");
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -101,8 +103,11 @@ TEST(Replay, ABadLogIsOneLineAndExitTwo) {
   };
   for (const auto& c : cases) {
     testing::TempDir tmp;
-    testing::WriteJskLog(tmp.path() / "log", 3.0, 0.05, 0.0, 0.0, /*tags=*/true, 0.0,
-                         /*contacts=*/true);
+    testing::JskLogOptions o;
+    o.duration = 3.0;
+    o.tags = true;
+    o.contacts = true;
+    testing::WriteJskLog(tmp.path() / "log", o);
     const fs::path f = tmp.path() / "log" / c.file;
     std::string text = testing::ReadFile(f);
     const size_t at = text.find(c.from);
@@ -136,7 +141,10 @@ std::map<double, Vec3> TumPositions(const fs::path& file) {
 // where fk cannot (along it a 4 cm tag 1.2 m away says little).
 TEST(Replay, TagDetectionsInALogCorrectTheOffsetEncoders) {
   testing::TempDir tmp;
-  testing::WriteJskLog(tmp.path() / "log", 20.0, 0.05, 0.0, 0.0, /*tags=*/true);
+  testing::JskLogOptions o;
+  o.duration = 20.0;
+  o.tags = true;
+  testing::WriteJskLog(tmp.path() / "log", o);
   const CommandResult r = RunCommand(
       testing::Flexbench() + " replay " + (tmp.path() / "log").string() +
       " --estimators fk,ppoe_ekf --step-hz 10 --quiet --out " + (tmp.path() / "out").string());
@@ -178,7 +186,10 @@ TEST(Replay, TagDetectionsInALogCorrectTheOffsetEncoders) {
 // along the plane's normal at every step, where fk keeps the offset's error.
 TEST(Replay, ContactReadingsInALogCorrectTheOffsetEncodersAlongTheNormal) {
   testing::TempDir tmp;
-  testing::WriteJskLog(tmp.path() / "log", 10.0, 0.05, 0.0, 0.0, false, 0.0, /*contacts=*/true);
+  testing::JskLogOptions o;
+  o.duration = 10.0;
+  o.contacts = true;
+  testing::WriteJskLog(tmp.path() / "log", o);
   const CommandResult r = RunCommand(
       testing::Flexbench() + " replay " + (tmp.path() / "log").string() +
       " --estimators fk,ppoe_ekf --step-hz 10 --quiet --out " + (tmp.path() / "out").string());
@@ -262,7 +273,9 @@ TEST(Replay, AnExportedRunWithATagCameraReplaysToTheSameBits) {
 TEST(Replay, TheCommandRunsALogAndNeverReplacesIt) {
   testing::TempDir tmp;
   const fs::path log = tmp.path() / "log";
-  testing::WriteJskLog(log, 2.0);
+  testing::JskLogOptions o;
+  o.duration = 2.0;
+  testing::WriteJskLog(log, o);
   const std::string fb = testing::Flexbench() + " replay " + log.string();
   const CommandResult r = RunCommand(fb + " --estimators fk,direct_fusion_yxz --step-hz 10 --out " +
                                      (tmp.path() / "out").string() + " --quiet");
@@ -343,7 +356,10 @@ TEST(Replay, AnExportedRunReplaysToTheSameBits) {
 TEST(Replay, AnImuClockOffsetIsEstimatedFromTheData) {
   for (const double offset : {0.037, 0.0}) {
     testing::TempDir tmp;
-    testing::WriteJskLog(tmp.path() / "log", 20.0, 0.05, offset);
+    testing::JskLogOptions o;
+    o.duration = 20.0;
+    o.imu_clock_s = offset;
+    testing::WriteJskLog(tmp.path() / "log", o);
     const std::string fb = testing::Flexbench() + " replay " + (tmp.path() / "log").string() +
                            " --estimators direct_fusion_yxz --step-hz 10 --quiet";
     ASSERT_EQ(

@@ -161,7 +161,8 @@ TEST_P(TangentTest, PoseTangentsEqualCentralDifferences) {
   EXPECT_GT(bent, 0);
 }
 
-// Rows of every kind, at random configurations, observed with a camera in front of the arm.
+// Rows of every kind (points, groups, poses, pixels, gravity), at random configurations, observed
+// with a camera in front of the arm.
 DataSet MixedRows(const EffectModel& em, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u(-1.2, 1.2);
   std::normal_distribution<double> n(0.0, 1e-3);
@@ -184,11 +185,13 @@ DataSet MixedRows(const EffectModel& em, std::mt19937_64& rng) {
     o.q = Eigen::VectorXd(em.chain().nq());
     for (int k = 0; k < o.q.size(); ++k) o.q[k] = u(rng);
     const lie::SE3 T = em.PredictPose(o.q, em.Loads(o.q), {}, nullptr, ws);
-    o.type = static_cast<ObservationType>(r % 4);
+    o.type = static_cast<ObservationType>(r % 5);
     o.p_base = T.translation() + Vec3(n(rng), n(rng), n(rng));
     o.R_base = T.rotation() * lie::SO3Exp(Vec3(n(rng), n(rng), n(rng)));
     o.group = r % 2;
     o.uv = Eigen::Vector2d(320.0, 240.0);
+    o.up() = lie::SO3Exp(Vec3(n(rng), n(rng), n(rng))) * T.rotation().transpose() *
+             GravityUp(em, {}, nullptr);
     d.rows.push_back(o);
   }
   return d;
