@@ -836,6 +836,14 @@ TEST_F(CalibrationCsv, BadInputNamesTheFileAndLine) {
   EXPECT_NE(Error("j1,j2,x,y,z,qw,qx,qy,qz\n0,0,1,1,1,2,0,0,0\n").find("not of unit length"),
             std::string::npos);
   EXPECT_NE(Error("j1,j2,u,v\n0,0,1,1\n").find("need a camera"), std::string::npos);
+  EXPECT_NE(Error("j1,j2,up_x,up_y,up_z\n0,0,0,0,2\n")
+                .find("data.csv:2: (up_x, up_y, up_z) is "
+                      "not of unit length"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,j2,up_x,up_y\n0,0,0,1\n").find("up_x, up_y and up_z go together"),
+            std::string::npos);
+  EXPECT_NE(Error("j1,j2,up_x,up_y,up_z,x,y,z\n0,0,0,0,1,1,1,1\n").find("need exactly one of"),
+            std::string::npos);
   EXPECT_NE(Error("j1,j2,x,y,z,x\n0,0,1,1,1,1\n").find("column 'x' twice"), std::string::npos);
   EXPECT_NE(Error("j1,j2,group,set\n0,0,a,\n").find("column 'set' is empty"), std::string::npos);
   EXPECT_NE(Error("j1,j2,motion_j2,group\n0,0,2,a\n").find("must be -1, 0 or 1"),
