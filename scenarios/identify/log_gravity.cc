@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <limits>
 
 namespace flexbench::identify {
@@ -57,6 +58,29 @@ bool MakeWindow(const sim::RecordedLog& log, const std::vector<int>& column,
   return true;
 }
 
+// Per joint row, the spread (max - min) of one joints.csv column over the rows within h of it:
+// monotonic queues of the window's candidates for its minimum and maximum, so that a long log
+// at a high rate costs a pass, not a pass per row.
+std::vector<double> JointSpread(const sim::RecordedLog& log, int col, double h) {
+  const std::vector<double>& t = log.joint_t;
+  const auto v = [&](size_t r) { return log.q(r)[col]; };
+  std::vector<double> out(t.size());
+  std::deque<size_t> lo, hi;  // row indices, values increasing (lo) or decreasing (hi)
+  size_t next = 0;            // the first row not yet in the window
+  for (size_t r = 0; r < t.size(); ++r) {
+    for (; next < t.size() && t[next] <= t[r] + h; ++next) {
+      while (!lo.empty() && v(lo.back()) >= v(next)) lo.pop_back();
+      while (!hi.empty() && v(hi.back()) <= v(next)) hi.pop_back();
+      lo.push_back(next);
+      hi.push_back(next);
+    }
+    while (t[lo.front()] < t[r] - h) lo.pop_front();
+    while (t[hi.front()] < t[r] - h) hi.pop_front();
+    out[r] = v(hi.front()) - v(lo.front());
+  }
+  return out;
+}
+
 }  // namespace
 
 std::vector<StaticWindow> FindStaticWindows(const sim::RecordedLog& log,
@@ -66,21 +90,10 @@ std::vector<StaticWindow> FindStaticWindows(const sim::RecordedLog& log,
   // A joint row is at rest when every joint's readings within min_s / 2 of it stay within the
   // span: a window then starts where the arm has stopped, not in the slow end of a motion.
   const std::vector<double>& jt = log.joint_t;
-  const double h = 0.5 * opt.min_s;
-  std::vector<char> row_still(jt.size(), 0);
-  size_t lo_row = 0;
-  for (size_t r = 0; r < jt.size(); ++r) {
-    while (jt[lo_row] < jt[r] - h) ++lo_row;
-    bool still = true;
-    for (size_t j = 0; j < column.size() && still; ++j) {
-      double lo = log.q(r)[column[j]], hi = lo;
-      for (size_t k = lo_row; k < jt.size() && jt[k] <= jt[r] + h; ++k) {
-        lo = std::min(lo, log.q(k)[column[j]]);
-        hi = std::max(hi, log.q(k)[column[j]]);
-      }
-      still = hi - lo <= opt.joint_span_rad;
-    }
-    row_still[r] = still;
+  std::vector<char> row_still(jt.size(), 1);
+  for (size_t j = 0; j < column.size(); ++j) {
+    const std::vector<double> spread = JointSpread(log, column[j], 0.5 * opt.min_s);
+    for (size_t r = 0; r < jt.size(); ++r) row_still[r] &= spread[r] <= opt.joint_span_rad;
   }
   for (size_t s = 0; s < log.imus.size(); ++s) {
     const int sensor = static_cast<int>(s);
