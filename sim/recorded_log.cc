@@ -98,21 +98,26 @@ std::string Num(double v) {
   return b;
 }
 
-void ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std::string>& want) {
+size_t ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std::string>& want,
+                  size_t optional) {
   std::vector<std::string> header;
   if (!csv->Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
   std::string names;
-  for (const std::string& h : want) names += (names.empty() ? "" : ",") + h;
-  if (header.size() != want.size()) {
+  for (size_t c = 0; c < want.size(); ++c) {
+    names += (c ? "," : "") + std::string(c == want.size() - optional ? "[" : "") + want[c];
+  }
+  if (optional > 0) names += "]";
+  if (header.size() != want.size() && header.size() != want.size() - optional) {
     throw InputError(csv->Where() + ": the header must be " + names + " (it has " +
                      std::to_string(header.size()) + " columns)");
   }
-  for (size_t c = 0; c < want.size(); ++c) {
+  for (size_t c = 0; c < header.size(); ++c) {
     if (header[c] != want[c]) {
       throw InputError(csv->Where() + ": the header must be " + names + " (column " +
                        std::to_string(c + 1) + " is '" + CapForMessage(header[c]) + "')");
     }
   }
+  return header.size();
 }
 
 void CheckRowColumns(const std::vector<std::string>& cells, size_t want, const std::string& where) {
@@ -160,6 +165,10 @@ using log_internal::TagsYaml;
 void ReadJoints(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string file = node.ResolvePath(node.GetString("file"));
   const double offset = ClockOffset(node);
+  log->joint_std = node.GetDouble("std_rad", 0.0);
+  if (!(log->joint_std >= 0.0 && log->joint_std <= 1.0)) {
+    node.Child("std_rad").Fail("must be in [0, 1]");
+  }
   CsvLines csv(file, kMaxLogStreamBytes);
   std::vector<std::string> header;
   if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
@@ -348,7 +357,9 @@ std::string LogYaml(const RecordedLog& log) {
   std::ostringstream y;
   y << "# A recorded log (flexbench replay reads it).\n";
   if (!log.robot.empty()) y << "robot: " << log.robot << "\n";
-  y << "declared: " << log.declared_path << "\njoints: {file: joints.csv}\n";
+  y << "declared: " << log.declared_path << "\njoints: {file: joints.csv";
+  if (log.joint_std > 0.0) y << ", std_rad: " << Num(log.joint_std);
+  y << "}\n";
   if (!log.imus.empty()) {
     y << "imu:\n  file: imu.csv\n  sensors:\n";
     for (const LogImu& imu : log.imus) {

@@ -5,7 +5,8 @@
 //
 //   log.yaml    robot: jsk_arm                         # a label
 //               declared: ../models/jsk_arm.declared.yaml   # relative to the folder
-//               joints: {file: joints.csv, clock_offset_s: 0}
+//               joints: {file: joints.csv, clock_offset_s: 0,
+//                        std_rad: 0}   # the readings' noise, each joint (m for a slide)
 //               imu: {file: imu.csv, clock_offset_s: 0,     # optional
 //                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0],
 //                                      filter_beta: 0.05}}}   # Madgwick's gain, rad/s
@@ -14,6 +15,7 @@
 //                 cam0: {frame: external_camera, fx: 600, fy: 600, cx: 320, cy: 240,
 //                        width: 640, height: 480}
 //               tags: {file: tags.csv, clock_offset_s: 0, pixel_std_px: 1,
+//                      measurement: corners,   # or centre: the estimators fuse the centre
 //                      ids: {20: {frame: tag_gripper, corners_m: [[x, y, z], x 4]}}}
 //               images: {dir: images, clock_offset_s: 0}    # instead of tags.file
 //               contacts: {file: contacts.csv, clock_offset_s: 0,           # optional
@@ -26,7 +28,8 @@
 //   truth.tum   TUM lines "t x y z qx qy qz qw": the frame's pose in the base frame (m, s)
 //   tags.csv    t_s, camera, tag_id, u0_px, v0_px, ..., u3_px, v3_px: a tag's corners as
 //               libapriltag reports them (its order; pixel centres at +0.5: estimators/camera/
-//               pinhole.h)
+//               pinhole.h); optionally then uc_px, vc_px: the detector's centre (else the
+//               corners' diagonals' crossing is the centre)
 //   contacts.csv  t_s, point, plane, distance_m, std_m: the signed distance of a point on the
 //               arm from a plane along its normal (the plane's z axis; 0 in contact) and the
 //               sensor's standard deviation; the plane's pose is known within std_m / std_deg
@@ -104,7 +107,12 @@ struct LogTagRow {
   int camera = 0;
   int tag = 0;
   std::array<Eigen::Vector2d, 4> uv;
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();  // the detector's, or the diagonals' crossing
 };
+
+// Where the diagonals of a tag's four corners cross (the centre of a planar square's image);
+// false when they do not (degenerate corners).
+bool DiagonalsCross(const std::array<Eigen::Vector2d, 4>& uv, Eigen::Vector2d* centre);
 
 struct LogPlane {
   std::string name;  // contacts.csv's `plane`
@@ -136,6 +144,7 @@ struct RecordedLog {
   std::vector<char> joint_is_slide;
   std::vector<double> joint_t;
   std::vector<double> joint_q;  // row-major, joints.size() a row
+  double joint_std = 0.0;       // each reading's noise (joints.std_rad), rad or m
   // imu.csv: the sensors of log.yaml and every reading (`imu` indexes imus), in file order.
   std::vector<LogImu> imus;
   std::vector<estimators::ImuReading> imu;
@@ -147,6 +156,8 @@ struct RecordedLog {
   std::vector<LogCamera> cameras;
   std::vector<LogTag> tags;
   double pixel_std_px = 1.0;  // each corner's, in u and in v
+  bool tag_centres = false;   // tags.measurement: centre (the estimators fuse the centre pixel)
+  bool has_centre_columns = false;  // tags.csv holds the detector's centres (uc_px, vc_px)
   std::vector<LogTagRow> tag_rows;
   // images/ (optional, instead of tags.csv): the frames in time order (cameras in their order at
   // equal times), undetected.

@@ -39,9 +39,11 @@ double RowTime(const std::string& cell, const std::string& where, double offset,
 // 17 significant digits: a number written reads back as itself.
 std::string Num(double v);
 
-// Reads the stream file's header, which must be `want` exactly (InputError naming its line and
-// the column count or the first column that differs).
-void ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std::string>& want);
+// Reads the stream file's header, which must be `want` exactly, or `want` without its last
+// `optional` columns (InputError naming its line and the column count or the first column that
+// differs). Returns its column count.
+size_t ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std::string>& want,
+                  size_t optional = 0);
 
 // InputError at `where` when a row has another column count than the header's `want`.
 void CheckRowColumns(const std::vector<std::string>& cells, size_t want, const std::string& where);

@@ -13,10 +13,17 @@
 namespace flexbench::sim::log_internal {
 namespace {
 
-const std::vector<std::string>& TagsHeader() {
+// tags.csv's columns; `centres`: with the detector's centre.
+const std::vector<std::string>& TagsHeader(bool centres) {
   static const std::vector<std::string> h = {"t_s",   "camera", "tag_id", "u0_px", "v0_px", "u1_px",
                                              "v1_px", "u2_px",  "v2_px",  "u3_px", "v3_px"};
-  return h;
+  static const std::vector<std::string> hc = [] {
+    std::vector<std::string> v = h;
+    v.push_back("uc_px");
+    v.push_back("vc_px");
+    return v;
+  }();
+  return centres ? hc : h;
 }
 
 double Positive(const ConfigNode& c, const std::string& key, double max) {
@@ -82,6 +89,11 @@ void ReadCameras(const ConfigNode& node, RecordedLog* log) {
 void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
   if (log->cameras.empty()) node.Fail("needs `cameras` (those that see the tags)");
   if (node.Has("pixel_std_px")) log->pixel_std_px = Positive(node, "pixel_std_px", 1e3);
+  const std::string measurement = node.GetString("measurement", "corners");
+  if (measurement != "corners" && measurement != "centre") {
+    node.Child("measurement").Fail("expected corners or centre");
+  }
+  log->tag_centres = measurement == "centre";
   const ConfigNode ids = node.Child("ids");
   for (const std::string& key : ids.Keys()) {
     const LogTag tag = ReadTag(key, ids.Child(key));
@@ -95,8 +107,8 @@ void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string file = node.ResolvePath(node.GetString("file"));
   const double offset = ClockOffset(node);
   CsvLines csv(file, kMaxLogStreamBytes);
-  const std::vector<std::string>& want = TagsHeader();
-  ReadHeader(&csv, file, want);
+  log->has_centre_columns = ReadHeader(&csv, file, TagsHeader(true), 2) == TagsHeader(true).size();
+  const std::vector<std::string>& want = TagsHeader(log->has_centre_columns);
   log->tag_rows.reserve(CheckRows(file, sizeof(LogTagRow) + 16.0, used));
   PairedTimes times;  // a camera's view of one tag is a stream of its own
   std::vector<std::string> cells;
@@ -119,6 +131,12 @@ void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
     for (int k = 0; k < 4; ++k) {
       row.uv[k] = Eigen::Vector2d(ParseCsvNumber(cells[3 + 2 * k], where, want[3 + 2 * k], 1e6),
                                   ParseCsvNumber(cells[4 + 2 * k], where, want[4 + 2 * k], 1e6));
+    }
+    if (log->has_centre_columns) {
+      row.centre = Eigen::Vector2d(ParseCsvNumber(cells[11], where, want[11], 1e6),
+                                   ParseCsvNumber(cells[12], where, want[12], 1e6));
+    } else if (!DiagonalsCross(row.uv, &row.centre) && log->tag_centres) {
+      throw InputError(where + ": the corners' diagonals do not cross: no centre");
     }
     log->tag_rows.push_back(row);
   }
@@ -194,6 +212,7 @@ std::string TagsYaml(const RecordedLog& log) {
   }
   y << "tags:\n";
   if (log.images.empty()) y << "  file: tags.csv\n";
+  if (log.tag_centres) y << "  measurement: centre\n";
   y << "  pixel_std_px: " << Num(log.pixel_std_px) << "\n  ids:\n";
   for (const LogTag& t : log.tags) {
     y << "    " << t.id << ":\n      frame: " << t.frame << "\n      corners_m: [";
@@ -209,15 +228,28 @@ std::string TagsYaml(const RecordedLog& log) {
 
 std::string TagsCsv(const RecordedLog& log) {
   std::ostringstream c;
-  const std::vector<std::string>& h = TagsHeader();
+  const std::vector<std::string>& h = TagsHeader(log.has_centre_columns);
   for (size_t i = 0; i < h.size(); ++i) c << (i ? "," : "") << h[i];
   c << "\n";
   for (const LogTagRow& r : log.tag_rows) {
     c << Num(r.t) << "," << log.cameras[r.camera].name << "," << log.tags[r.tag].id;
     for (int k = 0; k < 4; ++k) c << "," << Num(r.uv[k].x()) << "," << Num(r.uv[k].y());
+    if (log.has_centre_columns) c << "," << Num(r.centre.x()) << "," << Num(r.centre.y());
     c << "\n";
   }
   return c.str();
 }
 
 }  // namespace flexbench::sim::log_internal
+
+namespace flexbench::sim {
+
+bool DiagonalsCross(const std::array<Eigen::Vector2d, 4>& uv, Eigen::Vector2d* centre) {
+  const auto h = [&](int k) { return Eigen::Vector3d(uv[k].x(), uv[k].y(), 1.0); };
+  const Eigen::Vector3d c = h(0).cross(h(2)).cross(h(1).cross(h(3)));
+  if (!(std::abs(c.z()) > 1e-12)) return false;
+  *centre = c.head<2>() / c.z();
+  return true;
+}
+
+}  // namespace flexbench::sim

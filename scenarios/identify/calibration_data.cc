@@ -228,13 +228,12 @@ int AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column,
         !sim::JointsAt(log, column, row.t, &o.q)) {
       continue;
     }
-    const auto h = [&](int k) { return Eigen::Vector3d(row.uv[k].x(), row.uv[k].y(), 1.0); };
-    const Eigen::Vector3d centre = h(0).cross(h(2)).cross(h(1).cross(h(3)));
-    if (!(std::abs(centre.z()) > 1e-12)) continue;  // degenerate corners: no centre
+    Eigen::Vector2d centre = row.centre;  // the detector's
+    if (!log.has_centre_columns && !sim::DiagonalsCross(row.uv, &centre)) continue;
     o.type = ObservationType::kPixel;
     o.set = set;
     o.point = tag_points[row.tag];
-    o.uv = centre.head<2>() / centre.z();
+    o.uv = centre;
     o.where = LogWhere(log.tag_stats.file, row.t);
     data->rows.push_back(std::move(o));
     times.push_back(row.t);

@@ -92,7 +92,8 @@ int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column,
 // DataSet::camera) read as pixel rows: each row of tags.csv in [t_from, t_to] and inside the
 // joints' span whose tag has a point (`tag_points[tag]`: its index in data->points, the tag's
 // frame, whose origin is the tag's centre; -1: not a row) becomes the pixel of that point, the
-// centre libapriltag reports (where the corners' diagonals cross), at the joint readings of its
+// centre libapriltag reports (tags.csv's uc_px, vc_px; without them, where the corners'
+// diagonals cross, as libapriltag computes it), at the joint readings of its
 // time. Set, `where` and time-span `pose` labels as AppendLogPoints'. Returns the rows appended.
 int AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
                     double t_to, int camera, const std::vector<int>& tag_points, DataSet* data,

@@ -124,9 +124,11 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
   const std::vector<size_t>& tag_order = index.tag_order;
   estimators::JointReading j;
   j.q.resize(static_cast<int>(column.size()));
-  j.std = estimators::JointVector::Zero(static_cast<int>(column.size()));
+  j.std = estimators::JointVector::Constant(static_cast<int>(column.size()), log.joint_std);
   estimators::TagCorners corners;
   corners.cov *= log.pixel_std_px * log.pixel_std_px;
+  estimators::PixelPoint centre;  // tags.measurement: centre
+  centre.cov = Eigen::Matrix2d::Identity() * (log.pixel_std_px * log.pixel_std_px);
   estimators::PlaneContact contact;
   size_t next_imu = 0, next_tag = 0, next_contact = 0;
   for (size_t s = 0; s < steps.size(); ++s) {
@@ -142,6 +144,16 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
          ++next_tag) {
       const sim::LogTagRow& row = log.tag_rows[tag_order[next_tag]];
       const sim::LogTag& tag = log.tags[row.tag];
+      if (log.tag_centres) {
+        centre.t = row.t;
+        centre.camera = row.camera;
+        centre.frame = index.tag_frame[row.tag];
+        const std::array<Vec3, 4>& c = tag.corners_m;
+        centre.p_frame = 0.25 * (c[0] + c[1] + c[2] + c[3]);
+        centre.uv = row.centre;
+        count(est.Update(centre));
+        continue;
+      }
       corners.t = row.t;
       corners.camera = row.camera;
       corners.tag_id = tag.id;

@@ -268,6 +268,53 @@ TEST(Replay, AnExportedRunWithATagCameraReplaysToTheSameBits) {
   }
 }
 
+// closed_loop_estimators' tracking with the declared model (rendered tags, libapriltag's tag
+// centres fused with noisy encoders by fk, two EKFs and a particle filter), exported and replayed
+// with the scenario's estimators and seed: every estimate and covariance, bit for bit. The log
+// says what the replay needs: the encoders' noise (joints.std_rad), the detector's centres
+// (uc_px, vc_px) and that the centre is what is fused (tags.measurement: centre).
+TEST(Replay, AnExportedClosedLoopEstimatorsRunReplaysToTheSameBits) {
+  testing::TempDir tmp;
+  std::string yaml =
+      testing::ReadFile(testing::SourceDir() + "/scenarios/closed_loop_estimators.yaml");
+  for (size_t at; (at = yaml.find("../models/")) != std::string::npos;) {
+    yaml.replace(at, 10, testing::SourceDir() + "/models/");
+  }
+  yaml = yaml.substr(0, yaml.find("gates:"));
+  const std::string steps = "  steps: 30\n";
+  ASSERT_NE(yaml.find(steps), std::string::npos);
+  yaml.replace(yaml.find(steps), steps.size(), "  steps: 10\n");
+  testing::WriteFile(tmp.path() / "loop.yaml", yaml);
+  const CommandResult live =
+      RunCommand(testing::Flexbench() + " run " + (tmp.path() / "loop.yaml").string() + " --out " +
+                 (tmp.path() / "live").string() + " --export-log " + (tmp.path() / "log").string() +
+                 " --quiet");
+  ASSERT_EQ(live.exit_code, 0) << live.err;
+  const std::string log_yaml = testing::ReadFile(tmp.path() / "log" / "log.yaml");
+  EXPECT_NE(log_yaml.find("measurement: centre"), std::string::npos);
+  EXPECT_NE(log_yaml.find("std_rad: "), std::string::npos);
+  const std::string estimators = yaml.substr(yaml.find("estimators:"));
+  testing::WriteFile(tmp.path() / "replay.yaml",
+                     "scenario: replayed\nkind: replay\nseed: 15\nlog: " +
+                         (tmp.path() / "log").string() + "\n" + estimators);
+  const CommandResult replay =
+      RunCommand(testing::Flexbench() + " run " + (tmp.path() / "replay.yaml").string() +
+                 " --out " + (tmp.path() / "replayed").string() + " --quiet");
+  ASSERT_EQ(replay.exit_code, 0) << replay.err;
+  const nlohmann::json s =
+      nlohmann::json::parse(testing::ReadFile(tmp.path() / "replayed" / "summary.json"));
+  EXPECT_GE(s["metrics"]["streams"]["tags"]["rows"].get<int>(), 10);
+  for (const char* name : {"fk", "naive_ekf", "ppoe_ekf", "pf_encoders"}) {
+    for (const std::string ext : {".tum", ".cov.csv"}) {
+      const fs::path live_file =
+          tmp.path() / "live" / "trajectories" / "base" / "before" / (name + ext);
+      const fs::path replayed = tmp.path() / "replayed" / "trajectories" / "base" / (name + ext);
+      ASSERT_TRUE(fs::exists(live_file) && fs::exists(replayed)) << name << ext;
+      EXPECT_EQ(testing::ReadFile(live_file), testing::ReadFile(replayed)) << name << ext;
+    }
+  }
+}
+
 // `flexbench replay LOG`: the same run from the command line; a bad option is one line naming
 // it; the log folder is never an output, even with --force.
 TEST(Replay, TheCommandRunsALogAndNeverReplacesIt) {

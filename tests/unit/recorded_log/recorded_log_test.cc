@@ -209,6 +209,53 @@ TEST(RecordedLog, TagDetectionsRoundTrip) {
   }
 }
 
+// The detector's centres (uc_px, vc_px), what the estimators fuse (tags.measurement) and the
+// encoders' noise (joints.std_rad) are read, written and read back; without the centre columns
+// the centre is where the corners' diagonals cross; a bad measurement is named.
+TEST(RecordedLog, TagCentresAndJointNoiseRoundTrip) {
+  testing::TempDir dir;
+  Files f;
+  f.log_yaml.replace(f.log_yaml.find("joints: {file: joints.csv"), 25,
+                     "joints: {file: joints.csv, std_rad: 0.00125");
+  f.log_yaml +=
+      "cameras: {cam0: {frame: external_camera, fx: 600, fy: 600, cx: 320, cy: 240, width: 640, "
+      "height: 480}}\n"
+      "tags: {file: tags.csv, measurement: centre, ids: {20: {frame: tag_gripper, size_m: "
+      "0.04}}}\n";
+  f.Write(dir.path());
+  std::ofstream(dir.path() / "tags.csv")
+      << "t_s,camera,tag_id,u0_px,v0_px,u1_px,v1_px,u2_px,v2_px,u3_px,v3_px,uc_px,vc_px\n"
+         "0.1,cam0,20,0,0,10,0,10,10,0,10,5.25,4.75\n";
+  const RecordedLog log = ReadRecordedLog(dir.path().string());
+  EXPECT_EQ(log.joint_std, 0.00125);
+  EXPECT_TRUE(log.tag_centres);
+  EXPECT_TRUE(log.has_centre_columns);
+  ASSERT_EQ(log.tag_rows.size(), 1u);
+  EXPECT_EQ(log.tag_rows[0].centre, Eigen::Vector2d(5.25, 4.75));
+  const std::string again = (dir.path() / "again").string();
+  WriteRecordedLog(log, again);
+  const RecordedLog back = ReadRecordedLog(again);
+  EXPECT_EQ(back.joint_std, 0.00125);
+  EXPECT_TRUE(back.tag_centres && back.has_centre_columns);
+  EXPECT_EQ(back.tag_rows[0].centre, Eigen::Vector2d(5.25, 4.75));
+  // Without the columns: the diagonals' crossing.
+  std::ofstream(dir.path() / "tags.csv")
+      << "t_s,camera,tag_id,u0_px,v0_px,u1_px,v1_px,u2_px,v2_px,u3_px,v3_px\n"
+         "0.1,cam0,20,0,0,10,0,10,10,0,10\n";
+  const RecordedLog crossing = ReadRecordedLog(dir.path().string());
+  EXPECT_FALSE(crossing.has_centre_columns);
+  EXPECT_EQ(crossing.tag_rows[0].centre, Eigen::Vector2d(5, 5));
+  f.log_yaml.replace(f.log_yaml.find("measurement: centre"), 19, "measurement: middle");
+  f.Write(dir.path());
+  try {
+    ReadRecordedLog(dir.path().string());
+    ADD_FAILURE() << "an unknown tag measurement read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("expected corners or centre"), std::string::npos)
+        << e.what();
+  }
+}
+
 // Contact readings: planes (pose, its standard deviations as a diagonal covariance), points on
 // frames, and contacts.csv read with the stream's clock offset, then written and read back.
 TEST(RecordedLog, ContactsRoundTrip) {
