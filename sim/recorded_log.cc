@@ -325,6 +325,7 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   const ConfigNode root = ConfigNode::LoadFile(dir + "/log.yaml");
   log.robot = root.GetString("robot", "");
   log.declared_path = root.ResolvePath(root.GetString("declared"));
+  log.static_postures = root.GetBool("static_postures", false);
   double used = 0.0;  // bytes the streams' rows take
   ReadJoints(root.Child("joints"), &log, &used);
   if (const auto imu = root.Optional("imu")) ReadImu(*imu, &log, &used);
@@ -374,6 +375,7 @@ std::string LogYaml(const RecordedLog& log) {
     }
   }
   if (!log.truth_t.empty()) y << "truth: {file: truth.tum, frame: " << log.truth_frame << "}\n";
+  if (log.static_postures) y << "static_postures: true\n";
   y << TagsYaml(log) << ContactsYaml(log);
   return y.str();
 }

@@ -11,6 +11,8 @@
 //                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0],
 //                                      filter_beta: 0.05}}}   # Madgwick's gain, rad/s
 //               truth: {file: truth.tum, frame: grasp_point}  # optional
+//               static_postures: false   # true: each joint row is a posture of its own,
+//                                        # estimated afresh (a data set, not a motion)
 //               cameras:                                        # with tags
 //                 cam0: {frame: external_camera, fx: 600, fy: 600, cx: 320, cy: 240,
 //                        width: 640, height: 480}
@@ -138,7 +140,8 @@ struct LogContactRow {
 struct RecordedLog {
   std::string dir;
   std::string robot;
-  std::string declared_path;  // resolved against the folder
+  std::string declared_path;     // resolved against the folder
+  bool static_postures = false;  // each joint row a posture of its own (log.yaml's key)
   // joints.csv: the joints in its column order, whether each is a slide (_m), its rows.
   std::vector<std::string> joints;
   std::vector<char> joint_is_slide;

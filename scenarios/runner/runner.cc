@@ -144,9 +144,13 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
 
   if (!options.export_log.empty()) {
     if (!kind->ExportsLog()) {
-      throw InputError(
-          "--export-log: scenario kind '" + root.GetString("kind") +
-          "' does not export its readings (the jsk dynamic kinds and closed_loop_estimators do)");
+      std::string exporting;
+      for (const KindEntry& e : ScenarioKinds()) {
+        if (e.make()->ExportsLog())
+          exporting += (exporting.empty() ? "" : ", ") + std::string(e.name);
+      }
+      throw InputError("--export-log: scenario kind '" + root.GetString("kind") +
+                       "' does not export its readings (these do: " + exporting + ")");
     }
     std::error_code ec;
     if (fs::exists(options.export_log, ec)) {

@@ -136,6 +136,7 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
     for (; next_imu < imu_order.size() && log.imu[imu_order[next_imu]].t <= step.t; ++next_imu) {
       count(est.Update(log.imu[imu_order[next_imu]]));
     }
+    if (log.static_postures) est.Reset();  // a posture of its own: estimated afresh
     est.Predict(step.t);
     j.t = step.t;
     for (int k = 0; k < j.q.size(); ++k) j.q[k] = log.q(step.row)[column[k]];

@@ -52,8 +52,9 @@ std::vector<LogStep> LogSteps(const sim::RecordedLog& log, double step_hz,
 std::vector<size_t> ImuTimeOrder(const sim::RecordedLog& log);
 
 // Runs `est` over `steps` (the IMU readings through `imu_order`, the tag detections through
-// `index`), calling on_step(step index, belief) after each step. Returns the readings the
-// estimator did not accept (rejected now or deferred).
+// `index`), calling on_step(step index, belief) after each step; on a log of static postures
+// each step starts from Reset. Returns the readings the estimator did not accept (rejected now
+// or deferred).
 int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vector<LogStep>& steps,
               const std::vector<size_t>& imu_order, estimators::Estimator& est,
               const std::function<void(size_t, const estimators::Belief&)>& on_step);

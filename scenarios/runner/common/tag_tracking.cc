@@ -64,4 +64,37 @@ std::vector<estimators::Measurement> TagMeasurements(
   return out;
 }
 
+void AddTagCameraToLog(const mjModel* m, const std::string& camera, const PinholeCamera& intrinsics,
+                       const std::vector<render::TagInModel>& tags,
+                       const std::map<int, kinematics::FrameId>& tag_frames, double pixel_std,
+                       bool centres, sim::RecordedLog* log) {
+  log->cameras.push_back({camera, camera, intrinsics});
+  log->pixel_std_px = pixel_std;
+  log->tag_centres = log->has_centre_columns = centres;
+  for (const render::TagInModel& tag : tags) {
+    if (!tag_frames.count(tag.id)) continue;
+    sim::LogTag t;
+    t.id = tag.id;
+    t.frame = sim::ObjectName(m, mjOBJ_GEOM, tag.geom_id);
+    for (int c = 0; c < 4; ++c) t.corners_m[c] = tag.corners_geom[c];
+    log->tags.push_back(t);
+  }
+}
+
+void AddDetectionsToLog(const render::DetectionResult& det, double t, sim::RecordedLog* log) {
+  for (const render::TagDetection& d : det.detections) {
+    int tag = -1;
+    for (size_t i = 0; i < log->tags.size(); ++i) {
+      if (log->tags[i].id == d.id) tag = static_cast<int>(i);
+    }
+    if (tag < 0) continue;
+    sim::LogTagRow row;
+    row.t = t;
+    row.tag = tag;
+    for (int c = 0; c < 4; ++c) row.uv[c] = d.corners[c];
+    row.centre = d.center;
+    log->tag_rows.push_back(row);
+  }
+}
+
 }  // namespace flexbench::scenarios

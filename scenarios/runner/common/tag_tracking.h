@@ -10,6 +10,7 @@
 #include "estimators/measurement.h"
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
+#include "sim/recorded_log.h"
 #include "sim/simulation.h"
 
 namespace flexbench::scenarios {
@@ -26,5 +27,17 @@ void AimCamera(sim::Simulation* sim, const std::string& pan, const std::string& 
 std::vector<estimators::Measurement> TagMeasurements(
     const render::DetectionResult& det, const std::vector<render::TagInModel>& tags,
     const std::map<int, kinematics::FrameId>& tag_frames, bool corners, double pixel_std, double t);
+
+// The camera (an observed frame named as the MuJoCo camera) and the tags on observed frames as a
+// recorded log's cameras and tags (--export-log). `centres`: the estimators fuse the centre
+// pixel (tags.measurement: centre), and tags.csv keeps the detector's centres.
+void AddTagCameraToLog(const mjModel* m, const std::string& camera, const PinholeCamera& intrinsics,
+                       const std::vector<render::TagInModel>& tags,
+                       const std::map<int, kinematics::FrameId>& tag_frames, double pixel_std,
+                       bool centres, sim::RecordedLog* log);
+
+// The detections of the log's tags at time t as its tags.csv rows, in the detector's order (as
+// TagMeasurements feeds them to the estimators).
+void AddDetectionsToLog(const render::DetectionResult& det, double t, sim::RecordedLog* log);
 
 }  // namespace flexbench::scenarios

@@ -27,6 +27,7 @@
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/render_config.h"
@@ -36,8 +37,6 @@
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/declared_chain.h"
-#include "sim/declared_model.h"
-#include "sim/recorded_log.h"
 #include "sim/simulation.h"
 
 namespace flexbench::scenarios {
@@ -288,7 +287,10 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
               : ToSE3(sim_->BodyPose(sim::ObjectName(sim_->model(), mjOBJ_BODY, chain.base_body)));
       const lie::SE3 T_base_ee = T_w_base.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
       trajectories->AddTruth(joints.t, T_base_ee);
-      if (log) AddToLog(joints, det, T_base_ee, &*log);
+      if (log) {
+        AddStepToLog(joints, T_base_ee, &*log);
+        AddDetectionsToLog(det, joints.t, &*log);
+      }
       const Mat6x G = fk.empty() ? Mat6x() : SharedColumns(fk, joints);
       for (size_t e = 0; e < instances.size(); ++e) {
         estimators::Estimator& est = *instances[e];
@@ -304,71 +306,23 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       ctx.progress(stage, k + 1, steps_);
     }
     (*ctx.summary)["metrics"][index == 0 ? "tags_before" : "tags_after"] = tags_seen;
-    if (log) WriteLog(*log, ctx);
+    if (log) {
+      WriteLogWithDeclared(*log, declared_, ctx.export_log);
+      ctx.log("readings of the declared tracking written to " + ctx.export_log);
+    }
     return tracks;
   }
 
-  // The declared tracking's readings as a recorded log (--export-log; sim/recorded_log.h): the
-  // encoders with their stated noise, the tags libapriltag found with its centres (the
-  // estimators fuse the centre pixel: tags.measurement centre), the hand's truth. Replayed, the
-  // estimators give the live run's estimates bit for bit.
+  // The declared tracking's readings as a recorded log (--export-log): the encoders with their
+  // stated noise, the tags libapriltag found with its centres (the estimators fuse the centre
+  // pixel), the hand's truth. Replayed, the estimators give the live run's estimates bit for bit.
   sim::RecordedLog StartLog(const sim::DeclaredChain& chain,
                             const std::map<int, kinematics::FrameId>& tag_frames) const {
-    sim::RecordedLog log;
-    log.robot = fs::path(declared_.model_path).stem().string();
-    log.declared_path = "declared.yaml";
-    const kinematics::PpoeModel& model = chain.model;
-    log.joints = chain.q_joints;
-    for (int k = 0; k < model.nq(); ++k) {
-      log.joint_is_slide.push_back(model.frame(model.joint_frame(k)).joint.type ==
-                                   kinematics::JointType::kPrismatic);
-    }
+    sim::RecordedLog log = LogOfChain(declared_, chain);
     log.joint_std = encoder_noise_rad_;
-    log.truth_frame = declared_.end_effector;
-    log.cameras.push_back({camera_, camera_, sim::CameraIntrinsics(sim_->model(), camera_id_)});
-    log.pixel_std_px = pixel_std_;
-    log.tag_centres = log.has_centre_columns = true;
-    for (const render::TagInModel& tag : tags_) {
-      if (!tag_frames.count(tag.id)) continue;
-      sim::LogTag t;
-      t.id = tag.id;
-      t.frame = sim::ObjectName(sim_->model(), mjOBJ_GEOM, tag.geom_id);
-      for (int c = 0; c < 4; ++c) t.corners_m[c] = tag.corners_geom[c];
-      log.tags.push_back(t);
-    }
+    AddTagCameraToLog(sim_->model(), camera_, sim::CameraIntrinsics(sim_->model(), camera_id_),
+                      tags_, tag_frames, pixel_std_, /*centres=*/true, &log);
     return log;
-  }
-
-  // One step: its joint row, the detections of the log's tags (in the detector's order, as
-  // TagMeasurements feeds them) and the truth.
-  static void AddToLog(const estimators::JointReading& joints, const render::DetectionResult& det,
-                       const lie::SE3& T_base_ee, sim::RecordedLog* log) {
-    log->joint_t.push_back(joints.t);
-    for (int j = 0; j < joints.q.size(); ++j) log->joint_q.push_back(joints.q[j]);
-    for (const render::TagDetection& d : det.detections) {
-      int tag = -1;
-      for (size_t i = 0; i < log->tags.size(); ++i) {
-        if (log->tags[i].id == d.id) tag = static_cast<int>(i);
-      }
-      if (tag < 0) continue;
-      sim::LogTagRow row;
-      row.t = joints.t;
-      row.tag = tag;
-      for (int c = 0; c < 4; ++c) row.uv[c] = d.corners[c];
-      row.centre = d.center;
-      log->tag_rows.push_back(row);
-    }
-    log->truth_t.push_back(joints.t);
-    log->truth.push_back(T_base_ee);
-  }
-
-  void WriteLog(const sim::RecordedLog& log, RunContext& ctx) const {
-    sim::DeclaredModel declared = declared_;
-    declared.model_path = fs::absolute(declared.model_path).lexically_normal().string();
-    sim::WriteRecordedLog(log, ctx.export_log,
-                          {{"declared.yaml", sim::EmitDeclaredModel(
-                                                 declared, "The declared model of the run.", 17)}});
-    ctx.log("readings of the declared tracking written to " + ctx.export_log);
   }
 
   // Runs the closed_loop kind into identify/ and returns its augmented model's path.

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <random>
 
 #include "estimators/estimator.h"
@@ -18,6 +19,7 @@
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/render_config.h"
@@ -35,6 +37,8 @@ namespace {
 
 class TagFusionKind : public ScenarioKind {
  public:
+  bool ExportsLog() const final { return true; }
+
   void Configure(const ConfigNode& root) override {
     declared_ = ReadModelAndDeclared(root, &model_path_);
     effects_ = sim::ParseEffects(root.Child("effects"));
@@ -83,8 +87,14 @@ class TagFusionKind : public ScenarioKind {
     ctx.log("GL_RENDERER: " + renderer.gl_renderer());
     if (random_count_ > 0) SampleConfigurations(renderer, ctx);
     RunState state(instances_.size(), ctx.out->File("configurations.csv"));
+    std::optional<sim::RecordedLog> log;
+    if (!ctx.export_log.empty()) log = StartLog();
     for (size_t c = 0; c < configurations_.size(); ++c) {
       const Frame frame = Collect(c, renderer, &state);
+      if (log) {
+        AddStepToLog(frame.joints, frame.T_base_ee, &*log);
+        AddDetectionsToLog(frame.det, frame.joints.t, &*log);
+      }
       render::Image overlay = TruthOverlay(frame);
       for (size_t e = 0; e < instances_.size(); ++e) {
         const estimators::Belief b = Estimate(e, frame, &state);
@@ -98,6 +108,10 @@ class TagFusionKind : public ScenarioKind {
       }
       ctx.progress("configurations", static_cast<int>(c + 1),
                    static_cast<int>(configurations_.size()));
+    }
+    if (log) {
+      WriteLogWithDeclared(*log, declared_, ctx.export_log);
+      ctx.log("readings of the configurations written to " + ctx.export_log);
     }
     state.timer.Write(ctx.timing, "frame", static_cast<int>(configurations_.size()));
     WriteMetrics(state, ctx);
@@ -271,6 +285,21 @@ class TagFusionKind : public ScenarioKind {
     T.linear() = T_w_x.rotation();
     T.translation() = T_w_x.translation();
     return Eigen::Isometry3d(f.T_cam_w * T);
+  }
+
+  // The configurations' readings as a recorded log of static postures (--export-log): each
+  // configuration a joint row at t = its index, estimated afresh as here; the tags libapriltag
+  // found (with its centres when the centre is fused); the truth.
+  sim::RecordedLog StartLog() const {
+    if (!estimate_in_.empty()) {
+      throw InputError("--export-log: estimate_in '" + estimate_in_ +
+                       "': a log's replay estimates in the declared base frame");
+    }
+    sim::RecordedLog log = LogOfChain(declared_, *chain_);
+    log.static_postures = true;
+    AddTagCameraToLog(sim_->model(), camera_, setup_.cameras[0].intrinsics, tags_, tag_frames_,
+                      pixel_std_, /*centres=*/!use_corners_, &log);
+    return log;
   }
 
   // The evaluation overlay's truth: its axes and the detected tags' outlines.

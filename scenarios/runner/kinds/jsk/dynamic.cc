@@ -7,6 +7,7 @@
 #include "estimators/error.h"
 #include "estimators/imu/imu_orientations.h"
 #include "render/image.h"
+#include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/tag_tracking.h"
@@ -201,18 +202,10 @@ namespace {
 // The tag camera, its tags on observed frames and the snapshots' detections, in the log format.
 void AddTags(const Rig& rig, const TagCamera& tc, const std::vector<Snapshot>& snaps,
              sim::RecordedLog* log, std::vector<std::pair<std::string, std::string>>* files) {
-  log->cameras.push_back({tc.camera, tc.camera, rig.setup.cameras[0].intrinsics});
-  log->pixel_std_px = tc.pixel_std_px;
+  AddTagCameraToLog(rig.sim->model(), tc.camera, rig.setup.cameras[0].intrinsics, tc.tags,
+                    tc.tag_frames, tc.pixel_std_px, /*centres=*/false, log);
   std::map<int, int> index;  // tag id -> log->tags
-  for (const render::TagInModel& tag : tc.tags) {
-    if (!tc.tag_frames.count(tag.id)) continue;
-    index[tag.id] = static_cast<int>(log->tags.size());
-    sim::LogTag t;
-    t.id = tag.id;
-    t.frame = sim::ObjectName(rig.sim->model(), mjOBJ_GEOM, tag.geom_id);
-    for (int k = 0; k < 4; ++k) t.corners_m[k] = tag.corners_geom[k];
-    log->tags.push_back(t);
-  }
+  for (size_t i = 0; i < log->tags.size(); ++i) index[log->tags[i].id] = static_cast<int>(i);
   for (const Snapshot& s : snaps) {
     if (tc.export_images) {
       // The frame's time in whole nanoseconds, not after s.t: read back, its detections come
@@ -240,21 +233,10 @@ void AddTags(const Rig& rig, const TagCamera& tc, const std::vector<Snapshot>& s
 
 void ExportLog(const Rig& rig, const DynamicOptions& options, const std::vector<Snapshot>& snaps,
                const std::string& dir) {
-  sim::RecordedLog log;
-  log.robot = std::filesystem::path(rig.declared.model_path).stem().string();
-  log.declared_path = "declared.yaml";
-  const kinematics::PpoeModel& model = rig.chain->model;
-  log.joints = rig.chain->q_joints;
-  for (int k = 0; k < rig.nq(); ++k) {
-    log.joint_is_slide.push_back(model.frame(model.joint_frame(k)).joint.type ==
-                                 kinematics::JointType::kPrismatic);
-  }
+  sim::RecordedLog log = LogOfChain(rig.declared, *rig.chain);
   for (const Snapshot& s : snaps) {
-    log.joint_t.push_back(s.t);
-    for (int k = 0; k < rig.nq(); ++k) log.joint_q.push_back(s.joints.q[k]);
+    AddStepToLog(s.joints, s.T_true, &log);
     log.imu.insert(log.imu.end(), s.imu_raw.begin(), s.imu_raw.end());
-    log.truth_t.push_back(s.t);
-    log.truth.push_back(s.T_true);
   }
   for (size_t k = 0; k < rig.imu_sites.size(); ++k) {
     sim::LogImu imu;
@@ -264,14 +246,9 @@ void ExportLog(const Rig& rig, const DynamicOptions& options, const std::vector<
     imu.filter_beta = rig.setup.imus[k].filter_beta;
     log.imus.push_back(imu);
   }
-  log.truth_frame = rig.declared.end_effector;
   std::vector<std::pair<std::string, std::string>> files;
   if (options.tag_camera) AddTags(rig, *options.tag_camera, snaps, &log, &files);
-  sim::DeclaredModel declared = rig.declared;
-  declared.model_path = std::filesystem::absolute(declared.model_path).lexically_normal().string();
-  files.emplace_back("declared.yaml",
-                     sim::EmitDeclaredModel(declared, "The declared model of the run.", 17));
-  sim::WriteRecordedLog(log, dir, files);
+  WriteLogWithDeclared(log, rig.declared, dir, files);
 }
 
 Trace RunOnSnapshots(const Rig& rig, const EstimatorSpec& spec, const std::vector<Snapshot>& snaps,
