@@ -58,13 +58,13 @@ inline double HeldOut(const nlohmann::json& m, const char* when) {
 
 // jsk_flexible_arm's run of the truth `effects` (its motion, motor-side encoders with noise and
 // quantisation, two IMUs, truth at 10 Hz), exported as a log; `tags`: with the external camera
-// rendered and its tags detected at each step.
+// rendered and its tags detected at each step; `model`: the truth's MJCF (default jsk_arm's).
 inline fs::path ExportMujocoRun(const fs::path& dir, const std::string& effects, int seed,
-                                bool tags = false) {
+                                bool tags = false, const std::string& model = "") {
   testing::WriteFile(
       dir / "run.yaml",
-      "scenario: export\nkind: jsk_flexible_arm\nseed: " + std::to_string(seed) +
-          "\nmodel: " + kModels + "jsk_arm.xml\ndeclared: " + kModels +
+      "scenario: export\nkind: jsk_flexible_arm\nseed: " + std::to_string(seed) + "\nmodel: " +
+          (model.empty() ? kModels + "jsk_arm.xml" : model) + "\ndeclared: " + kModels +
           "jsk_arm.declared.yaml\nimus: [imu_link2, imu_link3]\neffects: " + effects +
           "\nsensors:\n"
           "  - {name: encoders, kind: encoder, side: motor, noise_std_deg: 0.02, "
