@@ -152,10 +152,15 @@ using log_internal::ContactsCsv;
 using log_internal::ContactsYaml;
 using log_internal::kMaxLogTime;
 using log_internal::Num;
+using log_internal::OrientationsCsv;
+using log_internal::PosesYaml;
+using log_internal::PositionsCsv;
 using log_internal::ReadCameras;
 using log_internal::ReadContacts;
 using log_internal::ReadHeader;
 using log_internal::ReadImages;
+using log_internal::ReadOrientations;
+using log_internal::ReadPositions;
 using log_internal::ReadTags;
 using log_internal::RowTime;
 using log_internal::Stats;
@@ -333,6 +338,8 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   if (const auto cameras = root.Optional("cameras")) ReadCameras(*cameras, &log);
   if (const auto tags = root.Optional("tags")) ReadTags(*tags, &log, &used);
   if (const auto contacts = root.Optional("contacts")) ReadContacts(*contacts, &log, &used);
+  if (const auto o = root.Optional("orientations")) ReadOrientations(*o, &log, &used);
+  if (const auto p = root.Optional("positions")) ReadPositions(*p, &log, &used);
   if (const auto images = root.Optional("images")) {
     if (!log.tag_rows.empty() || (root.Has("tags") && root.Child("tags").Has("file"))) {
       images->Fail("a log has tags.csv or images, not both");
@@ -376,7 +383,7 @@ std::string LogYaml(const RecordedLog& log) {
   }
   if (!log.truth_t.empty()) y << "truth: {file: truth.tum, frame: " << log.truth_frame << "}\n";
   if (log.static_postures) y << "static_postures: true\n";
-  y << TagsYaml(log) << ContactsYaml(log);
+  y << TagsYaml(log) << ContactsYaml(log) << PosesYaml(log);
   return y.str();
 }
 
@@ -453,6 +460,8 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
   }
   if (!log.tags.empty() && log.images.empty()) WriteText(tmp / "tags.csv", TagsCsv(log));
   if (!log.planes.empty()) WriteText(tmp / "contacts.csv", ContactsCsv(log));
+  if (!log.orientations.empty()) WriteText(tmp / "orientations.csv", OrientationsCsv(log));
+  if (!log.positions.empty()) WriteText(tmp / "positions.csv", PositionsCsv(log));
   WriteText(tmp / "log.yaml", LogYaml(log));
 }
 

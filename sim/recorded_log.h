@@ -20,6 +20,8 @@
 //                      measurement: corners,   # or centre: the estimators fuse the centre
 //                      ids: {20: {frame: tag_gripper, corners_m: [[x, y, z], x 4]}}}
 //               images: {dir: images, clock_offset_s: 0}    # instead of tags.file
+//               orientations: {file: orientations.csv, clock_offset_s: 0}  # optional
+//               positions: {file: positions.csv, clock_offset_s: 0}        # optional
 //               contacts: {file: contacts.csv, clock_offset_s: 0,           # optional
 //                 planes: {table: {T_base_plane: [x, y, z, qw, qx, qy, qz],
 //                                  std_m: 0.001, std_deg: 0.5}},
@@ -36,6 +38,12 @@
 //               arm from a plane along its normal (the plane's z axis; 0 in contact) and the
 //               sensor's standard deviation; the plane's pose is known within std_m / std_deg
 //               (a 6x6 covariance of its tangent [rho; theta], diagonal: PPOE paper sec. V-B)
+//   orientations.csv  t_s, frame, qw, qx, qy, qz: an observed frame's orientation in the base
+//               frame as a sensor reads it (an orientation filter's output, a motion-capture
+//               body), which the estimators fuse
+//   positions.csv  t_s, frame, x_m, y_m, z_m, std_m: an observed frame's origin in the base
+//               frame as a tracker reads it, with its noise per axis, fused by the estimators
+//               (truth.tum, by contrast, only scores them)
 //   images/<camera>/<t_ns>.png   a camera's frames, named by their time in nanoseconds: the
 //               scenario layer detects their tags (scenarios/runner/common/log_images.h)
 //
@@ -109,12 +117,17 @@ struct LogTagRow {
   int camera = 0;
   int tag = 0;
   std::array<Eigen::Vector2d, 4> uv;
-  Eigen::Vector2d centre = Eigen::Vector2d::Zero();  // the detector's, or the diagonals' crossing
+  // The detector's (tags.csv's uc_px, vc_px; a detected image's), or the diagonals' crossing;
+  // NaN when they do not cross.
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
 };
 
 // Where the diagonals of a tag's four corners cross (the centre of a planar square's image);
 // false when they do not (degenerate corners).
 bool DiagonalsCross(const std::array<Eigen::Vector2d, 4>& uv, Eigen::Vector2d* centre);
+
+// A tag's centre in its frame: the mean of its four corners (a parallelogram's centre).
+inline Vec3 TagCentre(const std::array<Vec3, 4>& c) { return 0.25 * (c[0] + c[1] + c[2] + c[3]); }
 
 struct LogPlane {
   std::string name;  // contacts.csv's `plane`
@@ -126,6 +139,19 @@ struct LogContactPoint {
   std::string name;   // contacts.csv's `point`
   std::string frame;  // an observed frame of the declared model
   Vec3 p_frame = Vec3::Zero();
+};
+
+// An orientation or a position reading of RecordedLog::sensed_frames[frame].
+struct LogOrientationRow {
+  double t = 0.0;
+  int frame = 0;
+  Quat q_base_frame = Quat::Identity();
+};
+struct LogPositionRow {
+  double t = 0.0;
+  int frame = 0;
+  Vec3 p_base = Vec3::Zero();
+  double std_m = 0.0;
 };
 
 // One contact reading: indices into RecordedLog::contact_points and ::planes.
@@ -169,10 +195,18 @@ struct RecordedLog {
   std::vector<LogPlane> planes;
   std::vector<LogContactPoint> contact_points;
   std::vector<LogContactRow> contacts;
-  StreamStats joint_stats, imu_stats, truth_stats, tag_stats, image_stats, contact_stats;
+  // orientations.csv and positions.csv (optional): the frames they read, in first-seen order.
+  std::vector<std::string> sensed_frames;
+  std::vector<LogOrientationRow> orientations;
+  std::vector<LogPositionRow> positions;
+  StreamStats joint_stats, imu_stats, truth_stats, tag_stats, image_stats, contact_stats,
+      orientation_stats, position_stats;
 
   const double* q(size_t row) const { return joint_q.data() + row * joints.size(); }
 };
+
+// Index of the tag `id` in log.tags, -1 when the log has no such tag.
+int TagIndex(const RecordedLog& log, int id);
 
 // Reads DIR/log.yaml and the streams it names (InputError on bad input).
 RecordedLog ReadRecordedLog(const std::string& dir);
@@ -182,7 +216,8 @@ RecordedLog ReadRecordedLog(const std::string& dir);
 // 0, the times as they are; the truth's rotation goes through its quaternion, so to the last
 // digit): log.yaml with `declared:` as log.declared_path is written, then
 // joints.csv, imu.csv when it has IMUs, truth.tum when it has truth, tags.csv when it has tag
-// rows. `files`: further files to write there first (name relative to the folder, bytes), e.g.
+// rows, orientations.csv and positions.csv when it has such rows. `files`: further files to
+// write there first (name relative to the folder, bytes), e.g.
 // the declared model or images/<camera>/<t_ns>.png (log.yaml then names `images:` when the log
 // has `images` and no tag rows). The folder appears whole or not at all.
 void WriteRecordedLog(const RecordedLog& log, const std::string& dir,

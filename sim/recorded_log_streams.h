@@ -82,4 +82,12 @@ void ReadContacts(const ConfigNode& node, RecordedLog* log, double* used);
 std::string ContactsYaml(const RecordedLog& log);
 std::string ContactsCsv(const RecordedLog& log);
 
+// log.yaml's `orientations` and `positions` and their CSVs (recorded_log_poses.cc), and their
+// writers.
+void ReadOrientations(const ConfigNode& node, RecordedLog* log, double* used);
+void ReadPositions(const ConfigNode& node, RecordedLog* log, double* used);
+std::string PosesYaml(const RecordedLog& log);
+std::string OrientationsCsv(const RecordedLog& log);
+std::string PositionsCsv(const RecordedLog& log);
+
 }  // namespace flexbench::sim::log_internal

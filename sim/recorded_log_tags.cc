@@ -135,8 +135,11 @@ void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
     if (log->has_centre_columns) {
       row.centre = Eigen::Vector2d(ParseCsvNumber(cells[11], where, want[11], 1e6),
                                    ParseCsvNumber(cells[12], where, want[12], 1e6));
-    } else if (!DiagonalsCross(row.uv, &row.centre) && log->tag_centres) {
-      throw InputError(where + ": the corners' diagonals do not cross: no centre");
+    } else if (!DiagonalsCross(row.uv, &row.centre)) {
+      if (log->tag_centres) {
+        throw InputError(where + ": the corners' diagonals do not cross: no centre");
+      }
+      row.centre.setConstant(std::nan(""));  // no centre: no pixel row (identify)
     }
     log->tag_rows.push_back(row);
   }
@@ -243,6 +246,10 @@ std::string TagsCsv(const RecordedLog& log) {
 }  // namespace flexbench::sim::log_internal
 
 namespace flexbench::sim {
+
+int TagIndex(const RecordedLog& log, int id) {
+  return log_internal::IndexOf(log.tags, [&](const LogTag& t) { return t.id == id; });
+}
 
 bool DiagonalsCross(const std::array<Eigen::Vector2d, 4>& uv, Eigen::Vector2d* centre) {
   const auto h = [&](int k) { return Eigen::Vector3d(uv[k].x(), uv[k].y(), 1.0); };

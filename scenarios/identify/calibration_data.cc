@@ -172,15 +172,18 @@ int LogSet(const sim::RecordedLog& log, DataSet* data) {
   return LabelIndex(&data->sets, folder.empty() ? "log" : folder);
 }
 
-// Labels the rows from `first` on (their times `times`) with `time_blocks` equal spans of time.
-void LabelTimeSpans(const std::vector<double>& times, size_t first, int time_blocks,
+// Labels the rows from `first` on (their times `times`) with `time_blocks` equal spans of the
+// source's time: [t_from, t_to] within the joints' span, the same for every kind of row of a
+// log, so that a fold holds what was measured at one time.
+void LabelTimeSpans(const sim::RecordedLog& log, double t_from, double t_to,
+                    const std::vector<double>& times, size_t first, int time_blocks,
                     DataSet* data) {
   if (times.empty()) return;
-  const auto [lo, hi] = std::minmax_element(times.begin(), times.end());
-  const double t0 = *lo, span = *hi - *lo;
+  const double t0 = std::max(t_from, log.joint_t.front());
+  const double span = std::min(t_to, log.joint_t.back()) - t0;
   for (size_t i = 0; i < times.size(); ++i) {
-    const int k = span > 0.0 ? std::min(time_blocks - 1,
-                                        static_cast<int>(time_blocks * (times[i] - t0) / span))
+    const int k = span > 0.0 ? std::clamp(static_cast<int>(time_blocks * (times[i] - t0) / span), 0,
+                                          time_blocks - 1)
                              : 0;
     data->rows[first + i].pose = LabelIndex(&data->poses, "span" + std::to_string(k));
   }
@@ -212,7 +215,7 @@ int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column,
     data->rows.push_back(std::move(o));
     times.push_back(t);
   }
-  LabelTimeSpans(times, first, time_blocks, data);
+  LabelTimeSpans(log, t_from, t_to, times, first, time_blocks, data);
   return static_cast<int>(times.size());
 }
 
@@ -228,22 +231,22 @@ int AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column,
         !sim::JointsAt(log, column, row.t, &o.q)) {
       continue;
     }
-    Eigen::Vector2d centre = row.centre;  // the detector's
-    if (!log.has_centre_columns && !sim::DiagonalsCross(row.uv, &centre)) continue;
+    if (!row.centre.allFinite()) continue;  // degenerate corners: no centre
     o.type = ObservationType::kPixel;
     o.set = set;
     o.point = tag_points[row.tag];
-    o.uv = centre;
+    o.uv = row.centre;
     o.where = LogWhere(log.tag_stats.file, row.t);
     data->rows.push_back(std::move(o));
     times.push_back(row.t);
   }
-  LabelTimeSpans(times, first, time_blocks, data);
+  LabelTimeSpans(log, t_from, t_to, times, first, time_blocks, data);
   return static_cast<int>(times.size());
 }
 
 int AppendLogGravity(const sim::RecordedLog& log, const std::vector<StaticWindow>& windows,
-                     const std::vector<int>& imu_points, DataSet* data, int time_blocks) {
+                     double t_from, double t_to, const std::vector<int>& imu_points, DataSet* data,
+                     int time_blocks) {
   const int set = LogSet(log, data);
   const size_t first = data->rows.size();
   std::vector<double> times;
@@ -261,7 +264,7 @@ int AppendLogGravity(const sim::RecordedLog& log, const std::vector<StaticWindow
     data->rows.push_back(std::move(o));
     times.push_back(0.5 * (w.t_begin + w.t_end));
   }
-  LabelTimeSpans(times, first, time_blocks, data);
+  LabelTimeSpans(log, t_from, t_to, times, first, time_blocks, data);
   return static_cast<int>(times.size());
 }
 

@@ -80,8 +80,9 @@ void ReadMukcaPlacement(const std::string& dir, const std::string& set, int num_
 // rows with t_from <= t <= t_to and inside the joints' span becomes a point row of
 // data->points[point] (the log's truth frame) in the base frame, at the joint readings linear
 // between the rows around its time (`column`: sim::JointColumns). Their set is the log's folder,
-// `where` "<truth file> t=<time>", and their `pose` one of `time_blocks` equal spans of their
-// times ("span<k>"): cross-validation then holds out stretches of time, not rows interleaved with
+// `where` "<truth file> t=<time>", and their `pose` one of `time_blocks` equal spans of
+// [t_from, t_to] within the joints' span ("span<k>", the same spans for every kind of row of
+// the log): cross-validation then holds out stretches of time, not rows interleaved with
 // their neighbours, which a moving arm makes all but equal. `frame` >= 0: the points are measured
 // in data->frames[frame] (a tracker's own frame), not in the base frame. Returns the rows
 // appended.
@@ -92,19 +93,20 @@ int AppendLogPoints(const sim::RecordedLog& log, const std::vector<int>& column,
 // DataSet::camera) read as pixel rows: each row of tags.csv in [t_from, t_to] and inside the
 // joints' span whose tag has a point (`tag_points[tag]`: its index in data->points, the tag's
 // frame, whose origin is the tag's centre; -1: not a row) becomes the pixel of that point, the
-// centre libapriltag reports (tags.csv's uc_px, vc_px; without them, where the corners'
-// diagonals cross, as libapriltag computes it), at the joint readings of its
-// time. Set, `where` and time-span `pose` labels as AppendLogPoints'. Returns the rows appended.
+// centre the log gives (sim::LogTagRow::centre: libapriltag's, or where the corners' diagonals
+// cross; a row without one gives none), at the joint readings of its time. Set, `where` and
+// time-span `pose` labels as AppendLogPoints'. Returns the rows appended.
 int AppendLogPixels(const sim::RecordedLog& log, const std::vector<int>& column, double t_from,
                     double t_to, int camera, const std::vector<int>& tag_points, DataSet* data,
                     int time_blocks = 5);
 
-// A log's static IMU windows (FindStaticWindows) as gravity rows of the points
-// `imu_points[sensor]` (index into data->points, the IMU's frame; -1: no row): q and up as the
-// window has them, set and time-span `pose` labels (of the windows' mid times) as
+// A log's static IMU windows in [t_from, t_to] (FindStaticWindows) as gravity rows of the
+// points `imu_points[sensor]` (index into data->points, the IMU's frame; -1: no row): q and up
+// as the window has them, set and time-span `pose` labels (of the windows' mid times) as
 // AppendLogPoints', `where` "<imu file> t=<begin>..<end>". Returns the rows appended.
 int AppendLogGravity(const sim::RecordedLog& log, const std::vector<StaticWindow>& windows,
-                     const std::vector<int>& imu_points, DataSet* data, int time_blocks = 5);
+                     double t_from, double t_to, const std::vector<int>& imu_points, DataSet* data,
+                     int time_blocks = 5);
 
 // Index of `label` in `labels`, appended when new.
 int LabelIndex(std::vector<std::string>* labels, const std::string& label);

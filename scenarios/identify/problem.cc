@@ -86,7 +86,7 @@ Vec3 GravityUp(const EffectModel& em, const std::vector<int>& active, const doub
     }
   };
   add(em.base_effects(), em.base_theta().data());
-  add(active, theta);
+  if (theta != nullptr) add(active, theta);
   const Vec3 g = any ? kinematics::TiltedGravity(em.g_base(), phi[0], phi[1]) : em.g_base();
   return -g.normalized();
 }

@@ -2,6 +2,7 @@
 
 #include "estimators/error.h"
 #include "render/image.h"
+#include "scenarios/runner/common/tag_tracking.h"
 #include "sim/config.h"
 
 namespace flexbench::scenarios {
@@ -19,22 +20,7 @@ int DetectLogImages(const render::DetectorSettings& settings, sim::RecordedLog* 
                        log->cameras[frame.camera].name + "' has " + std::to_string(cam.width) +
                        " x " + std::to_string(cam.height));
     }
-    for (const render::TagDetection& d : detector.Detect(image).detections) {
-      int tag = -1;
-      for (size_t k = 0; k < log->tags.size(); ++k) {
-        if (log->tags[k].id == d.id) tag = static_cast<int>(k);
-      }
-      if (tag < 0) {
-        ++others;
-        continue;
-      }
-      sim::LogTagRow row;
-      row.t = frame.t;
-      row.camera = frame.camera;
-      row.tag = tag;
-      row.uv = d.corners;
-      log->tag_rows.push_back(row);
-    }
+    others += AddDetectionsToLog(detector.Detect(image), frame.t, frame.camera, log);
   }
   log->tag_stats = log->image_stats;
   log->tag_stats.rows = static_cast<int>(log->tag_rows.size());

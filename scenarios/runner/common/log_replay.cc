@@ -7,6 +7,27 @@
 #include "estimators/error.h"
 
 namespace flexbench::scenarios {
+namespace {
+
+// Indices of `rows` in time order (a stream's own order where times are equal).
+template <typename Row>
+std::vector<size_t> TimeOrder(const std::vector<Row>& rows) {
+  std::vector<size_t> order(rows.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return rows[a].t < rows[b].t; });
+  return order;
+}
+
+// fn(row) for the rows of `order` (indices into `rows`, in time order) from *next on while
+// their time is at most t.
+template <typename Row, typename Fn>
+void UpTo(const std::vector<size_t>& order, const std::vector<Row>& rows, double t, size_t* next,
+          Fn fn) {
+  for (; *next < order.size() && rows[order[*next]].t <= t; ++*next) fn(rows[order[*next]]);
+}
+
+}  // namespace
 
 estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
                                              const sim::DeclaredChain& chain,
@@ -27,6 +48,27 @@ estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
     s.has_initial = imu.has_initial;
     s.q_base_frame_initial = imu.q_base_frame_initial;
     setup.imus.push_back(s);
+  }
+  // The frames orientations.csv reads are the estimators' orientation-sensed frames too (the
+  // filters' IMU terms), after imu.csv's sensors, in the order the file first names them.
+  std::vector<int> oriented;
+  for (const sim::LogOrientationRow& row : log.orientations) {
+    if (std::find(oriented.begin(), oriented.end(), row.frame) == oriented.end()) {
+      oriented.push_back(row.frame);
+    }
+  }
+  for (int f : oriented) {
+    estimators::ImuSetup s;
+    try {
+      s.frame = chain.ObservedFrame(log.sensed_frames[f]);
+    } catch (const InputError& e) {
+      throw InputError(log_yaml + ": orientations: frame '" + log.sensed_frames[f] +
+                       "': " + e.what());
+    }
+    const bool known =
+        std::any_of(setup.imus.begin(), setup.imus.end(),
+                    [&](const estimators::ImuSetup& i) { return i.frame == s.frame; });
+    if (!known) setup.imus.push_back(s);
   }
   for (const sim::LogCamera& cam : log.cameras) {
     try {
@@ -68,14 +110,18 @@ LogIndex IndexLog(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
                        ".frame: " + e.what());
     }
   }
-  index.contact_order.resize(log.contacts.size());
-  std::iota(index.contact_order.begin(), index.contact_order.end(), 0);
-  std::stable_sort(index.contact_order.begin(), index.contact_order.end(),
-                   [&](size_t a, size_t b) { return log.contacts[a].t < log.contacts[b].t; });
-  index.tag_order.resize(log.tag_rows.size());
-  std::iota(index.tag_order.begin(), index.tag_order.end(), 0);
-  std::stable_sort(index.tag_order.begin(), index.tag_order.end(),
-                   [&](size_t a, size_t b) { return log.tag_rows[a].t < log.tag_rows[b].t; });
+  for (const std::string& frame : log.sensed_frames) {
+    try {
+      index.sensed_frame.push_back(chain.ObservedFrame(frame));
+    } catch (const InputError& e) {
+      throw InputError(log.dir + "/log.yaml: orientations or positions: frame '" + frame +
+                       "': " + e.what());
+    }
+  }
+  index.contact_order = TimeOrder(log.contacts);
+  index.tag_order = TimeOrder(log.tag_rows);
+  index.orientation_order = TimeOrder(log.orientations);
+  index.position_order = TimeOrder(log.positions);
   return index;
 }
 
@@ -105,13 +151,7 @@ std::vector<LogStep> LogSteps(const sim::RecordedLog& log, double step_hz, doubl
   return steps;
 }
 
-std::vector<size_t> ImuTimeOrder(const sim::RecordedLog& log) {
-  std::vector<size_t> order(log.imu.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](size_t a, size_t b) { return log.imu[a].t < log.imu[b].t; });
-  return order;
-}
+std::vector<size_t> ImuTimeOrder(const sim::RecordedLog& log) { return TimeOrder(log.imu); }
 
 int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vector<LogStep>& steps,
               const std::vector<size_t>& imu_order, estimators::Estimator& est,
@@ -121,7 +161,6 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
     rejected += s != estimators::UpdateStatus::kAccepted && s != estimators::UpdateStatus::kIgnored;
   };
   const std::vector<int>& column = index.column;
-  const std::vector<size_t>& tag_order = index.tag_order;
   estimators::JointReading j;
   j.q.resize(static_cast<int>(column.size()));
   j.std = estimators::JointVector::Constant(static_cast<int>(column.size()), log.joint_std);
@@ -130,30 +169,43 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
   estimators::PixelPoint centre;  // tags.measurement: centre
   centre.cov = Eigen::Matrix2d::Identity() * (log.pixel_std_px * log.pixel_std_px);
   estimators::PlaneContact contact;
-  size_t next_imu = 0, next_tag = 0, next_contact = 0;
+  estimators::OrientationReading orientation;
+  estimators::PositionReading position;
+  size_t next_imu = 0, next_tag = 0, next_contact = 0, next_orientation = 0, next_position = 0;
   for (size_t s = 0; s < steps.size(); ++s) {
     const LogStep& step = steps[s];
-    for (; next_imu < imu_order.size() && log.imu[imu_order[next_imu]].t <= step.t; ++next_imu) {
-      count(est.Update(log.imu[imu_order[next_imu]]));
-    }
+    UpTo(imu_order, log.imu, step.t, &next_imu,
+         [&](const estimators::ImuReading& r) { count(est.Update(r)); });
     if (log.static_postures) est.Reset();  // a posture of its own: estimated afresh
     est.Predict(step.t);
     j.t = step.t;
     for (int k = 0; k < j.q.size(); ++k) j.q[k] = log.q(step.row)[column[k]];
     count(est.Update(j));
-    for (; next_tag < tag_order.size() && log.tag_rows[tag_order[next_tag]].t <= step.t;
-         ++next_tag) {
-      const sim::LogTagRow& row = log.tag_rows[tag_order[next_tag]];
+    UpTo(index.orientation_order, log.orientations, step.t, &next_orientation,
+         [&](const sim::LogOrientationRow& row) {
+           orientation.t = row.t;
+           orientation.frame = index.sensed_frame[row.frame];
+           orientation.q_base_frame = row.q_base_frame;
+           count(est.Update(orientation));
+         });
+    UpTo(index.position_order, log.positions, step.t, &next_position,
+         [&](const sim::LogPositionRow& row) {
+           position.t = row.t;
+           position.frame = index.sensed_frame[row.frame];
+           position.p_base = row.p_base;
+           position.cov = Mat3::Identity() * (row.std_m * row.std_m);
+           count(est.Update(position));
+         });
+    UpTo(index.tag_order, log.tag_rows, step.t, &next_tag, [&](const sim::LogTagRow& row) {
       const sim::LogTag& tag = log.tags[row.tag];
       if (log.tag_centres) {
         centre.t = row.t;
         centre.camera = row.camera;
         centre.frame = index.tag_frame[row.tag];
-        const std::array<Vec3, 4>& c = tag.corners_m;
-        centre.p_frame = 0.25 * (c[0] + c[1] + c[2] + c[3]);
+        centre.p_frame = sim::TagCentre(tag.corners_m);
         centre.uv = row.centre;
         count(est.Update(centre));
-        continue;
+        return;
       }
       corners.t = row.t;
       corners.camera = row.camera;
@@ -162,21 +214,19 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
       corners.p_frame = tag.corners_m;
       corners.uv = row.uv;
       count(est.Update(corners));
-    }
-    for (; next_contact < index.contact_order.size() &&
-           log.contacts[index.contact_order[next_contact]].t <= step.t;
-         ++next_contact) {
-      const sim::LogContactRow& row = log.contacts[index.contact_order[next_contact]];
-      const sim::LogPlane& plane = log.planes[row.plane];
-      contact.t = row.t;
-      contact.frame = index.contact_frame[row.point];
-      contact.p_frame = log.contact_points[row.point].p_frame;
-      contact.T_base_plane = plane.T_base_plane;
-      contact.plane_cov = plane.cov;
-      contact.distance = row.distance_m;
-      contact.std = row.std_m;
-      count(est.Update(contact));
-    }
+    });
+    UpTo(index.contact_order, log.contacts, step.t, &next_contact,
+         [&](const sim::LogContactRow& row) {
+           const sim::LogPlane& plane = log.planes[row.plane];
+           contact.t = row.t;
+           contact.frame = index.contact_frame[row.point];
+           contact.p_frame = log.contact_points[row.point].p_frame;
+           contact.T_base_plane = plane.T_base_plane;
+           contact.plane_cov = plane.cov;
+           contact.distance = row.distance_m;
+           contact.std = row.std_m;
+           count(est.Update(contact));
+         });
     on_step(s, est.Estimate());
   }
   return rejected + est.deferred_rejections();

@@ -31,6 +31,9 @@ struct LogIndex {
   std::vector<size_t> tag_order;                   // tags.csv's rows in time order
   std::vector<kinematics::FrameId> contact_frame;  // per log contact point, its frame
   std::vector<size_t> contact_order;               // contacts.csv's rows in time order
+  std::vector<kinematics::FrameId> sensed_frame;   // per RecordedLog::sensed_frames entry
+  std::vector<size_t> orientation_order;           // orientations.csv's rows in time order
+  std::vector<size_t> position_order;              // positions.csv's rows in time order
 };
 
 // InputError naming joints.csv's header or log.yaml's key (`declared_file` for messages).
@@ -52,7 +55,9 @@ std::vector<LogStep> LogSteps(const sim::RecordedLog& log, double step_hz,
 std::vector<size_t> ImuTimeOrder(const sim::RecordedLog& log);
 
 // Runs `est` over `steps` (the IMU readings through `imu_order`, the tag detections through
-// `index`), calling on_step(step index, belief) after each step; on a log of static postures
+// `index`): at each step the IMU readings up to its time, the joint row, then the
+// orientations, positions, tag detections and contacts up to its time; calling
+// on_step(step index, belief) after each step; on a log of static postures
 // each step starts from Reset. Returns the readings the estimator did not accept (rejected now
 // or deferred).
 int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vector<LogStep>& steps,

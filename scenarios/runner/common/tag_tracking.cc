@@ -54,8 +54,7 @@ std::vector<estimators::Measurement> TagMeasurements(
       m.t = t;
       m.camera = 0;
       m.frame = frame_it->second;
-      m.p_frame = 0.25 * (tag->corners_geom[0] + tag->corners_geom[1] + tag->corners_geom[2] +
-                          tag->corners_geom[3]);
+      m.p_frame = sim::TagCentre(tag->corners_geom);
       m.uv = d.center;
       m.cov = Eigen::Matrix2d::Identity() * sigma2;
       out.push_back(m);
@@ -81,20 +80,24 @@ void AddTagCameraToLog(const mjModel* m, const std::string& camera, const Pinhol
   }
 }
 
-void AddDetectionsToLog(const render::DetectionResult& det, double t, sim::RecordedLog* log) {
+int AddDetectionsToLog(const render::DetectionResult& det, double t, int camera,
+                       sim::RecordedLog* log) {
+  int others = 0;
   for (const render::TagDetection& d : det.detections) {
-    int tag = -1;
-    for (size_t i = 0; i < log->tags.size(); ++i) {
-      if (log->tags[i].id == d.id) tag = static_cast<int>(i);
+    const int tag = sim::TagIndex(*log, d.id);
+    if (tag < 0) {
+      ++others;
+      continue;
     }
-    if (tag < 0) continue;
     sim::LogTagRow row;
     row.t = t;
+    row.camera = camera;
     row.tag = tag;
-    for (int c = 0; c < 4; ++c) row.uv[c] = d.corners[c];
+    row.uv = d.corners;
     row.centre = d.center;
     log->tag_rows.push_back(row);
   }
+  return others;
 }
 
 }  // namespace flexbench::scenarios

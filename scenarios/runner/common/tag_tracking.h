@@ -36,8 +36,10 @@ void AddTagCameraToLog(const mjModel* m, const std::string& camera, const Pinhol
                        const std::map<int, kinematics::FrameId>& tag_frames, double pixel_std,
                        bool centres, sim::RecordedLog* log);
 
-// The detections of the log's tags at time t as its tags.csv rows, in the detector's order (as
-// TagMeasurements feeds them to the estimators).
-void AddDetectionsToLog(const render::DetectionResult& det, double t, sim::RecordedLog* log);
+// The detections of the log's tags by its camera `camera` at time t as its tags.csv rows, with
+// the detector's centres, in the detector's order (as TagMeasurements feeds them to the
+// estimators). Returns the detections of tags the log does not have.
+int AddDetectionsToLog(const render::DetectionResult& det, double t, int camera,
+                       sim::RecordedLog* log);
 
 }  // namespace flexbench::scenarios

@@ -24,8 +24,8 @@
 //     With `streams` (any of truth, tags, imu; default all the log has) only those become rows:
 //     truth.tum as points, a fixed camera's tag detections as pixels of the tags' centres, and
 //     each IMU's windows at rest (`static: {min_s, gyro_max_rad_s, joint_span_rad}`,
-//     identify/log_gravity.h) as gravity rows of its frame (gravity_std_rad: by default the
-//     windows' standard error).
+//     identify/log_gravity.h) as gravity rows of its frame (gravity_std_rad: by default what
+//     the log shows of a row's error, the windows' standard error and the encoders' rounding).
 //   expected_effects: [names]   what a log's truth is known to hold (a demonstration, a test):
 //     scored as for simulated truth (effect_found_correct, effects_named_up_to_equivalence).
 #include <Eigen/Eigenvalues>
@@ -94,6 +94,7 @@ struct Source {
   std::string frame;  // a log's points measured in this one of `frames` ("": the base frame)
   // A log's streams that become rows: truth (points), tags (pixels), imu (gravity).
   std::set<std::string> streams = {"truth", "tags", "imu"};
+  bool streams_named = false;           // `streams` given (else: all the log has)
   identify::StaticWindowOptions still;  // when a log's IMU is at rest
   std::string where;
   std::string path_where;  // where the file was named (a line, or the --set that named it)
@@ -181,6 +182,7 @@ Source ParseSource(const ConfigNode& n, bool tracker) {
     }
     if (const auto st = log->Optional("streams")) {
       s.streams.clear();
+      s.streams_named = true;
       for (const ConfigNode& e : st->Items()) {
         const std::string v = e.AsString();
         if (v != "truth" && v != "tags" && v != "imu") e.Fail("expected truth, tags or imu");
@@ -189,12 +191,14 @@ Source ParseSource(const ConfigNode& n, bool tracker) {
       if (s.streams.empty()) st->Fail("names no stream");
     }
     if (const auto st = log->Optional("static")) {
+      if (!s.streams.count("imu"))
+        st->Fail("applies to the imu stream, which `streams` leaves out");
       identify::StaticWindowOptions& w = s.still;
       for (auto [key, value] : {std::pair{"min_s", &w.min_s},
                                 {"gyro_max_rad_s", &w.gyro_max_rad_s},
                                 {"joint_span_rad", &w.joint_span_rad}}) {
         *value = st->GetDouble(key, *value);
-        if (!(*value > 0.0 && *value < 1e6)) st->Child(key).Fail("must be > 0");
+        if (!(*value > 0.0 && *value < 1e6)) st->Child(key).Fail("must be > 0 and below 1e6");
       }
     }
   } else {
@@ -736,8 +740,12 @@ class ClosedLoopKind : public ScenarioKind {
     const DataSet& val = sets.val;
     const std::vector<Mat3> noise_before = RowNoise(val, sets.val_loads, nullptr);
     const std::vector<Mat3> noise_after = RowNoise(val, sc.val_loads_after, &res);
-    const stats::ChiSquareBounds nb =
-        stats::MeanChiSquareBounds(3.0, static_cast<int>(val.rows.size()));
+    // Over the rows MeanNees averages: those in metres.
+    const int metres = static_cast<int>(
+        std::count_if(val.rows.begin(), val.rows.end(), [](const identify::Observation& o) {
+          return identify::UnitOf(o.type) == identify::RowUnit::kMetres;
+        }));
+    const stats::ChiSquareBounds nb = stats::MeanChiSquareBounds(3.0, std::max(1, metres));
     (*m)["nees_before"] = FiniteOrNull(MeanNees(val, sc.val_p0, noise_before));
     (*m)["nees_after"] = FiniteOrNull(MeanNees(val, sc.val_p1, noise_after));
     (*m)["nees_bound_low"] = nb.lower;
@@ -901,7 +909,9 @@ class ClosedLoopKind : public ScenarioKind {
     }
     if (d.rows.empty()) {
       throw InputError(s.where + ": no " + what + " rows" +
-                       (s.type == Source::Type::kLog ? " in " + Span(s) + " of " + s.path : ""));
+                       (s.type == Source::Type::kLog
+                            ? " in " + Span(s) + " of " + s.path + " (" + WhyNoLogRows(s) + ")"
+                            : ""));
     }
     if (s.type == Source::Type::kSimulate || s.type == Source::Type::kLog) {
       WriteDataCsv(ctx, d, what);
@@ -924,10 +934,10 @@ class ClosedLoopKind : public ScenarioKind {
       if (s->type != Source::Type::kLog) continue;
       const sim::RecordedLog& log = Log(*s);
       if (!log.truth_t.empty()) measured.insert(log.truth_frame);
-      if (log.tag_rows.empty()) continue;
+      if (log.tag_rows.empty() || !s->streams.count("tags")) continue;
       for (const sim::LogTag& tag : log.tags) {
         const std::array<Vec3, 4>& c = tag.corners_m;
-        const Vec3 centre = 0.25 * (c[0] + c[1] + c[2] + c[3]);
+        const Vec3 centre = sim::TagCentre(c);
         const bool parallelogram = (c[0] + c[2] - c[1] - c[3]).norm() <= 1e-9;
         const auto [it, added] = centre_of.emplace(tag.frame, centre);
         if ((!added && it->second != centre) || !parallelogram) {
@@ -955,7 +965,7 @@ class ClosedLoopKind : public ScenarioKind {
   // its tags' frames measured points. Called when the scenario names no camera.
   void CameraFromLogs(const ConfigNode& root) {
     for (const Source* s : {&calibration_, &validation_}) {
-      if (s->type != Source::Type::kLog || camera_.present) continue;
+      if (s->type != Source::Type::kLog || camera_.present || !s->streams.count("tags")) continue;
       const sim::RecordedLog& log = Log(*s);
       if (log.tag_rows.empty()) continue;
       const sim::LogCamera& cam =
@@ -1086,7 +1096,7 @@ class ClosedLoopKind : public ScenarioKind {
       const auto p = std::find(points_.begin(), points_.end(), imu.frame);
       imu_points.push_back(p == points_.end() ? -1 : static_cast<int>(p - points_.begin()));
     }
-    const int n = identify::AppendLogGravity(log, it->second, imu_points, d);
+    const int n = identify::AppendLogGravity(log, it->second, s.from_s, s.to_s, imu_points, d);
     const double g = em_->g_base().norm();
     double worst = 0.0, ss = 0.0;
     for (const identify::StaticWindow& w : it->second) {
@@ -1107,6 +1117,22 @@ class ClosedLoopKind : public ScenarioKind {
     }
   }
 
+  // What each of a log source's streams gave: none, or no row in its span.
+  std::string WhyNoLogRows(const Source& s) {
+    const sim::RecordedLog& log = Log(s);
+    std::string out;
+    const auto say = [&](const std::string& text) { out += (out.empty() ? "" : "; ") + text; };
+    if (s.streams.count("truth")) say(log.truth_t.empty() ? "no truth.tum" : "truth.tum: none");
+    if (s.streams.count("tags")) {
+      say(log.tag_rows.empty() ? "no tag detections"
+                               : "tags: none of a fixed camera's on a measured frame");
+    }
+    if (s.streams.count("imu")) {
+      say(log.imu.empty() ? "no imu.csv" : "imu.csv: no window at rest (static:)");
+    }
+    return out;
+  }
+
   // Index in frames_ of the frame a log source's points are measured in (-1: the base frame).
   int LogFrame(const Source& s) const {
     if (s.frame.empty()) return -1;
@@ -1124,12 +1150,24 @@ class ClosedLoopKind : public ScenarioKind {
       it = logs_.emplace(s.path, sim::ReadRecordedLog(s.path)).first;
       DetectLogImages(detector_, &it->second);
     }
-    if (it->second.truth_t.empty() && it->second.tag_rows.empty()) {
-      throw InputError(s.path_where + ": " + it->second.dir +
-                       " has no truth.tum and no tag detections (tags.csv or images/): " +
-                       "identification fits their rows");
+    const sim::RecordedLog& log = it->second;
+    const std::pair<const char*, bool> has[] = {{"truth", !log.truth_t.empty()},
+                                                {"tags", !log.tag_rows.empty()},
+                                                {"imu", !log.imu.empty()}};
+    bool any = false;
+    for (const auto& [stream, present] : has) {
+      if (s.streams_named && s.streams.count(stream) && !present) {
+        throw InputError(s.path_where + ": streams names '" + stream + "', which " + log.dir +
+                         " does not have");
+      }
+      any = any || (present && s.streams.count(stream));
     }
-    return it->second;
+    if (!any) {
+      throw InputError(s.path_where + ": " + log.dir +
+                       " has none of truth.tum, tag detections (tags.csv or images/) and imu.csv" +
+                       " among its streams: identification fits their rows");
+    }
+    return log;
   }
 
   // The `truth` block: effects, the expected names, and where simulated data come from (sockets
@@ -2119,12 +2157,12 @@ class ClosedLoopKind : public ScenarioKind {
     const double scale = unit == identify::RowUnit::kMetres    ? 1e3
                          : unit == identify::RowUnit::kRadians ? 1.0 / kDeg
                                                                : 1.0;
-    std::vector<double> xs, b_mm, a_mm;
+    std::vector<double> xs, b_shown, a_shown;
     for (size_t r = 0; r < before.size(); ++r) {
       if (identify::UnitOf(d.rows[r].type) != unit) continue;
       xs.push_back(x[r]);
-      b_mm.push_back(scale * before[r]);
-      a_mm.push_back(scale * after[r]);
+      b_shown.push_back(scale * before[r]);
+      a_shown.push_back(scale * after[r]);
     }
     x = xs;
     render::Figure fig(900, 560);
@@ -2138,8 +2176,8 @@ class ClosedLoopKind : public ScenarioKind {
                  : unit == identify::RowUnit::kRadians ? "angle to the measured up [deg]"
                  : sockets                             ? "distance from the socket's mean [mm]"
                                                        : "distance from the measured point [mm]";
-    ax.AddScatter("declared model", x, b_mm).marker = render::Marker::kCircle;
-    ax.AddScatter("with identified effects", x, a_mm).marker = render::Marker::kSquare;
+    ax.AddScatter("declared model", x, b_shown).marker = render::Marker::kCircle;
+    ax.AddScatter("with identified effects", x, a_shown).marker = render::Marker::kSquare;
     ax.legend_position = render::LegendPosition::kTopRight;
     ax.y_min = 0.0;
     fig.SavePng(ctx.out->File("residual_before_after.png").string());

@@ -289,7 +289,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       trajectories->AddTruth(joints.t, T_base_ee);
       if (log) {
         AddStepToLog(joints, T_base_ee, &*log);
-        AddDetectionsToLog(det, joints.t, &*log);
+        AddDetectionsToLog(det, joints.t, 0, &*log);
       }
       const Mat6x G = fk.empty() ? Mat6x() : SharedColumns(fk, joints);
       for (size_t e = 0; e < instances.size(); ++e) {

@@ -59,6 +59,10 @@ class ReplayKind : public ScenarioKind {
     if (!(step_hz_ >= 0.0) || !std::isfinite(step_hz_)) {
       root.Child("step_hz").Fail("must be 0 (a step per joint row) or a rate > 0 in Hz");
     }
+    if (step_hz_ > 0.0 && log_.static_postures) {
+      root.Child("step_hz").Fail(
+          "a log of static postures (static_postures: true) is replayed a posture a step");
+    }
     if (const auto c = root.Optional("imu_clock_offset")) {
       if (c->AsString() != "estimate") c->Fail("expected 'estimate' (or leave it out)");
       if (log_.imu.empty()) c->Fail("the log has no IMU readings");
@@ -130,6 +134,8 @@ class ReplayKind : public ScenarioKind {
     stream("truth", log_.truth_stats);
     stream("tags", log_.tag_stats);
     stream("contacts", log_.contact_stats);
+    stream("orientations", log_.orientation_stats);
+    stream("positions", log_.position_stats);
     if (!log_.images.empty()) {
       m["streams"]["images"]["rows"] = log_.image_stats.rows;
       m["streams"]["images"]["tags_not_in_the_log"] = other_tags_;

@@ -93,7 +93,7 @@ class TagFusionKind : public ScenarioKind {
       const Frame frame = Collect(c, renderer, &state);
       if (log) {
         AddStepToLog(frame.joints, frame.T_base_ee, &*log);
-        AddDetectionsToLog(frame.det, frame.joints.t, &*log);
+        AddDetectionsToLog(frame.det, frame.joints.t, 0, &*log);
       }
       render::Image overlay = TruthOverlay(frame);
       for (size_t e = 0; e < instances_.size(); ++e) {

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -292,6 +293,8 @@ std::string ExpectReplayedBitForBit(const std::string& scenario, const std::stri
                  " --quiet");
   EXPECT_EQ(live.exit_code, 0) << live.err;
   const size_t seed = yaml.find("\nseed: ");
+  EXPECT_NE(seed, std::string::npos) << scenario << " names no seed";
+  if (seed == std::string::npos) return "";
   const std::string seed_line = yaml.substr(seed + 1, yaml.find('\n', seed + 1) - seed);
   // The scenario's estimators block runs to the end of the file or to a comment line.
   std::string block = yaml.substr(yaml.find("\nestimators:") + 1);
@@ -337,6 +340,36 @@ TEST(Replay, AnExportedTagFusionRunReplaysToTheSameBits) {
                                                        {"fk", "ppoe_ekf", "naive_ekf"});
   EXPECT_NE(log_yaml.find("static_postures: true"), std::string::npos);
   EXPECT_NE(log_yaml.find("measurement: centre"), std::string::npos);
+}
+
+// jsk_sim_deflection's synthetic run ([PF eq. 31]): its orientation sensors and end-effector
+// tracker are the log's orientations.csv and positions.csv; every particle filter, bootstrap and
+// conjugate, replays bit for bit.
+TEST(Replay, AnExportedSyntheticRunReplaysToTheSameBits) {
+  const std::string log_yaml = ExpectReplayedBitForBit(
+      "jsk_sim_deflection.yaml", "", "", "",
+      {"pf_encoders", "pf_encoders_ee", "pf_encoders_imu", "pf_all", "pf_encoders_bootstrap",
+       "pf_encoders_ee_bootstrap", "pf_encoders_imu_bootstrap", "pf_all_bootstrap"});
+  EXPECT_NE(log_yaml.find("orientations: {file: orientations.csv}"), std::string::npos);
+  EXPECT_NE(log_yaml.find("positions: {file: positions.csv}"), std::string::npos);
+}
+
+// A log of static postures is replayed a posture a step: a step rate is refused, in one line.
+TEST(Replay, AStepRateOnStaticPosturesIsRefused) {
+  testing::TempDir tmp;
+  testing::JskLogOptions o;
+  o.duration = 1.0;
+  testing::WriteJskLog(tmp.path() / "log", o);
+  std::ofstream(tmp.path() / "log" / "log.yaml", std::ios::app) << "static_postures: true\n";
+  const CommandResult r =
+      RunCommand(testing::Flexbench() + " replay " + (tmp.path() / "log").string() +
+                 " --estimators fk --step-hz 10 --quiet --out " + (tmp.path() / "out").string());
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("a log of static postures (static_postures: true) is replayed a posture a "
+                       "step"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << r.err;
 }
 
 // `flexbench replay LOG`: the same run from the command line; a bad option is one line naming

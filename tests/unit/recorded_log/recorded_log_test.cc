@@ -256,6 +256,59 @@ TEST(RecordedLog, TagCentresAndJointNoiseRoundTrip) {
   }
 }
 
+// Orientation and position readings of observed frames: read (with the stream's clock offset),
+// written and read back; a quaternion off unit length and a std of 0 are named.
+TEST(RecordedLog, OrientationsAndPositionsRoundTrip) {
+  testing::TempDir dir;
+  Files f;
+  f.log_yaml +=
+      "orientations: {file: orientations.csv, clock_offset_s: 0.25}\n"
+      "positions: {file: positions.csv}\n";
+  f.Write(dir.path());
+  std::ofstream(dir.path() / "orientations.csv")
+      << "t_s,frame,qw,qx,qy,qz\n0.1,imu_link2,1,0,0,0\n0.1,imu_link3,0.6,0.8,0,0\n"
+         "0.2,imu_link2,0,0,1,0\n";
+  std::ofstream(dir.path() / "positions.csv")
+      << "t_s,frame,x_m,y_m,z_m,std_m\n0.1,grasp_point,0.5,-0.25,1.125,0.001\n";
+  const RecordedLog log = ReadRecordedLog(dir.path().string());
+  ASSERT_EQ(log.orientations.size(), 3u);
+  ASSERT_EQ(log.positions.size(), 1u);
+  EXPECT_EQ(log.sensed_frames, (std::vector<std::string>{"imu_link2", "imu_link3", "grasp_point"}));
+  EXPECT_DOUBLE_EQ(log.orientations[1].t, 0.35);
+  EXPECT_EQ(log.orientations[1].frame, 1);
+  EXPECT_EQ(log.orientations[1].q_base_frame.x(), 0.8);
+  EXPECT_EQ(log.positions[0].frame, 2);
+  EXPECT_EQ(log.positions[0].p_base, Vec3(0.5, -0.25, 1.125));
+  EXPECT_EQ(log.orientation_stats.rows, 3);
+  const std::string again = (dir.path() / "again").string();
+  WriteRecordedLog(log, again);
+  const RecordedLog back = ReadRecordedLog(again);
+  ASSERT_EQ(back.orientations.size(), 3u);
+  for (size_t r = 0; r < 3; ++r) {
+    EXPECT_EQ(back.orientations[r].t, log.orientations[r].t);
+    EXPECT_EQ(back.orientations[r].q_base_frame.coeffs(),
+              log.orientations[r].q_base_frame.coeffs());
+  }
+  EXPECT_EQ(back.positions[0].p_base, log.positions[0].p_base);
+  EXPECT_EQ(back.positions[0].std_m, 0.001);
+  const auto error = [&](const std::string& file, const std::string& text) {
+    std::ofstream(dir.path() / file) << text;
+    try {
+      ReadRecordedLog(dir.path().string());
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error("orientations.csv", "t_s,frame,qw,qx,qy,qz\n0.1,imu_link2,1,0.1,0,0\n")
+                .find("orientations.csv:2: (qw, qx, qy, qz) is not of unit length"),
+            std::string::npos);
+  std::ofstream(dir.path() / "orientations.csv") << "t_s,frame,qw,qx,qy,qz\n";
+  EXPECT_NE(error("positions.csv", "t_s,frame,x_m,y_m,z_m,std_m\n0.1,grasp_point,0,0,1,0\n")
+                .find("positions.csv:2: column 'std_m' must be > 0"),
+            std::string::npos);
+}
+
 // Contact readings: planes (pose, its standard deviations as a diagonal covariance), points on
 // frames, and contacts.csv read with the stream's clock offset, then written and read back.
 TEST(RecordedLog, ContactsRoundTrip) {

@@ -204,8 +204,6 @@ void AddTags(const Rig& rig, const TagCamera& tc, const std::vector<Snapshot>& s
              sim::RecordedLog* log, std::vector<std::pair<std::string, std::string>>* files) {
   AddTagCameraToLog(rig.sim->model(), tc.camera, rig.setup.cameras[0].intrinsics, tc.tags,
                     tc.tag_frames, tc.pixel_std_px, /*centres=*/false, log);
-  std::map<int, int> index;  // tag id -> log->tags
-  for (size_t i = 0; i < log->tags.size(); ++i) index[log->tags[i].id] = static_cast<int>(i);
   for (const Snapshot& s : snaps) {
     if (tc.export_images) {
       // The frame's time in whole nanoseconds, not after s.t: read back, its detections come
@@ -222,7 +220,7 @@ void AddTags(const Rig& rig, const TagCamera& tc, const std::vector<Snapshot>& s
       sim::LogTagRow row;
       row.t = z.t;
       row.camera = 0;
-      row.tag = index.at(z.tag_id);
+      row.tag = sim::TagIndex(*log, z.tag_id);
       for (int k = 0; k < 4; ++k) row.uv[k] = z.uv[k];
       log->tag_rows.push_back(row);
     }

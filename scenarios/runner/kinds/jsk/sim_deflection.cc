@@ -28,6 +28,8 @@ using jsk::Deg;
 
 class JskSimDeflectionKind : public jsk::SyntheticKind {
  public:
+  bool ExportsLog() const final { return true; }
+
   void Configure(const ConfigNode& root) override {
     ConfigureSynthetic(root);
     estimators_ = jsk::ParseAndCheckEstimators(root, rig_);
@@ -35,6 +37,7 @@ class JskSimDeflectionKind : public jsk::SyntheticKind {
 
   void Run(RunContext& ctx) override {
     const jsk::SyntheticRun run = jsk::MakeSyntheticRun(rig_, trajectory_, options_, ctx.seed);
+    if (!ctx.export_log.empty()) jsk::ExportSyntheticLog(rig_, run, options_, ctx.export_log);
     std::vector<int> rejected;
     const std::vector<jsk::Trace> traces = Estimate(run, ctx, &rejected);
     Json& all = (*ctx.summary)["estimators"];

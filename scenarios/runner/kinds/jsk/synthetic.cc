@@ -5,6 +5,7 @@
 
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/lie/so3.h"
+#include "scenarios/runner/common/log_export.h"
 #include "sim/rng.h"
 
 namespace flexbench::scenarios::jsk {
@@ -74,6 +75,26 @@ SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,
     p.cov = Mat3::Identity() * std::max(options.position_std * options.position_std, 1e-12);
   }
   return run;
+}
+
+void ExportSyntheticLog(const Rig& rig, const SyntheticRun& run, const SyntheticOptions& options,
+                        const std::string& dir) {
+  sim::RecordedLog log = LogOfChain(rig.declared, *rig.chain);
+  log.joint_std = options.reference_std;
+  log.sensed_frames = rig.imu_sites;
+  log.sensed_frames.push_back(rig.declared.end_effector);
+  const int ee = static_cast<int>(log.sensed_frames.size()) - 1;
+  // The positions' covariance is std^2: the floor MakeSyntheticRun puts on it as a std.
+  const double position_std = std::max(options.position_std, 1e-6);
+  for (int s = 0; s < run.steps(); ++s) {
+    AddStepToLog(run.joints[s], run.T_true[s], &log);
+    for (size_t k = 0; k < run.orientations[s].size(); ++k) {
+      log.orientations.push_back(
+          {run.orientations[s][k].t, static_cast<int>(k), run.orientations[s][k].q_base_frame});
+    }
+    log.positions.push_back({run.positions[s].t, ee, run.positions[s].p_base, position_std});
+  }
+  WriteLogWithDeclared(log, rig.declared, dir);
 }
 
 Trace RunSynthetic(const Rig& rig, const EstimatorSpec& spec, const SyntheticRun& run,
