@@ -120,6 +120,12 @@ size_t ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std:
   return header.size();
 }
 
+std::string HeaderLine(const std::vector<std::string>& columns) {
+  std::string line;
+  for (size_t i = 0; i < columns.size(); ++i) line += (i ? "," : "") + columns[i];
+  return line + "\n";
+}
+
 void CheckRowColumns(const std::vector<std::string>& cells, size_t want, const std::string& where) {
   if (cells.size() != want) {
     throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +

@@ -118,8 +118,7 @@ std::string ContactsYaml(const RecordedLog& log) {
 std::string ContactsCsv(const RecordedLog& log) {
   std::ostringstream c;
   const std::vector<std::string>& h = ContactsHeader();
-  for (size_t i = 0; i < h.size(); ++i) c << (i ? "," : "") << h[i];
-  c << "\n";
+  c << HeaderLine(h);
   for (const LogContactRow& r : log.contacts) {
     c << Num(r.t) << "," << log.contact_points[r.point].name << "," << log.planes[r.plane].name
       << "," << Num(r.distance_m) << "," << Num(r.std_m) << "\n";

@@ -93,8 +93,7 @@ std::string PosesYaml(const RecordedLog& log) {
 std::string OrientationsCsv(const RecordedLog& log) {
   std::ostringstream c;
   const std::vector<std::string>& h = OrientationsHeader();
-  for (size_t i = 0; i < h.size(); ++i) c << (i ? "," : "") << h[i];
-  c << "\n";
+  c << HeaderLine(h);
   for (const LogOrientationRow& r : log.orientations) {
     const Quat& q = r.q_base_frame;
     c << Num(r.t) << "," << log.sensed_frames[r.frame] << "," << Num(q.w()) << "," << Num(q.x())
@@ -106,8 +105,7 @@ std::string OrientationsCsv(const RecordedLog& log) {
 std::string PositionsCsv(const RecordedLog& log) {
   std::ostringstream c;
   const std::vector<std::string>& h = PositionsHeader();
-  for (size_t i = 0; i < h.size(); ++i) c << (i ? "," : "") << h[i];
-  c << "\n";
+  c << HeaderLine(h);
   for (const LogPositionRow& r : log.positions) {
     c << Num(r.t) << "," << log.sensed_frames[r.frame] << "," << Num(r.p_base.x()) << ","
       << Num(r.p_base.y()) << "," << Num(r.p_base.z()) << "," << Num(r.std_m) << "\n";

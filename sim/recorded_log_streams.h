@@ -45,6 +45,9 @@ std::string Num(double v);
 size_t ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std::string>& want,
                   size_t optional = 0);
 
+// A stream file's header line: the columns, comma-separated, and a newline.
+std::string HeaderLine(const std::vector<std::string>& columns);
+
 // InputError at `where` when a row has another column count than the header's `want`.
 void CheckRowColumns(const std::vector<std::string>& cells, size_t want, const std::string& where);
 

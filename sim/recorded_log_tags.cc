@@ -232,8 +232,7 @@ std::string TagsYaml(const RecordedLog& log) {
 std::string TagsCsv(const RecordedLog& log) {
   std::ostringstream c;
   const std::vector<std::string>& h = TagsHeader(log.has_centre_columns);
-  for (size_t i = 0; i < h.size(); ++i) c << (i ? "," : "") << h[i];
-  c << "\n";
+  c << HeaderLine(h);
   for (const LogTagRow& r : log.tag_rows) {
     c << Num(r.t) << "," << log.cameras[r.camera].name << "," << log.tags[r.tag].id;
     for (int k = 0; k < 4; ++k) c << "," << Num(r.uv[k].x()) << "," << Num(r.uv[k].y());

@@ -232,11 +232,12 @@ std::optional<std::string> Report(const std::uint8_t* data, std::size_t size) {
 
 std::optional<std::string> RecordedLog(const std::uint8_t* data, std::size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);
-  std::vector<std::string> parts(4);
+  constexpr int kParts = 6;
+  std::vector<std::string> parts(kParts);
   size_t part = 0, begin = 0;
-  while (part < 4) {
+  while (part < kParts) {
     const size_t cut = text.find("\n----\n", begin);
-    if (cut == std::string::npos || part == 3) {
+    if (cut == std::string::npos || part == kParts - 1) {
       parts[part] = text.substr(begin);
       break;
     }
@@ -246,8 +247,9 @@ std::optional<std::string> RecordedLog(const std::uint8_t* data, std::size_t siz
   const fs::path dir = Work("log");
   fs::remove_all(dir);
   fs::create_directories(dir);
-  const char* names[4] = {"joints.csv", "imu.csv", "truth.tum", "tags.csv"};
-  for (int i = 0; i < 4; ++i) {
+  const char* names[kParts] = {"joints.csv", "imu.csv",          "truth.tum",
+                               "tags.csv",   "orientations.csv", "positions.csv"};
+  for (int i = 0; i < kParts; ++i) {
     WriteFile(dir / names[i], reinterpret_cast<const std::uint8_t*>(parts[i].data()),
               parts[i].size());
   }
@@ -263,7 +265,10 @@ std::optional<std::string> RecordedLog(const std::uint8_t* data, std::size_t siz
            : "cameras: {cam0: {frame: c, fx: 500, fy: 500, cx: 320, cy: 240, width: 640, "
              "height: 480}}\ntags: {file: tags.csv, pixel_std_px: 0.5, ids: {20: {frame: t, "
              "size_m: 0.04}, 3: {frame: u, corners_m: [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, "
-             "0]]}}}\n");
+             "0]]}}}\n") +
+      // A fifth and sixth part: orientations.csv and positions.csv.
+      (parts[4].empty() ? "" : "orientations: {file: orientations.csv, clock_offset_s: 0.2}\n") +
+      (parts[5].empty() ? "" : "positions: {file: positions.csv}\n");
   WriteFile(dir / "log.yaml", reinterpret_cast<const std::uint8_t*>(yaml.data()), yaml.size());
   return Guard([&] {
     const sim::RecordedLog log = sim::ReadRecordedLog(dir.string());
