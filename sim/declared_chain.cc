@@ -72,6 +72,7 @@ class ChainBuilder {
     }
     // End effector first, so its chain gets the first q indices in root-to-tip order.
     out_->end_effector = AddTarget(d_.end_effector, "end_effector");
+    out_->end_effector_name = d_.end_effector;
     for (const std::string& name : d_.observed_frames) {
       out_->observed.emplace_back(name, AddTarget(name, "observed_frames"));
     }

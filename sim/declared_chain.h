@@ -33,6 +33,7 @@ struct DeclaredChain {
   // MuJoCo body the PPOE base frame stands for, and the end-effector frame.
   int base_body = 0;
   kinematics::FrameId end_effector = -1;
+  std::string end_effector_name;  // as the declared model names it
   // Observed frames by their declared name.
   std::vector<std::pair<std::string, kinematics::FrameId>> observed;
   // The declared file's identified effects (none when it has none), with the chain's masses and

@@ -161,12 +161,14 @@ using log_internal::Num;
 using log_internal::OrientationsCsv;
 using log_internal::PosesYaml;
 using log_internal::PositionsCsv;
+using log_internal::PosturesCsv;
 using log_internal::ReadCameras;
 using log_internal::ReadContacts;
 using log_internal::ReadHeader;
 using log_internal::ReadImages;
 using log_internal::ReadOrientations;
 using log_internal::ReadPositions;
+using log_internal::ReadPostures;
 using log_internal::ReadTags;
 using log_internal::RowTime;
 using log_internal::Stats;
@@ -346,6 +348,7 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   if (const auto contacts = root.Optional("contacts")) ReadContacts(*contacts, &log, &used);
   if (const auto o = root.Optional("orientations")) ReadOrientations(*o, &log, &used);
   if (const auto p = root.Optional("positions")) ReadPositions(*p, &log, &used);
+  if (const auto p = root.Optional("postures")) ReadPostures(*p, &log, &used);
   if (const auto images = root.Optional("images")) {
     if (!log.tag_rows.empty() || (root.Has("tags") && root.Child("tags").Has("file"))) {
       images->Fail("a log has tags.csv or images, not both");
@@ -468,6 +471,7 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
   if (!log.planes.empty()) WriteText(tmp / "contacts.csv", ContactsCsv(log));
   if (!log.orientations.empty()) WriteText(tmp / "orientations.csv", OrientationsCsv(log));
   if (!log.positions.empty()) WriteText(tmp / "positions.csv", PositionsCsv(log));
+  if (!log.posture_starts.empty()) WriteText(tmp / "postures.csv", PosturesCsv(log));
   WriteText(tmp / "log.yaml", LogYaml(log));
 }
 

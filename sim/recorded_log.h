@@ -13,6 +13,7 @@
 //               truth: {file: truth.tum, frame: grasp_point}  # optional
 //               static_postures: false   # true: each joint row is a posture of its own,
 //                                        # estimated afresh (a data set, not a motion)
+//               postures: {file: postures.csv}   # optional: when postures of several rows begin
 //               cameras:                                        # with tags
 //                 cam0: {frame: external_camera, fx: 600, fy: 600, cx: 320, cy: 240,
 //                        width: 640, height: 480}
@@ -44,6 +45,9 @@
 //   positions.csv  t_s, frame, x_m, y_m, z_m, std_m: an observed frame's origin in the base
 //               frame as a tracker reads it, with its noise per axis, fused by the estimators
 //               (truth.tum, by contrast, only scores them)
+//   postures.csv  t_s: the times at which a posture begins (the arm resting while several
+//               readings come in); the estimators start afresh at the first step at or after
+//               each
 //   images/<camera>/<t_ns>.png   a camera's frames, named by their time in nanoseconds: the
 //               scenario layer detects their tags (scenarios/runner/common/log_images.h)
 //
@@ -166,8 +170,9 @@ struct LogContactRow {
 struct RecordedLog {
   std::string dir;
   std::string robot;
-  std::string declared_path;     // resolved against the folder
-  bool static_postures = false;  // each joint row a posture of its own (log.yaml's key)
+  std::string declared_path;           // resolved against the folder
+  bool static_postures = false;        // each joint row a posture of its own (log.yaml's key)
+  std::vector<double> posture_starts;  // postures.csv: when each posture begins, in time order
   // joints.csv: the joints in its column order, whether each is a slide (_m), its rows.
   std::vector<std::string> joints;
   std::vector<char> joint_is_slide;
@@ -216,7 +221,8 @@ RecordedLog ReadRecordedLog(const std::string& dir);
 // 0, the times as they are; the truth's rotation goes through its quaternion, so to the last
 // digit): log.yaml with `declared:` as log.declared_path is written, then
 // joints.csv, imu.csv when it has IMUs, truth.tum when it has truth, tags.csv when it has tag
-// rows, orientations.csv and positions.csv when it has such rows. `files`: further files to
+// rows, orientations.csv, positions.csv and postures.csv when it has such rows. `files`: further
+// files to
 // write there first (name relative to the folder, bytes), e.g.
 // the declared model or images/<camera>/<t_ns>.png (log.yaml then names `images:` when the log
 // has `images` and no tag rows). The folder appears whole or not at all.

@@ -1,5 +1,6 @@
-// A recorded log's orientation and position readings of observed frames (recorded_log.h):
-// log.yaml's `orientations` and `positions`, their CSVs, and their writers.
+// A recorded log's orientation and position readings of observed frames and its postures
+// (recorded_log.h): log.yaml's `orientations`, `positions` and `postures`, their CSVs, and their
+// writers.
 #include <cmath>
 #include <sstream>
 
@@ -83,11 +84,33 @@ void ReadPositions(const ConfigNode& node, RecordedLog* log, double* used) {
       });
 }
 
+void ReadPostures(const ConfigNode& node, RecordedLog* log, double* used) {
+  const std::string file = node.ResolvePath(node.GetString("file"));
+  const double offset = ClockOffset(node);
+  CsvLines csv(file, kMaxLogStreamBytes);
+  ReadHeader(&csv, file, {"t_s"});
+  log->posture_starts.reserve(CheckRows(file, 16.0, used));
+  std::vector<std::string> cells;
+  double last = 0.0;
+  while (csv.Next(&cells)) {
+    CheckRowColumns(cells, 1, csv.Where());
+    log->posture_starts.push_back(
+        RowTime(cells[0], csv.Where(), offset, &last, !log->posture_starts.empty()));
+  }
+}
+
 std::string PosesYaml(const RecordedLog& log) {
   std::string y;
   if (!log.orientations.empty()) y += "orientations: {file: orientations.csv}\n";
   if (!log.positions.empty()) y += "positions: {file: positions.csv}\n";
+  if (!log.posture_starts.empty()) y += "postures: {file: postures.csv}\n";
   return y;
+}
+
+std::string PosturesCsv(const RecordedLog& log) {
+  std::string c = HeaderLine({"t_s"});
+  for (double t : log.posture_starts) c += Num(t) + "\n";
+  return c;
 }
 
 std::string OrientationsCsv(const RecordedLog& log) {

@@ -85,10 +85,12 @@ void ReadContacts(const ConfigNode& node, RecordedLog* log, double* used);
 std::string ContactsYaml(const RecordedLog& log);
 std::string ContactsCsv(const RecordedLog& log);
 
-// log.yaml's `orientations` and `positions` and their CSVs (recorded_log_poses.cc), and their
-// writers.
+// log.yaml's `orientations`, `positions` and `postures` and their CSVs (recorded_log_poses.cc),
+// and their writers.
 void ReadOrientations(const ConfigNode& node, RecordedLog* log, double* used);
 void ReadPositions(const ConfigNode& node, RecordedLog* log, double* used);
+void ReadPostures(const ConfigNode& node, RecordedLog* log, double* used);
+std::string PosturesCsv(const RecordedLog& log);
 std::string PosesYaml(const RecordedLog& log);
 std::string OrientationsCsv(const RecordedLog& log);
 std::string PositionsCsv(const RecordedLog& log);

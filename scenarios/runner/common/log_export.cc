@@ -2,6 +2,8 @@
 
 #include <filesystem>
 
+#include "estimators/error.h"
+
 namespace flexbench::scenarios {
 
 sim::RecordedLog LogOfChain(const sim::DeclaredModel& declared, const sim::DeclaredChain& chain) {
@@ -34,6 +36,26 @@ void WriteLogWithDeclared(const sim::RecordedLog& log, const sim::DeclaredModel&
   files.emplace_back("declared.yaml",
                      sim::EmitDeclaredModel(d, "The declared model of the run.", 17));
   sim::WriteRecordedLog(log, dir, files);
+}
+
+void WriteLogsWithDeclared(const std::vector<std::pair<std::string, sim::RecordedLog>>& logs,
+                           const sim::DeclaredModel& declared, const std::string& dir) {
+  namespace fs = std::filesystem;
+  const fs::path target = fs::absolute(dir).lexically_normal();
+  const fs::path tmp = target.string() + ".tmp";
+  std::error_code ec;
+  if (fs::exists(target, ec) || fs::exists(tmp, ec)) {
+    throw InputError(CapForMessage(dir) +
+                     " or its .tmp exists; logs are written into a new folder");
+  }
+  fs::create_directories(tmp);
+  try {
+    for (const auto& [name, log] : logs) WriteLogWithDeclared(log, declared, (tmp / name).string());
+    fs::rename(tmp, target);
+  } catch (...) {
+    fs::remove_all(tmp, ec);  // ours alone: it did not exist before
+    throw;
+  }
 }
 
 }  // namespace flexbench::scenarios

@@ -28,4 +28,9 @@ void WriteLogWithDeclared(const sim::RecordedLog& log, const sim::DeclaredModel&
                           const std::string& dir,
                           std::vector<std::pair<std::string, std::string>> files = {});
 
+// Several logs, each in `dir`/<name> (a folder per effect column, per seed), with `declared`
+// beside each; `dir` appears whole or not at all.
+void WriteLogsWithDeclared(const std::vector<std::pair<std::string, sim::RecordedLog>>& logs,
+                           const sim::DeclaredModel& declared, const std::string& dir);
+
 }  // namespace flexbench::scenarios

@@ -27,6 +27,12 @@ void UpTo(const std::vector<size_t>& order, const std::vector<Row>& rows, double
   for (; *next < order.size() && rows[order[*next]].t <= t; ++*next) fn(rows[order[*next]]);
 }
 
+// A frame orientations.csv or positions.csv reads: the end effector or an observed frame.
+kinematics::FrameId SensedFrame(const sim::DeclaredChain& chain, const std::string& name) {
+  if (chain.end_effector_name == name) return chain.end_effector;
+  return chain.ObservedFrame(name);
+}
+
 }  // namespace
 
 estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
@@ -60,7 +66,7 @@ estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
   for (int f : oriented) {
     estimators::ImuSetup s;
     try {
-      s.frame = chain.ObservedFrame(log.sensed_frames[f]);
+      s.frame = SensedFrame(chain, log.sensed_frames[f]);
     } catch (const InputError& e) {
       throw InputError(log_yaml + ": orientations: frame '" + log.sensed_frames[f] +
                        "': " + e.what());
@@ -112,7 +118,7 @@ LogIndex IndexLog(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
   }
   for (const std::string& frame : log.sensed_frames) {
     try {
-      index.sensed_frame.push_back(chain.ObservedFrame(frame));
+      index.sensed_frame.push_back(SensedFrame(chain, frame));
     } catch (const InputError& e) {
       throw InputError(log.dir + "/log.yaml: orientations or positions: frame '" + frame +
                        "': " + e.what());
@@ -171,12 +177,19 @@ int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vec
   estimators::PlaneContact contact;
   estimators::OrientationReading orientation;
   estimators::PositionReading position;
-  size_t next_imu = 0, next_tag = 0, next_contact = 0, next_orientation = 0, next_position = 0;
+  size_t next_imu = 0, next_tag = 0, next_contact = 0, next_orientation = 0, next_position = 0,
+         next_posture = 0;
   for (size_t s = 0; s < steps.size(); ++s) {
     const LogStep& step = steps[s];
     UpTo(imu_order, log.imu, step.t, &next_imu,
          [&](const estimators::ImuReading& r) { count(est.Update(r)); });
-    if (log.static_postures) est.Reset();  // a posture of its own: estimated afresh
+    // A posture of its own (a static-posture row, or one postures.csv begins): estimated afresh.
+    bool fresh = log.static_postures;
+    for (; next_posture < log.posture_starts.size() && log.posture_starts[next_posture] <= step.t;
+         ++next_posture) {
+      fresh = true;
+    }
+    if (fresh) est.Reset();
     est.Predict(step.t);
     j.t = step.t;
     for (int k = 0; k < j.q.size(); ++k) j.q[k] = log.q(step.row)[column[k]];

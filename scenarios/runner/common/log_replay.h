@@ -57,9 +57,9 @@ std::vector<size_t> ImuTimeOrder(const sim::RecordedLog& log);
 // Runs `est` over `steps` (the IMU readings through `imu_order`, the tag detections through
 // `index`): at each step the IMU readings up to its time, the joint row, then the
 // orientations, positions, tag detections and contacts up to its time; calling
-// on_step(step index, belief) after each step; on a log of static postures
-// each step starts from Reset. Returns the readings the estimator did not accept (rejected now
-// or deferred).
+// on_step(step index, belief) after each step; a step that begins a posture (every step of a log
+// of static postures; the first at or after each of postures.csv's times) starts from Reset.
+// Returns the readings the estimator did not accept (rejected now or deferred).
 int ReplayLog(const sim::RecordedLog& log, const LogIndex& index, const std::vector<LogStep>& steps,
               const std::vector<size_t>& imu_order, estimators::Estimator& est,
               const std::function<void(size_t, const estimators::Belief&)>& on_step);

@@ -18,6 +18,7 @@
 #include "estimators/stats/chi_square.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/sim_readings.h"
@@ -42,6 +43,8 @@ std::string Fmt(const char* f, double v) {
 
 class MismatchMatrixKind : public ScenarioKind {
  public:
+  bool ExportsLog() const final { return true; }
+
   void Configure(const ConfigNode& root) override {
     declared_ = ReadModelAndDeclared(root, &model_path_);
     const ConfigNode effects = root.Child("effects");
@@ -88,7 +91,22 @@ class MismatchMatrixKind : public ScenarioKind {
     std::vector<std::vector<ErrorStats>> stats(
         instances_.size(),
         std::vector<ErrorStats>(columns_.size(), ErrorStats(std::min(10, count_))));
-    for (size_t col = 0; col < columns_.size(); ++col) RunColumn(col, configs, &stats, ctx);
+    // --export-log: each column's readings as a log, DIR/<column>: its configurations are
+    // postures (postures.csv: the estimators start afresh at each, as here), every step's
+    // encoders and tracked point (positions.csv), the truth.
+    std::vector<std::pair<std::string, sim::RecordedLog>> logs;
+    for (size_t col = 0; col < columns_.size(); ++col) {
+      if (!ctx.export_log.empty()) {
+        logs.emplace_back(columns_[col], LogOfChain(declared_, *chain_));
+        logs.back().second.joint_std = encoder_std_;
+        logs.back().second.sensed_frames = {declared_.end_effector};
+      }
+      RunColumn(col, configs, &stats, ctx, logs.empty() ? nullptr : &logs.back().second);
+    }
+    if (!logs.empty()) {
+      WriteLogsWithDeclared(logs, declared_, ctx.export_log);
+      ctx.log("readings of every column written to " + ctx.export_log + "/<column>");
+    }
     Report(stats, ctx);
   }
 
@@ -115,7 +133,8 @@ class MismatchMatrixKind : public ScenarioKind {
   };
 
   void RunColumn(size_t col, const std::vector<Eigen::VectorXd>& configs,
-                 std::vector<std::vector<ErrorStats>>* stats, RunContext& ctx) {
+                 std::vector<std::vector<ErrorStats>>* stats, RunContext& ctx,
+                 sim::RecordedLog* log) {
     sim::Simulation& sim = *sims_[col];
     const sim::FrameRef ee = sims_[0]->Frame(declared_.end_effector);
     TrajectoryRecorder trajectories;  // one pose per configuration (timestamp: its index)
@@ -131,8 +150,9 @@ class MismatchMatrixKind : public ScenarioKind {
       // The arm rests while readings stream in (fresh noise each step); filters that need
       // several steps to converge get them, EKFs restart from each step's prior.
       for (auto& est : instances_) est->Reset();
+      if (log) log->posture_starts.push_back(c * steps_);
       for (int step = 0; step < steps_; ++step) {
-        FeedStep(sim, T_true, c * steps_ + step, &noise);
+        FeedStep(sim, T_true, c * steps_ + step, &noise, log);
       }
       trajectories.AddTruth(c, T_true);
       for (size_t e = 0; e < instances_.size(); ++e) {
@@ -156,8 +176,10 @@ class MismatchMatrixKind : public ScenarioKind {
     return act;
   }
 
-  // One step's readings (the encoders and the tracked point, with noise) into every estimator.
-  void FeedStep(const sim::Simulation& sim, const lie::SE3& T_true, double t, Noise* noise) {
+  // One step's readings (the encoders and the tracked point, with noise) into every estimator,
+  // and into `log` when given.
+  void FeedStep(const sim::Simulation& sim, const lie::SE3& T_true, double t, Noise* noise,
+                sim::RecordedLog* log) {
     const int nq = chain_->model.nq();
     estimators::JointReading joints;
     joints.t = t;
@@ -175,6 +197,10 @@ class MismatchMatrixKind : public ScenarioKind {
     const double n2 = (*noise)(), n1 = (*noise)(), n0 = (*noise)();
     point.p_base = T_true.translation() + point_std_ * Vec3(n0, n1, n2);
     point.cov = point_std_ * point_std_ * Mat3::Identity();
+    if (log) {
+      AddStepToLog(joints, T_true, log);
+      log->positions.push_back({t, 0, point.p_base, point_std_});
+    }
     for (auto& est : instances_) {
       est->Predict(t);
       est->Update(joints);

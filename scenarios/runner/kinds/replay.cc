@@ -59,9 +59,9 @@ class ReplayKind : public ScenarioKind {
     if (!(step_hz_ >= 0.0) || !std::isfinite(step_hz_)) {
       root.Child("step_hz").Fail("must be 0 (a step per joint row) or a rate > 0 in Hz");
     }
-    if (step_hz_ > 0.0 && log_.static_postures) {
+    if (step_hz_ > 0.0 && (log_.static_postures || !log_.posture_starts.empty())) {
       root.Child("step_hz").Fail(
-          "a log of static postures (static_postures: true) is replayed a posture a step");
+          "a log of postures (static_postures, postures.csv) is replayed a joint row a step");
     }
     if (const auto c = root.Optional("imu_clock_offset")) {
       if (c->AsString() != "estimate") c->Fail("expected 'estimate' (or leave it out)");

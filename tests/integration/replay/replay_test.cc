@@ -354,6 +354,70 @@ TEST(Replay, AnExportedSyntheticRunReplaysToTheSameBits) {
   EXPECT_NE(log_yaml.find("positions: {file: positions.csv}"), std::string::npos);
 }
 
+// Rows of a trajectory file (TUM, or a covariance CSV) by their first field, the time.
+std::map<std::string, std::string> RowsByTime(const fs::path& file) {
+  std::map<std::string, std::string> rows;
+  std::istringstream in(testing::ReadFile(file));
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty() || line[0] == '#' || line.rfind("timestamp", 0) == 0) continue;
+    const size_t cut = line.find_first_of(" ,");
+    rows[line.substr(0, cut)] = line.substr(cut + 1);
+  }
+  return rows;
+}
+
+// mismatch_matrix: each effect column's log (DIR/<column>), its configurations postures of 20
+// readings at rest (postures.csv: the estimators start afresh at each) with the tracked end
+// effector (positions.csv). Replayed (the kind's estimators are seeded 1), each configuration's
+// last step gives the live estimate and covariance, bit for bit.
+TEST(Replay, AnExportedMismatchMatrixReplaysEachConfigurationToTheSameBits) {
+  testing::TempDir tmp;
+  std::string yaml = testing::ReadFile(testing::SourceDir() + "/scenarios/mismatch_matrix.yaml");
+  for (size_t at; (at = yaml.find("../models/")) != std::string::npos;) {
+    yaml.replace(at, 10, testing::SourceDir() + "/models/");
+  }
+  yaml = yaml.substr(0, yaml.find("gates:"));
+  const std::string count = "configurations: 30\n";
+  ASSERT_NE(yaml.find(count), std::string::npos);
+  yaml.replace(yaml.find(count), count.size(), "configurations: 4\n");
+  testing::WriteFile(tmp.path() / "live.yaml", yaml);
+  const CommandResult live =
+      RunCommand(testing::Flexbench() + " run " + (tmp.path() / "live.yaml").string() + " --out " +
+                 (tmp.path() / "live").string() + " --export-log " + (tmp.path() / "log").string() +
+                 " --quiet");
+  ASSERT_EQ(live.exit_code, 0) << live.err;
+  std::string block = yaml.substr(yaml.find("\nestimators:") + 1);
+  for (size_t at; (at = block.find("\n  #")) != std::string::npos;) {
+    block.erase(at + 1, block.find('\n', at + 1) - at);  // comment lines inside the block
+  }
+  for (const std::string column : {"none", "encoder_offset"}) {
+    const fs::path log = tmp.path() / "log" / column;
+    EXPECT_NE(testing::ReadFile(log / "log.yaml").find("postures: {file: postures.csv}"),
+              std::string::npos);
+    testing::WriteFile(
+        tmp.path() / "replay.yaml",
+        "scenario: replayed\nkind: replay\nseed: 1\nlog: " + log.string() + "\n" + block);
+    const fs::path out = tmp.path() / ("replayed_" + column);
+    const CommandResult replay =
+        RunCommand(testing::Flexbench() + " run " + (tmp.path() / "replay.yaml").string() +
+                   " --out " + out.string() + " --quiet");
+    ASSERT_EQ(replay.exit_code, 0) << replay.err;
+    for (const std::string name : {"fk", "naive_ekf", "ppoe_ekf", "pf_encoders_ee"}) {
+      for (const std::string ext : {".tum", ".cov.csv"}) {
+        const auto live_rows =
+            RowsByTime(tmp.path() / "live" / "trajectories" / "base" / column / (name + ext));
+        const auto replayed = RowsByTime(out / "trajectories" / "base" / (name + ext));
+        ASSERT_EQ(live_rows.size(), 4u) << column << " " << name << ext;
+        for (const auto& [config, row] : live_rows) {
+          const std::string last_step = std::to_string(std::stoi(config) * 20 + 19);
+          ASSERT_TRUE(replayed.count(last_step)) << column << " " << name << ext << " " << config;
+          EXPECT_EQ(replayed.at(last_step), row) << column << " " << name << ext << " " << config;
+        }
+      }
+    }
+  }
+}
+
 // A log of static postures is replayed a posture a step: a step rate is refused, in one line.
 TEST(Replay, AStepRateOnStaticPosturesIsRefused) {
   testing::TempDir tmp;
@@ -365,8 +429,8 @@ TEST(Replay, AStepRateOnStaticPosturesIsRefused) {
       RunCommand(testing::Flexbench() + " replay " + (tmp.path() / "log").string() +
                  " --estimators fk --step-hz 10 --quiet --out " + (tmp.path() / "out").string());
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_NE(r.err.find("a log of static postures (static_postures: true) is replayed a posture a "
-                       "step"),
+  EXPECT_NE(r.err.find("a log of postures (static_postures, postures.csv) is replayed a joint "
+                       "row a step"),
             std::string::npos)
       << r.err;
   EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << r.err;

@@ -256,21 +256,24 @@ TEST(RecordedLog, TagCentresAndJointNoiseRoundTrip) {
   }
 }
 
-// Orientation and position readings of observed frames: read (with the stream's clock offset),
-// written and read back; a quaternion off unit length and a std of 0 are named.
+// Orientation and position readings of observed frames and posture starts: read (with the
+// stream's clock offset), written and read back; a quaternion off unit length and a std of 0
+// are named.
 TEST(RecordedLog, OrientationsAndPositionsRoundTrip) {
   testing::TempDir dir;
   Files f;
   f.log_yaml +=
       "orientations: {file: orientations.csv, clock_offset_s: 0.25}\n"
-      "positions: {file: positions.csv}\n";
+      "positions: {file: positions.csv}\npostures: {file: postures.csv}\n";
   f.Write(dir.path());
   std::ofstream(dir.path() / "orientations.csv")
       << "t_s,frame,qw,qx,qy,qz\n0.1,imu_link2,1,0,0,0\n0.1,imu_link3,0.6,0.8,0,0\n"
          "0.2,imu_link2,0,0,1,0\n";
   std::ofstream(dir.path() / "positions.csv")
       << "t_s,frame,x_m,y_m,z_m,std_m\n0.1,grasp_point,0.5,-0.25,1.125,0.001\n";
+  std::ofstream(dir.path() / "postures.csv") << "t_s\n0\n0.2\n";
   const RecordedLog log = ReadRecordedLog(dir.path().string());
+  EXPECT_EQ(log.posture_starts, (std::vector<double>{0.0, 0.2}));
   ASSERT_EQ(log.orientations.size(), 3u);
   ASSERT_EQ(log.positions.size(), 1u);
   EXPECT_EQ(log.sensed_frames, (std::vector<std::string>{"imu_link2", "imu_link3", "grasp_point"}));
@@ -291,6 +294,7 @@ TEST(RecordedLog, OrientationsAndPositionsRoundTrip) {
   }
   EXPECT_EQ(back.positions[0].p_base, log.positions[0].p_base);
   EXPECT_EQ(back.positions[0].std_m, 0.001);
+  EXPECT_EQ(back.posture_starts, log.posture_starts);
   const auto error = [&](const std::string& file, const std::string& text) {
     std::ofstream(dir.path() / file) << text;
     try {

@@ -23,6 +23,7 @@
 #include <cstdio>
 
 #include "render/plot.h"
+#include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/jsk/jsk_kind.h"
 #include "scenarios/runner/kinds/jsk/plots.h"
@@ -76,6 +77,8 @@ struct SweepOutput {
 
 class JskParticleSweepKind : public jsk::SyntheticKind {
  public:
+  bool ExportsLog() const final { return true; }
+
   void Configure(const ConfigNode& root) override {
     ConfigureSynthetic(root);
     base_.name = root.GetString("estimator");
@@ -99,6 +102,14 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     Json& metrics = (*ctx.summary)["metrics"];
     Json& all = (*ctx.summary)["estimators"];
     const std::vector<jsk::SyntheticRun> runs = MakeRuns(ctx);
+    if (!ctx.export_log.empty()) {  // each synthetic run's readings, DIR/seed_<its seed>
+      std::vector<std::pair<std::string, sim::RecordedLog>> logs;
+      for (int s = 0; s < seeds_; ++s) {
+        logs.emplace_back("seed_" + std::to_string(ctx.seed + 1000 * s),
+                          jsk::SyntheticLog(rig_, runs[s], options_));
+      }
+      WriteLogsWithDeclared(logs, rig_.declared, ctx.export_log);
+    }
     SweepOutput out = StartOutput(runs);
     for (const Setting& setting : Settings()) {
       const RunMetrics mean = RunSetting(setting, runs, ctx, &out, &all);

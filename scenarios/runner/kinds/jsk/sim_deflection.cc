@@ -17,6 +17,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/kinds/jsk/jsk_kind.h"
 #include "scenarios/runner/kinds/jsk/plots.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -37,7 +38,9 @@ class JskSimDeflectionKind : public jsk::SyntheticKind {
 
   void Run(RunContext& ctx) override {
     const jsk::SyntheticRun run = jsk::MakeSyntheticRun(rig_, trajectory_, options_, ctx.seed);
-    if (!ctx.export_log.empty()) jsk::ExportSyntheticLog(rig_, run, options_, ctx.export_log);
+    if (!ctx.export_log.empty()) {
+      WriteLogWithDeclared(jsk::SyntheticLog(rig_, run, options_), rig_.declared, ctx.export_log);
+    }
     std::vector<int> rejected;
     const std::vector<jsk::Trace> traces = Estimate(run, ctx, &rejected);
     Json& all = (*ctx.summary)["estimators"];

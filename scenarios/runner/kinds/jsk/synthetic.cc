@@ -77,8 +77,8 @@ SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,
   return run;
 }
 
-void ExportSyntheticLog(const Rig& rig, const SyntheticRun& run, const SyntheticOptions& options,
-                        const std::string& dir) {
+sim::RecordedLog SyntheticLog(const Rig& rig, const SyntheticRun& run,
+                              const SyntheticOptions& options) {
   sim::RecordedLog log = LogOfChain(rig.declared, *rig.chain);
   log.joint_std = options.reference_std;
   log.sensed_frames = rig.imu_sites;
@@ -94,7 +94,7 @@ void ExportSyntheticLog(const Rig& rig, const SyntheticRun& run, const Synthetic
     }
     log.positions.push_back({run.positions[s].t, ee, run.positions[s].p_base, position_std});
   }
-  WriteLogWithDeclared(log, rig.declared, dir);
+  return log;
 }
 
 Trace RunSynthetic(const Rig& rig, const EstimatorSpec& spec, const SyntheticRun& run,

@@ -6,13 +6,13 @@
 #pragma once
 
 #include <cstdint>
-#include <string>
 #include <vector>
 
 #include "estimators/measurement.h"
 #include "scenarios/runner/kinds/jsk/rig.h"
 #include "scenarios/runner/kinds/jsk/trace.h"
 #include "scenarios/runner/kinds/jsk/trajectory.h"
+#include "sim/recorded_log.h"
 
 namespace flexbench::scenarios::jsk {
 
@@ -36,11 +36,11 @@ struct SyntheticRun {
 SyntheticRun MakeSyntheticRun(const Rig& rig, const Trajectory& trajectory,
                               const SyntheticOptions& options, std::uint64_t seed);
 
-// The run's readings as a recorded log in the new folder `dir` (--export-log): the reference
-// encoders with their noise, each IMU frame's orientation readings (orientations.csv) and the
-// end effector's positions (positions.csv), the truth.
-void ExportSyntheticLog(const Rig& rig, const SyntheticRun& run, const SyntheticOptions& options,
-                        const std::string& dir);
+// The run's readings as a recorded log (--export-log): the reference encoders with their
+// noise, each IMU frame's orientation readings (orientations.csv) and the end effector's
+// positions (positions.csv), the truth.
+sim::RecordedLog SyntheticLog(const Rig& rig, const SyntheticRun& run,
+                              const SyntheticOptions& options);
 
 // Runs an estimator over a synthetic run (Predict, encoders, IMUs, end-effector position).
 Trace RunSynthetic(const Rig& rig, const EstimatorSpec& spec, const SyntheticRun& run,
