@@ -339,6 +339,7 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   log.robot = root.GetString("robot", "");
   log.declared_path = root.ResolvePath(root.GetString("declared"));
   log.static_postures = root.GetBool("static_postures", false);
+  log.estimate_in = root.GetString("estimate_in", "");
   double used = 0.0;  // bytes the streams' rows take
   ReadJoints(root.Child("joints"), &log, &used);
   if (const auto imu = root.Optional("imu")) ReadImu(*imu, &log, &used);
@@ -392,6 +393,7 @@ std::string LogYaml(const RecordedLog& log) {
   }
   if (!log.truth_t.empty()) y << "truth: {file: truth.tum, frame: " << log.truth_frame << "}\n";
   if (log.static_postures) y << "static_postures: true\n";
+  if (!log.estimate_in.empty()) y << "estimate_in: " << log.estimate_in << "\n";
   y << TagsYaml(log) << ContactsYaml(log) << PosesYaml(log);
   return y.str();
 }

@@ -11,6 +11,8 @@
 //                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0],
 //                                      filter_beta: 0.05}}}   # Madgwick's gain, rad/s
 //               truth: {file: truth.tum, frame: grasp_point}  # optional
+//               estimate_in: head_camera  # optional: an observed frame the estimators work
+//                                        # in; truth.tum and the planes are in it too
 //               static_postures: false   # true: each joint row is a posture of its own,
 //                                        # estimated afresh (a data set, not a motion)
 //               postures: {file: postures.csv}   # optional: when postures of several rows begin
@@ -25,7 +27,7 @@
 //               positions: {file: positions.csv, clock_offset_s: 0}        # optional
 //               contacts: {file: contacts.csv, clock_offset_s: 0,           # optional
 //                 planes: {table: {T_base_plane: [x, y, z, qw, qx, qy, qz],
-//                                  std_m: 0.001, std_deg: 0.5}},
+//                                  std_m: 0.001, std_deg: 0.5}},  # or std: [6] (m, rad)
 //                 points: {tip: {frame: grasp_point, p_frame_m: [0, 0, 0]}}}
 //   joints.csv  t_s, then one column per joint: <joint>_rad (<joint>_m for a slide)
 //   imu.csv     t_s, sensor, gx_rad_s, gy_rad_s, gz_rad_s, ax_m_s2, ay_m_s2, az_m_s2 (sensor
@@ -134,9 +136,11 @@ bool DiagonalsCross(const std::array<Eigen::Vector2d, 4>& uv, Eigen::Vector2d* c
 inline Vec3 TagCentre(const std::array<Vec3, 4>& c) { return 0.25 * (c[0] + c[1] + c[2] + c[3]); }
 
 struct LogPlane {
-  std::string name;  // contacts.csv's `plane`
-  lie::SE3 T_base_plane;
-  Mat6 cov = Mat6::Zero();
+  std::string name;                      // contacts.csv's `plane`
+  Quat q_base_plane = Quat::Identity();  // as stated (written back as it is)
+  lie::SE3 T_base_plane;                 // PlanePose of it and the stated position
+  Vec6 std = Vec6::Zero();               // of its tangent [rho; theta] as stated (m, rad)
+  Mat6 cov = Mat6::Zero();               // diag(std^2)
 };
 
 struct LogContactPoint {
@@ -170,8 +174,9 @@ struct LogContactRow {
 struct RecordedLog {
   std::string dir;
   std::string robot;
-  std::string declared_path;           // resolved against the folder
-  bool static_postures = false;        // each joint row a posture of its own (log.yaml's key)
+  std::string declared_path;     // resolved against the folder
+  std::string estimate_in;       // the frame estimates, truth and planes are in ("": the base)
+  bool static_postures = false;  // each joint row a posture of its own (log.yaml's key)
   std::vector<double> posture_starts;  // postures.csv: when each posture begins, in time order
   // joints.csv: the joints in its column order, whether each is a slide (_m), its rows.
   std::vector<std::string> joints;
@@ -209,6 +214,12 @@ struct RecordedLog {
 
   const double* q(size_t row) const { return joint_q.data() + row * joints.size(); }
 };
+
+// The pose a log's plane [x, y, z, qw, qx, qy, qz] stands for: the quaternion normalised, as
+// the reader takes it (a kind that exports a plane builds its pose so, for the same bits).
+inline lie::SE3 PlanePose(const Quat& q, const Vec3& p) {
+  return lie::SE3(q.normalized().toRotationMatrix(), p);
+}
 
 // Index of the tag `id` in log.tags, -1 when the log has no such tag.
 int TagIndex(const RecordedLog& log, int id);

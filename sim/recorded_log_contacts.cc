@@ -29,12 +29,22 @@ LogPlane ReadPlane(const std::string& name, const ConfigNode& p) {
   if (!ok || std::abs(q.norm() - 1.0) > 1e-6) {
     pose.Fail("expected [x, y, z, qw, qx, qy, qz] (m, a unit quaternion)");
   }
-  plane.T_base_plane = lie::SE3(q.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
-  const double std_m = p.GetDouble("std_m", 0.0), std_deg = p.GetDouble("std_deg", 0.0);
-  if (!(std_m >= 0.0 && std_m <= 10.0)) p.Child("std_m").Fail("must be in [0, 10] m");
-  if (!(std_deg >= 0.0 && std_deg <= 180.0)) p.Child("std_deg").Fail("must be in [0, 180] deg");
-  plane.cov.diagonal() << Vec3::Constant(std_m * std_m),
-      Vec3::Constant(std::pow(std_deg * kDeg, 2));
+  plane.q_base_plane = q;
+  plane.T_base_plane = PlanePose(q, Vec3(v[0], v[1], v[2]));
+  if (const auto sd = p.Optional("std")) {
+    if (p.Has("std_m") || p.Has("std_deg")) sd->Fail("std, or std_m and std_deg: not both");
+    const std::vector<double> v = sd->AsDoubleList();
+    bool ok = v.size() == 6;
+    for (size_t i = 0; ok && i < 6; ++i) ok = v[i] >= 0.0 && v[i] <= (i < 3 ? 10.0 : M_PI);
+    if (!ok) sd->Fail("expected 6 standard deviations [m m m rad rad rad], each >= 0");
+    for (int i = 0; i < 6; ++i) plane.std[i] = v[i];
+  } else {
+    const double std_m = p.GetDouble("std_m", 0.0), std_deg = p.GetDouble("std_deg", 0.0);
+    if (!(std_m >= 0.0 && std_m <= 10.0)) p.Child("std_m").Fail("must be in [0, 10] m");
+    if (!(std_deg >= 0.0 && std_deg <= 180.0)) p.Child("std_deg").Fail("must be in [0, 180] deg");
+    plane.std << Vec3::Constant(std_m), Vec3::Constant(std_deg * kDeg);
+  }
+  plane.cov.diagonal() = plane.std.cwiseProduct(plane.std);
   return plane;
 }
 
@@ -101,11 +111,12 @@ std::string ContactsYaml(const RecordedLog& log) {
   y << "contacts:\n  file: contacts.csv\n  planes:\n";
   for (const LogPlane& p : log.planes) {
     const Vec3& t = p.T_base_plane.translation();
-    const Eigen::Quaterniond q(p.T_base_plane.rotation());
+    const Quat& q = p.q_base_plane;
     y << "    " << p.name << ": {T_base_plane: [" << Num(t.x()) << ", " << Num(t.y()) << ", "
       << Num(t.z()) << ", " << Num(q.w()) << ", " << Num(q.x()) << ", " << Num(q.y()) << ", "
-      << Num(q.z()) << "], std_m: " << Num(std::sqrt(p.cov(0, 0)))
-      << ", std_deg: " << Num(std::sqrt(p.cov(3, 3)) / kDeg) << "}\n";
+      << Num(q.z()) << "], std: [";
+    for (int i = 0; i < 6; ++i) y << (i ? ", " : "") << Num(p.std[i]);
+    y << "]}\n";
   }
   y << "  points:\n";
   for (const LogContactPoint& p : log.contact_points) {

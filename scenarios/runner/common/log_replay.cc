@@ -27,7 +27,8 @@ void UpTo(const std::vector<size_t>& order, const std::vector<Row>& rows, double
   for (; *next < order.size() && rows[order[*next]].t <= t; ++*next) fn(rows[order[*next]]);
 }
 
-// A frame orientations.csv or positions.csv reads: the end effector or an observed frame.
+// A frame orientations.csv, positions.csv or a contact point is on: the end effector or an
+// observed frame.
 kinematics::FrameId SensedFrame(const sim::DeclaredChain& chain, const std::string& name) {
   if (chain.end_effector_name == name) return chain.end_effector;
   return chain.ObservedFrame(name);
@@ -83,6 +84,13 @@ estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
       throw InputError(log_yaml + ": cameras." + cam.name + ".frame: " + e.what());
     }
   }
+  if (!log.estimate_in.empty()) {
+    try {
+      setup.reference_frame = chain.ObservedFrame(log.estimate_in);
+    } catch (const InputError& e) {
+      throw InputError(log_yaml + ": estimate_in: " + e.what());
+    }
+  }
   if (!log.truth_t.empty() && log.truth_frame != end_effector) {
     throw InputError(log_yaml + ": truth.frame '" + log.truth_frame +
                      "': the estimators estimate the declared end effector '" + end_effector + "'");
@@ -110,7 +118,7 @@ LogIndex IndexLog(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
   }
   for (const sim::LogContactPoint& point : log.contact_points) {
     try {
-      index.contact_frame.push_back(chain.ObservedFrame(point.frame));
+      index.contact_frame.push_back(SensedFrame(chain, point.frame));
     } catch (const InputError& e) {
       throw InputError(log.dir + "/log.yaml: contacts.points." + point.name +
                        ".frame: " + e.what());

@@ -1151,6 +1151,11 @@ class ClosedLoopKind : public ScenarioKind {
       DetectLogImages(detector_, &it->second);
     }
     const sim::RecordedLog& log = it->second;
+    if (!log.estimate_in.empty()) {
+      throw InputError(s.path_where + ": " + log.dir + " is estimated in '" + log.estimate_in +
+                       "' (estimate_in): its truth and planes are not in the base frame the "
+                       "identification measures in");
+    }
     const std::pair<const char*, bool> has[] = {{"truth", !log.truth_t.empty()},
                                                 {"tags", !log.tag_rows.empty()},
                                                 {"imu", !log.imu.empty()}};

@@ -13,12 +13,14 @@
 #include "estimators/estimator.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
+#include "sim/recorded_log.h"
 #include "sim/simulation.h"
 
 namespace flexbench::scenarios {
@@ -26,6 +28,8 @@ namespace {
 
 class ContactFusionKind : public ScenarioKind {
  public:
+  bool ExportsLog() const final { return true; }
+
   void Configure(const ConfigNode& root) override {
     declared_ = ReadModelAndDeclared(root, &model_path_);
     effects_ = sim::ParseEffects(root.Child("effects"));
@@ -38,6 +42,7 @@ class ContactFusionKind : public ScenarioKind {
     if (sd.size() != 6) sv.Fail("expected 6 standard deviations [m m m rad rad rad]");
     for (int i = 0; i < 6; ++i) {
       if (!(sd[i] >= 0.0)) sv.Fail("standard deviations must be >= 0");
+      table_std_[i] = sd[i];
       sigma_table_(i, i) = sd[i] * sd[i];
     }
     sensor_std_ = root.GetDouble("distance_std_m", 1e-3);
@@ -69,6 +74,10 @@ class ContactFusionKind : public ScenarioKind {
   // estimator; then the figure.
   void Run(RunContext& ctx) override {
     const Contact contact = Collect(ctx);
+    if (!ctx.export_log.empty()) {
+      WriteLogWithDeclared(ContactLog(contact), declared_, ctx.export_log);
+      ctx.log("the contact's readings written to " + ctx.export_log);
+    }
     std::ofstream csv(ctx.out->File("iterations.csv"));
     csv << "iteration,estimator,err_x_m,err_y_m,err_z_m,pos_err_m,rot_err_deg,"
            "eig1,eig2,eig3,eig4,eig5,eig6\n";
@@ -91,9 +100,34 @@ class ContactFusionKind : public ScenarioKind {
   struct Contact {
     lie::SE3 T_w_tip;          // the true fingertip, in the estimators' frame
     lie::SE3 T_w_table_known;  // the table as known to the estimators
+    Quat q_w_table;            // its orientation, from which T_w_table_known is made
     estimators::JointReading joints;
     std::vector<double> distances;  // the contact sensor's noise, one draw per iteration
   };
+
+  // The contact as a recorded log of static postures (--export-log): a joint row per iteration
+  // (the same posture, estimated afresh each time, as Estimate does), the table (its pose
+  // known within table_std, in the estimators' frame: estimate_in), and per iteration from the
+  // first the contact sensor's reading as Estimate fuses it: the mean of the contacts so far,
+  // with its standard error.
+  sim::RecordedLog ContactLog(const Contact& c) const {
+    sim::RecordedLog log = LogOfChain(declared_, *chain_);
+    log.static_postures = true;
+    log.estimate_in = estimate_in_;
+    log.planes.push_back({"table", c.q_w_table, c.T_w_table_known, table_std_, sigma_table_});
+    log.contact_points.push_back({"fingertip", declared_.end_effector, Vec3::Zero()});
+    double distance_sum = 0.0;
+    for (int it = 0; it <= iterations_; ++it) {
+      estimators::JointReading joints = c.joints;
+      joints.t = it;
+      AddStepToLog(joints, c.T_w_tip, &log);
+      if (it == 0) continue;
+      distance_sum += c.distances[it - 1];
+      log.contacts.push_back({static_cast<double>(it), 0, 0, distance_sum / it,
+                              sensor_std_ / std::sqrt(static_cast<double>(it))});
+    }
+    return log;
+  }
 
   // One estimator's beliefs, iteration 0 (the prior) to iterations_, and its update statuses.
   struct Trace {
@@ -123,7 +157,11 @@ class ContactFusionKind : public ScenarioKind {
     // (Not drawn here: the in-plane and tilt parts are invisible at a table frame centred on
     // the contact point, and its 1 mm normal part would be a floor common to both estimators.)
     std::mt19937_64 rng(ctx.seed * 6151ULL + 3);
-    c.T_w_table_known = T_w_ref.Inverse() * lie::SE3(Mat3::Identity(), T_world_tip.translation());
+    // Through a quaternion, as a recorded log states a plane (--export-log replays to the bit).
+    const lie::SE3 T_w_table =
+        T_w_ref.Inverse() * lie::SE3(Mat3::Identity(), T_world_tip.translation());
+    c.q_w_table = Quat(T_w_table.rotation());
+    c.T_w_table_known = sim::PlanePose(c.q_w_table, T_w_table.translation());
     std::normal_distribution<double> distance_noise(0.0, sensor_std_);
     c.joints = EncoderReading(*sim_, *chain_, 0.0);
     c.distances.resize(iterations_);
@@ -282,6 +320,7 @@ class ContactFusionKind : public ScenarioKind {
   sim::EffectList effects_;
   std::vector<std::pair<std::string, double>> configuration_;
   int iterations_ = 30;
+  Vec6 table_std_ = Vec6::Zero();
   Mat6 sigma_table_ = Mat6::Zero();
   double sensor_std_ = 1e-3;
   std::vector<EstimatorSpec> estimators_;

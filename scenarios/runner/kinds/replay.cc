@@ -107,7 +107,8 @@ class ReplayKind : public ScenarioKind {
       m["rejected_readings"] = rejected;
     }
     (*ctx.summary)["metrics"]["steps"] = static_cast<int>(steps.size());
-    recorder.Write(*ctx.out, "base");  // the coordinates: the declared base frame
+    // The coordinates: the declared base frame, or the frame the log's estimates are in.
+    recorder.Write(*ctx.out, log_.estimate_in.empty() ? "base" : log_.estimate_in);
   }
 
  private:

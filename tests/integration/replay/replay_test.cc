@@ -271,11 +271,12 @@ TEST(Replay, AnExportedRunWithATagCameraReplaysToTheSameBits) {
 
 // `scenario` (scenarios/, its gates dropped, `edit` replaced by `with`) run with --export-log,
 // then its log replayed with the scenario's estimators and seed: every estimate and covariance
-// of `estimators` (the live ones under trajectories/base/`live_dir`) bit for bit. Returns the
-// log's log.yaml.
+// of `estimators` (the live ones under trajectories/`frame`/`live_dir`) bit for bit. Returns
+// the log's log.yaml.
 std::string ExpectReplayedBitForBit(const std::string& scenario, const std::string& edit,
                                     const std::string& with, const std::string& live_dir,
-                                    const std::vector<std::string>& estimators) {
+                                    const std::vector<std::string>& estimators,
+                                    const std::string& frame = "base") {
   testing::TempDir tmp;
   std::string yaml = testing::ReadFile(testing::SourceDir() + "/scenarios/" + scenario);
   for (size_t at; (at = yaml.find("../models/")) != std::string::npos;) {
@@ -310,8 +311,8 @@ std::string ExpectReplayedBitForBit(const std::string& scenario, const std::stri
   for (const std::string& name : estimators) {
     for (const std::string ext : {".tum", ".cov.csv"}) {
       const fs::path live_file =
-          tmp.path() / "live" / "trajectories" / "base" / live_dir / (name + ext);
-      const fs::path replayed = tmp.path() / "replayed" / "trajectories" / "base" / (name + ext);
+          tmp.path() / "live" / "trajectories" / frame / live_dir / (name + ext);
+      const fs::path replayed = tmp.path() / "replayed" / "trajectories" / frame / (name + ext);
       EXPECT_TRUE(fs::exists(live_file) && fs::exists(replayed)) << name << ext;
       if (fs::exists(live_file) && fs::exists(replayed)) {
         EXPECT_EQ(testing::ReadFile(live_file), testing::ReadFile(replayed)) << name << ext;
@@ -352,6 +353,17 @@ TEST(Replay, AnExportedSyntheticRunReplaysToTheSameBits) {
        "pf_encoders_ee_bootstrap", "pf_encoders_imu_bootstrap", "pf_all_bootstrap"});
   EXPECT_NE(log_yaml.find("orientations: {file: orientations.csv}"), std::string::npos);
   EXPECT_NE(log_yaml.find("positions: {file: positions.csv}"), std::string::npos);
+}
+
+// contact_fusion (the PPOE paper's Fig. 5 on the humanoid): a fingertip's contacts with a table
+// known within per-axis standard deviations, estimated in the head camera's frame. The log holds
+// the posture once per iteration (static postures), the contact sensor's running mean with its
+// standard error, the table (contacts.planes with `std: [6]`) and `estimate_in: head_camera`.
+TEST(Replay, AnExportedContactFusionRunReplaysToTheSameBits) {
+  const std::string log_yaml = ExpectReplayedBitForBit(
+      "humanoid_table_contact.yaml", "", "", "", {"fk", "ppoe_ekf", "naive_ekf"}, "head_camera");
+  EXPECT_NE(log_yaml.find("estimate_in: head_camera"), std::string::npos);
+  EXPECT_NE(log_yaml.find("static_postures: true"), std::string::npos);
 }
 
 // Rows of a trajectory file (TUM, or a covariance CSV) by their first field, the time.

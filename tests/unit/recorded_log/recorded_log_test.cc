@@ -344,6 +344,25 @@ TEST(RecordedLog, ContactsRoundTrip) {
   }
   EXPECT_NEAR((back.planes[0].cov - log.planes[0].cov).norm(), 0.0, 1e-18);
   EXPECT_EQ(back.planes[0].T_base_plane.translation(), log.planes[0].T_base_plane.translation());
+  // A plane known per axis (std: [6]), turned (its quaternion kept as stated, so its pose comes
+  // back to the bit), and a log estimated in another frame.
+  const std::string turned =
+      "T_base_plane: [0, 0, 0.9, 0.6, 0.8, 0, 0], std: [0.5, 0.5, 0.001, "
+      "0.017, 0.017, 0.17]";
+  f.log_yaml.replace(f.log_yaml.find("T_base_plane"),
+                     f.log_yaml.find("}}, points") - f.log_yaml.find("T_base_plane"), turned);
+  f.log_yaml += "estimate_in: external_camera\n";
+  f.Write(dir.path());
+  const RecordedLog per_axis = ReadRecordedLog(dir.path().string());
+  EXPECT_EQ(per_axis.planes[0].cov(2, 2), 0.001 * 0.001);
+  EXPECT_EQ(per_axis.planes[0].cov(5, 5), 0.17 * 0.17);
+  EXPECT_EQ(per_axis.estimate_in, "external_camera");
+  const std::string again2 = (dir.path() / "again2").string();
+  WriteRecordedLog(per_axis, again2);
+  const RecordedLog back2 = ReadRecordedLog(again2);
+  EXPECT_EQ(back2.planes[0].cov, per_axis.planes[0].cov);
+  EXPECT_EQ(back2.planes[0].T_base_plane.rotation(), per_axis.planes[0].T_base_plane.rotation());
+  EXPECT_EQ(back2.estimate_in, "external_camera");
 }
 
 // A camera's frames are files images/<camera>/<t_ns>.png, in time order, with the stream's clock
