@@ -926,6 +926,16 @@ PYBIND11_MODULE(flexbench, m) {
       "flexbench: declared PPOE models, probabilistic forward kinematics, the estimators by "
       "name, and the runner (run_scenario, identify). See docs/python.md.";
   m.attr("__version__") = FLEXBENCH_VERSION;
+  // numpy carries every array in and out. A pyenv or conda interpreter can import the module
+  // built for /usr/bin/python3 without having numpy: say so now, naming the interpreter.
+  try {
+    py::module_::import("numpy");
+  } catch (const py::error_already_set&) {
+    const std::string exe = py::module_::import("sys").attr("executable").cast<std::string>();
+    throw py::import_error("flexbench needs numpy, which the interpreter importing it (" + exe +
+                           ") does not have: run /usr/bin/python3 (Debian's python3-numpy), or "
+                           "install numpy for this interpreter");
+  }
   py::register_local_exception_translator(&TranslateExceptions);
   // Before any MuJoCo call: its fatal errors must throw, never end the interpreter.
   sim::InstallMujocoHandlers();

@@ -35,6 +35,18 @@ def _leftovers(out):
     return sorted(str(p) for p in Path(out).parent.glob(Path(out).name + "*"))
 
 
+# ---- the interpreter --------------------------------------------------------------------------
+
+def test_an_interpreter_without_numpy_is_told_which_one_it_is():
+    code, out = _child("""
+        import sys
+        sys.modules['numpy'] = None  # as in an interpreter that has no numpy
+        import flexbench
+    """)
+    assert code != 0
+    assert "flexbench needs numpy, which the interpreter importing it (" + sys.executable in out, out
+
+
 # ---- overrides: cycles, depth, keys -------------------------------------------------------------
 
 @pytest.mark.parametrize("make", [
