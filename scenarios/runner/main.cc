@@ -12,6 +12,7 @@
 #include "scenarios/runner/replay_command.h"
 #include "scenarios/runner/report.h"
 #include "scenarios/runner/runner.h"
+#include "scenarios/runner/summary_command.h"
 #include "scenarios/sweep/sweep_command.h"
 #include "sim/config.h"
 #include "sim/mujoco_model.h"
@@ -33,6 +34,8 @@ struct Options {
   // The --out options, to tell `--out ''` from no --out (both leave the string empty).
   std::vector<std::pair<CLI::Option*, const std::string*>> outs;
   std::string report_dir;
+  std::vector<std::string> summary_dirs;
+  bool summary_tsv = false;
 };
 
 CLI::App* AddRun(CLI::App& app, Options& o) {
@@ -244,6 +247,11 @@ int Main(int argc, char** argv) {
   report_cmd
       ->add_option("dir", o.report_dir, "result folder (holds summary.json or aggregate.json)")
       ->required();
+  CLI::App* summary_cmd = app.add_subcommand(
+      "summary", "one table row per result folder: gates passed, headline metric, time, size");
+  summary_cmd->add_option("dirs", o.summary_dirs, "result folders (runs or sweeps)")->required();
+  summary_cmd->add_flag("--tsv", o.summary_tsv,
+                        "tab-separated: scenario, gates passed, gates, headline");
   CheckSubcommand(argc, argv, app);
   try {
     app.parse(argc, argv);
@@ -266,6 +274,7 @@ int Main(int argc, char** argv) {
   o.id.command = command;
   o.sw.command = command;
   o.rp.command = command;
+  if (*summary_cmd) return flexbench::scenarios::SummaryCommand(o.summary_dirs, o.summary_tsv);
   if (*report_cmd) return flexbench::scenarios::ReportCommand(o.report_dir);
   if (*run_cmd) return flexbench::scenarios::RunScenario(o.run);
   if (*sweep_cmd) {

@@ -572,6 +572,8 @@ std::string SweepReport(const fs::path& dir) {
 
 }  // namespace
 
+Json ReadResultJson(const fs::path& path) { return ReadJson(path); }
+
 std::string HtmlEscape(const std::string& text) {
   std::string out;
   out.reserve(text.size());

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "scenarios/runner/scenario_kind.h"
+
 namespace flexbench::scenarios {
 
 // Written by a sweep's collect beside aggregate.json: {"command", "sweep_file", "scenario"},
@@ -21,6 +23,10 @@ inline constexpr const char* kSweepCommandFile = "sweep_command.json";
 // refused as bad input before a tree is built.
 inline constexpr std::uintmax_t kMaxResultJsonBytes = 64u << 20;
 inline constexpr int kMaxResultJsonDepth = 64;
+
+// A result file (summary.json, aggregate.json) as a JSON object: too big, too deep, not JSON or
+// not an object is InputError naming the file.
+Json ReadResultJson(const std::filesystem::path& path);
 
 // `text` with &, <, >, " and ' replaced by entities: text from result files is never markup.
 std::string HtmlEscape(const std::string& text);
