@@ -830,6 +830,14 @@ mkdir -p "$D/r"
   printf '}}\n'
 } >"$D/r/summary.json"
 attack fuzz_report_deep_metric 2 "1line err~summary.json" -- "$FB" report r
+# summary on folders that are not results, or whose summary.json is not JSON.
+fresh summary_not_a_result
+mkdir -p "$D/r"
+attack summary_not_a_result 2 "1line err~not.a.flexbench.result" -- "$FB" summary r
+fresh summary_bad_json
+mkdir -p "$D/r"
+echo '{"scenario": ' >"$D/r/summary.json"
+attack summary_bad_json 2 "1line err~summary.json" -- "$FB" summary r
 # An AprilTag family error names neither the file nor the --set.
 fresh fuzz_set_detector_family_named
 smoke_yaml "$D/s.yaml"
