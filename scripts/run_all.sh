@@ -53,7 +53,8 @@ if [ $build -eq 1 ]; then
   [ $verbose -eq 1 ] || echo "setting up and building (output: $out/build_log.txt)"
   : >"$out/build_log.txt"
   quiet_step "$out/build_log.txt" bash scripts/setup.sh || exit 1
-  quiet_step "$out/build_log.txt" bash scripts/build.sh || exit 1
+  # The runner and its libraries only: scripts/test.sh builds the tests and benchmarks.
+  quiet_step "$out/build_log.txt" bash scripts/build.sh --target flexbench || exit 1
 fi
 
 failed=()
