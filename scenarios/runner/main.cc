@@ -24,6 +24,7 @@ struct Options {
   flexbench::scenarios::RunOptions run;
   std::string seed;
   CLI::Option* seed_opt = nullptr;
+  std::string frames = "key";
   std::string list_dir;
   std::string inspect_path;
   flexbench::scenarios::IdentifyCliOptions id;
@@ -55,6 +56,9 @@ CLI::App* AddRun(CLI::App& app, Options& o) {
                    "override a scenario key: KEY=VALUE, KEY a dotted path, VALUE YAML "
                    "(repeatable; recorded in summary.json)")
       ->allow_extra_args(false);  // one KEY=VALUE per --set: never the scenario path after it
+  run_cmd->add_option("--frames", o.frames,
+                      "images written: all (every rendered camera frame), key (default: a few "
+                      "frames and every figure) or none");
   run_cmd->add_flag("--force", o.run.force,
                     "let --out replace an existing folder that is not a flexbench result");
   run_cmd->add_option("--export-log", o.run.export_log,
@@ -260,6 +264,11 @@ int Main(int argc, char** argv) {
     return code == 0 ? 0 : flexbench::scenarios::kExitBadInput;
   }
   if (*o.seed_opt) o.run.seed = ParseSeed(o.seed);
+  try {
+    o.run.frames = flexbench::scenarios::ParseFrameOutput(o.frames, "--frames");
+  } catch (const std::exception& e) {
+    return flexbench::scenarios::ReportError(e);
+  }
   // An empty --out (an unset shell variable) would silently write the default folder.
   for (const auto& [option, value] : o.outs) {
     if (option->count() > 0 && value->empty()) {

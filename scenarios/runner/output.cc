@@ -586,6 +586,19 @@ fs::path OutputDir::File(const std::string& relative) const {
   return p;
 }
 
+void OutputDir::RemoveImages() {
+  std::vector<fs::path> images;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(tmp_, ec); !ec && it != fs::end(it);
+       it.increment(ec)) {
+    std::error_code type_ec;
+    if (it->is_regular_file(type_ec) && it->path().extension() == ".png") {
+      images.push_back(it->path());
+    }
+  }
+  for (const fs::path& p : images) fs::remove(p, ec);
+}
+
 void OutputDir::Commit() {
   CheckReplaceable(final_, force_, inputs_);
   // Fixed bytes: two runs of the same command stay identical, file for file.
@@ -622,6 +635,25 @@ void OutputDir::Commit() {
     signal_slot_ = -1;
   }
   if (!old.empty()) fs::remove_all(old, ec);
+}
+
+FrameOutput ParseFrameOutput(const std::string& text, const std::string& option) {
+  if (text == "all") return FrameOutput::kAll;
+  if (text == "key") return FrameOutput::kKey;
+  if (text == "none") return FrameOutput::kNone;
+  throw InputError(option + " '" + CapForMessage(text) + "': expected all, key or none");
+}
+
+const char* FrameOutputName(FrameOutput f) {
+  return f == FrameOutput::kAll ? "all" : f == FrameOutput::kKey ? "key" : "none";
+}
+
+bool WritesFrame(FrameOutput f, int index, int count, int key_count) {
+  if (f != FrameOutput::kKey) return f == FrameOutput::kAll;
+  for (int i = 0; i < key_count && count > 0; ++i) {
+    if (static_cast<int>((static_cast<long>(i) * count) / key_count) == index) return true;
+  }
+  return false;
 }
 
 void WriteFileAtomic(const fs::path& path, const std::string& text) {

@@ -24,6 +24,19 @@ namespace flexbench::scenarios {
 inline constexpr const char* kResultMarker = ".flexbench-result";
 inline constexpr const char* kTemporaryMarker = ".flexbench-temporary";
 
+// Which images a run writes (`--frames`): every rendered camera frame; the key ones (a few
+// spread over the run, and every figure: what a report shows); or no image at all (a sweep's
+// runs, which keep their summaries, CSVs and trajectories).
+enum class FrameOutput { kAll, kKey, kNone };
+
+// "all", "key" or "none"; anything else is InputError naming `option`.
+FrameOutput ParseFrameOutput(const std::string& text, const std::string& option);
+const char* FrameOutputName(FrameOutput f);
+
+// Whether camera frame `index` of `count` is written: every one with kAll, none with kNone;
+// with kKey the `key_count` frames spread evenly from the first.
+bool WritesFrame(FrameOutput f, int index, int count, int key_count);
+
 class OutputDir {
  public:
   // Creates the temporary folder (and its frames/ folder). Throws InputError naming the path
@@ -40,6 +53,8 @@ class OutputDir {
   // Path of a file inside the (temporary) output folder; creates parent folders.
   std::filesystem::path File(const std::string& relative) const;
   std::filesystem::path FramesDir() const { return tmp_ / "frames"; }
+  // Removes every PNG written so far (--frames none): one place, whichever kind drew them.
+  void RemoveImages();
 
   // Replaces `final_dir` with the temporary folder (checked again, with the inputs read since:
   // refused when something that is not a result appeared there meanwhile). A signal that

@@ -99,6 +99,10 @@ std::string EquivalentCommand(const RunOptions& options, const fs::path& out_dir
     args.push_back(s);
   }
   if (options.check_gates) args.push_back("--check-gates");
+  if (options.frames != FrameOutput::kKey) {
+    args.push_back("--frames");
+    args.push_back(FrameOutputName(options.frames));
+  }
   return CommandLine(args);
 }
 
@@ -201,6 +205,7 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   ctx.timing = &timing;
   ctx.log = info;
   ctx.export_log = options.export_log;
+  ctx.frames = options.frames;
   ProgressLine::Options progress_options;
   progress_options.terminal = isatty(fileno(stderr));
   progress_options.quiet = options.quiet;
@@ -214,6 +219,7 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
   info("scenario " + name + " (" + shown_path + "), seed " + std::to_string(seed));
   kind->Run(ctx);
 
+  if (options.frames == FrameOutput::kNone) out.RemoveImages();
   CheckMetricsFinite(summary["metrics"], "");
   CheckMetricsFinite(summary["estimators"], "estimators");
   CheckGateMetricsExist(gates, summary);

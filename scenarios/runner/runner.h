@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "scenarios/runner/output.h"
 #include "sim/config.h"
 
 namespace flexbench::scenarios {
@@ -28,6 +29,8 @@ struct RunOptions {
   // --export-log DIR: the run's sensor readings and truth written as a recorded-log folder
   // (sim/recorded_log.h), for `flexbench replay`; empty: none.
   std::string export_log;
+  // --frames: which images the run writes (default: the key frames and every figure).
+  FrameOutput frames = FrameOutput::kKey;
   // The command line as typed (shell-quoted), recorded in summary.json and the report; empty
   // (a sweep's run): the equivalent `flexbench run` line is recorded.
   std::string command;

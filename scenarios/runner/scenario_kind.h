@@ -33,6 +33,9 @@ struct RunContext {
   // A folder to write the run's readings into as a recorded log (ScenarioKind::ExportsLog);
   // empty: none.
   std::string export_log;
+  // Which images to write (--frames); kinds ask WritesFrame for rendered camera frames, and the
+  // runner removes every image of a run with kNone.
+  FrameOutput frames = FrameOutput::kKey;
 };
 
 class ScenarioKind {

@@ -49,6 +49,7 @@ std::string LastLine(const fs::path& log) {
   o.scenario_path = spec.scenario;
   o.out_dir = (out / run.dir).string();
   o.seed = run.seed;
+  o.frames = spec.frames;
   o.set = spec.set;
   o.set.insert(o.set.end(), point.set.begin(), point.set.end());
   int rc = RunScenario(o);

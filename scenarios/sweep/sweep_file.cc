@@ -235,6 +235,13 @@ SweepSpec LoadSweep(const std::string& path) {
   if (const auto b = root.Optional("bootstrap_resamples")) {
     spec.bootstrap_resamples = ParseBootstrapResamples(*b);
   }
+  if (const auto f = root.Optional("frames")) {
+    try {
+      spec.frames = ParseFrameOutput(f->AsString(), "frames");
+    } catch (const InputError& e) {
+      f->Fail(e.what());
+    }
+  }
   root.CheckNoUnknownKeys();
   CheckSweepSize(root, spec);
   return spec;

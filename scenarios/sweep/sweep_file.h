@@ -24,6 +24,8 @@
 #include <string>
 #include <vector>
 
+#include "scenarios/runner/output.h"
+
 namespace flexbench::scenarios::sweep {
 
 struct SweepAxis {
@@ -76,6 +78,8 @@ struct SweepSpec {
   std::vector<std::string> plot_metrics;
   std::string plot_x;  // a grid key; empty: the first grid key
   int bootstrap_resamples = 2000;
+  // Images each run writes (`frames:`; default none: a sweep keeps its runs' numbers).
+  FrameOutput frames = FrameOutput::kNone;
 };
 
 // Reads and checks a sweep file (not the scenario); throws InputError naming file and line.

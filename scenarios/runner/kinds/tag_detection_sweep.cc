@@ -143,7 +143,6 @@ class TagDetectionSweepKind : public ScenarioKind {
         static_cast<int>(distances_.size() * views_.size() * rotations_.size()) * frames_per_pose_;
     std::vector<FrameRow> rows;
     rows.reserve(total);
-    const std::vector<int> save_at = SaveIndices(total);
     int frame = 0;
     for (double distance : distances_) {
       for (double view : views_) {
@@ -162,7 +161,7 @@ class TagDetectionSweepKind : public ScenarioKind {
             const render::DetectionResult result = Detect(shot);
             const render::TagDetection* det = Score(result, truth, v, &row);
             rows.push_back(row);
-            if (std::find(save_at.begin(), save_at.end(), frame) != save_at.end()) {
+            if (WritesFrame(ctx.frames, frame, total, saved_frames_)) {
               SaveOverlay(ctx, shot.rgb, row, truth.px, det, v.cam);
             }
             ctx.progress("frames", frame + 1, total);
@@ -348,14 +347,6 @@ class TagDetectionSweepKind : public ScenarioKind {
     };
     return {clampi(x0, cam.width), clampi(y0, cam.height), clampi(x1, cam.width),
             clampi(y1, cam.height)};
-  }
-
-  std::vector<int> SaveIndices(int total) const {
-    std::vector<int> out;
-    for (int i = 0; i < saved_frames_ && total > 0; ++i) {
-      out.push_back(static_cast<int>((static_cast<long>(i) * total) / saved_frames_));
-    }
-    return out;
   }
 
   void SaveOverlay(RunContext& ctx, render::Image image, const FrameRow& row,

@@ -35,6 +35,10 @@
 namespace flexbench::scenarios {
 namespace {
 
+// The configurations' frames a report shows by default (three, spread evenly from the first):
+// the others are written with --frames all.
+constexpr int kKeyFrames = 3;
+
 class TagFusionKind : public ScenarioKind {
  public:
   bool ExportsLog() const final { return true; }
@@ -101,7 +105,8 @@ class TagFusionKind : public ScenarioKind {
         Score(c, e, frame, b, &state);
         DrawEstimate(e, frame, b, &overlay);
       }
-      if (save_frames_) {
+      if (save_frames_ && WritesFrame(ctx.frames, static_cast<int>(c),
+                                      static_cast<int>(configurations_.size()), kKeyFrames)) {
         char name[64];
         std::snprintf(name, sizeof(name), "config_%02zu.png", c);
         render::WritePng(overlay, (ctx.out->FramesDir() / name).string());

@@ -110,7 +110,8 @@ TEST(Faults, KilledRunLeavesNothingOrACompleteResult) {
   const fs::path log = tmp.path() / "log.txt";
   const std::vector<std::string> args = {
       Flexbench(), "run",        SourceDir() + "/scenarios/rover_apriltag_exp2.yaml",
-      "--out",     out.string(), "--quiet"};
+      "--out",     out.string(), "--quiet",
+      "--frames",  "all"};
   // The reference: an uninterrupted run to the same --out (the command it records names it).
   const Clock::time_point t0 = Clock::now();
   const Ended ref = KillWhen(Spawn(args, log, true), [] { return false; });

@@ -2,7 +2,9 @@
 // output, same seed same bytes.
 #include <gtest/gtest.h>
 
+#include <map>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "tests/common/test_util.h"
 
@@ -153,6 +155,39 @@ TEST(Runner, SummaryFollowsTheContract) {
     }
   }
   EXPECT_TRUE(fs::exists(out / "frames" / "smoke.png"));
+}
+
+// --frames: key (default) writes a few of tag_fusion's configuration frames and every figure,
+// all every frame, none no PNG, with the same numbers; a wrong word is bad input.
+TEST(Runner, FramesOptionChoosesTheImagesAndNothingElse) {
+  TempDir tmp;
+  const std::string run =
+      Flexbench() + " run " + SourceDir() + "/scenarios/rover_apriltag_exp1.yaml --quiet --out ";
+  std::map<std::string, std::set<std::string>> pngs;
+  std::map<std::string, nlohmann::json> estimators;
+  for (const char* f : {"key", "all", "none"}) {
+    const fs::path out = tmp.path() / f;
+    const CommandResult r = RunCommand(
+        run + out.string() + (std::string(f) == "key" ? "" : " --frames " + std::string(f)));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    for (const auto& e : fs::recursive_directory_iterator(out)) {
+      if (e.path().extension() == ".png") pngs[f].insert(e.path().filename().string());
+    }
+    estimators[f] = nlohmann::json::parse(ReadFile(out / "summary.json"))["estimators"];
+  }
+  EXPECT_EQ(pngs["key"], (std::set<std::string>{"config_00.png", "config_03.png", "config_06.png",
+                                                "lateral_error.png"}));
+  EXPECT_EQ(pngs["all"].size(), 10u);
+  EXPECT_TRUE(pngs["none"].empty());
+  EXPECT_EQ(estimators["key"], estimators["all"]);
+  EXPECT_EQ(estimators["key"], estimators["none"]);
+  EXPECT_NE(nlohmann::json::parse(ReadFile(tmp.path() / "none" / "summary.json"))["command"]
+                .get<std::string>()
+                .find("--frames none"),
+            std::string::npos);
+  const CommandResult bad = RunCommand(run + (tmp.path() / "x").string() + " --frames some");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("--frames 'some': expected all, key or none"), std::string::npos);
 }
 
 TEST(Runner, SameSeedSameBytes) {

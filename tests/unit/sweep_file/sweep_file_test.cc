@@ -61,6 +61,10 @@ TEST(SweepFile, NoGridIsOnePointNamedBase) {
   const auto points = ExpandPoints(s);
   ASSERT_EQ(points.size(), 1u);
   EXPECT_EQ(points[0].name, "base");
+  // A sweep's runs keep their numbers, not their images, unless the file asks.
+  EXPECT_EQ(s.frames, FrameOutput::kNone);
+  EXPECT_EQ(Load(tmp, "sweep: g\nscenario: x.yaml\nseeds: [1]\nframes: key\n").frames,
+            FrameOutput::kKey);
 }
 
 TEST(SweepFile, ParsesStatistics) {
@@ -102,6 +106,7 @@ TEST(SweepFile, BadInputNamesFileLineAndKey) {
             "point 'nowhere' is not a point of this sweep"},
            {head + "seeds: [1]\nplot: {metrics: [a], x: nokey}\n", "not a grid key"},
            {"sweep: a/b\nscenario: x.yaml\nseeds: [1]\n", "plain name"},
+           {head + "seeds: [1]\nframes: some\n", "expected all, key or none"},
        }) {
     const std::string e = ErrorOf(c.text);
     EXPECT_NE(e.find(c.expect), std::string::npos) << c.text << "\n-> " << e;
