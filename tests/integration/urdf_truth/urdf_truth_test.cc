@@ -4,7 +4,7 @@
 // URDF with the same servos, so truth effects act on its joints: a joint offset and a joint
 // compliance checked against MuJoCo's import of the URDF without servos (its kinematics and its
 // gravity torque), and a mismatch_matrix scenario on the URDF runs and scores its estimators.
-// Bad input to convert is one line and exit 2.
+// Bad input to convert is one line and exit 2. `flexbench export` writes mesh geoms in place.
 #include <gtest/gtest.h>
 #include <mujoco/mujoco.h>
 
@@ -191,6 +191,28 @@ TEST_F(UrdfTruth, ConvertWritesServosInertialsAndTheUrdfsPoses) {
   EXPECT_EQ(testing::CountLines(again.err), 1) << again.err;
   EXPECT_EQ(Fb("convert " + urdf() + " --actuators position --force -o " + out.string()).exit_code,
             0);
+}
+
+// The same writer under `flexbench export`: the rover's AprilTag meshes (recentred by MuJoCo)
+// stand where the model has them; written at the model's compiled pose they were compiled a
+// second time (1 mm and a quarter turn off).
+TEST_F(UrdfTruth, ExportKeepsMeshGeomsWhereTheModelHasThem) {
+  const std::string declared = testing::SourceDir() + "/models/rover_arm.declared.yaml";
+  const fs::path out = dir() / "rover.xml";
+  const testing::CommandResult r = Fb("export " + declared + " --mjcf " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  sim::MjModelPtr a = sim::LoadModel(testing::SourceDir() + "/models/rover_arm.xml");
+  sim::MjModelPtr b = sim::LoadModel(out.string());
+  ASSERT_EQ(a->ngeom, b->ngeom);
+  int meshes = 0;
+  for (int g = 0; g < a->ngeom; ++g) meshes += a->geom_type[g] == mjGEOM_MESH;
+  ASSERT_GT(meshes, 0);
+  sim::MjDataPtr da = sim::MakeData(a.get());
+  sim::MjDataPtr db = sim::MakeData(b.get());
+  mj_kinematics(a.get(), da.get());
+  mj_kinematics(b.get(), db.get());
+  EXPECT_LT(MaxDiff(da->geom_xpos, db->geom_xpos, 3 * a->ngeom), 1e-12);
+  EXPECT_LT(MaxDiff(da->geom_xmat, db->geom_xmat, 9 * a->ngeom), 1e-12);
 }
 
 TEST_F(UrdfTruth, ConvertBadInputIsOneLineExit2) {
