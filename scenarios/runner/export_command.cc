@@ -71,7 +71,8 @@ int ConvertCommand(const ConvertCliOptions& o) {
         o.out.empty() ? std::filesystem::path(o.urdf).replace_extension(".xml").string() : o.out;
     std::error_code ec;
     if (std::filesystem::equivalent(out, o.urdf, ec)) {
-      throw InputError("convert: -o " + CapForMessage(out) + ": is the input URDF; name another file");
+      throw InputError("convert: -o " + CapForMessage(out) +
+                       ": is the input URDF; name another file");
     }
     CheckOutput(o.out.empty() ? "output" : "-o", out, o.force);
     const sim::ConvertedUrdf mjcf = sim::UrdfToMjcf(o.urdf, kp);
@@ -82,8 +83,8 @@ int ConvertCommand(const ConvertCliOptions& o) {
       std::cerr << "[flexbench] warning: no servo on " << names << "\n";
     }
     WriteFileAtomic(out, mjcf.text);
-    std::cout << "wrote " << out << " (" << mjcf.servoed.size() << " position servos, kp "
-              << kp << ")\n";
+    std::cout << "wrote " << out << " (" << mjcf.servoed.size() << " position servos, kp " << kp
+              << ")\n";
     return kExitOk;
   } catch (const InputError& e) {
     return ReportError(e);

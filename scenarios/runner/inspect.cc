@@ -8,8 +8,8 @@
 #include "scenarios/runner/runner.h"
 #include "sim/camera.h"
 #include "sim/declared_check.h"
-#include "sim/export_model.h"
 #include "sim/effects/effect.h"
+#include "sim/export_model.h"
 #include "sim/model_catalog.h"
 #include "sim/mujoco_model.h"
 #include "sim/sensors/sensor.h"
@@ -203,8 +203,9 @@ Json InspectModel(const std::string& mjcf_path) {
   if (sim::IsUrdfPath(mjcf_path)) {
     char kp[32];
     std::snprintf(kp, sizeof(kp), "%g", sim::kDefaultServoKp);
-    out["servos_added"] = std::string("a URDF has no actuators: as the truth, each hinge and "
-                                      "slide joint gets a <position> servo (kp ") +
+    out["servos_added"] = std::string(
+                              "a URDF has no actuators: as the truth, each hinge and "
+                              "slide joint gets a <position> servo (kp ") +
                           kp + "), listed in actuated_joints; `flexbench convert` writes that MJCF";
   }
   PassiveAndCoupled(m, catalog, &out);

@@ -11,7 +11,8 @@
 
 namespace flexbench::scenarios {
 
-// Description of a truth model (MJCF, or URDF with its servos). Throws InputError for a missing or rejected model.
+// Description of a truth model (MJCF, or URDF with its servos). Throws InputError for a missing or
+// rejected model.
 Json InspectModel(const std::string& mjcf_path);
 
 // The subcommand: prints JSON and returns 0, or prints one line on stderr and returns 2.

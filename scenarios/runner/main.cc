@@ -1,5 +1,6 @@
 // flexbench: run scenarios that score pose estimators of flexible arms against MuJoCo's truth.
 #include <CLI/CLI.hpp>
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <string>
@@ -14,6 +15,7 @@
 #include "scenarios/runner/runner.h"
 #include "scenarios/sweep/sweep_command.h"
 #include "sim/config.h"
+#include "sim/export_model.h"
 #include "sim/mujoco_model.h"
 
 namespace {
@@ -138,7 +140,11 @@ CLI::App* AddConvert(CLI::App& app, Options& o) {
   cmd->add_option("urdf", o.cv.urdf, "URDF file")->required();
   // Checked by ConvertCommand: one line naming the option (CLI11 adds a second).
   cmd->add_option("--actuators", o.cv.actuators, "the actuators to add: position (required)");
-  cmd->add_option("--kp", o.cv.kp, "servo stiffness, N m/rad (N/m on a prismatic joint; default 100)");
+  char kp[32];
+  std::snprintf(kp, sizeof(kp), "%g", flexbench::sim::kDefaultServoKp);
+  cmd->add_option(
+      "--kp", o.cv.kp,
+      std::string("servo stiffness, N m/rad (N/m on a prismatic joint; default ") + kp + ")");
   cmd->add_option("-o,--out", o.cv.out, "output MJCF (default: the URDF's name with .xml)");
   cmd->add_flag("--force", o.cv.force, "replace an existing output file");
   return cmd;
