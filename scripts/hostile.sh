@@ -847,6 +847,29 @@ fresh fuzz_scenario_detector_family_named
 smoke_yaml "$D/s.yaml" "detector: {family: bogus}"
 attack fuzz_scenario_detector_family_named 2 "1line err~s.yaml:[0-9]+" -- "$FB" run s.yaml --out o
 
+# === flexbench convert (a URDF as MJCF with servos) ========================================
+
+# A URDF whose XML ends mid-element, one whose joint names a link that does not exist, a file
+# that is a folder, and a URDF a path that is not one: one line naming it, and no output written.
+fresh convert_urdf_cut
+printf '<?xml version="1.0"?>\n<robot name="r">\n  <link name="a"/>\n  <joint name="j" type="rev' \
+  >"$D/r.urdf"
+attack convert_urdf_cut 2 "1line err~r.urdf none:*.xml" -- "$FB" convert r.urdf --actuators position
+fresh convert_urdf_unknown_link
+printf '<robot name="r"><link name="a"/><joint name="j" type="revolute"><parent link="a"/><child link="ghost"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>\n' \
+  >"$D/r.urdf"
+attack convert_urdf_unknown_link 2 "1line err~r.urdf none:*.xml" -- "$FB" convert r.urdf --actuators position
+fresh convert_urdf_is_folder
+mkdir -p "$D/d.urdf"
+attack convert_urdf_is_folder 2 "1line err~d.urdf" -- "$FB" convert d.urdf --actuators position -o o.xml
+fresh convert_kp_nan
+printf '<robot name="r"><link name="a"/></robot>\n' >"$D/r.urdf"
+attack convert_kp_nan 2 "1line err~--kp none:*.xml" -- "$FB" convert r.urdf --actuators position --kp nan
+fresh convert_output_is_input
+printf '<robot name="r"><link name="a"/></robot>\n' >"$D/r.urdf"
+attack convert_output_is_input 2 "1line err~input has:r.urdf:robot" -- "$FB" convert r.urdf \
+  --actuators position -o ./r.urdf --force
+
 # === Summary =================================================================================
 wait
 PASSED=0

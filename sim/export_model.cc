@@ -121,6 +121,10 @@ class Folder {
   std::vector<std::string>* skipped_;
 };
 
+SE3 PoseOf(const double* pos, const double* quat) {
+  return SE3(QuatFromWxyz(quat).normalized(), Eigen::Map<const Vec3>(pos));
+}
+
 std::string Num(double v) {
   char b[32];
   std::snprintf(b, sizeof(b), "%.17g", v);
@@ -146,11 +150,14 @@ void SetAttribute(std::string* line, const std::string& key, const std::string& 
   line->insert(tag_end, pat + value + "\"");
 }
 
-// MuJoCo's writer keeps six digits: every pose inside <worldbody> gets all of them again (the
-// elements come in the model's order, type by type), and relative asset folders are made
-// absolute (the file is written elsewhere).
+// MuJoCo's writer keeps six digits: every pose and inertial inside <worldbody> gets all of them
+// again (the elements come in the model's order, type by type), and relative asset folders are
+// made absolute (the file is written elsewhere). A mesh geom's pose in the model includes the
+// mesh's own frame (centroid, principal axes), which the compiler adds to the written one: it is
+// written as `mesh_geom_poses` gives it (identity when null).
 std::string WithFullPrecision(const std::string& xml, const mjModel* m,
-                              const std::filesystem::path& model_dir) {
+                              const std::filesystem::path& model_dir,
+                              const std::vector<SE3>* mesh_geom_poses) {
   std::istringstream in(xml);
   std::ostringstream out;
   std::string line;
@@ -188,9 +195,22 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
         ++joint;
       } else if (is("freejoint")) {
         ++joint;
+      } else if (is("inertial")) {
+        const int b = body - 1;  // written first inside its body
+        SetAttribute(&line, "pos", Nums(m->body_ipos + 3 * b, 3));
+        SetAttribute(&line, "quat", Nums(m->body_iquat + 4 * b, 4));
+        SetAttribute(&line, "mass", Num(m->body_mass[b]));
+        SetAttribute(&line, "diaginertia", Nums(m->body_inertia + 3 * b, 3));
       } else if (is("geom")) {
-        SetAttribute(&line, "pos", Nums(m->geom_pos + 3 * geom, 3));
-        SetAttribute(&line, "quat", Nums(m->geom_quat + 4 * geom, 4));
+        if (m->geom_type[geom] != mjGEOM_MESH) {
+          SetAttribute(&line, "pos", Nums(m->geom_pos + 3 * geom, 3));
+          SetAttribute(&line, "quat", Nums(m->geom_quat + 4 * geom, 4));
+        } else {
+          double pos[3], quat[4];
+          SetPose(mesh_geom_poses ? (*mesh_geom_poses)[geom] : SE3(), pos, quat);
+          SetAttribute(&line, "pos", Nums(pos, 3));
+          SetAttribute(&line, "quat", Nums(quat, 4));
+        }
         ++geom;
       } else if (is("site")) {
         SetAttribute(&line, "pos", Nums(m->site_pos + 3 * site, 3));
@@ -328,10 +348,6 @@ Folded Fold(const DeclaredModel& declared) {
   return out;
 }
 
-SE3 PoseOf(const double* pos, const double* quat) {
-  return SE3(QuatFromWxyz(quat).normalized(), Eigen::Map<const Vec3>(pos));
-}
-
 // URDF's origin: xyz and fixed-axis roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll)).
 std::string Origin(const SE3& T) {
   const Mat3& R = T.rotation();
@@ -464,16 +480,49 @@ class UrdfWriter {
   std::vector<SE3> offset_;           // per body: that link's pose in the body
 };
 
+// Text as an XML attribute value.
+std::string XmlEscaped(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    if (c == '&')
+      out += "&amp;";
+    else if (c == '<')
+      out += "&lt;";
+    else if (c == '>')
+      out += "&gt;";
+    else if (c == '"')
+      out += "&quot;";
+    else
+      out += c;
+  }
+  return out;
+}
+
 }  // namespace
+
+std::string SavedMjcf(const mjModel* m, const std::filesystem::path& model_dir) {
+  const std::string saved = SaveLastXml(m);
+  std::string xml = WithFullPrecision(saved, m, model_dir, nullptr);
+  bool meshes = false;
+  for (int g = 0; g < m->ngeom; ++g) meshes = meshes || m->geom_type[g] == mjGEOM_MESH;
+  if (!meshes) return xml;
+  // Written at the identity, a mesh geom compiles to the mesh's own frame O; written as
+  // G O^-1 it compiles to the model's G, every digit (the writer's own pose has six).
+  const MjModelPtr frames = LoadModelFromString(xml, (model_dir / "saved.xml").string());
+  std::vector<SE3> poses(m->ngeom);
+  for (int g = 0; g < m->ngeom; ++g) {
+    poses[g] = PoseOf(m->geom_pos + 3 * g, m->geom_quat + 4 * g) *
+               PoseOf(frames->geom_pos + 3 * g, frames->geom_quat + 4 * g).Inverse();
+  }
+  return WithFullPrecision(saved, m, model_dir, &poses);
+}
 
 ExportedModel ExportMjcf(const DeclaredModel& declared) {
   Folded f = Fold(declared);
-  const std::string saved = SaveLastXml(f.model.get());
   ExportedModel out;
   out.skipped = std::move(f.skipped);
   out.text = WithGearAnnotation(
-      WithFullPrecision(saved, f.model.get(),
-                        std::filesystem::absolute(declared.model_path).parent_path()),
+      SavedMjcf(f.model.get(), std::filesystem::absolute(declared.model_path).parent_path()),
       f.gear);
   return out;
 }
@@ -485,6 +534,45 @@ ExportedModel ExportUrdf(const DeclaredModel& declared) {
   for (const std::string& c : f.compliance) out.skipped.push_back(c + " (URDF has no spring)");
   if (f.tilt) out.skipped.push_back("gravity_tilt@base (URDF has no gravity)");
   out.text = UrdfWriter(f.model.get(), &out.skipped).Write();
+  return out;
+}
+
+ConvertedUrdf UrdfToMjcf(const std::string& urdf_path, double kp) {
+  if (!IsUrdfPath(urdf_path)) {
+    throw InputError(CapForMessage(urdf_path) + ": not a URDF file (.urdf)");
+  }
+  if (!(kp > 0.0 && std::isfinite(kp))) {
+    throw InputError(CapForMessage(urdf_path) + ": servo kp " + Num(kp) +
+                     ": expected a positive number (N m/rad, N/m)");
+  }
+  ConvertedUrdf out;
+  const MjModelPtr m = LoadModel(urdf_path, &out.warnings);
+  std::string xml = SavedMjcf(m.get(), std::filesystem::absolute(urdf_path).parent_path());
+  // The writer leaves out the importer's bounds: a massless moving link would be refused.
+  const size_t compiler = xml.find("<compiler");
+  const size_t compiler_end = xml.find('\n', compiler);
+  if (compiler == std::string::npos || compiler_end == std::string::npos) {
+    throw std::logic_error("convert: MuJoCo's saved XML has no <compiler> line");
+  }
+  std::string line = xml.substr(compiler, compiler_end - compiler);
+  SetAttribute(&line, "boundmass", Num(kUrdfBoundMass));
+  SetAttribute(&line, "boundinertia", Num(kUrdfBoundInertia));
+  xml.replace(compiler, compiler_end - compiler, line);
+  std::string servos;
+  for (int j = 0; j < m->njnt; ++j) {
+    const std::string name = ObjectName(m.get(), mjOBJ_JOINT, j);
+    if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE) {
+      out.skipped.push_back(name + " (a floating joint: no position servo)");
+      continue;
+    }
+    servos += "    <position name=\"" + XmlEscaped(name) + "\" joint=\"" + XmlEscaped(name) +
+              "\" kp=\"" + Num(kp) + "\"/>\n";
+    out.servoed.push_back(name);
+  }
+  if (!servos.empty()) {
+    xml.insert(xml.rfind("</mujoco>"), "  <actuator>\n" + servos + "  </actuator>\n");
+  }
+  out.text = std::move(xml);
   return out;
 }
 

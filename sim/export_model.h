@@ -18,10 +18,14 @@
 // caller names it in one warning line.
 #pragma once
 
+#include <mujoco/mujoco.h>
+
+#include <filesystem>
 #include <string>
 #include <vector>
 
 #include "sim/declared_model.h"
+#include "sim/mujoco_model.h"
 
 namespace flexbench::sim {
 
@@ -35,11 +39,37 @@ struct ExportedModel {
 // effect (as BuildDeclaredChain does).
 ExportedModel ExportMjcf(const DeclaredModel& declared);
 
+// MuJoCo's MJCF of `m`, which must be the model MuJoCo loaded last (mj_saveLastXML; changes
+// made to `m` since are written): poses and inertials inside <worldbody> with every digit, mesh
+// and texture folders absolute from `model_dir` (the model file's folder), so the text loads
+// from any folder.
+std::string SavedMjcf(const mjModel* m, const std::filesystem::path& model_dir);
+
 // The same model as URDF (loaded by sim::LoadModel's URDF path): a link per body at its last
 // joint's anchor (URDF joints turn about their link's origin; a body with several joints gets
 // a link per joint, named BODY__JOINT), a fixed link per site, camera and named geom (named as
 // it), the bodies' inertials; no visual or collision geometry. Compliances and a gravity tilt
 // have no URDF form and are in `skipped` as well.
 ExportedModel ExportUrdf(const DeclaredModel& declared);
+
+// The stiffness of the position servos a URDF gets when it is the truth (N m/rad; N/m on a
+// prismatic joint). The static solves hold a servoed joint at its command whatever kp is; kp
+// sets how stiffly dynamic kinds track it.
+inline constexpr double kDefaultServoKp = 100.0;
+
+// A URDF as MJCF with a position servo per hinge and slide joint.
+struct ConvertedUrdf {
+  std::string text;                   // the MJCF
+  std::vector<std::string> servoed;   // joints given a servo (actuator named as the joint)
+  std::vector<std::string> skipped;   // joints MJCF gives no position servo (floating)
+  std::vector<std::string> warnings;  // the URDF import's (meshes dropped, MuJoCo's)
+};
+
+// MuJoCo's import of `urdf_path` (sim::LoadModel: its links' inertials, unreadable meshes
+// dropped) written as MJCF (SavedMjcf: the compiled poses and inertials with every digit,
+// mesh folders absolute) with a <position kp> servo per hinge and slide joint: `flexbench
+// convert`, and how a URDF becomes the truth (LoadTruthModel). Loaded, its bodies stand where
+// the URDF's do. Throws InputError naming the file for anything but a loadable URDF, or kp <= 0.
+ConvertedUrdf UrdfToMjcf(const std::string& urdf_path, double kp = kDefaultServoKp);
 
 }  // namespace flexbench::sim

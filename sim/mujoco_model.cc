@@ -147,12 +147,23 @@ std::string PrepareUrdf(const std::string& urdf, const std::string& path,
     const size_t open_end = robot == std::string::npos ? robot : out.find('>', robot);
     if (open_end != std::string::npos) {
       // On the <robot> line, so that lines in messages are the URDF's own.
+      char bounds[96];
+      std::snprintf(bounds, sizeof(bounds), "boundmass=\"%.17g\" boundinertia=\"%.17g\"",
+                    kUrdfBoundMass, kUrdfBoundInertia);
+      // strippath off: MuJoCo's URDF default keeps only a mesh's file name, whereas the checks
+      // above find it where the URDF says.
       out.insert(open_end + 1,
                  "<mujoco><compiler fusestatic=\"false\" discardvisual=\"false\" "
-                 "boundmass=\"1e-6\" boundinertia=\"1e-9\"/></mujoco>");
+                 "strippath=\"false\" " +
+                     std::string(bounds) + "/></mujoco>");
     }
   }
   return out;
+}
+
+bool IsUrdfPath(const std::string& path) {
+  const std::string ext = std::filesystem::path(path).extension().string();
+  return ext == ".urdf" || ext == ".URDF";
 }
 
 MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings) {
@@ -162,8 +173,7 @@ MjModelPtr LoadModel(const std::string& path, std::vector<std::string>* warnings
     throw InputError(CapForMessage(path) + ": model file not found");
   }
   CheckInputFile(path, kMaxModelFileBytes);
-  const std::string ext = std::filesystem::path(path).extension().string();
-  if (ext == ".urdf" || ext == ".URDF") {
+  if (IsUrdfPath(path)) {
     std::ifstream in(path);
     std::stringstream text;
     text << in.rdbuf();

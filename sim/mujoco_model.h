@@ -61,9 +61,17 @@ MjDataPtr MakeData(const mjModel* m);
 // attribute. LoadModel checks every model it loads; Renderer checks again.
 void CheckRenderSizes(const mjModel* m, const std::string& model_name);
 
+// Whether LoadModel reads `path` as URDF (.urdf or .URDF).
+bool IsUrdfPath(const std::string& path);
+
+// The mass and inertia LoadModel gives a massless URDF link (<compiler boundmass boundinertia>).
+inline constexpr double kUrdfBoundMass = 1e-6;
+inline constexpr double kUrdfBoundInertia = 1e-9;
+
 // URDF text made loadable for kinematics: <visual>/<collision> elements with meshes MuJoCo
 // cannot read (missing, or not STL/OBJ/MSH) are dropped with a warning each, fixed links stay
-// bodies (fusestatic off) and massless links get a tiny inertia. `path` resolves mesh files.
+// bodies (fusestatic off), mesh paths stay relative to the URDF's folder (strippath off) and
+// massless links get a tiny inertia. `path` resolves mesh files.
 std::string PrepareUrdf(const std::string& urdf, const std::string& path,
                         std::vector<std::string>* warnings);
 

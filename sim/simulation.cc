@@ -10,6 +10,7 @@
 
 #include "estimators/error.h"
 #include "sim/camera.h"
+#include "sim/truth_model.h"
 
 namespace flexbench::sim {
 namespace {
@@ -145,7 +146,7 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
 Simulation::~Simulation() = default;
 
 std::unique_ptr<Simulation> Simulation::Load(const std::string& path, const EffectList& effects) {
-  return std::make_unique<Simulation>(LoadModel(path), path, effects);
+  return std::make_unique<Simulation>(LoadTruthModel(path), path, effects);
 }
 
 std::unique_ptr<Simulation> Simulation::FromString(const std::string& xml, const std::string& name,

@@ -60,6 +60,7 @@ class Simulation {
   Simulation(const Simulation&) = delete;
   Simulation& operator=(const Simulation&) = delete;
 
+  // An MJCF, or a URDF with a position servo per joint (LoadTruthModel, sim/truth_model.h).
   static std::unique_ptr<Simulation> Load(const std::string& path, const EffectList& effects = {});
   static std::unique_ptr<Simulation> FromString(const std::string& xml, const std::string& name,
                                                 const EffectList& effects = {});

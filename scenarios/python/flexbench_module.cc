@@ -42,6 +42,7 @@
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
+#include "sim/truth_model.h"
 
 namespace py = pybind11;
 
@@ -264,13 +265,21 @@ py::sequence ListArg(const py::handle& v, const std::string& what) {
 
 // ---- Declared model -----------------------------------------------------------------------
 
+// A robot's MJCF or URDF (DeclaredModel.load builds the declared model from it) rather than a
+// declared-model YAML.
+bool IsRobotFile(const std::string& path) {
+  const std::string ext = std::filesystem::path(path).extension().string();
+  return sim::IsUrdfPath(path) || ext == ".xml" || ext == ".XML";
+}
+
 class Model {
  public:
   static std::shared_ptr<Model> Load(const std::string& path) {
     const std::unique_lock<std::mutex> lock = LockProcess();
     const py::gil_scoped_release release;
     auto m = std::shared_ptr<Model>(new Model());
-    m->declared_ = sim::LoadDeclaredModel(path);
+    m->declared_ =
+        IsRobotFile(path) ? sim::DeclaredModelOfRobot(path) : sim::LoadDeclaredModel(path);
     m->mj_ = sim::LoadModel(m->declared_.model_path);
     m->chain_ =
         std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(m->mj_.get(), m->declared_));
@@ -599,9 +608,20 @@ void BindDeclaredModel(py::module_& m) {
   ModelClass cls(m, "DeclaredModel",
                  "A declared model (models/<name>.declared.yaml) built "
                  "into its PPOE chain from the MuJoCo model it names.");
-  cls.def_static("load", &Model::Load, py::arg("path"),
-                 "Loads a declared-model YAML file (and the MJCF/URDF it names). Calls from "
-                 "several threads are serialised, with run_scenario and identify.")
+  // Outlives the module: pybind11 keeps the pointer.
+  static const std::string load_doc =
+      "Loads a declared-model YAML file (and the MJCF/URDF it names), or a robot's URDF or MJCF "
+      "(.urdf, .xml) without one: actuated joints are the joints the truth commands (every "
+      "hinge and slide of a URDF; an MJCF's <position> servos), the end effector the body at "
+      "the end of the chain past the last of them, a source of " +
+      [] {
+        char b[32];
+        std::snprintf(b, sizeof(b), "%g", sim::kDefaultSourceDeg);
+        return std::string(b);
+      }() +
+      " deg about each joint's axis. Calls from several threads are serialised, with "
+      "run_scenario and identify.";
+  cls.def_static("load", &Model::Load, py::arg("path"), load_doc.c_str())
       .def_property_readonly("nq", &Model::nq, "number of joint variables (len(q))")
       .def_property_readonly(
           "joint_names", [](const Model& self) { return self.chain().q_joints; },

@@ -1,5 +1,6 @@
 #include "scenarios/runner/export_command.h"
 
+#include <cmath>
 #include <filesystem>
 #include <iostream>
 
@@ -8,6 +9,7 @@
 #include "scenarios/runner/runner.h"
 #include "sim/declared_model.h"
 #include "sim/export_model.h"
+#include "sim/mujoco_model.h"
 
 namespace flexbench::scenarios {
 namespace {
@@ -36,7 +38,60 @@ void WriteOne(const std::string& path, const char* format, const sim::ExportedMo
   std::cout << "wrote " << path << "\n";
 }
 
+// --kp as typed: a positive number, all of the text.
+double ParseKp(const std::string& text) {
+  if (text.empty()) return sim::kDefaultServoKp;
+  double kp = 0.0;
+  size_t used = 0;
+  try {
+    kp = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != text.size() || !(kp > 0.0) || !std::isfinite(kp)) {
+    throw InputError("convert: --kp '" + CapForMessage(text) +
+                     "': expected a positive number (N m/rad)");
+  }
+  return kp;
+}
+
 }  // namespace
+
+int ConvertCommand(const ConvertCliOptions& o) {
+  try {
+    if (o.actuators != "position") {
+      throw InputError("convert: --actuators '" + CapForMessage(o.actuators) +
+                       "': give --actuators position (a <position> servo per joint)");
+    }
+    const double kp = ParseKp(o.kp);
+    if (!sim::IsUrdfPath(o.urdf)) {
+      throw InputError("convert: " + CapForMessage(o.urdf) + ": expected a URDF file (.urdf)");
+    }
+    const std::string out =
+        o.out.empty() ? std::filesystem::path(o.urdf).replace_extension(".xml").string() : o.out;
+    std::error_code ec;
+    if (std::filesystem::equivalent(out, o.urdf, ec)) {
+      throw InputError("convert: -o " + CapForMessage(out) +
+                       ": is the input URDF; name another file");
+    }
+    CheckOutput(o.out.empty() ? "output" : "-o", out, o.force);
+    const sim::ConvertedUrdf mjcf = sim::UrdfToMjcf(o.urdf, kp);
+    for (const std::string& w : mjcf.warnings) std::cerr << "[flexbench] warning: " << w << "\n";
+    if (!mjcf.skipped.empty()) {
+      std::string names;
+      for (const std::string& s : mjcf.skipped) names += (names.empty() ? "" : ", ") + s;
+      std::cerr << "[flexbench] warning: no servo on " << names << "\n";
+    }
+    WriteFileAtomic(out, mjcf.text);
+    std::cout << "wrote " << out << " (" << mjcf.servoed.size() << " position servos, kp " << kp
+              << ")\n";
+    return kExitOk;
+  } catch (const InputError& e) {
+    return ReportError(e);
+  } catch (const std::filesystem::filesystem_error& e) {
+    return ReportError(e);
+  }
+}
 
 int ExportCommand(const ExportCliOptions& o) {
   try {

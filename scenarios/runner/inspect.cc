@@ -1,5 +1,6 @@
 #include "scenarios/runner/inspect.h"
 
+#include <cstdio>
 #include <iostream>
 
 #include "estimators/error.h"
@@ -8,9 +9,11 @@
 #include "sim/camera.h"
 #include "sim/declared_check.h"
 #include "sim/effects/effect.h"
+#include "sim/export_model.h"
 #include "sim/model_catalog.h"
 #include "sim/mujoco_model.h"
 #include "sim/sensors/sensor.h"
+#include "sim/truth_model.h"
 
 namespace flexbench::scenarios {
 namespace {
@@ -183,7 +186,7 @@ Json Effects(const mjModel* m, const sim::ModelCatalog& catalog) {
 
 Json InspectModel(const std::string& mjcf_path) {
   std::vector<std::string> warnings;
-  sim::MjModelPtr model = sim::LoadModel(mjcf_path, &warnings);
+  sim::MjModelPtr model = sim::LoadTruthModel(mjcf_path, &warnings);
   mjModel* m = model.get();
   const sim::ModelCatalog catalog = sim::ModelCatalog::Build(m, mjcf_path);
   Json out;
@@ -197,6 +200,14 @@ Json InspectModel(const std::string& mjcf_path) {
   out["nbody"] = m->nbody;
   if (!warnings.empty()) out["mujoco_warnings"] = warnings;
   out["actuated_joints"] = ActuatedJoints(m, catalog);
+  if (sim::IsUrdfPath(mjcf_path)) {
+    char kp[32];
+    std::snprintf(kp, sizeof(kp), "%g", sim::kDefaultServoKp);
+    out["servos_added"] = std::string(
+                              "a URDF has no actuators: as the truth, each hinge and "
+                              "slide joint gets a <position> servo (kp ") +
+                          kp + "), listed in actuated_joints; `flexbench convert` writes that MJCF";
+  }
   PassiveAndCoupled(m, catalog, &out);
   out["sensors"] = Sensors(m, catalog);
   out["cameras"] = Cameras(m);

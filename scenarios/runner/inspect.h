@@ -1,7 +1,8 @@
 // `flexbench inspect MODEL`: what a truth model offers, as JSON on stdout: actuated joints,
 // passive compliance joints, coupled joints, sensors, cameras, AprilTags and the effects it
-// supports. MODEL may also be a declared-model file (*.yaml): it is validated against its MJCF
-// and summarised, followed by the model's own description.
+// supports. MODEL may be a URDF: described as the truth has it, with a position servo per joint
+// (sim/truth_model.h). It may also be a declared-model file (*.yaml): it is validated against
+// its model and summarised, followed by the model's own description.
 #pragma once
 
 #include <string>
@@ -10,7 +11,8 @@
 
 namespace flexbench::scenarios {
 
-// Description of an MJCF model. Throws InputError for a missing or rejected model.
+// Description of a truth model (MJCF, or URDF with its servos). Throws InputError for a missing or
+// rejected model.
 Json InspectModel(const std::string& mjcf_path);
 
 // The subcommand: prints JSON and returns 0, or prints one line on stderr and returns 2.

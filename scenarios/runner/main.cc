@@ -1,5 +1,6 @@
 // flexbench: run scenarios that score pose estimators of flexible arms against MuJoCo's truth.
 #include <CLI/CLI.hpp>
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <string>
@@ -15,6 +16,7 @@
 #include "scenarios/runner/summary_command.h"
 #include "scenarios/sweep/sweep_command.h"
 #include "sim/config.h"
+#include "sim/export_model.h"
 #include "sim/mujoco_model.h"
 
 namespace {
@@ -30,6 +32,7 @@ struct Options {
   flexbench::scenarios::IdentifyCliOptions id;
   flexbench::scenarios::sweep::SweepCliOptions sw;
   flexbench::scenarios::ExportCliOptions ex;
+  flexbench::scenarios::ConvertCliOptions cv;
   flexbench::scenarios::ReplayCliOptions rp;
   bool no_wait = false;
   // The --out options, to tell `--out ''` from no --out (both leave the string empty).
@@ -137,6 +140,23 @@ CLI::App* AddExport(CLI::App& app, Options& o) {
   return cmd;
 }
 
+// convert: a URDF as the MJCF with position servos the truth loads it as.
+CLI::App* AddConvert(CLI::App& app, Options& o) {
+  CLI::App* cmd = app.add_subcommand(
+      "convert", "write a URDF as MJCF with a position servo per joint (how the truth loads it)");
+  cmd->add_option("urdf", o.cv.urdf, "URDF file")->required();
+  // Checked by ConvertCommand: one line naming the option (CLI11 adds a second).
+  cmd->add_option("--actuators", o.cv.actuators, "the actuators to add: position (required)");
+  char kp[32];
+  std::snprintf(kp, sizeof(kp), "%g", flexbench::sim::kDefaultServoKp);
+  cmd->add_option(
+      "--kp", o.cv.kp,
+      std::string("servo stiffness, N m/rad (N/m on a prismatic joint; default ") + kp + ")");
+  cmd->add_option("-o,--out", o.cv.out, "output MJCF (default: the URDF's name with .xml)");
+  cmd->add_flag("--force", o.cv.force, "replace an existing output file");
+  return cmd;
+}
+
 // replay: a recorded log folder through the estimators.
 CLI::App* AddReplay(CLI::App& app, Options& o) {
   flexbench::scenarios::ReplayCliOptions& rp = o.rp;
@@ -241,10 +261,12 @@ int Main(int argc, char** argv) {
   list_cmd->add_option("--dir", o.list_dir, "folder with scenario files (default: scenarios)");
   CLI::App* inspect_cmd = app.add_subcommand(
       "inspect", "print a model's joints, sensors, cameras, tags and effects as JSON");
-  inspect_cmd->add_option("model", o.inspect_path, "MJCF model or declared-model YAML")->required();
+  inspect_cmd->add_option("model", o.inspect_path, "MJCF or URDF model, or declared-model YAML")
+      ->required();
   CLI::App* identify_cmd = AddIdentify(app, o);
   CLI::App* sweep_cmd = AddSweep(app, o);
   CLI::App* export_cmd = AddExport(app, o);
+  CLI::App* convert_cmd = AddConvert(app, o);
   CLI::App* replay_cmd = AddReplay(app, o);
   CLI::App* report_cmd = app.add_subcommand(
       "report", "write report.html in a run's or a sweep's result folder (again)");
@@ -293,6 +315,7 @@ int Main(int argc, char** argv) {
   }
   if (*inspect_cmd) return flexbench::scenarios::InspectCommand(o.inspect_path);
   if (*export_cmd) return flexbench::scenarios::ExportCommand(o.ex);
+  if (*convert_cmd) return flexbench::scenarios::ConvertCommand(o.cv);
   if (*replay_cmd) return flexbench::scenarios::ReplayCommand(o.rp);
   if (*identify_cmd) {
     if (o.id.out_dir.empty()) o.id.out_dir = "out/identify";
