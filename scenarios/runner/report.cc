@@ -905,12 +905,47 @@ std::string SeedRanges(const Json& seeds) {
   return out + " (" + std::to_string(v.size()) + " seeds)";
 }
 
-void PointMetrics(const Json& point, std::ostringstream* h) {
+// Metrics with one value in every run of every point (a model's nees_dof, a fixed count):
+// "group/name" -> that value. Shown once, not per point.
+std::map<std::string, Json> ConstantMetrics(const Json& points) {
+  std::map<std::string, Json> same;
+  if (!points.is_array() || points.empty()) return same;
+  for (const char* group : {"metrics", "ratios"}) {
+    const Json& first = At(points[0], group);
+    if (!first.is_object()) continue;
+    for (auto it = first.begin(); it != first.end(); ++it) {
+      const Json& v = At(it.value(), "min");
+      if (!v.is_number()) continue;
+      const bool constant = std::all_of(points.begin(), points.end(), [&](const Json& p) {
+        const Json& m = At(At(p, group), it.key());
+        return At(m, "min") == v && At(m, "max") == v;
+      });
+      if (constant) same[std::string(group) + "/" + it.key()] = v;
+    }
+  }
+  return same;
+}
+
+void ConstantTable(const std::map<std::string, Json>& same, std::ostringstream* h) {
+  if (same.empty()) return;
+  *h << "<h2 id=\"same\">The same in every run</h2>\n<p>These " << same.size()
+     << " metrics have one value in every run of every point; the tables per point leave them "
+        "out.</p>\n<div class=\"scroll\"><table>\n<tr><th>metric</th><th>value</th></tr>\n";
+  for (const auto& [key, v] : same) {
+    *h << "<tr><td>" << HtmlEscape(key.substr(key.find('/') + 1)) << "</td>" << Td(v)
+       << "</tr>\n";
+  }
+  *h << "</table></div>\n";
+}
+
+void PointMetrics(const Json& point, const std::map<std::string, Json>& same,
+                  std::ostringstream* h) {
   *h << "<div class=\"scroll\"><table>\n<tr><th>metric</th><th>n</th><th>mean</th>"
         "<th>95% CI of the mean</th><th>std</th><th>median</th><th>min</th><th>max</th></tr>\n";
   for (const char* group : {"metrics", "ratios"}) {
     if (!point.contains(group) || !point[group].is_object()) continue;
     for (auto it = point[group].begin(); it != point[group].end(); ++it) {
+      if (same.count(std::string(group) + "/" + it.key())) continue;
       const Json& m = it.value();
       *h << "<tr><td>" << HtmlEscape(it.key()) << "</td>" << Td(m.value("n", Json()))
          << Td(m.value("mean", Json())) << "<td class=\"num\">[" << Cell(m.value("ci_low", Json()))
@@ -973,7 +1008,12 @@ std::string SweepReportUnchecked(const fs::path& dir) {
     }
     h << "</table>\n";
   }
+  const std::map<std::string, Json> same = ConstantMetrics(At(a, "points"));
   h << "<h2>Aggregate per point</h2>\n";
+  if (!same.empty()) {
+    h << "<p>Metrics with one value in every run are listed once, under <a href=\"#same\">The "
+         "same in every run</a>.</p>\n";
+  }
   for (const Json& p : a.value("points", Json::array())) {
     h << "<h3>Point " << Cell(p.value("point", Json())) << "</h3>\n";
     std::string set;
@@ -987,8 +1027,9 @@ std::string SweepReportUnchecked(const fs::path& dir) {
       << Cell(p.value("succeeded", Json())) << " of " << Cell(p.value("runs", Json()))
       << " runs succeeded.</p>\n";
     PointGates(p, &h);
-    PointMetrics(p, &h);
+    PointMetrics(p, same, &h);
   }
+  ConstantTable(same, &h);
   h << "<h2>Figures</h2>\n";
   Figures(files, true, &h);
   h << "<h2>Files</h2>\n<p>Each run's folder has its own report.</p>\n";
