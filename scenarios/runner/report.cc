@@ -255,7 +255,20 @@ std::string FigureDescription(const std::string& rel) {
       {"sweep_", "a rendered frame of the detection sweep"},
       {"sweep", "mean over seeds with its 95% bootstrap confidence interval"},
       {"smoke", "the rendered tag with detected and true corners"},
-      {"fig", "joint estimates with their 95% bands against the truth"},
+      {"fig6_", "joint estimates with their 95% bands against the simulated truth and the "
+                "commanded reference"},
+      {"fig8_gripper_error",
+       "each estimator's gripper position error against MuJoCo's grasp point (the truth), and "
+       "the commanded postures"},
+      {"fig8_",
+       "joint estimates with their 95% bands against the commanded reference angles; the "
+       "flexible arm bends between its joints, so there is no true joint angle to draw: its "
+       "truth is the gripper's position (fig8_gripper_error.png)"},
+      {"fig9_direct_fusion", "the gripper's height per estimator and the reference joint angles"},
+      {"fig9_", "joint estimates with their 95% bands against the commanded reference angles"},
+      {"fig10_yaw_drift", "the IMU orientation filter's yaw drift against the truth"},
+      {"fig10_", "joint estimates with their 95% bands against the simulated truth and the "
+                 "commanded reference"},
   };
   const std::string name = fs::path(rel).filename().string();
   for (const auto& [prefix, text] : kKnown) {
