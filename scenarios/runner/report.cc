@@ -645,18 +645,37 @@ void WhatIsLeft(const Json& s, std::ostringstream* h) {
 }
 
 // The calibrated model files the run wrote, and how to load them.
-void ModelLinks(const std::vector<FileEntry>& files, std::ostringstream* h) {
-  static const std::pair<const char*, const char*> kModels[] = {
-      {"declared_augmented.yaml", "the declared model with the identified effects (flexbench)"},
-      {"calibrated_model.xml", "MJCF: <code>simulate calibrated_model.xml</code>"},
-      {"calibrated_model.urdf", "URDF"}};
+void ModelLinks(const Json& id, const std::vector<FileEntry>& files, std::ostringstream* h) {
+  static const struct {
+    const char* name;
+    const char* what;
+    const char* not_held;  // identification.calibrated_model's list of what it lacks
+  } kModels[] = {
+      {"declared_augmented.yaml",
+       "the declared model with the identified effects and their stds (flexbench's estimators)",
+       ""},
+      {"calibrated_model.xml",
+       "MJCF for MuJoCo: <code>simulate calibrated_model.xml</code> (Debian: "
+       "<code>mujoco-simulate</code>)",
+       "not_in_mjcf"},
+      {"calibrated_model.urdf", "URDF", "not_in_urdf"}};
+  const Json& cm = At(id, "calibrated_model");
   std::ostringstream links;
-  for (const auto& [name, what] : kModels) {
+  for (const auto& m : kModels) {
     for (const FileEntry& f : files) {
-      if (fs::path(f.rel).filename() != name) continue;
+      if (fs::path(f.rel).filename() != m.name) continue;
       links << "<li><a href=\"" << HtmlEscape(UrlPath(f.rel)) << "\">" << HtmlEscape(f.rel)
-            << "</a> &mdash; " << what << "</li>\n";
+            << "</a> &mdash; " << m.what;
+      const Json& lacks = At(cm, m.not_held);
+      if (lacks.is_array() && !lacks.empty()) {
+        links << "; without <code>" << HtmlEscape(Joined(lacks, ", "))
+              << "</code> (no form for them)";
+      }
+      links << "</li>\n";
     }
+  }
+  if (!Text(At(cm, "not_written")).empty()) {
+    links << "<li>No MJCF or URDF: " << HtmlEscape(Text(At(cm, "not_written"))) << "</li>\n";
   }
   if (links.str().empty()) return;
   *h << "<h3>The calibrated model</h3>\n<ul class=\"answer\">\n" << links.str() << "</ul>\n";
@@ -715,7 +734,7 @@ void Answer(const Json& run, const fs::path& dir, const std::vector<FileEntry>& 
   BetterTable(s, h);
   HowSure(s, id, h);
   WhatIsLeft(s, h);
-  ModelLinks(files, h);
+  ModelLinks(id, files, h);
 }
 
 // Plain words for the flags and bounds the metric tables hold; each shown when a key ends in it.
