@@ -245,7 +245,9 @@ std::string FigureDescription(const std::string& rel) {
        "estimate's 95% position ellipse"},
       {"lateral_error", "Table I: lateral error per estimator beside the paper's values"},
       {"fig5_contact", "error and covariance over the contact iterations"},
-      {"loop", "position error and NEES before and after identification, per estimator"},
+      {"loop",
+       "each estimator's mean position error with the declared and with the augmented model "
+       "(log axis, values in mm)"},
       {"residual_before_after",
        "residual against the quantity that exposed the first chosen "
        "effect, before and after"},
