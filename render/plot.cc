@@ -182,7 +182,8 @@ std::vector<double> ResolveLogLimits(Range r, std::optional<double> fixed_lo,
   std::vector<double> ticks;
   for (long d = std::lround(*lo); d <= std::lround(*hi); ++d) {
     for (double m : {1.0, 2.0, 5.0}) {
-      if ((m == 1.0 || fine) && d + std::log10(m) <= *hi + 1e-9) ticks.push_back(m * std::pow(10.0, d));
+      if ((m == 1.0 || fine) && d + std::log10(m) <= *hi + 1e-9)
+        ticks.push_back(m * std::pow(10.0, d));
     }
   }
   return ticks;

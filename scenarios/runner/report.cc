@@ -257,8 +257,9 @@ std::string FigureDescription(const std::string& rel) {
       {"sweep_", "a rendered frame of the detection sweep"},
       {"sweep", "mean over seeds with its 95% bootstrap confidence interval"},
       {"smoke", "the rendered tag with detected and true corners"},
-      {"fig6_", "joint estimates with their 95% bands against the simulated truth and the "
-                "commanded reference"},
+      {"fig6_",
+       "joint estimates with their 95% bands against the simulated truth and the "
+       "commanded reference"},
       {"fig8_gripper_error",
        "each estimator's gripper position error against MuJoCo's grasp point (the truth), and "
        "the commanded postures"},
@@ -269,8 +270,9 @@ std::string FigureDescription(const std::string& rel) {
       {"fig9_direct_fusion", "the gripper's height per estimator and the reference joint angles"},
       {"fig9_", "joint estimates with their 95% bands against the commanded reference angles"},
       {"fig10_yaw_drift", "the IMU orientation filter's yaw drift against the truth"},
-      {"fig10_", "joint estimates with their 95% bands against the simulated truth and the "
-                 "commanded reference"},
+      {"fig10_",
+       "joint estimates with their 95% bands against the simulated truth and the "
+       "commanded reference"},
   };
   const std::string name = fs::path(rel).filename().string();
   for (const auto& [prefix, text] : kKnown) {
@@ -538,14 +540,15 @@ void BetterTable(const Json& s, std::ostringstream* h) {
   }
   const double cb = Number(IdMetric(s, "cv_err_before")), ca = Number(IdMetric(s, "cv_err_after"));
   if (std::isfinite(cb) || std::isfinite(ca)) {
-    rows << "<tr><td>held-out folds (cross-validation)</td><td class=\"num\">"
-         << Fmt("%.4g", cb) << " &sigma;&sup2;</td><td class=\"num\">" << Fmt("%.4g", ca)
+    rows << "<tr><td>held-out folds (cross-validation)</td><td class=\"num\">" << Fmt("%.4g", cb)
+         << " &sigma;&sup2;</td><td class=\"num\">" << Fmt("%.4g", ca)
          << " &sigma;&sup2;</td><td class=\"num\">" << Fmt("%.3g", ca / cb) << "</td></tr>\n";
   }
   if (rows.str().empty()) return;
   *h << "<h3>How much better</h3>\n<table class=\"answer\">\n<tr><th>mean error on</th>"
         "<th>declared model</th><th>identified model</th><th>after / before</th></tr>\n"
-     << rows.str() << "</table>\n<p class=\"muted\">&sigma;&sup2;: the mean squared residual "
+     << rows.str()
+     << "</table>\n<p class=\"muted\">&sigma;&sup2;: the mean squared residual "
         "in units of the stated noise (1: the noise alone).</p>\n";
 }
 
@@ -565,16 +568,17 @@ void HowSure(const Json& s, const Json& id, std::ostringstream* h) {
     items << "<li>Without <code>" << HtmlEscape(Text(At(a, "banned"))) << "</code>: <code>"
           << HtmlEscape(Joined(At(a, "effects"), " + ")) << "</code> reach a held-out error of "
           << Fmt("%.4g", Number(At(a, "cv_err"))) << " &sigma;&sup2;"
-          << (std::isfinite(chosen) ? " (the chosen model: " + Fmt("%.4g", chosen) + " &sigma;&sup2;)"
-                                    : std::string())
+          << (std::isfinite(chosen)
+                  ? " (the chosen model: " + Fmt("%.4g", chosen) + " &sigma;&sup2;)"
+                  : std::string())
           << ".</li>\n";
   }
   if (also.is_array()) {
     for (const Json& a : also) {
       items << "<li>Also fits: <code>" << HtmlEscape(Joined(At(a, "effects"), " + "))
             << "</code> in place of <code>" << HtmlEscape(Text(At(a, "banned")))
-            << "</code> reaches " << Fmt("%.4g", Number(At(a, "cv_err")))
-            << " &sigma;&sup2; with " << Cell(At(a, "num_params")) << " parameters instead of "
+            << "</code> reaches " << Fmt("%.4g", Number(At(a, "cv_err"))) << " &sigma;&sup2; with "
+            << Cell(At(a, "num_params")) << " parameters instead of "
             << Cell(At(a, "chosen_num_params"))
             << ": as good but more complex, so no evidence against the simpler cause.</li>\n";
     }
@@ -594,13 +598,13 @@ void HowSure(const Json& s, const Json& id, std::ostringstream* h) {
           << HtmlEscape(Text(At(id, "undetermined"))) << "</code>.</li>\n";
   }
   const double nb = Number(IdMetric(s, "nees_before")), na = Number(IdMetric(s, "nees_after"));
-  const double lo = Number(IdMetric(s, "nees_bound_low")), hi = Number(IdMetric(s, "nees_bound_high"));
+  const double lo = Number(IdMetric(s, "nees_bound_low")),
+               hi = Number(IdMetric(s, "nees_bound_high"));
   if (std::isfinite(na) && std::isfinite(lo)) {
     items << "<li>Uncertainty: the validation rows' mean NEES is " << Fmt("%.3g", nb)
           << " under the declared model and " << Fmt("%.3g", na)
           << " under the identified one, with the declared PPOE sources (a consistent model: "
-          << Fmt("%.3g", lo) << " to " << Fmt("%.3g", hi)
-          << ", 95%)"
+          << Fmt("%.3g", lo) << " to " << Fmt("%.3g", hi) << ", 95%)"
           << (na < lo   ? ": below it, the declared sources are larger than the error left"
               : na > hi ? ": above it, the declared sources are smaller than the error left"
                         : "")
@@ -966,8 +970,7 @@ void ConstantTable(const std::map<std::string, Json>& same, std::ostringstream* 
      << " metrics have one value in every run of every point; the tables per point leave them "
         "out.</p>\n<div class=\"scroll\"><table>\n<tr><th>metric</th><th>value</th></tr>\n";
   for (const auto& [key, v] : same) {
-    *h << "<tr><td>" << HtmlEscape(key.substr(key.find('/') + 1)) << "</td>" << Td(v)
-       << "</tr>\n";
+    *h << "<tr><td>" << HtmlEscape(key.substr(key.find('/') + 1)) << "</td>" << Td(v) << "</tr>\n";
   }
   *h << "</table></div>\n";
 }

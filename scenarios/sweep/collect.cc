@@ -410,7 +410,10 @@ MetricName Describe(const std::string& path) {
     const char* suffix;
     const char* unit;
     double scale;
-  } kUnits[] = {{"_m", "mm", 1e3}, {"_deg", "deg", 1.0}, {"_px", "px", 1.0}, {"_s", "s", 1.0},
+  } kUnits[] = {{"_m", "mm", 1e3},
+                {"_deg", "deg", 1.0},
+                {"_px", "px", 1.0},
+                {"_s", "s", 1.0},
                 {"_rad", "rad", 1.0}};
   n.quantity = rest;
   for (const auto& u : kUnits) {
@@ -510,8 +513,7 @@ void PlotGrid(const SweepSpec& spec, const std::vector<SweepPoint>& points, cons
       m.color = c;
       m.marker = render::Marker::kCircle;
       for (const auto* band : {&lo, &hi}) {
-        render::Series& b =
-            ax->AddLine(band == &lo ? label + " 95% CI" : "", x, Scaled(*band, k));
+        render::Series& b = ax->AddLine(band == &lo ? label + " 95% CI" : "", x, Scaled(*band, k));
         b.color = c;
         b.line = render::LineStyle::kDashed;
         b.line_width = 1;

@@ -4,11 +4,11 @@
 // folder that decodes.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <cstdio>
 #include <regex>
 #include <set>
 
@@ -117,8 +117,7 @@ TEST(ReportCli, IdentifyRunPageHoldsTheFittedValuesTheirStdsAndUnits) {
   for (const Json& e : s["identification"]["effects"]) {
     for (size_t i = 0; i < e["value"].size(); ++i) {
       const std::string cell = G6(e["value"][i].get<double>()) + " &plusmn; " +
-                               G6(e["std"][i].get<double>()) + " " +
-                               e["unit"].get<std::string>();
+                               G6(e["std"][i].get<double>()) + " " + e["unit"].get<std::string>();
       EXPECT_NE(html.find(cell), std::string::npos) << cell;
     }
   }

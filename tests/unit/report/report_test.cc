@@ -269,8 +269,7 @@ TEST(Report, IdentificationPageAnswersFirstWithValuesStdsAndUnits) {
             std::string::npos);
   EXPECT_NE(html.find("<td class=\"num\">439</td>"), std::string::npos);  // |value| / std
   // The verdict in words; held-out error before and after in mm.
-  EXPECT_NE(html.find("Verdict: <b>ambiguous</b> &mdash; the correction holds"),
-            std::string::npos);
+  EXPECT_NE(html.find("Verdict: <b>ambiguous</b> &mdash; the correction holds"), std::string::npos);
   EXPECT_NE(html.find("<td class=\"num\">1.624 mm</td><td class=\"num\">0.06533 mm</td>"),
             std::string::npos);
   // How sure and what is left: the alternative, the more complex fit, the NEES explained.
@@ -357,10 +356,10 @@ TEST(Report, SweepListsMetricsConstantOverEveryRunOnce) {
            "\"nees_dof\": " + stat(6, 6) + ", \"err_m\": " + stat(err_lo, 0.9) +
            ", \"per_point_k\": " + stat(k, k) + "}}";
   };
-  WriteFile(tmp.path() / "aggregate.json", "{\"sweep\": \"s\", \"seeds\": [1, 2, 3], "
-                                           "\"points\": [" +
-                                               point("a", 0.1, 1) + ", " + point("b", 0.2, 2) +
-                                               "]}");
+  WriteFile(tmp.path() / "aggregate.json",
+            "{\"sweep\": \"s\", \"seeds\": [1, 2, 3], "
+            "\"points\": [" +
+                point("a", 0.1, 1) + ", " + point("b", 0.2, 2) + "]}");
   const std::string html = RenderReport(tmp.path());
   EXPECT_EQ(Count(html, "<td>nees_dof</td>"), 1) << html;
   EXPECT_NE(html.find("<tr><td>nees_dof</td><td class=\"num\">6</td></tr>"), std::string::npos);
