@@ -439,6 +439,7 @@ std::string YLabel(const std::vector<std::string>& metrics) {
   }
   const std::string unit =
       units.size() == 1 ? (units.begin()->empty() ? "" : " [" + *units.begin() + "]") : "";
+  if (units.size() > 1) return "value [units in the legend]";
   return (quantities.size() == 1 ? *quantities.begin() : std::string("value")) + unit;
 }
 
