@@ -47,6 +47,7 @@ li{font-family:monospace;font-size:13px}
 ul.answer li,ul.notes li,.warnings li{font-family:sans-serif;font-size:14px;margin:3px 0}
 ul.notes li{font-size:13px;color:#333}table.answer{font-size:14px}
 table.answer td:first-child{white-space:nowrap}
+span.also{display:block;white-space:normal;max-width:24em;font-size:12px;color:#555}
 p.verdict{font-size:16px;background:#eef4fb;border-left:4px solid #3a6ea5;padding:6px 10px}
 .warnings{background:#fff3cd;border:2px solid #d39e00;padding:8px 12px;margin:10px 0}
 details{margin:6px 0 12px}summary{cursor:pointer;color:#1a4d80}
@@ -507,11 +508,23 @@ void EffectsTable(const Json& effects, std::ostringstream* h) {
       si += br + Num(v) + " &plusmn; " + Num(s) + " " + HtmlEscape(u);
       shown += br + Fmt("%.4g", r.scale * v) + " &plusmn; " + Fmt("%.2g", r.scale * s) + " " +
                HtmlEscape(r.unit);
-      z += br + Fmt("%.3g", std::abs(v) / s);
+      // A direction the data do not determine is reported as 0 +- 0: no ratio.
+      z += br + (s > 0.0 ? Fmt("%.3g", std::abs(v) / s) : std::string("&mdash;"));
     }
-    *h << "<tr><td><b>" << HtmlEscape(Text(At(e, "effect"))) << "</b></td><td class=\"num\">" << si
-       << "</td><td class=\"num\">" << shown << "</td><td class=\"num\">" << z
-       << "</td><td class=\"num\">" << Fmt("%.3g", Number(At(e, "share"))) << "</td></tr>\n";
+    // An equivalence set's name lists its members, the reported one first.
+    const std::string name = Text(At(e, "effect"));
+    const size_t bar = name.find(" | ");
+    std::string shown_name = "<b>" + HtmlEscape(name.substr(0, bar)) + "</b>";
+    if (bar != std::string::npos) {
+      std::string others = name.substr(bar + 3);
+      for (size_t p = others.find(" | "); p != std::string::npos; p = others.find(" | ", p)) {
+        others.replace(p, 3, ", ");
+      }
+      shown_name += "<span class=\"also\">the same correction as " + HtmlEscape(others) + "</span>";
+    }
+    *h << "<tr><td>" << shown_name << "</td><td class=\"num\">" << si << "</td><td class=\"num\">"
+       << shown << "</td><td class=\"num\">" << z << "</td><td class=\"num\">"
+       << Fmt("%.3g", Number(At(e, "share"))) << "</td></tr>\n";
   }
   *h << "</table>\n";
 }
@@ -565,13 +578,20 @@ void HowSure(const Json& s, const Json& id, std::ostringstream* h) {
   };
   for (const Json& a : At(id, "alternatives")) {
     if (in_also(a)) continue;
-    items << "<li>Without <code>" << HtmlEscape(Text(At(a, "banned"))) << "</code>: <code>"
-          << HtmlEscape(Joined(At(a, "effects"), " + ")) << "</code> reach a held-out error of "
-          << Fmt("%.4g", Number(At(a, "cv_err"))) << " &sigma;&sup2;"
-          << (std::isfinite(chosen)
-                  ? " (the chosen model: " + Fmt("%.4g", chosen) + " &sigma;&sup2;)"
-                  : std::string())
-          << ".</li>\n";
+    const Json& effects = At(a, "effects");
+    const std::string error =
+        " reach a held-out error of " + Fmt("%.4g", Number(At(a, "cv_err"))) + " &sigma;&sup2;" +
+        (std::isfinite(chosen) ? " (the chosen model: " + Fmt("%.4g", chosen) + " &sigma;&sup2;)"
+                               : std::string());
+    const std::string without = "Without <code>" + HtmlEscape(Text(At(a, "banned"))) + "</code>: ";
+    const std::string list = "<code>" + HtmlEscape(Joined(effects, " + ")) + "</code>";
+    // A long list folds: the numbers stay on one line.
+    if (effects.is_array() && effects.size() > 4) {
+      items << "<li><details><summary>" << without << effects.size() << " effects" << error
+            << "</summary>" << list << "</details></li>\n";
+    } else {
+      items << "<li>" << without << list << error << ".</li>\n";
+    }
   }
   if (also.is_array()) {
     for (const Json& a : also) {
