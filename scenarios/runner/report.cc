@@ -529,6 +529,29 @@ void EffectsTable(const Json& effects, std::ostringstream* h) {
   *h << "</table>\n";
 }
 
+// The units an identification's errors come in (closed_loop's metric suffixes), as shown.
+const std::pair<const char*, Shown> kErrorUnits[] = {
+    {"_m", {1e3, "mm"}}, {"_px", {1.0, "px"}}, {"_gravity_deg", {1.0, "deg (gravity)"}}};
+
+// One line under the verdict, so a long table of effects leaves the answer in view: how many
+// effects, and the held-out error before and after.
+void Headline(const Json& s, const Json& effects, std::ostringstream* h) {
+  size_t params = 0;
+  for (const Json& e : effects) params += At(e, "value").is_array() ? At(e, "value").size() : 1;
+  *h << "<p>" << effects.size() << " effect" << (effects.size() == 1 ? "" : "s") << " found ("
+     << params << " parameters)";
+  for (const auto& [suffix, shown] : kErrorUnits) {
+    const double b = Number(IdMetric(s, std::string("val_err_before") + suffix));
+    const double a = Number(IdMetric(s, std::string("val_err_after") + suffix));
+    if (!std::isfinite(b) || !std::isfinite(a)) continue;
+    *h << "; the held-out error goes from " << Fmt("%.4g", shown.scale * b) << " " << shown.unit
+       << " to " << Fmt("%.4g", shown.scale * a) << " " << shown.unit << " (" << Fmt("%.3g", a / b)
+       << " of it)";
+    break;
+  }
+  *h << ".</p>\n";
+}
+
 // Errors before and after on the held-out and the calibration rows, in their own units (metre
 // errors as mm), and the cross-validated held-out error in units of the stated noise.
 void BetterTable(const Json& s, std::ostringstream* h) {
@@ -538,11 +561,9 @@ void BetterTable(const Json& s, std::ostringstream* h) {
   };
   static const Row kRows[] = {{"held-out (validation) rows", "val_err"},
                               {"calibration rows", "cal_err"}};
-  static const std::pair<const char*, Shown> kSuffixes[] = {
-      {"_m", {1e3, "mm"}}, {"_px", {1.0, "px"}}, {"_gravity_deg", {1.0, "deg (gravity)"}}};
   std::ostringstream rows;
   for (const Row& r : kRows) {
-    for (const auto& [suffix, shown] : kSuffixes) {
+    for (const auto& [suffix, shown] : kErrorUnits) {
       const double b = Number(IdMetric(s, std::string(r.key) + "_before" + suffix));
       const double a = Number(IdMetric(s, std::string(r.key) + "_after" + suffix));
       if (!std::isfinite(b) && !std::isfinite(a)) continue;
@@ -745,8 +766,9 @@ void Answer(const Json& run, const fs::path& dir, const std::vector<FileEntry>& 
     *h << "<p class=\"verdict\">Verdict: <b>" << HtmlEscape(verdict) << "</b> &mdash; "
        << HtmlEscape(VerdictWords(verdict)) << "</p>\n";
   }
-  *h << "<h3>What was found</h3>\n";
   const Json& effects = At(id, "effects");
+  if (effects.is_array()) Headline(s, effects, h);
+  *h << "<h3>What was found</h3>\n";
   if (effects.is_array() && !effects.empty()) {
     EffectsTable(effects, h);
   } else {

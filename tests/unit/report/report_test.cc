@@ -268,6 +268,10 @@ TEST(Report, IdentificationPageAnswersFirstWithValuesStdsAndUnits) {
                       "6.42205e-06 rad/Nm"),
             std::string::npos);
   EXPECT_NE(html.find("<td class=\"num\">439</td>"), std::string::npos);  // |value| / std
+  // In view above the effects however many there are: their count and the held-out error.
+  EXPECT_NE(html.find("<p>2 effects found (3 parameters); the held-out error goes from 1.624 mm "
+                      "to 0.06533 mm (0.0402 of it).</p>"),
+            std::string::npos);
   // The verdict in words; held-out error before and after in mm.
   EXPECT_NE(html.find("Verdict: <b>ambiguous</b> &mdash; the correction holds"), std::string::npos);
   EXPECT_NE(html.find("<td class=\"num\">1.624 mm</td><td class=\"num\">0.06533 mm</td>"),
