@@ -539,7 +539,7 @@ void Headline(const Json& s, const Json& effects, std::ostringstream* h) {
   size_t params = 0;
   for (const Json& e : effects) params += At(e, "value").is_array() ? At(e, "value").size() : 1;
   *h << "<p>" << effects.size() << " effect" << (effects.size() == 1 ? "" : "s") << " found ("
-     << params << " parameters)";
+     << params << " parameter" << (params == 1 ? "" : "s") << ")";
   for (const auto& [suffix, shown] : kErrorUnits) {
     const double b = Number(IdMetric(s, std::string("val_err_before") + suffix));
     const double a = Number(IdMetric(s, std::string("val_err_after") + suffix));
