@@ -45,6 +45,13 @@ std::string TickLabel(double v, double step) {
   return buf;
 }
 
+// A value as "%g" prints it: a log axis' ticks (0.01, 2e-05, 100).
+std::string ValueLabel(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%g", v);
+  return buf;
+}
+
 cv::Size TextSize(const std::string& text, double scale, int thickness = 1) {
   int baseline = 0;
   return cv::getTextSize(text, kFont, scale, thickness, &baseline);
@@ -163,17 +170,42 @@ std::vector<double> ResolveLimits(Range r, std::optional<double> fixed_lo,
   return ticks;
 }
 
-// The plot area of one axes in its cell and the data-to-pixel map.
+// Limits whole decades apart (in log10 units) and ticks at 1, (2, 5,) 10 ... in data units.
+std::vector<double> ResolveLogLimits(Range r, std::optional<double> fixed_lo,
+                                     std::optional<double> fixed_hi, double* lo, double* hi) {
+  if (!(r.lo <= r.hi)) r.lo = 0.0, r.hi = 1.0;
+  if (fixed_lo && *fixed_lo > 0) r.lo = std::log10(*fixed_lo);
+  if (fixed_hi && *fixed_hi > 0) r.hi = std::log10(*fixed_hi);
+  *lo = std::floor(r.lo + 1e-9);
+  *hi = std::max(*lo + 1.0, std::ceil(r.hi - 1e-9));
+  const bool fine = *hi - *lo <= 3.0;
+  std::vector<double> ticks;
+  for (long d = std::lround(*lo); d <= std::lround(*hi); ++d) {
+    for (double m : {1.0, 2.0, 5.0}) {
+      if ((m == 1.0 || fine) && d + std::log10(m) <= *hi + 1e-9)
+        ticks.push_back(m * std::pow(10.0, d));
+    }
+  }
+  return ticks;
+}
+
+// The plot area of one axes in its cell and the data-to-pixel map (y0, y1 in log10 units on a
+// log axis).
 struct PlotArea {
   cv::Rect area;
   double x0 = 0.0, x1 = 1.0, y0 = 0.0, y1 = 1.0;
+  bool y_log = false;
   std::vector<double> xt, yt;  // ticks
   int px(double x) const {
     return static_cast<int>(std::lround(area.x + (x - x0) / (x1 - x0) * area.width));
   }
   int py(double y) const {
+    // On a log axis a value <= 0 lies a decade below the axes (clipped there).
+    if (y_log) y = y > 0.0 ? std::log10(y) : y0 - 1.0;
     return static_cast<int>(std::lround(area.y + area.height - (y - y0) / (y1 - y0) * area.height));
   }
+  // Where bars start: zero, or the bottom edge of a log axis.
+  double y_base() const { return y_log ? std::pow(10.0, y0) : 0.0; }
 };
 
 // Room for the title, tick labels and axis labels; limits from the data, bars, error bars and
@@ -185,7 +217,13 @@ PlotArea Layout(const Axes& ax, const cv::Rect& cell) {
   const int bottom = cell.y + cell.height - (ax.x_label.empty() ? 30 : 52);
   PlotArea pa;
   pa.area = cv::Rect(left, top, std::max(10, right - left), std::max(10, bottom - top));
+  pa.y_log = ax.y_log;
   Range xr, yr;
+  // On a log axis only positive values set the range, in log10 units.
+  const auto add_y = [&](double y) {
+    if (!ax.y_log) yr.Add(y);
+    if (ax.y_log && y > 0.0) yr.Add(std::log10(y));
+  };
   for (const Series& s : ax.series) {
     for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
       if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
@@ -193,16 +231,20 @@ PlotArea Layout(const Axes& ax, const cv::Rect& cell) {
       if (s.bar_width > 0.0) {
         xr.Add(s.x[i] - 0.5 * s.bar_width);
         xr.Add(s.x[i] + 0.5 * s.bar_width);
-        yr.Add(0.0);
+        if (!ax.y_log) yr.Add(0.0);
       }
       const double e = i < s.y_err.size() && std::isfinite(s.y_err[i]) ? s.y_err[i] : 0.0;
-      yr.Add(s.y[i] - e);
-      yr.Add(s.y[i] + e);
+      add_y(s.y[i] - e);
+      add_y(s.y[i] + e);
     }
   }
-  for (const RefLine& l : ax.ref_lines) (l.vertical ? xr : yr).Add(l.value);
+  for (const RefLine& l : ax.ref_lines) {
+    if (l.vertical) xr.Add(l.value);
+    if (!l.vertical) add_y(l.value);
+  }
   pa.xt = ResolveLimits(xr, ax.x_min, ax.x_max, &pa.x0, &pa.x1);
-  pa.yt = ResolveLimits(yr, ax.y_min, ax.y_max, &pa.y0, &pa.y1);
+  pa.yt = ax.y_log ? ResolveLogLimits(yr, ax.y_min, ax.y_max, &pa.y0, &pa.y1)
+                   : ResolveLimits(yr, ax.y_min, ax.y_max, &pa.y0, &pa.y1);
   return pa;
 }
 
@@ -214,7 +256,13 @@ void DrawGrid(cv::Mat& img, const Axes& ax, const PlotArea& pa) {
     const int x = pa.px(t);
     if (ax.grid) cv::line(img, {x, area.y}, {x, area.y + area.height}, kGridGray, 1);
     cv::line(img, {x, area.y + area.height}, {x, area.y + area.height + 5}, kAxisGray, 1);
-    const std::string label = TickLabel(t, xstep);
+    const long k = std::lround(t);
+    const bool named = !ax.x_tick_labels.empty();
+    const std::string label =
+        !named ? TickLabel(t, xstep)
+        : std::abs(t - k) < 1e-9 && k >= 0 && k < static_cast<long>(ax.x_tick_labels.size())
+            ? ax.x_tick_labels[k]
+            : "";
     const cv::Size s = TextSize(label, kTickFont);
     PutText(img, label, {x - s.width / 2, area.y + area.height + 8 + s.height}, kTickFont);
   }
@@ -222,7 +270,7 @@ void DrawGrid(cv::Mat& img, const Axes& ax, const PlotArea& pa) {
     const int y = pa.py(t);
     if (ax.grid) cv::line(img, {area.x, y}, {area.x + area.width, y}, kGridGray, 1);
     cv::line(img, {area.x - 5, y}, {area.x, y}, kAxisGray, 1);
-    const std::string label = TickLabel(t, ystep);
+    const std::string label = pa.y_log ? ValueLabel(t) : TickLabel(t, ystep);
     const cv::Size s = TextSize(label, kTickFont);
     PutText(img, label, {area.x - 8 - s.width, y + s.height / 2}, kTickFont);
   }
@@ -255,7 +303,7 @@ void DrawSeries(cv::Mat& img, const Series& s, const PlotArea& pa) {
   const auto finite = [&](size_t i) { return std::isfinite(s.x[i]) && std::isfinite(s.y[i]); };
   for (size_t i = 0; s.bar_width > 0.0 && i < n; ++i) {
     if (!finite(i)) continue;
-    const cv::Rect bar = cv::Rect(cv::Point(pa.px(s.x[i] - 0.5 * s.bar_width), pa.py(0.0)),
+    const cv::Rect bar = cv::Rect(cv::Point(pa.px(s.x[i] - 0.5 * s.bar_width), pa.py(pa.y_base())),
                                   cv::Point(pa.px(s.x[i] + 0.5 * s.bar_width), pa.py(s.y[i]))) &
                          area;
     if (bar.area() == 0) continue;
@@ -279,6 +327,14 @@ void DrawSeries(cv::Mat& img, const Series& s, const PlotArea& pa) {
     if (!finite(i)) continue;
     const cv::Point p(pa.px(s.x[i]), pa.py(s.y[i]));
     if (area.contains(p)) DrawMarker(img, p, s.marker, s.marker_size, c);
+  }
+  for (size_t i = 0; i < n && i < s.point_labels.size(); ++i) {
+    if (!finite(i) || s.point_labels[i].empty()) continue;
+    const cv::Size ts = TextSize(s.point_labels[i], kTickFont);
+    // Above the point, kept inside the axes.
+    const int y = std::clamp(pa.py(s.y[i]) - s.marker_size - 5, area.y + ts.height + 2,
+                             area.y + area.height - 3);
+    PutText(img, s.point_labels[i], {pa.px(s.x[i]) - ts.width / 2, y}, kTickFont);
   }
 }
 

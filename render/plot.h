@@ -47,6 +47,8 @@ struct Series {
   // > 0: each point is a bar from 0 to y this wide (x units), filled with a light tint of
   // `color` (no line is drawn between points; error bars still are).
   double bar_width = 0.0;
+  // Text drawn just above each point or bar (its value, say); empty, or "" for a point: none.
+  std::vector<std::string> point_labels;
 };
 
 // A horizontal (or vertical) reference line across the axes, e.g. a gate threshold.
@@ -66,6 +68,12 @@ struct Axes {
   std::optional<double> x_min, x_max, y_min, y_max;
   std::vector<Series> series;
   std::vector<RefLine> ref_lines;
+  // y on a log10 scale: ticks at powers of ten (with 2 and 5 between over few decades), values
+  // <= 0 below the axes, bars rising from the bottom edge. Small values beside large ones stay
+  // visible.
+  bool y_log = false;
+  // Names for the x ticks at 0, 1, 2 ... (categories such as estimators); other ticks unlabelled.
+  std::vector<std::string> x_tick_labels;
   bool grid = true;
   bool legend = true;
   LegendPosition legend_position = LegendPosition::kTopLeft;

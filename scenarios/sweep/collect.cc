@@ -387,6 +387,75 @@ double Field(const Json* s, const char* key) {
   return s && (*s)[key].is_number() ? (*s)[key].get<double>() : NAN;
 }
 
+// A plotted metric as a reader names it: "naive_ekf pos_err_final" for
+// estimators.naive_ekf.metrics.pos_err_final_m, in mm; the unit from the name's suffix.
+struct MetricName {
+  std::string label;     // the legend's
+  std::string quantity;  // the name without estimator and unit
+  std::string unit;      // "" none
+  double scale = 1.0;    // stored value -> shown value
+};
+
+MetricName Describe(const std::string& path) {
+  MetricName n;
+  std::string rest = path;
+  std::string who;
+  if (rest.rfind("estimators.", 0) == 0) {
+    rest = rest.substr(11);
+    who = rest.substr(0, rest.find('.'));
+    rest = rest.find('.') == std::string::npos ? "" : rest.substr(rest.find('.') + 1);
+  }
+  if (rest.rfind("metrics.", 0) == 0) rest = rest.substr(8);
+  static const struct {
+    const char* suffix;
+    const char* unit;
+    double scale;
+  } kUnits[] = {{"_m", "mm", 1e3},
+                {"_deg", "deg", 1.0},
+                {"_px", "px", 1.0},
+                {"_s", "s", 1.0},
+                {"_rad", "rad", 1.0}};
+  n.quantity = rest;
+  for (const auto& u : kUnits) {
+    const std::string sfx = u.suffix;
+    if (rest.size() > sfx.size() && rest.compare(rest.size() - sfx.size(), sfx.size(), sfx) == 0) {
+      n.quantity = rest.substr(0, rest.size() - sfx.size());
+      n.unit = u.unit;
+      n.scale = u.scale;
+      break;
+    }
+  }
+  n.label = who.empty() ? n.quantity : who + " " + n.quantity;
+  return n;
+}
+
+// The y axis' label: the one quantity and unit all plotted metrics share, else what they share.
+std::string YLabel(const std::vector<std::string>& metrics) {
+  std::set<std::string> quantities, units;
+  for (const std::string& m : metrics) {
+    const MetricName n = Describe(m);
+    quantities.insert(n.quantity);
+    units.insert(n.unit);
+  }
+  const std::string unit =
+      units.size() == 1 ? (units.begin()->empty() ? "" : " [" + *units.begin() + "]") : "";
+  if (units.size() > 1) return "value [units in the legend]";
+  return (quantities.size() == 1 ? *quantities.begin() : std::string("value")) + unit;
+}
+
+// The legend's name of a metric: with its unit when the axis cannot give one.
+std::string LegendName(const std::string& metric, const std::vector<std::string>& metrics) {
+  std::set<std::string> units;
+  for (const std::string& m : metrics) units.insert(Describe(m).unit);
+  const MetricName n = Describe(metric);
+  return n.label + (units.size() > 1 && !n.unit.empty() ? " [" + n.unit + "]" : "");
+}
+
+std::vector<double> Scaled(std::vector<double> v, double scale) {
+  for (double& x : v) x *= scale;
+  return v;
+}
+
 // The plotted metrics: the plot's, else those the value gates name.
 std::vector<std::string> PlotMetrics(const SweepSpec& spec) {
   if (!spec.plot_metrics.empty()) return spec.plot_metrics;
@@ -439,12 +508,13 @@ void PlotGrid(const SweepSpec& spec, const std::vector<SweepPoint>& points, cons
         hi.push_back(Field(s, "ci_high"));
       }
       const render::Rgb c = render::PaletteColor(colour++);
-      const std::string label = metric + (rest.empty() ? "" : " [" + rest + "]");
-      render::Series& m = ax->AddLine(label + " mean", x, mean);
+      const double k = Describe(metric).scale;
+      const std::string label = LegendName(metric, metrics) + (rest.empty() ? "" : ", " + rest);
+      render::Series& m = ax->AddLine(label + " mean", x, Scaled(mean, k));
       m.color = c;
       m.marker = render::Marker::kCircle;
       for (const auto* band : {&lo, &hi}) {
-        render::Series& b = ax->AddLine(band == &lo ? label + " 95% CI" : "", x, *band);
+        render::Series& b = ax->AddLine(band == &lo ? label + " 95% CI" : "", x, Scaled(*band, k));
         b.color = c;
         b.line = render::LineStyle::kDashed;
         b.line_width = 1;
@@ -469,16 +539,19 @@ void PlotSeeds(const SweepSpec& spec, const Json& agg, const Collected& col,
       sx.push_back(static_cast<double>(seed));
       sy.push_back(it->second);
     }
-    render::Series& runs = ax->AddScatter(metric + " per run", sx, sy);
+    const double k = Describe(metric).scale;
+    const std::string label = LegendName(metric, metrics);
+    render::Series& runs = ax->AddScatter(label + " per run", sx, Scaled(sy, k));
     runs.color = c;
     runs.marker = render::Marker::kCircle;
     std::vector<double> x(spec.seeds.begin(), spec.seeds.end());
-    const double lo = Field(s, "ci_low"), hi = Field(s, "ci_high"), mean = Field(s, "mean");
-    render::Series& m = ax->AddLine(metric + " mean", {x.front(), x.back()}, {mean, mean});
+    const double lo = k * Field(s, "ci_low"), hi = k * Field(s, "ci_high");
+    const double mean = k * Field(s, "mean");
+    render::Series& m = ax->AddLine(label + " mean", {x.front(), x.back()}, {mean, mean});
     m.color = c;
     for (double b : {lo, hi}) {
       render::Series& l =
-          ax->AddLine(b == lo ? metric + " 95% CI" : "", {x.front(), x.back()}, {b, b});
+          ax->AddLine(b == lo ? label + " 95% CI" : "", {x.front(), x.back()}, {b, b});
       l.color = c;
       l.line = render::LineStyle::kDashed;
       l.line_width = 1;
@@ -498,7 +571,7 @@ void WriteCollected(const fs::path& out, const SweepSpec& spec,
   render::Figure fig(1000, 620);
   render::Axes& ax = fig.axes();
   ax.title = spec.name + ": mean over seeds with its 95% bootstrap CI";
-  ax.y_label = "metric value";
+  ax.y_label = YLabel(metrics);
   if (spec.grid.empty()) {
     PlotSeeds(spec, c.aggregate, c, metrics, &ax);
   } else {

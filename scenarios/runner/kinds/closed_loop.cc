@@ -67,6 +67,7 @@
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/effects/effect.h"
+#include "sim/export_model.h"
 #include "sim/mujoco_model.h"
 #include "sim/simulation.h"
 
@@ -814,6 +815,7 @@ class ClosedLoopKind : public ScenarioKind {
     // A model that does not lower the validation error is no fix: it is not shipped.
     if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
       WriteAugmented(ctx, res);
+      WriteCalibratedModel(ctx, res);
     } else {
       ctx.log(
           "declared_augmented.yaml not written: the identified model does not explain the "
@@ -2063,6 +2065,32 @@ class ClosedLoopKind : public ScenarioKind {
                          .generic_string();
     WriteFileAtomic(ctx.out->File("declared_augmented.yaml"),
                     sim::EmitDeclaredModel(out, header.str()));
+  }
+
+  // The augmented model as files MuJoCo and URDF tools load (what `flexbench export` writes),
+  // beside declared_augmented.yaml; summary.json's identification.calibrated_model names them
+  // and what the formats cannot hold. A model export cannot read (a URDF) is said so instead.
+  void WriteCalibratedModel(RunContext& ctx, const identify::IdentifyResult& res) const {
+    Json& cm = (*ctx.summary)["identification"]["calibrated_model"];
+    try {
+      const sim::DeclaredModel model = Augmented(res);
+      const sim::ExportedModel mjcf = sim::ExportMjcf(model);
+      const sim::ExportedModel urdf = sim::ExportUrdf(model);
+      WriteFileAtomic(ctx.out->File("calibrated_model.xml"), mjcf.text);
+      WriteFileAtomic(ctx.out->File("calibrated_model.urdf"), urdf.text);
+      cm = {{"mjcf", "calibrated_model.xml"},
+            {"urdf", "calibrated_model.urdf"},
+            {"not_in_mjcf", mjcf.skipped},
+            {"not_in_urdf", urdf.skipped}};
+      if (!mjcf.skipped.empty()) {
+        std::string names;
+        for (const std::string& s : mjcf.skipped) names += (names.empty() ? "" : ", ") + s;
+        ctx.log("calibrated_model.xml cannot hold (MJCF has no form for them): " + names);
+      }
+    } catch (const InputError& e) {
+      cm = {{"not_written", e.what()}};
+      ctx.log(std::string("calibrated model not exported: ") + e.what());
+    }
   }
 
   // Simulated rows as the measured data a user brings (`flexbench identify --calibration`).

@@ -4,6 +4,7 @@
 // folder that decodes.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -93,6 +94,46 @@ TEST(ReportCli, SweepWritesReportWithAggregatesAndRunLinks) {
   fs::remove(out / "report.html");
   ASSERT_EQ(RunCommand(Flexbench() + " report " + out.string()).exit_code, 0);
   EXPECT_EQ(ReadFile(out / "report.html"), html);
+}
+
+std::string G6(double v) {
+  char b[32];
+  std::snprintf(b, sizeof(b), "%.6g", v);
+  return b;
+}
+
+// A real closed_loop run: its page holds every fitted value, its std and its unit as
+// summary.json stores them, and links the calibrated model, which MuJoCo loads.
+TEST(ReportCli, IdentifyRunPageHoldsTheFittedValuesTheirStdsAndUnits) {
+  TempDir tmp;
+  const fs::path out = tmp.path() / "cl";
+  const CommandResult r =
+      RunCommand(Flexbench() + " run " + SourceDir() +
+                 "/scenarios/closed_loop_encoder_offset.yaml --quiet --out " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json s = Json::parse(ReadFile(out / "summary.json"));
+  const std::string html = ReadFile(out / "report.html");
+  ASSERT_FALSE(s["identification"]["effects"].empty());
+  for (const Json& e : s["identification"]["effects"]) {
+    for (size_t i = 0; i < e["value"].size(); ++i) {
+      const std::string cell = G6(e["value"][i].get<double>()) + " &plusmn; " +
+                               G6(e["std"][i].get<double>()) + " " + e["unit"].get<std::string>();
+      EXPECT_NE(html.find(cell), std::string::npos) << cell;
+    }
+  }
+  EXPECT_NE(html.find("Verdict: <b>" + s["metrics"]["verdict"].get<std::string>() + "</b>"),
+            std::string::npos);
+  EXPECT_NE(html.find(G6(1e3 * s["metrics"]["val_err_before_m"].get<double>()).substr(0, 4)),
+            std::string::npos);
+  const Json& cm = s["identification"]["calibrated_model"];
+  ASSERT_EQ(cm["mjcf"], "calibrated_model.xml") << cm.dump();
+  EXPECT_NE(html.find("<a href=\"calibrated_model.xml\">"), std::string::npos);
+  EXPECT_NE(html.find("<a href=\"calibrated_model.urdf\">"), std::string::npos);
+  // MuJoCo's own loader takes the MJCF (inspect is mj_loadXML and the model's summary).
+  const CommandResult load =
+      RunCommand(Flexbench() + " inspect " + (out / "calibrated_model.xml").string());
+  EXPECT_EQ(load.exit_code, 0) << load.err;
+  EXPECT_NE(load.out.find("\"name\": \"rover_arm\""), std::string::npos) << load.out;
 }
 
 // --- The real browser ------------------------------------------------------------------------

@@ -96,6 +96,49 @@ TEST(Plot, BarAreasFollowTheirHeights) {
   EXPECT_NEAR(static_cast<double>(minus) / one, 1.5, 0.2);
 }
 
+// On a log axis a bar's height is log10 of its value over the bottom edge: 0.07 beside 4 (a
+// fiftieth, a sliver on a linear axis) keeps a height in proportion to its decades.
+TEST(Plot, LogAxisBarsRiseFromTheBottomEdgeByDecades) {
+  Figure fig(500, 400);
+  Axes& a = fig.axes();
+  a.y_log = true;
+  a.y_min = 0.01;
+  a.y_max = 100.0;
+  a.AddBars("big", {0.0}, {10.0});
+  a.AddBars("small", {1.0}, {0.1});
+  a.AddBars("zero", {2.0}, {0.0});  // below the axes: not drawn
+  a.legend = false;
+  const Image img = fig.Render();
+  const auto tinted = [&](Rgb c) {
+    const auto t = [](int v) { return static_cast<int>(std::lround(v + 0.6 * (255 - v))); };
+    int n = 0;
+    for (size_t i = 0; i + 2 < img.data.size(); i += 3) {
+      n += std::abs(img.data[i] - t(c.r)) <= 1 && std::abs(img.data[i + 1] - t(c.g)) <= 1 &&
+           std::abs(img.data[i + 2] - t(c.b)) <= 1;
+    }
+    return n;
+  };
+  const int big = tinted(PaletteColor(0));
+  const int small = tinted(PaletteColor(1));
+  ASSERT_GT(small, 100);
+  // 10 is 3 decades above 0.01, 0.1 one decade.
+  EXPECT_NEAR(static_cast<double>(big) / small, 3.0, 0.3);
+  EXPECT_EQ(tinted(PaletteColor(2)), 0);
+}
+
+TEST(Plot, PointLabelsAreDrawnAboveTheirPoints) {
+  Figure fig(400, 300);
+  Axes& a = fig.axes();
+  a.legend = false;
+  a.AddBars("b", {0.0, 1.0}, {1.0, 2.0});
+  const Image without = fig.Render();
+  a.series.back().point_labels = {"1.00", ""};
+  const Image with = fig.Render();
+  int changed = 0;
+  for (size_t i = 0; i < with.data.size(); ++i) changed += with.data[i] != without.data[i];
+  EXPECT_GT(changed, 20);
+}
+
 TEST(Plot, NonFinitePointsAreSkipped) {
   Figure fig(300, 200);
   const double nan = std::numeric_limits<double>::quiet_NaN();

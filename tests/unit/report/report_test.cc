@@ -222,6 +222,157 @@ TEST(Report, SweepHasAggregateTablesGatePassFractionsAndPlots) {
   EXPECT_NE(html.find("href=\"sweep.csv\""), std::string::npos);
 }
 
+// An identification's summary.json as closed_loop writes it (keys of
+// scenarios/runner/kinds/closed_loop.cc), with a two-parameter effect and an also-fits entry.
+void MakeIdentifyFolder(const fs::path& dir, const std::string& extra = "") {
+  WriteFile(dir / "summary.json", R"json({
+  "scenario": "closed_loop_encoder_offset", "kind": "closed_loop", "seed": 11,
+  "metrics": {"verdict": "ambiguous", "val_err_before_m": 0.0016243554508408508,
+              "val_err_after_m": 6.532768333128384e-05, "cal_err_before_m": 0.0017948,
+              "cal_err_after_m": 6.144e-05, "cv_err_before": 123.09, "cv_err_after": 0.16409,
+              "truth_effects": ["joint_offset@j3"], "effect_found_correct": true,
+              "nees_before": 0.19, "nees_after": 0.0087, "nees_bound_low": 2.29,
+              "nees_bound_high": 3.65, "source_covariance_scale": 1e-06,
+              "nees_after_scaled": 0.466, "cal_residual_noise_ratio": 0.417,
+              "unidentifiable": ["joint_offset@j1", "link_length@j2"],
+              "residual_finding": {"significant": false,
+                "message": "residual periodic in j3, 1 cycles/rev, 0.0163 deg, p = 0.074"}},
+  "identification": {
+    "effects": [
+      {"effect": "joint_offset@j3", "value": [-0.005241138332355449],
+       "std": [1.1931675845693566e-05], "unit": "rad", "share": 0.954},
+      {"effect": "base_compliance@base_plate", "value": [0.000285681, 0.000768366],
+       "std": [1.92586e-05, 6.42205e-06], "unit": "rad/Nm", "share": 0.0457}],
+    "alternatives": [
+      {"banned": "joint_offset@j3", "effects": ["link_offset@j4", "joint_axis_tilt_b@j4"],
+       "cv_err": 0.16703}],
+    "also_fits": [
+      {"banned": "base_compliance@base_plate", "effects": ["link_bending@j2", "backlash@j2"],
+       "num_params": 2, "chosen_num_params": 1, "cv_err": 0.17}],
+    "equivalence_sets": [], "simpler_equivalents": []},
+  "gates": [{"name": "g", "metric": "val_err_after_m", "op": "<", "threshold": 1,
+             "value": 6.5e-05, "passed": true}]
+  )json" + extra + "}");
+}
+
+TEST(Report, IdentificationPageAnswersFirstWithValuesStdsAndUnits) {
+  TempDir tmp;
+  MakeIdentifyFolder(tmp.path());
+  WriteFile(tmp.path() / "declared_augmented.yaml", "model: m.xml\n");
+  WriteFile(tmp.path() / "calibrated_model.xml", "<mujoco/>\n");
+  const std::string html = RenderReport(tmp.path());
+  // Every fitted value with its std and unit, as stored and in readable units.
+  EXPECT_NE(html.find("-0.00524114 &plusmn; 1.19317e-05 rad"), std::string::npos) << html;
+  EXPECT_NE(html.find("-0.3003 &plusmn; 0.00068 deg"), std::string::npos);
+  EXPECT_NE(html.find("0.000285681 &plusmn; 1.92586e-05 rad/Nm<br>0.000768366 &plusmn; "
+                      "6.42205e-06 rad/Nm"),
+            std::string::npos);
+  EXPECT_NE(html.find("<td class=\"num\">439</td>"), std::string::npos);  // |value| / std
+  // In view above the effects however many there are: their count and the held-out error.
+  EXPECT_NE(html.find("<p>2 effects found (3 parameters); the held-out error goes from 1.624 mm "
+                      "to 0.06533 mm (0.0402 of it).</p>"),
+            std::string::npos);
+  // The verdict in words; held-out error before and after in mm.
+  EXPECT_NE(html.find("Verdict: <b>ambiguous</b> &mdash; the correction holds"), std::string::npos);
+  EXPECT_NE(html.find("<td class=\"num\">1.624 mm</td><td class=\"num\">0.06533 mm</td>"),
+            std::string::npos);
+  // How sure and what is left: the alternative, the more complex fit, the NEES explained.
+  EXPECT_NE(html.find("<code>link_offset@j4 + joint_axis_tilt_b@j4</code> reach a held-out "
+                      "error of 0.167"),
+            std::string::npos);
+  EXPECT_NE(html.find("with 2 parameters instead of 1"), std::string::npos);
+  EXPECT_NE(html.find("0.0087 under the identified one"), std::string::npos);
+  EXPECT_NE(html.find("below it, the declared sources are larger than the error left"),
+            std::string::npos);
+  EXPECT_NE(html.find("residual periodic in j3, 1 cycles/rev"), std::string::npos);
+  EXPECT_NE(html.find("2 candidates this data cannot identify"), std::string::npos);
+  // The calibrated model's files, linked; the URDF the folder lacks is not.
+  EXPECT_NE(html.find("<a href=\"calibrated_model.xml\">"), std::string::npos);
+  EXPECT_NE(html.find("<a href=\"declared_augmented.yaml\">"), std::string::npos);
+  EXPECT_EQ(html.find("<a href=\"calibrated_model.urdf\">"), std::string::npos);
+  // Above the rest: the answer before the run's table, gates and the (folded) metrics.
+  const size_t answer = html.find("<h2>The answer</h2>");
+  ASSERT_NE(answer, std::string::npos);
+  EXPECT_LT(answer, html.find("<h2>How this was made</h2>"));
+  EXPECT_LT(answer, html.find("<h2>Gates</h2>"));
+  EXPECT_LT(html.find("<h2>Metrics</h2>\n<details>"), html.find("<tr><td>val_err_before_m</td>"));
+}
+
+TEST(Report, RunWithoutIdentificationHasNoAnswerAndUnfoldedMetrics) {
+  TempDir tmp;
+  MakeRunFolder(tmp.path());
+  const std::string html = RenderReport(tmp.path());
+  EXPECT_EQ(html.find("The answer"), std::string::npos);
+  EXPECT_EQ(html.find("<details>"), std::string::npos);
+  EXPECT_EQ(html.find("class=\"warnings\""), std::string::npos);
+}
+
+TEST(Report, WarningsComeFirstEscaped) {
+  TempDir tmp;
+  MakeIdentifyFolder(tmp.path(), R"json(, "warnings": ["sources scaled <outside> the fit's data",
+      "second"])json");
+  WriteFile(tmp.path() / "identify" / "summary.json",
+            R"json({"scenario": "identify", "warnings": ["inner one"]})json");
+  const std::string html = RenderReport(tmp.path());
+  const size_t box = html.find("<div class=\"warnings\">");
+  ASSERT_NE(box, std::string::npos) << html;
+  EXPECT_LT(box, html.find("<h2>The answer</h2>"));
+  EXPECT_NE(html.find("<li>sources scaled &lt;outside&gt; the fit&#39;s data</li>\n<li>second</li>"
+                      "\n<li>identify/: inner one</li>"),
+            std::string::npos);
+}
+
+TEST(Report, EstimatorsBeforeAndAfterInMmWithTheirBoundsAndFlagsExplained) {
+  TempDir tmp;
+  WriteFile(tmp.path() / "summary.json", R"json({
+  "scenario": "cle", "kind": "closed_loop_estimators", "seed": 15, "metrics": {},
+  "estimators": {"fk": {"metrics": {
+    "before": {"pos_err_mean_m": 0.00393354, "lateral_err_mean_m": 0.00204321,
+               "nees_mean": 0.109, "nees_bound_low": 4.82, "nees_bound_high": 7.30,
+               "nees_consistent": false, "mismatch_flagged": false, "mismatch_first_step": -1},
+    "after": {"pos_err_mean_m": 7.46356e-05, "lateral_err_mean_m": 6.344e-05,
+              "nees_mean": 6.77, "nees_bound_low": 4.47, "nees_bound_high": 8.36,
+              "nees_consistent": true, "mismatch_flagged": true, "mismatch_first_step": 9}}}},
+  "gates": []})json");
+  const std::string html = RenderReport(tmp.path());
+  EXPECT_NE(html.find("<tr><td><b>fk</b></td><td class=\"num\">3.93 mm</td><td class=\"num\">"
+                      "0.0746 mm</td><td class=\"num\">0.019</td>"),
+            std::string::npos)
+      << html;
+  EXPECT_NE(html.find("0.109 [4.82, 7.3] below"), std::string::npos);
+  EXPECT_NE(html.find("6.77 [4.47, 8.36] inside"), std::string::npos);
+  EXPECT_NE(html.find("<td>no / yes (step 9)</td>"), std::string::npos);
+  EXPECT_NE(html.find("the gates decide pass or fail"), std::string::npos);
+  // The flat table is still there, folded below.
+  EXPECT_LT(html.find("Before and after, per estimator"), html.find("<details>"));
+  EXPECT_NE(html.find("<tr><td>before.pos_err_mean_m</td>"), std::string::npos);
+}
+
+TEST(Report, SweepListsMetricsConstantOverEveryRunOnce) {
+  TempDir tmp;
+  const auto stat = [](double lo, double hi) {
+    return "{\"n\": 3, \"mean\": " + std::to_string((lo + hi) / 2) + ", \"std\": 0.1, " +
+           "\"median\": 1, \"min\": " + std::to_string(lo) + ", \"max\": " + std::to_string(hi) +
+           ", \"ci_low\": 0, \"ci_high\": 2}";
+  };
+  const auto point = [&](const std::string& name, double err_lo, double k) {
+    return "{\"point\": \"" + name + "\", \"runs\": 3, \"succeeded\": 3, \"metrics\": {" +
+           "\"nees_dof\": " + stat(6, 6) + ", \"err_m\": " + stat(err_lo, 0.9) +
+           ", \"per_point_k\": " + stat(k, k) + "}}";
+  };
+  WriteFile(tmp.path() / "aggregate.json",
+            "{\"sweep\": \"s\", \"seeds\": [1, 2, 3], "
+            "\"points\": [" +
+                point("a", 0.1, 1) + ", " + point("b", 0.2, 2) + "]}");
+  const std::string html = RenderReport(tmp.path());
+  EXPECT_EQ(Count(html, "<td>nees_dof</td>"), 1) << html;
+  EXPECT_NE(html.find("<tr><td>nees_dof</td><td class=\"num\">6</td></tr>"), std::string::npos);
+  EXPECT_LT(html.find("<h3>Point b</h3>"), html.find("<td>nees_dof</td>"));
+  // Varying over seeds, or constant within a point but not across points: per point.
+  EXPECT_EQ(Count(html, "<td>err_m</td>"), 2);
+  EXPECT_EQ(Count(html, "<td>per_point_k</td>"), 2);
+}
+
 TEST(Report, QuotingHelpers) {
   EXPECT_EQ(HtmlEscape("a<b>&\"'"), "a&lt;b&gt;&amp;&quot;&#39;");
   EXPECT_EQ(scenarios::ShellQuote("plain/path-1.yaml"), "plain/path-1.yaml");
