@@ -165,6 +165,10 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
     lin_q_ = Eigen::VectorXd::Zero(nq_);
     J_frame_q_ = kinematics::Matrix6Xd::Zero(6, nq_);
     k_.assign(total, 0.0);
+    const double k_hi = config_.kappa_v + config_.kappa_w;
+    for (int b = 0; b < kLogI0Bands; ++b) {
+      log_i0_bands_.emplace_back(std::ldexp(k_hi, b), std::ldexp(k_hi, b + 1));
+    }
   }
   Reset();
 }
@@ -400,6 +404,24 @@ void ParticleFilter::LinearisedReadings() {
   }
 }
 
+// The proposal's kappa is at least the conjugate k >= |kappa_v - kappa_w| (a Schur complement
+// of diag(k) + H, H >= 0): below kappa_v + kappa_w the conjugate interpolant, then octaves.
+double ParticleFilter::LogI0(double kappa) const {
+  const double k_hi = config_.kappa_v + config_.kappa_w;
+  if (kappa <= k_hi) return log_i0_.Evaluate(kappa);
+  const int b = std::ilogb(kappa / k_hi);
+  return b < kLogI0Bands ? log_i0_bands_[b].Evaluate(kappa) : LogBesselI0(kappa);
+}
+
+namespace {
+// A coordinate of the angle of (c, s) on the line: 2 tan(angle / 2) (the angle to third order,
+// one division) up to 120 degrees, the angle beyond. The proposal below needs a deterministic
+// map, not the angle itself: its density is evaluated with the same map.
+inline double LinearAngle(double c, double s) {
+  return c > -0.5 ? 2.0 * s / (1.0 + c) : std::atan2(s, c);
+}
+}  // namespace
+
 // Per particle: target k_j cos(x_j - mu_j) + l(x) with l the readings' log-likelihood to second
 // order about xbar: precision P = diag(k) + H, mean xbar + P^-1 (k o wrap(mu - xbar) + g).
 // With P = L L^T, L^T (x - mean) is standard normal, so x_j given the later joints has mean
@@ -446,8 +468,8 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
     // P = diag(k) + H and its right-hand side, then P = L L^T in place.
     for (int a = 0; a < m; ++a) {
       const size_t ia = static_cast<size_t>(a) * stride_ + i;
-      const double delta = std::atan2(sin_[ia] * cbar[a] - cos_[ia] * sbar[a],
-                                      cos_[ia] * cbar[a] + sin_[ia] * sbar[a]);
+      const double delta = LinearAngle(cos_[ia] * cbar[a] + sin_[ia] * sbar[a],
+                                       sin_[ia] * cbar[a] - cos_[ia] * sbar[a]);
       mean[a] = k_[ia] * delta + g_[a];
       for (int b = 0; b <= a; ++b) L[a * m + b] = H_[a * m + b];
       L[a * m + a] += k_[ia];
@@ -474,19 +496,19 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
       for (int b = a + 1; b < m; ++b) v -= L[b * m + a] * mean[b];
       mean[a] = v / L[a * m + a];
     }
-    double log_target = 0.0, log_q = 0.0;
+    double log_target = 0.0, log_q = 0.0;  // log q + m log 2 pi
     for (int j = m - 1; j >= 0; --j) {
       double cj = mean[j];
       for (int b = j + 1; b < m; ++b) cj -= L[b * m + j] * e[b] / L[j * m + j];
       const double kappa = L[j * m + j] * L[j * m + j];
       const UnitAngle v = BestFisherDraw(kappa, OptimalBestFisherEnvelope(kappa), rng_);
-      const double dev = std::atan2(v.s, v.c);
-      e[j] = cj - mean[j] + dev;
-      const double x = lin_q_[j] + cj + dev;
-      const double cx = std::cos(x), sx = std::sin(x);
+      e[j] = cj - mean[j] + LinearAngle(v.c, v.s);
+      const double a = lin_q_[j] + cj;
+      const double ca = std::cos(a), sa = std::sin(a);
+      const double cx = ca * v.c - sa * v.s, sx = sa * v.c + ca * v.s;  // x = a + the draw
       const size_t ij = static_cast<size_t>(j) * stride_ + i;
       log_target += k_[ij] * (cx * cos_[ij] + sx * sin_[ij]);
-      log_q += kappa * v.c - LogBesselI0(kappa);  // log q + log 2 pi, as log_norm_conjugate_ has
+      log_q += kappa * v.c - LogI0(kappa);
       cos_[ij] = cx;
       sin_[ij] = sx;
     }

@@ -232,6 +232,10 @@ class ParticleFilter {
   double H_[kMaxPfJoints * kMaxPfJoints] = {};
   double g_[kMaxPfJoints] = {};
   std::vector<double> k_;  // [nq][stride_]: each particle's conjugate concentrations
+  // log I0 on [kappa_v + kappa_w] * [2^b, 2^(b+1)], b < kLogI0Bands (the proposal's kappas).
+  static constexpr int kLogI0Bands = 12;
+  std::vector<LogBesselI0Interpolant> log_i0_bands_;
+  double LogI0(double kappa) const;
 
   bool pending_move_ = false;
   bool awaiting_first_reading_ = false;  // initial_at_first_reading: centre on the next reading
