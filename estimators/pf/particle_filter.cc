@@ -323,8 +323,7 @@ void ParticleFilter::EnsurePropagated() {
 bool ParticleFilter::KeepReading(const double* u, FrameId frame, const Vec3* p_frame,
                                  const Vec3* p_base, const Quat* q) {
   if (config_.proposal != Proposal::kLaplace || !pending_move_) return false;
-  if (u != nullptr) {
-    if (kept_u_valid_) return false;  // a second joint reading in the step: CompleteStep first
+  if (u != nullptr && !kept_u_valid_) {
     std::copy(u, u + nq_, kept_u_);
     kept_u_valid_ = true;
     return true;
@@ -337,6 +336,8 @@ bool ParticleFilter::KeepReading(const double* u, FrameId frame, const Vec3* p_f
     kept_orientations_[num_kept_orientations_++] = {frame, *q};
     return true;
   }
+  // A second reading of a kind in the step: the move takes what it has, this one is a weight.
+  CompleteStep();
   return false;
 }
 

@@ -3,7 +3,7 @@
 // weighted particles after three steps match a brute-force grid posterior written here from the
 // arm's closed-form kinematics (Pearson chi-square on the grid's blocks, scaled by the ESS); the
 // bootstrap and encoder-conjugate proposals pass the same test, and the new proposal's ESS is
-// several times theirs.
+// several times theirs; readings beyond the ones the move keeps still count.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -198,6 +198,42 @@ TEST(LaplaceProposal, WeightedParticlesMatchTheGridPosterior) {
   }
   EXPECT_GT(ess[2], 3.0 * ess[1]);
   EXPECT_GT(ess[2], 0.5 * 20000);
+}
+
+// A second orientation reading of the same frame in a step (more than the filter keeps): the
+// move takes the first, the second becomes a weight; both count. Against the conjugate proposal
+// fed the same readings.
+TEST(LaplaceProposal, ReadingsBeyondTheKeptOnesStillCount) {
+  PlanarArm arm;
+  const Reading& r = kReadings[0];
+  const Quat q(Eigen::AngleAxisd(r.yaw, Vec3::UnitZ()));
+  double mean[2][2], std_dev[2][2];
+  const Proposal proposals[2] = {Proposal::kEncoderConjugate, Proposal::kLaplace};
+  for (int p = 0; p < 2; ++p) {
+    ParticleFilterConfig c;
+    c.num_particles = 100000;
+    c.kappa_0 = kKappa0;
+    c.kappa_v = kKappaV;
+    c.kappa_w = kKappaW;
+    c.orientation_frames = {arm.link2};
+    c.bingham_lambda = Vec4(-kBinghamA, -kBinghamA, -kBinghamA, 0.0);
+    c.proposal = proposals[p];
+    ParticleFilter pf(arm.model, c, 3);
+    pf.Predict();
+    ASSERT_EQ(pf.UpdateReference(r.u, 2), PfStatus::kAccepted);
+    ASSERT_EQ(pf.UpdateOrientation(arm.link2, q), PfStatus::kAccepted);
+    ASSERT_EQ(pf.UpdateOrientation(arm.link2, q), PfStatus::kAccepted);
+    pf.CompleteStep();
+    const ParticleSummary& s = pf.Summary();
+    for (int j = 0; j < 2; ++j) {
+      mean[p][j] = s.mean[j];
+      std_dev[p][j] = s.circular_std[j];
+    }
+  }
+  for (int j = 0; j < 2; ++j) {
+    EXPECT_NEAR(mean[1][j], mean[0][j], 0.05 * std_dev[0][j]) << j;
+    EXPECT_NEAR(std_dev[1][j], std_dev[0][j], 0.05 * std_dev[0][j]) << j;
+  }
 }
 
 }  // namespace
