@@ -131,6 +131,7 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
                          config.kappa_v + config.kappa_w),
       log_i0_(std::abs(config.kappa_v - config.kappa_w), config.kappa_v + config.kappa_w),
       fk_(model, KinematicOutputs(config), config.num_particles, TranslationNeeded(config)),
+      lin_data_(model),
       fk_data_(model) {
   position_info_ = config_.position_cov.inverse();
   log_norm_position_ = -0.5 * std::log((2.0 * M_PI * config_.position_cov).determinant());
@@ -158,6 +159,17 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
   kept_c_.assign(n_ + 4, 0.0);
   kept_s_.assign(n_ + 4, 0.0);
   q_mean_ = Eigen::VectorXd::Zero(nq_);
+  if (config_.proposal == Proposal::kLaplace) {
+    kept_positions_.resize(config_.position_frames.size());
+    kept_orientations_.resize(config_.orientation_frames.size());
+    lin_q_ = Eigen::VectorXd::Zero(nq_);
+    J_frame_q_ = kinematics::Matrix6Xd::Zero(6, nq_);
+    k_.assign(total, 0.0);
+    const double k_hi = config_.kappa_v + config_.kappa_w;
+    for (int b = 0; b < kLogI0Bands; ++b) {
+      log_i0_bands_.emplace_back(std::ldexp(k_hi, b), std::ldexp(k_hi, b + 1));
+    }
+  }
   Reset();
 }
 
@@ -175,6 +187,8 @@ void ParticleFilter::Reset() {
   }
   std::fill(log_w_.begin(), log_w_.end(), 0.0);
   pending_move_ = false;
+  kept_u_valid_ = false;
+  num_kept_positions_ = num_kept_orientations_ = 0;
   awaiting_first_reading_ = config_.initial_at_first_reading;
   moves_ = 0;
   log_norm_at_step_start_ = std::log(static_cast<double>(n_));
@@ -288,7 +302,8 @@ void ParticleFilter::PropagateConjugate(const double* u) {
 }
 
 void ParticleFilter::Predict() {
-  if (config_.proposal == Proposal::kEncoderConjugate) {
+  CompleteStep();
+  if (config_.proposal != Proposal::kBootstrap) {
     pending_move_ = true;
     return;
   }
@@ -303,6 +318,205 @@ void ParticleFilter::EnsurePropagated() {
   ResampleIfNeeded();
   PropagateBootstrap();
   ComputeKinematics();
+}
+
+bool ParticleFilter::KeepReading(const double* u, FrameId frame, const Vec3* p_frame,
+                                 const Vec3* p_base, const Quat* q) {
+  if (config_.proposal != Proposal::kLaplace || !pending_move_) return false;
+  if (u != nullptr && !kept_u_valid_) {
+    std::copy(u, u + nq_, kept_u_);
+    kept_u_valid_ = true;
+    return true;
+  }
+  if (p_frame != nullptr && num_kept_positions_ < kept_positions_.size()) {
+    kept_positions_[num_kept_positions_++] = {frame, *p_frame, *p_base};
+    return true;
+  }
+  if (q != nullptr && num_kept_orientations_ < kept_orientations_.size()) {
+    kept_orientations_[num_kept_orientations_++] = {frame, *q};
+    return true;
+  }
+  // A second reading of a kind in the step: the move takes what it has, this one is a weight.
+  CompleteStep();
+  return false;
+}
+
+FLEXBENCH_PARTICLE_LOOP void ParticleFilter::CompleteStep() {
+  if (config_.proposal != Proposal::kLaplace || !pending_move_) return;
+  pending_move_ = false;
+  if (!kept_u_valid_) {
+    // Without encoders the step has no conjugate centre: the system model moves the particles.
+    ResampleIfNeeded();
+    PropagateBootstrap();
+    ComputeKinematics();
+  } else {
+    ResampleIfNeeded();
+    LaplaceMove();
+  }
+  kept_u_valid_ = false;
+  const size_t np = num_kept_positions_, no = num_kept_orientations_;
+  num_kept_positions_ = num_kept_orientations_ = 0;
+  for (size_t a = 0; a < np; ++a) {
+    const KeptPosition& r = kept_positions_[a];
+    UpdatePosition(r.frame, r.p_frame, r.p_base);
+  }
+  for (size_t a = 0; a < no; ++a) {
+    UpdateOrientation(kept_orientations_[a].frame, kept_orientations_[a].q_base_frame);
+  }
+}
+
+void ParticleFilter::LinearisedReadings() {
+  const int m = nq_;
+  std::fill(H_, H_ + m * m, 0.0);
+  std::fill(g_, g_ + m, 0.0);
+  kinematics::ForwardKinematics(*model_, lin_data_, lin_q_);
+  const auto add = [&](const auto& J, const Mat3& A, const Vec3& grad) {
+    for (int a = 0; a < m; ++a) {
+      const Vec3 AJa = A * J.col(a);
+      g_[a] += J.col(a).dot(grad);
+      for (int b = 0; b < m; ++b) H_[a * m + b] += J.col(b).dot(AJa);
+    }
+  };
+  Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxPfJoints> J(3, m);
+  for (size_t a = 0; a < num_kept_positions_; ++a) {
+    const KeptPosition& r = kept_positions_[a];
+    const lie::SE3& T = lin_data_.T_base_frame[r.frame];
+    kinematics::ComputeFrameJacobian(*model_, lin_data_, r.frame, J_frame_q_);
+    // p = R p_frame + t moves by R (rho - [p_frame]x theta) for T Exp([rho; theta]).
+    const Mat3 R = T.rotation();
+    J = R * (J_frame_q_.topRows<3>() - lie::Skew(r.p_frame) * J_frame_q_.bottomRows<3>());
+    const Vec3 residual = r.p_base - (R * r.p_frame + T.translation());
+    add(J, position_info_, position_info_ * residual);
+  }
+  for (size_t a = 0; a < num_kept_orientations_; ++a) {
+    const KeptOrientation& r = kept_orientations_[a];
+    kinematics::ComputeFrameJacobian(*model_, lin_data_, r.frame, J_frame_q_);
+    // log B = c0 + tr(C^T R) [PF eq. 27]; at R Exp(w), with B = C^T R, its gradient in w is
+    // vee(B^T - B) and its Hessian sym(B) - tr(B) I. The Hessian's concave part is kept.
+    const Mat3 B = bingham_.RotationForm(r.q_base_frame).C.transpose() *
+                   lin_data_.T_base_frame[r.frame].rotation();
+    const Vec3 grad(B(1, 2) - B(2, 1), B(2, 0) - B(0, 2), B(0, 1) - B(1, 0));
+    const Mat3 A = B.trace() * Mat3::Identity() - 0.5 * (B + B.transpose());
+    const Eigen::SelfAdjointEigenSolver<Mat3> eig(A);
+    const Mat3 A_psd = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
+                       eig.eigenvectors().transpose();
+    J = J_frame_q_.bottomRows<3>();
+    add(J, A_psd, grad);
+  }
+}
+
+// The proposal's kappa is at least the conjugate k >= |kappa_v - kappa_w| (a Schur complement
+// of diag(k) + H, H >= 0): below kappa_v + kappa_w the conjugate interpolant, then octaves.
+double ParticleFilter::LogI0(double kappa) const {
+  const double k_hi = config_.kappa_v + config_.kappa_w;
+  if (kappa <= k_hi) return log_i0_.Evaluate(kappa);
+  const int b = std::ilogb(kappa / k_hi);
+  return b < kLogI0Bands ? log_i0_bands_[b].Evaluate(kappa) : LogBesselI0(kappa);
+}
+
+namespace {
+// A coordinate of the angle of (c, s) on the line: 2 tan(angle / 2) (the angle to third order,
+// one division) up to 120 degrees, the angle beyond. The proposal below needs a deterministic
+// map, not the angle itself: its density is evaluated with the same map.
+inline double LinearAngle(double c, double s) {
+  return c > -0.5 ? 2.0 * s / (1.0 + c) : std::atan2(s, c);
+}
+}  // namespace
+
+// Per particle: target k_j cos(x_j - mu_j) + l(x) with l the readings' log-likelihood to second
+// order about xbar: precision P = diag(k) + H, mean xbar + P^-1 (k o wrap(mu - xbar) + g).
+// With P = L L^T, L^T (x - mean) is standard normal, so x_j given the later joints has mean
+// c_j = mean_j - sum_{k>j} L_kj e_k / L_jj and precision L_jj^2; it is drawn as
+// vM(L_jj^2, c_j), e_j its deviation in the linear coordinate.
+FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
+  const int m = nq_;
+  const double kv = config_.kappa_v;
+  const double kw = config_.kappa_w;
+  // The conjugate centres: k e^{i mu} = kappa_v e^{i x_prev} + kappa_w e^{i u}, (c, s) := e^{i mu}.
+  for (int j = 0; j < m; ++j) {
+    const double cu = kw * std::cos(kept_u_[j]);
+    const double su = kw * std::sin(kept_u_[j]);
+    const size_t off = static_cast<size_t>(j) * stride_;
+    double* __restrict c = cos_.data() + off;
+    double* __restrict s = sin_.data() + off;
+    double* __restrict k = k_.data() + off;
+    for (int i = 0; i < n_; ++i) {
+      const double zc = kv * c[i] + cu;
+      const double zs = kv * s[i] + su;
+      const double ki = std::sqrt(zc * zc + zs * zs);
+      const bool ok = ki > 1e-300;
+      k[i] = ok ? ki : 1e-300;
+      c[i] = ok ? zc / ki : 1.0;
+      s[i] = ok ? zs / ki : 0.0;
+    }
+  }
+  // The linearisation point: the weighted circular mean of the centres.
+  double* __restrict w = w_.data();
+  for (int i = 0; i < n_; ++i) w[i] = std::exp(log_w_[i]);
+  double cbar[kMaxPfJoints], sbar[kMaxPfJoints];
+  for (int j = 0; j < m; ++j) {
+    double sc = 0.0, ss = 0.0;
+    WeightedResultant(cos_.data() + j * stride_, sin_.data() + j * stride_, w, n_, &sc, &ss);
+    lin_q_[j] = std::atan2(ss, sc);
+    cbar[j] = std::cos(lin_q_[j]);
+    sbar[j] = std::sin(lin_q_[j]);
+  }
+  LinearisedReadings();
+  double L[kMaxPfJoints * kMaxPfJoints];
+  double mean[kMaxPfJoints], e[kMaxPfJoints];
+  constexpr double kMinKappa = 1e-3;  // keeps the draws proper where nothing constrains a joint
+  for (int i = 0; i < n_; ++i) {
+    // P = diag(k) + H and its right-hand side, then P = L L^T in place.
+    for (int a = 0; a < m; ++a) {
+      const size_t ia = static_cast<size_t>(a) * stride_ + i;
+      const double delta = LinearAngle(cos_[ia] * cbar[a] + sin_[ia] * sbar[a],
+                                       sin_[ia] * cbar[a] - cos_[ia] * sbar[a]);
+      mean[a] = k_[ia] * delta + g_[a];
+      for (int b = 0; b <= a; ++b) L[a * m + b] = H_[a * m + b];
+      L[a * m + a] += k_[ia];
+    }
+    for (int a = 0; a < m; ++a) {
+      double d = L[a * m + a];
+      for (int b = 0; b < a; ++b) d -= L[a * m + b] * L[a * m + b];
+      d = std::sqrt(std::max(d, kMinKappa));
+      L[a * m + a] = d;
+      for (int r = a + 1; r < m; ++r) {
+        double v = L[r * m + a];
+        for (int b = 0; b < a; ++b) v -= L[r * m + b] * L[a * m + b];
+        L[r * m + a] = v / d;
+      }
+    }
+    // mean := P^-1 rhs (forward then backward substitution).
+    for (int a = 0; a < m; ++a) {
+      double v = mean[a];
+      for (int b = 0; b < a; ++b) v -= L[a * m + b] * mean[b];
+      mean[a] = v / L[a * m + a];
+    }
+    for (int a = m - 1; a >= 0; --a) {
+      double v = mean[a];
+      for (int b = a + 1; b < m; ++b) v -= L[b * m + a] * mean[b];
+      mean[a] = v / L[a * m + a];
+    }
+    double log_target = 0.0, log_q = 0.0;  // log q + m log 2 pi
+    for (int j = m - 1; j >= 0; --j) {
+      double cj = mean[j];
+      for (int b = j + 1; b < m; ++b) cj -= L[b * m + j] * e[b] / L[j * m + j];
+      const double kappa = L[j * m + j] * L[j * m + j];
+      const UnitAngle v = BestFisherDraw(kappa, OptimalBestFisherEnvelope(kappa), rng_);
+      e[j] = cj - mean[j] + LinearAngle(v.c, v.s);
+      const double a = lin_q_[j] + cj;
+      const double ca = std::cos(a), sa = std::sin(a);
+      const double cx = ca * v.c - sa * v.s, sx = sa * v.c + ca * v.s;  // x = a + the draw
+      const size_t ij = static_cast<size_t>(j) * stride_ + i;
+      log_target += k_[ij] * (cx * cos_[ij] + sx * sin_[ij]);
+      log_q += kappa * v.c - LogI0(kappa);
+      cos_[ij] = cx;
+      sin_[ij] = sx;
+    }
+    ll_[i] = log_target - log_q;
+  }
+  ComputeKinematics();
+  ApplyLogLikelihood(m * log_norm_conjugate_);
 }
 
 FLEXBENCH_PARTICLE_LOOP bool ParticleFilter::ApplyLogLikelihood(double constant) {
@@ -331,6 +545,7 @@ FLEXBENCH_PARTICLE_LOOP PfStatus ParticleFilter::UpdateReference(const double* u
     if (!std::isfinite(u[j])) return PfStatus::kRejectedNonFinite;
   }
   if (awaiting_first_reading_) CentreOnReading(u);
+  if (KeepReading(u, -1, nullptr, nullptr, nullptr)) return PfStatus::kAccepted;
   if (pending_move_ && config_.proposal == Proposal::kEncoderConjugate) {
     pending_move_ = false;
     ResampleIfNeeded();
@@ -365,6 +580,7 @@ FLEXBENCH_PARTICLE_LOOP PfStatus ParticleFilter::UpdatePosition(FrameId frame, c
   }
   if (k < 0) return PfStatus::kIgnored;
   if (!p_frame.allFinite() || !p_base.allFinite()) return PfStatus::kRejectedNonFinite;
+  if (KeepReading(nullptr, frame, &p_frame, &p_base, nullptr)) return PfStatus::kAccepted;
   EnsurePropagated();
   const double i00 = position_info_(0, 0), i11 = position_info_(1, 1), i22 = position_info_(2, 2);
   const double i01 = 2.0 * position_info_(0, 1), i02 = 2.0 * position_info_(0, 2),
@@ -414,6 +630,7 @@ FLEXBENCH_PARTICLE_LOOP PfStatus ParticleFilter::UpdateOrientation(FrameId frame
   const Vec4 xyzw(q_base_frame.x(), q_base_frame.y(), q_base_frame.z(), q_base_frame.w());
   if (!xyzw.allFinite()) return PfStatus::kRejectedNonFinite;
   if (std::abs(xyzw.norm() - 1.0) > kUnitQuaternionTol) return PfStatus::kRejectedOutside;
+  if (KeepReading(nullptr, frame, nullptr, nullptr, &q_base_frame)) return PfStatus::kAccepted;
   EnsurePropagated();
   const BinghamRotationForm form = bingham_.RotationForm(q_base_frame);
   const double c0 = form.c0;

@@ -27,6 +27,15 @@
 // weighted by I0(k) (the locally optimal proposal for that term; same model, same posterior,
 // lower Monte-Carlo variance). Propagation is then deferred from Predict to the step's
 // JointReading; a step without one falls back to the bootstrap move at its first other reading.
+// kLaplace folds every reading of the step into the move: the step's readings are kept until
+// CompleteStep (called by Predict, and by PfEstimator before an estimate), then each particle is
+// drawn from a Gaussian approximation of its own target vM(k, mu) * p(readings | x) [PF eq. 23]
+// with the position and Bingham terms linearised once per step at the particles' circular mean
+// through the declared chain's frame Jacobians (Doucet, Godsill, Andrieu 2000, sec. II-D). The
+// Gaussian is drawn joint by joint as von Mises conditionals (last joint first, from the
+// precision's Cholesky factor), whose product density q is exact on the torus, and the particle
+// is weighted vM(k, mu)(x) C / q(x) before the readings' likelihoods are applied, so the
+// posterior is the paper's whatever the linearisation's quality.
 //
 // Output (Summary): per-joint circular mean [PF eq. 5], circular standard deviation and 95%
 // interval (2.5% and 97.5% weighted quantiles of the deviations from the mean), and the
@@ -42,6 +51,7 @@
 #include <vector>
 
 #include "estimators/conventions.h"
+#include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/kinematics/ppoe_data.h"
 #include "estimators/kinematics/ppoe_model.h"
 #include "estimators/lie/se3.h"
@@ -54,7 +64,7 @@
 
 namespace flexbench::pf {
 
-enum class Proposal { kBootstrap, kEncoderConjugate };
+enum class Proposal { kBootstrap, kEncoderConjugate, kLaplace };
 
 // The most joints a filter supports (the same capacity as estimators::JointVector).
 inline constexpr int kMaxPfJoints = 32;
@@ -116,8 +126,12 @@ class ParticleFilter {
   // Back to the initial particles of [PF eq. 29]; reseeds the random stream (same seed, same run).
   void Reset();
   // One system-model step [PF eq. 30]. With kEncoderConjugate the move waits for the step's
-  // JointReading.
+  // JointReading; with kLaplace for CompleteStep (which Predict calls first).
   void Predict();
+  // kLaplace: moves the particles with every reading since Predict and applies them; Summary,
+  // the weights and the angles show the step only after it. A no-op for the other proposals
+  // and when nothing is pending.
+  void CompleteStep();
 
   // Replaces the kinematic model by `model` (the same frames and joints, other fixed parts: the
   // declared model corrected at this reading, kinematics::EffectiveChain). Kept by reference;
@@ -156,6 +170,13 @@ class ParticleFilter {
   void PropagateBootstrap();
   void PropagateConjugate(const double* u);
   void EnsurePropagated();
+  // kLaplace: keeps a reading of the pending step; false when it has no room (apply it now).
+  bool KeepReading(const double* u, FrameId frame, const Vec3* p_frame, const Vec3* p_base,
+                   const Quat* q);
+  void LaplaceMove();
+  // The readings' log-likelihood at lin_q_ to second order in the joint angles: H_ (precision)
+  // and g_ (gradient), summed over the kept readings.
+  void LinearisedReadings();
   // Adds ll_ (+ constant) to the log weights; false when every particle got -inf/NaN.
   bool ApplyLogLikelihood(double constant);
   double LogSumExpWeights() const;
@@ -190,6 +211,31 @@ class ParticleFilter {
   std::vector<int> position_outputs_;     // fk_ output index per position frame
   std::vector<int> orientation_outputs_;  // fk_ output index per orientation frame
   int ee_output_ = -1;
+
+  // kLaplace: the pending step's readings and the linearisation scratch.
+  struct KeptPosition {
+    FrameId frame;
+    Vec3 p_frame, p_base;
+  };
+  struct KeptOrientation {
+    FrameId frame;
+    Quat q_base_frame;
+  };
+  bool kept_u_valid_ = false;
+  double kept_u_[kMaxPfJoints] = {};
+  std::vector<KeptPosition> kept_positions_;        // capacity: one per F_P frame
+  std::vector<KeptOrientation> kept_orientations_;  // capacity: one per F_Q frame
+  size_t num_kept_positions_ = 0, num_kept_orientations_ = 0;
+  kinematics::PpoeData lin_data_;
+  Eigen::VectorXd lin_q_;
+  kinematics::Matrix6Xd J_frame_q_;
+  double H_[kMaxPfJoints * kMaxPfJoints] = {};
+  double g_[kMaxPfJoints] = {};
+  std::vector<double> k_;  // [nq][stride_]: each particle's conjugate concentrations
+  // log I0 on [kappa_v + kappa_w] * [2^b, 2^(b+1)], b < kLogI0Bands (the proposal's kappas).
+  static constexpr int kLogI0Bands = 12;
+  std::vector<LogBesselI0Interpolant> log_i0_bands_;
+  double LogI0(double kappa) const;
 
   bool pending_move_ = false;
   bool awaiting_first_reading_ = false;  // initial_at_first_reading: centre on the next reading

@@ -83,8 +83,14 @@ pf::ParticleFilterConfig MakePfConfig(const EstimatorSetup& setup,
   c.ess_threshold = p.Scalar("ess_threshold", 0.5);
   c.resampling = Flag(p, "systematic_resampling", false, name) ? pf::ResamplingScheme::kSystematic
                                                                : pf::ResamplingScheme::kStratified;
-  c.proposal = Flag(p, "conjugate_proposal", false, name) ? pf::Proposal::kEncoderConjugate
-                                                          : pf::Proposal::kBootstrap;
+  const bool conjugate = Flag(p, "conjugate_proposal", false, name);
+  const bool laplace = Flag(p, "laplace_proposal", false, name);
+  if (conjugate && laplace) {
+    throw InputError(name + ": 'conjugate_proposal' and 'laplace_proposal' exclude each other");
+  }
+  c.proposal = laplace     ? pf::Proposal::kLaplace
+               : conjugate ? pf::Proposal::kEncoderConjugate
+                           : pf::Proposal::kBootstrap;
   c.initial_at_first_reading = Flag(p, "initial_at_first_reading", false, name);
   c.end_effector = setup.end_effector;
   if (Flag(p, "ee_position", variant.ee_position, name)) {
@@ -203,6 +209,7 @@ UpdateStatus PfEstimator::Update(const Measurement& z) {
 }
 
 Belief PfEstimator::Estimate() const {
+  filter_->CompleteStep();  // the step's readings are all in: the Laplace move may run
   const pf::ParticleSummary& s = filter_->Summary();
   Belief b;
   b.t = t_;

@@ -34,6 +34,8 @@
 //   ess_threshold (0.5): resample when ESS < ess_threshold * N
 //   systematic_resampling (0): 1 = systematic instead of stratified
 //   conjugate_proposal (0): 1 = the encoder-conjugate proposal (particle_filter.h)
+//   laplace_proposal (0): 1 = the proposal that folds in every reading of the step
+//     (particle_filter.h); excludes conjugate_proposal
 //   initial_at_first_reading (0): 1 = initial particles vM(kappa_0, first reading), not about 0
 //
 // Predict(t) makes one system-model step [PF eq. 30] when t is later than the last step.

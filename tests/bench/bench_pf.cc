@@ -3,8 +3,8 @@
 // the likelihood of [PF eq. 23] (reference angles, two Bingham IMU terms, the grasp position) and
 // ESS-triggered stratified resampling (which fires every step with these sensors). Target (one
 // core): N = 2048 in at most 200 us, no heap allocation per step (tests/unit/pf_alloc/).
-// Also: the scaling for N = 256 ... 8192, the encoder-conjugate proposal, and the batch
-// kinematics alone.
+// Also: the scaling for N = 256 ... 8192, the encoder-conjugate and Laplace proposals, and the
+// batch kinematics alone.
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true.
 //
 // Target for the estimate (BM_Summary): at most 0.25x of a step (BM_PfStep) in the same run; the
@@ -72,6 +72,7 @@ void FilterStep(benchmark::State& state, Proposal proposal, bool with_estimate =
     pf.UpdateOrientation(arm.imu2, arm.q2);
     pf.UpdateOrientation(arm.imu3, arm.q3);
     pf.UpdatePosition(arm.grasp, Vec3::Zero(), arm.p);
+    pf.CompleteStep();
   }
   for (auto _ : state) {
     pf.Predict();
@@ -79,6 +80,7 @@ void FilterStep(benchmark::State& state, Proposal proposal, bool with_estimate =
     pf.UpdateOrientation(arm.imu2, arm.q2);
     pf.UpdateOrientation(arm.imu3, arm.q3);
     pf.UpdatePosition(arm.grasp, Vec3::Zero(), arm.p);
+    pf.CompleteStep();  // the kLaplace move (a no-op for the other proposals)
     if (with_estimate) benchmark::DoNotOptimize(pf.Summary().mean[0]);
     benchmark::ClobberMemory();
   }
@@ -93,6 +95,9 @@ void BM_PfStepWithEstimate(benchmark::State& state) {
   FilterStep(state, Proposal::kBootstrap, true);
 }
 void BM_PfStepConjugate(benchmark::State& state) { FilterStep(state, Proposal::kEncoderConjugate); }
+// The proposal that folds every reading into the move; compare /256 with BM_PfStepConjugate/2048
+// (equal accuracy on the Fig. 6 setting, docs/particle_filter.md).
+void BM_PfStepLaplace(benchmark::State& state) { FilterStep(state, Proposal::kLaplace); }
 
 void BM_BatchKinematics(benchmark::State& state) {
   const Arm& arm = TheArm();
@@ -136,6 +141,7 @@ BENCHMARK(BM_PfStepWithEstimate)
     ->Range(256, 8192)
     ->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_PfStepConjugate)->RangeMultiplier(2)->Range(256, 8192)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_PfStepLaplace)->RangeMultiplier(2)->Range(256, 2048)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_BatchKinematics)->Arg(2048)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_Summary)->Arg(2048)->Unit(benchmark::kMicrosecond);
 

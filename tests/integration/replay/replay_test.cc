@@ -492,7 +492,9 @@ TEST(Replay, AnExportedRunReplaysToTheSameBits) {
                      "  fk: {}\n  pf_encoders: {conjugate_proposal: 1}\n"
                      "  pf_encoders_imu: {conjugate_proposal: 1}\n"
                      "  pf_encoders_bootstrap: {estimator: pf_encoders}\n"
-                     "  pf_encoders_imu_bootstrap: {estimator: pf_encoders_imu}\n");
+                     "  pf_encoders_imu_bootstrap: {estimator: pf_encoders_imu}\n"
+                     "  pf_encoders_imu_laplace256: {estimator: pf_encoders_imu, "
+                     "laplace_proposal: 1, particles: 256}\n");
   ASSERT_EQ(RunReplay(tmp.path() / "replay.yaml", tmp.path() / "replayed").exit_code, 0);
   int compared = 0;
   for (const auto& e : fs::directory_iterator(tmp.path() / "live" / "trajectories" / "base")) {
@@ -503,7 +505,7 @@ TEST(Replay, AnExportedRunReplaysToTheSameBits) {
     EXPECT_EQ(testing::ReadFile(e.path()), testing::ReadFile(replayed)) << name;
     ++compared;
   }
-  EXPECT_EQ(compared, 10);  // five estimators, their TUM and covariance files
+  EXPECT_EQ(compared, 12);  // six estimators, their TUM and covariance files
   // A kind without readings to export, and a folder that exists, are refused before any work.
   const CommandResult smoke = RunCommand(
       testing::Flexbench() + " run " + testing::SourceDir() + "/scenarios/smoke.yaml --out " +

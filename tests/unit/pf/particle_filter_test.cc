@@ -107,6 +107,7 @@ TEST_P(OneStepTest, ReferenceOnlyMatchesGridPosteriorAndEvidence) {
     ParticleFilter pf(arm.model, c, 100 + seed);
     pf.Predict();
     ASSERT_EQ(pf.UpdateReference(u, 4), PfStatus::kAccepted);
+    pf.CompleteStep();
     const ParticleSummary& s = pf.Summary();
     ess += s.ess / seeds;
     const double rel = 5.0 / std::sqrt(2.0 * s.ess);
@@ -146,6 +147,7 @@ TEST_P(OneStepTest, InitialAtFirstReadingIsThePriorAboutTheReading) {
     ParticleFilter pf(arm.model, c, 7);
     pf.Predict();
     ASSERT_EQ(pf.UpdateReference(u, 4), PfStatus::kAccepted);
+    pf.CompleteStep();
     const ParticleSummary& s = pf.Summary();
     const double tol = 5.0 * grid.std / std::sqrt(s.ess);
     for (int j = 0; j < 4; ++j) {
@@ -162,6 +164,7 @@ TEST_P(OneStepTest, InitialAtFirstReadingIsThePriorAboutTheReading) {
     pf.Predict();
     const double v[4] = {-1.0, 1.0, 0.5, -2.5};
     ASSERT_EQ(pf.UpdateReference(v, 4), PfStatus::kAccepted);
+    pf.CompleteStep();
     if (at_reading) {
       for (int j = 0; j < 4; ++j) {
         EXPECT_NEAR(AngleDiff(pf.Summary().mean[j], v[j]), 0.0, tol) << j;
@@ -171,7 +174,8 @@ TEST_P(OneStepTest, InitialAtFirstReadingIsThePriorAboutTheReading) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Proposals, OneStepTest,
-                         ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate));
+                         ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate,
+                                           Proposal::kLaplace));
 
 class ConvergenceTest : public ::testing::TestWithParam<Proposal> {};
 
@@ -191,6 +195,7 @@ TEST_P(ConvergenceTest, AllSensorsRecoverDeflectedAngles) {
   for (int step = 0; step < 60; ++step) {
     pf.Predict();
     Feed(pf, arm, truth, u);
+    pf.CompleteStep();
     if (step < 20) continue;
     const ParticleSummary& s = pf.Summary();
     for (int j = 0; j < 4; ++j) sq[j] += std::pow(AngleDiff(s.mean[j], q(j)), 2);
@@ -208,7 +213,8 @@ TEST_P(ConvergenceTest, AllSensorsRecoverDeflectedAngles) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Proposals, ConvergenceTest,
-                         ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate));
+                         ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate,
+                                           Proposal::kLaplace));
 
 // The summary's means and 95% intervals (no sort, bands guessed from the circular
 // std) against their definitions on the raw particles: [PF eq. 5], and the weighted 2.5% / 97.5%

@@ -85,6 +85,11 @@ TEST(PfEstimator, ParametersAreValidatedWithClearMessages) {
   EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"imus", {2}}})).find("names IMU 2"), std::string::npos);
   EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"conjugate_proposal", {2}}})).find("must be 0 or 1"),
             std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"laplace_proposal", {0.5}}})).find("must be 0 or 1"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"conjugate_proposal", {1}}, {"laplace_proposal", {1}}}))
+                .find("exclude each other"),
+            std::string::npos);
   EXPECT_NE(ErrorOf("pf_all", rig.Setup({{"ess_threshold", {0.0}}})).find("ess_threshold"),
             std::string::npos);
   const std::string typo = ErrorOf("pf_all", rig.Setup({{"kapa_v", {5.0}}}));

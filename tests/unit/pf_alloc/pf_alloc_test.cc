@@ -82,6 +82,7 @@ TEST_P(NoAllocationTest, FilterStepsDoNotAllocate) {
       pf.UpdateOrientation(arm.imu2, q2);
       pf.UpdateOrientation(arm.imu3, q3);
       pf.UpdatePosition(arm.grasp, Vec3::Zero(), p);
+      pf.CompleteStep();
       pf.Summary();
       pf.StepLogLikelihood();
     }
@@ -129,7 +130,8 @@ TEST_P(NoAllocationTest, EstimatorInterfaceDoesNotAllocate) {
   setup.end_effector = arm.grasp;
   setup.imus = {estimators::ImuSetup{arm.imu2}, estimators::ImuSetup{arm.imu3}};
   setup.params = estimators::Params(
-      {{"conjugate_proposal", {GetParam() == Proposal::kEncoderConjugate ? 1.0 : 0.0}}});
+      {{"conjugate_proposal", {GetParam() == Proposal::kEncoderConjugate ? 1.0 : 0.0}},
+       {"laplace_proposal", {GetParam() == Proposal::kLaplace ? 1.0 : 0.0}}});
   auto est = estimators::MakeEstimator("pf_all", setup);
   Eigen::VectorXd q(4);
   q << 0.3, 0.6, 0.2, 0.0;
@@ -207,7 +209,8 @@ TEST_P(NoAllocationTest, EstimatorsWithIdentifiedEffectsDoNotAllocate) {
     setup.end_effector = arm.grasp;
     if (std::string(name) == "pf_encoders") {
       setup.params = estimators::Params(
-          {{"conjugate_proposal", {GetParam() == Proposal::kEncoderConjugate ? 1.0 : 0.0}}});
+          {{"conjugate_proposal", {GetParam() == Proposal::kEncoderConjugate ? 1.0 : 0.0}},
+           {"laplace_proposal", {GetParam() == Proposal::kLaplace ? 1.0 : 0.0}}});
     } else {
       setup.params = estimators::Params({{"reading_noise", {1.0}}});
     }
@@ -226,7 +229,8 @@ TEST_P(NoAllocationTest, EstimatorsWithIdentifiedEffectsDoNotAllocate) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Proposals, NoAllocationTest,
-                         ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate));
+                         ::testing::Values(Proposal::kBootstrap, Proposal::kEncoderConjugate,
+                                           Proposal::kLaplace));
 
 }  // namespace
 }  // namespace flexbench::pf

@@ -13,6 +13,7 @@
 //   base_kappa_v: 5
 //   seeds: 3
 //   burn_in_steps: 5
+//   converged_rmse_deg: 0.202   # optional: the N = 65,536 RMSE, a line in the N panel
 //
 // Metrics (means over seeds; '.' in numbers spelled 'p'): <variant>.particles.<N>.joint_rmse_deg
 // / joint_err_max_deg / ess_mean and <variant>.kappa_v.<k>.{...}; every run also under
@@ -89,6 +90,10 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     kappas_ = root.Child("kappa_v").AsDoubleList();
     base_n_ = root.GetDouble("base_particles", 2048);
     base_kappa_ = root.GetDouble("base_kappa_v", 5.0);
+    converged_rmse_deg_ = root.GetDouble("converged_rmse_deg", 0.0);
+    if (!(converged_rmse_deg_ >= 0.0) || !std::isfinite(converged_rmse_deg_)) {
+      root.Child("converged_rmse_deg").Fail("must be a finite number >= 0");
+    }
     seeds_ = root.GetInt("seeds", 3);
     if (seeds_ < 1) root.Child("seeds").Fail("must be >= 1");
     // Validate every configuration before any work.
@@ -252,6 +257,7 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     Panel(&fig.axes(1, 1), "mean effective sample size vs kappa_v", "log10 kappa_v", "log10 ESS",
           out.k_curves, true);
     fig.axes(0, 0).AddVLine(8.0, "N = 256");
+    if (converged_rmse_deg_ > 0.0) fig.axes(0, 0).AddHLine(converged_rmse_deg_, "converged RMSE");
     fig.SavePng((ctx.out->FramesDir() / "sweep.png").string());
   }
 
@@ -315,6 +321,7 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
   std::vector<std::pair<std::string, std::map<std::string, std::vector<double>>>> variants_;
   std::vector<double> particles_, kappas_;
   double base_n_ = 2048, base_kappa_ = 5.0;
+  double converged_rmse_deg_ = 0.0;  // 0: no line
   int seeds_ = 3;
 };
 
