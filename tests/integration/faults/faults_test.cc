@@ -286,9 +286,9 @@ std::set<std::string> Entries(const fs::path& dir) {
 }
 
 // A full disk is an error of one line naming the file and the reason, exit 2, and leaves
-// nothing at --out. First the 2 MiB tmpfs alone (rover_apriltag_exp2 writes 2.3 MB); then a
-// short scenario (~180 KB of CSV, TUM, PNG, JSON, HTML) with a filler leaving 0 to 200 KiB
-// free, so that the disk fills up in each of its writers in turn. Where the run fits it is a
+// nothing at --out. First the 2 MiB tmpfs alone (rover_apriltag_exp2 writes 2.3 MB with every
+// frame); then a short scenario (~180 KB of CSV, TUM, PNG, JSON, HTML) with a filler leaving 0
+// to 200 KiB free, so that the disk fills up in each of its writers in turn. Where the run fits it is a
 // complete result; only report.html may be missing (a report that cannot be written costs the
 // page, not the run, and says so).
 TEST(Faults, FullDiskIsOneLineAndLeavesNothingPartial) {
@@ -299,7 +299,7 @@ TEST(Faults, FullDiskIsOneLineAndLeavesNothingPartial) {
   const fs::path out = mnt / "out";
   auto run = [&](const std::string& scenario) {
     return RunCommand(Flexbench() + " run " + SourceDir() + "/scenarios/" + scenario +
-                      ".yaml --out " + out.string() + " --quiet </dev/null");
+                      ".yaml --out " + out.string() + " --quiet --frames all </dev/null");
   };
   CommandResult r = run("rover_apriltag_exp2");
   EXPECT_EQ(r.exit_code, 2) << r.err;
