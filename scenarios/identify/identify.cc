@@ -330,7 +330,8 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
         also_fits ? Fmt(": also fits, with %d parameters instead of %d: the data favour the "
                         "simpler chosen cause",
                         a.num_params, a.chosen_params)
-        : close   ? std::string(": as good, the cause is not singled out")
+        : close   ? Fmt(": as good, with %d parameters (chosen %d): the cause is not singled out",
+                          a.num_params, a.chosen_params)
                   : std::string();
     res->steps.push_back(Fmt("without %s: %s reach held-out %.4g sigma^2 (chosen %.4g)%s",
                              a.banned.c_str(), what.c_str(), cv, res->cv_after, judged.c_str()));
