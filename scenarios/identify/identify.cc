@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "estimators/error.h"
+#include "estimators/stats/chi_square.h"
 #include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/diagnostics.h"
 #include "scenarios/identify/equivalence.h"
@@ -253,6 +254,18 @@ int EffectParams(const EffectModel& em, const Fit& fit) {
   return n;
 }
 
+// Whether the held-out error `cv` of `fit` is what the stated noise alone leaves: at most the
+// (1 - explained_p) quantile of a mean chi-square over its residuals, raised by the share of
+// fitted unknowns (a held-out residual's variance is about sigma^2 (1 + k / n)). Above it the
+// chosen model leaves something unexplained, so being simpler than an alternative that does as
+// well is no reason to prefer it: both may stand in for a cause the library lacks.
+bool HeldOutAtNoise(const Fit& fit, double cv, const IdentifyOptions& opt) {
+  const double n = std::max(1, fit.num_residuals);
+  const double bound =
+      stats::ChiSquareQuantile(1.0 - opt.explained_p, n) / n * (1.0 + fit.num_params / n);
+  return cv <= bound;
+}
+
 // For each chosen effect, the best model without it (cross-validation only): the chosen model
 // with it removed and refitted from the others' values, then forward selection from there over
 // the named candidates with it banned. When the removal alone keeps the held-out error within
@@ -306,6 +319,7 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
   });
   // A more complex alternative clearly better on held-out data still counts against the cause.
   const double better_cv = (1.0 - ctx.opt.cv_min_gain) * res->cv_after;
+  const bool at_noise = HeldOutAtNoise(chosen, res->cv_after, ctx.opt);
   for (int i = 0; i < n; ++i) {
     const Fit& alt = alts[i];
     const double cv = cvs[i];
@@ -320,19 +334,24 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
       if (static_cast<int>(k) >= kept[i]) added += (added.empty() ? "" : " + ") + a.effects.back();
     }
     const bool close = !alt.active.empty() && cv < close_cv;
-    const bool also_fits = close && a.num_params > a.chosen_params && !(cv < better_cv);
+    const bool costlier = close && a.num_params > a.chosen_params && !(cv < better_cv);
+    const bool also_fits = costlier && at_noise;
     if (close && !also_fits) res->attribution_unique = false;
     const std::string what = alt.active.empty() ? "nothing"
                              : kept[i] == 0     ? added
                              : added.empty()    ? "the other chosen effects"
                                                 : "the others + " + added;
-    const std::string judged =
-        also_fits ? Fmt(": also fits, with %d parameters instead of %d: the data favour the "
-                        "simpler chosen cause",
-                        a.num_params, a.chosen_params)
-        : close   ? Fmt(": as good, with %d parameters (chosen %d): the cause is not singled out",
-                          a.num_params, a.chosen_params)
-                  : std::string();
+    std::string judged;
+    if (also_fits) {
+      judged =
+          Fmt(": also fits, with %d parameters instead of %d: the data favour the simpler "
+              "chosen cause",
+              a.num_params, a.chosen_params);
+    } else if (close) {
+      judged = Fmt(": as good, with %d parameters (chosen %d)%s: the cause is not singled out",
+                   a.num_params, a.chosen_params,
+                   costlier ? ", and the chosen model leaves more than the stated noise" : "");
+    }
     res->steps.push_back(Fmt("without %s: %s reach held-out %.4g sigma^2 (chosen %.4g)%s",
                              a.banned.c_str(), what.c_str(), cv, res->cv_after, judged.c_str()));
     if (also_fits) res->also_fits.push_back(a);

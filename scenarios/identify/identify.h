@@ -282,7 +282,10 @@ struct EquivalenceSet {
 // error (within ambiguity_cv) with no more parameters than the chosen model means the data does
 // not single out the banned effect as the cause. One that needs more parameters and is only as
 // good (not better by cv_min_gain) is no evidence against the simpler chosen cause: it is
-// reported as also fitting (IdentifyResult::also_fits), and the attribution stands.
+// reported as also fitting (IdentifyResult::also_fits), and the attribution stands; but only
+// while the chosen model's held-out error is within what the stated noise leaves (a chi-square
+// bound at explained_p). Above it both may stand in for a cause the library lacks, and the
+// alternative counts as any close one does.
 struct Alternative {
   std::string banned;
   std::vector<std::string> effects;
@@ -329,12 +332,13 @@ struct IdentifyResult {
   // "time_budget" (IdentifyOptions::time_budget_s ran out before the selection ended).
   std::string stopped_by;
   std::vector<Alternative> alternatives;  // one per chosen effect (cross-validation only)
-  // Alternatives as good on held-out data as the chosen model but with more parameters.
+  // Alternatives as good on held-out data as the chosen model but with more parameters, the
+  // chosen model's held-out error within the stated noise (Alternative).
   std::vector<Alternative> also_fits;
-  // No alternative with at most the chosen model's parameters comes within ambiguity_cv, and no
-  // simpler candidate makes the same correction as several chosen effects.
+  // No alternative comes within ambiguity_cv but those in also_fits, and no simpler candidate
+  // makes the same correction as several chosen effects.
   bool attribution_unique = true;
-  std::vector<std::string> simpler;       // chosen effects that together equal a simpler one
+  std::vector<std::string> simpler;  // chosen effects that together equal a simpler one
   // |sum of the effects' corrections|^2 / sum of their |correction|^2 (group points projected
   // out): about 1 for independent causes, well below 1 when effects cancel each other.
   double overlap = 1.0;
