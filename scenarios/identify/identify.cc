@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "estimators/error.h"
+#include "estimators/stats/chi_square.h"
 #include "scenarios/identify/cross_validation.h"
 #include "scenarios/identify/diagnostics.h"
 #include "scenarios/identify/equivalence.h"
@@ -242,11 +243,36 @@ Fit FollowFinding(const SelectionContext& ctx, const std::vector<int>& candidate
   return SelectEffects(ctx, cur, pool, true, cv);
 }
 
+// Effect parameters `fit` determines: its effects' fitted directions.
+int EffectParams(const EffectModel& em, const Fit& fit) {
+  int n = 0;
+  for (size_t e = 0; e < fit.active.size(); ++e) {
+    n += e < fit.basis.size() && fit.basis[e].size() > 0
+             ? static_cast<int>(fit.basis[e].cols())
+             : em.candidates()[fit.active[e]].num_params;  // empty basis: every direction
+  }
+  return n;
+}
+
+// Whether the held-out error `cv` of `fit` is what the stated noise alone leaves: at most the
+// (1 - explained_p) quantile of a mean chi-square over its residuals, raised by the share of
+// fitted unknowns (a held-out residual's variance is about sigma^2 (1 + k / n)). Above it the
+// chosen model leaves something unexplained, so being simpler than an alternative that does as
+// well is no reason to prefer it: both may stand in for a cause the library lacks.
+bool HeldOutAtNoise(const Fit& fit, double cv, const IdentifyOptions& opt) {
+  const double n = std::max(1, fit.num_residuals);
+  const double bound =
+      stats::ChiSquareQuantile(1.0 - opt.explained_p, n) / n * (1.0 + fit.num_params / n);
+  return cv <= bound;
+}
+
 // For each chosen effect, the best model without it (cross-validation only): the chosen model
 // with it removed and refitted from the others' values, then forward selection from there over
 // the named candidates with it banned. When the removal alone keeps the held-out error within
-// ambiguity_cv, nothing is searched: the data does not single the effect out beyond noise. The
-// alternatives are independent: they run side by side, and are reported in the chosen order.
+// ambiguity_cv, nothing is searched: the data does not single the effect out beyond noise. An
+// alternative as good with more parameters is kept apart (Alternative): Occam's razor, as
+// PreferSimpler applies it to the chosen model. The alternatives are independent: they run side
+// by side, and are reported in the chosen order.
 void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candidates,
                       const Fit& chosen, IdentifyResult* res) {
   if (!ctx.opt.cross_validation) return;
@@ -291,26 +317,44 @@ void FindAlternatives(const SelectionContext& ctx, const std::vector<int>& candi
     // what is looked for (no swap step either: found, not polished).
     alts[i] = SelectEffects(alt_ctx, start, rests[i], false, &cvs[i], false);
   });
+  // A more complex alternative clearly better on held-out data still counts against the cause.
+  const double better_cv = (1.0 - ctx.opt.cv_min_gain) * res->cv_after;
+  const bool at_noise = HeldOutAtNoise(chosen, res->cv_after, ctx.opt);
   for (int i = 0; i < n; ++i) {
     const Fit& alt = alts[i];
     const double cv = cvs[i];
     Alternative a;
     a.banned = ctx.em.candidates()[chosen.active[banned_list[i]]].Name();
     a.cv = cv;
+    a.num_params = EffectParams(ctx.em, alt);
+    a.chosen_params = EffectParams(ctx.em, chosen);
     std::string added;
     for (size_t k = 0; k < alt.active.size(); ++k) {
       a.effects.push_back(ctx.em.candidates()[alt.active[k]].Name());
       if (static_cast<int>(k) >= kept[i]) added += (added.empty() ? "" : " + ") + a.effects.back();
     }
     const bool close = !alt.active.empty() && cv < close_cv;
-    if (close) res->attribution_unique = false;
+    const bool costlier = close && a.num_params > a.chosen_params && !(cv < better_cv);
+    const bool also_fits = costlier && at_noise;
+    if (close && !also_fits) res->attribution_unique = false;
     const std::string what = alt.active.empty() ? "nothing"
                              : kept[i] == 0     ? added
                              : added.empty()    ? "the other chosen effects"
                                                 : "the others + " + added;
+    std::string judged;
+    if (also_fits) {
+      judged =
+          Fmt(": also fits, with %d parameters instead of %d: the data favour the simpler "
+              "chosen cause",
+              a.num_params, a.chosen_params);
+    } else if (close) {
+      judged = Fmt(": as good, with %d parameters (chosen %d)%s: the cause is not singled out",
+                   a.num_params, a.chosen_params,
+                   costlier ? ", and the chosen model leaves more than the stated noise" : "");
+    }
     res->steps.push_back(Fmt("without %s: %s reach held-out %.4g sigma^2 (chosen %.4g)%s",
-                             a.banned.c_str(), what.c_str(), cv, res->cv_after,
-                             close ? ": as good, the cause is not singled out" : ""));
+                             a.banned.c_str(), what.c_str(), cv, res->cv_after, judged.c_str()));
+    if (also_fits) res->also_fits.push_back(a);
     res->alternatives.push_back(std::move(a));
   }
 }

@@ -275,12 +275,23 @@ struct EquivalenceSet {
   double correction_rms = 0.0;  // whitened RMS of the correction it makes
 };
 
-// The best model selection finds when one chosen effect is banned: if it reaches about the same
-// held-out error, the data does not single out that effect as the cause.
+// The best model selection finds when one chosen effect is banned. Complexity is the number of
+// effect parameters a model fits (its effects' observable directions; the nuisance parameters
+// are the same for every model of the data), counted rather than scored by BIC because the
+// held-out error already weighs the fit. An alternative that reaches about the same held-out
+// error (within ambiguity_cv) with no more parameters than the chosen model means the data does
+// not single out the banned effect as the cause. One that needs more parameters and is only as
+// good (not better by cv_min_gain) is no evidence against the simpler chosen cause: it is
+// reported as also fitting (IdentifyResult::also_fits), and the attribution stands; but only
+// while the chosen model's held-out error is within what the stated noise leaves (a chi-square
+// bound at explained_p). Above it both may stand in for a cause the library lacks, and the
+// alternative counts as any close one does.
 struct Alternative {
   std::string banned;
   std::vector<std::string> effects;
-  double cv = 0.0;  // its held-out error (mean squared whitened residual)
+  double cv = 0.0;        // its held-out error (mean squared whitened residual)
+  int num_params = 0;     // effect parameters it fits
+  int chosen_params = 0;  // effect parameters of the chosen model it is compared with
 };
 
 // Structure left in the residual (diagnostics.h).
@@ -321,8 +332,13 @@ struct IdentifyResult {
   // "time_budget" (IdentifyOptions::time_budget_s ran out before the selection ended).
   std::string stopped_by;
   std::vector<Alternative> alternatives;  // one per chosen effect (cross-validation only)
-  bool attribution_unique = true;         // no alternative comes within ambiguity_cv
-  std::vector<std::string> simpler;       // chosen effects that together equal a simpler one
+  // Alternatives as good on held-out data as the chosen model but with more parameters, the
+  // chosen model's held-out error within the stated noise (Alternative).
+  std::vector<Alternative> also_fits;
+  // No alternative comes within ambiguity_cv but those in also_fits, and no simpler candidate
+  // makes the same correction as several chosen effects.
+  bool attribution_unique = true;
+  std::vector<std::string> simpler;  // chosen effects that together equal a simpler one
   // |sum of the effects' corrections|^2 / sum of their |correction|^2 (group points projected
   // out): about 1 for independent causes, well below 1 when effects cancel each other.
   double overlap = 1.0;
@@ -352,10 +368,12 @@ DataSet WithoutRows(const DataSet& data, const std::vector<int>& drop);
 //   "partly_explained"  the validation error drops, but structure remains (a finding with
 //                       p < explained_p, or more than twice the stated noise);
 //   "ambiguous"         the validation error drops and nothing is left, but with one of the
-//                       chosen effects banned, other effects do about as well on held-out data:
-//                       the correction holds, its cause is not singled out;
+//                       chosen effects banned, other effects with no more parameters do about
+//                       as well on held-out data (or chosen effects together equal a simpler
+//                       candidate): the correction holds, its cause is not singled out;
 //   "explained"         the validation error drops, no significant structure remains, and no
-//                       alternative explains the held-out data as well.
+//                       alternative at most as complex explains the held-out data as well (more
+//                       complex ones that do are listed in also_fits).
 // A fit whose whitened RMS residual exceeds kFarAboveNoise times the stated noise is
 // "unexplained" whatever else holds: outliers the rejection missed, wrong units, or a wrong
 // noise level, never a model that only needs another effect.

@@ -805,6 +805,15 @@ class ClosedLoopKind : public ScenarioKind {
       alts.push_back({{"banned", a.banned}, {"effects", a.effects}, {"cv_err", a.cv}});
     }
     (*id)["alternatives"] = alts;
+    Json also = Json::array();
+    for (const identify::Alternative& a : res.also_fits) {
+      also.push_back({{"banned", a.banned},
+                      {"effects", a.effects},
+                      {"num_params", a.num_params},
+                      {"chosen_num_params", a.chosen_params},
+                      {"cv_err", a.cv}});
+    }
+    (*id)["also_fits"] = also;
     (*id)["simpler_equivalents"] = res.simpler;
     if (!frames_.empty()) (*id)["frames"] = FramesJson(res);
     if (!unknown_offset_nodes_.empty()) (*id)["marker_offsets"] = OffsetsJson(res);
