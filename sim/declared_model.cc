@@ -235,10 +235,12 @@ FittedUnder ReadFittedUnder(const ConfigNode& node) {
     const auto ranges = node.Optional(slide ? "joint_range_m" : "joint_range_deg");
     if (!ranges) continue;
     const char* unit = slide ? "metres" : "degrees";
-    if (!ranges->IsMap()) ranges->Fail(std::string("expected a map: joint -> [min, max] in ") + unit);
+    if (!ranges->IsMap())
+      ranges->Fail(std::string("expected a map: joint -> [min, max] in ") + unit);
     for (const std::string& joint : ranges->Keys()) {
       const ConfigNode r = ranges->Child(joint);
-      const std::vector<double> v = ReadFinite(r, 2, slide ? "[min, max] in metres" : "[min, max] in degrees");
+      const std::vector<double> v =
+          ReadFinite(r, 2, slide ? "[min, max] in metres" : "[min, max] in degrees");
       if (v[0] > v[1]) r.Fail("min must not exceed max");
       const double k = slide ? 1.0 : M_PI / 180.0;
       f.joint_ranges.push_back({joint, v[0] * k, v[1] * k, slide});

@@ -114,7 +114,7 @@ struct FittedUnder {
   };
   std::vector<JointRange> joint_ranges;
   double source_scale = 1.0;
-  std::vector<std::string> constrained_sources;    // "<at>:<direction>" (identify/source_scaling.h)
+  std::vector<std::string> constrained_sources;  // "<at>:<direction>" (identify/source_scaling.h)
   std::vector<std::string> kept_declared_sources;
   std::string where;  // "<file>:<line>: key 'fitted_under'"
   bool empty() const { return joint_ranges.empty(); }

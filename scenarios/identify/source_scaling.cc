@@ -135,10 +135,11 @@ std::vector<double> SourceSignalToNoise(const kinematics::PpoeModel& model, cons
     for (size_t i = 0; i < nd; ++i) {
       const kinematics::FrameId k = dirs[i].frame;
       if (!above[k]) continue;
-      const lie::SE3 T_base_kp = pd.T_base_frame[model.frame(k).parent] * model.frame(k).T_parent_ip;
+      const lie::SE3 T_base_kp =
+          pd.T_base_frame[model.frame(k).parent] * model.frame(k).T_parent_ip;
       const Mat3& R = T_base_kp.rotation();
-      g[r * nd + i] = R * dirs[i].v.head<3>() +
-                      (R * dirs[i].v.tail<3>()).cross(p[r] - T_base_kp.translation());
+      g[r * nd + i] =
+          R * dirs[i].v.head<3>() + (R * dirs[i].v.tail<3>()).cross(p[r] - T_base_kp.translation());
     }
   }
   for (const auto& [key, rows] : NuisanceBlocks(d)) {

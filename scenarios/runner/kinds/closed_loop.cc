@@ -2088,11 +2088,18 @@ class ClosedLoopKind : public ScenarioKind {
     return out;
   }
 
-  // Where the fit holds: each joint's range over the calibration and validation rows, and the
+  // Where the fit holds: the range over the calibration and validation rows of each joint that
+  // moves a measured frame (the others, a mast beside the arm, were never measured), and the
   // source directions those rows sized.
   sim::FittedUnder FittedUnder(const Sets& sets) const {
     sim::FittedUnder f;
     const int nq = chain_->model.nq();
+    std::vector<char> moves(nq, 0);
+    for (kinematics::FrameId p : em_->points()) {
+      for (; p > 0; p = chain_->model.frame(p).parent) {
+        if (chain_->model.frame(p).q_index >= 0) moves[chain_->model.frame(p).q_index] = 1;
+      }
+    }
     Eigen::VectorXd lo = Eigen::VectorXd::Constant(nq, INFINITY), hi = -lo;
     for (const DataSet* d : {&sets.cal, &sets.val}) {
       for (const identify::Observation& o : d->rows) {
@@ -2100,9 +2107,11 @@ class ClosedLoopKind : public ScenarioKind {
         hi = hi.cwiseMax(o.q);
       }
     }
-    for (int k = 0; k < nq && lo[k] <= hi[k]; ++k) {
+    for (int k = 0; k < nq; ++k) {
+      if (!moves[k] || !(lo[k] <= hi[k])) continue;
       const int j = mj_name2id(mj_.get(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
-      f.joint_ranges.push_back({chain_->q_joints[k], lo[k], hi[k], mj_->jnt_type[j] == mjJNT_SLIDE});
+      f.joint_ranges.push_back(
+          {chain_->q_joints[k], lo[k], hi[k], mj_->jnt_type[j] == mjJNT_SLIDE});
     }
     f.source_scale = source_scale_;
     for (size_t i = 0; i < directions_.size(); ++i) {
@@ -2122,10 +2131,10 @@ class ClosedLoopKind : public ScenarioKind {
     std::ostringstream header;
     header << "Declared model augmented by flexbench closed_loop: the identified effects with "
               "their\nfitted parameters, and the PPOE source directions the validation rows "
-              "constrain scaled by "
-           << Num(source_scale_) << "\n(what the remaining validation residual supports; mean "
-           << "NEES there " << Num(nees_scaled_) << ", 3 is consistent); kept as declared (the "
-           << "rows do not\nsee them): " << kept << ".\nVerdict: " << verdict_
+              "constrain\nscaled by "
+           << Num(source_scale_) << " (what the remaining validation residual supports; mean "
+           << "NEES there " << Num(nees_scaled_) << ",\n3 is consistent). Kept as declared (the "
+           << "rows do not see them): " << kept << ".\nVerdict: " << verdict_
            << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the "
                                          "data about as well, so no cause is singled out)"
                                        : "")

@@ -87,8 +87,8 @@ TEST(FittedRange, WrittenAndReadBackEnclosingTheRows) {
   ASSERT_NE(text.find(written), std::string::npos) << text;
   text.replace(text.find(written), written.size(), "[47, -12]");
   testing::WriteFile(dir / "bad.yaml", text);
-  const std::string err = testing::ErrorOf(
-      [&] { sim::LoadDeclaredModel((dir / "bad.yaml").string()); });
+  const std::string err =
+      testing::ErrorOf([&] { sim::LoadDeclaredModel((dir / "bad.yaml").string()); });
   EXPECT_NE(err.find("bad.yaml:"), std::string::npos) << err;
   EXPECT_NE(err.find("min must not exceed max"), std::string::npos) << err;
   fs::remove_all(dir);
@@ -111,18 +111,20 @@ Lateral Exp1(const fs::path& out, const std::string& declared, const std::vector
     o.force = true;
     if (!declared.empty()) o.set = {"declared=" + declared};
     EXPECT_EQ(RunScenario(o), kExitOk);
-    const nlohmann::json s = nlohmann::json::parse(testing::ReadFile(fs::path(o.out_dir) / "summary.json"));
-    l.ppoe += s["estimators"]["ppoe_ekf"]["metrics"]["lateral_err_mean_m"].get<double>() / seeds.size();
-    l.naive += s["estimators"]["naive_ekf"]["metrics"]["lateral_err_mean_m"].get<double>() / seeds.size();
+    const nlohmann::json s =
+        nlohmann::json::parse(testing::ReadFile(fs::path(o.out_dir) / "summary.json"));
+    l.ppoe +=
+        s["estimators"]["ppoe_ekf"]["metrics"]["lateral_err_mean_m"].get<double>() / seeds.size();
+    l.naive +=
+        s["estimators"]["naive_ekf"]["metrics"]["lateral_err_mean_m"].get<double>() / seeds.size();
     l.warned += s.contains("warnings") ? 1 : 0;
   }
   return l;
 }
 
 // Calibration rows of sockets whose truth has only exp1's elbow offset (0.17 deg): they see no
-// plate tilt (a socket's rows move alike) and no mast. Before the sorting every source was
-// scaled by 1e-6 and on exp1 (compliant plate, bending links) ppoe_ekf's lateral error rose
-// from 1.23 to 2.1 mm (mean of seeds 101-106), above naive_ekf's.
+// plate tilt (a socket's rows move alike) and no mast. Scaling every source by 1e-6 on their
+// word put ppoe_ekf's lateral error on exp1 (compliant plate, bending links) above naive_ekf's.
 TEST(AugmentedModelElsewhere, KeepsWhatTheCalibrationDidNotSeeAndWarns) {
   const fs::path dir = TempDir("augmented_use");
   RunOptions cal;
@@ -139,8 +141,7 @@ TEST(AugmentedModelElsewhere, KeepsWhatTheCalibrationDidNotSeeAndWarns) {
     EXPECT_NE(std::find(kept.begin(), kept.end(), k), kept.end()) << k;
   }
   const std::vector<std::string> constrained = scaling["constrained"];
-  EXPECT_NE(std::find(constrained.begin(), constrained.end(), "j3:about_axis"),
-            constrained.end());
+  EXPECT_NE(std::find(constrained.begin(), constrained.end(), "j3:about_axis"), constrained.end());
   const fs::path augmented = dir / "cal" / "declared_augmented.yaml";
   const sim::DeclaredModel aug = sim::LoadDeclaredModel(augmented.string());
   EXPECT_FALSE(aug.fitted_under.empty());

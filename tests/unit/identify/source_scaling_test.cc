@@ -43,7 +43,7 @@ DataSet EndEffectorRows(const Rover& r, int frame, std::vector<Vec3>* p) {
   for (int i = 0; i < 40; ++i) {
     Eigen::VectorXd q = Eigen::VectorXd::Zero(r.chain.model.nq());
     for (int k = 0; k < 6; ++k) q[k] = angle(rng);  // j1..j6; the mast stays
-    q[2] -= 1.6;                                      // the elbow bent, as the rover works
+    q[2] -= 1.6;                                    // the elbow bent, as the rover works
     std::copy(r.m->qpos0, r.m->qpos0 + r.m->nq, data->qpos);
     r.chain.WriteQpos(q, data->qpos);
     mj_kinematics(r.m.get(), data.get());
@@ -94,9 +94,11 @@ TEST(SourceScaling, DirectionsAreTheDeclaredAxes) {
 TEST(SourceScaling, SourcesNoRowSeesKeepTheirDeclaredSize) {
   const Rover r = LoadRover();
   const std::vector<double> snr = Snr(r, -1, 1e-4);
-  // The mast's joints move the camera, not the hand the rows measure.
+  // The mast's joints move the camera, not the hand the rows measure; the hand's point lies on
+  // the wrist's roll axis.
   EXPECT_EQ(snr[Find(r, "mast_pan:about_axis")], 0.0);
   EXPECT_EQ(snr[Find(r, "mast_tilt:about_axis")], 0.0);
+  EXPECT_LT(snr[Find(r, "j6:about_axis")], 1e-6);
   // In the base frame a 5 deg plate tilt and 0.5 deg at the elbow move the hand by millimetres.
   EXPECT_GT(snr[Find(r, "base_plate:rot_x")], 100.0);
   EXPECT_GT(snr[Find(r, "j3:about_axis")], 100.0);
@@ -105,7 +107,7 @@ TEST(SourceScaling, SourcesNoRowSeesKeepTheirDeclaredSize) {
   ScaleSourceDirections(r.dirs, Constrained(snr), 1e-6, &scaled);
   for (size_t s = 0; s < scaled.size(); ++s) {
     const std::string& at = r.d.sources[s].at;
-    if (at == "mast_pan" || at == "mast_tilt") {
+    if (at == "mast_pan" || at == "mast_tilt" || at == "j6") {
       EXPECT_EQ(scaled[s].about_axis_rad, r.d.sources[s].about_axis_rad) << at;  // to the bit
       EXPECT_EQ(scaled[s].cov, r.d.sources[s].cov) << at;
     } else if (at == "base_plate") {
@@ -121,8 +123,8 @@ TEST(SourceScaling, RigidMotionsAFittedFrameAbsorbsAreNotConstrained) {
   // Measured in a tracker frame whose pose is fitted: the plate's tilt and j1's turn move every
   // measured point rigidly, which the frame's pose takes up whatever their size.
   const std::vector<double> snr = Snr(r, 0, 1e-4);
-  for (const char* rigid : {"base_plate:rot_x", "base_plate:rot_y", "base_plate:rot_z",
-                            "j1:about_axis"}) {
+  for (const char* rigid :
+       {"base_plate:rot_x", "base_plate:rot_y", "base_plate:rot_z", "j1:about_axis"}) {
     EXPECT_LT(snr[Find(r, rigid)], 1e-6) << rigid;
   }
   EXPECT_GT(snr[Find(r, "j3:about_axis")], 100.0);  // the elbow bends the arm: not rigid
@@ -131,7 +133,8 @@ TEST(SourceScaling, RigidMotionsAFittedFrameAbsorbsAreNotConstrained) {
   ScaleSourceDirections(r.dirs, Constrained(snr), 1e-6, &scaled);
   for (size_t s = 0; s < scaled.size(); ++s) {
     const std::string& at = r.d.sources[s].at;
-    const bool kept = at == "base_plate" || at == "j1" || at == "mast_pan" || at == "mast_tilt";
+    const bool kept =
+        at == "base_plate" || at == "j1" || at == "j6" || at == "mast_pan" || at == "mast_tilt";
     if (kept) {
       EXPECT_EQ(scaled[s].cov, r.d.sources[s].cov) << at;
       EXPECT_EQ(scaled[s].about_axis_rad, r.d.sources[s].about_axis_rad) << at;
