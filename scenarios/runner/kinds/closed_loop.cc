@@ -758,7 +758,8 @@ class ClosedLoopKind : public ScenarioKind {
       target = SharedNeesUpperBound(val, sc.val_loads_after, res, noise_after);
       (*m)["nees_bound_high_shared"] = target;
     }
-    const kinematics::PpoeModel constrained = ConstrainedSources(ctx, val, sc.val_p1, noise_after);
+    const kinematics::PpoeModel constrained =
+        ConstrainedSources(ctx, val, sc.val_p1, noise_after, res);
     const bool any = std::count(constrained_.begin(), constrained_.end(), true) > 0;
     source_scale_ = any ? SourceScale(val, sc.val_p1, noise_after, target, constrained) : 1.0;
     (*m)["source_covariance_scale"] = source_scale_;
@@ -1854,16 +1855,23 @@ class ClosedLoopKind : public ScenarioKind {
   // the augmented model's points, against its rows' noise: identify/source_scaling.h) and the
   // others, which keep their declared size; returns the chain with the constrained ones alone,
   // the chain itself when none is left out (the same bits as before the sorting).
+  // A source where the fit placed an effect is sized by the fit as well: the effect is the
+  // measured form of the error the source declared (a compliant plate's tilt fitted as
+  // base_compliance), and its fitted std now carries that uncertainty.
   kinematics::PpoeModel ConstrainedSources(RunContext& ctx, const DataSet& val,
                                            const std::vector<Vec3>& p,
-                                           const std::vector<Mat3>& noise) {
+                                           const std::vector<Mat3>& noise,
+                                           const identify::IdentifyResult& res) {
     directions_ = identify::SourceDirections(mj_.get(), declared_, chain_->model);
     const std::vector<double> snr =
         identify::SourceSignalToNoise(chain_->model, val, em_->points(), p, noise, directions_);
+    std::set<std::string> fitted_at;
+    for (const auto& e : res.effects) fitted_at.insert(em_->candidates()[e.candidate].location);
     constrained_.assign(directions_.size(), false);
     std::vector<std::string> kept;
     for (size_t i = 0; i < directions_.size(); ++i) {
-      constrained_[i] = snr[i] >= identify::kConstrainedSignalToNoise;
+      constrained_[i] = snr[i] >= identify::kConstrainedSignalToNoise ||
+                        fitted_at.count(declared_.sources[directions_[i].source].at) > 0;
       if (!constrained_[i]) kept.push_back(directions_[i].name);
     }
     if (!kept.empty()) {
