@@ -94,6 +94,39 @@ TEST(FittedRange, WrittenAndReadBackEnclosingTheRows) {
   fs::remove_all(dir);
 }
 
+// A recorded log replayed under an augmented model whose fitted_under leaves out part of the
+// log's postures: the warning is printed and in summary.json; within the ranges, none.
+TEST(FittedRange, ReplayOfALogBeyondTheRangesIsWarned) {
+  const fs::path dir = TempDir("replay_range");
+  RunOptions cal;
+  cal.scenario_path = testing::SourceDir() + "/scenarios/closed_loop_recorded_log.yaml";
+  cal.out_dir = (dir / "cal").string();
+  cal.quiet = true;
+  ASSERT_EQ(RunScenario(cal), kExitOk);
+  std::string yaml = testing::ReadFile(dir / "cal" / "declared_augmented.yaml");
+  const size_t at = yaml.find("link2_pitch_joint: [");
+  ASSERT_NE(at, std::string::npos) << yaml;
+  yaml.replace(at, yaml.find(']', at) - at + 1, "link2_pitch_joint: [0, 45]");
+  testing::WriteFile(dir / "cal" / "narrow.yaml", yaml);
+  const auto replay = [&](const std::string& declared, const std::string& out) {
+    const testing::CommandResult r = testing::RunCommand(
+        testing::Flexbench() + " replay " + testing::SourceDir() +
+        "/scenarios/logs/jsk_flexible_arm --declared " + (dir / "cal" / declared).string() +
+        " --out " + (dir / out).string() + " --quiet");
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return std::make_pair(r.err,
+                          nlohmann::json::parse(testing::ReadFile(dir / out / "summary.json")));
+  };
+  const auto [err, narrow] = replay("narrow.yaml", "narrow");
+  ASSERT_TRUE(narrow.contains("warnings"));
+  EXPECT_NE(narrow["warnings"][0].get<std::string>().find("link2_pitch_joint 0..90"),
+            std::string::npos);
+  EXPECT_NE(err.find("warning: the run leaves the joint ranges narrow.yaml"), std::string::npos)
+      << err;
+  EXPECT_FALSE(replay("declared_augmented.yaml", "whole").second.contains("warnings"));
+  fs::remove_all(dir);
+}
+
 struct Lateral {
   double ppoe = 0.0, naive = 0.0;
   int warned = 0;
