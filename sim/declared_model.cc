@@ -226,6 +226,39 @@ std::vector<DeclaredMarkerOffset> ReadMarkerOffsets(const ConfigNode& node,
   return out;
 }
 
+// `fitted_under:` {joint_range_deg: {joint: [min, max]}, source_scale, constrained_sources,
+// kept_declared_sources}. The joints' names are checked where a run compares its own.
+FittedUnder ReadFittedUnder(const ConfigNode& node) {
+  FittedUnder f;
+  f.where = node.WhereKey();
+  for (const bool slide : {false, true}) {
+    const auto ranges = node.Optional(slide ? "joint_range_m" : "joint_range_deg");
+    if (!ranges) continue;
+    const char* unit = slide ? "metres" : "degrees";
+    if (!ranges->IsMap())
+      ranges->Fail(std::string("expected a map: joint -> [min, max] in ") + unit);
+    for (const std::string& joint : ranges->Keys()) {
+      const ConfigNode r = ranges->Child(joint);
+      const std::vector<double> v =
+          ReadFinite(r, 2, slide ? "[min, max] in metres" : "[min, max] in degrees");
+      if (v[0] > v[1]) r.Fail("min must not exceed max");
+      const double k = slide ? 1.0 : M_PI / 180.0;
+      f.joint_ranges.push_back({joint, v[0] * k, v[1] * k, slide});
+    }
+  }
+  if (f.joint_ranges.empty()) node.Fail("needs joint_range_deg or joint_range_m");
+  const ConfigNode scale = node.Child("source_scale");
+  f.source_scale = scale.AsDouble();
+  if (!(std::isfinite(f.source_scale) && f.source_scale > 0.0)) {
+    scale.Fail("must be a positive finite number");
+  }
+  if (const auto c = node.Optional("constrained_sources")) f.constrained_sources = ReadNames(*c);
+  if (const auto k = node.Optional("kept_declared_sources")) {
+    f.kept_declared_sources = ReadNames(*k);
+  }
+  return f;
+}
+
 }  // namespace
 
 Vec3 DeclaredModel::MarkerOffset(const std::string& frame) const {
@@ -253,6 +286,7 @@ DeclaredModel ParseDeclaredModel(const ConfigNode& node) {
   if (const auto coupled = node.Optional("coupled")) d.coupled = ReadCouplings(*coupled);
   if (const auto frames = node.Optional("frames")) d.frames = ReadFramePoses(*frames);
   if (const auto mo = node.Optional("marker_offsets")) d.marker_offsets = ReadMarkerOffsets(*mo, d);
+  if (const auto fu = node.Optional("fitted_under")) d.fitted_under = ReadFittedUnder(*fu);
   // Checked last, so format errors come first. (In a scenario's inline `declared:` block the
   // scenario's own `model` is what is loaded; a path here that names nothing is still an error.)
   std::error_code ec;
@@ -396,6 +430,36 @@ void EmitMarkerOffsets(YAML::Emitter& y, const std::vector<DeclaredMarkerOffset>
   y << YAML::EndMap;
 }
 
+// Ranges in degrees at `digits` digits, widened outward by one unit of the last digit kept, so
+// the rows the ranges were taken from stay inside them when read back.
+void EmitFittedUnder(YAML::Emitter& y, const FittedUnder& f, int digits) {
+  y << YAML::Key << "fitted_under" << YAML::Value << YAML::BeginMap;
+  const auto outward = [digits](double x, double dir) {
+    if (x == 0.0) return 0.0;
+    const double ulp = std::pow(10.0, std::floor(std::log10(std::abs(x))) - digits + 1);
+    return (dir > 0 ? std::ceil(x / ulp) : std::floor(x / ulp)) * ulp;
+  };
+  for (const bool slide : {false, true}) {
+    const double k = slide ? 1.0 : 180.0 / M_PI;
+    bool open = false;
+    for (const FittedUnder::JointRange& r : f.joint_ranges) {
+      if (r.slide != slide) continue;
+      if (!open) {
+        y << YAML::Key << (slide ? "joint_range_m" : "joint_range_deg") << YAML::Value
+          << YAML::BeginMap;
+        open = true;
+      }
+      y << YAML::Key << r.joint << YAML::Value << YAML::Flow << YAML::BeginSeq
+        << outward(r.min * k, -1.0) << outward(r.max * k, 1.0) << YAML::EndSeq;
+    }
+    if (open) y << YAML::EndMap;
+  }
+  y << YAML::Key << "source_scale" << YAML::Value << f.source_scale;
+  EmitNames(y, "constrained_sources", f.constrained_sources);
+  EmitNames(y, "kept_declared_sources", f.kept_declared_sources);
+  y << YAML::EndMap;
+}
+
 }  // namespace
 
 std::string EmitDeclaredModel(const DeclaredModel& d, const std::string& header, int digits) {
@@ -414,6 +478,7 @@ std::string EmitDeclaredModel(const DeclaredModel& d, const std::string& header,
   if (!d.identified_effects.empty()) EmitIdentifiedEffects(y, d.identified_effects);
   if (!d.frames.empty()) EmitFramePoses(y, d.frames);
   if (!d.marker_offsets.empty()) EmitMarkerOffsets(y, d.marker_offsets);
+  if (!d.fitted_under.empty()) EmitFittedUnder(y, d.fitted_under, digits);
   y << YAML::EndMap;
   return std::string(y.c_str()) + "\n";
 }

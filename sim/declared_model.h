@@ -24,6 +24,12 @@
 //     ee:                           #   closed_loop's unknown_marker_offsets)
 //       offset_m: [dx, dy, dz]
 //       covariance: [9 numbers]     # optional, m^2
+//   fitted_under:                   # written with the fit: where it holds (FittedUnder)
+//     joint_range_deg: {j1: [-12.5, 3.1], j2: [20, 48.2]}   # hinges
+//     joint_range_m: {lift: [0.1, 0.25]}                     # slides (optional)
+//     source_scale: 1e-06
+//     constrained_sources: [j3:about_axis]
+//     kept_declared_sources: [base_plate:rot_x]
 //   coupled:                        # joints driven by others, never read
 //     torso_pitch_3: {torso_pitch_1: -1, torso_pitch_2: -1}   # q = sum_j c_j q_j
 //     wrist_follower: mjcf          # the MJCF's <equality><joint> on it (a polynomial of one
@@ -94,6 +100,26 @@ struct DeclaredCoupling {
   std::string where;       // "<file>:<line>: key 'coupled.<joint>'"
 };
 
+// The conditions an augmented model was fitted under (`fitted_under:`, written by closed_loop and
+// `flexbench identify`): the range of each joint over the rows the effects were fitted and the
+// sources sized on, and which source directions those rows constrained (scaled by
+// `source_scale`) or left as declared. A run whose joints leave these ranges uses the model
+// where nothing was measured: the runner warns (scenarios/runner/common/model_config.h).
+struct FittedUnder {
+  struct JointRange {
+    std::string joint;
+    double min = 0.0;  // rad, or m for a slide (joint_range_m)
+    double max = 0.0;
+    bool slide = false;
+  };
+  std::vector<JointRange> joint_ranges;
+  double source_scale = 1.0;
+  std::vector<std::string> constrained_sources;  // "<at>:<direction>" (identify/source_scaling.h)
+  std::vector<std::string> kept_declared_sources;
+  std::string where;  // "<file>:<line>: key 'fitted_under'"
+  bool empty() const { return joint_ranges.empty(); }
+};
+
 struct DeclaredModel {
   std::string file;        // the declared-model file
   std::string model_path;  // resolved MJCF/URDF path
@@ -106,6 +132,7 @@ struct DeclaredModel {
   std::vector<DeclaredCoupling> coupled;
   std::vector<DeclaredFramePose> frames;
   std::vector<DeclaredMarkerOffset> marker_offsets;
+  FittedUnder fitted_under;  // empty: not an augmented model (or written before it was kept)
   // The offset of an observed frame (zero when it has none).
   Vec3 MarkerOffset(const std::string& frame) const;
 };

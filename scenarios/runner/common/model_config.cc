@@ -1,6 +1,10 @@
 #include "scenarios/runner/common/model_config.h"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <iostream>
 
 namespace flexbench::scenarios {
 
@@ -25,6 +29,52 @@ sim::DeclaredModel ReadModelAndDeclared(const ConfigNode& root, std::string* mod
     d.model_path = *model_path;
   }
   return d;
+}
+
+void Warn(RunContext& ctx, const std::string& line) {
+  std::cerr << "[flexbench] warning: " << line << "\n";
+  Json& warnings = (*ctx.summary)["warnings"];
+  if (!warnings.is_array()) warnings = Json::array();
+  warnings.push_back(line);
+}
+
+FittedRangeCheck::FittedRangeCheck(const sim::DeclaredModel& d,
+                                   const std::vector<std::string>& q_joints)
+    : file_(d.file) {
+  for (const sim::FittedUnder::JointRange& r : d.fitted_under.joint_ranges) {
+    const auto it = std::find(q_joints.begin(), q_joints.end(), r.joint);
+    if (it == q_joints.end()) continue;  // not a joint of this run's chain
+    joints_.push_back({r, static_cast<int>(it - q_joints.begin())});
+  }
+}
+
+void FittedRangeCheck::Observe(const double* q, int n) {
+  for (Joint& j : joints_) {
+    if (j.q_index >= n) continue;
+    j.min = std::min(j.min, q[j.q_index]);
+    j.max = std::max(j.max, q[j.q_index]);
+  }
+}
+
+void FittedRangeCheck::Report(RunContext& ctx) const {
+  std::string outside;
+  for (const Joint& j : joints_) {
+    if (j.min >= j.fitted.min && j.max <= j.fitted.max) continue;
+    if (j.min > j.max) continue;  // never observed
+    const double k = j.fitted.slide ? 1.0 : 180.0 / M_PI;
+    const auto num = [k](double x) {
+      char b[32];
+      std::snprintf(b, sizeof(b), "%.4g", x * k);
+      return std::string(b);
+    };
+    outside += (outside.empty() ? "" : ", ") + j.fitted.joint + " " + num(j.min) + ".." +
+               num(j.max) + (j.fitted.slide ? " m" : " deg") + " (fitted " + num(j.fitted.min) +
+               ".." + num(j.fitted.max) + ")";
+  }
+  if (outside.empty()) return;
+  Warn(ctx, "the run leaves the joint ranges " + std::filesystem::path(file_).filename().string() +
+                " was fitted under (fitted_under): " + outside +
+                "; its effects and source sizes were measured elsewhere");
 }
 
 }  // namespace flexbench::scenarios

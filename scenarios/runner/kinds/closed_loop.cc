@@ -55,6 +55,7 @@
 #include "scenarios/identify/identify.h"
 #include "scenarios/identify/log_gravity.h"
 #include "scenarios/identify/measurement_frames.h"
+#include "scenarios/identify/source_scaling.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/log_images.h"
 #include "scenarios/runner/common/log_replay.h"
@@ -758,11 +759,15 @@ class ClosedLoopKind : public ScenarioKind {
       target = SharedNeesUpperBound(val, sc.val_loads_after, res, noise_after);
       (*m)["nees_bound_high_shared"] = target;
     }
-    source_scale_ = SourceScale(val, sc.val_p1, noise_after, target);
+    const kinematics::PpoeModel constrained =
+        ConstrainedSources(ctx, val, sc.val_p1, noise_after, res);
+    const bool any = std::count(constrained_.begin(), constrained_.end(), true) > 0;
+    source_scale_ = any ? SourceScale(val, sc.val_p1, noise_after, target, constrained) : 1.0;
     (*m)["source_covariance_scale"] = source_scale_;
     (*m)["source_scale_from"] = reading_std_rad_ > 0.0 ? "readings' noise and fitted parameters"
                                                        : "point_std_m (floor 1e-6)";
-    nees_scaled_ = MeanNees(val, sc.val_p1, noise_after, source_scale_);
+    (*m)["source_scaling"] = SourceScalingJson();
+    nees_scaled_ = MeanNees(val, sc.val_p1, noise_after, source_scale_, &constrained);
     // At the largest scale and still above: what is left is not where the sources act.
     (*m)["sources_cover_residual"] = nees_scaled_ <= target + 1e-6;
     if (nees_scaled_ > target + 1e-6) {
@@ -823,7 +828,7 @@ class ClosedLoopKind : public ScenarioKind {
               const identify::IdentifyResult& res) {
     // A model that does not lower the validation error is no fix: it is not shipped.
     if (verdict_ == "explained" || verdict_ == "partly_explained" || verdict_ == "ambiguous") {
-      WriteAugmented(ctx, res);
+      WriteAugmented(ctx, sets, res);
       WriteCalibratedModel(ctx, res);
     } else {
       ctx.log(
@@ -1454,18 +1459,20 @@ class ClosedLoopKind : public ScenarioKind {
     return true;
   }
 
-  // Mean NEES of the rows' point errors under the declared PPOE position covariance plus the
-  // point noise, each row against its group's mean (or its measured point).
+  // Mean NEES of the rows' point errors under the declared PPOE position covariance (of
+  // `model`'s sources; null: the declared chain's) plus the point noise, each row against its
+  // group's mean (or its measured point).
   double MeanNees(const DataSet& d, const std::vector<Vec3>& p, const std::vector<Mat3>& noise,
-                  double source_scale = 1.0) const {
+                  double source_scale = 1.0, const kinematics::PpoeModel* model = nullptr) const {
+    if (model == nullptr) model = &chain_->model;
     const std::vector<Vec3> mean = identify::GroupMeans(d, p);
-    kinematics::PpoeData pd(chain_->model);
+    kinematics::PpoeData pd(*model);
     double sum = 0.0;
     size_t n = 0;
     for (size_t r = 0; r < d.rows.size(); ++r) {
       if (identify::UnitOf(d.rows[r].type) != identify::RowUnit::kMetres) continue;
       ++n;
-      kinematics::ForwardKinematicsWithCovariance(chain_->model, pd, d.rows[r].q,
+      kinematics::ForwardKinematicsWithCovariance(*model, pd, d.rows[r].q,
                                                   lie::CompoundOrder::kSecond);
       const kinematics::FrameId f = em_->points()[d.rows[r].point];  // the row's marker
       const Mat3 R = pd.T_base_frame[f].rotation();
@@ -1855,6 +1862,52 @@ class ClosedLoopKind : public ScenarioKind {
     fig.SavePng(ctx.out->File("residual_structure.png").string());
   }
 
+  // Sorts the declared sources' directions into those the validation rows constrain (at `p`,
+  // the augmented model's points, against its rows' noise: identify/source_scaling.h) and the
+  // others, which keep their declared size; returns the chain with the constrained ones alone,
+  // the chain itself when none is left out (the same bits as before the sorting).
+  // A source where the fit placed an effect is sized by the fit as well: the effect is the
+  // measured form of the error the source declared (a compliant plate's tilt fitted as
+  // base_compliance), and its fitted std now carries that uncertainty.
+  kinematics::PpoeModel ConstrainedSources(RunContext& ctx, const DataSet& val,
+                                           const std::vector<Vec3>& p,
+                                           const std::vector<Mat3>& noise,
+                                           const identify::IdentifyResult& res) {
+    directions_ = identify::SourceDirections(mj_.get(), declared_, chain_->model);
+    const std::vector<double> snr =
+        identify::SourceSignalToNoise(chain_->model, val, em_->points(), p, noise, directions_);
+    std::set<std::string> fitted_at;
+    for (const auto& e : res.effects) fitted_at.insert(em_->candidates()[e.candidate].location);
+    constrained_.assign(directions_.size(), false);
+    std::vector<std::string> kept;
+    for (size_t i = 0; i < directions_.size(); ++i) {
+      constrained_[i] = snr[i] >= identify::kConstrainedSignalToNoise ||
+                        fitted_at.count(declared_.sources[directions_[i].source].at) > 0;
+      if (!constrained_[i]) kept.push_back(directions_[i].name);
+    }
+    if (!kept.empty()) {
+      ctx.log("PPOE source directions the validation rows do not constrain, kept as declared: " +
+              Join(kept));
+    }
+    if (std::count(constrained_.begin(), constrained_.end(), false) == 0) return chain_->model;
+    return identify::WithSourceDirections(chain_->model, directions_, constrained_);
+  }
+
+  static std::string Join(const std::vector<std::string>& names) {
+    std::string out;
+    for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
+    return out;
+  }
+
+  // The source directions by their sorting, and the scale on the constrained ones.
+  Json SourceScalingJson() const {
+    Json constrained = Json::array(), kept = Json::array();
+    for (size_t i = 0; i < directions_.size(); ++i) {
+      (constrained_[i] ? constrained : kept).push_back(directions_[i].name);
+    }
+    return {{"constrained", constrained}, {"kept_declared", kept}, {"scale", source_scale_}};
+  }
+
   // The factor on the declared PPOE sources that makes the validation mean NEES `target` (it
   // may grow as well as shrink), found by bisection on a log scale.
   // With the readings' noise stated the data decide down to nothing (1e-12), and the target is
@@ -1864,15 +1917,16 @@ class ClosedLoopKind : public ScenarioKind {
   // tracking NEES then fell below its bounds in 6 of 40 runs, all of them at a scale above
   // 1e-7. With only a point noise the target is 3 and the scale keeps a floor of 1e-6, since
   // that noise usually hides what is left.
+  // `model`: the chain with the constrained source directions alone (ScoreNees).
   double SourceScale(const DataSet& d, const std::vector<Vec3>& p, const std::vector<Mat3>& noise,
-                     double target) const {
+                     double target, const kinematics::PpoeModel& model) const {
     double lo = reading_std_rad_ > 0.0 ? 1e-12 : 1e-6, hi = 1e6;
-    if (!std::isfinite(MeanNees(d, p, noise, 1.0))) return 1.0;
-    if (MeanNees(d, p, noise, hi) > target) return hi;
-    if (MeanNees(d, p, noise, lo) < target) return lo;
+    if (!std::isfinite(MeanNees(d, p, noise, 1.0, &model))) return 1.0;
+    if (MeanNees(d, p, noise, hi, &model) > target) return hi;
+    if (MeanNees(d, p, noise, lo, &model) < target) return lo;
     for (int it = 0; it < 60; ++it) {
       const double mid = std::sqrt(lo * hi);
-      (MeanNees(d, p, noise, mid) > target ? lo : hi) = mid;
+      (MeanNees(d, p, noise, mid, &model) > target ? lo : hi) = mid;
     }
     return std::sqrt(lo * hi);
   }
@@ -2039,10 +2093,7 @@ class ClosedLoopKind : public ScenarioKind {
   // (the model file where declared_ has it).
   sim::DeclaredModel Augmented(const identify::IdentifyResult& res) const {
     sim::DeclaredModel out = declared_;
-    for (sim::DeclaredSource& s : out.sources) {
-      s.about_axis_rad = std::sqrt(source_scale_) * s.about_axis_rad;
-      s.cov = source_scale_ * s.cov;
-    }
+    identify::ScaleSourceDirections(directions_, constrained_, source_scale_, &out.sources);
     // The declared file's own effects stay (the fit acted on top of them); a refit of one of
     // them adds to it.
     for (const auto& e : res.effects) {
@@ -2056,17 +2107,57 @@ class ClosedLoopKind : public ScenarioKind {
     return out;
   }
 
-  void WriteAugmented(RunContext& ctx, const identify::IdentifyResult& res) const {
+  // Where the fit holds: the range over the calibration and validation rows of each joint that
+  // moves a measured frame (the others, a mast beside the arm, were never measured), and the
+  // source directions those rows sized.
+  sim::FittedUnder FittedUnder(const Sets& sets) const {
+    sim::FittedUnder f;
+    const int nq = chain_->model.nq();
+    std::vector<char> moves(nq, 0);
+    for (kinematics::FrameId p : em_->points()) {
+      for (; p > 0; p = chain_->model.frame(p).parent) {
+        if (chain_->model.frame(p).q_index >= 0) moves[chain_->model.frame(p).q_index] = 1;
+      }
+    }
+    Eigen::VectorXd lo = Eigen::VectorXd::Constant(nq, INFINITY), hi = -lo;
+    for (const DataSet* d : {&sets.cal, &sets.val}) {
+      for (const identify::Observation& o : d->rows) {
+        lo = lo.cwiseMin(o.q);
+        hi = hi.cwiseMax(o.q);
+      }
+    }
+    for (int k = 0; k < nq; ++k) {
+      if (!moves[k] || !(lo[k] <= hi[k])) continue;
+      const int j = mj_name2id(mj_.get(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
+      f.joint_ranges.push_back(
+          {chain_->q_joints[k], lo[k], hi[k], mj_->jnt_type[j] == mjJNT_SLIDE});
+    }
+    f.source_scale = source_scale_;
+    for (size_t i = 0; i < directions_.size(); ++i) {
+      (constrained_[i] ? f.constrained_sources : f.kept_declared_sources)
+          .push_back(directions_[i].name);
+    }
+    return f;
+  }
+
+  void WriteAugmented(RunContext& ctx, const Sets& sets,
+                      const identify::IdentifyResult& res) const {
+    sim::DeclaredModel out = Augmented(res);
+    out.fitted_under = FittedUnder(sets);
+    const std::string kept = out.fitted_under.kept_declared_sources.empty()
+                                 ? "none"
+                                 : Join(out.fitted_under.kept_declared_sources);
     std::ostringstream header;
     header << "Declared model augmented by flexbench closed_loop: the identified effects with "
-              "their\nfitted parameters, and the PPOE sources scaled by "
-           << Num(source_scale_) << " (what the\nremaining validation residual supports; mean "
-           << "NEES there " << Num(nees_scaled_) << ", 3 is consistent). Verdict: " << verdict_
+              "their\nfitted parameters, and the PPOE source directions the validation rows "
+              "constrain\nscaled by "
+           << Num(source_scale_) << " (what the remaining validation residual supports; mean "
+           << "NEES there " << Num(nees_scaled_) << ",\n3 is consistent). Kept as declared (the "
+           << "rows do not see them): " << kept << ".\nVerdict: " << verdict_
            << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the "
                                          "data about as well, so no cause is singled out)"
                                        : "")
-           << ".";
-    sim::DeclaredModel out = Augmented(res);
+           << ".\nfitted_under: the joint ranges of those rows; a run outside them is warned of.";
     // Relative to the result folder, so the file loads from where it is written.
     out.model_path = fs::absolute(declared_.model_path)
                          .lexically_normal()
@@ -2268,6 +2359,8 @@ class ClosedLoopKind : public ScenarioKind {
   bool replay_held_out_ = false;              // CheckHeldOutReplay
   std::set<std::string> centred_tag_frames_;  // log tag frames at their tags' centres
   double source_scale_ = 1.0;
+  std::vector<identify::SourceDirection> directions_;  // of declared_'s sources
+  std::vector<bool> constrained_;                      // per directions_ entry
   std::string verdict_;
   double nees_scaled_ = 0.0;
 };

@@ -30,6 +30,7 @@
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/log_images.h"
 #include "scenarios/runner/common/log_replay.h"
+#include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/common/render_config.h"
 #include "scenarios/runner/common/trajectories.h"
 #include "scenarios/runner/kinds/kinds.h"
@@ -106,6 +107,12 @@ class ReplayKind : public ScenarioKind {
       m["steps_scored"] = stats.count();
       m["rejected_readings"] = rejected;
     }
+    FittedRangeCheck range(declared_, log_.joints);
+    const int columns = static_cast<int>(log_.joints.size());
+    for (size_t r = 0; r < log_.joint_t.size(); ++r) {
+      range.Observe(log_.joint_q.data() + r * columns, columns);
+    }
+    range.Report(ctx);
     (*ctx.summary)["metrics"]["steps"] = static_cast<int>(steps.size());
     // The coordinates: the declared base frame, or the frame the log's estimates are in.
     recorder.Write(*ctx.out, log_.estimate_in.empty() ? "base" : log_.estimate_in);

@@ -93,8 +93,10 @@ class TagFusionKind : public ScenarioKind {
     RunState state(instances_.size(), ctx.out->File("configurations.csv"));
     std::optional<sim::RecordedLog> log;
     if (!ctx.export_log.empty()) log = StartLog();
+    FittedRangeCheck range(declared_, chain_->q_joints);
     for (size_t c = 0; c < configurations_.size(); ++c) {
       const Frame frame = Collect(c, renderer, &state);
+      range.Observe(frame.joints.q.data(), static_cast<int>(frame.joints.q.size()));
       if (log) {
         AddStepToLog(frame.joints, frame.T_base_ee, &*log);
         AddDetectionsToLog(frame.det, frame.joints.t, 0, &*log);
@@ -118,6 +120,7 @@ class TagFusionKind : public ScenarioKind {
       WriteLogWithDeclared(*log, declared_, ctx.export_log);
       ctx.log("readings of the configurations written to " + ctx.export_log);
     }
+    range.Report(ctx);
     state.timer.Write(ctx.timing, "frame", static_cast<int>(configurations_.size()));
     WriteMetrics(state, ctx);
     PlotLateralError(ctx);
