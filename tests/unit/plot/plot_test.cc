@@ -13,6 +13,17 @@
 namespace flexbench::render {
 namespace {
 
+// The pixels of a bar of colour `c` (bars are filled with the colour lightened by 60%).
+int Tinted(const Image& img, Rgb c) {
+  const auto t = [](int v) { return static_cast<int>(std::lround(v + 0.6 * (255 - v))); };
+  int n = 0;
+  for (size_t i = 0; i + 2 < img.data.size(); i += 3) {
+    n += std::abs(img.data[i] - t(c.r)) <= 1 && std::abs(img.data[i + 1] - t(c.g)) <= 1 &&
+         std::abs(img.data[i + 2] - t(c.b)) <= 1;
+  }
+  return n;
+}
+
 Figure MakeFigure() {
   Figure fig(800, 400, 1, 2);
   fig.title = "test figure";
@@ -79,18 +90,9 @@ TEST(Plot, BarAreasFollowTheirHeights) {
   a.AddBars("minus", {2.0}, {-1.5});
   a.legend = false;
   const Image img = fig.Render();
-  const auto tinted = [&](Rgb c) {
-    const auto t = [](int v) { return static_cast<int>(std::lround(v + 0.6 * (255 - v))); };
-    int n = 0;
-    for (size_t i = 0; i + 2 < img.data.size(); i += 3) {
-      n += std::abs(img.data[i] - t(c.r)) <= 1 && std::abs(img.data[i + 1] - t(c.g)) <= 1 &&
-           std::abs(img.data[i + 2] - t(c.b)) <= 1;
-    }
-    return n;
-  };
-  const int one = tinted(PaletteColor(0));
-  const int three = tinted(PaletteColor(1));
-  const int minus = tinted(PaletteColor(2));
+  const int one = Tinted(img, PaletteColor(0));
+  const int three = Tinted(img, PaletteColor(1));
+  const int minus = Tinted(img, PaletteColor(2));
   ASSERT_GT(one, 100);
   EXPECT_NEAR(static_cast<double>(three) / one, 3.0, 0.3);
   EXPECT_NEAR(static_cast<double>(minus) / one, 1.5, 0.2);
@@ -109,21 +111,12 @@ TEST(Plot, LogAxisBarsRiseFromTheBottomEdgeByDecades) {
   a.AddBars("zero", {2.0}, {0.0});  // below the axes: not drawn
   a.legend = false;
   const Image img = fig.Render();
-  const auto tinted = [&](Rgb c) {
-    const auto t = [](int v) { return static_cast<int>(std::lround(v + 0.6 * (255 - v))); };
-    int n = 0;
-    for (size_t i = 0; i + 2 < img.data.size(); i += 3) {
-      n += std::abs(img.data[i] - t(c.r)) <= 1 && std::abs(img.data[i + 1] - t(c.g)) <= 1 &&
-           std::abs(img.data[i + 2] - t(c.b)) <= 1;
-    }
-    return n;
-  };
-  const int big = tinted(PaletteColor(0));
-  const int small = tinted(PaletteColor(1));
+  const int big = Tinted(img, PaletteColor(0));
+  const int small = Tinted(img, PaletteColor(1));
   ASSERT_GT(small, 100);
   // 10 is 3 decades above 0.01, 0.1 one decade.
   EXPECT_NEAR(static_cast<double>(big) / small, 3.0, 0.3);
-  EXPECT_EQ(tinted(PaletteColor(2)), 0);
+  EXPECT_EQ(Tinted(img, PaletteColor(2)), 0);
 }
 
 TEST(Plot, PointLabelsAreDrawnAboveTheirPoints) {
