@@ -838,6 +838,17 @@ fresh summary_bad_json
 mkdir -p "$D/r"
 echo '{"scenario": ' >"$D/r/summary.json"
 attack summary_bad_json 2 "1line err~summary.json" -- "$FB" summary r
+# Valid JSON of the wrong types is still listed (a dash), never an internal error.
+for shape in name_number passed_string sweep_list; do
+  fresh "summary_types_$shape"
+  mkdir -p "$D/r"
+  case $shape in
+    name_number) echo '{"scenario": 5, "timing": 3}' >"$D/r/summary.json" ;;
+    passed_string) echo '{"scenario": "s", "gates": [{"passed": "yes", "value": "x"}]}' >"$D/r/summary.json" ;;
+    sweep_list) echo '{"sweep": [1], "gates": 7}' >"$D/r/aggregate.json" ;;
+  esac
+  attack "summary_types_$shape" 0 "" -- "$FB" summary r
+done
 # An AprilTag family error names neither the file nor the --set.
 fresh fuzz_set_detector_family_named
 smoke_yaml "$D/s.yaml"

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job: sets up, builds and runs every scenario in scenarios/ with its gates, then every
-# sweep in scenarios/sweeps/, writing results/<scenario>/{summary.json, report.html, *.csv,
-# frames/*.png, log.txt} and results/sweeps/<sweep>/.
+# sweep at the top of scenarios/sweeps/ (not its subfolders: converged/), writing
+# results/<scenario>/{summary.json, report.html, *.csv, frames/*.png, log.txt} and
+# results/sweeps/<sweep>/.
 # Prints one line per scenario as it ends (name, gates passed of total, time, folder) and a
 # table at the end (`flexbench summary`); each run's full output is its folder's log.txt.
 # Usage: scripts/run_all.sh [--summary | --verbose] [--no-build] [--only GLOB] [output folder]
@@ -64,7 +65,9 @@ folders=()
 run_one() {
   local name=$1 dir=$2
   shift 2
-  local log="$out/.$name.log.tmp" start=$SECONDS rc
+  local log="$out/.$name.log.tmp" stamp="$out/.$name.start" start=$SECONDS rc
+  # A result older than this run (one that failed before writing its own) is not this run's.
+  : >"$stamp"
   if [ $verbose -eq 1 ]; then
     echo "== $name"
     "$@"
@@ -74,13 +77,14 @@ run_one() {
     rc=$?
   fi
   local took=$((SECONDS - start)) gates="no result"
-  if [ -f "$dir/summary.json" ] || [ -f "$dir/aggregate.json" ]; then
+  if [ "$dir/summary.json" -nt "$stamp" ] || [ "$dir/aggregate.json" -nt "$stamp" ]; then
     folders+=("$dir")
     local tsv
     tsv=$("$bin" summary --tsv "$dir" 2>/dev/null) &&
       gates="gates $(cut -f2 <<<"$tsv")/$(cut -f3 <<<"$tsv")"
     [ $verbose -eq 1 ] || mv -f "$log" "$dir/log.txt"
   fi
+  rm -f "$stamp"
   [ $rc -eq 0 ] || failed+=("$name (exit $rc)")
   if [ $verbose -eq 0 ]; then
     local where="$dir"

@@ -36,7 +36,16 @@ DeclaredModel DeclaredModelOfRobot(const std::string& path) {
     s.where = path;
     d.sources.push_back(s);
   }
-  int body = m->jnt_bodyid[catalog.actuated.back()];
+  // From the deepest commanded joint: an MJCF's <actuator> list need not follow the chain.
+  const auto depth = [m](int b) {
+    int d = 0;
+    for (; b > 0; b = m->body_parentid[b]) ++d;
+    return d;
+  };
+  int body = m->jnt_bodyid[catalog.actuated.front()];
+  for (int j : catalog.actuated) {
+    if (depth(m->jnt_bodyid[j]) > depth(body)) body = m->jnt_bodyid[j];
+  }
   for (;;) {
     int only_child = -1, children = 0;
     for (int b = body + 1; b < m->nbody; ++b) {

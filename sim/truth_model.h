@@ -22,8 +22,8 @@ inline constexpr double kDefaultSourceDeg = 0.1;
 
 // The declared model of a robot file (MJCF or URDF) without a declared-model YAML: base `world`;
 // the joints the truth commands (LoadTruthModel's position servos: every hinge and slide of a
-// URDF) as actuated joints, in actuator order; the end effector the body reached from the last
-// of them's body by following single children (a gripper's palm, not a finger); a source of
+// URDF) as actuated joints, in actuator order; the end effector the body reached from the
+// deepest of them's body by following single children (a gripper's palm, not a finger); a source of
 // kDefaultSourceDeg about each actuated joint's axis. `file` and `model_path` are `path`.
 // Throws InputError naming the file when no joint is commanded.
 DeclaredModel DeclaredModelOfRobot(const std::string& path);

@@ -586,6 +586,24 @@ void BetterTable(const Json& s, std::ostringstream* h) {
         "in units of the stated noise (1: the noise alone).</p>\n";
 }
 
+// Which source directions the augmented model scaled: those the rows constrain; the others
+// keep their declared size (metrics.source_scaling).
+std::string ScaledSources(const Json& scaling) {
+  const Json& on = At(scaling, "constrained");
+  const Json& kept = At(scaling, "kept_declared");
+  if (!on.is_array() || !kept.is_array()) return "them";
+  const auto names = [](const Json& list) {
+    std::string out;
+    for (const Json& n : list) out += (out.empty() ? "" : ", ") + HtmlEscape(Text(n));
+    return out;
+  };
+  std::string text = "the " + std::to_string(on.size()) + " source direction(s) the rows constrain";
+  if (!kept.empty()) {
+    text += " (" + names(on) + "; kept as declared, unseen by the rows: " + names(kept) + ")";
+  }
+  return text;
+}
+
 // Alternatives, near-equivalent effects and the augmented model's uncertainty.
 void HowSure(const Json& s, const Json& id, std::ostringstream* h) {
   std::ostringstream items;
@@ -649,9 +667,10 @@ void HowSure(const Json& s, const Json& id, std::ostringstream* h) {
           << (na < lo   ? ": below it, the declared sources are larger than the error left"
               : na > hi ? ": above it, the declared sources are smaller than the error left"
                         : "")
-          << ". The augmented model scales them by "
-          << Fmt("%.3g", Number(IdMetric(s, "source_covariance_scale"))) << " (mean NEES then "
-          << Fmt("%.3g", Number(IdMetric(s, "nees_after_scaled"))) << ").</li>\n";
+          << ". The augmented model scales " << ScaledSources(IdMetric(s, "source_scaling"))
+          << " by " << Fmt("%.3g", Number(IdMetric(s, "source_covariance_scale")))
+          << " (mean NEES then " << Fmt("%.3g", Number(IdMetric(s, "nees_after_scaled")))
+          << ").</li>\n";
   }
   if (items.str().empty()) return;
   *h << "<h3>How sure</h3>\n<ul class=\"answer\">\n" << items.str() << "</ul>\n";

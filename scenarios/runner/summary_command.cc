@@ -95,6 +95,14 @@ std::uintmax_t FolderBytes(const fs::path& dir) {
   return total;
 }
 
+// A run's timing.total_s; -1 when its summary does not hold one.
+double RunSeconds(const Json& summary) {
+  if (!summary.contains("timing") || !summary["timing"].is_object()) return -1;
+  const Json& timing = summary["timing"];
+  return timing.contains("total_s") && IsNumber(timing["total_s"]) ? timing["total_s"].get<double>()
+                                                                   : -1;
+}
+
 // The runs' own times, summed over the run folders below `dir` (a sweep's work, not its wall
 // time: its runs share the cores).
 double RunSecondsInside(const fs::path& dir) {
@@ -104,10 +112,7 @@ double RunSecondsInside(const fs::path& dir) {
        it.increment(ec)) {
     if (it->path().filename() != "summary.json") continue;
     try {
-      const Json timing = ReadResultJson(it->path()).value("timing", Json::object());
-      if (timing.is_object() && timing.contains("total_s") && IsNumber(timing["total_s"])) {
-        total += timing["total_s"].get<double>();
-      }
+      total += std::max(0.0, RunSeconds(ReadResultJson(it->path())));
     } catch (const InputError&) {
       // A run that is not a result adds no time; collect has already reported it.
     }
@@ -115,12 +120,19 @@ double RunSecondsInside(const fs::path& dir) {
   return total;
 }
 
+// j[key] when it is a string, else `otherwise`: a result of the wrong shape is still listed.
+std::string Text(const Json& j, const char* key, const std::string& otherwise) {
+  return j.contains(key) && j[key].is_string() ? j[key].get<std::string>() : otherwise;
+}
+
 void CountGates(const Json& gates, ResultRow* row) {
   if (!gates.is_array()) return;
   for (const Json& g : gates) {
     if (!g.is_object()) continue;
     ++row->gates_total;
-    if (g.value("passed", false) == true) ++row->gates_passed;
+    if (g.contains("passed") && g["passed"].is_boolean() && g["passed"].get<bool>()) {
+      ++row->gates_passed;
+    }
   }
 }
 
@@ -166,21 +178,18 @@ ResultRow ReadResultRow(const fs::path& dir) {
   Json j;
   if (fs::is_regular_file(dir / "summary.json", ec)) {
     j = ReadResultJson(dir / "summary.json");
-    row.scenario = j.value("scenario", std::string("(unnamed)"));
-    const Json timing = j.value("timing", Json::object());
-    if (timing.is_object() && timing.contains("total_s") && IsNumber(timing["total_s"])) {
-      row.seconds = timing["total_s"].get<double>();
-    }
+    row.scenario = Text(j, "scenario", "(unnamed)");
+    row.seconds = RunSeconds(j);
   } else if (fs::is_regular_file(dir / "aggregate.json", ec)) {
     j = ReadResultJson(dir / "aggregate.json");
-    row.scenario = "sweep " + j.value("sweep", std::string("(unnamed)"));
+    row.scenario = "sweep " + Text(j, "sweep", "(unnamed)");
     row.seconds = RunSecondsInside(dir);
     row.summed = true;
   } else {
     throw InputError(CapForMessage(row.folder) +
                      ": not a flexbench result (no summary.json or aggregate.json)");
   }
-  const Json gates = j.value("gates", Json::array());
+  const Json gates = j.contains("gates") ? j["gates"] : Json::array();
   CountGates(gates, &row);
   row.headline = Headline(gates);
   row.bytes = FolderBytes(dir);

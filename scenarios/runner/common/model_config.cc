@@ -59,7 +59,9 @@ void FittedRangeCheck::Observe(const double* q, int n) {
 void FittedRangeCheck::Report(RunContext& ctx) const {
   std::string outside;
   for (const Joint& j : joints_) {
-    if (j.min >= j.fitted.min && j.max <= j.fitted.max) continue;
+    // The fitted bounds were read back from text: a tolerance far below any joint's resolution.
+    constexpr double kTol = 1e-9;
+    if (j.min >= j.fitted.min - kTol && j.max <= j.fitted.max + kTol) continue;
     if (j.min > j.max) continue;  // never observed
     const double k = j.fitted.slide ? 1.0 : 180.0 / M_PI;
     const auto num = [k](double x) {

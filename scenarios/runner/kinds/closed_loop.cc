@@ -2172,24 +2172,27 @@ class ClosedLoopKind : public ScenarioKind {
   // and what the formats cannot hold. A model export cannot read (a URDF) is said so instead.
   void WriteCalibratedModel(RunContext& ctx, const identify::IdentifyResult& res) const {
     Json& cm = (*ctx.summary)["identification"]["calibrated_model"];
+    sim::ExportedModel mjcf, urdf;
+    // Only the export may refuse the model; a write that fails (a full disk) fails the run.
     try {
       const sim::DeclaredModel model = Augmented(res);
-      const sim::ExportedModel mjcf = sim::ExportMjcf(model);
-      const sim::ExportedModel urdf = sim::ExportUrdf(model);
-      WriteFileAtomic(ctx.out->File("calibrated_model.xml"), mjcf.text);
-      WriteFileAtomic(ctx.out->File("calibrated_model.urdf"), urdf.text);
-      cm = {{"mjcf", "calibrated_model.xml"},
-            {"urdf", "calibrated_model.urdf"},
-            {"not_in_mjcf", mjcf.skipped},
-            {"not_in_urdf", urdf.skipped}};
-      if (!mjcf.skipped.empty()) {
-        std::string names;
-        for (const std::string& s : mjcf.skipped) names += (names.empty() ? "" : ", ") + s;
-        ctx.log("calibrated_model.xml cannot hold (MJCF has no form for them): " + names);
-      }
+      mjcf = sim::ExportMjcf(model);
+      urdf = sim::ExportUrdf(model);
     } catch (const InputError& e) {
       cm = {{"not_written", e.what()}};
       ctx.log(std::string("calibrated model not exported: ") + e.what());
+      return;
+    }
+    WriteFileAtomic(ctx.out->File("calibrated_model.xml"), mjcf.text);
+    WriteFileAtomic(ctx.out->File("calibrated_model.urdf"), urdf.text);
+    cm = {{"mjcf", "calibrated_model.xml"},
+          {"urdf", "calibrated_model.urdf"},
+          {"not_in_mjcf", mjcf.skipped},
+          {"not_in_urdf", urdf.skipped}};
+    if (!mjcf.skipped.empty()) {
+      std::string names;
+      for (const std::string& s : mjcf.skipped) names += (names.empty() ? "" : ", ") + s;
+      ctx.log("calibrated_model.xml cannot hold (MJCF has no form for them): " + names);
     }
   }
 
