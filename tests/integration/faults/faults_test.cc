@@ -288,8 +288,8 @@ std::set<std::string> Entries(const fs::path& dir) {
 // A full disk is an error of one line naming the file and the reason, exit 2, and leaves
 // nothing at --out. First the 2 MiB tmpfs alone (rover_apriltag_exp2 writes 2.3 MB with every
 // frame); then a short scenario (~180 KB of CSV, TUM, PNG, JSON, HTML) with a filler leaving 0
-// to 200 KiB free, so that the disk fills up in each of its writers in turn. Where the run fits it is a
-// complete result; only report.html may be missing (a report that cannot be written costs the
+// to 200 KiB free, so that the disk fills up in each of its writers in turn. Where the run fits it
+// is a complete result; only report.html may be missing (a report that cannot be written costs the
 // page, not the run, and says so).
 TEST(Faults, FullDiskIsOneLineAndLeavesNothingPartial) {
   TempDir tmp;
