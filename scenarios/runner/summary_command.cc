@@ -152,8 +152,8 @@ std::string Headline(const Json& gates) {
     if (chosen) break;
   }
   if (!chosen) return "";
-  // A sweep's statistic wraps the metric: "ci_high(ratio(a_m, b_m))" is about a; a ratio has no
-  // unit.
+  // A sweep's statistic wraps the metric: "ci_high(ratio(a_m, b_m))" is about a; a ratio and
+  // the fraction of runs passing a gate have no unit.
   const std::string text = (*chosen)["metric"].get<std::string>();
   std::string statistic;
   size_t open = 0;
@@ -163,7 +163,9 @@ std::string Headline(const Json& gates) {
   }
   const std::string metric = text.substr(open, text.find_first_of(",)", open) - open);
   const std::string leaf = LeafName(metric);
-  const Unit* unit = statistic.find("ratio") == std::string::npos ? UnitOf(leaf) : nullptr;
+  const bool unitless = statistic.find("ratio") != std::string::npos ||
+                        statistic.find("pass_fraction") != std::string::npos;
+  const Unit* unit = unitless ? nullptr : UnitOf(leaf);
   const double v = (*chosen)["value"].get<double>() * (unit ? unit->scale : 1.0);
   char b[48];
   std::snprintf(b, sizeof(b), "%.3g", v);

@@ -49,6 +49,8 @@ TEST(SummaryHeadline, ASweepStatisticIsNamedAndARatioHasNoUnit) {
                                        "estimators.b.metrics.e_m))",
                                        0.105)})),
             "ci_high ratio a e_m 0.105");
+  EXPECT_EQ(Headline(Json::array({Gate("pass_fraction(stays_below_1p5_deg)", 0.96875)})),
+            "pass_fraction stays_below_1p5_deg 0.969");
 }
 
 TEST(SummaryRow, RunAndSweepFoldersAndSomethingElse) {
