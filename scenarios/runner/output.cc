@@ -172,13 +172,33 @@ bool MakerGone(const Maker& m) {
   return state == 'Z' || state == 'X';
 }
 
+// True for a temporary killed between its mkdir and the end of its marker's write: it holds
+// nothing (or only a partial marker), so it holds nothing of anyone's, and no process of the
+// PID its name holds runs here. Were the PID another host's on a shared file system, that run
+// finds its folder gone when it writes the marker and takes the next name.
+bool IsUnmarkedAbandoned(const fs::path& dir, long pid) {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    std::error_code type_ec;
+    if (it->path().filename() != kTemporaryMarker ||
+        !fs::is_regular_file(fs::symlink_status(it->path(), type_ec)) ||
+        fs::file_size(it->path(), type_ec) > 4096 || type_ec) {
+      return false;
+    }
+  }
+  if (ec) return false;
+  errno = 0;
+  return kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+}
+
 // True only for a temporary of a flexbench run of this host and this PID namespace (so its
 // PID means the same process here) whose process has ended, `pid` being the PID its name holds.
 bool IsStaleTemporary(const fs::path& dir, long pid, const Maker& self) {
   std::error_code ec;
   if (!fs::is_directory(fs::symlink_status(dir, ec)) || ec) return false;
   const std::optional<Maker> m = ReadMarker(dir);
-  if (!m || m->pid != pid) return false;
+  if (!m) return pid != self.pid && IsUnmarkedAbandoned(dir, pid);
+  if (m->pid != pid) return false;
   if (self.host.empty() || self.pid_namespace.empty() || self.start_time == 0) return false;
   if (m->host != self.host || m->pid_namespace != self.pid_namespace) return false;
   if (m->pid == self.pid && m->start_time == self.start_time) return false;  // this process's
@@ -539,9 +559,15 @@ OutputDir::OutputDir(const fs::path& final_dir, bool force, const std::vector<fs
   const std::string name = final_.filename().string();
   SignalsHeld held;
   bool retried = false;
+  int err = 0;
   for (int k = 0; k < 100 && tmp_.empty(); ++k) {
     const fs::path candidate = final_.parent_path() / TemporaryName(name, "tmp", self.pid, k);
     if (::mkdir(candidate.c_str(), 0777) == 0) {
+      // The marker first (an unmarked temporary is removed only while it holds nothing), and
+      // it is the probe write: permissions can allow mkdir yet refuse files (read-only mounts,
+      // a full disk). ENOENT: another run took the empty folder for an abandoned one.
+      err = WriteMarker(candidate, self);
+      if (err == ENOENT) continue;
       tmp_ = candidate;
     } else if (errno == EEXIST) {
       // A folder of that name that is not a temporary of an ended run (its PID reused) is
@@ -560,9 +586,6 @@ OutputDir::OutputDir(const fs::path& final_dir, bool force, const std::vector<fs
                      TemporaryName(name, "tmp", self.pid) + "...); remove them");
   }
   signal_slot_ = RegisterTemporary(tmp_);
-  // The marker first (an unmarked temporary is never removed by a later run), and it is the
-  // probe write: permissions can allow mkdir yet refuse files (read-only mounts, a full disk).
-  int err = WriteMarker(tmp_, self);
   if (err == 0 && !fs::create_directories(tmp_ / "frames", ec)) err = ec ? ec.value() : EIO;
   if (err != 0) {
     fs::remove_all(tmp_, ec);

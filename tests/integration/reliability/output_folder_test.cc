@@ -87,9 +87,10 @@ std::string Marker(const std::string& host, const std::string& ns, long pid,
          "\npid=" + std::to_string(pid) + "\nstart_time=" + std::to_string(start) + "\n";
 }
 
-// only a temporary with a marker of this host and PID namespace whose process has
-// ended (gone, its PID reused, or a zombie) is removed; a user's folder named like one, a
-// live run's and one of another host or container are kept.
+// Only a temporary with a marker of this host and PID namespace whose process has ended
+// (gone, its PID reused, or a zombie), or one that holds nothing but a partial marker and whose
+// PID runs nowhere, is removed; a user's folder named like one, a live run's and one of another
+// host or container are kept.
 TEST(OutputFolder, OnlyMarkedTemporariesOfEndedRunsAreRemoved) {
   TempDir tmp;
   const fs::path s = tmp.path() / "s.yaml";
@@ -111,6 +112,13 @@ TEST(OutputFolder, OnlyMarkedTemporariesOfEndedRunsAreRemoved) {
   const std::string live = "results.tmp-" + std::to_string(getpid());
   WriteFile(dir / live / kTemporaryMarker, Marker(host, ns, getpid(), me));
   WriteFile(dir / "results.tmp-1999999997" / kTemporaryMarker, Marker(host, ns, gone, 5));
+  // Kept: an unmarked empty folder whose PID runs (the test runner's: mid-way through its
+  // mkdir and marker write, as far as a later run can tell).
+  const std::string unmarked_live = "results.tmp-" + std::to_string(getppid());
+  fs::create_directories(dir / unmarked_live);
+  // Removed: a run killed between its mkdir and the end of its marker's write: an empty
+  // folder, or one holding only a partial marker, whose PID runs nowhere here.
+  fs::create_directories(dir / "results.tmp-1999999994");
   WriteFile(dir / "results.tmp-1999999996" / kTemporaryMarker, "flexbench temporary folder\n");
   // Removed: ended runs of this host and namespace: gone, PID reused (this test's PID with
   // another start time), a zombie.
@@ -140,7 +148,9 @@ TEST(OutputFolder, OnlyMarkedTemporariesOfEndedRunsAreRemoved) {
   EXPECT_TRUE(fs::exists(dir / ("results.old-" + std::to_string(gone))));
   EXPECT_TRUE(fs::exists(dir / live));
   EXPECT_TRUE(fs::exists(dir / "results.tmp-1999999997"));
-  EXPECT_TRUE(fs::exists(dir / "results.tmp-1999999996"));
+  EXPECT_TRUE(fs::exists(dir / unmarked_live));
+  EXPECT_FALSE(fs::exists(dir / "results.tmp-1999999994"));
+  EXPECT_FALSE(fs::exists(dir / "results.tmp-1999999996"));
   EXPECT_FALSE(fs::exists(dir / gone_dir));
   EXPECT_FALSE(fs::exists(dir / reused));
   EXPECT_FALSE(fs::exists(dir / zombie_dir));
