@@ -247,6 +247,25 @@ FittedUnder ReadFittedUnder(const ConfigNode& node) {
     }
   }
   if (f.joint_ranges.empty()) node.Fail("needs joint_range_deg or joint_range_m");
+  if (const auto torques = node.Optional("gravity_torque_nm")) {
+    if (!torques->IsMap()) torques->Fail("expected a map: joint -> [min, max] in N m");
+    for (const std::string& joint : torques->Keys()) {
+      const ConfigNode r = torques->Child(joint);
+      const std::vector<double> v = ReadFinite(r, 2, "[min, max] in N m");
+      if (v[0] > v[1]) r.Fail("min must not exceed max");
+      f.gravity_torques.push_back({joint, v[0], v[1]});
+    }
+  }
+  if (const auto box = node.Optional("end_effector_box_m")) {
+    const std::vector<double> lo = ReadFinite(box->Child("min"), 3, "[x, y, z] in metres");
+    const std::vector<double> hi = ReadFinite(box->Child("max"), 3, "[x, y, z] in metres");
+    for (int i = 0; i < 3; ++i) {
+      if (lo[i] > hi[i]) box->Child("max").Fail("must not be below min in any coordinate");
+      f.box_min[i] = lo[i];
+      f.box_max[i] = hi[i];
+    }
+    f.has_box = true;
+  }
   const ConfigNode scale = node.Child("source_scale");
   f.source_scale = scale.AsDouble();
   if (!(std::isfinite(f.source_scale) && f.source_scale > 0.0)) {
@@ -453,6 +472,25 @@ void EmitFittedUnder(YAML::Emitter& y, const FittedUnder& f, int digits) {
         << outward(r.min * k, -1.0) << outward(r.max * k, 1.0) << YAML::EndSeq;
     }
     if (open) y << YAML::EndMap;
+  }
+  if (!f.gravity_torques.empty()) {
+    y << YAML::Key << "gravity_torque_nm" << YAML::Value << YAML::BeginMap;
+    for (const FittedUnder::TorqueRange& r : f.gravity_torques) {
+      y << YAML::Key << r.joint << YAML::Value << YAML::Flow << YAML::BeginSeq
+        << outward(r.min, -1.0) << outward(r.max, 1.0) << YAML::EndSeq;
+    }
+    y << YAML::EndMap;
+  }
+  if (f.has_box) {
+    y << YAML::Key << "end_effector_box_m" << YAML::Value << YAML::BeginMap;
+    for (const bool upper : {false, true}) {
+      y << YAML::Key << (upper ? "max" : "min") << YAML::Value << YAML::Flow << YAML::BeginSeq;
+      for (int i = 0; i < 3; ++i) {
+        y << outward(upper ? f.box_max[i] : f.box_min[i], upper ? 1.0 : -1.0);
+      }
+      y << YAML::EndSeq;
+    }
+    y << YAML::EndMap;
   }
   y << YAML::Key << "source_scale" << YAML::Value << f.source_scale;
   EmitNames(y, "constrained_sources", f.constrained_sources);

@@ -27,6 +27,8 @@
 //   fitted_under:                   # written with the fit: where it holds (FittedUnder)
 //     joint_range_deg: {j1: [-12.5, 3.1], j2: [20, 48.2]}   # hinges
 //     joint_range_m: {lift: [0.1, 0.25]}                     # slides (optional)
+//     gravity_torque_nm: {j2: [-31.2, -4.5]}   # optional: the torque each joint held
+//     end_effector_box_m: {min: [x, y, z], max: [x, y, z]}  # optional: where the rows reached
 //     source_scale: 1e-06
 //     constrained_sources: [j3:about_axis]
 //     kept_declared_sources: [base_plate:rot_x]
@@ -113,6 +115,19 @@ struct FittedUnder {
     bool slide = false;
   };
   std::vector<JointRange> joint_ranges;
+  // The gravity torque each joint held over the rows (sim::PostureLoad; N m, N for a slide):
+  // the load a bending link or compliant mount was seen under. Empty in files written before.
+  struct TorqueRange {
+    std::string joint;
+    double min = 0.0;
+    double max = 0.0;
+  };
+  std::vector<TorqueRange> gravity_torques;
+  // The box the end effector's position in the base frame stayed in (m); has_box false when the
+  // file does not say.
+  bool has_box = false;
+  Vec3 box_min = Vec3::Zero();
+  Vec3 box_max = Vec3::Zero();
   double source_scale = 1.0;
   std::vector<std::string> constrained_sources;  // "<at>:<direction>" (identify/source_scaling.h)
   std::vector<std::string> kept_declared_sources;

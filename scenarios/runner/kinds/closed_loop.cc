@@ -70,6 +70,7 @@
 #include "sim/effects/effect.h"
 #include "sim/export_model.h"
 #include "sim/mujoco_model.h"
+#include "sim/posture_load.h"
 #include "sim/simulation.h"
 
 namespace flexbench::scenarios {
@@ -2126,11 +2127,31 @@ class ClosedLoopKind : public ScenarioKind {
         hi = hi.cwiseMax(o.q);
       }
     }
+    // The loads and reach of the same rows (what a bending link or a compliant mount answers to).
+    sim::PostureLoadEvaluator load(mj_.get(), *chain_);
+    sim::PostureLoad at;
+    Eigen::VectorXd tau_lo = Eigen::VectorXd::Constant(nq, INFINITY), tau_hi = -tau_lo;
+    Vec3 box_lo = Vec3::Constant(INFINITY), box_hi = -box_lo;
+    for (const DataSet* d : {&sets.cal, &sets.val}) {
+      for (const identify::Observation& o : d->rows) {
+        load.Evaluate(o.q, &at);
+        tau_lo = tau_lo.cwiseMin(at.gravity_torque);
+        tau_hi = tau_hi.cwiseMax(at.gravity_torque);
+        box_lo = box_lo.cwiseMin(at.p_base_ee);
+        box_hi = box_hi.cwiseMax(at.p_base_ee);
+      }
+    }
     for (int k = 0; k < nq; ++k) {
       if (!moves[k] || !(lo[k] <= hi[k])) continue;
       const int j = mj_name2id(mj_.get(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
       f.joint_ranges.push_back(
           {chain_->q_joints[k], lo[k], hi[k], mj_->jnt_type[j] == mjJNT_SLIDE});
+      f.gravity_torques.push_back({chain_->q_joints[k], tau_lo[k], tau_hi[k]});
+    }
+    f.has_box = box_lo.x() <= box_hi.x();
+    if (f.has_box) {
+      f.box_min = box_lo;
+      f.box_max = box_hi;
     }
     f.source_scale = source_scale_;
     for (size_t i = 0; i < directions_.size(); ++i) {
@@ -2157,7 +2178,9 @@ class ClosedLoopKind : public ScenarioKind {
            << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the "
                                          "data about as well, so no cause is singled out)"
                                        : "")
-           << ".\nfitted_under: the joint ranges of those rows; a run outside them is warned of.";
+           << ".\nfitted_under: the joint ranges, gravity torques and end-effector box of those "
+              "rows; a run "
+              "outside them is warned of.";
     // Relative to the result folder, so the file loads from where it is written.
     out.model_path = fs::absolute(declared_.model_path)
                          .lexically_normal()

@@ -116,17 +116,21 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
     const fs::path augmented = Identify(ctx);
     std::unique_ptr<sim::DeclaredChain> aug_chain;
     SharedError shared;
+    FittedRangeCheck range;
     if (fs::exists(augmented)) {
       const sim::DeclaredModel aug = sim::LoadDeclaredModel(augmented.string());
       aug_chain =
           std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(sim_->nominal_model(), aug));
       shared = PerturbedChains(aug);
+      range = FittedRangeCheck(aug, aug_chain->q_joints, sim_->nominal_model(), aug_chain.get());
     } else {
       ctx.log("no augmented model (see identify/summary.json): tracking again as declared");
     }
     ctx.log("(c) tracking a new trajectory with the augmented model");
-    const std::vector<Track> after = Follow(
-        ctx, renderer, detector, aug_chain ? *aug_chain : *chain_, 1, &after_trajectories, &shared);
+    const std::vector<Track> after =
+        Follow(ctx, renderer, detector, aug_chain ? *aug_chain : *chain_, 1, &after_trajectories,
+               &shared, &range);
+    range.Report(ctx);
     after_trajectories.Write(*ctx.out, "base", "after");
     (*ctx.summary)["metrics"]["augmented_model_used"] = aug_chain != nullptr;
     Report(ctx, before, after);
@@ -246,7 +250,8 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
   std::vector<Track> Follow(RunContext& ctx, render::Renderer& renderer,
                             render::TagDetector& detector, const sim::DeclaredChain& chain,
                             int index, TrajectoryRecorder* trajectories,
-                            const SharedError* shared = nullptr) {
+                            const SharedError* shared = nullptr,
+                            FittedRangeCheck* range = nullptr) {
     seed_ = ctx.seed;
     auto instances = Instances(chain);
     std::vector<std::unique_ptr<estimators::Estimator>> fk;  // chain, then up, then down
@@ -277,6 +282,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       for (int j = 0; j < joints.q.size(); ++j)
         joints.q[j] += encoder_noise_rad_ * noise(noise_rng);
       joints.std.setConstant(encoder_noise_rad_);
+      if (range) range->Observe(joints.q.data(), static_cast<int>(joints.q.size()));
       const render::DetectionResult det = detector.Detect(frame);
       const auto measurements =
           TagMeasurements(det, tags_, tag_frames, false, pixel_std_, joints.t);

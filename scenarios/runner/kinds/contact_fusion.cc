@@ -74,6 +74,9 @@ class ContactFusionKind : public ScenarioKind {
   // estimator; then the figure.
   void Run(RunContext& ctx) override {
     const Contact contact = Collect(ctx);
+    FittedRangeCheck range(declared_, chain_->q_joints, sim_->nominal_model(), chain_.get());
+    range.Observe(contact.joints.q.data(), static_cast<int>(contact.joints.q.size()));
+    range.Report(ctx);
     if (!ctx.export_log.empty()) {
       WriteLogWithDeclared(ContactLog(contact), declared_, ctx.export_log);
       ctx.log("the contact's readings written to " + ctx.export_log);

@@ -107,7 +107,7 @@ class ReplayKind : public ScenarioKind {
       m["steps_scored"] = stats.count();
       m["rejected_readings"] = rejected;
     }
-    FittedRangeCheck range(declared_, log_.joints);
+    FittedRangeCheck range(declared_, log_.joints, model_.get(), chain_.get());
     const int columns = static_cast<int>(log_.joints.size());
     for (size_t r = 0; r < log_.joint_t.size(); ++r) {
       range.Observe(log_.joint_q.data() + r * columns, columns);

@@ -93,7 +93,7 @@ class TagFusionKind : public ScenarioKind {
     RunState state(instances_.size(), ctx.out->File("configurations.csv"));
     std::optional<sim::RecordedLog> log;
     if (!ctx.export_log.empty()) log = StartLog();
-    FittedRangeCheck range(declared_, chain_->q_joints);
+    FittedRangeCheck range(declared_, chain_->q_joints, sim_->nominal_model(), chain_.get());
     for (size_t c = 0; c < configurations_.size(); ++c) {
       const Frame frame = Collect(c, renderer, &state);
       range.Observe(frame.joints.q.data(), static_cast<int>(frame.joints.q.size()));

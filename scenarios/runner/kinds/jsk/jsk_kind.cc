@@ -1,5 +1,6 @@
 #include "scenarios/runner/kinds/jsk/jsk_kind.h"
 
+#include "scenarios/runner/common/model_config.h"
 #include "scenarios/runner/kinds/jsk/plots.h"
 
 namespace flexbench::scenarios::jsk {
@@ -14,6 +15,17 @@ std::vector<EstimatorSpec> ParseAndCheckEstimators(const ConfigNode& root, const
       ParseEstimators(root.Child("estimators"), EstimatorLabels::kAllowed);
   for (const EstimatorSpec& e : specs) MakeLabelled(rig, e, 0);
   return specs;
+}
+
+void CheckFittedRange(const Rig& rig, const std::vector<estimators::JointReading>& joints,
+                      const RunContext& ctx) {
+  if (rig.declared.fitted_under.empty()) return;
+  FittedRangeCheck range(rig.declared, rig.chain->q_joints, rig.sim->nominal_model(),
+                         rig.chain.get());
+  for (const estimators::JointReading& j : joints) {
+    range.Observe(j.q.data(), static_cast<int>(j.q.size()));
+  }
+  range.Report(ctx);
 }
 
 void SyntheticKind::ConfigureSynthetic(const ConfigNode& root) {
@@ -43,6 +55,9 @@ void DynamicKind::Configure(const ConfigNode& root) {
 std::vector<Snapshot> DynamicKind::Simulate(const RunContext& ctx) {
   sim::SensorSuite sensors = sim::SensorSuite::Parse(*sensors_node_, *rig_.sim, ctx.seed);
   std::vector<Snapshot> snaps = SimulateDynamic(rig_, trajectory_, sensors, options_, ctx);
+  std::vector<estimators::JointReading> joints;
+  for (const Snapshot& s : snaps) joints.push_back(s.joints);
+  CheckFittedRange(rig_, joints, ctx);
   if (!ctx.export_log.empty()) ExportLog(rig_, options_, snaps, ctx.export_log);
   return snaps;
 }

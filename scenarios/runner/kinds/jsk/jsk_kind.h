@@ -38,6 +38,11 @@ namespace flexbench::scenarios::jsk {
 // before any work.
 std::vector<EstimatorSpec> ParseAndCheckEstimators(const ConfigNode& root, const Rig& rig);
 
+// Warns when the joint readings leave the conditions an augmented declared model was fitted
+// under (FittedRangeCheck); says nothing for a declared model without fitted_under.
+void CheckFittedRange(const Rig& rig, const std::vector<estimators::JointReading>& joints,
+                      const RunContext& ctx);
+
 // Synthetic runs: the rigid model read at the deflected angles of [PF eq. 31].
 class SyntheticKind : public ScenarioKind {
  protected:

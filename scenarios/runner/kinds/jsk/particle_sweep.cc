@@ -164,6 +164,10 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     for (int s = 0; s < seeds_; ++s) {
       runs.push_back(jsk::MakeSyntheticRun(rig_, trajectory_, options_, ctx.seed + 1000 * s));
     }
+    std::vector<estimators::JointReading> joints;
+    for (const jsk::SyntheticRun& r : runs)
+      joints.insert(joints.end(), r.joints.begin(), r.joints.end());
+    jsk::CheckFittedRange(rig_, joints, ctx);
     return runs;
   }
 

@@ -38,6 +38,7 @@ class JskSimDeflectionKind : public jsk::SyntheticKind {
 
   void Run(RunContext& ctx) override {
     const jsk::SyntheticRun run = jsk::MakeSyntheticRun(rig_, trajectory_, options_, ctx.seed);
+    jsk::CheckFittedRange(rig_, run.joints, ctx);
     if (!ctx.export_log.empty()) {
       WriteLogWithDeclared(jsk::SyntheticLog(rig_, run, options_), rig_.declared, ctx.export_log);
     }
