@@ -18,6 +18,10 @@
 #include "estimators/kinematics/ppoe_model.h"
 #include "estimators/measurement.h"
 
+namespace flexbench::pf {
+struct ParticleSummary;
+}  // namespace flexbench::pf
+
 namespace flexbench::estimators {
 
 // Named numeric parameters from the scenario file (scalars are 1-element lists).
@@ -115,6 +119,17 @@ class Estimator {
   // term, applied at the step's joint reading, that was not finite or not a unit quaternion)
   // since it was made; scenarios count them with the readings Update refused.
   virtual int deferred_rejections() const { return 0; }
+
+  // What a scenario may ask beyond the Belief, to choose what it reports and draws (never the
+  // estimator's name). Whether readings other than the joints' move its estimate (fk's never
+  // do: it is the declared model at the joint readings).
+  virtual bool FusesExternalMeasurements() const { return true; }
+  // Whether its prior is the configuration-dependent PPOE covariance [PPOE eq. 18] (ppoe_ekf,
+  // fk) rather than a static or diagonal one (the naive baselines, the particle filters).
+  virtual bool HasConfigurationPrior() const { return false; }
+  // Its particles' summary (weights, effective sample size) after the last step; nullptr for
+  // an estimator without particles.
+  virtual const pf::ParticleSummary* Particles() const { return nullptr; }
 };
 
 struct EstimatorEntry {

@@ -31,6 +31,8 @@ class FkEstimator : public Estimator {
   }
 
   void Reset() override { belief_ = Belief{}; }
+  bool FusesExternalMeasurements() const override { return false; }
+  bool HasConfigurationPrior() const override { return true; }
 
   void Predict(double t) override { belief_.t = t; }
 

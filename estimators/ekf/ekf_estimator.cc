@@ -73,6 +73,7 @@ class EkfEstimator : public Estimator {
   Belief Estimate() const override { return belief_; }
 
   int covariance_repairs() const override { return prior_repairs_; }
+  bool HasConfigurationPrior() const override { return kind_ == PriorKind::kPpoe; }
 
  private:
   UpdateStatus SetPrior(const JointReading& j) {

@@ -75,6 +75,7 @@ class PfEstimator : public Estimator {
   const pf::ParticleFilterConfig& config() const { return filter_->config(); }
   // IMU orientation terms the filter refused (non-finite or not unit) since it was made.
   int deferred_rejections() const override { return imu_terms_rejected_; }
+  const pf::ParticleSummary* Particles() const override { return &filter_->Summary(); }
 
  private:
   void ParameterCovariance(const Eigen::VectorXd& q);

@@ -273,10 +273,11 @@ class ContactFusionKind : public ScenarioKind {
     updates["covariance_repairs"] = instances_[e]->covariance_repairs();
   }
 
-  // Fig. 5 draws PPOE (solid) and naive (dashed); fk stays at iteration 0's error (CSV only).
+  // Fig. 5 draws PPOE (solid) and naive (dashed); fk, which fuses no contact, stays at
+  // iteration 0's error (CSV only).
   void Plot(size_t e, const Curves& curves, render::Figure* fig) const {
-    if (estimators_[e].name == "fk") return;
-    const bool naive = estimators_[e].name != "ppoe_ekf";
+    if (!instances_[e]->FusesExternalMeasurements()) return;
+    const bool naive = !instances_[e]->HasConfigurationPrior();
     const render::LineStyle style = naive ? render::LineStyle::kDashed : render::LineStyle::kSolid;
     const std::string tag = estimators_[e].name;
     const std::pair<const char*, const std::vector<double>*> axes[] = {

@@ -90,6 +90,31 @@ PixelPoint Pixel(kinematics::FrameId frame, double u, double v) {
   return m;
 }
 
+// The capability query a scenario asks instead of the name, against what each estimator does:
+// a configuration-dependent prior changes with the joints, a static one does not, and fk
+// ignores what is not a joint reading.
+TEST(EstimatorCapabilities, AnswersMatchBehaviour) {
+  const Rig rig;
+  for (const char* name : {"fk", "ppoe_ekf", "naive_ekf"}) {
+    SCOPED_TRACE(name);
+    auto est = MakeEstimator(name, rig.Setup(name));
+    EXPECT_EQ(est->Particles(), nullptr);
+    const auto prior = [&](double b) {
+      est->Reset();
+      EXPECT_EQ(est->Update(rig.Joints(0.1, b, 0.3)), UpdateStatus::kAccepted);
+      return est->Estimate().cov;
+    };
+    const bool varies = !prior(0.2).isApprox(prior(1.1), 1e-6);
+    EXPECT_EQ(est->HasConfigurationPrior(), varies);
+    PositionReading p;
+    p.frame = rig.ee;
+    p.p_base = Vec3(0.5, 0.0, 0.3);
+    p.cov = 1e-6 * Mat3::Identity();
+    const UpdateStatus st = est->Update(p);
+    EXPECT_EQ(est->FusesExternalMeasurements(), st != UpdateStatus::kIgnored) << ToString(st);
+  }
+}
+
 class EkfEstimatorBadInput : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(EkfEstimatorBadInput, NonFiniteAndOutOfImageReadingsAreRejectedAndChangeNothing) {

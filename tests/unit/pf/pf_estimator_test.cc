@@ -130,6 +130,12 @@ TEST(PfEstimator, MeasurementsReachTheFilter) {
     bad.q_base_frame = Quat(1.5, 0.0, 0.0, 0.0);
     EXPECT_EQ(est->Update(bad), UpdateStatus::kRejectedOutside);
   }
+  // What a scenario asks instead of the name: a particle filter's particles, after the step.
+  ASSERT_NE(est->Particles(), nullptr);
+  EXPECT_EQ(est->Particles(), &dynamic_cast<const PfEstimator&>(*est).filter().Summary());
+  EXPECT_GT(est->Particles()->ess, 1.0);
+  EXPECT_TRUE(est->FusesExternalMeasurements());
+  EXPECT_FALSE(est->HasConfigurationPrior());
   const Belief b = est->Estimate();
   ASSERT_TRUE(b.has_joints);
   ASSERT_EQ(b.q.size(), 4);

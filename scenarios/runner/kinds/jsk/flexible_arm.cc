@@ -89,7 +89,7 @@ class JskFlexibleArmKind : public jsk::DynamicKind {
       hold.push_back(hold_n[w] ? Json(hold_sum[w] / hold_n[w]) : Json());
     }
     m["pos_err_hold_mean_m"] = hold;
-    if (jsk::IsParticleFilter(spec)) m["ess_mean"] = ess / n;
+    if (tr.has_particles) m["ess_mean"] = ess / n;
     m["rejected_readings"] = rejected;
   }
 

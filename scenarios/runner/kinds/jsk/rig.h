@@ -43,9 +43,6 @@ struct Rig {
 // (InputError on bad names). Call in Configure.
 Rig LoadRig(const ConfigNode& root, bool with_effects);
 
-// Whether the estimator is one of the particle filters (pf_*).
-inline bool IsParticleFilter(const EstimatorSpec& e) { return e.name.rfind("pf_", 0) == 0; }
-
 // Builds the estimator; InputError messages are prefixed with the entry's file and line.
 std::unique_ptr<estimators::Estimator> MakeLabelled(const Rig& rig, const EstimatorSpec& e,
                                                     std::uint64_t seed);

@@ -109,7 +109,7 @@ class JskSimDeflectionKind : public jsk::SyntheticKind {
     m["joint_err_max_deg"] = err_max;
     m["pos_err_mean_m"] = pos_sum / n;
     m["pos_err_max_m"] = pos_max;
-    if (jsk::IsParticleFilter(spec)) m["ess_mean"] = ess_sum / n;
+    if (tr.has_particles) m["ess_mean"] = ess_sum / n;
     m["rejected_readings"] = rejected;
   }
 

@@ -30,15 +30,11 @@ void Trace::Add(double time, const estimators::Belief& b, const pf::ParticleSumm
   ess.push_back(pf ? pf->ess : 0.0);
 }
 
-const pf::ParticleSummary* PfSummary(const estimators::Estimator& e) {
-  const auto* p = dynamic_cast<const estimators::PfEstimator*>(&e);
-  return p ? &p->filter().Summary() : nullptr;
-}
-
 TracedRun::TracedRun(const Rig& rig, const EstimatorSpec& spec, std::uint64_t seed)
     : est(MakeLabelled(rig, spec, seed)) {
   est->Reset();
   trace.label = spec.label;
+  trace.has_particles = est->Particles() != nullptr;
   trace.Resize(rig.nq());
 }
 

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "estimators/estimator.h"
-#include "estimators/pf/pf_estimator.h"
+#include "estimators/pf/particle_filter.h"
 #include "scenarios/runner/kinds/jsk/rig.h"
 #include "scenarios/runner/scenario_kind.h"
 
@@ -21,6 +21,7 @@ struct Trace {
   std::vector<double> ee_err_m;                         // |p_est - p_true| of the end effector
   std::vector<double> ee_err_z_m;                       // z component p_est - p_true
   std::vector<double> ess;
+  bool has_particles = false;  // the estimator is a particle filter (ess is its, else zeros)
   // The end effector's pose per step: the estimate (mean, covariance) and the truth, for the
   // TUM trajectories.
   std::vector<lie::SE3> T_est, T_true;
@@ -30,9 +31,6 @@ struct Trace {
   void Add(double time, const estimators::Belief& b, const pf::ParticleSummary* pf,
            const lie::SE3& T_true);
 };
-
-// The particle summary of an estimator when it is a particle filter.
-const pf::ParticleSummary* PfSummary(const estimators::Estimator& e);
 
 // One estimator's run over a jsk kind's readings: the estimator (reset), its trace, and the
 // count of updates it refused (neither accepted nor ignored).
@@ -44,7 +42,7 @@ struct TracedRun {
   }
   // Appends the estimate after the step's updates.
   void Record(double time, const lie::SE3& T_true) {
-    trace.Add(time, est->Estimate(), PfSummary(*est), T_true);
+    trace.Add(time, est->Estimate(), est->Particles(), T_true);
   }
   std::unique_ptr<estimators::Estimator> est;
   Trace trace;
