@@ -36,6 +36,7 @@
 #include "estimators/kinematics/ppoe_data.h"
 #include "scenarios/python/overrides.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/truth_rig.h"
 #include "scenarios/runner/runner.h"
 #include "sim/camera.h"
 #include "sim/config.h"
@@ -278,38 +279,39 @@ class Model {
     const std::unique_lock<std::mutex> lock = LockProcess();
     const py::gil_scoped_release release;
     auto m = std::shared_ptr<Model>(new Model());
-    m->declared_ =
+    sim::DeclaredModel declared =
         IsRobotFile(path) ? sim::DeclaredModelOfRobot(path) : sim::LoadDeclaredModel(path);
-    m->mj_ = sim::LoadModel(m->declared_.model_path);
-    m->chain_ =
-        std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(m->mj_.get(), m->declared_));
-    m->data_ = std::make_unique<kinematics::PpoeData>(m->chain_->model);
-    const kinematics::PpoeModel& pm = m->chain_->model;
+    m->mj_ = sim::LoadModel(declared.model_path);
+    m->rig_ = scenarios::BuildDeclaredRig(m->mj_.get(), std::move(declared));
+    m->data_ = std::make_unique<kinematics::PpoeData>(m->rig_.chain->model);
+    const kinematics::PpoeModel& pm = m->rig_.chain->model;
     for (FrameId i = 0; i < pm.num_frames(); ++i) m->frames_[pm.frame(i).name] = i;
-    for (const auto& [name, id] : m->chain_->observed) m->frames_[name] = id;
-    m->frames_[m->declared_.end_effector] = m->chain_->end_effector;
+    for (const auto& [name, id] : m->rig_.chain->observed) m->frames_[name] = id;
+    m->frames_[m->rig_.declared.end_effector] = m->rig_.chain->end_effector;
     return m;
   }
 
-  const kinematics::PpoeModel& ppoe() const { return chain_->model; }
-  const sim::DeclaredChain& chain() const { return *chain_; }
-  const sim::DeclaredModel& declared() const { return declared_; }
+  const kinematics::PpoeModel& ppoe() const { return rig_.chain->model; }
+  const sim::DeclaredChain& chain() const { return *rig_.chain; }
+  // The chain's estimator set-up (model, identified effects, end effector).
+  const estimators::EstimatorSetup& setup() const { return rig_.setup; }
+  const sim::DeclaredModel& declared() const { return rig_.declared; }
   const mjModel* mj() const { return mj_.get(); }
   kinematics::PpoeData& data() { return *data_; }
-  int nq() const { return chain_->model.nq(); }
+  int nq() const { return rig_.chain->model.nq(); }
 
   // A frame by id or by name: the declared end effector and observed frames by their declared
   // names, any PPOE frame by its typed name ("site/ee", "body/link3", "joint/j2", "base");
   // None is the end effector.
   FrameId Frame(const py::handle& frame) const {
-    if (frame.is_none()) return chain_->end_effector;
+    if (frame.is_none()) return rig_.chain->end_effector;
     if (py::isinstance<py::str>(frame)) {
       const std::string name = frame.cast<std::string>();
       const auto it = frames_.find(name);
       if (it != frames_.end()) return it->second;
-      std::string known = "'" + declared_.end_effector + "'";
-      for (const auto& [n, id] : chain_->observed) known += ", '" + n + "'";
-      throw InputError(declared_.file + ": no frame '" + CapForMessage(name) +
+      std::string known = "'" + rig_.declared.end_effector + "'";
+      for (const auto& [n, id] : rig_.chain->observed) known += ", '" + n + "'";
+      throw InputError(rig_.declared.file + ": no frame '" + CapForMessage(name) +
                        "' (the end effector and observed frames: " + known +
                        "; or a typed name such as site/<name>, body/<name>)");
     }
@@ -343,9 +345,8 @@ class Model {
 
  private:
   Model() = default;
-  sim::DeclaredModel declared_;
   sim::MjModelPtr mj_;
-  std::unique_ptr<sim::DeclaredChain> chain_;
+  scenarios::DeclaredRig rig_;
   std::unique_ptr<kinematics::PpoeData> data_;
   std::unordered_map<std::string, FrameId> frames_;
 };
@@ -392,10 +393,7 @@ std::unique_ptr<PyEstimator> MakePyEstimator(const std::string& name,
     throw ValueErrorMessage("estimator name '" + CapForMessage(name) +
                             "': expected letters, digits and '_' (flexbench.estimator_names())");
   }
-  estimators::EstimatorSetup setup;
-  setup.model = &model->ppoe();
-  setup.effects = model->chain().effects_or_null();
-  setup.end_effector = model->chain().end_effector;
+  estimators::EstimatorSetup setup = model->setup();
   std::vector<ConfigOverride> overrides;
   double imu_beta = estimators::ImuSetup{}.filter_beta;
   std::vector<Quat> imu_initial;

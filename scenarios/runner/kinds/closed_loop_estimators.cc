@@ -34,6 +34,7 @@
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/tag_tracking.h"
 #include "scenarios/runner/common/trajectories.h"
+#include "scenarios/runner/common/truth_rig.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/declared_chain.h"
@@ -57,7 +58,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
   void Configure(const ConfigNode& root) override {
     identify_ = MakeClosedLoopKind();
     identify_->Configure(root);  // model, declared, truth, calibration, validation, ...
-    declared_ = ReadModelAndDeclared(root, &model_path_);
+    rig_.declared = ReadModelAndDeclared(root, &model_path_);
     truth_ = sim::ParseEffects(root.Child("truth").Child("effects"));
     // The encoders of the tracking runs read with the noise of the calibration routine's.
     encoder_noise_rad_ = root.Child("truth").GetDouble("encoder_noise_deg", 0.0) * M_PI / 180.0;
@@ -86,53 +87,51 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
     detector_ = ParseDetectorSettings(root);
     specs_ = ParseEstimators(root.Child("estimators"));
 
-    sim_ = sim::Simulation::Load(model_path_, truth_);
-    for (const Range& r : ranges_) sim_->SetCommand(r.joint, 0.0);
-    for (const auto& [j, v] : fixed_) sim_->SetCommand(j, 0.0);
-    sim_->SetCommand(aim_pan_, 0.0);
-    sim_->SetCommand(aim_tilt_, 0.0);
-    sim_->Frame(aim_at_);
-    chain_ = std::make_unique<sim::DeclaredChain>(
-        sim::BuildDeclaredChain(sim_->nominal_model(), declared_));
-    camera_id_ = sim::CameraId(sim_->model(), camera_, model_path_);
-    chain_->ObservedFrame(camera_);
-    tags_ = render::ApplyTagTextures(sim_->mutable_model());
-    if (TagFrames(*chain_).empty()) {
-      throw InputError(declared_.file + ": no tag geom of " + model_path_ +
+    rig_ = LoadTruthRig(model_path_, truth_, std::move(rig_.declared));
+    for (const Range& r : ranges_) rig_.sim->SetCommand(r.joint, 0.0);
+    for (const auto& [j, v] : fixed_) rig_.sim->SetCommand(j, 0.0);
+    rig_.sim->SetCommand(aim_pan_, 0.0);
+    rig_.sim->SetCommand(aim_tilt_, 0.0);
+    rig_.sim->Frame(aim_at_);
+    camera_id_ = sim::CameraId(rig_.sim->model(), camera_, model_path_);
+    AddCamera(&rig_);
+    tags_ = render::ApplyTagTextures(rig_.sim->mutable_model());
+    if (TagFrames(*rig_.chain).empty()) {
+      throw InputError(rig_.declared.file + ": no tag geom of " + model_path_ +
                        " is among the observed frames");
     }
-    Instances(*chain_);  // bad estimator parameters fail now
+    Instances(rig_);  // bad estimator parameters fail now
   }
 
   void Run(RunContext& ctx) override {
-    render::Renderer renderer(sim_->model(), mode_);
+    render::Renderer renderer(rig_.sim->model(), mode_);
     render::TagDetector detector(detector_);
     ctx.log("(a) tracking with the declared model");
     TrajectoryRecorder before_trajectories, after_trajectories;
     const std::vector<Track> before =
-        Follow(ctx, renderer, detector, *chain_, 0, &before_trajectories);
+        Follow(ctx, renderer, detector, rig_, 0, &before_trajectories);
     before_trajectories.Write(*ctx.out, "base", "before");
     ctx.log("(b) calibration routine and identification (identify/)");
     const fs::path augmented = Identify(ctx);
-    std::unique_ptr<sim::DeclaredChain> aug_chain;
+    std::unique_ptr<DeclaredRig> aug_rig;
     SharedError shared;
     FittedRangeCheck range;
     if (fs::exists(augmented)) {
-      const sim::DeclaredModel aug = sim::LoadDeclaredModel(augmented.string());
-      aug_chain =
-          std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(sim_->nominal_model(), aug));
-      shared = PerturbedChains(aug);
-      range = FittedRangeCheck(aug, aug_chain->q_joints, sim_->nominal_model(), aug_chain.get());
+      aug_rig = std::make_unique<DeclaredRig>(
+          BuildDeclaredRig(rig_.sim->nominal_model(), sim::LoadDeclaredModel(augmented.string())));
+      AddCamera(aug_rig.get());
+      shared = PerturbedChains(aug_rig->declared);
+      range = FittedRangeCheck(aug_rig->declared, aug_rig->chain->q_joints,
+                               rig_.sim->nominal_model(), aug_rig->chain.get());
     } else {
       ctx.log("no augmented model (see identify/summary.json): tracking again as declared");
     }
     ctx.log("(c) tracking a new trajectory with the augmented model");
-    const std::vector<Track> after =
-        Follow(ctx, renderer, detector, aug_chain ? *aug_chain : *chain_, 1, &after_trajectories,
-               &shared, &range);
+    const std::vector<Track> after = Follow(ctx, renderer, detector, aug_rig ? *aug_rig : rig_, 1,
+                                            &after_trajectories, &shared, &range);
     range.Report(ctx);
     after_trajectories.Write(*ctx.out, "base", "after");
-    (*ctx.summary)["metrics"]["augmented_model_used"] = aug_chain != nullptr;
+    (*ctx.summary)["metrics"]["augmented_model_used"] = aug_rig != nullptr;
     Report(ctx, before, after);
   }
 
@@ -145,7 +144,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
   std::map<int, kinematics::FrameId> TagFrames(const sim::DeclaredChain& chain) const {
     std::map<int, kinematics::FrameId> frames;
     for (const auto& tag : tags_) {
-      const std::string geom = sim::ObjectName(sim_->model(), mjOBJ_GEOM, tag.geom_id);
+      const std::string geom = sim::ObjectName(rig_.sim->model(), mjOBJ_GEOM, tag.geom_id);
       for (const auto& [name, frame] : chain.observed) {
         if (name == geom) frames[tag.id] = frame;
       }
@@ -157,7 +156,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
   // model with each identified parameter one standard deviation up and down. The estimates'
   // shared error G z (ErrorStats) takes G's columns from the difference of fk's poses.
   struct SharedError {
-    std::vector<std::unique_ptr<sim::DeclaredChain>> up, down;
+    std::vector<DeclaredRig> up, down;
   };
 
   SharedError PerturbedChains(const sim::DeclaredModel& aug) const {
@@ -170,21 +169,16 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
           sim::DeclaredModel d = aug;
           d.identified_effects[e].value[k] += sign * effect.std[k];
           (sign > 0 ? out.up : out.down)
-              .push_back(std::make_unique<sim::DeclaredChain>(
-                  sim::BuildDeclaredChain(sim_->nominal_model(), d)));
+              .push_back(BuildDeclaredRig(rig_.sim->nominal_model(), std::move(d)));
         }
       }
     }
     return out;
   }
 
-  // fk on `chain`: the pose the model predicts from the readings alone.
-  static std::unique_ptr<estimators::Estimator> Fk(const sim::DeclaredChain& chain) {
-    estimators::EstimatorSetup setup;
-    setup.model = &chain.model;
-    setup.effects = chain.effects_or_null();
-    setup.end_effector = chain.end_effector;
-    return estimators::MakeEstimator("fk", setup);
+  // fk on `rig`: the pose the model predicts from the readings alone.
+  static std::unique_ptr<estimators::Estimator> Fk(const DeclaredRig& rig) {
+    return estimators::MakeEstimator("fk", rig.setup);
   }
 
   // G (6 x parameters): the change of fk's pose, in its tangent space, with one standard
@@ -205,20 +199,15 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
     return G;
   }
 
-  std::vector<std::unique_ptr<estimators::Estimator>> Instances(const sim::DeclaredChain& chain) {
-    estimators::EstimatorSetup setup;
-    setup.model = &chain.model;
-    setup.effects = chain.effects_or_null();
-    setup.end_effector = chain.end_effector;
-    setup.cameras.push_back(
-        {sim::CameraIntrinsics(sim_->model(), camera_id_), chain.ObservedFrame(camera_)});
+  // The camera the tags are seen with, on `rig`'s set-up.
+  void AddCamera(DeclaredRig* rig) const {
+    rig->setup.cameras.push_back(
+        {sim::CameraIntrinsics(rig_.sim->model(), camera_id_), rig->chain->ObservedFrame(camera_)});
+  }
+
+  std::vector<std::unique_ptr<estimators::Estimator>> Instances(const DeclaredRig& rig) const {
     std::vector<std::unique_ptr<estimators::Estimator>> out;
-    for (const EstimatorSpec& spec : specs_) {
-      estimators::EstimatorSetup s = setup;
-      s.params = spec.params;
-      s.seed = seed_;
-      out.push_back(estimators::MakeEstimator(spec.name, s));
-    }
+    for (const EstimatorSpec& spec : specs_) out.push_back(rig.MakeEstimator(spec, seed_));
     return out;
   }
 
@@ -248,18 +237,18 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
   }
 
   std::vector<Track> Follow(RunContext& ctx, render::Renderer& renderer,
-                            render::TagDetector& detector, const sim::DeclaredChain& chain,
-                            int index, TrajectoryRecorder* trajectories,
-                            const SharedError* shared = nullptr,
+                            render::TagDetector& detector, const DeclaredRig& rig, int index,
+                            TrajectoryRecorder* trajectories, const SharedError* shared = nullptr,
                             FittedRangeCheck* range = nullptr) {
     seed_ = ctx.seed;
-    auto instances = Instances(chain);
-    std::vector<std::unique_ptr<estimators::Estimator>> fk;  // chain, then up, then down
+    auto instances = Instances(rig);
+    std::vector<std::unique_ptr<estimators::Estimator>> fk;  // rig, then up, then down
     if (shared != nullptr && !shared->up.empty()) {
-      fk.push_back(Fk(chain));
-      for (const auto& c : shared->up) fk.push_back(Fk(*c));
-      for (const auto& c : shared->down) fk.push_back(Fk(*c));
+      fk.push_back(Fk(rig));
+      for (const DeclaredRig& r : shared->up) fk.push_back(Fk(r));
+      for (const DeclaredRig& r : shared->down) fk.push_back(Fk(r));
     }
+    const sim::DeclaredChain& chain = *rig.chain;
     const std::map<int, kinematics::FrameId> tag_frames = TagFrames(chain);
     std::vector<Track> tracks(instances.size());
     for (Track& tr : tracks) tr.stats = ErrorStats(window_);
@@ -271,14 +260,15 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
     std::optional<sim::RecordedLog> log;
     if (index == 0 && !ctx.export_log.empty()) log = StartLog(chain, tag_frames);
     for (int k = 0; k < steps_; ++k) {
-      for (const auto& [j, deg] : fixed_) sim_->SetCommand(j, deg * M_PI / 180.0);
+      for (const auto& [j, deg] : fixed_) rig_.sim->SetCommand(j, deg * M_PI / 180.0);
       for (const auto& [j, deg] : trajectory[k]) {
-        sim_->SetCommand(j, deg * M_PI / 180.0);
+        rig_.sim->SetCommand(j, deg * M_PI / 180.0);
       }
-      AimCamera(sim_.get(), aim_pan_, aim_tilt_, aim_at_, camera_);
-      sim_->Settle();
-      const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
-      estimators::JointReading joints = EncoderReading(*sim_, chain, k);
+      AimCamera(rig_.sim.get(), aim_pan_, aim_tilt_, aim_at_, camera_);
+      rig_.sim->Settle();
+      const render::Image frame =
+          renderer.RenderRgb(const_cast<mjData*>(rig_.sim->data()), camera_id_);
+      estimators::JointReading joints = EncoderReading(*rig_.sim, chain, k);
       for (int j = 0; j < joints.q.size(); ++j)
         joints.q[j] += encoder_noise_rad_ * noise(noise_rng);
       joints.std.setConstant(encoder_noise_rad_);
@@ -287,11 +277,12 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
       const auto measurements =
           TagMeasurements(det, tags_, tag_frames, false, pixel_std_, joints.t);
       tags_seen += static_cast<int>(measurements.size());
-      const lie::SE3 T_w_base =
-          chain.base_body == 0
-              ? lie::SE3()
-              : ToSE3(sim_->BodyPose(sim::ObjectName(sim_->model(), mjOBJ_BODY, chain.base_body)));
-      const lie::SE3 T_base_ee = T_w_base.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
+      const lie::SE3 T_w_base = chain.base_body == 0
+                                    ? lie::SE3()
+                                    : ToSE3(rig_.sim->BodyPose(sim::ObjectName(
+                                          rig_.sim->model(), mjOBJ_BODY, chain.base_body)));
+      const lie::SE3 T_base_ee =
+          T_w_base.Inverse() * ToSE3(rig_.sim->Pose(rig_.declared.end_effector));
       trajectories->AddTruth(joints.t, T_base_ee);
       if (log) {
         AddStepToLog(joints, T_base_ee, &*log);
@@ -313,7 +304,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
     }
     (*ctx.summary)["metrics"][index == 0 ? "tags_before" : "tags_after"] = tags_seen;
     if (log) {
-      WriteLogWithDeclared(*log, declared_, ctx.export_log);
+      WriteLogWithDeclared(*log, rig_.declared, ctx.export_log);
       ctx.log("readings of the declared tracking written to " + ctx.export_log);
     }
     return tracks;
@@ -324,10 +315,11 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
   // pixel), the hand's truth. Replayed, the estimators give the live run's estimates bit for bit.
   sim::RecordedLog StartLog(const sim::DeclaredChain& chain,
                             const std::map<int, kinematics::FrameId>& tag_frames) const {
-    sim::RecordedLog log = LogOfChain(declared_, chain);
+    sim::RecordedLog log = LogOfChain(rig_.declared, chain);
     log.joint_std = encoder_noise_rad_;
-    AddTagCameraToLog(sim_->model(), camera_, sim::CameraIntrinsics(sim_->model(), camera_id_),
-                      tags_, tag_frames, pixel_std_, /*centres=*/true, &log);
+    AddTagCameraToLog(rig_.sim->model(), camera_,
+                      sim::CameraIntrinsics(rig_.sim->model(), camera_id_), tags_, tag_frames,
+                      pixel_std_, /*centres=*/true, &log);
     return log;
   }
 
@@ -441,7 +433,6 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
 
   std::unique_ptr<ScenarioKind> identify_;
   std::string model_path_;
-  sim::DeclaredModel declared_;
   sim::EffectList truth_;
   std::string camera_, aim_pan_, aim_tilt_, aim_at_;
   int steps_ = 30;
@@ -455,8 +446,7 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
   std::vector<EstimatorSpec> specs_;
   std::uint64_t seed_ = 0;
 
-  std::unique_ptr<sim::Simulation> sim_;
-  std::unique_ptr<sim::DeclaredChain> chain_;
+  TruthRig rig_;
   int camera_id_ = -1;
   std::vector<render::TagInModel> tags_;
 };

@@ -18,6 +18,7 @@
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/trajectories.h"
+#include "scenarios/runner/common/truth_rig.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/recorded_log.h"
@@ -31,7 +32,7 @@ class ContactFusionKind : public ScenarioKind {
   bool ExportsLog() const final { return true; }
 
   void Configure(const ConfigNode& root) override {
-    declared_ = ReadModelAndDeclared(root, &model_path_);
+    sim::DeclaredModel declared = ReadModelAndDeclared(root, &model_path_);
     effects_ = sim::ParseEffects(root.Child("effects"));
     const ConfigNode cfg = root.Child("configuration_deg");
     for (const std::string& j : cfg.Keys()) configuration_.emplace_back(j, cfg.GetDouble(j));
@@ -49,36 +50,28 @@ class ContactFusionKind : public ScenarioKind {
     if (!(sensor_std_ > 0.0)) root.Child("distance_std_m").Fail("must be > 0");
     estimators_ = ParseEstimators(root.Child("estimators"));
 
-    sim_ = sim::Simulation::Load(model_path_, effects_);
-    for (const auto& [j, v] : configuration_) sim_->SetCommand(j, 0.0);
-    chain_ = std::make_unique<sim::DeclaredChain>(
-        sim::BuildDeclaredChain(sim_->nominal_model(), declared_));
-    setup_.model = &chain_->model;
-    setup_.effects = chain_->effects_or_null();
-    setup_.end_effector = chain_->end_effector;
+    rig_ = LoadTruthRig(model_path_, effects_, std::move(declared));
+    for (const auto& [j, v] : configuration_) rig_.sim->SetCommand(j, 0.0);
     // estimate_in: an observed frame, e.g. the head camera whose depth image shows the table
     // (the paper's set-up): the table's pose is known in that frame, the chain from it to the
     // fingertip (neck, torso, arm) is what the contact corrects, and the scores are in it.
     if (root.Has("estimate_in")) {
       estimate_in_ = root.GetString("estimate_in");
-      setup_.reference_frame = chain_->ObservedFrame(estimate_in_);
+      rig_.setup.reference_frame = rig_.chain->ObservedFrame(estimate_in_);
     }
-    for (const EstimatorSpec& spec : estimators_) {
-      estimators::EstimatorSetup s = setup_;
-      s.params = spec.params;
-      instances_.push_back(estimators::MakeEstimator(spec.name, s));
-    }
+    for (const EstimatorSpec& spec : estimators_) instances_.push_back(rig_.MakeEstimator(spec));
   }
 
   // collect (settle, place the table, draw the contact readings) -> estimate -> score, per
   // estimator; then the figure.
   void Run(RunContext& ctx) override {
     const Contact contact = Collect(ctx);
-    FittedRangeCheck range(declared_, chain_->q_joints, sim_->nominal_model(), chain_.get());
+    FittedRangeCheck range(rig_.declared, rig_.chain->q_joints, rig_.sim->nominal_model(),
+                           rig_.chain.get());
     range.Observe(contact.joints.q.data(), static_cast<int>(contact.joints.q.size()));
     range.Report(ctx);
     if (!ctx.export_log.empty()) {
-      WriteLogWithDeclared(ContactLog(contact), declared_, ctx.export_log);
+      WriteLogWithDeclared(ContactLog(contact), rig_.declared, ctx.export_log);
       ctx.log("the contact's readings written to " + ctx.export_log);
     }
     std::ofstream csv(ctx.out->File("iterations.csv"));
@@ -114,11 +107,11 @@ class ContactFusionKind : public ScenarioKind {
   // first the contact sensor's reading as Estimate fuses it: the mean of the contacts so far,
   // with its standard error.
   sim::RecordedLog ContactLog(const Contact& c) const {
-    sim::RecordedLog log = LogOfChain(declared_, *chain_);
+    sim::RecordedLog log = LogOfChain(rig_.declared, *rig_.chain);
     log.static_postures = true;
     log.estimate_in = estimate_in_;
     log.planes.push_back({"table", c.q_w_table, c.T_w_table_known, table_std_, sigma_table_});
-    log.contact_points.push_back({"fingertip", declared_.end_effector, Vec3::Zero()});
+    log.contact_points.push_back({"fingertip", rig_.declared.end_effector, Vec3::Zero()});
     double distance_sum = 0.0;
     for (int it = 0; it <= iterations_; ++it) {
       estimators::JointReading joints = c.joints;
@@ -145,12 +138,13 @@ class ContactFusionKind : public ScenarioKind {
   };
 
   Contact Collect(RunContext& ctx) {
-    for (const auto& [j, deg] : configuration_) sim_->SetCommand(j, deg * M_PI / 180.0);
-    sim_->Settle();
+    for (const auto& [j, deg] : configuration_) rig_.sim->SetCommand(j, deg * M_PI / 180.0);
+    rig_.sim->Settle();
     // The fingertip and the table in the estimators' frame ("w" below): the world, or the true
     // pose of the reference frame (where the depth camera that sees the table really is).
-    const lie::SE3 T_w_ref = estimate_in_.empty() ? lie::SE3() : ToSE3(sim_->Pose(estimate_in_));
-    const lie::SE3 T_world_tip = ToSE3(sim_->Pose(declared_.end_effector));
+    const lie::SE3 T_w_ref =
+        estimate_in_.empty() ? lie::SE3() : ToSE3(rig_.sim->Pose(estimate_in_));
+    const lie::SE3 T_world_tip = ToSE3(rig_.sim->Pose(rig_.declared.end_effector));
     Contact c;
     c.T_w_tip = T_w_ref.Inverse() * T_world_tip;
     // The table passes through the true fingertip (the finger touches it), normal up. As in
@@ -166,7 +160,7 @@ class ContactFusionKind : public ScenarioKind {
     c.q_w_table = Quat(T_w_table.rotation());
     c.T_w_table_known = sim::PlanePose(c.q_w_table, T_w_table.translation());
     std::normal_distribution<double> distance_noise(0.0, sensor_std_);
-    c.joints = EncoderReading(*sim_, *chain_, 0.0);
+    c.joints = EncoderReading(*rig_.sim, *rig_.chain, 0.0);
     c.distances.resize(iterations_);
     for (double& d : c.distances) d = distance_noise(rng);
     return c;
@@ -192,7 +186,7 @@ class ContactFusionKind : public ScenarioKind {
         est.Update(c.joints);  // the prior again (counted once, above)
         estimators::PlaneContact m;
         m.t = it;
-        m.frame = chain_->end_effector;
+        m.frame = rig_.chain->end_effector;
         m.T_base_plane = c.T_w_table_known;
         m.plane_cov = sigma_table_;
         m.distance = distance_sum / it;
@@ -320,7 +314,6 @@ class ContactFusionKind : public ScenarioKind {
 
   std::string model_path_;
   std::string estimate_in_;  // "" = the declared base
-  sim::DeclaredModel declared_;
   sim::EffectList effects_;
   std::vector<std::pair<std::string, double>> configuration_;
   int iterations_ = 30;
@@ -328,9 +321,7 @@ class ContactFusionKind : public ScenarioKind {
   Mat6 sigma_table_ = Mat6::Zero();
   double sensor_std_ = 1e-3;
   std::vector<EstimatorSpec> estimators_;
-  std::unique_ptr<sim::Simulation> sim_;
-  std::unique_ptr<sim::DeclaredChain> chain_;
-  estimators::EstimatorSetup setup_;
+  TruthRig rig_;
   std::vector<std::unique_ptr<estimators::Estimator>> instances_;
 };
 

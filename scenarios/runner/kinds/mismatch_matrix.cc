@@ -23,6 +23,7 @@
 #include "scenarios/runner/common/pose.h"
 #include "scenarios/runner/common/sim_readings.h"
 #include "scenarios/runner/common/trajectories.h"
+#include "scenarios/runner/common/truth_rig.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -46,7 +47,7 @@ class MismatchMatrixKind : public ScenarioKind {
   bool ExportsLog() const final { return true; }
 
   void Configure(const ConfigNode& root) override {
-    declared_ = ReadModelAndDeclared(root, &model_path_);
+    rig_.declared = ReadModelAndDeclared(root, &model_path_);
     const ConfigNode effects = root.Child("effects");
     for (const std::string& name : effects.Keys()) {
       columns_.push_back(name);
@@ -69,25 +70,17 @@ class MismatchMatrixKind : public ScenarioKind {
     if (steps_ < 1) root.Child("steps_per_configuration").Fail("need at least 1");
     specs_ = ParseEstimators(root.Child("estimators"));
     const sim::Simulation& s0 = *sims_[0];
-    chain_ = std::make_unique<sim::DeclaredChain>(
-        sim::BuildDeclaredChain(s0.nominal_model(), declared_));
-    setup_.model = &chain_->model;
-    setup_.effects = chain_->effects_or_null();
-    setup_.end_effector = chain_->end_effector;
-    for (const auto& [j, r] : ranges_) chain_->QIndex(j);  // names checked now
-    for (const EstimatorSpec& spec : specs_) {
-      estimators::EstimatorSetup s = setup_;
-      s.params = spec.params;
-      s.seed = 1;
-      instances_.push_back(estimators::MakeEstimator(spec.name, s));
-    }
+    rig_ = BuildDeclaredRig(s0.nominal_model(), std::move(rig_.declared));
+    for (const auto& [j, r] : ranges_) rig_.chain->QIndex(j);  // names checked now
+    for (const EstimatorSpec& spec : specs_) instances_.push_back(rig_.MakeEstimator(spec, 1));
   }
 
   // Per column (one effect in the truth): configurations settled -> readings at rest ->
   // estimates -> scores; then the matrix (CSV, heat maps, metrics).
   void Run(RunContext& ctx) override {
     const std::vector<Eigen::VectorXd> configs = DrawConfigurations(ctx.seed);
-    range_ = FittedRangeCheck(declared_, chain_->q_joints, sims_[0]->nominal_model(), chain_.get());
+    range_ = FittedRangeCheck(rig_.declared, rig_.chain->q_joints, sims_[0]->nominal_model(),
+                              rig_.chain.get());
     // Detection delay: the running-NEES test over the configurations in their order.
     std::vector<std::vector<ErrorStats>> stats(
         instances_.size(),
@@ -98,14 +91,14 @@ class MismatchMatrixKind : public ScenarioKind {
     std::vector<std::pair<std::string, sim::RecordedLog>> logs;
     for (size_t col = 0; col < columns_.size(); ++col) {
       if (!ctx.export_log.empty()) {
-        logs.emplace_back(columns_[col], LogOfChain(declared_, *chain_));
+        logs.emplace_back(columns_[col], LogOfChain(rig_.declared, *rig_.chain));
         logs.back().second.joint_std = encoder_std_;
-        logs.back().second.sensed_frames = {declared_.end_effector};
+        logs.back().second.sensed_frames = {rig_.declared.end_effector};
       }
       RunColumn(col, configs, &stats, ctx, logs.empty() ? nullptr : &logs.back().second);
     }
     if (!logs.empty()) {
-      WriteLogsWithDeclared(logs, declared_, ctx.export_log);
+      WriteLogsWithDeclared(logs, rig_.declared, ctx.export_log);
       ctx.log("readings of every column written to " + ctx.export_log + "/<column>");
     }
     range_.Report(ctx);
@@ -118,9 +111,9 @@ class MismatchMatrixKind : public ScenarioKind {
     std::uniform_real_distribution<double> u(0.0, 1.0);
     std::vector<Eigen::VectorXd> configs;
     for (int c = 0; c < count_; ++c) {
-      Eigen::VectorXd q = Eigen::VectorXd::Zero(chain_->model.nq());
+      Eigen::VectorXd q = Eigen::VectorXd::Zero(rig_.chain->model.nq());
       for (const auto& [j, r] : ranges_)
-        q[chain_->QIndex(j)] = r.first + (r.second - r.first) * u(rng);
+        q[rig_.chain->QIndex(j)] = r.first + (r.second - r.first) * u(rng);
       configs.push_back(q);
     }
     return configs;
@@ -138,14 +131,14 @@ class MismatchMatrixKind : public ScenarioKind {
                  std::vector<std::vector<ErrorStats>>* stats, RunContext& ctx,
                  sim::RecordedLog* log) {
     sim::Simulation& sim = *sims_[col];
-    const sim::FrameRef ee = sims_[0]->Frame(declared_.end_effector);
+    const sim::FrameRef ee = sims_[0]->Frame(rig_.declared.end_effector);
     TrajectoryRecorder trajectories;  // one pose per configuration (timestamp: its index)
     const std::vector<int> act = ActuatorIndices(sim);
     Noise noise(ctx.seed);
     for (int c = 0; c < count_; ++c) {
       ctx.progress("mismatch " + columns_[col], c, count_);
       Eigen::VectorXd cmd = Eigen::VectorXd::Zero(sim.num_actuated());
-      for (int k = 0; k < chain_->model.nq(); ++k) cmd[act[k]] = configs[c][k];
+      for (int k = 0; k < rig_.chain->model.nq(); ++k) cmd[act[k]] = configs[c][k];
       sim.SetCommand(cmd);
       sim.Settle();
       const lie::SE3 T_true = ToSE3(sim.Pose(ee));
@@ -168,10 +161,10 @@ class MismatchMatrixKind : public ScenarioKind {
 
   // Where each declared joint sits among the simulation's actuated joints.
   std::vector<int> ActuatorIndices(const sim::Simulation& sim) const {
-    const std::vector<int> act = scenarios::ActuatorIndices(sim, *chain_);
+    const std::vector<int> act = scenarios::ActuatorIndices(sim, *rig_.chain);
     for (size_t k = 0; k < act.size(); ++k) {
       if (act[k] < 0) {
-        throw InputError(model_path_ + ": declared joint '" + chain_->q_joints[k] +
+        throw InputError(model_path_ + ": declared joint '" + rig_.chain->q_joints[k] +
                          "' is not actuated in the truth");
       }
     }
@@ -182,18 +175,18 @@ class MismatchMatrixKind : public ScenarioKind {
   // and into `log` when given.
   void FeedStep(const sim::Simulation& sim, const lie::SE3& T_true, double t, Noise* noise,
                 sim::RecordedLog* log) {
-    const int nq = chain_->model.nq();
+    const int nq = rig_.chain->model.nq();
     estimators::JointReading joints;
     joints.t = t;
     joints.q.resize(nq);
     joints.std = estimators::JointVector::Constant(nq, encoder_std_);
     for (int k = 0; k < nq; ++k) {
-      const int jid = mj_name2id(sim.model(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
+      const int jid = mj_name2id(sim.model(), mjOBJ_JOINT, rig_.chain->q_joints[k].c_str());
       joints.q[k] = sim.MotorPosition(jid) + sim.EncoderOffset(jid) + encoder_std_ * (*noise)();
     }
     estimators::PositionReading point;
     point.t = t;
-    point.frame = chain_->end_effector;
+    point.frame = rig_.chain->end_effector;
     // z, y, x: the order GCC evaluated the arguments of the Vec3(n(), n(), n()) this was, so the
     // draws (and every output) stay what they were.
     const double n2 = (*noise)(), n1 = (*noise)(), n0 = (*noise)();
@@ -280,7 +273,6 @@ class MismatchMatrixKind : public ScenarioKind {
   }
 
   std::string model_path_;
-  sim::DeclaredModel declared_;
   std::vector<std::string> columns_;
   std::vector<std::unique_ptr<sim::Simulation>> sims_;
   int count_ = 30;
@@ -288,9 +280,8 @@ class MismatchMatrixKind : public ScenarioKind {
   double encoder_std_ = 0.0, point_std_ = 0.002, growth_ = 1.5;
   int steps_ = 1;
   std::vector<EstimatorSpec> specs_;
-  std::unique_ptr<sim::DeclaredChain> chain_;
+  DeclaredRig rig_;         // on the first column's truth's nominal model (all columns share it)
   FittedRangeCheck range_;  // the declared model used beyond where it was fitted (Run)
-  estimators::EstimatorSetup setup_;
   std::vector<std::unique_ptr<estimators::Estimator>> instances_;
 };
 

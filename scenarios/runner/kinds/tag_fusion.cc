@@ -27,6 +27,7 @@
 #include "scenarios/runner/common/stage_timer.h"
 #include "scenarios/runner/common/tag_tracking.h"
 #include "scenarios/runner/common/trajectories.h"
+#include "scenarios/runner/common/truth_rig.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/camera.h"
 #include "sim/declared_chain.h"
@@ -44,7 +45,7 @@ class TagFusionKind : public ScenarioKind {
   bool ExportsLog() const final { return true; }
 
   void Configure(const ConfigNode& root) override {
-    declared_ = ReadModelAndDeclared(root, &model_path_);
+    rig_.declared = ReadModelAndDeclared(root, &model_path_);
     effects_ = sim::ParseEffects(root.Child("effects"));
     camera_ = root.GetString("camera");
     pixel_std_ = root.GetDouble("pixel_noise_std_px", 0.5);
@@ -87,13 +88,14 @@ class TagFusionKind : public ScenarioKind {
 
   // collect (settle, render, detect) -> estimate -> score, per configuration; then report.
   void Run(RunContext& ctx) override {
-    render::Renderer renderer(sim_->model(), mode_);
+    render::Renderer renderer(rig_.sim->model(), mode_);
     ctx.log("GL_RENDERER: " + renderer.gl_renderer());
     if (random_count_ > 0) SampleConfigurations(renderer, ctx);
     RunState state(instances_.size(), ctx.out->File("configurations.csv"));
     std::optional<sim::RecordedLog> log;
     if (!ctx.export_log.empty()) log = StartLog();
-    FittedRangeCheck range(declared_, chain_->q_joints, sim_->nominal_model(), chain_.get());
+    FittedRangeCheck range(rig_.declared, rig_.chain->q_joints, rig_.sim->nominal_model(),
+                           rig_.chain.get());
     for (size_t c = 0; c < configurations_.size(); ++c) {
       const Frame frame = Collect(c, renderer, &state);
       range.Observe(frame.joints.q.data(), static_cast<int>(frame.joints.q.size()));
@@ -117,7 +119,7 @@ class TagFusionKind : public ScenarioKind {
                    static_cast<int>(configurations_.size()));
     }
     if (log) {
-      WriteLogWithDeclared(*log, declared_, ctx.export_log);
+      WriteLogWithDeclared(*log, rig_.declared, ctx.export_log);
       ctx.log("readings of the configurations written to " + ctx.export_log);
     }
     range.Report(ctx);
@@ -174,51 +176,42 @@ class TagFusionKind : public ScenarioKind {
 
   // The truth simulation, its camera and tags, and the declared chain the estimators see.
   void LoadTruth() {
-    sim_ = sim::Simulation::Load(model_path_, effects_);
+    rig_ = LoadTruthRig(model_path_, effects_, std::move(rig_.declared));
     for (const auto& cfg : configurations_) {
-      for (const auto& [j, v] : cfg) sim_->SetCommand(j, 0.0);
+      for (const auto& [j, v] : cfg) rig_.sim->SetCommand(j, 0.0);
     }
-    for (const auto& [j, v] : fixed_) sim_->SetCommand(j, 0.0);
-    for (const auto& r : ranges_) sim_->SetCommand(r.joint, 0.0);
+    for (const auto& [j, v] : fixed_) rig_.sim->SetCommand(j, 0.0);
+    for (const auto& r : ranges_) rig_.sim->SetCommand(r.joint, 0.0);
     if (!aim_pan_.empty()) {
-      sim_->SetCommand(aim_pan_, 0.0);
-      sim_->SetCommand(aim_tilt_, 0.0);
-      sim_->Frame(aim_at_);
+      rig_.sim->SetCommand(aim_pan_, 0.0);
+      rig_.sim->SetCommand(aim_tilt_, 0.0);
+      rig_.sim->Frame(aim_at_);
     }
-    chain_ = std::make_unique<sim::DeclaredChain>(
-        sim::BuildDeclaredChain(sim_->nominal_model(), declared_));
-    camera_id_ = sim::CameraId(sim_->model(), camera_, model_path_);
-    chain_->ObservedFrame(camera_);
-    tags_ = render::ApplyTagTextures(sim_->mutable_model());
+    camera_id_ = sim::CameraId(rig_.sim->model(), camera_, model_path_);
+    rig_.chain->ObservedFrame(camera_);
+    tags_ = render::ApplyTagTextures(rig_.sim->mutable_model());
     for (const auto& tag : tags_) {
-      const std::string geom = sim::ObjectName(sim_->model(), mjOBJ_GEOM, tag.geom_id);
-      for (const auto& [name, frame] : chain_->observed) {
+      const std::string geom = sim::ObjectName(rig_.sim->model(), mjOBJ_GEOM, tag.geom_id);
+      for (const auto& [name, frame] : rig_.chain->observed) {
         if (name == geom) tag_frames_[tag.id] = frame;
       }
     }
     if (tag_frames_.empty()) {
-      throw InputError(declared_.file + ": no tag geom of " + model_path_ +
+      throw InputError(rig_.declared.file + ": no tag geom of " + model_path_ +
                        " is among the observed frames");
     }
   }
 
   void MakeEstimators(const ConfigNode& root) {
-    setup_.model = &chain_->model;
-    setup_.effects = chain_->effects_or_null();
-    setup_.end_effector = chain_->end_effector;
-    setup_.cameras.push_back(
-        {sim::CameraIntrinsics(sim_->model(), camera_id_), chain_->ObservedFrame(camera_)});
+    rig_.setup.cameras.push_back(
+        {sim::CameraIntrinsics(rig_.sim->model(), camera_id_), rig_.chain->ObservedFrame(camera_)});
     // estimate_in: an observed frame (e.g. the camera, as in [PPOE eq. 25]) in which every
     // estimator works and is scored; by default the declared base.
     if (root.Has("estimate_in")) {
       estimate_in_ = root.GetString("estimate_in");
-      setup_.reference_frame = chain_->ObservedFrame(estimate_in_);
+      rig_.setup.reference_frame = rig_.chain->ObservedFrame(estimate_in_);
     }
-    for (const EstimatorSpec& spec : estimators_) {
-      estimators::EstimatorSetup s = setup_;
-      s.params = spec.params;
-      instances_.push_back(estimators::MakeEstimator(spec.name, s));
-    }
+    for (const EstimatorSpec& spec : estimators_) instances_.push_back(rig_.MakeEstimator(spec));
     detector_instance_ = std::make_unique<render::TagDetector>(detector_);
   }
 
@@ -259,13 +252,13 @@ class TagFusionKind : public ScenarioKind {
     }
     {
       const auto t = state->timer.Time("render");
-      f.image = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
+      f.image = renderer.RenderRgb(const_cast<mjData*>(rig_.sim->data()), camera_id_);
     }
     {
       const auto t = state->timer.Time("detect");
       f.det = detector_instance_->Detect(f.image);
     }
-    f.joints = EncoderReading(*sim_, *chain_, static_cast<double>(c));
+    f.joints = EncoderReading(*rig_.sim, *rig_.chain, static_cast<double>(c));
     f.measurements =
         TagMeasurements(f.det, tags_, tag_frames_, use_corners_, pixel_std_, f.joints.t);
     state->total_tags += static_cast<int>(f.measurements.size());
@@ -273,15 +266,15 @@ class TagFusionKind : public ScenarioKind {
     f.view_angle_deg = LargestViewAngleDeg(f.det);
     f.ee_axis_deg = EeAxisToSightDeg();
     // The truth in the declared model's base frame.
-    const lie::SE3 T_w_base =
-        chain_->base_body == 0
-            ? lie::SE3()
-            : ToSE3(sim_->BodyPose(sim::ObjectName(sim_->model(), mjOBJ_BODY, chain_->base_body)));
+    const lie::SE3 T_w_base = rig_.chain->base_body == 0
+                                  ? lie::SE3()
+                                  : ToSE3(rig_.sim->BodyPose(sim::ObjectName(
+                                        rig_.sim->model(), mjOBJ_BODY, rig_.chain->base_body)));
     // Estimates made in a reference frame are scored against the truth seen from that frame's
     // true pose (a sagging camera mount moves the frame, not the truth).
-    f.T_w_ref = estimate_in_.empty() ? T_w_base : ToSE3(sim_->Pose(estimate_in_));
-    f.T_base_ee = f.T_w_ref.Inverse() * ToSE3(sim_->Pose(declared_.end_effector));
-    f.T_cam_w = sim_->Pose(camera_).inverse();
+    f.T_w_ref = estimate_in_.empty() ? T_w_base : ToSE3(rig_.sim->Pose(estimate_in_));
+    f.T_base_ee = f.T_w_ref.Inverse() * ToSE3(rig_.sim->Pose(rig_.declared.end_effector));
+    f.T_cam_w = rig_.sim->Pose(camera_).inverse();
     state->trajectories.AddTruth(f.joints.t, f.T_base_ee);
     return f;
   }
@@ -303,18 +296,18 @@ class TagFusionKind : public ScenarioKind {
       throw InputError("--export-log: estimate_in '" + estimate_in_ +
                        "': a log's replay estimates in the declared base frame");
     }
-    sim::RecordedLog log = LogOfChain(declared_, *chain_);
+    sim::RecordedLog log = LogOfChain(rig_.declared, *rig_.chain);
     log.static_postures = true;
-    AddTagCameraToLog(sim_->model(), camera_, setup_.cameras[0].intrinsics, tags_, tag_frames_,
-                      pixel_std_, /*centres=*/!use_corners_, &log);
+    AddTagCameraToLog(rig_.sim->model(), camera_, rig_.setup.cameras[0].intrinsics, tags_,
+                      tag_frames_, pixel_std_, /*centres=*/!use_corners_, &log);
     return log;
   }
 
   // The evaluation overlay's truth: its axes and the detected tags' outlines.
   render::Image TruthOverlay(const Frame& f) const {
     render::Image overlay = f.image;
-    render::DrawFrameAxes(&overlay, setup_.cameras[0].intrinsics, ToCamera(f, f.T_base_ee), 0.06,
-                          2);
+    render::DrawFrameAxes(&overlay, rig_.setup.cameras[0].intrinsics, ToCamera(f, f.T_base_ee),
+                          0.06, 2);
     render::DrawText(&overlay, "truth: axes   estimates: + and 95% ellipse", {8, 18},
                      render::kWhite);
     for (const render::TagDetection& d : f.det.detections) {
@@ -354,7 +347,7 @@ class TagFusionKind : public ScenarioKind {
     const render::Color colors[] = {render::kMagenta, render::kCyan, render::kYellow,
                                     render::kGreen, render::kRed};
     const render::Color color = colors[e % 5];
-    const PinholeCamera& cam = setup_.cameras[0].intrinsics;
+    const PinholeCamera& cam = rig_.setup.cameras[0].intrinsics;
     const Eigen::Isometry3d T_cam_est = ToCamera(f, b.T_base_ee);
     // Right perturbation: the position part of the local covariance turns with R.
     const Mat3 R_cam_est = T_cam_est.linear();
@@ -439,13 +432,13 @@ class TagFusionKind : public ScenarioKind {
   // scenario's configurations do.
   double LargestViewAngleDeg(const render::DetectionResult& det) const {
     double largest = -1.0;
-    const Eigen::Vector3d p_w_cam = sim_->Pose(camera_).translation();
+    const Eigen::Vector3d p_w_cam = rig_.sim->Pose(camera_).translation();
     for (const render::TagDetection& d : det.detections) {
       if (tag_frames_.count(d.id) == 0) continue;
       for (const render::TagInModel& tag : tags_) {
         if (tag.id != d.id) continue;
         const Eigen::Isometry3d T_w_geom =
-            sim_->Pose(sim::ObjectName(sim_->model(), mjOBJ_GEOM, tag.geom_id));
+            rig_.sim->Pose(sim::ObjectName(rig_.sim->model(), mjOBJ_GEOM, tag.geom_id));
         const auto& c = tag.corners_geom;
         const Eigen::Vector3d n_w =
             T_w_geom.linear() * (c[1] - c[0]).cross(c[3] - c[0]).normalized();
@@ -461,8 +454,8 @@ class TagFusionKind : public ScenarioKind {
   // to it (truth poses): near 0 the hand points away from the camera and its lateral directions
   // (the scored ones) lie across the image, where a bearing sees them.
   double EeAxisToSightDeg() const {
-    const Eigen::Isometry3d T_w_ee = sim_->Pose(declared_.end_effector);
-    const Eigen::Vector3d sight = T_w_ee.translation() - sim_->Pose(camera_).translation();
+    const Eigen::Isometry3d T_w_ee = rig_.sim->Pose(rig_.declared.end_effector);
+    const Eigen::Vector3d sight = T_w_ee.translation() - rig_.sim->Pose(camera_).translation();
     return std::acos(std::clamp(T_w_ee.linear().col(2).dot(sight.normalized()), -1.0, 1.0)) *
            180.0 / M_PI;
   }
@@ -474,10 +467,10 @@ class TagFusionKind : public ScenarioKind {
 
   // Commands a configuration (after the fixed joints), aims the camera, settles the truth.
   void Command(const std::vector<std::pair<std::string, double>>& cfg) {
-    for (const auto& [j, deg] : fixed_) sim_->SetCommand(j, deg * M_PI / 180.0);
-    for (const auto& [j, deg] : cfg) sim_->SetCommand(j, deg * M_PI / 180.0);
-    if (!aim_pan_.empty()) AimCamera(sim_.get(), aim_pan_, aim_tilt_, aim_at_, camera_);
-    sim_->Settle();
+    for (const auto& [j, deg] : fixed_) rig_.sim->SetCommand(j, deg * M_PI / 180.0);
+    for (const auto& [j, deg] : cfg) rig_.sim->SetCommand(j, deg * M_PI / 180.0);
+    if (!aim_pan_.empty()) AimCamera(rig_.sim.get(), aim_pan_, aim_tilt_, aim_at_, camera_);
+    rig_.sim->Settle();
   }
 
   void SampleConfigurations(render::Renderer& renderer, RunContext& ctx) {
@@ -499,7 +492,8 @@ class TagFusionKind : public ScenarioKind {
       }
       Command(cfg);
       if (EeAxisToSightDeg() > max_ee_axis_to_sight_deg_) continue;
-      const render::Image frame = renderer.RenderRgb(const_cast<mjData*>(sim_->data()), camera_id_);
+      const render::Image frame =
+          renderer.RenderRgb(const_cast<mjData*>(rig_.sim->data()), camera_id_);
       int seen = 0;
       for (const auto& d : detector_instance_->Detect(frame).detections) {
         seen += tag_frames_.count(d.id) > 0;
@@ -509,7 +503,6 @@ class TagFusionKind : public ScenarioKind {
   }
 
   std::string model_path_;
-  sim::DeclaredModel declared_;
   sim::EffectList effects_;
   std::string camera_;
   std::string estimate_in_;  // "" = the declared base
@@ -530,12 +523,10 @@ class TagFusionKind : public ScenarioKind {
   std::string aim_pan_, aim_tilt_, aim_at_;
   std::vector<EstimatorSpec> estimators_;
 
-  std::unique_ptr<sim::Simulation> sim_;
-  std::unique_ptr<sim::DeclaredChain> chain_;
+  TruthRig rig_;
   int camera_id_ = -1;
   std::vector<render::TagInModel> tags_;
   std::map<int, kinematics::FrameId> tag_frames_;
-  estimators::EstimatorSetup setup_;
   std::vector<std::unique_ptr<estimators::Estimator>> instances_;
   std::unique_ptr<render::TagDetector> detector_instance_;
 };

@@ -13,7 +13,7 @@ void FailAt(const ConfigNode& node, const std::string& key, const std::string& m
 std::vector<EstimatorSpec> ParseAndCheckEstimators(const ConfigNode& root, const Rig& rig) {
   std::vector<EstimatorSpec> specs =
       ParseEstimators(root.Child("estimators"), EstimatorLabels::kAllowed);
-  for (const EstimatorSpec& e : specs) MakeLabelled(rig, e, 0);
+  for (const EstimatorSpec& e : specs) rig.MakeEstimator(e);
   return specs;
 }
 

@@ -300,7 +300,7 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     values["particles"] = {n};
     values["kappa_v"] = {k};
     e.params = estimators::Params(values, "sweep " + label);
-    if (label == "check") jsk::MakeLabelled(rig_, e, 0);
+    if (label == "check") rig_.MakeEstimator(e);
     return e;
   }
 

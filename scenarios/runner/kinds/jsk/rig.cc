@@ -1,6 +1,7 @@
 #include "scenarios/runner/kinds/jsk/rig.h"
 
 #include <algorithm>
+#include <utility>
 
 #include "estimators/error.h"
 #include "scenarios/runner/common/model_config.h"
@@ -10,14 +11,12 @@ namespace flexbench::scenarios::jsk {
 Rig LoadRig(const ConfigNode& root, bool with_effects) {
   Rig rig;
   std::string model_path;
-  rig.declared = ReadModelAndDeclared(root, &model_path);
+  sim::DeclaredModel declared = ReadModelAndDeclared(root, &model_path);
   sim::EffectList effects;
   if (with_effects) {
     if (const auto e = root.Optional("effects")) effects = sim::ParseEffects(*e);
   }
-  rig.sim = sim::Simulation::Load(model_path, effects);
-  rig.chain = std::make_unique<sim::DeclaredChain>(
-      sim::BuildDeclaredChain(rig.sim->nominal_model(), rig.declared));
+  static_cast<TruthRig&>(rig) = LoadTruthRig(model_path, effects, std::move(declared));
   const ConfigNode imus = root.Child("imus");
   for (const ConfigNode& item : imus.Items()) {
     const std::string site = item.AsString();
@@ -29,9 +28,6 @@ Rig LoadRig(const ConfigNode& root, bool with_effects) {
     rig.imu_sites.push_back(site);
     rig.imu_frames.push_back(rig.chain->ObservedFrame(site));
   }
-  rig.setup.model = &rig.chain->model;
-  rig.setup.effects = rig.chain->effects_or_null();
-  rig.setup.end_effector = rig.chain->end_effector;
   for (kinematics::FrameId f : rig.imu_frames) rig.setup.imus.push_back(estimators::ImuSetup{f});
   const std::vector<std::string>& act = rig.sim->actuated_joints();
   for (const std::string& j : rig.chain->q_joints) {
@@ -57,11 +53,6 @@ Eigen::VectorXd Rig::LinkAngles() const {
   Eigen::VectorXd q(nq());
   for (int k = 0; k < nq(); ++k) q[k] = sim->JointPosition(chain->q_joints[k]) - chain->q_qpos0[k];
   return q;
-}
-
-std::unique_ptr<estimators::Estimator> MakeLabelled(const Rig& rig, const EstimatorSpec& e,
-                                                    std::uint64_t seed) {
-  return MakeEstimatorOf(e, rig.setup, seed);
 }
 
 }  // namespace flexbench::scenarios::jsk

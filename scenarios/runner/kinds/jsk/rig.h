@@ -13,6 +13,7 @@
 
 #include "estimators/estimator.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/truth_rig.h"
 #include "scenarios/runner/scenario_kind.h"
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
@@ -20,14 +21,10 @@
 
 namespace flexbench::scenarios::jsk {
 
-// The truth simulation, the declared chain and the estimators' setup.
-struct Rig {
-  std::unique_ptr<sim::Simulation> sim;
-  sim::DeclaredModel declared;
-  std::unique_ptr<sim::DeclaredChain> chain;
+// The truth rig with the IMUs on the estimators' set-up.
+struct Rig : TruthRig {
   std::vector<std::string> imu_sites;  // IMU site names, setup.imus order
   std::vector<kinematics::FrameId> imu_frames;
-  estimators::EstimatorSetup setup;
   // Declared joint k is actuator act_of_q[k] of the simulation.
   std::vector<int> act_of_q;
 
@@ -42,10 +39,6 @@ struct Rig {
 // Reads model and declared (ReadModelAndDeclared), imus and (optional) effects; loads everything
 // (InputError on bad names). Call in Configure.
 Rig LoadRig(const ConfigNode& root, bool with_effects);
-
-// Builds the estimator; InputError messages are prefixed with the entry's file and line.
-std::unique_ptr<estimators::Estimator> MakeLabelled(const Rig& rig, const EstimatorSpec& e,
-                                                    std::uint64_t seed);
 
 inline double Deg(double rad) { return rad * 180.0 / M_PI; }
 // Wrapped difference a - b in [-pi, pi] (std::remainder: a difference of exactly -pi stays -pi).

@@ -31,7 +31,7 @@ void Trace::Add(double time, const estimators::Belief& b, const pf::ParticleSumm
 }
 
 TracedRun::TracedRun(const Rig& rig, const EstimatorSpec& spec, std::uint64_t seed)
-    : est(MakeLabelled(rig, spec, seed)) {
+    : est(rig.MakeEstimator(spec, seed)) {
   est->Reset();
   trace.label = spec.label;
   trace.has_particles = est->Particles() != nullptr;
