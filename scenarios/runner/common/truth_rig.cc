@@ -12,8 +12,7 @@ std::unique_ptr<estimators::Estimator> DeclaredRig::MakeEstimator(const Estimato
 DeclaredRig BuildDeclaredRig(const mjModel* nominal, sim::DeclaredModel declared) {
   DeclaredRig rig;
   rig.declared = std::move(declared);
-  rig.chain =
-      std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(nominal, rig.declared));
+  rig.chain = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(nominal, rig.declared));
   rig.setup.model = &rig.chain->model;
   rig.setup.effects = rig.chain->effects_or_null();
   rig.setup.end_effector = rig.chain->end_effector;
