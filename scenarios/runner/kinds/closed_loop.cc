@@ -56,6 +56,7 @@
 #include "scenarios/identify/log_gravity.h"
 #include "scenarios/identify/measurement_frames.h"
 #include "scenarios/identify/source_scaling.h"
+#include "scenarios/runner/common/error_stats.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/log_images.h"
 #include "scenarios/runner/common/log_replay.h"

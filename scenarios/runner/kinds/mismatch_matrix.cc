@@ -17,6 +17,7 @@
 #include "estimators/error.h"
 #include "estimators/stats/chi_square.h"
 #include "render/plot.h"
+#include "scenarios/runner/common/error_stats.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/model_config.h"

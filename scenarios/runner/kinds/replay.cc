@@ -27,6 +27,7 @@
 
 #include "estimators/error.h"
 #include "scenarios/runner/common/clock_offset.h"
+#include "scenarios/runner/common/error_stats.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/log_images.h"
 #include "scenarios/runner/common/log_replay.h"

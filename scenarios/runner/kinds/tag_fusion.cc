@@ -18,6 +18,7 @@
 #include "render/renderer.h"
 #include "render/tag_detector.h"
 #include "render/tag_texture.h"
+#include "scenarios/runner/common/error_stats.h"
 #include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/model_config.h"

@@ -3,6 +3,8 @@
 // dof and rarely flag; errors twice the stated size flag almost always, and early. With a term
 // shared by every step of a run (a fitted parameter's error), the bounds that account for it
 // hold about 95% of consistent runs, where those of independent values do not.
+#include "scenarios/runner/common/error_stats.h"
+
 #include <gtest/gtest.h>
 
 #include <random>
