@@ -1,9 +1,11 @@
 #include "sim/declared_effects.h"
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 
 #include "estimators/error.h"
+#include "estimators/kinematics/effect_table.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "sim/mujoco_model.h"
 
@@ -13,38 +15,23 @@ namespace {
 using kinematics::FrameId;
 using kinematics::ModelEffects;
 
-// The number of values of each effect type (scenarios/identify/effect_model.h), and whether it
-// acts through the gravity loads.
-struct TypeInfo {
-  int num_values;
-  bool load_driven;
-};
-const std::map<std::string, TypeInfo>& Types() {
-  static const std::map<std::string, TypeInfo> types = {
-      {"joint_offset", {1, false}},
-      {"joint_compliance", {1, true}},
-      {"backlash", {1, true}},
-      {"link_length", {1, false}},
-      {"link_offset", {3, false}},
-      {"joint_axis_tilt_a", {1, false}},
-      {"joint_axis_tilt_b", {1, false}},
-      {"link_bending", {1, true}},
-      {"base_compliance", {2, true}},
-      {"thermal_expansion", {1, false}},
-      {"payload", {4, true}},
-      {"camera_offset", {6, false}},
-      {"joint_origin", {6, false}},
-      {"transmission_error", {4, false}},
-      {"joint_error_curve", {6, false}},
-      {"stiffening_spring", {2, true}},
-      {"gravity_tilt", {2, true}},
-      {"lateral_compliance", {2, true}},
-  };
-  return types;
+// The names declared files give the effects (kinematics' effect table; an axis tilt is written
+// per axis), sorted, for messages.
+std::string KnownEffectNames() {
+  std::vector<std::string> names;
+  for (const kinematics::EffectRow& r : kinematics::EffectTable()) {
+    if (r.kind == kinematics::EffectKind::kAxisTilt) {
+      names.push_back(std::string(r.name) + "_a");
+      names.push_back(std::string(r.name) + "_b");
+    } else {
+      names.push_back(r.name);
+    }
+  }
+  std::sort(names.begin(), names.end());
+  std::string known;
+  for (const std::string& n : names) known += (known.empty() ? "" : ", ") + n;
+  return known;
 }
-
-// The identification's tau0 of the stiffening spring's cubic term (N m).
-constexpr double kStiffeningTau0 = 10.0;
 
 class EffectsBuilder {
  public:
@@ -66,8 +53,9 @@ class EffectsBuilder {
     }
     if (load_driven && !HasMasses()) {
       for (const IdentifiedEffect& ie : d_.identified_effects) {
-        const auto it = Types().find(ie.effect.substr(0, ie.effect.find('@')));
-        if (it != Types().end() && it->second.load_driven) {
+        const kinematics::EffectRow* row =
+            kinematics::FindEffect(ie.effect.substr(0, ie.effect.find('@')));
+        if (row != nullptr && row->load_driven) {
           Fail(ie, "acts through the gravity loads, but the model " + CapForMessage(d_.model_path) +
                        " has no masses on the arm");
         }
@@ -88,15 +76,11 @@ class EffectsBuilder {
     }
     const std::string type = ie.effect.substr(0, at);
     const std::string loc = ie.effect.substr(at + 1);
-    const auto info = Types().find(type);
-    if (info == Types().end()) {
-      std::string known;
-      for (const auto& [name, _] : Types()) known += (known.empty() ? "" : ", ") + name;
-      Fail(ie, "is not a known effect type (" + known + ")");
-    }
+    const kinematics::EffectRow* info = kinematics::FindEffect(type);
+    if (info == nullptr) Fail(ie, "is not a known effect type (" + KnownEffectNames() + ")");
     const std::vector<double>& v = ie.value;
-    if (static_cast<int>(v.size()) != info->second.num_values) {
-      Fail(ie, "needs " + std::to_string(info->second.num_values) + " values, got " +
+    if (static_cast<int>(v.size()) != info->num_values) {
+      Fail(ie, "needs " + std::to_string(info->num_values) + " values, got " +
                    std::to_string(v.size()));
     }
     for (double x : v) {
@@ -141,7 +125,7 @@ class EffectsBuilder {
     } else {
       AddJointEffect(ie, type, loc);
     }
-    return info->second.load_driven;
+    return info->load_driven;
   }
 
   // The effect's parameter stds (if given) as ModelEffects::Uncertainty: variances per term;
@@ -195,7 +179,7 @@ class EffectsBuilder {
       j.backlash += v2[0];
     } else if (type == "stiffening_spring") {
       j.compliance += v2[0];
-      j.cubic += v2[1] / std::pow(kStiffeningTau0, 4);
+      j.cubic += v2[1] / std::pow(kinematics::kStiffeningTau0Nm, 4);
     } else if (type == "transmission_error" || type == "joint_error_curve") {
       for (size_t i = 0; i < v2.size(); ++i) j.harmonic[i] += v2[i];
     } else if (type == "link_bending") {
@@ -203,7 +187,7 @@ class EffectsBuilder {
     } else if (type == "lateral_compliance") {
       u.lateral[f] += Eigen::Vector2d(v2[0], v2[1]);
     } else {
-      Fail(ie, "has no uncertainty model");  // Types() and this list disagree
+      Fail(ie, "has no uncertainty model");  // the effect table and this list disagree
     }
   }
 
@@ -242,7 +226,7 @@ class EffectsBuilder {
       j.backlash += v[0];
     } else if (type == "stiffening_spring") {
       j.compliance += v[0];
-      j.cubic += v[1] / (kStiffeningTau0 * kStiffeningTau0);
+      j.cubic += v[1] / (kinematics::kStiffeningTau0Nm * kinematics::kStiffeningTau0Nm);
     } else if (type == "transmission_error" || type == "joint_error_curve") {
       for (size_t i = 0; i < v.size(); ++i) j.harmonic[i] += v[i];
     } else if (type == "link_bending") {

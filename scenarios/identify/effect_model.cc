@@ -48,65 +48,14 @@ int BodyOfFrame(const mjModel* m, const std::string& typed) {
 
 constexpr double kDeg = M_PI / 180.0;
 
-// The bound a family puts on each of its parameters alike, into *lo, *hi (effect_model.h says
-// why); false for the families bounded per parameter.
-bool UniformBound(EffectType type, bool prismatic, double* lo, double* hi) {
-  const auto set = [&](double l, double h) {
-    *lo = l;
-    *hi = h;
-    return true;
-  };
-  switch (type) {
-    case EffectType::kJointOffset:
-      return prismatic ? set(-0.1, 0.1) : set(-10 * kDeg, 10 * kDeg);
-    case EffectType::kAxisTilt:
-    case EffectType::kGravityTilt:
-      return set(-10 * kDeg, 10 * kDeg);
-    case EffectType::kBacklash:
-      return set(-5 * kDeg, 5 * kDeg);
-    case EffectType::kLinkLength:
-    case EffectType::kLinkOffset:
-      return set(-0.1, 0.1);
-    case EffectType::kJointCompliance:
-      return set(-1.0, 0.0);
-    case EffectType::kLinkBending:
-    case EffectType::kBaseCompliance:
-      return set(0.0, 1.0);
-    case EffectType::kLateralCompliance:
-      return set(0.0, 1e-2);
-    case EffectType::kThermalExpansion:
-      return set(-1e-3, 1e-3);
-    case EffectType::kPayload:  // the first moment; SetBounds bounds the mass
-      return set(-50.0, 50.0);
-    case EffectType::kTransmissionError:
-    case EffectType::kJointErrorCurve:
-      return set(-1 * kDeg, 1 * kDeg);
-    case EffectType::kStiffeningSpring:
-    case EffectType::kCameraOffset:
-    case EffectType::kJointOrigin:
-      return false;
-  }
-  return false;
-}
-
-// Physical bounds per family (effect_model.h says why).
+// The table's physical bounds of the candidate's values; a prismatic joint's offset in metres.
 void SetBounds(Candidate* c, bool prismatic) {
-  double lo = 0.0, hi = 0.0;
-  if (UniformBound(c->type, prismatic, &lo, &hi)) {
-    c->lower.assign(c->num_params, lo);
-    c->upper.assign(c->num_params, hi);
-  }
-  if (c->type == EffectType::kPayload) {
-    c->lower[0] = -1e-3;
-    c->upper[0] = 100.0;
-  } else if (c->type == EffectType::kStiffeningSpring) {
-    c->lower = {-1.0, 0.0};
-    c->upper = {0.0, 1.0};
-  } else if (c->type == EffectType::kCameraOffset || c->type == EffectType::kJointOrigin) {
-    const double lin = c->type == EffectType::kCameraOffset ? 0.5 : 0.1;
-    const double ang = c->type == EffectType::kCameraOffset ? 0.5 : 10 * kDeg;
-    c->lower = {-lin, -lin, -lin, -ang, -ang, -ang};
-    c->upper = {lin, lin, lin, ang, ang, ang};
+  const kinematics::EffectRow& row = kinematics::Row(c->type);
+  c->lower.assign(row.lower.begin(), row.lower.begin() + c->num_params);
+  c->upper.assign(row.upper.begin(), row.upper.begin() + c->num_params);
+  if (c->type == EffectType::kJointOffset && prismatic) {
+    c->lower.assign(1, -0.1);
+    c->upper.assign(1, 0.1);
   }
 }
 
@@ -120,45 +69,7 @@ void AddPeriodicError(const Candidate& c, double qj, const double* t, double* dq
 
 }  // namespace
 
-const char* ToString(EffectType type) {
-  switch (type) {
-    case EffectType::kJointOffset:
-      return "joint_offset";
-    case EffectType::kJointCompliance:
-      return "joint_compliance";
-    case EffectType::kBacklash:
-      return "backlash";
-    case EffectType::kLinkLength:
-      return "link_length";
-    case EffectType::kLinkOffset:
-      return "link_offset";
-    case EffectType::kAxisTilt:
-      return "joint_axis_tilt";
-    case EffectType::kLinkBending:
-      return "link_bending";
-    case EffectType::kBaseCompliance:
-      return "base_compliance";
-    case EffectType::kThermalExpansion:
-      return "thermal_expansion";
-    case EffectType::kPayload:
-      return "payload";
-    case EffectType::kCameraOffset:
-      return "camera_offset";
-    case EffectType::kJointOrigin:
-      return "joint_origin";
-    case EffectType::kTransmissionError:
-      return "transmission_error";
-    case EffectType::kJointErrorCurve:
-      return "joint_error_curve";
-    case EffectType::kStiffeningSpring:
-      return "stiffening_spring";
-    case EffectType::kGravityTilt:
-      return "gravity_tilt";
-    case EffectType::kLateralCompliance:
-      return "lateral_compliance";
-  }
-  return "?";
-}
+const char* ToString(EffectType type) { return kinematics::Row(type).name; }
 
 EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, FrameId point_frame,
                          const std::string& camera, const std::vector<FrameId>& more_points,
@@ -193,7 +104,7 @@ EffectModel::EffectModel(const mjModel* m, const sim::DeclaredChain& chain, Fram
     g_base_ = R_w_base.transpose() * Vec3(m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
   }
   if (gravity_tilt) {
-    AddCandidate(EffectType::kGravityTilt, "base", -1, -1, 2, 1e-6, "rad");
+    AddCandidate(EffectType::kGravityTilt, "base", -1, -1);
     gravity_tilt_ = static_cast<int>(candidates_.size()) - 1;
   }
 }
@@ -271,18 +182,20 @@ void EffectModel::SetTiltAxes() {
   }
 }
 
-Candidate& EffectModel::AddCandidate(EffectType type, const std::string& location, int q, FrameId f,
-                                     int num_params, double step, const char* unit) {
+Candidate& EffectModel::AddCandidate(EffectType type, const std::string& location, int q,
+                                     FrameId f) {
   const kinematics::PpoeModel& model = chain_->model;
+  const kinematics::EffectRow& row = kinematics::Row(type);
+  const bool prismatic = model.frame(f > 0 ? f : 0).joint.type == kinematics::JointType::kPrismatic;
   Candidate c;
   c.type = type;
   c.location = location;
   c.q_index = q;
   c.frame = f;
-  c.num_params = num_params;
-  c.step = step;
-  c.unit = unit;
-  SetBounds(&c, model.frame(f > 0 ? f : 0).joint.type == kinematics::JointType::kPrismatic);
+  c.num_params = row.num_values;
+  c.step = row.fd_step;
+  c.unit = type == EffectType::kJointOffset && prismatic ? "m" : row.unit;
+  SetBounds(&c, prismatic);
   candidates_.push_back(c);
   return candidates_.back();
 }
@@ -293,14 +206,13 @@ void EffectModel::AddJointFamilies() {
     const FrameId f = model.joint_frame(k);
     if (!on_path_[f]) continue;
     const std::string& name = chain_->q_joints[k];
-    AddCandidate(EffectType::kJointOffset, name, k, f, 1, 1e-6,
-                 model.frame(f).joint.type == kinematics::JointType::kPrismatic ? "m" : "rad");
-    AddCandidate(EffectType::kAxisTilt, name, k, f, 1, 1e-6, "rad");
-    AddCandidate(EffectType::kAxisTilt, name, k, f, 1, 1e-6, "rad").axis = 1;
-    AddCandidate(EffectType::kLinkOffset, name, k, f, 3, 1e-6, "m");
+    AddCandidate(EffectType::kJointOffset, name, k, f);
+    AddCandidate(EffectType::kAxisTilt, name, k, f);
+    AddCandidate(EffectType::kAxisTilt, name, k, f).axis = 1;
+    AddCandidate(EffectType::kLinkOffset, name, k, f);
     if (model.frame(f).joint.type != kinematics::JointType::kRevolute) continue;
-    AddCandidate(EffectType::kJointCompliance, name, k, f, 1, 1e-7, "rad/Nm");
-    AddCandidate(EffectType::kBacklash, name, k, f, 1, 1e-6, "rad");
+    AddCandidate(EffectType::kJointCompliance, name, k, f);
+    AddCandidate(EffectType::kBacklash, name, k, f);
   }
 }
 
@@ -309,7 +221,7 @@ void EffectModel::AddLinkLengths() {
   for (FrameId f = 1; f < model.num_frames(); ++f) {
     if (!on_path_[f] || model.frame(f).T_parent_ip.translation().norm() < 0.01) continue;
     const std::string name = Untyped(model.frame(f).name);
-    AddCandidate(EffectType::kLinkLength, name, -1, f, 1, 1e-6, "m");
+    AddCandidate(EffectType::kLinkLength, name, -1, f);
   }
 }
 
@@ -334,8 +246,7 @@ void EffectModel::AddLinkBending() {
     mid_slot_[f] = num_mid_++;
     link_dir_.resize(n, Vec3::Zero());
     link_dir_[f] = link_p.normalized();
-    AddCandidate(EffectType::kLinkBending, chain_->q_joints[model.frame(f).q_index], -1, f, 1, 1e-7,
-                 "rad/Nm");
+    AddCandidate(EffectType::kLinkBending, chain_->q_joints[model.frame(f).q_index], -1, f);
   }
 }
 
@@ -345,8 +256,7 @@ void EffectModel::AddToolOffsets() {
   const kinematics::PpoeModel& model = chain_->model;
   for (FrameId point : points_) {
     if (model.frame(point).q_index < 0)
-      AddCandidate(EffectType::kLinkOffset, Untyped(model.frame(point).name), -1, point, 3, 1e-6,
-                   "m");
+      AddCandidate(EffectType::kLinkOffset, Untyped(model.frame(point).name), -1, point);
   }
 }
 
@@ -354,13 +264,11 @@ void EffectModel::AddToolOffsets() {
 void EffectModel::AddChainWide(const std::string& camera) {
   const kinematics::PpoeModel& model = chain_->model;
   if (mount_ != kinematics::kBaseFrame) {
-    AddCandidate(EffectType::kBaseCompliance, Untyped(model.frame(mount_).name), -1, mount_, 2,
-                 1e-7, "rad/Nm");
+    AddCandidate(EffectType::kBaseCompliance, Untyped(model.frame(mount_).name), -1, mount_);
   }
-  AddCandidate(EffectType::kThermalExpansion, "all", -1, -1, 1, 1e-6, "-");
-  if (!camera.empty()) AddCandidate(EffectType::kCameraOffset, camera, -1, -1, 6, 1e-6, "m, rad");
-  AddCandidate(EffectType::kPayload, Untyped(model.frame(point_frame_).name), -1, point_frame_, 4,
-               1e-3, "kg, kg m");
+  AddCandidate(EffectType::kThermalExpansion, "all", -1, -1);
+  if (!camera.empty()) AddCandidate(EffectType::kCameraOffset, camera, -1, -1);
+  AddCandidate(EffectType::kPayload, Untyped(model.frame(point_frame_).name), -1, point_frame_);
 }
 
 // Bearing and housing compliance at each revolute joint; after the families that came before it,
@@ -387,7 +295,7 @@ void EffectModel::AddLateralCompliance() {
                "the mount tilting, base_compliance@" + Untyped(model.frame(mount_).name)});
       continue;
     }
-    AddCandidate(EffectType::kLateralCompliance, name, k, f, 2, 1e-7, "rad/Nm").after_named = true;
+    AddCandidate(EffectType::kLateralCompliance, name, k, f).after_named = true;
   }
 }
 
@@ -407,10 +315,9 @@ void EffectModel::AddEvidenceFamilies() {
     const FrameId f = model.joint_frame(k);
     if (!on_path_[f] || model.frame(f).joint.type != kinematics::JointType::kRevolute) continue;
     const std::string& name = chain_->q_joints[k];
-    AddCandidate(EffectType::kTransmissionError, name, k, f, 4, 1e-6, "rad").needs_evidence = true;
-    AddCandidate(EffectType::kJointErrorCurve, name, k, f, 6, 1e-6, "rad").needs_evidence = true;
-    AddCandidate(EffectType::kStiffeningSpring, name, k, f, 2, 1e-7, "rad/Nm").needs_evidence =
-        true;
+    AddCandidate(EffectType::kTransmissionError, name, k, f).needs_evidence = true;
+    AddCandidate(EffectType::kJointErrorCurve, name, k, f).needs_evidence = true;
+    AddCandidate(EffectType::kStiffeningSpring, name, k, f).needs_evidence = true;
   }
 }
 
@@ -420,8 +327,7 @@ void EffectModel::AddJointOrigins() {
   for (int k = 0; k < model.nq(); ++k) {
     const FrameId f = model.joint_frame(k);
     if (!on_path_[f]) continue;
-    AddCandidate(EffectType::kJointOrigin, chain_->q_joints[k], k, f, 6, 1e-6, "m, rad")
-        .generic_geometry = true;
+    AddCandidate(EffectType::kJointOrigin, chain_->q_joints[k], k, f).generic_geometry = true;
   }
 }
 
@@ -844,7 +750,6 @@ inline Eigen::Vector2d LateralLoadOf(const ConfigLoads& L, int k, double payload
 }
 
 // The stiffening spring's reference torque tau0 [N m].
-constexpr double kSpringTau0 = 10.0;
 
 // The moment at a link's middle (start joint axes; `slot`: the link's entry in the loads) with
 // the payload's share.
@@ -867,7 +772,8 @@ inline void AddLoadDriven(const Candidate& c, const ConfigLoads& L, double tau, 
       *dq += t[0] * Flank(L, c.q_index, tau);
       break;
     case EffectType::kStiffeningSpring:
-      *dq += t[0] * tau + t[1] * tau * tau * tau / (kSpringTau0 * kSpringTau0);
+      *dq += t[0] * tau + t[1] * tau * tau * tau /
+                              (kinematics::kStiffeningTau0Nm * kinematics::kStiffeningTau0Nm);
       break;
     default:
       break;
@@ -1281,7 +1187,8 @@ void EffectModel::JointTangents(const Candidate& c, const Eigen::VectorXd& q, co
     case EffectType::kStiffeningSpring: {
       const double tau = Load(JointLoad(L, c.q_index, ws));
       out[0] = joint(tau);
-      out[1] = joint(tau * tau * tau / (kSpringTau0 * kSpringTau0));
+      out[1] =
+          joint(tau * tau * tau / (kinematics::kStiffeningTau0Nm * kinematics::kStiffeningTau0Nm));
       break;
     }
     default:

@@ -79,6 +79,7 @@
 #include <string>
 #include <vector>
 
+#include "estimators/kinematics/effect_table.h"
 #include "estimators/kinematics/ppoe_data.h"
 #include "estimators/kinematics/ppoe_model.h"
 #include "sim/declared_chain.h"
@@ -88,25 +89,8 @@ namespace flexbench::identify {
 
 using kinematics::FrameId;
 
-enum class EffectType {
-  kJointOffset,
-  kJointCompliance,
-  kBacklash,
-  kLinkLength,
-  kLinkOffset,
-  kAxisTilt,
-  kLinkBending,
-  kBaseCompliance,
-  kThermalExpansion,
-  kPayload,
-  kCameraOffset,
-  kJointOrigin,
-  kTransmissionError,
-  kJointErrorCurve,
-  kStiffeningSpring,
-  kGravityTilt,
-  kLateralCompliance,
-};
+// The effect families are the rows of kinematics' effect table.
+using EffectType = kinematics::EffectKind;
 
 const char* ToString(EffectType type);
 
@@ -329,8 +313,7 @@ class EffectModel {
   void FindMount();
   void SetTiltAxes();
   // A candidate at the end of candidates_, with its family's bounds (for more fields).
-  Candidate& AddCandidate(EffectType type, const std::string& location, int q, FrameId f,
-                          int num_params, double step, const char* unit);
+  Candidate& AddCandidate(EffectType type, const std::string& location, int q, FrameId f);
   // The candidates family by family, in candidates_' order: per joint (offset, tilts, link
   // offset, compliance, backlash), link lengths, link bending (with prev_joint_, link_dir_), the
   // tools' offsets, the chain-wide ones (base compliance, thermal expansion, camera, payload),

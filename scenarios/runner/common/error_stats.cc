@@ -1,6 +1,5 @@
 #include "scenarios/runner/common/error_stats.h"
 
-
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
@@ -26,7 +25,6 @@ void MeanStdMax(const std::vector<double>& v, double* mean, double* stdev, doubl
 }
 
 }  // namespace
-
 
 namespace {
 template <int N>

@@ -1289,17 +1289,10 @@ class ClosedLoopKind : public ScenarioKind {
     bool load_named = true;
     for (const std::string& t : truth_names_) {
       const int c = em_->FindCandidate(t);
-      if (c < 0 || !IsLoadDriven(em_->candidates()[c].type)) continue;
+      if (c < 0 || !kinematics::Row(em_->candidates()[c].type).load_driven) continue;
       load_named &= std::find(found.begin(), found.end(), t) != found.end();
     }
     (*m)["load_effects_named"] = load_named;
-  }
-
-  static bool IsLoadDriven(identify::EffectType t) {
-    using T = identify::EffectType;
-    return t == T::kJointCompliance || t == T::kBacklash || t == T::kLinkBending ||
-           t == T::kBaseCompliance || t == T::kPayload || t == T::kStiffeningSpring ||
-           t == T::kLateralCompliance;
   }
 
   // The fitted tracker pose against the truth's: the error of xi (T = T_ref Exp(xi)) under the

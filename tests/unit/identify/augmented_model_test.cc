@@ -9,6 +9,7 @@
 
 #include "estimators/error.h"
 #include "estimators/estimator.h"
+#include "estimators/kinematics/effect_table.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "scenarios/identify/effect_model.h"
 #include "sim/declared_chain.h"
@@ -250,6 +251,61 @@ TEST_P(AugmentedModel, ParameterStdsMatchMonteCarloThroughTheIdentificationModel
 }
 
 INSTANTIATE_TEST_SUITE_P(Arms, AugmentedModel, ::testing::Values("arm4", "rover_arm"));
+
+// Every row of the effect table has its maths in both layers: the identification offers it as a
+// candidate (on rover_arm, with its mast camera and gravity's tilt), its values move the pose the
+// identification predicts, and a declared file holding it builds a chain that predicts the same.
+// A row added without its maths fails here. The camera's offset moves the camera, not the hand;
+// a payload and gravity's tilt act only through the load-driven terms (here with j2's gear).
+TEST(EffectTable, EveryRowHasItsMaths) {
+  const auto rig = MakeRig("rover_arm");
+  EffectModel em(rig->m, rig->chain, rig->chain.end_effector, "mast_camera", {}, true);
+  std::mt19937_64 rng(16);
+  const std::vector<Eigen::VectorXd> qs = Configurations(rig->chain.model.nq(), rng);
+  EffectModel::Workspace ws = em.MakeWorkspace();
+  const int gear = em.FindCandidate("joint_compliance@j2");
+  ASSERT_GE(gear, 0);
+  for (int kind = 0; kind < kinematics::kNumEffectKinds; ++kind) {
+    const kinematics::EffectRow& row = kinematics::EffectTable()[kind];
+    SCOPED_TRACE(row.name);
+    ASSERT_EQ(static_cast<int>(row.kind), kind);
+    ASSERT_EQ(kinematics::Row(row.kind).name, row.name);
+    int offered = 0;
+    double moved = 0.0;
+    for (size_t c = 0; c < em.candidates().size(); ++c) {
+      const Candidate& cand = em.candidates()[c];
+      if (static_cast<int>(cand.type) != kind) continue;
+      ++offered;
+      EXPECT_EQ(cand.num_params, row.num_values);
+      if (row.kind == kinematics::EffectKind::kCameraOffset) continue;
+      const bool through_loads = row.kind == kinematics::EffectKind::kPayload ||
+                                 row.kind == kinematics::EffectKind::kGravityTilt;
+      std::vector<int> set = {static_cast<int>(c)};
+      std::vector<double> v = Values(cand, rng);
+      sim::DeclaredModel aug = rig->declared;
+      aug.identified_effects.push_back({cand.Name(), v, {}, cand.unit, "test:1", {}});
+      const std::vector<int> base = through_loads ? std::vector<int>{gear} : std::vector<int>{};
+      const std::vector<double> base_v = {-2e-3};
+      if (through_loads) {
+        set.push_back(gear);
+        v.push_back(base_v[0]);
+        aug.identified_effects.push_back(
+            {"joint_compliance@j2", base_v, {}, "rad/Nm", "test:2", {}});
+      }
+      const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
+      for (const Eigen::VectorXd& q : qs) {
+        const lie::SE3 with = em.PredictPose(q, em.Loads(q), set, v.data(), ws);
+        const lie::SE3 without = em.PredictPose(q, em.Loads(q), base, base_v.data(), ws);
+        moved = std::max(moved, (with.translation() - without.translation()).norm());
+        ExpectSamePose(AugmentedPose(chain, q), with, cand.Name());
+      }
+    }
+    EXPECT_GT(offered, 0) << "no candidate offers it";
+    for (int k = 0; k < row.num_values; ++k) EXPECT_LE(row.lower[k], row.upper[k]);
+    if (row.kind == kinematics::EffectKind::kCameraOffset) continue;
+    EXPECT_GT(moved, 1e-6) << "its values do not move the hand";
+  }
+}
 
 // Every registered estimator, given the effects, believes what the same estimator believes
 // without them when handed the corrected model and joint angles directly.
