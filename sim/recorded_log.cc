@@ -152,7 +152,6 @@ using log_internal::ClockOffset;
 using log_internal::ContactsCsv;
 using log_internal::ContactsYaml;
 using log_internal::kMaxLogTime;
-using log_internal::Num;
 using log_internal::OrientationsCsv;
 using log_internal::PosesYaml;
 using log_internal::PositionsCsv;
