@@ -2,8 +2,8 @@
 // end-effector points in 4 sets, 30 candidate effects, two of them in the data (a gear
 // compliance at j2, an encoder offset at j3). BM_Identify runs every stage (loads, selection
 // cross-validated over the 4 sets, diagnostics, alternatives, equivalence sets, covariance,
-// shares); target at most 10 s. BM_IdentifyBicOnly is the same without cross-validation (the
-// issue-8 selection), for the ratio. BM_Predict is one augmented forward kinematics.
+// shares); target at most 10 s. BM_IdentifyBicOnly is the same without cross-validation (BIC
+// alone), for the ratio. BM_Predict is one augmented forward kinematics.
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true; quote medians.
 #include <benchmark/benchmark.h>
 
