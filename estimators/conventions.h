@@ -27,6 +27,9 @@ using Mat4 = Eigen::Matrix4d;
 using Mat6 = Eigen::Matrix<double, 6, 6>;
 using Quat = Eigen::Quaterniond;
 
+// Radians in a degree: deg * kDeg is rad, rad / kDeg is deg (files and messages speak degrees).
+inline constexpr double kDeg = M_PI / 180.0;
+
 // Block offsets of xi = [rho; theta].
 inline constexpr int kTransIdx = 0;
 inline constexpr int kRotIdx = 3;

@@ -14,6 +14,10 @@ class InputError : public std::runtime_error {
   explicit InputError(const std::string& what) : std::runtime_error(what) {}
 };
 
+// A caller's bug (a broken precondition of the code, never the user's input: an enum out of
+// range, buffers of the wrong size, data of another model) throws std::invalid_argument: the
+// runner reports it as an internal error (exit 1), not as bad input.
+
 // A simulation that diverged or did not converge; names the model and the step.
 class SimulationError : public std::runtime_error {
  public:

@@ -12,9 +12,8 @@
 // __builtin_cpu_supports("x86-64-v3") (ForwardKinematicsWithCovariance: 4-wide transports on
 // x86-64-v3, 2-wide SSE2 ones on the baseline, where GCC's split of the 4-wide code went through
 // memory for the lane shuffles). The baseline's 2-wide code does every element's operations in
-// its 4-wide lane's order, so it keeps the same bits (tested); with it the 7-DoF FK with
-// covariance is ~520 ns on the baseline against ~470 on x86-64-v3 (the bound: 550 ns with
-// the bits kept, so no non-identical variant was needed).
+// its 4-wide lane's order, so it keeps the same bits (tested), close enough to the x86-64-v3
+// path in speed (bench_kinematics) that no variant with other bits is needed.
 #pragma once
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && \

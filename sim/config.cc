@@ -169,6 +169,16 @@ std::vector<std::string> RecordedInputFiles() {
   return {InputFiles().begin(), InputFiles().end()};
 }
 
+void NoteFormerName(const std::string& where, const std::string& former,
+                    const std::string& current) {
+  const std::string line = "[flexbench] note: " + CapForMessage(where) + ": '" + former +
+                           "' is the former name of '" + current + "'; read as '" + current + "'\n";
+  static std::mutex mutex;
+  static std::set<std::string> noted;
+  const std::lock_guard<std::mutex> lock(mutex);
+  if (noted.insert(line).second) std::fputs(line.c_str(), stderr);
+}
+
 ConfigOverride ParseOverride(const std::string& arg) {
   const size_t eq = arg.find('=');
   const std::string shown = "--set '" + CapForMessage(arg) + "'";

@@ -40,6 +40,12 @@ void CheckInputFile(const std::string& path, std::uintmax_t max_bytes);
 std::vector<std::string> RecordedInputFiles();
 void RecordInputFile(const std::string& path);
 
+// A file spelled a name its former way (`former` for `current`): read as the current name, with
+// one "[flexbench] note:" line on stderr naming `where`, once per place and process (a rig that
+// loads one model many times says it once).
+void NoteFormerName(const std::string& where, const std::string& former,
+                    const std::string& current);
+
 // A command-line override of one scenario key (`--set KEY=VALUE`): `key` a dotted path
 // (estimators.ppoe_ekf.iterations), `value` YAML text (3, [1, 2], {a: 1}, text).
 struct ConfigOverride {

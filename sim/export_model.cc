@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "estimators/kinematics/model_effects.h"
 #include "sim/declared_chain.h"
 #include "sim/mujoco_model.h"
@@ -33,8 +34,11 @@ bool IsGeometric(const std::string& type) {
 std::string TypeOf(const std::string& effect) { return effect.substr(0, effect.find('@')); }
 
 // The gear-stiffness annotations of the truth's joint_compliance effect (sim/effects).
-constexpr char kGearText[] = "effect:joint_elasticity";
-constexpr char kGearNumbers[] = "effect:joint_elasticity:stiffness";
+constexpr char kGearText[] = "effect:joint_compliance";
+constexpr char kGearNumbers[] = "effect:joint_compliance:stiffness";
+// Their former names: read, and replaced by the current ones in what is written.
+constexpr char kFormerGearText[] = "effect:joint_elasticity";
+constexpr char kFormerGearNumbers[] = "effect:joint_elasticity:stiffness";
 
 // MuJoCo's camera looks along -z with y up; the declared chain's optical frame has y down.
 const SE3 kMjcamOptical(Mat3(Vec3(1.0, -1.0, -1.0).asDiagonal()), Vec3::Zero());
@@ -125,15 +129,9 @@ SE3 PoseOf(const double* pos, const double* quat) {
   return SE3(QuatFromWxyz(quat).normalized(), Eigen::Map<const Vec3>(pos));
 }
 
-std::string Num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof(b), "%.17g", v);
-  return b;
-}
-
 std::string Nums(const double* v, int n) {
   std::string s;
-  for (int k = 0; k < n; ++k) s += (k ? " " : "") + Num(v[k]);
+  for (int k = 0; k < n; ++k) s += (k ? " " : "") + ExactNum(v[k]);
   return s;
 }
 
@@ -199,7 +197,7 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
         const int b = body - 1;  // written first inside its body
         SetAttribute(&line, "pos", Nums(m->body_ipos + 3 * b, 3));
         SetAttribute(&line, "quat", Nums(m->body_iquat + 4 * b, 4));
-        SetAttribute(&line, "mass", Num(m->body_mass[b]));
+        SetAttribute(&line, "mass", ExactNum(m->body_mass[b]));
         SetAttribute(&line, "diaginertia", Nums(m->body_inertia + 3 * b, 3));
       } else if (is("geom")) {
         if (m->geom_type[geom] != mjGEOM_MESH) {
@@ -235,8 +233,12 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
 std::map<std::string, double> GearStiffness(const mjModel* m, const DeclaredChain& full,
                                             std::vector<std::string>* skipped) {
   std::map<std::string, double> k;
-  const int t = mj_name2id(m, mjOBJ_TEXT, kGearText);
-  const int n = mj_name2id(m, mjOBJ_NUMERIC, kGearNumbers);
+  int t = mj_name2id(m, mjOBJ_TEXT, kGearText);
+  int n = mj_name2id(m, mjOBJ_NUMERIC, kGearNumbers);
+  if (t < 0 && n < 0) {
+    t = mj_name2id(m, mjOBJ_TEXT, kFormerGearText);
+    n = mj_name2id(m, mjOBJ_NUMERIC, kFormerGearNumbers);
+  }
   if (t >= 0 && n >= 0) {
     std::istringstream names(std::string(m->text_data + m->text_adr[t]));  // NUL-terminated
     std::string name;
@@ -257,7 +259,7 @@ std::map<std::string, double> GearStiffness(const mjModel* m, const DeclaredChai
 
 // The saved XML with the gear annotation replaced by `k` (nothing when empty).
 std::string WithGearAnnotation(std::string xml, const std::map<std::string, double>& k) {
-  for (const char* name : {kGearText, kGearNumbers}) {
+  for (const char* name : {kGearText, kGearNumbers, kFormerGearText, kFormerGearNumbers}) {
     const size_t at = xml.find(std::string("name=\"") + name + "\"");
     if (at == std::string::npos) continue;
     const size_t start = xml.rfind('\n', at) + 1;
@@ -267,7 +269,7 @@ std::string WithGearAnnotation(std::string xml, const std::map<std::string, doub
   std::string joints, values;
   for (const auto& [j, v] : k) {
     joints += (joints.empty() ? "" : " ") + j;
-    values += (values.empty() ? "" : " ") + Num(v);
+    values += (values.empty() ? "" : " ") + ExactNum(v);
   }
   const std::string lines = "    <text name=\"" + std::string(kGearText) + "\" data=\"" + joints +
                             "\"/>\n    <numeric name=\"" + kGearNumbers + "\" size=\"" +
@@ -420,8 +422,8 @@ class UrdfWriter {
       std::string type = hinge ? "continuous" : "prismatic";
       if (m_->jnt_limited[j]) {
         type = hinge ? "revolute" : "prismatic";
-        extra += "    <limit lower=\"" + Num(m_->jnt_range[2 * j]) + "\" upper=\"" +
-                 Num(m_->jnt_range[2 * j + 1]) + "\" effort=\"0\" velocity=\"0\"/>\n";
+        extra += "    <limit lower=\"" + ExactNum(m_->jnt_range[2 * j]) + "\" upper=\"" +
+                 ExactNum(m_->jnt_range[2 * j + 1]) + "\" effort=\"0\" velocity=\"0\"/>\n";
       }
       if (j + 1 < j0 + nj) Link(link, -1, SE3());
       Joint(jname, type, prev, link, origin, extra);
@@ -447,9 +449,9 @@ class UrdfWriter {
     const SE3 I = L.Inverse() * PoseOf(m_->body_ipos + 3 * b, m_->body_iquat + 4 * b);
     const double* d = m_->body_inertia + 3 * b;
     u_ << "  <link name=\"" << name << "\">\n    <inertial>\n      " << Origin(I)
-       << "\n      <mass value=\"" << Num(m_->body_mass[b]) << "\"/>\n      <inertia ixx=\""
-       << Num(d[0]) << "\" ixy=\"0\" ixz=\"0\" iyy=\"" << Num(d[1]) << "\" iyz=\"0\" izz=\""
-       << Num(d[2]) << "\"/>\n    </inertial>\n  </link>\n";
+       << "\n      <mass value=\"" << ExactNum(m_->body_mass[b]) << "\"/>\n      <inertia ixx=\""
+       << ExactNum(d[0]) << "\" ixy=\"0\" ixz=\"0\" iyy=\"" << ExactNum(d[1])
+       << "\" iyz=\"0\" izz=\"" << ExactNum(d[2]) << "\"/>\n    </inertial>\n  </link>\n";
   }
 
   // Sites, cameras and (named) geoms as fixed links named as they are.
@@ -542,7 +544,7 @@ ConvertedUrdf UrdfToMjcf(const std::string& urdf_path, double kp) {
     throw InputError(CapForMessage(urdf_path) + ": not a URDF file (.urdf)");
   }
   if (!(kp > 0.0 && std::isfinite(kp))) {
-    throw InputError(CapForMessage(urdf_path) + ": servo kp " + Num(kp) +
+    throw InputError(CapForMessage(urdf_path) + ": servo kp " + ExactNum(kp) +
                      ": expected a positive number (N m/rad, N/m)");
   }
   ConvertedUrdf out;
@@ -555,8 +557,8 @@ ConvertedUrdf UrdfToMjcf(const std::string& urdf_path, double kp) {
     throw std::logic_error("convert: MuJoCo's saved XML has no <compiler> line");
   }
   std::string line = xml.substr(compiler, compiler_end - compiler);
-  SetAttribute(&line, "boundmass", Num(kUrdfBoundMass));
-  SetAttribute(&line, "boundinertia", Num(kUrdfBoundInertia));
+  SetAttribute(&line, "boundmass", ExactNum(kUrdfBoundMass));
+  SetAttribute(&line, "boundinertia", ExactNum(kUrdfBoundInertia));
   xml.replace(compiler, compiler_end - compiler, line);
   std::string servos;
   for (int j = 0; j < m->njnt; ++j) {
@@ -566,7 +568,7 @@ ConvertedUrdf UrdfToMjcf(const std::string& urdf_path, double kp) {
       continue;
     }
     servos += "    <position name=\"" + XmlEscaped(name) + "\" joint=\"" + XmlEscaped(name) +
-              "\" kp=\"" + Num(kp) + "\"/>\n";
+              "\" kp=\"" + ExactNum(kp) + "\"/>\n";
     out.servoed.push_back(name);
   }
   if (!servos.empty()) {

@@ -10,7 +10,7 @@
 //   - gravity_tilt@base turns <option gravity>;
 //   - joint_compliance (and stiffening_spring's linear term) become the gear-stiffness
 //     annotations the truth's joint_compliance effect reads (<custom> text
-//     effect:joint_elasticity and numeric effect:joint_elasticity:stiffness, k = -1/c). Not
+//     effect:joint_compliance and numeric effect:joint_compliance:stiffness, k = -1/c). Not
 //     <joint stiffness>: that spring pulls the link towards a fixed springref, whereas a gear
 //     spring sits between the motor and the link, which is what the truth effect simulates.
 // Everything else (backlash, link_bending, base_compliance, payload, transmission_error,

@@ -3,6 +3,8 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "sim/config.h"
+#include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
 
 namespace flexbench::sim {
@@ -118,19 +120,37 @@ void ReadCouplings(const mjModel* m, ModelCatalog* c) {
   }
 }
 
+// "effect:NAME[:param]" -> "NAME[:param]" with a former effect name read as its current one.
+std::string EffectField(const std::string& field, const std::string& model_name) {
+  const std::string tag = field.substr(sizeof(kEffectPrefix) - 1);
+  const size_t colon = tag.find(':');
+  const std::string effect = tag.substr(0, colon);
+  const std::string current = CanonicalEffectName(effect);
+  if (current.empty() || current == effect) return tag;
+  NoteFormerName(model_name + ": <custom> " + field, effect, current);
+  return current + (colon == std::string::npos ? "" : tag.substr(colon));
+}
+
+template <class Map, class Value>
+void PutField(Map* fields, const std::string& field, Value value, const ModelCatalog& c) {
+  const std::string key = EffectField(field, c.model_name);
+  if (!fields->emplace(key, std::move(value)).second) {
+    throw InputError(c.model_name + ": <custom> names effect:" + key +
+                     " twice (once by a former name)");
+  }
+}
+
 void ReadEffectFields(const mjModel* m, ModelCatalog* c) {
   for (int t = 0; t < m->ntext; ++t) {
     const std::string name = ObjectName(m, mjOBJ_TEXT, t);
     if (name.rfind(kEffectPrefix, 0) != 0) continue;
-    const std::string effect = name.substr(sizeof(kEffectPrefix) - 1);
-    c->effect_parts[effect] = SplitWords(m->text_data + m->text_adr[t]);
+    PutField(&c->effect_parts, name, SplitWords(m->text_data + m->text_adr[t]), *c);
   }
   for (int n = 0; n < m->nnumeric; ++n) {
     const std::string name = ObjectName(m, mjOBJ_NUMERIC, n);
     if (name.rfind(kEffectPrefix, 0) != 0) continue;
     const double* data = m->numeric_data + m->numeric_adr[n];
-    c->effect_numbers[name.substr(sizeof(kEffectPrefix) - 1)] =
-        std::vector<double>(data, data + m->numeric_size[n]);
+    PutField(&c->effect_numbers, name, std::vector<double>(data, data + m->numeric_size[n]), *c);
   }
 }
 
@@ -141,8 +161,7 @@ void AssignEffectJoints(const mjModel* m, ModelCatalog* c) {
       const int j = mj_name2id(m, mjOBJ_JOINT, part.c_str());
       if (j < 0) continue;  // bodies (payload, thermal expansion) are checked by their effect
       JointEntry& e = c->joints[j];
-      if (e.role == JointRole::kActuated)
-        continue;  // joint_compliance (tagged joint_elasticity), backlash
+      if (e.role == JointRole::kActuated) continue;  // joint_compliance, backlash
       if (!e.effect.empty() && e.effect != effect) {
         throw InputError(c->model_name + ": joint '" + part + "' is listed by effect:" + e.effect +
                          " and effect:" + effect);

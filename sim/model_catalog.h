@@ -3,8 +3,9 @@
 // and which model parts each effect acts on.
 //
 // MJCF convention (models/*.xml): effects name their parts in <custom> fields,
-//   <text name="effect:base_plate_compliance" data="plate_pitch plate_roll"/>
-//   <numeric name="effect:joint_elasticity:stiffness" data="120 80"/>
+//   <text name="effect:base_compliance" data="plate_pitch plate_roll"/>
+//   <numeric name="effect:joint_compliance:stiffness" data="120 80"/>
+// (an effect's former name is still read, with a note: effect:joint_elasticity).
 // A passive joint is a hinge or slide without an actuator; a coupled joint is joint1 of an
 // active two-joint <equality><joint> (its value is a polynomial of joint2, e.g. a linkage), or
 // the one joint without an actuator in a fixed tendon that an active one-tendon

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "sim/config.h"
 #include "sim/csv.h"
 #include "sim/recorded_log_streams.h"
@@ -92,12 +93,6 @@ double RowTime(const std::string& cell, const std::string& where, double offset,
   return t + offset;
 }
 
-std::string Num(double v) {
-  char b[40];
-  std::snprintf(b, sizeof(b), "%.17g", v);
-  return b;
-}
-
 size_t ReadHeader(CsvLines* csv, const std::string& file, const std::vector<std::string>& want,
                   size_t optional) {
   std::vector<std::string> header;
@@ -157,7 +152,6 @@ using log_internal::ClockOffset;
 using log_internal::ContactsCsv;
 using log_internal::ContactsYaml;
 using log_internal::kMaxLogTime;
-using log_internal::Num;
 using log_internal::OrientationsCsv;
 using log_internal::PosesYaml;
 using log_internal::PositionsCsv;
@@ -376,17 +370,17 @@ std::string LogYaml(const RecordedLog& log) {
   y << "# A recorded log (flexbench replay reads it).\n";
   if (!log.robot.empty()) y << "robot: " << log.robot << "\n";
   y << "declared: " << log.declared_path << "\njoints: {file: joints.csv";
-  if (log.joint_std > 0.0) y << ", std_rad: " << Num(log.joint_std);
+  if (log.joint_std > 0.0) y << ", std_rad: " << ExactNum(log.joint_std);
   y << "}\n";
   if (!log.imus.empty()) {
     y << "imu:\n  file: imu.csv\n  sensors:\n";
     for (const LogImu& imu : log.imus) {
       y << "    " << imu.name << ": {frame: " << imu.frame
-        << ", filter_beta: " << Num(imu.filter_beta);
+        << ", filter_beta: " << ExactNum(imu.filter_beta);
       if (imu.has_initial) {
         const Quat& q = imu.q_base_frame_initial;
-        y << ", initial_wxyz: [" << Num(q.w()) << ", " << Num(q.x()) << ", " << Num(q.y()) << ", "
-          << Num(q.z()) << "]";
+        y << ", initial_wxyz: [" << ExactNum(q.w()) << ", " << ExactNum(q.x()) << ", "
+          << ExactNum(q.y()) << ", " << ExactNum(q.z()) << "]";
       }
       y << "}\n";
     }
@@ -442,8 +436,8 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
   }
   j << "\n";
   for (size_t r = 0; r < log.joint_t.size(); ++r) {
-    j << Num(log.joint_t[r]);
-    for (size_t k = 0; k < log.joints.size(); ++k) j << "," << Num(log.q(r)[k]);
+    j << ExactNum(log.joint_t[r]);
+    for (size_t k = 0; k < log.joints.size(); ++k) j << "," << ExactNum(log.q(r)[k]);
     j << "\n";
   }
   WriteText(tmp / "joints.csv", j.str());
@@ -451,9 +445,9 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
     std::ostringstream i;
     i << "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n";
     for (const estimators::ImuReading& z : log.imu) {
-      i << Num(z.t) << "," << log.imus[z.imu].name;
-      for (int a = 0; a < 3; ++a) i << "," << Num(z.gyro[a]);
-      for (int a = 0; a < 3; ++a) i << "," << Num(z.accel[a]);
+      i << ExactNum(z.t) << "," << log.imus[z.imu].name;
+      for (int a = 0; a < 3; ++a) i << "," << ExactNum(z.gyro[a]);
+      for (int a = 0; a < 3; ++a) i << "," << ExactNum(z.accel[a]);
       i << "\n";
     }
     WriteText(tmp / "imu.csv", i.str());
@@ -464,8 +458,9 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
     for (size_t r = 0; r < log.truth_t.size(); ++r) {
       const Vec3& p = log.truth[r].translation();
       const Quat q(log.truth[r].rotation());
-      t << Num(log.truth_t[r]) << " " << Num(p.x()) << " " << Num(p.y()) << " " << Num(p.z()) << " "
-        << Num(q.x()) << " " << Num(q.y()) << " " << Num(q.z()) << " " << Num(q.w()) << "\n";
+      t << ExactNum(log.truth_t[r]) << " " << ExactNum(p.x()) << " " << ExactNum(p.y()) << " "
+        << ExactNum(p.z()) << " " << ExactNum(q.x()) << " " << ExactNum(q.y()) << " "
+        << ExactNum(q.z()) << " " << ExactNum(q.w()) << "\n";
     }
     WriteText(tmp / "truth.tum", t.str());
   }

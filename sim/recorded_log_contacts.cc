@@ -4,7 +4,9 @@
 #include <cmath>
 #include <sstream>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "sim/csv.h"
 #include "sim/recorded_log_streams.h"
 
@@ -15,8 +17,6 @@ const std::vector<std::string>& ContactsHeader() {
   static const std::vector<std::string> h = {"t_s", "point", "plane", "distance_m", "std_m"};
   return h;
 }
-
-constexpr double kDeg = M_PI / 180.0;
 
 LogPlane ReadPlane(const std::string& name, const ConfigNode& p) {
   LogPlane plane;
@@ -112,16 +112,16 @@ std::string ContactsYaml(const RecordedLog& log) {
   for (const LogPlane& p : log.planes) {
     const Vec3& t = p.T_base_plane.translation();
     const Quat& q = p.q_base_plane;
-    y << "    " << p.name << ": {T_base_plane: [" << Num(t.x()) << ", " << Num(t.y()) << ", "
-      << Num(t.z()) << ", " << Num(q.w()) << ", " << Num(q.x()) << ", " << Num(q.y()) << ", "
-      << Num(q.z()) << "], std: [";
-    for (int i = 0; i < 6; ++i) y << (i ? ", " : "") << Num(p.std[i]);
+    y << "    " << p.name << ": {T_base_plane: [" << ExactNum(t.x()) << ", " << ExactNum(t.y())
+      << ", " << ExactNum(t.z()) << ", " << ExactNum(q.w()) << ", " << ExactNum(q.x()) << ", "
+      << ExactNum(q.y()) << ", " << ExactNum(q.z()) << "], std: [";
+    for (int i = 0; i < 6; ++i) y << (i ? ", " : "") << ExactNum(p.std[i]);
     y << "]}\n";
   }
   y << "  points:\n";
   for (const LogContactPoint& p : log.contact_points) {
-    y << "    " << p.name << ": {frame: " << p.frame << ", p_frame_m: [" << Num(p.p_frame.x())
-      << ", " << Num(p.p_frame.y()) << ", " << Num(p.p_frame.z()) << "]}\n";
+    y << "    " << p.name << ": {frame: " << p.frame << ", p_frame_m: [" << ExactNum(p.p_frame.x())
+      << ", " << ExactNum(p.p_frame.y()) << ", " << ExactNum(p.p_frame.z()) << "]}\n";
   }
   return y.str();
 }
@@ -131,8 +131,8 @@ std::string ContactsCsv(const RecordedLog& log) {
   const std::vector<std::string>& h = ContactsHeader();
   c << HeaderLine(h);
   for (const LogContactRow& r : log.contacts) {
-    c << Num(r.t) << "," << log.contact_points[r.point].name << "," << log.planes[r.plane].name
-      << "," << Num(r.distance_m) << "," << Num(r.std_m) << "\n";
+    c << ExactNum(r.t) << "," << log.contact_points[r.point].name << "," << log.planes[r.plane].name
+      << "," << ExactNum(r.distance_m) << "," << ExactNum(r.std_m) << "\n";
   }
   return c.str();
 }

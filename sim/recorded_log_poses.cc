@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "sim/csv.h"
 #include "sim/recorded_log_streams.h"
 
@@ -109,7 +110,7 @@ std::string PosesYaml(const RecordedLog& log) {
 
 std::string PosturesCsv(const RecordedLog& log) {
   std::string c = HeaderLine({"t_s"});
-  for (double t : log.posture_starts) c += Num(t) + "\n";
+  for (double t : log.posture_starts) c += ExactNum(t) + "\n";
   return c;
 }
 
@@ -119,8 +120,8 @@ std::string OrientationsCsv(const RecordedLog& log) {
   c << HeaderLine(h);
   for (const LogOrientationRow& r : log.orientations) {
     const Quat& q = r.q_base_frame;
-    c << Num(r.t) << "," << log.sensed_frames[r.frame] << "," << Num(q.w()) << "," << Num(q.x())
-      << "," << Num(q.y()) << "," << Num(q.z()) << "\n";
+    c << ExactNum(r.t) << "," << log.sensed_frames[r.frame] << "," << ExactNum(q.w()) << ","
+      << ExactNum(q.x()) << "," << ExactNum(q.y()) << "," << ExactNum(q.z()) << "\n";
   }
   return c.str();
 }
@@ -130,8 +131,9 @@ std::string PositionsCsv(const RecordedLog& log) {
   const std::vector<std::string>& h = PositionsHeader();
   c << HeaderLine(h);
   for (const LogPositionRow& r : log.positions) {
-    c << Num(r.t) << "," << log.sensed_frames[r.frame] << "," << Num(r.p_base.x()) << ","
-      << Num(r.p_base.y()) << "," << Num(r.p_base.z()) << "," << Num(r.std_m) << "\n";
+    c << ExactNum(r.t) << "," << log.sensed_frames[r.frame] << "," << ExactNum(r.p_base.x()) << ","
+      << ExactNum(r.p_base.y()) << "," << ExactNum(r.p_base.z()) << "," << ExactNum(r.std_m)
+      << "\n";
   }
   return c.str();
 }

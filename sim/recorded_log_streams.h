@@ -36,9 +36,6 @@ std::uintmax_t CheckRows(const std::string& file, double bytes_per_row, double* 
 double RowTime(const std::string& cell, const std::string& where, double offset, double* last,
                bool has_last);
 
-// 17 significant digits: a number written reads back as itself.
-std::string Num(double v);
-
 // Reads the stream file's header, which must be `want` exactly, or `want` without its last
 // `optional` columns (InputError naming its line and the column count or the first column that
 // differs). Returns its column count.

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "sim/csv.h"
 #include "sim/recorded_log_streams.h"
 
@@ -28,7 +29,7 @@ const std::vector<std::string>& TagsHeader(bool centres) {
 
 double Positive(const ConfigNode& c, const std::string& key, double max) {
   const double v = c.GetDouble(key);
-  if (!(v > 0.0 && v <= max)) c.Child(key).Fail("must be > 0 and at most " + Num(max));
+  if (!(v > 0.0 && v <= max)) c.Child(key).Fail("must be > 0 and at most " + ExactNum(max));
   return v;
 }
 
@@ -209,19 +210,20 @@ std::string TagsYaml(const RecordedLog& log) {
   y << "cameras:\n";
   for (const LogCamera& c : log.cameras) {
     const PinholeCamera& k = c.intrinsics;
-    y << "  " << c.name << ": {frame: " << c.frame << ", fx: " << Num(k.fx) << ", fy: " << Num(k.fy)
-      << ", cx: " << Num(k.cx) << ", cy: " << Num(k.cy) << ", width: " << k.width
-      << ", height: " << k.height << "}\n";
+    y << "  " << c.name << ": {frame: " << c.frame << ", fx: " << ExactNum(k.fx)
+      << ", fy: " << ExactNum(k.fy) << ", cx: " << ExactNum(k.cx) << ", cy: " << ExactNum(k.cy)
+      << ", width: " << k.width << ", height: " << k.height << "}\n";
   }
   y << "tags:\n";
   if (log.images.empty()) y << "  file: tags.csv\n";
   if (log.tag_centres) y << "  measurement: centre\n";
-  y << "  pixel_std_px: " << Num(log.pixel_std_px) << "\n  ids:\n";
+  y << "  pixel_std_px: " << ExactNum(log.pixel_std_px) << "\n  ids:\n";
   for (const LogTag& t : log.tags) {
     y << "    " << t.id << ":\n      frame: " << t.frame << "\n      corners_m: [";
     for (int k = 0; k < 4; ++k) {
       const Vec3& p = t.corners_m[k];
-      y << (k ? ", " : "") << "[" << Num(p.x()) << ", " << Num(p.y()) << ", " << Num(p.z()) << "]";
+      y << (k ? ", " : "") << "[" << ExactNum(p.x()) << ", " << ExactNum(p.y()) << ", "
+        << ExactNum(p.z()) << "]";
     }
     y << "]\n";
   }
@@ -234,9 +236,9 @@ std::string TagsCsv(const RecordedLog& log) {
   const std::vector<std::string>& h = TagsHeader(log.has_centre_columns);
   c << HeaderLine(h);
   for (const LogTagRow& r : log.tag_rows) {
-    c << Num(r.t) << "," << log.cameras[r.camera].name << "," << log.tags[r.tag].id;
-    for (int k = 0; k < 4; ++k) c << "," << Num(r.uv[k].x()) << "," << Num(r.uv[k].y());
-    if (log.has_centre_columns) c << "," << Num(r.centre.x()) << "," << Num(r.centre.y());
+    c << ExactNum(r.t) << "," << log.cameras[r.camera].name << "," << log.tags[r.tag].id;
+    for (int k = 0; k < 4; ++k) c << "," << ExactNum(r.uv[k].x()) << "," << ExactNum(r.uv[k].y());
+    if (log.has_centre_columns) c << "," << ExactNum(r.centre.x()) << "," << ExactNum(r.centre.y());
     c << "\n";
   }
   return c.str();

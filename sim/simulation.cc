@@ -9,6 +9,7 @@
 #include <tuple>
 
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "sim/camera.h"
 #include "sim/truth_model.h"
 
@@ -42,12 +43,6 @@ struct StepWarningScope {
   }
   void (*previous)(const char*);
 };
-
-std::string Fmt(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), "%.6g", v);
-  return buf;
-}
 
 double DeadZone(double x, double half_width) {
   if (x > half_width) return x - half_width;
@@ -89,7 +84,7 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
   setup_.model_name = model_name_;
   setup_.released.assign(m->njnt, 0);
   setup_.gear.assign(m->njnt, GearSpec{});
-  setup_.encoder_offset.assign(m->njnt, 0.0);
+  setup_.joint_offset.assign(m->njnt, 0.0);
   // Passive joints and linkages no effect claims are part of the model's own physics: always
   // free (a linkage: always following its drivers).
   for (const JointEntry& j : catalog_.joints) {
@@ -321,8 +316,9 @@ void Simulation::SolveFreeJoints(const SettleOptions& options, Eigen::VectorXd* 
       r->cwiseAbs().maxCoeff(&worst);
       throw SimulationError(model_name_ + ": quasi-static settle did not converge in " +
                             std::to_string(options.max_iterations) + " iterations (residual " +
-                            Fmt(err) + " Nm at joint '" + catalog_.Joint(free_joints_[worst]).name +
-                            "', iteration " + std::to_string(report->iterations + it) + ")");
+                            ShortNum(err) + " Nm at joint '" +
+                            catalog_.Joint(free_joints_[worst]).name + "', iteration " +
+                            std::to_string(report->iterations + it) + ")");
     }
     DampedNewtonStep(err, report->iterations + it, x, r, x_try, r_try);
   }
@@ -463,7 +459,7 @@ void Simulation::CheckStep() const {
   }
   if (!reason.empty()) {
     throw SimulationError(model_name_ + ": simulation diverged at step " + std::to_string(steps_) +
-                          " (t = " + Fmt(steps_ * m->opt.timestep) + " s): " + reason);
+                          " (t = " + ShortNum(steps_ * m->opt.timestep) + " s): " + reason);
   }
 }
 
@@ -502,9 +498,9 @@ double Simulation::SettleDynamic(double max_time_s, double velocity_tol) {
     }
     if (worst < velocity_tol) return time() - t0;
   }
-  throw SimulationError(model_name_ + ": no equilibrium within " + Fmt(max_time_s) + " s (step " +
-                        std::to_string(steps_) + ", |qvel| = " + Fmt(worst) + " at joint '" +
-                        ObjectName(m, mjOBJ_JOINT, m->dof_jntid[worst_dof]) + "')");
+  throw SimulationError(model_name_ + ": no equilibrium within " + ShortNum(max_time_s) +
+                        " s (step " + std::to_string(steps_) + ", |qvel| = " + ShortNum(worst) +
+                        " at joint '" + ObjectName(m, mjOBJ_JOINT, m->dof_jntid[worst_dof]) + "')");
 }
 
 // ---------------------------------------------------------------- ground truth

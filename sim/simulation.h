@@ -118,7 +118,7 @@ class Simulation {
   // ---- Nominal (rigid) model.
   // Pose of a frame with the actuated joints at q (actuator order), every other joint at qpos0
   // but the linkages of the model's own mechanism (coupled joints no effect lists), which follow
-  // their drivers.
+  // their drivers. Writes the nominal model's scratch data (nominal_data_).
   Eigen::Isometry3d NominalPose(const FrameRef& frame, const Eigen::VectorXd& q) const;
   Eigen::Isometry3d NominalPose(const std::string& name, const Eigen::VectorXd& q) const {
     return NominalPose(Frame(name), q);
@@ -130,7 +130,8 @@ class Simulation {
   Eigen::VectorXd GravityTorque(const Eigen::VectorXd& q) const;
 
   // ---- Effect state read by sensors.
-  double EncoderOffset(int joint_id) const { return setup_.encoder_offset.at(joint_id); }
+  // The joint_offset effect's link - reading (0 without it): an encoder reads motor - offset.
+  double JointOffset(int joint_id) const { return setup_.joint_offset.at(joint_id); }
   ImuBiasSpec ImuBias(const std::string& site) const;
 
  private:
@@ -161,7 +162,10 @@ class Simulation {
   MjModelPtr nominal_;
   MjModelPtr truth_;
   MjDataPtr data_;
-  MjDataPtr nominal_data_;
+  // Scratch of the nominal model's queries (NominalPose, GravityTorque): each call sets every
+  // qpos it reads, so nothing carries from one call to the next and the queries stay const; but
+  // two threads may not query one Simulation at once.
+  mutable MjDataPtr nominal_data_;
   ModelCatalog catalog_;
   TruthSetup setup_;
   std::vector<std::string> effect_names_;

@@ -1,11 +1,10 @@
 #include "estimators/kinematics/effect_table.h"
 
-#include <cmath>
+#include "estimators/conventions.h"
 
 namespace flexbench::kinematics {
 namespace {
 
-constexpr double kD = M_PI / 180.0;
 using E = EffectEntry;
 using K = EffectKind;
 
@@ -16,16 +15,16 @@ constexpr std::array<double, 6> All(double x) { return {x, x, x, x, x, x}; }
 
 const std::array<EffectRow, kNumEffectKinds>& EffectTable() {
   static const std::array<EffectRow, kNumEffectKinds> table = {{
-      {K::kJointOffset, "joint_offset", 1, "rad", false, E::kReadingToAngle, 1e-6, All(-10 * kD),
-       All(10 * kD)},
+      {K::kJointOffset, "joint_offset", 1, "rad", false, E::kReadingToAngle, 1e-6, All(-10 * kDeg),
+       All(10 * kDeg)},
       {K::kJointCompliance, "joint_compliance", 1, "rad/Nm", true, E::kReadingToAngle, 1e-7,
        All(-1.0), All(0.0)},
-      {K::kBacklash, "backlash", 1, "rad", true, E::kReadingToAngle, 1e-6, All(-5 * kD),
-       All(5 * kD)},
+      {K::kBacklash, "backlash", 1, "rad", true, E::kReadingToAngle, 1e-6, All(-5 * kDeg),
+       All(5 * kDeg)},
       {K::kLinkLength, "link_length", 1, "m", false, E::kFixedTransform, 1e-6, All(-0.1), All(0.1)},
       {K::kLinkOffset, "link_offset", 3, "m", false, E::kFixedTransform, 1e-6, All(-0.1), All(0.1)},
-      {K::kAxisTilt, "joint_axis_tilt", 1, "rad", false, E::kJointAxis, 1e-6, All(-10 * kD),
-       All(10 * kD)},
+      {K::kAxisTilt, "joint_axis_tilt", 1, "rad", false, E::kJointAxis, 1e-6, All(-10 * kDeg),
+       All(10 * kDeg)},
       {K::kLinkBending, "link_bending", 1, "rad/Nm", true, E::kFixedTransform, 1e-7, All(0.0),
        All(1.0)},
       {K::kBaseCompliance, "base_compliance", 2, "rad/Nm", true, E::kMountTilt, 1e-7, All(0.0),
@@ -51,12 +50,12 @@ const std::array<EffectRow, kNumEffectKinds>& EffectTable() {
        false,
        E::kFixedTransform,
        1e-6,
-       {-0.1, -0.1, -0.1, -10 * kD, -10 * kD, -10 * kD},
-       {0.1, 0.1, 0.1, 10 * kD, 10 * kD, 10 * kD}},
+       {-0.1, -0.1, -0.1, -10 * kDeg, -10 * kDeg, -10 * kDeg},
+       {0.1, 0.1, 0.1, 10 * kDeg, 10 * kDeg, 10 * kDeg}},
       {K::kTransmissionError, "transmission_error", 4, "rad", false, E::kReadingToAngle, 1e-6,
-       All(-1 * kD), All(1 * kD)},
+       All(-1 * kDeg), All(1 * kDeg)},
       {K::kJointErrorCurve, "joint_error_curve", 6, "rad", false, E::kReadingToAngle, 1e-6,
-       All(-1 * kD), All(1 * kD)},
+       All(-1 * kDeg), All(1 * kDeg)},
       // Linear and cubic compliance: a spring that stiffens with the load.
       {K::kStiffeningSpring,
        "stiffening_spring",
@@ -67,8 +66,8 @@ const std::array<EffectRow, kNumEffectKinds>& EffectTable() {
        1e-7,
        {-1.0, 0.0},
        {0.0, 1.0}},
-      {K::kGravityTilt, "gravity_tilt", 2, "rad", true, E::kLoads, 1e-6, All(-10 * kD),
-       All(10 * kD)},
+      {K::kGravityTilt, "gravity_tilt", 2, "rad", true, E::kLoads, 1e-6, All(-10 * kDeg),
+       All(10 * kDeg)},
       {K::kLateralCompliance, "lateral_compliance", 2, "rad/Nm", true, E::kJointAxis, 1e-7,
        All(0.0), All(1e-2)},
   }};

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <cstring>
 #include <sstream>
+#include <stdexcept>
 
 #include "estimators/error.h"
 #include "estimators/lie/sincos.h"
@@ -26,7 +27,7 @@ void CheckInputs(const PpoeModel& model, const PpoeData& data,
     msg << caller << ": PpoeData was built for a model with " << data.num_frames << " frames and "
         << data.nq << " joints, but PPOE model '" << model.name() << "' has " << model.num_frames()
         << " frames and " << model.nq() << " joints";
-    throw InputError(msg.str());
+    throw std::invalid_argument(msg.str());
   }
   if (q.size() != model.nq()) {
     std::ostringstream msg;
@@ -234,13 +235,13 @@ __attribute__((target("arch=x86-64-v3"))) void CovarianceRecursionV3(
 
 namespace internal {
 
-// The baseline: two-lane (SSE2) transports. The 4-wide vector code compiled for plain x86-64 ran
-// ~840 ns (GCC splits every operation in two and lowers the lane shuffles through memory), the
-// scalar transports ~600 ns; the two-lane transport does each element's operations in the
-// vector lane's order, so both paths give the same bits (tests/unit/kinematics, lie). It runs
-// about 1.1x the x86-64-v3 path (bench_kinematics BM_ForwardKinematicsCov2Baseline; the
-// scalar transports were slower still). Besides the transports: the joints' sincos four frames
-// at a time (lie::internal::SinCos4) and no memset of the base frame's covariance per call.
+// The baseline: two-lane (SSE2) transports. 4-wide vector code compiled for plain x86-64 is slower
+// than scalar code (GCC splits every operation in two and lowers the lane shuffles through
+// memory), and scalar transports are slower than two-lane ones; the two-lane transport does each
+// element's operations in the vector lane's order, so both paths give the same bits
+// (tests/unit/kinematics, lie). bench_kinematics' BM_ForwardKinematicsCov2Baseline measures it
+// against the x86-64-v3 path. Besides the transports: the joints' sincos four frames at a time
+// (lie::internal::SinCos4) and no memset of the base frame's covariance per call.
 void ForwardKinematicsWithCovarianceBaseline(const PpoeModel& model, PpoeData& data,
                                              const Eigen::Ref<const Eigen::VectorXd>& q,
                                              lie::CompoundOrder order) {
@@ -254,8 +255,9 @@ void ForwardKinematicsWithCovariance(const PpoeModel& model, PpoeData& data,
                                      lie::CompoundOrder order) {
   CheckInputs(model, data, q, "ForwardKinematicsWithCovariance");
   if (order != lie::CompoundOrder::kSecond && order != lie::CompoundOrder::kFourth) {
-    throw InputError("ForwardKinematicsWithCovariance: order must be kSecond or kFourth, got " +
-                     std::to_string(static_cast<int>(order)));
+    throw std::invalid_argument(
+        "ForwardKinematicsWithCovariance: order must be kSecond or kFourth, got " +
+        std::to_string(static_cast<int>(order)));
   }
 #if FLEXBENCH_MULTIVERSION
   static const bool v3 = __builtin_cpu_supports("x86-64-v3");
@@ -276,8 +278,8 @@ void RelativeCovariance(const PpoeModel& model, const PpoeData& data, FrameId re
                      " does not exist in PPOE model '" + model.name() + "'");
   }
   if (static_cast<int>(data.T_base_frame.size()) != n) {
-    throw InputError("RelativeCovariance: data was built for another model than '" + model.name() +
-                     "'");
+    throw std::invalid_argument("RelativeCovariance: data was built for another model than '" +
+                                model.name() + "'");
   }
   // Lowest common ancestor: parents have smaller ids (frames are added below existing ones),
   // so step the larger id up until both meet.
@@ -314,9 +316,9 @@ void ComputeFrameJacobian(const PpoeModel& model, const PpoeData& data, FrameId 
   }
   if (J_frame_q.cols() != model.nq() ||
       static_cast<int>(data.T_base_frame.size()) != model.num_frames()) {
-    throw InputError("ComputeFrameJacobian: J_frame_q has " + std::to_string(J_frame_q.cols()) +
-                     " columns, PPOE model '" + model.name() + "' has " +
-                     std::to_string(model.nq()) + " joints");
+    throw std::invalid_argument("ComputeFrameJacobian: J_frame_q has " +
+                                std::to_string(J_frame_q.cols()) + " columns, PPOE model '" +
+                                model.name() + "' has " + std::to_string(model.nq()) + " joints");
   }
   J_frame_q.setZero();
   const SE3 T_frame_base = data.T_base_frame[frame].Inverse();

@@ -15,8 +15,8 @@ namespace flexbench::kinematics {
 using Matrix6Xd = Eigen::Matrix<double, 6, Eigen::Dynamic>;
 
 // Mean poses of all frames, [PPOE eqs. 16-17] with xi = 0: data.T_base_frame. Throws InputError if
-// q.size() != model.nq(), if any q is NaN or infinite (naming the joint), or if data was built
-// for another model.
+// q.size() != model.nq() or if any q is NaN or infinite (naming the joint);
+// std::invalid_argument if data was built for another model.
 void ForwardKinematics(const PpoeModel& model, PpoeData& data,
                        const Eigen::Ref<const Eigen::VectorXd>& q);
 
@@ -54,13 +54,15 @@ void RelativeCovariance(const PpoeModel& model, const PpoeData& data, FrameId re
 // J_frame_q (6 x nq): T_base_frame(q + dq) = T_base_frame(q) * Exp(J_frame_q dq) to first
 // order (right/local tangent, xi = [rho; theta]). Column k is Ad_{T_frame_j} zeta_j for the
 // frame j moved by q[k] if j is `frame` or one of its ancestors, else zero. Reads the mean poses
-// in `data`: call ForwardKinematics* with the same q first.
+// in `data`: call ForwardKinematics* with the same q first. Throws InputError for a frame id the
+// model lacks, std::invalid_argument when J_frame_q is not 6 x nq.
 void ComputeFrameJacobian(const PpoeModel& model, const PpoeData& data, FrameId frame,
                           Eigen::Ref<Matrix6Xd> J_frame_q);
 
 // Adds the joint readings' own noise to a frame's local covariance: Sigma += J diag(std^2) J^T
 // with J = J_frame_q at the mean poses in `data` (first order; the PPOE sources know nothing of
-// the encoders' noise). `J_frame_q` is scratch of 6 x nq. Throws InputError on sizes.
+// the encoders' noise). `J_frame_q` is scratch of 6 x nq. Throws InputError when q_std has
+// another size than nq, std::invalid_argument when J_frame_q does.
 void AddJointNoiseCovariance(const PpoeModel& model, const PpoeData& data, FrameId frame,
                              const Eigen::Ref<const Eigen::VectorXd>& q_std,
                              Eigen::Ref<Matrix6Xd> J_frame_q, Mat6* Sigma);

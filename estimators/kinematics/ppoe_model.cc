@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <stdexcept>
 #include <utility>
 
 #include "estimators/error.h"
@@ -148,8 +149,8 @@ void PpoeModel::Precompute(PpoeFrame* f, bool move_source) {
 
 void PpoeModel::SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip, bool move_source) {
   if (id <= kBaseFrame || id >= num_frames()) {
-    throw InputError("PPOE model '" + name_ + "': SetFixedTransform of frame id " +
-                     std::to_string(id) + ", which does not exist");
+    throw std::invalid_argument("PPOE model '" + name_ + "': SetFixedTransform of frame id " +
+                                std::to_string(id) + ", which does not exist");
   }
   PpoeFrame& f = frames_[id];
   f.T_parent_ip = T_parent_ip;
@@ -172,8 +173,8 @@ void PpoeModel::SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip, bool 
 
 void PpoeModel::SetSourceCovariance(FrameId id, const Mat6& source_cov) {
   if (id <= kBaseFrame || id >= num_frames()) {
-    throw InputError("PPOE model '" + name_ + "': SetSourceCovariance of frame id " +
-                     std::to_string(id) + ", which does not exist");
+    throw std::invalid_argument("PPOE model '" + name_ + "': SetSourceCovariance of frame id " +
+                                std::to_string(id) + ", which does not exist");
   }
   PpoeFrame& f = frames_[id];
   f.source_cov = source_cov;

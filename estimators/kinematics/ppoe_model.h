@@ -150,7 +150,7 @@ class PpoeModel {
   // precomputed terms; does not allocate. For a model corrected at run time (model_effects.h);
   // the caller keeps T_parent_ip a rigid transform. With move_source false the source keeps its
   // covariance at the parent (source_cov_parent), which saves a 6x6 transport when the change is
-  // a milliradian turn. Throws InputError for an unknown frame.
+  // a milliradian turn. Throws std::invalid_argument for an unknown frame.
   void SetFixedTransform(FrameId id, const lie::SE3& T_parent_ip, bool move_source = true);
 
   // Replaces frame `id`'s source covariance (at F_{i,p}) and its transport to the parent, e.g.

@@ -250,9 +250,9 @@ EIGEN_ALWAYS_INLINE void TransportBlocks(const Mat3& R_in, const Vec3& t, const 
 // TransportBlocks for CPUs without AVX2, in two-double (SSE2) vectors, every element by the same
 // operations in the same order as its lane in the 4-wide code, so the bits agree (tested): a
 // column of a 3x3 block is rows 0-1 in a V2 and row 2 alone, the lane shuffles are explicit
-// unpacks. GCC's own split of the 4-wide code lowers those shuffles through memory (7-DoF FK
-// with covariance ~840 ns); the scalar twin this replaces ran ~590 ns, this ~520 ns (see
-// ForwardKinematicsWithCovarianceBaseline). `out` may alias either input.
+// unpacks. GCC's own split of the 4-wide code lowers those shuffles through memory, and a scalar
+// twin is slower than these two lanes (bench_kinematics, ForwardKinematicsWithCovarianceBaseline).
+// `out` may alias either input.
 typedef double V2 __attribute__((vector_size(16)));
 
 struct Col3 {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <functional>
 #include <map>
+#include <stdexcept>
 #include <utility>
 
 #include "estimators/error.h"
@@ -103,9 +104,10 @@ BatchKinematics::BatchKinematics(const PpoeModel& model, const std::vector<Frame
                                  int capacity, const std::vector<bool>& translation_needed)
     : capacity_(capacity) {
   if (!translation_needed.empty() && translation_needed.size() != outputs.size()) {
-    throw InputError("BatchKinematics: translation_needed must have one flag per output");
+    throw std::invalid_argument(
+        "BatchKinematics: translation_needed must have one flag per output");
   }
-  if (capacity <= 0) throw InputError("BatchKinematics: capacity must be > 0");
+  if (capacity <= 0) throw std::invalid_argument("BatchKinematics: capacity must be > 0");
   std::map<FrameId, int> node_of_frame;
   std::function<int(FrameId)> node_for = [&](FrameId joint_frame) -> int {
     if (joint_frame == kinematics::kBaseFrame) return -1;
@@ -162,8 +164,8 @@ void BatchKinematics::Fold(const PpoeModel& model, Node* n) {
 void BatchKinematics::Refold(const PpoeModel& model) {
   for (Node& n : nodes_) {
     if (n.frame >= model.num_frames() || model.frame(n.frame).q_index != n.q_index) {
-      throw InputError("BatchKinematics: Refold with PPOE model '" + model.name() +
-                       "', which has other joints than the model it was built for");
+      throw std::invalid_argument("BatchKinematics: Refold with PPOE model '" + model.name() +
+                                  "', which has other joints than the model it was built for");
     }
     Fold(model, &n);
   }
@@ -183,8 +185,8 @@ int BatchKinematics::OutputIndex(FrameId frame) const {
 FLEXBENCH_PARTICLE_LOOP void BatchKinematics::Compute(const double* cos_q, const double* sin_q,
                                                       int stride, int n) {
   if (n > capacity_ || n < 0) {
-    throw InputError("BatchKinematics: " + std::to_string(n) + " particles for a capacity of " +
-                     std::to_string(capacity_));
+    throw std::invalid_argument("BatchKinematics: " + std::to_string(n) +
+                                " particles for a capacity of " + std::to_string(capacity_));
   }
   constexpr int B = kBlock;
   for (int start = 0; start < n; start += B) {

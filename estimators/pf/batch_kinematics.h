@@ -37,7 +37,7 @@ class BatchKinematics {
 
   // Takes the fixed parts of `model` (the model this was built for, with other T_parent_ip: a
   // corrected model, kinematics::EffectiveChain); the outputs keep their last values until the
-  // next Compute. Does not allocate. Throws InputError for a model of another shape.
+  // next Compute. Does not allocate. Throws std::invalid_argument for a model of another shape.
   void Refold(const kinematics::PpoeModel& model);
 
   int num_outputs() const { return static_cast<int>(outputs_.size()); }

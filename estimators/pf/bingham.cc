@@ -8,15 +8,15 @@
 #include <vector>
 
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "estimators/pf/bessel.h"
 
 namespace flexbench::pf {
 namespace {
 
 std::string Format(const Vec4& v) {
-  std::ostringstream s;
-  s << "[" << v(0) << ", " << v(1) << ", " << v(2) << ", " << v(3) << "]";
-  return s.str();
+  return "[" + ShortNum(v(0)) + ", " + ShortNum(v(1)) + ", " + ShortNum(v(2)) + ", " +
+         ShortNum(v(3)) + "]";
 }
 
 // Gauss-Kronrod 7/15 nodes on [-1, 1] (abscissae >= 0; the rest by symmetry) and weights.

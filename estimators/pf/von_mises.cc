@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <sstream>
+#include <stdexcept>
 
 #include "estimators/conventions.h"
 #include "estimators/error.h"
@@ -221,8 +222,8 @@ CircularSummary SummariseAngles(const std::vector<double>& angles,
                                 const std::vector<double>& weights) {
   if (angles.empty()) throw InputError("SummariseAngles: no angles");
   if (!weights.empty() && weights.size() != angles.size()) {
-    throw InputError("SummariseAngles: " + std::to_string(weights.size()) + " weights for " +
-                     std::to_string(angles.size()) + " angles");
+    throw std::invalid_argument("SummariseAngles: " + std::to_string(weights.size()) +
+                                " weights for " + std::to_string(angles.size()) + " angles");
   }
   double sw = 0.0;
   double sc = 0.0;
@@ -259,9 +260,9 @@ double NaiveMean(const std::vector<double>& angles) {
 
 VonMisesProduct::VonMisesProduct(std::vector<double> kappas, std::vector<double> theta0s) {
   if (kappas.size() != theta0s.size() || kappas.empty()) {
-    throw InputError("VonMisesProduct: need as many kappas as theta0s (got " +
-                     std::to_string(kappas.size()) + " and " + std::to_string(theta0s.size()) +
-                     ")");
+    throw std::invalid_argument("VonMisesProduct: need as many kappas as theta0s (got " +
+                                std::to_string(kappas.size()) + " and " +
+                                std::to_string(theta0s.size()) + ")");
   }
   components_.reserve(kappas.size());
   for (size_t j = 0; j < kappas.size(); ++j) components_.emplace_back(kappas[j], theta0s[j]);
@@ -274,8 +275,8 @@ VonMisesProduct VonMisesProduct::Iid(int m, double kappa, double theta0) {
 
 double VonMisesProduct::LogDensity(const std::vector<double>& x) const {
   if (static_cast<int>(x.size()) != size()) {
-    throw InputError("VonMisesProduct: x has " + std::to_string(x.size()) + " entries, expected " +
-                     std::to_string(size()));
+    throw std::invalid_argument("VonMisesProduct: x has " + std::to_string(x.size()) +
+                                " entries, expected " + std::to_string(size()));
   }
   double sum = 0.0;
   for (int j = 0; j < size(); ++j) sum += components_[j].LogDensity(x[j]);

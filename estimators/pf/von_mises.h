@@ -245,7 +245,7 @@ class VonMises {
 };
 
 // Statistics of a (weighted) sample of angles. Weights must be >= 0 with a positive sum;
-// throws InputError otherwise (or when sizes differ).
+// throws InputError otherwise (std::invalid_argument when sizes differ).
 struct CircularSummary {
   double mean = 0.0;                   // [PF eq. 5]: atan2(sum w sin x, sum w cos x)
   double mean_resultant_length = 0.0;  // |sum w e^{ix}| / sum w, in [0, 1]
@@ -268,7 +268,8 @@ class VonMisesProduct {
 
   int size() const { return static_cast<int>(components_.size()); }
   const VonMises& component(int j) const { return components_[j]; }
-  // Sum of the component log-densities; x must have size() entries (InputError otherwise).
+  // Sum of the component log-densities; x must have size() entries (std::invalid_argument
+  // otherwise).
   double LogDensity(const std::vector<double>& x) const;
   // One draw of every component, in order.
   void Sample(std::mt19937_64& rng, std::vector<double>* x) const;

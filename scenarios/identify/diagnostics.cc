@@ -6,13 +6,12 @@
 #include <cstdio>
 #include <functional>
 
+#include "estimators/conventions.h"
 #include "estimators/stats/chi_square.h"
 #include "scenarios/identify/problem.h"
 
 namespace flexbench::identify {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 struct Regression {
   Eigen::VectorXd beta;

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <memory>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/kinematics/model_effects.h"
@@ -45,8 +46,6 @@ int BodyOfFrame(const mjModel* m, const std::string& typed) {
   }
   return -1;
 }
-
-constexpr double kDeg = M_PI / 180.0;
 
 // The table's physical bounds of the candidate's values; a prismatic joint's offset in metres.
 void SetBounds(Candidate* c, bool prismatic) {

@@ -12,8 +12,6 @@
 namespace flexbench::identify {
 namespace {
 
-constexpr double kDegToRad = M_PI / 180.0;
-
 bool IsIdentifier(const std::string& s) {
   if (s.empty() || s.size() > 64) return false;
   for (char c : s) {
@@ -47,7 +45,7 @@ MeasurementFrame ParseFrame(const std::string& name, const ConfigNode& n) {
   if (m != d) n.Fail("prior_std_m and prior_std_deg go together");
   if (m) {
     f.prior_std_m = PositiveStd(n, "prior_std_m");
-    f.prior_std_rad = PositiveStd(n, "prior_std_deg") * kDegToRad;
+    f.prior_std_rad = PositiveStd(n, "prior_std_deg") * kDeg;
     if (!f.has_guess) n.Fail("a prior needs its mean, T_base_frame");
     f.has_prior = true;
   }

@@ -4,8 +4,6 @@
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
-#include <cstdarg>
-#include <cstdio>
 #include <stdexcept>
 
 #include "estimators/kinematics/model_effects.h"
@@ -13,15 +11,6 @@
 #include "scenarios/identify/parallel.h"
 
 namespace flexbench::identify {
-
-std::string Fmt(const char* format, ...) {
-  char line[512];
-  va_list args;
-  va_start(args, format);
-  std::vsnprintf(line, sizeof(line), format, args);
-  va_end(args);
-  return line;
-}
 
 int NumTheta(const EffectModel& em, const std::vector<int>& active) {
   int n = 0;

@@ -15,15 +15,13 @@
 #include <string>
 #include <vector>
 
+#include "estimators/format.h"
 #include "scenarios/identify/identify.h"
 
 namespace flexbench::identify {
 
 // Number of parameters of the candidates `active` (sum of their num_params).
 int NumTheta(const EffectModel& em, const std::vector<int>& active);
-
-// printf into a string, for the selection log.
-std::string Fmt(const char* format, ...) __attribute__((format(printf, 1, 2)));
 
 // BIC = N ln(RSS / N) + k ln N.
 double Bic(double rss, int n, int k);

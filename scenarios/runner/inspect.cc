@@ -82,7 +82,7 @@ void PassiveAndCoupled(const mjModel* m, const sim::ModelCatalog& catalog, Json*
       p["stiffness"] = m->jnt_stiffness[e.id];
       p["damping"] = m->dof_damping[e.dof_adr];
       p["armature"] = m->dof_armature[e.dof_adr];
-      p["effect"] = e.effect.empty() ? Json() : Json(sim::EffectOfMjcfTag(e.effect));
+      p["effect"] = e.effect.empty() ? Json() : Json(e.effect);
       passive.push_back(p);
     } else if (e.role == JointRole::kCoupled) {
       Json c;
@@ -99,7 +99,7 @@ void PassiveAndCoupled(const mjModel* m, const sim::ModelCatalog& catalog, Json*
         c["follows"] = slopes;  // d q / d q_driver of a linear linkage
         c["offset"] = e.linkage_offset;
       }
-      c["effect"] = e.effect.empty() ? Json() : Json(sim::EffectOfMjcfTag(e.effect));
+      c["effect"] = e.effect.empty() ? Json() : Json(e.effect);
       coupled.push_back(c);
     }
   }
@@ -174,7 +174,7 @@ Json Effects(const mjModel* m, const sim::ModelCatalog& catalog) {
     entry["name"] = e.name;
     entry["supported"] = effect->SupportedBy(catalog, m, &why);
     entry["description"] = e.description;
-    const auto parts = catalog.effect_parts.find(sim::MjcfTag(e));
+    const auto parts = catalog.effect_parts.find(e.name);
     if (parts != catalog.effect_parts.end()) entry["parts"] = parts->second;
     if (!why.empty()) entry["missing"] = why;
     effects.push_back(entry);

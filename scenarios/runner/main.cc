@@ -111,7 +111,7 @@ CLI::App* AddIdentify(CLI::App& app, Options& o) {
   identify_cmd->add_option("--outlier-iqr", id.outlier_iqr,
                            "reject rows beyond Q3 + k IQR (default 3; 0: off)");
   identify_cmd->add_flag("--no-cross-validation", id.no_cross_validation,
-                         "select by BIC alone (the issue-8 rule)");
+                         "select by BIC alone (no held-out folds)");
   identify_cmd
       ->add_option("--set", id.set,
                    "override a closed_loop key: KEY=VALUE (repeatable; e.g. "

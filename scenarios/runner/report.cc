@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "scenarios/runner/output.h"
 #include "scenarios/runner/runner.h"
 #include "scenarios/runner/scenario_kind.h"
@@ -55,9 +56,7 @@ details{margin:6px 0 12px}summary{cursor:pointer;color:#1a4d80}
 
 std::string Num(double v) {
   if (!std::isfinite(v)) return std::isnan(v) ? "NaN" : (v > 0 ? "inf" : "-inf");
-  char b[32];
-  std::snprintf(b, sizeof(b), "%.6g", v);
-  return b;
+  return ShortNum(v);
 }
 
 // A JSON value as table text (escaped): numbers to 6 significant digits, short arrays inline,
@@ -406,11 +405,9 @@ void FileLinks(const std::vector<FileEntry>& files, Keep keep, std::ostringstrea
 
 constexpr double kPi = 3.14159265358979323846;
 
-std::string Fmt(const char* format, double v) {
-  if (!std::isfinite(v)) return Num(v);
-  char b[48];
-  std::snprintf(b, sizeof(b), format, v);
-  return b;
+// Fmt of one number, a non-finite one spelled as Num spells it.
+std::string FmtNum(const char* format, double v) {
+  return std::isfinite(v) ? Fmt(format, v) : Num(v);
 }
 
 // `j[key]` when `j` is an object holding it, else null.
@@ -506,10 +503,10 @@ void EffectsTable(const Json& effects, std::ostringstream* h) {
       const Shown r = Readable(u);
       const char* br = i ? "<br>" : "";
       si += br + Num(v) + " &plusmn; " + Num(s) + " " + HtmlEscape(u);
-      shown += br + Fmt("%.4g", r.scale * v) + " &plusmn; " + Fmt("%.2g", r.scale * s) + " " +
+      shown += br + FmtNum("%.4g", r.scale * v) + " &plusmn; " + FmtNum("%.2g", r.scale * s) + " " +
                HtmlEscape(r.unit);
       // A direction the data do not determine is reported as 0 +- 0: no ratio.
-      z += br + (s > 0.0 ? Fmt("%.3g", std::abs(v) / s) : std::string("&mdash;"));
+      z += br + (s > 0.0 ? FmtNum("%.3g", std::abs(v) / s) : std::string("&mdash;"));
     }
     // An equivalence set's name lists its members, the reported one first.
     const std::string name = Text(At(e, "effect"));
@@ -524,7 +521,7 @@ void EffectsTable(const Json& effects, std::ostringstream* h) {
     }
     *h << "<tr><td>" << shown_name << "</td><td class=\"num\">" << si << "</td><td class=\"num\">"
        << shown << "</td><td class=\"num\">" << z << "</td><td class=\"num\">"
-       << Fmt("%.3g", Number(At(e, "share"))) << "</td></tr>\n";
+       << FmtNum("%.3g", Number(At(e, "share"))) << "</td></tr>\n";
   }
   *h << "</table>\n";
 }
@@ -544,9 +541,9 @@ void Headline(const Json& s, const Json& effects, std::ostringstream* h) {
     const double b = Number(IdMetric(s, std::string("val_err_before") + suffix));
     const double a = Number(IdMetric(s, std::string("val_err_after") + suffix));
     if (!std::isfinite(b) || !std::isfinite(a)) continue;
-    *h << "; the held-out error goes from " << Fmt("%.4g", shown.scale * b) << " " << shown.unit
-       << " to " << Fmt("%.4g", shown.scale * a) << " " << shown.unit << " (" << Fmt("%.3g", a / b)
-       << " of it)";
+    *h << "; the held-out error goes from " << FmtNum("%.4g", shown.scale * b) << " " << shown.unit
+       << " to " << FmtNum("%.4g", shown.scale * a) << " " << shown.unit << " ("
+       << FmtNum("%.3g", a / b) << " of it)";
     break;
   }
   *h << ".</p>\n";
@@ -567,16 +564,17 @@ void BetterTable(const Json& s, std::ostringstream* h) {
       const double b = Number(IdMetric(s, std::string(r.key) + "_before" + suffix));
       const double a = Number(IdMetric(s, std::string(r.key) + "_after" + suffix));
       if (!std::isfinite(b) && !std::isfinite(a)) continue;
-      rows << "<tr><td>" << r.data << "</td><td class=\"num\">" << Fmt("%.4g", shown.scale * b)
-           << " " << shown.unit << "</td><td class=\"num\">" << Fmt("%.4g", shown.scale * a) << " "
-           << shown.unit << "</td><td class=\"num\">" << Fmt("%.3g", a / b) << "</td></tr>\n";
+      rows << "<tr><td>" << r.data << "</td><td class=\"num\">" << FmtNum("%.4g", shown.scale * b)
+           << " " << shown.unit << "</td><td class=\"num\">" << FmtNum("%.4g", shown.scale * a)
+           << " " << shown.unit << "</td><td class=\"num\">" << FmtNum("%.3g", a / b)
+           << "</td></tr>\n";
     }
   }
   const double cb = Number(IdMetric(s, "cv_err_before")), ca = Number(IdMetric(s, "cv_err_after"));
   if (std::isfinite(cb) || std::isfinite(ca)) {
-    rows << "<tr><td>held-out folds (cross-validation)</td><td class=\"num\">" << Fmt("%.4g", cb)
-         << " &sigma;&sup2;</td><td class=\"num\">" << Fmt("%.4g", ca)
-         << " &sigma;&sup2;</td><td class=\"num\">" << Fmt("%.3g", ca / cb) << "</td></tr>\n";
+    rows << "<tr><td>held-out folds (cross-validation)</td><td class=\"num\">" << FmtNum("%.4g", cb)
+         << " &sigma;&sup2;</td><td class=\"num\">" << FmtNum("%.4g", ca)
+         << " &sigma;&sup2;</td><td class=\"num\">" << FmtNum("%.3g", ca / cb) << "</td></tr>\n";
   }
   if (rows.str().empty()) return;
   *h << "<h3>How much better</h3>\n<table class=\"answer\">\n<tr><th>mean error on</th>"
@@ -619,8 +617,8 @@ void HowSure(const Json& s, const Json& id, std::ostringstream* h) {
     if (in_also(a)) continue;
     const Json& effects = At(a, "effects");
     const std::string error =
-        " reach a held-out error of " + Fmt("%.4g", Number(At(a, "cv_err"))) + " &sigma;&sup2;" +
-        (std::isfinite(chosen) ? " (the chosen model: " + Fmt("%.4g", chosen) + " &sigma;&sup2;)"
+        " reach a held-out error of " + FmtNum("%.4g", Number(At(a, "cv_err"))) + " &sigma;&sup2;" +
+        (std::isfinite(chosen) ? " (the chosen model: " + FmtNum("%.4g", chosen) + " &sigma;&sup2;)"
                                : std::string());
     const std::string without = "Without <code>" + HtmlEscape(Text(At(a, "banned"))) + "</code>: ";
     const std::string list = "<code>" + HtmlEscape(Joined(effects, " + ")) + "</code>";
@@ -636,8 +634,8 @@ void HowSure(const Json& s, const Json& id, std::ostringstream* h) {
     for (const Json& a : also) {
       items << "<li>Also fits: <code>" << HtmlEscape(Joined(At(a, "effects"), " + "))
             << "</code> in place of <code>" << HtmlEscape(Text(At(a, "banned")))
-            << "</code> reaches " << Fmt("%.4g", Number(At(a, "cv_err"))) << " &sigma;&sup2; with "
-            << Cell(At(a, "num_params")) << " parameters instead of "
+            << "</code> reaches " << FmtNum("%.4g", Number(At(a, "cv_err")))
+            << " &sigma;&sup2; with " << Cell(At(a, "num_params")) << " parameters instead of "
             << Cell(At(a, "chosen_num_params"))
             << ": as good but more complex, so no evidence against the simpler cause.</li>\n";
     }
@@ -660,16 +658,16 @@ void HowSure(const Json& s, const Json& id, std::ostringstream* h) {
   const double lo = Number(IdMetric(s, "nees_bound_low")),
                hi = Number(IdMetric(s, "nees_bound_high"));
   if (std::isfinite(na) && std::isfinite(lo)) {
-    items << "<li>Uncertainty: the validation rows' mean NEES is " << Fmt("%.3g", nb)
-          << " under the declared model and " << Fmt("%.3g", na)
+    items << "<li>Uncertainty: the validation rows' mean NEES is " << FmtNum("%.3g", nb)
+          << " under the declared model and " << FmtNum("%.3g", na)
           << " under the identified one, with the declared PPOE sources (a consistent model: "
-          << Fmt("%.3g", lo) << " to " << Fmt("%.3g", hi) << ", 95%)"
+          << FmtNum("%.3g", lo) << " to " << FmtNum("%.3g", hi) << ", 95%)"
           << (na < lo   ? ": below it, the declared sources are larger than the error left"
               : na > hi ? ": above it, the declared sources are smaller than the error left"
                         : "")
           << ". The augmented model scales " << ScaledSources(IdMetric(s, "source_scaling"))
-          << " by " << Fmt("%.3g", Number(IdMetric(s, "source_covariance_scale")))
-          << " (mean NEES then " << Fmt("%.3g", Number(IdMetric(s, "nees_after_scaled")))
+          << " by " << FmtNum("%.3g", Number(IdMetric(s, "source_covariance_scale")))
+          << " (mean NEES then " << FmtNum("%.3g", Number(IdMetric(s, "nees_after_scaled")))
           << ").</li>\n";
   }
   if (items.str().empty()) return;
@@ -687,7 +685,7 @@ void WhatIsLeft(const Json& s, std::ostringstream* h) {
   }
   const double ratio = Number(IdMetric(s, "cal_residual_noise_ratio"));
   if (std::isfinite(ratio)) {
-    items << "<li>The calibration residual after the fit is " << Fmt("%.3g", ratio)
+    items << "<li>The calibration residual after the fit is " << FmtNum("%.3g", ratio)
           << " times the stated noise (1: all of it is noise).</li>\n";
   }
   if (IdMetric(s, "sources_cover_residual") == Json(false)) {
@@ -853,7 +851,7 @@ std::string NeesCell(const Json& m) {
   const double lo = Number(At(m, "nees_bound_low")), hi = Number(At(m, "nees_bound_high"));
   if (!std::isfinite(v)) return "&mdash;";
   std::string where = !(v >= lo) ? "below" : !(v <= hi) ? "above" : "inside";
-  return Fmt("%.3g", v) + " [" + Fmt("%.3g", lo) + ", " + Fmt("%.3g", hi) + "] " + where;
+  return FmtNum("%.3g", v) + " [" + FmtNum("%.3g", lo) + ", " + FmtNum("%.3g", hi) + "] " + where;
 }
 
 std::string FlagCell(const Json& m) {
@@ -870,12 +868,12 @@ bool BeforeAfterTable(const Json& estimators, std::ostringstream* h) {
     const Json &b = At(m, "before"), &a = At(m, "after");
     if (!b.is_object() || !a.is_object()) continue;
     const auto mm = [](const Json& j, const char* key) {
-      return Fmt("%.3g", 1e3 * Number(At(j, key))) + " mm";
+      return FmtNum("%.3g", 1e3 * Number(At(j, key))) + " mm";
     };
     rows << "<tr><td><b>" << HtmlEscape(it.key()) << "</b></td><td class=\"num\">"
          << mm(b, "pos_err_mean_m") << "</td><td class=\"num\">" << mm(a, "pos_err_mean_m")
          << "</td><td class=\"num\">"
-         << Fmt("%.3g", Number(At(a, "pos_err_mean_m")) / Number(At(b, "pos_err_mean_m")))
+         << FmtNum("%.3g", Number(At(a, "pos_err_mean_m")) / Number(At(b, "pos_err_mean_m")))
          << "</td><td class=\"num\">" << mm(b, "lateral_err_mean_m") << " &rarr; "
          << mm(a, "lateral_err_mean_m") << "</td><td class=\"num\">" << NeesCell(b)
          << "</td><td class=\"num\">" << NeesCell(a) << "</td><td>" << FlagCell(b) << " / "

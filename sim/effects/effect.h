@@ -52,22 +52,16 @@ struct EffectEntry {
   const char* name;
   const char* description;
   std::unique_ptr<Effect> (*make)();
-  // The name scenario files used before truth and identification shared one vocabulary
-  // (nullptr: none). Still read; the effect's name() is then the former name, which
-  // joint_offset needs (encoder_offset took the encoder's error, the opposite sign).
+  // The name scenario files and MJCF annotations (<custom><text name="effect:NAME">) used
+  // before truth and identification shared one vocabulary (nullptr: none). Still read, with a
+  // note; the effect's name() is then the former name, which joint_offset needs
+  // (encoder_offset took the encoder's error, the opposite sign).
   const char* former_name = nullptr;
-  // The MJCF annotation that lists the joints it acts on, <custom><text name="effect:TAG">,
-  // when that is not `name` (the models' tags predate the shared vocabulary).
-  const char* mjcf_tag = nullptr;
 };
 
-// The annotation tag of an effect's joints in an MJCF (mjcf_tag, else its name).
-std::string MjcfTag(const EffectEntry& entry);
 // The registry name for a current or former name ("" when unknown): two spellings of one effect
 // are one effect.
 std::string CanonicalEffectName(const std::string& name);
-// The registry name of the effect whose MJCF annotation is `tag` (the tag itself when none).
-std::string EffectOfMjcfTag(const std::string& tag);
 
 // The explicit list of effects (EffectRegistry in sim/effects/effects.cc).
 const std::vector<EffectEntry>& EffectRegistry();

@@ -6,7 +6,9 @@
 #include <sstream>
 #include <tuple>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "estimators/kinematics/model_effects.h"
 #include "estimators/lie/se3.h"
 #include "sim/effects/effect.h"
@@ -15,19 +17,11 @@
 namespace flexbench::sim {
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
-// Gear stiffnesses a model lists itself: effect:joint_elasticity (joints) and
-// effect:joint_elasticity:stiffness (numbers).
-constexpr char kGearTag[] = "joint_elasticity";
+// Gear stiffnesses a model lists itself: effect:joint_compliance (joints) and
+// effect:joint_compliance:stiffness (numbers).
+constexpr char kGearTag[] = "joint_compliance";
 // joint_offset's former name, which gave the offset the other sign.
 constexpr char kEncoderOffset[] = "encoder_offset";
-
-std::string Num(double v) {
-  std::ostringstream s;
-  s.precision(6);
-  s << v;
-  return s.str();
-}
 
 int ActuatedJointOrFail(const TruthSetup& setup, const Effect& effect, const std::string& joint) {
   const int j = mj_name2id(setup.model, mjOBJ_JOINT, joint.c_str());
@@ -84,7 +78,7 @@ class JointGroupEffect : public Effect {
       s.released[j] = 1;
     }
   }
-  std::string Describe() const override { return "stiffness_scale=" + Num(scale_); }
+  std::string Describe() const override { return "stiffness_scale=" + ShortNum(scale_); }
 
  private:
   std::string group_;
@@ -141,9 +135,9 @@ class LateralComplianceEffect : public Effect {
     }
   }
   std::string Describe() const override {
-    std::string d = per_joint_.empty() ? "stiffness_Nm_per_rad=" + Num(all_[0]) : "";
+    std::string d = per_joint_.empty() ? "stiffness_Nm_per_rad=" + ShortNum(all_[0]) : "";
     for (const auto& [j, v] : per_joint_) {
-      d += (d.empty() ? "" : " ") + j + "=[" + Num(v[0]) + "," + Num(v[1]) + "]";
+      d += (d.empty() ? "" : " ") + j + "=[" + ShortNum(v[0]) + "," + ShortNum(v[1]) + "]";
     }
     return d;
   }
@@ -191,8 +185,9 @@ class LateralComplianceEffect : public Effect {
         (Vec3(m->jnt_pos + 3 * h) - Vec3(m->jnt_pos + 3 * J)).norm() > 1e-9) {
       throw InputError(where() + ": '" + name + "' of " + s.model_name +
                        " must sit at the anchor of '" + joint + "' with axis [" +
-                       Num(expected.x()) + " " + Num(expected.y()) + " " + Num(expected.z()) +
-                       "] (the identification's lateral axis " + (axis == 0 ? "a" : "b") + ")");
+                       ShortNum(expected.x()) + " " + ShortNum(expected.y()) + " " +
+                       ShortNum(expected.z()) + "] (the identification's lateral axis " +
+                       (axis == 0 ? "a" : "b") + ")");
     }
     return h;
   }
@@ -232,14 +227,14 @@ class JointComplianceEffect : public Effect {
       for (int j : s.catalog->actuated) k[s.catalog->Joint(j).name] = all_;
     }
     if (k.empty()) {
-      // The model's own values: effect:joint_elasticity (joints) + :stiffness (numbers).
+      // The model's own values: effect:joint_compliance (joints) + :stiffness (numbers).
       const auto parts = s.catalog->effect_parts.find(kGearTag);
       const auto nums = s.catalog->effect_numbers.find(std::string(kGearTag) + ":stiffness");
       if (parts == s.catalog->effect_parts.end() || nums == s.catalog->effect_numbers.end() ||
           parts->second.size() != nums->second.size()) {
         throw InputError(where() + ": " + s.model_name +
-                         " declares no gear stiffness (effect:joint_elasticity with "
-                         "effect:joint_elasticity:stiffness); give stiffness_Nm_per_rad");
+                         " declares no gear stiffness (effect:joint_compliance with "
+                         "effect:joint_compliance:stiffness); give stiffness_Nm_per_rad");
       }
       for (size_t i = 0; i < parts->second.size(); ++i) k[parts->second[i]] = nums->second[i];
     }
@@ -249,9 +244,9 @@ class JointComplianceEffect : public Effect {
     }
   }
   std::string Describe() const override {
-    std::string d = "stiffness_scale=" + Num(scale_);
-    if (all_ > 0) d += " stiffness_Nm_per_rad=" + Num(all_);
-    for (const auto& [j, v] : per_joint_) d += " " + j + "=" + Num(v);
+    std::string d = "stiffness_scale=" + ShortNum(scale_);
+    if (all_ > 0) d += " stiffness_Nm_per_rad=" + ShortNum(all_);
+    for (const auto& [j, v] : per_joint_) d += " " + j + "=" + ShortNum(v);
     return d;
   }
 
@@ -301,8 +296,8 @@ class BacklashEffect : public Effect {
   }
   std::string Describe() const override {
     std::string d;
-    if (per_joint_.empty()) d = "width_deg=" + Num(all_);
-    for (const auto& [j, v] : per_joint_) d += (d.empty() ? "" : " ") + j + "=" + Num(v);
+    if (per_joint_.empty()) d = "width_deg=" + ShortNum(all_);
+    for (const auto& [j, v] : per_joint_) d += (d.empty() ? "" : " ") + j + "=" + ShortNum(v);
     return d;
   }
 
@@ -362,8 +357,9 @@ class PayloadEffect : public Effect {
     s.constants_changed = true;
   }
   std::string Describe() const override {
-    return "mass_kg=" + Num(mass_) + " offset_m=[" + Num(offset_.x()) + "," + Num(offset_.y()) +
-           "," + Num(offset_.z()) + "]" + (body_.empty() ? "" : " body=" + body_);
+    return "mass_kg=" + ShortNum(mass_) + " offset_m=[" + ShortNum(offset_.x()) + "," +
+           ShortNum(offset_.y()) + "," + ShortNum(offset_.z()) + "]" +
+           (body_.empty() ? "" : " body=" + body_);
   }
 
  private:
@@ -380,7 +376,7 @@ class JointOffsetEffect : public Effect {
   void Configure(const ComponentParams& p) override {
     // joint_offset says what identification reports, link = reading + offset; the former name
     // said what the encoder adds. Negation is exact, so both give the same bits.
-    sign_ = name() == kEncoderOffset ? 1.0 : -1.0;
+    sign_ = name() == kEncoderOffset ? -1.0 : 1.0;
     const ConfigNode c = p.Require("offset_deg");
     if (c.IsMap()) {
       for (const std::string& j : c.Keys()) per_joint_[j] = c.GetDouble(j);
@@ -396,21 +392,21 @@ class JointOffsetEffect : public Effect {
   }
   void Apply(TruthSetup& s) const override {
     if (has_all_) {
-      for (int j : s.catalog->actuated) s.encoder_offset[j] += sign_ * (all_ * kDeg);
+      for (int j : s.catalog->actuated) s.joint_offset[j] += sign_ * (all_ * kDeg);
     }
     for (const auto& [joint, deg] : per_joint_) {
       const int j = ActuatedJointOrFail(s, *this, joint);
-      s.encoder_offset[j] += sign_ * (deg * kDeg);
+      s.joint_offset[j] += sign_ * (deg * kDeg);
     }
   }
   std::string Describe() const override {
-    std::string d = has_all_ ? "offset_deg=" + Num(all_) : "";
-    for (const auto& [j, v] : per_joint_) d += (d.empty() ? "" : " ") + j + "=" + Num(v);
+    std::string d = has_all_ ? "offset_deg=" + ShortNum(all_) : "";
+    for (const auto& [j, v] : per_joint_) d += (d.empty() ? "" : " ") + j + "=" + ShortNum(v);
     return d;
   }
 
  private:
-  double sign_ = -1.0;  // of offset_deg in the encoder's error, reading - link
+  double sign_ = 1.0;  // of offset_deg in link - reading
   bool has_all_ = false;
   double all_ = 0.0;
   std::map<std::string, double> per_joint_;
@@ -460,7 +456,7 @@ class TransmissionErrorEffect : public Effect {
     std::string d;
     for (const auto& [j, h] : per_joint_) {
       std::string list;
-      for (double v : h) list += (list.empty() ? "" : ",") + Num(v);
+      for (double v : h) list += (list.empty() ? "" : ",") + ShortNum(v);
       d += (d.empty() ? "" : " ") + j + "=[" + list + "]";
     }
     return d;
@@ -505,8 +501,8 @@ class StiffeningSpringEffect : public Effect {
   std::string Describe() const override {
     std::string d;
     for (const auto& [j, v] : k1_) {
-      d += (d.empty() ? "" : " ") + j + "=" + Num(v) + "+" + Num(k3_.count(j) ? k3_.at(j) : 0.0) +
-           "d^3";
+      d += (d.empty() ? "" : " ") + j + "=" + ShortNum(v) + "+" +
+           ShortNum(k3_.count(j) ? k3_.at(j) : 0.0) + "d^3";
     }
     return d;
   }
@@ -572,7 +568,7 @@ class ThermalExpansionEffect : public Effect {
     s.constants_changed = true;
   }
   std::string Describe() const override {
-    return "delta_T_K=" + Num(delta_t_) + " alpha_per_K=" + Num(alpha_);
+    return "delta_T_K=" + ShortNum(delta_t_) + " alpha_per_K=" + ShortNum(alpha_);
   }
 
  private:
@@ -649,9 +645,9 @@ class JointOriginEffect : public Effect {
   std::string Describe() const override {
     std::string d;
     for (const auto& [j, xi, where_key] : errors_) {
-      d += (d.empty() ? "" : " ") + j + "=[" + Num(xi[0] * 1e3) + "," + Num(xi[1] * 1e3) + "," +
-           Num(xi[2] * 1e3) + " mm; " + Num(xi[3] / kDeg) + "," + Num(xi[4] / kDeg) + "," +
-           Num(xi[5] / kDeg) + " deg]";
+      d += (d.empty() ? "" : " ") + j + "=[" + ShortNum(xi[0] * 1e3) + "," + ShortNum(xi[1] * 1e3) +
+           "," + ShortNum(xi[2] * 1e3) + " mm; " + ShortNum(xi[3] / kDeg) + "," +
+           ShortNum(xi[4] / kDeg) + "," + ShortNum(xi[5] / kDeg) + " deg]";
     }
     return d;
   }
@@ -689,8 +685,9 @@ class ImuBiasEffect : public Effect {
     }
   }
   std::string Describe() const override {
-    return "gyro_bias_rad_s=[" + Num(spec_.gyro_bias.x()) + "," + Num(spec_.gyro_bias.y()) + "," +
-           Num(spec_.gyro_bias.z()) + "] gyro_walk=" + Num(spec_.gyro_walk);
+    return "gyro_bias_rad_s=[" + ShortNum(spec_.gyro_bias.x()) + "," +
+           ShortNum(spec_.gyro_bias.y()) + "," + ShortNum(spec_.gyro_bias.z()) +
+           "] gyro_walk=" + ShortNum(spec_.gyro_walk);
   }
 
  private:
@@ -698,8 +695,8 @@ class ImuBiasEffect : public Effect {
   std::vector<std::string> sites_;
 };
 
-constexpr char kBasePlate[] = "base_plate_compliance";
-constexpr char kLinks[] = "link_elasticity";
+constexpr char kBasePlate[] = "base_compliance";
+constexpr char kLinks[] = "link_bending";
 constexpr char kNeck[] = "neck_elasticity";
 constexpr char kCameraSag[] = "camera_mount_sag";
 constexpr char kWrist[] = "nonlinear_wrist";
@@ -714,11 +711,10 @@ std::unique_ptr<Effect> Make() {
 const std::vector<EffectEntry>& EffectRegistry() {
   // One line per effect.
   static const std::vector<EffectEntry> effects = {
-      {"base_compliance", "base plate bends under load: passive tilt joints (stiffness_scale)",
-       MakeGroup<kBasePlate>, "base_plate_compliance", kBasePlate},
-      {"link_bending",
-       "elastic links: passive bending hinges between link segments (stiffness_scale)",
-       MakeGroup<kLinks>, "link_elasticity", kLinks},
+      {kBasePlate, "base plate bends under load: passive tilt joints (stiffness_scale)",
+       MakeGroup<kBasePlate>, "base_plate_compliance"},
+      {kLinks, "elastic links: passive bending hinges between link segments (stiffness_scale)",
+       MakeGroup<kLinks>, "link_elasticity"},
       {kNeck, "continuum-elastic neck: chain of passive spring joints (stiffness_scale)",
        MakeGroup<kNeck>},
       {kCameraSag, "camera mount sags under the camera's weight: passive joint (stiffness_scale)",
@@ -733,7 +729,7 @@ const std::vector<EffectEntry>& EffectRegistry() {
       {"joint_compliance",
        "gear elasticity between motor encoder and link (stiffness_Nm_per_rad; identification "
        "reports its inverse, rad/Nm)",
-       Make<JointComplianceEffect>, "joint_elasticity", kGearTag},
+       Make<JointComplianceEffect>, "joint_elasticity"},
       {"backlash", "play between motor and link, load holds the link on one flank (width_deg)",
        Make<BacklashEffect>},
       {"payload", "extra mass at the end effector (mass_kg, offset_m, radius_m, body)",
@@ -774,21 +770,10 @@ const EffectEntry* FindEffect(const std::string& name, std::string* known) {
 
 }  // namespace
 
-std::string MjcfTag(const EffectEntry& entry) {
-  return entry.mjcf_tag ? entry.mjcf_tag : entry.name;
-}
-
 std::string CanonicalEffectName(const std::string& name) {
   std::string known;
   const EffectEntry* entry = FindEffect(name, &known);
   return entry ? entry->name : "";
-}
-
-std::string EffectOfMjcfTag(const std::string& tag) {
-  for (const EffectEntry& e : EffectRegistry()) {
-    if (MjcfTag(e) == tag) return e.name;
-  }
-  return tag;
 }
 
 std::unique_ptr<Effect> MakeEffect(const std::string& name, const ComponentParams& params) {
@@ -797,6 +782,7 @@ std::unique_ptr<Effect> MakeEffect(const std::string& name, const ComponentParam
   if (!entry) {
     throw InputError(params.where() + ": unknown effect '" + name + "' (known: " + known + ")");
   }
+  if (name != entry->name) NoteFormerName(params.where(), name, entry->name);
   std::unique_ptr<Effect> effect = entry->make();
   effect->set_identity(name, params.where());
   effect->Configure(params);

@@ -54,7 +54,7 @@ struct TruthSetup {
   // Joints that are not released are held at qpos0, i.e. at the nominal model's value.
   std::vector<char> released;
   std::vector<GearSpec> gear;                   // per joint id (actuated joints)
-  std::vector<double> encoder_offset;           // per joint id, rad (m)
+  std::vector<double> joint_offset;             // per joint id: link - reading, rad (m)
   std::map<std::string, ImuBiasSpec> imu_bias;  // by IMU site; "*" applies to every IMU
   // Set by effects that change masses or geometry: the simulation then calls mj_setConst.
   bool constants_changed = false;

@@ -4,6 +4,7 @@
 #include <limits>
 #include <set>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "sim/camera.h"
 #include "sim/mujoco_model.h"
@@ -12,8 +13,6 @@
 
 namespace flexbench::sim {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 // (+ 0.0 turns a rounded -0 into 0.)
 double Quantize(double x, double step) { return step > 0 ? step * std::round(x / step) + 0.0 : x; }
@@ -55,7 +54,7 @@ class EncoderSensor : public Sensor {
       const double truth =
           side_ == EncoderSide::kMotor ? sim.MotorPosition(c.id) : sim.JointPosition(c.id);
       const double noisy =
-          truth + sim.EncoderOffset(c.id) + c.noise.Normal(c.slide ? noise_std_m_ : noise_std_);
+          truth - sim.JointOffset(c.id) + c.noise.Normal(c.slide ? noise_std_m_ : noise_std_);
       EncoderReading r;
       r.t = t;
       r.sensor = name();

@@ -2,8 +2,8 @@
 // end-effector points in 4 sets, 30 candidate effects, two of them in the data (a gear
 // compliance at j2, an encoder offset at j3). BM_Identify runs every stage (loads, selection
 // cross-validated over the 4 sets, diagnostics, alternatives, equivalence sets, covariance,
-// shares); target at most 10 s. BM_IdentifyBicOnly is the same without cross-validation (the
-// issue-8 selection), for the ratio. BM_Predict is one augmented forward kinematics.
+// shares); target at most 10 s. BM_IdentifyBicOnly is the same without cross-validation (BIC
+// alone), for the ratio. BM_Predict is one augmented forward kinematics.
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true; quote medians.
 #include <benchmark/benchmark.h>
 
@@ -204,7 +204,7 @@ BENCHMARK(BM_IdentifyRows)
 // the CSV read, the loads and the whole identification, with its peak heap per row. Targets:
 // 10,000 rows under 5 s; at most 1 KB a row, and 1,000,000 rows within 2 GB. From 100,000 rows
 // on, most rows' loads are computed in every pass (RowLoads) and the fits work on row blocks.
-// The figures are in the README's performance table.
+// The figures are in docs/performance.md.
 void IdentifyPointCsv(benchmark::State& state, bool geometry) {
   const int rows = static_cast<int>(state.range(0));
   const std::string dir = std::string(FLEXBENCH_SOURCE_DIR) + "/models/";

@@ -55,7 +55,7 @@ void BM_ForwardKinematicsCov2(benchmark::State& state) {
 
 // The path a CPU without AVX2 runs (two-lane SSE2 transports, same bits), timed on this CPU;
 // the target is <= 550 ns on 7 DoF. Its ratio to BM_ForwardKinematicsCov2 in the same run
-// is the cost of having no AVX2 (figures: the README's performance table).
+// is the cost of having no AVX2 (figures: docs/performance.md).
 void BM_ForwardKinematicsCov2Baseline(benchmark::State& state) {
   Fixture f(static_cast<int>(state.range(0)));
   for (auto _ : state) {

@@ -8,7 +8,7 @@
 // Run with --benchmark_repetitions=5 --benchmark_report_aggregates_only=true.
 //
 // Target for the estimate (BM_Summary): at most 0.25x of a step (BM_PfStep) in the same run; the
-// measured figures are in the README's performance table.
+// measured figures are in docs/performance.md.
 // Where BM_Summary/2048 goes (perf): about half the particles are negligible (w < 1e-14) after
 // a reading, and the summary now skips them (KeptParticles): the end-effector logs about a
 // quarter, the four joints' band passes, gathers and band sorts about half, the weights and

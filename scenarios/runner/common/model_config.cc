@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <iostream>
 
+#include "estimators/format.h"
+
 namespace flexbench::scenarios {
 
 sim::DeclaredModel ReadModelAndDeclared(const ConfigNode& root, std::string* model_path) {
@@ -85,12 +87,6 @@ void FittedRangeCheck::Observe(const double* q, int n) {
 
 namespace {
 
-std::string Short(double x) {
-  char b[32];
-  std::snprintf(b, sizeof(b), "%.4g", x);
-  return b;
-}
-
 // "name lo..hi unit (fitted lo..hi)" when [lo, hi] leaves [fitted_lo, fitted_hi], else "".
 // The fitted bounds were read back from text, widened outward: a tolerance far below any
 // joint's resolution covers what remains of the rounding.
@@ -99,8 +95,8 @@ std::string Outside(const std::string& name, double lo, double hi, double fitted
   constexpr double kTol = 1e-9;
   if (lo > hi) return "";  // never observed
   if (lo >= fitted_lo - kTol && hi <= fitted_hi + kTol) return "";
-  return name + " " + Short(lo * k) + ".." + Short(hi * k) + " " + unit + " (fitted " +
-         Short(fitted_lo * k) + ".." + Short(fitted_hi * k) + ")";
+  return name + " " + Fmt("%.4g", lo * k) + ".." + Fmt("%.4g", hi * k) + " " + unit + " (fitted " +
+         Fmt("%.4g", fitted_lo * k) + ".." + Fmt("%.4g", fitted_hi * k) + ")";
 }
 
 void Append(const std::string& item, std::string* list) {

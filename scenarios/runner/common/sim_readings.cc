@@ -14,7 +14,7 @@ estimators::JointReading EncoderReading(const sim::Simulation& sim, const sim::D
   r.std.setZero(chain.model.nq());
   for (int k = 0; k < chain.model.nq(); ++k) {
     const int jid = sim::JointId(sim.model(), chain.q_joints[k]);
-    r.q[k] = sim.MotorPosition(jid) + sim.EncoderOffset(jid) - chain.q_qpos0[k];
+    r.q[k] = sim.MotorPosition(jid) - sim.JointOffset(jid) - chain.q_qpos0[k];
   }
   return r;
 }

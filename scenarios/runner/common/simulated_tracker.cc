@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/measurement_frames.h"
@@ -11,8 +12,6 @@
 
 namespace flexbench::scenarios {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 std::pair<double, double> ParseRange(const ConfigNode& n) {
   const std::vector<double> v = n.AsDoubleList();
@@ -149,7 +148,7 @@ void SimulateTrackerRows(const TrackerTruth& t, const TrackerRowsSetup& s, int p
     for (int k = 0; k < nq; ++k) {
       if (space.actuator[k] < 0) continue;
       const int jid = mj_name2id(s.sim->model(), mjOBJ_JOINT, chain.q_joints[k].c_str());
-      q[k] = s.sim->MotorPosition(jid) + s.sim->EncoderOffset(jid) + n.Normal(s.encoder_noise_rad);
+      q[k] = s.sim->MotorPosition(jid) - s.sim->JointOffset(jid) + n.Normal(s.encoder_noise_rad);
     }
     chain.ApplyCouplings(&q);
     AppendMarkerRows(t, s, q, c, si, n, d, truth_errors);

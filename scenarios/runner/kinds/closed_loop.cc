@@ -46,7 +46,9 @@
 #include <sstream>
 #include <tuple>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/stats/chi_square.h"
 #include "render/plot.h"
@@ -80,8 +82,6 @@ namespace {
 namespace fs = std::filesystem;
 using identify::DataSet;
 using Mat3x = Eigen::Matrix<double, 3, Eigen::Dynamic>;
-
-constexpr double kDeg = M_PI / 180.0;
 
 struct Source {
   enum class Type { kMukca, kCsv, kSimulate, kLog } type = Type::kCsv;
@@ -211,19 +211,13 @@ Source ParseSource(const ConfigNode& n, bool tracker) {
   return s;
 }
 
-std::string Num(double v) {
-  char b[64];
-  std::snprintf(b, sizeof(b), "%.6g", v);
-  return b;
-}
-
 // A log source's time span, for messages.
 std::string Span(const Source& s) {
   const bool from = std::isfinite(s.from_s), to = std::isfinite(s.to_s);
   if (!from && !to) return "the whole log";
-  if (!from) return "t <= " + Num(s.to_s) + " s";
-  if (!to) return "t >= " + Num(s.from_s) + " s";
-  return "[" + Num(s.from_s) + ", " + Num(s.to_s) + "] s";
+  if (!from) return "t <= " + ShortNum(s.to_s) + " s";
+  if (!to) return "t >= " + ShortNum(s.from_s) + " s";
+  return "[" + ShortNum(s.from_s) + ", " + ShortNum(s.to_s) + "] s";
 }
 
 struct Stats {
@@ -774,14 +768,14 @@ class ClosedLoopKind : public ScenarioKind {
     (*m)["sources_cover_residual"] = nees_scaled_ <= target + 1e-6;
     if (nees_scaled_ > target + 1e-6) {
       ctx.log("the declared sources cannot cover what the effects leave: validation mean NEES " +
-              Num(nees_scaled_) + " at the largest source scale");
+              ShortNum(nees_scaled_) + " at the largest source scale");
     }
     (*m)["nees_after_scaled"] = FiniteOrNull(nees_scaled_);
   }
 
   void WriteIdentification(const identify::IdentifyResult& res, Json* id) const {
     (*id)["selection_rule"] = "forward stepwise, BIC = N ln(RSS/N) + k ln N, add while dBIC < -" +
-                              Num(opt_.bic_threshold);
+                              ShortNum(opt_.bic_threshold);
     (*id)["steps"] = res.steps;
     Json effects = Json::array();
     for (const auto& e : res.effects) {
@@ -1129,8 +1123,8 @@ class ClosedLoopKind : public ScenarioKind {
                   1e3 * std::sqrt(ss / it->second.size()), 1e3 * opt_.gravity_std_rad);
     ctx.log(what + line);
     if (worst > 0.1) {
-      ctx.log(what + ": warning: an accelerometer at rest reads " + Num(100.0 * worst) +
-              "% off |g| = " + Num(g) +
+      ctx.log(what + ": warning: an accelerometer at rest reads " + ShortNum(100.0 * worst) +
+              "% off |g| = " + ShortNum(g) +
               " m/s^2 (imu.csv's units are m/s^2): the up directions are used, their length not");
     }
   }
@@ -1430,8 +1424,7 @@ class ClosedLoopKind : public ScenarioKind {
     o.q.resize(nq);
     for (int k = 0; k < nq; ++k) {
       const int jid = mj_name2id(sim_->model(), mjOBJ_JOINT, chain_->q_joints[k].c_str());
-      o.q[k] =
-          sim_->MotorPosition(jid) + sim_->EncoderOffset(jid) + encoder_noise_rad_ * noise(rng);
+      o.q[k] = sim_->MotorPosition(jid) - sim_->JointOffset(jid) + encoder_noise_rad_ * noise(rng);
     }
     return o;
   }
@@ -1586,7 +1579,7 @@ class ClosedLoopKind : public ScenarioKind {
     m["theta_cov_from"] = "readings' noise (least-squares sandwich)";
     m["cal_rss_over_reading_noise"] = rss_ratio;
     ctx.log("fitted parameters' covariance from the readings' noise; calibration residual " +
-            Num(rss_ratio) + "x what that noise explains");
+            ShortNum(rss_ratio) + "x what that noise explains");
   }
 
   static Eigen::MatrixXd PseudoInverse(const Eigen::MatrixXd& A) {
@@ -2048,7 +2041,7 @@ class ClosedLoopKind : public ScenarioKind {
         j["steps_scored"] = stats.count();
         j["rejected_readings"] = rejected;
         errors[e] += (after ? " -> " : "") +
-                     (stats.count() > 0 ? Num(j["pos_err_mean_m"].get<double>()) : "-");
+                     (stats.count() > 0 ? ShortNum(j["pos_err_mean_m"].get<double>()) : "-");
       }
       recorder.Write(*ctx.out, "base", after ? "heldout_after" : "heldout_before");
     }
@@ -2080,7 +2073,7 @@ class ClosedLoopKind : public ScenarioKind {
     ctx.log(
         "verdict: unexplained; the augmented model replays the held-out truth worse than the "
         "declared one (" +
-        judge + " " + Num(1e3 * before) + " -> " + Num(1e3 * after) +
+        judge + " " + ShortNum(1e3 * before) + " -> " + ShortNum(1e3 * after) +
         " mm): the effects named fit the rows, not the arm");
   }
 
@@ -2166,8 +2159,9 @@ class ClosedLoopKind : public ScenarioKind {
     header << "Declared model augmented by flexbench closed_loop: the identified effects with "
               "their\nfitted parameters, and the PPOE source directions the validation rows "
               "constrain\nscaled by "
-           << Num(source_scale_) << " (what the remaining validation residual supports; mean "
-           << "NEES there " << Num(nees_scaled_) << ",\n3 is consistent). Kept as declared (the "
+           << ShortNum(source_scale_) << " (what the remaining validation residual supports; mean "
+           << "NEES there " << ShortNum(nees_scaled_)
+           << ",\n3 is consistent). Kept as declared (the "
            << "rows do not see them): " << kept << ".\nVerdict: " << verdict_
            << (verdict_ == "ambiguous" ? " (the correction holds; other effect sets explain the "
                                          "data about as well, so no cause is singled out)"
@@ -2251,9 +2245,10 @@ class ClosedLoopKind : public ScenarioKind {
       const identify::ConfigLoads& L = loads.At(r, d.rows[r], ws);
       c << r << "," << d.sets[d.rows[r].set] << ","
         << (d.rows[r].type == identify::ObservationType::kGroup ? d.groups[d.rows[r].group] : "")
-        << "," << d.rows[r].where << "," << Num(before[r]) << "," << Num(after[r]) << ","
-        << Num(reach) << "," << Num(L.tau.size() ? L.tau.cwiseAbs().maxCoeff() : 0.0) << ","
-        << Num(p[r].x()) << "," << Num(p[r].y()) << "," << Num(p[r].z()) << "\n";
+        << "," << d.rows[r].where << "," << ShortNum(before[r]) << "," << ShortNum(after[r]) << ","
+        << ShortNum(reach) << "," << ShortNum(L.tau.size() ? L.tau.cwiseAbs().maxCoeff() : 0.0)
+        << "," << ShortNum(p[r].x()) << "," << ShortNum(p[r].y()) << "," << ShortNum(p[r].z())
+        << "\n";
     }
     WriteFileAtomic(ctx.out->File(name + "_residuals.csv"), c.str());
   }

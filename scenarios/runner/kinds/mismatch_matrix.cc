@@ -14,7 +14,9 @@
 #include <random>
 #include <sstream>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "estimators/stats/chi_square.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/error_stats.h"
@@ -34,14 +36,6 @@
 
 namespace flexbench::scenarios {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
-
-std::string Fmt(const char* f, double v) {
-  char b[64];
-  std::snprintf(b, sizeof(b), f, v);
-  return b;
-}
 
 class MismatchMatrixKind : public ScenarioKind {
  public:
@@ -183,7 +177,7 @@ class MismatchMatrixKind : public ScenarioKind {
     joints.std = estimators::JointVector::Constant(nq, encoder_std_);
     for (int k = 0; k < nq; ++k) {
       const int jid = mj_name2id(sim.model(), mjOBJ_JOINT, rig_.chain->q_joints[k].c_str());
-      joints.q[k] = sim.MotorPosition(jid) + sim.EncoderOffset(jid) + encoder_std_ * (*noise)();
+      joints.q[k] = sim.MotorPosition(jid) - sim.JointOffset(jid) + encoder_std_ * (*noise)();
     }
     estimators::PositionReading point;
     point.t = t;

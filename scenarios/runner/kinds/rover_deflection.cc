@@ -12,7 +12,9 @@
 #include <set>
 
 #include "estimators/camera/pinhole.h"
+#include "estimators/conventions.h"
 #include "estimators/error.h"
+#include "estimators/format.h"
 #include "render/plot.h"
 #include "render/renderer.h"
 #include "render/tag_detector.h"
@@ -27,17 +29,9 @@
 namespace flexbench::scenarios {
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
-
 using Clock = std::chrono::steady_clock;
 double Seconds(Clock::time_point a) {
   return std::chrono::duration<double>(Clock::now() - a).count();
-}
-
-std::string Fmt(const char* format, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), format, v);
-  return buf;
 }
 
 double RotationAngleDeg(const Mat3& a, const Mat3& b) {

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <random>
 
+#include "estimators/conventions.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "scenarios/identify/calibration_data.h"
 #include "scenarios/identify/identify.h"
@@ -30,7 +31,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr double kDeg = M_PI / 180.0;
 constexpr double kNoise = 5e-5;  // m per axis
 
 constexpr char kArm[] = R"(

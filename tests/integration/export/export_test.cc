@@ -283,8 +283,8 @@ TEST_F(Export, CompliancesBecomeGearAnnotationsAndTheRestIsNamed) {
   }
   EXPECT_EQ(r.err.find("joint_compliance"), std::string::npos) << r.err;
   sim::MjModelPtr m = sim::LoadModel(out.string());
-  const int t = mj_name2id(m.get(), mjOBJ_TEXT, "effect:joint_elasticity");
-  const int n = mj_name2id(m.get(), mjOBJ_NUMERIC, "effect:joint_elasticity:stiffness");
+  const int t = mj_name2id(m.get(), mjOBJ_TEXT, "effect:joint_compliance");
+  const int n = mj_name2id(m.get(), mjOBJ_NUMERIC, "effect:joint_compliance:stiffness");
   ASSERT_GE(t, 0);
   ASSERT_GE(n, 0);
   EXPECT_EQ(std::string(m->text_data + m->text_adr[t]), "j2 j3");

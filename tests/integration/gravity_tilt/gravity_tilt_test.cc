@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "estimators/conventions.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/kinematics/model_effects.h"
 #include "estimators/lie/so3.h"
@@ -33,7 +34,6 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr double kNoise = 1e-4;  // tracker noise per axis, m
-constexpr double kDeg = M_PI / 180.0;
 
 struct Rig {
   std::unique_ptr<sim::Simulation> sim;

@@ -99,7 +99,8 @@ TEST(OutputFolder, OnlyMarkedTemporariesOfEndedRunsAreRemoved) {
   const std::string host = Host(), ns = PidNamespace();
   const unsigned long long me = StartTime(getpid());
   ASSERT_FALSE(ns.empty());
-  // Kept: the reproducer and an unmarked "temporary".
+  // Kept: the data-loss reproducer (a user's folder named like a temporary) and an unmarked
+  // "temporary".
   WriteFile(dir / "results.old-2024" / "thesis.tex", "years of work");
   WriteFile(dir / "results.tmp-1999999999" / "notes.txt", "mine");
   // Kept: a marker of another host, of another PID namespace (a Slurm node, a container), of

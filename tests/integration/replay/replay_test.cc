@@ -402,7 +402,7 @@ TEST(Replay, AnExportedMismatchMatrixReplaysEachConfigurationToTheSameBits) {
   for (size_t at; (at = block.find("\n  #")) != std::string::npos;) {
     block.erase(at + 1, block.find('\n', at + 1) - at);  // comment lines inside the block
   }
-  for (const std::string column : {"none", "encoder_offset"}) {
+  for (const std::string column : {"none", "joint_offset"}) {
     const fs::path log = tmp.path() / "log" / column;
     EXPECT_NE(testing::ReadFile(log / "log.yaml").find("postures: {file: postures.csv}"),
               std::string::npos);

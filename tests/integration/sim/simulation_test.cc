@@ -9,16 +9,16 @@
 #include <map>
 #include <regex>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
 #include "sim/sensors/sensor.h"
 #include "sim/trajectory.h"
+#include "tests/common/test_util.h"
 
 namespace flexbench::sim {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 std::string ModelPath(const std::string& name) {
   return std::string(FLEXBENCH_SOURCE_DIR) + "/models/" + name + ".xml";
@@ -526,6 +526,51 @@ TEST(Effects, FormerNamesBuildTheSameTruth) {
   }
 }
 
+// A model annotated with the former effect names (effect:base_plate_compliance,
+// effect:link_elasticity, effect:joint_elasticity[:stiffness]) builds the same truth as one with
+// the current names, and says once which name it read as which.
+TEST(Effects, FormerMjcfTagsBuildTheSameTruthWithANote) {
+  testing::TempDir tmp;
+  std::string xml = testing::ReadFile(ModelPath("rover_arm"));
+  for (const auto& [now, before] : std::vector<std::pair<std::string, std::string>>{
+           {"effect:base_compliance", "effect:base_plate_compliance"},
+           {"effect:link_bending", "effect:link_elasticity"},
+           {"effect:joint_compliance", "effect:joint_elasticity"}}) {
+    for (size_t at; (at = xml.find(now + "\"")) != std::string::npos;)
+      xml.replace(at, now.size(), before);
+    for (size_t at; (at = xml.find(now + ":")) != std::string::npos;)
+      xml.replace(at, now.size(), before);
+  }
+  ASSERT_EQ(xml.find("effect:joint_compliance"), std::string::npos);
+  const std::string former = (tmp.path() / "rover_former.xml").string();
+  testing::WriteFile(former, xml);
+  const EffectList fx =
+      Effects({{"base_compliance", ""}, {"link_bending", ""}, {"joint_compliance", ""}});
+  std::vector<Eigen::Isometry3d> ee;
+  for (const std::string& path : {ModelPath("rover_arm"), former}) {
+    ::testing::internal::CaptureStderr();
+    auto s = Simulation::Load(path, fx);
+    const std::string err = ::testing::internal::GetCapturedStderr();
+    const bool old = path == former;
+    EXPECT_EQ(err.find("'joint_elasticity' is the former name of 'joint_compliance'") !=
+                  std::string::npos,
+              old)
+        << err;
+    EXPECT_EQ(err.find("'base_plate_compliance' is the former name of 'base_compliance'") !=
+                  std::string::npos,
+              old)
+        << err;
+    s->SetCommand(Command(*s, kOutstretched));
+    s->Settle();
+    ee.push_back(s->Pose("ee"));
+  }
+  EXPECT_TRUE(ee[0].matrix() == ee[1].matrix());
+  auto rigid = Rover();
+  rigid->SetCommand(Command(*rigid, kOutstretched));
+  rigid->Settle();
+  EXPECT_GT((ee[0].translation() - rigid->Pose("ee").translation()).norm(), 1e-4);
+}
+
 // One effect under both its names would apply twice (offsets cancelling, a plate twice as soft).
 TEST(Effects, AnEffectUnderBothNamesIsGivenTwice) {
   try {
@@ -716,7 +761,7 @@ TEST(Errors, NonConvergingSettleNamesModelAndIteration) {
 TEST(Errors, PassiveJointWithoutStiffnessCannotSettle) {
   const char xml[] = R"(
 <mujoco model="floppy">
-  <custom><text name="effect:link_elasticity" data="floppy"/></custom>
+  <custom><text name="effect:link_bending" data="floppy"/></custom>
   <worldbody>
     <body name="b">
       <joint name="floppy" axis="1 0 0"/>

@@ -41,7 +41,7 @@ TEST(Inspect, RoverModelAsJson) {
   EXPECT_EQ(j["actuated_joints"].size(), 8u);
   std::map<std::string, std::string> passive;
   for (const Json& p : j["passive_joints"]) passive[p["name"]] = p["effect"];
-  // Labelled with the effect's name, though the MJCF tags them effect:base_plate_compliance.
+  // Labelled with the effect's name, as the MJCF tags them (effect:base_compliance).
   EXPECT_EQ(passive["plate_pitch"], "base_compliance");
   EXPECT_EQ(passive["plate_roll"], "base_compliance");
   EXPECT_EQ(passive["link2_bend_y"], "link_bending");

@@ -533,8 +533,8 @@ constexpr char kTwoArms[] = R"(
 <mujoco model="two_arms">
   <compiler angle="radian" autolimits="true"/>
   <custom>
-    <text name="effect:joint_elasticity" data="waist"/>
-    <numeric name="effect:joint_elasticity:stiffness" data="2000"/>
+    <text name="effect:joint_compliance" data="waist"/>
+    <numeric name="effect:joint_compliance:stiffness" data="2000"/>
   </custom>
   <worldbody>
     <body name="pelvis" pos="0 0 0.5">

@@ -9,6 +9,7 @@
 #include <map>
 #include <set>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "render/renderer.h"
 #include "render/tag_detector.h"
@@ -21,8 +22,6 @@
 
 namespace flexbench {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 std::string Models() { return std::string(FLEXBENCH_SOURCE_DIR) + "/models/"; }
 

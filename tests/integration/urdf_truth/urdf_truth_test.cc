@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "estimators/conventions.h"
 #include "sim/effects/effect.h"
 #include "sim/model_catalog.h"
 #include "sim/mujoco_model.h"
@@ -27,7 +28,6 @@ namespace flexbench {
 namespace {
 
 namespace fs = std::filesystem;
-constexpr double kDeg = M_PI / 180.0;
 
 // Three revolute joints (yaw, then two pitches), full inertia tensors, a mesh in a subfolder on
 // the first link (off its origin, so MuJoCo recentres it), a box on the second, nothing on the
@@ -282,7 +282,7 @@ TEST_F(UrdfTruth, TruthEffectsActOnUrdfJoints) {
   EXPECT_NEAR(q1, command[0], 1e-12);
   // The link stands at its command; its encoders read link - offset.
   EXPECT_NEAR(q2, command[1], 1e-12);
-  EXPECT_EQ(sim->EncoderOffset(sim::JointId(sim->model(), "j2")), -offset);
+  EXPECT_EQ(sim->JointOffset(sim::JointId(sim->model(), "j2")), offset);
   // Deflected by gravity, by a visible amount.
   EXPECT_GT(std::abs(q3 - command[2]), 1e-3);
   // The URDF's own gravity torque at the settled posture is what the spring holds.

@@ -5,10 +5,14 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 #include <random>
+#include <sstream>
+#include <string>
 
 #include "estimators/camera/pinhole.h"
+#include "estimators/format.h"
 #include "estimators/lie/sampling.h"
 #include "estimators/lie/se3.h"
 
@@ -132,6 +136,28 @@ TEST(Conventions, RowMajorRotationAndMakeTransform) {
   EXPECT_EQ(T(0, 3), 1.0);
   EXPECT_EQ(T(2, 3), 3.0);
   EXPECT_TRUE(T.row(3).isApprox(Eigen::RowVector4d(0, 0, 0, 1), 0.0));
+}
+
+// Degrees: one constant for every layer.
+TEST(Conventions, DegreesToRadians) {
+  EXPECT_DOUBLE_EQ(180.0 * kDeg, M_PI);
+  EXPECT_DOUBLE_EQ(M_PI / 2 / kDeg, 90.0);
+}
+
+// Numbers as text (estimators/format.h): six significant digits as an ostream writes them by
+// default, 17 that read back as the same double, and printf output of any length.
+TEST(Conventions, NumbersAsText) {
+  for (double v : {0.0, -0.0, 1.0, 1.0 / 3.0, -2.5e-7, 123456789.0, 1e300, M_PI,
+                   std::numeric_limits<double>::infinity(), std::nan("")}) {
+    std::ostringstream os;
+    os << v;
+    EXPECT_EQ(ShortNum(v), os.str());
+    if (std::isfinite(v)) EXPECT_EQ(std::strtod(ExactNum(v).c_str(), nullptr), v);
+  }
+  EXPECT_EQ(ShortNum(1.0 / 3.0), "0.333333");
+  EXPECT_EQ(Fmt("%s=%.2f", "x", 1.005), "x=1.00");
+  const std::string long_text(1000, 'a');
+  EXPECT_EQ(Fmt("%s|%d", long_text.c_str(), 7), long_text + "|7");
 }
 
 // --- WrapAngle: [-pi, pi) ----------------------------------------------------------------------

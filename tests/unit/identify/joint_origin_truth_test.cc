@@ -8,6 +8,7 @@
 
 #include <random>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "scenarios/identify/effect_model.h"
 #include "sim/declared_chain.h"
@@ -19,8 +20,6 @@
 
 namespace flexbench::identify {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 TEST(JointOriginTruth, MujocoPosesEqualTheIdentifiedEffectModel) {
   const sim::DeclaredModel d =

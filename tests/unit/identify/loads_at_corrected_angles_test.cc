@@ -12,6 +12,7 @@
 #include <cmath>
 #include <random>
 
+#include "estimators/conventions.h"
 #include "estimators/estimator.h"
 #include "estimators/lie/so3.h"
 #include "scenarios/identify/effect_model.h"
@@ -23,8 +24,6 @@
 
 namespace flexbench::identify {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 TEST(LoadsAtCorrectedAngles, IdentificationModelEqualsMuJoCoStatics) {
   sim::EffectList fx;
@@ -78,7 +77,7 @@ TEST(LoadsAtCorrectedAngles, IdentificationModelEqualsMuJoCoStatics) {
     sim->Settle();
     const Vec3 p_truth = sim->Pose("ee").translation();  // base: world
     Eigen::VectorXd q(nq);
-    for (int k = 0; k < nq; ++k) q[k] = sim->MotorPosition(jid[k]) + sim->EncoderOffset(jid[k]);
+    for (int k = 0; k < nq; ++k) q[k] = sim->MotorPosition(jid[k]) - sim->JointOffset(jid[k]);
     const lie::SE3 T = em.PredictPose(q, em.LoadsFor(q, active, theta), active, theta, ws);
     worst_corrected = std::max(worst_corrected, (T.translation() - p_truth).norm());
     const lie::SE3 T_read = em.PredictPose(q, em.Loads(q), active, theta, ws);

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <string>
 
 #include "estimators/error.h"
@@ -24,6 +25,23 @@ void ExpectInputError(const F& f, std::initializer_list<std::string> parts) {
     f();
     ADD_FAILURE() << "no InputError thrown";
   } catch (const InputError& e) {
+    const std::string what = e.what();
+    for (const std::string& p : parts) {
+      EXPECT_NE(what.find(p), std::string::npos) << "'" << p << "' not in: " << what;
+    }
+  }
+}
+
+// Runs f, expects a caller's bug (std::invalid_argument, an internal error) naming `parts`: never
+// an InputError, which would tell the user their file is wrong.
+template <class F>
+void ExpectCallerBug(const F& f, std::initializer_list<std::string> parts) {
+  try {
+    f();
+    ADD_FAILURE() << "nothing thrown";
+  } catch (const InputError& e) {
+    ADD_FAILURE() << "a caller's bug reported as bad input: " << e.what();
+  } catch (const std::invalid_argument& e) {
     const std::string what = e.what();
     for (const std::string& p : parts) {
       EXPECT_NE(what.find(p), std::string::npos) << "'" << p << "' not in: " << what;
@@ -124,16 +142,16 @@ TEST_F(FkInput, DataOfAnotherModel) {
   PpoeModel other("other");
   other.AddLink(kBaseFrame, "j", SE3(), Joint::Revolute(Vec3::UnitX()));
   PpoeData wrong(other);
-  ExpectInputError([&] { ForwardKinematics(model_, wrong, q_); }, {"PpoeData", "planar3r"});
+  ExpectCallerBug([&] { ForwardKinematics(model_, wrong, q_); }, {"PpoeData", "planar3r"});
 }
 
 TEST_F(FkInput, BadOrderAndJacobianShape) {
-  ExpectInputError(
+  ExpectCallerBug(
       [&] { ForwardKinematicsWithCovariance(model_, data_, q_, static_cast<CompoundOrder>(3)); },
       {"order"});
   ForwardKinematics(model_, data_, q_);
   Matrix6Xd J(6, 2);
-  ExpectInputError([&] { ComputeFrameJacobian(model_, data_, 1, J); }, {"2 columns", "3 joints"});
+  ExpectCallerBug([&] { ComputeFrameJacobian(model_, data_, 1, J); }, {"2 columns", "3 joints"});
   Matrix6Xd J3(6, 3);
   ExpectInputError([&] { ComputeFrameJacobian(model_, data_, 42, J3); }, {"frame id 42"});
 }

@@ -19,7 +19,6 @@ namespace {
 
 using lie::CompoundOrder;
 using lie::SE3;
-using testing::kDeg;
 
 // ---------------------------------------------------------------------------------------------
 // Oracles.

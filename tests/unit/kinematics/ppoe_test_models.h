@@ -13,8 +13,6 @@
 
 namespace flexbench::kinematics::testing {
 
-inline constexpr double kDeg = M_PI / 180.0;
-
 // Entries uniform in [-scale, scale], drawn in a fixed order (function-argument evaluation order
 // is unspecified, so never draw inside an argument list).
 inline Vec3 UniformVec3(std::mt19937_64& rng, double scale = 1.0) {

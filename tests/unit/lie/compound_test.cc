@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "estimators/conventions.h"
 #include "estimators/lie/sampling.h"
 #include "tests/unit/lie/lie_test_util.h"
 
@@ -15,8 +16,6 @@ namespace {
 
 using Mat12 = Eigen::Matrix<double, 12, 12>;
 using Vec12 = Eigen::Matrix<double, 12, 1>;
-
-constexpr double kDeg = M_PI / 180.0;
 
 Mat6 RandomMatrix(std::mt19937_64& rng) {
   std::normal_distribution<double> n(0.0, 1.0);

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <random>
+#include <stdexcept>
 #include <vector>
 
 #include "estimators/error.h"
@@ -65,7 +66,8 @@ TEST(BatchKinematics, OutputsAndErrors) {
   EXPECT_EQ(batch.OutputIndex(arm.imu3), -1);
   EXPECT_THROW(BatchKinematics(arm.model, {99}, 8), InputError);
   std::vector<double> c(4 * 8, 1.0), s(4 * 8, 0.0);
-  EXPECT_THROW(batch.Compute(c.data(), s.data(), 8, 9), InputError);
+  // More particles than the capacity is the caller's bug, not bad input.
+  EXPECT_THROW(batch.Compute(c.data(), s.data(), 8, 9), std::invalid_argument);
   kinematics::PpoeModel prismatic("p");
   const int f =
       prismatic.AddLink(0, "slide", lie::SE3(), kinematics::Joint::Prismatic(Vec3::UnitX()));

@@ -13,14 +13,13 @@
 #include <utility>
 #include <vector>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "tests/unit/pf/pf_test_models.h"
 
 namespace flexbench::pf {
 namespace {
-
-constexpr double kDeg = M_PI / 180.0;
 
 double AngleDiff(double a, double b) { return std::remainder(a - b, 2.0 * M_PI); }
 

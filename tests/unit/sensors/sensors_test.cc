@@ -7,6 +7,7 @@
 #include <cmath>
 #include <set>
 
+#include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "sim/camera.h"
 #include "sim/sensors/sensor.h"
@@ -16,7 +17,6 @@
 namespace flexbench::sim {
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
 constexpr int kSamples = 10000;
 
 // A pendulum with a passive spring joint at its tip, an IMU site, a fingertip and a table.
@@ -25,9 +25,9 @@ const char kPendulum[] = R"(
   <compiler angle="radian" autolimits="true"/>
   <option timestep="0.001"/>
   <custom>
-    <text name="effect:link_elasticity" data="tip_bend"/>
-    <text name="effect:joint_elasticity" data="hinge"/>
-    <numeric name="effect:joint_elasticity:stiffness" data="80"/>
+    <text name="effect:link_bending" data="tip_bend"/>
+    <text name="effect:joint_compliance" data="hinge"/>
+    <numeric name="effect:joint_compliance:stiffness" data="80"/>
   </custom>
   <worldbody>
     <geom name="table" type="box" pos="0.45 0 0.75" size="0.2 0.2 0.02" contype="0" conaffinity="0"/>
@@ -151,9 +151,9 @@ TEST(EncoderSensor, QuantisedNoisyReadingsStayOnTheGrid) {
   ExpectNormal(v, 0.2, std);
 }
 
-TEST(EncoderSensor, OffsetComesFromTheEncoderOffsetEffect) {
+TEST(EncoderSensor, OffsetComesFromTheJointOffsetEffect) {
   auto plain = Pendulum();
-  auto offset = Pendulum(Effects({{"encoder_offset", "{offset_deg: {hinge: 0.4}}"}}));
+  auto offset = Pendulum(Effects({{"joint_offset", "{offset_deg: {hinge: -0.4}}"}}));
   for (Simulation* s : {plain.get(), offset.get()}) {
     s->SetCommand("hinge", 0.25);
     s->Settle();

@@ -23,6 +23,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "estimators/format.h"
 #include "render/plot.h"
 #include "scenarios/runner/common/log_export.h"
 #include "scenarios/runner/common/trajectories.h"
@@ -34,10 +35,8 @@ namespace flexbench::scenarios {
 namespace {
 
 // A number as a metric key or label: "%g" with '.' spelled 'p' (metric paths are dotted).
-std::string Num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof(b), "%g", v);
-  std::string s = b;
+std::string KeyNum(double v) {
+  std::string s = ShortNum(v);
   for (char& c : s) {
     if (c == '.') c = 'p';
   }
@@ -118,7 +117,7 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     SweepOutput out = StartOutput(runs);
     for (const Setting& setting : Settings()) {
       const RunMetrics mean = RunSetting(setting, runs, ctx, &out, &all);
-      Json& m = metrics[variants_[setting.variant].first][setting.sweep()][Num(setting.value)];
+      Json& m = metrics[variants_[setting.variant].first][setting.sweep()][KeyNum(setting.value)];
       m["joint_rmse_deg"] = mean.rmse_deg;
       m["joint_err_max_deg"] = mean.err_max_deg;
       m["ess_mean"] = mean.ess_mean;
@@ -203,8 +202,9 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     for (int s = 0; s < seeds_; ++s) {
       const std::uint64_t seed = ctx.seed + 1000 * s;
       const std::string label =
-          vlabel + (setting.particles_sweep ? "_n" + Num(setting.n) : "_kv" + Num(setting.k)) +
-          "_s" + std::to_string(s);
+          vlabel +
+          (setting.particles_sweep ? "_n" + KeyNum(setting.n) : "_kv" + KeyNum(setting.k)) + "_s" +
+          std::to_string(s);
       int rejected = 0;
       const jsk::Trace tr = jsk::RunSynthetic(
           rig_, Make(setting.variant, setting.n, setting.k, label), runs[s], seed, &rejected);
@@ -252,11 +252,11 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     fig.title = "Hyperparameters (sec. V-A): " + base_.name + ", mean over " +
                 std::to_string(seeds_) + " seeds (solid: RMSE, dashed: max error)";
     Panel(&fig.axes(0, 0),
-          "joint error vs number of particles (kappa_v = " + Num(base_kappa_) + ")", "log2 N",
+          "joint error vs number of particles (kappa_v = " + KeyNum(base_kappa_) + ")", "log2 N",
           "error [deg]", out.n_curves, false);
     Panel(&fig.axes(0, 1), "mean effective sample size vs N", "log2 N", "log10 ESS", out.n_curves,
           true);
-    Panel(&fig.axes(1, 0), "joint error vs system noise (N = " + Num(base_n_) + ")",
+    Panel(&fig.axes(1, 0), "joint error vs system noise (N = " + KeyNum(base_n_) + ")",
           "log10 kappa_v", "error [deg]", out.k_curves, false);
     Panel(&fig.axes(1, 1), "mean effective sample size vs kappa_v", "log10 kappa_v", "log10 ESS",
           out.k_curves, true);
