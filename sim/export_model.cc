@@ -233,12 +233,11 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
 std::map<std::string, double> GearStiffness(const mjModel* m, const DeclaredChain& full,
                                             std::vector<std::string>* skipped) {
   std::map<std::string, double> k;
+  // Each of the two under its current name, else its former one (a model may mix them).
   int t = mj_name2id(m, mjOBJ_TEXT, kGearText);
+  if (t < 0) t = mj_name2id(m, mjOBJ_TEXT, kFormerGearText);
   int n = mj_name2id(m, mjOBJ_NUMERIC, kGearNumbers);
-  if (t < 0 && n < 0) {
-    t = mj_name2id(m, mjOBJ_TEXT, kFormerGearText);
-    n = mj_name2id(m, mjOBJ_NUMERIC, kFormerGearNumbers);
-  }
+  if (n < 0) n = mj_name2id(m, mjOBJ_NUMERIC, kFormerGearNumbers);
   if (t >= 0 && n >= 0) {
     std::istringstream names(std::string(m->text_data + m->text_adr[t]));  // NUL-terminated
     std::string name;

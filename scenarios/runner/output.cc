@@ -174,8 +174,9 @@ bool MakerGone(const Maker& m) {
 
 // True for a temporary killed between its mkdir and the end of its marker's write: it holds
 // nothing (or only a partial marker), so it holds nothing of anyone's, and no process of the
-// PID its name holds runs here. Were the PID another host's on a shared file system, that run
-// finds its folder gone when it writes the marker and takes the next name.
+// PID its name holds runs in this PID namespace. Were it a live run of another host or
+// container on a shared file system, in that moment: it finds its marker gone once it has
+// written frames/ (IsOwnTemporary) and takes the next name.
 bool IsUnmarkedAbandoned(const fs::path& dir, long pid) {
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
@@ -189,6 +190,13 @@ bool IsUnmarkedAbandoned(const fs::path& dir, long pid) {
   if (ec) return false;
   errno = 0;
   return kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+}
+
+// Whether `dir` holds this process's complete marker.
+bool IsOwnTemporary(const fs::path& dir, const Maker& self) {
+  const std::optional<Maker> m = ReadMarker(dir);
+  return m && m->pid == self.pid && m->start_time == self.start_time && m->host == self.host &&
+         m->pid_namespace == self.pid_namespace;
 }
 
 // True only for a temporary of a flexbench run of this host and this PID namespace (so its
@@ -258,7 +266,14 @@ void RemoveStaleTemporaries(const fs::path& final_dir, const Maker& self) {
       const long pid = PidOfTemporaryName(f, stem, tag);
       if (pid == 0 || !IsStaleTemporary(it->path(), pid, self)) continue;
       std::error_code rm;
-      fs::remove_all(it->path(), rm);
+      if (ReadMarker(it->path())) {
+        fs::remove_all(it->path(), rm);
+      } else {
+        // Unmarked: never more than the partial marker, and the folder only while empty (a
+        // run that was only slow has written frames/ by now, and rmdir leaves it).
+        fs::remove(it->path() / kTemporaryMarker, rm);
+        ::rmdir(it->path().c_str());
+      }
     }
   }
 }
@@ -565,10 +580,22 @@ OutputDir::OutputDir(const fs::path& final_dir, bool force, const std::vector<fs
     if (::mkdir(candidate.c_str(), 0777) == 0) {
       // The marker first (an unmarked temporary is removed only while it holds nothing), and
       // it is the probe write: permissions can allow mkdir yet refuse files (read-only mounts,
-      // a full disk). ENOENT: another run took the empty folder for an abandoned one.
+      // a full disk).
       err = WriteMarker(candidate, self);
-      if (err == ENOENT) continue;
+      if (err == 0 && !fs::create_directories(candidate / "frames", ec))
+        err = ec ? ec.value() : EIO;
+      if (err == ENOENT || (err == 0 && !IsOwnTemporary(candidate, self))) {
+        // Another run took the folder for an abandoned one before its marker was complete:
+        // what is there now is this run's (frames/ made again), the next name is taken.
+        fs::remove_all(candidate, ec);
+        err = 0;
+        continue;
+      }
       tmp_ = candidate;
+      if (err != 0) {
+        fs::remove_all(tmp_, ec);
+        throw InputError(Shown(final_) + ": output folder is not writable: " + std::strerror(err));
+      }
     } else if (errno == EEXIST) {
       // A folder of that name that is not a temporary of an ended run (its PID reused) is
       // someone's: the next name.
@@ -586,12 +613,6 @@ OutputDir::OutputDir(const fs::path& final_dir, bool force, const std::vector<fs
                      TemporaryName(name, "tmp", self.pid) + "...); remove them");
   }
   signal_slot_ = RegisterTemporary(tmp_);
-  if (err == 0 && !fs::create_directories(tmp_ / "frames", ec)) err = ec ? ec.value() : EIO;
-  if (err != 0) {
-    fs::remove_all(tmp_, ec);
-    UnregisterTemporary(signal_slot_);
-    throw InputError(Shown(final_) + ": output folder is not writable: " + std::strerror(err));
-  }
 }
 
 OutputDir::~OutputDir() {

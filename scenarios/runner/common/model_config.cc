@@ -113,7 +113,14 @@ void FittedRangeCheck::Report(const RunContext& ctx) const {
            &angles);
   }
   for (const Torque& t : torques_) {
-    Append(Outside(t.fitted.joint, t.min, t.max, t.fitted.min, t.fitted.max, 1.0, "N m"), &loads);
+    // A slide joint holds a force.
+    const bool slide = std::any_of(fitted_.joint_ranges.begin(), fitted_.joint_ranges.end(),
+                                   [&](const sim::FittedUnder::JointRange& r) {
+                                     return r.joint == t.fitted.joint && r.slide;
+                                   });
+    Append(
+        Outside(t.fitted.joint, t.min, t.max, t.fitted.min, t.fitted.max, 1.0, slide ? "N" : "N m"),
+        &loads);
   }
   if (fitted_.has_box) {
     for (int i = 0; i < 3; ++i) {

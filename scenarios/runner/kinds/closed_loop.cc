@@ -2098,7 +2098,9 @@ class ClosedLoopKind : public ScenarioKind {
   // Where the fit holds: the range over the calibration and validation rows of each joint that
   // moves a measured frame (the others, a mast beside the arm, were never measured), and the
   // source directions those rows sized.
-  sim::FittedUnder FittedUnder(const Sets& sets) const {
+  // `augmented`: the file being written; the loads and reach are taken on its chain (its
+  // fitted marker offsets move the end effector), as a run using it evaluates them.
+  sim::FittedUnder FittedUnder(const Sets& sets, const sim::DeclaredModel& augmented) const {
     sim::FittedUnder f;
     const int nq = chain_->model.nq();
     std::vector<char> moves(nq, 0);
@@ -2115,7 +2117,8 @@ class ClosedLoopKind : public ScenarioKind {
       }
     }
     // The loads and reach of the same rows (what a bending link or a compliant mount answers to).
-    sim::PostureLoadEvaluator load(mj_.get(), *chain_);
+    const sim::DeclaredChain used = sim::BuildDeclaredChain(mj_.get(), augmented);
+    sim::PostureLoadEvaluator load(mj_.get(), used);
     sim::PostureLoad at;
     Eigen::VectorXd tau_lo = Eigen::VectorXd::Constant(nq, INFINITY), tau_hi = -tau_lo;
     Vec3 box_lo = Vec3::Constant(INFINITY), box_hi = -box_lo;
@@ -2151,7 +2154,7 @@ class ClosedLoopKind : public ScenarioKind {
   void WriteAugmented(RunContext& ctx, const Sets& sets,
                       const identify::IdentifyResult& res) const {
     sim::DeclaredModel out = Augmented(res);
-    out.fitted_under = FittedUnder(sets);
+    out.fitted_under = FittedUnder(sets, out);
     const std::string kept = out.fitted_under.kept_declared_sources.empty()
                                  ? "none"
                                  : Join(out.fitted_under.kept_declared_sources);

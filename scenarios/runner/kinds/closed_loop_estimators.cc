@@ -109,8 +109,12 @@ class ClosedLoopEstimatorsKind : public ScenarioKind {
     render::TagDetector detector(detector_);
     ctx.log("(a) tracking with the declared model");
     TrajectoryRecorder before_trajectories, after_trajectories;
+    // The scenario's declared model may itself be an augmented one (--set declared=...).
+    FittedRangeCheck declared_range(rig_.declared, rig_.chain->q_joints, rig_.sim->nominal_model(),
+                                    rig_.chain.get());
     const std::vector<Track> before =
-        Follow(ctx, renderer, detector, rig_, 0, &before_trajectories);
+        Follow(ctx, renderer, detector, rig_, 0, &before_trajectories, nullptr, &declared_range);
+    declared_range.Report(ctx);
     before_trajectories.Write(*ctx.out, "base", "before");
     ctx.log("(b) calibration routine and identification (identify/)");
     const fs::path augmented = Identify(ctx);

@@ -5,7 +5,7 @@
 // NEES, its chi-square bound, flagged) and matrix.png (heat maps of error and NEES, flagged cells
 // outlined). Metric `unflagged_growth_cells`: cells whose error grew by `growth_factor` over the
 // no-effect column while the mean NEES stayed inside its bound -- the mismatch went unnoticed.
-// Per cell, the running-NEES test (common/estimator_config.h, window 10) over the configurations
+// Per cell, the running-NEES test (common/error_stats.h, window 10) over the configurations
 // in order gives the detection delay: the configuration at which it first fires (-1: never).
 #include <algorithm>
 #include <cmath>
