@@ -2117,7 +2117,8 @@ class ClosedLoopKind : public ScenarioKind {
       }
     }
     // The loads and reach of the same rows (what a bending link or a compliant mount answers to).
-    const sim::DeclaredChain used = sim::BuildDeclaredChain(mj_.get(), augmented);
+    const sim::DeclaredChain used =
+        sim::BuildDeclaredChain(mj_.get(), augmented, /*with_couplings=*/true);
     sim::PostureLoadEvaluator load(mj_.get(), used);
     sim::PostureLoad at;
     Eigen::VectorXd tau_lo = Eigen::VectorXd::Constant(nq, INFINITY), tau_hi = -tau_lo;
