@@ -10,7 +10,7 @@
 #include "estimators/error.h"
 #include "estimators/format.h"
 #include "estimators/kinematics/forward_kinematics.h"
-#include "render/plot.h"
+#include "render/residual_figures.h"
 #include "scenarios/runner/common/closed_loop/truth.h"
 #include "scenarios/runner/output.h"
 #include "sim/export_model.h"
@@ -218,24 +218,20 @@ void PlotFinding(RunContext& ctx, const identify::ResidualFinding& f) {
     cx.push_back(v * xs);
     cz.push_back(y * zs);
   }
-  render::Figure fig(900, 560);
   char title[160];
   std::snprintf(title, sizeof(title), "Residual left: %s in %s, p = %.2g%s", f.kind.c_str(),
                 f.variable.c_str(), f.p_value,
                 f.significant   ? ""
                 : f.below_noise ? " (below the stated noise)"
                                 : " (not significant)");
-  fig.title = title;
-  render::Axes& ax = fig.axes();
-  ax.x_label = angle              ? f.variable + " [deg]"
-               : f.kind == "load" ? "gravity torque at " + f.variable + " [N m]"
-                                  : "row order (0 first, 1 last)";
-  ax.y_label = f.kind == "drift" ? "residual [mm]"
-                                 : "residual as an angle error of " + f.variable + " [deg]";
-  ax.AddScatter("rows", x, z).marker = render::Marker::kCircle;
-  ax.AddLine("fitted", cx, cz);
-  ax.legend_position = render::LegendPosition::kTopRight;
-  fig.SavePng(ctx.out->File("residual_structure.png").string());
+  const std::string x_label = angle              ? f.variable + " [deg]"
+                              : f.kind == "load" ? "gravity torque at " + f.variable + " [N m]"
+                                                 : "row order (0 first, 1 last)";
+  const std::string y_label = f.kind == "drift"
+                                  ? "residual [mm]"
+                                  : "residual as an angle error of " + f.variable + " [deg]";
+  render::SaveRowsAndCurve(ctx.out->File("residual_structure.png").string(),
+                           {title, x_label, y_label}, x, z, cx, cz);
 }
 
 
@@ -391,22 +387,16 @@ void Plot(const ClosedLoopSetup& cl, RunContext& ctx, const identify::IdentifyRe
     a_shown.push_back(scale * after[r]);
   }
   x = xs;
-  render::Figure fig(900, 560);
-  fig.title = "Validation residual before and after identification";
-  render::Axes& ax = fig.axes();
-  ax.x_label = xl;
   const bool sockets = std::any_of(d.rows.begin(), d.rows.end(), [](const auto& o) {
     return o.type == identify::ObservationType::kGroup;
   });
-  ax.y_label = unit == identify::RowUnit::kPixels    ? "pixel error of the tags [px]"
-               : unit == identify::RowUnit::kRadians ? "angle to the measured up [deg]"
-               : sockets                             ? "distance from the socket's mean [mm]"
-                                                     : "distance from the measured point [mm]";
-  ax.AddScatter("declared model", x, b_shown).marker = render::Marker::kCircle;
-  ax.AddScatter("with identified effects", x, a_shown).marker = render::Marker::kSquare;
-  ax.legend_position = render::LegendPosition::kTopRight;
-  ax.y_min = 0.0;
-  fig.SavePng(ctx.out->File("residual_before_after.png").string());
+  const std::string y_label = unit == identify::RowUnit::kPixels    ? "pixel error of the tags [px]"
+                              : unit == identify::RowUnit::kRadians ? "angle to the measured up [deg]"
+                              : sockets ? "distance from the socket's mean [mm]"
+                                        : "distance from the measured point [mm]";
+  render::SaveBeforeAfter(ctx.out->File("residual_before_after.png").string(),
+                          {"Validation residual before and after identification", xl, y_label},
+                          x, b_shown, a_shown);
 }
 
 // Conditioning, the fitted scale, what the data leave undetermined, and the verdict.
