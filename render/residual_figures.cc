@@ -16,9 +16,9 @@ Axes& Prepare(Figure* fig, const FigureText& text) {
 
 }  // namespace
 
-void SaveRowsAndCurve(const std::string& path, const FigureText& text,
-                      const std::vector<double>& x, const std::vector<double>& z,
-                      const std::vector<double>& cx, const std::vector<double>& cz) {
+void SaveRowsAndCurve(const std::string& path, const FigureText& text, const std::vector<double>& x,
+                      const std::vector<double>& z, const std::vector<double>& cx,
+                      const std::vector<double>& cz) {
   Figure fig(900, 560);
   Axes& ax = Prepare(&fig, text);
   ax.AddScatter("rows", x, z).marker = Marker::kCircle;
@@ -26,9 +26,8 @@ void SaveRowsAndCurve(const std::string& path, const FigureText& text,
   fig.SavePng(path);
 }
 
-void SaveBeforeAfter(const std::string& path, const FigureText& text,
-                     const std::vector<double>& x, const std::vector<double>& before,
-                     const std::vector<double>& after) {
+void SaveBeforeAfter(const std::string& path, const FigureText& text, const std::vector<double>& x,
+                     const std::vector<double>& before, const std::vector<double>& after) {
   Figure fig(900, 560);
   Axes& ax = Prepare(&fig, text);
   ax.AddScatter("declared model", x, before).marker = Marker::kCircle;

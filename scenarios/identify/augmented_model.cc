@@ -9,8 +9,7 @@ namespace {
 
 // Appends `ie`, or adds it to an entry of the same name: values add up, stds by root sum of
 // squares (the two fits' errors are independent).
-void AddIdentifiedEffect(sim::IdentifiedEffect ie,
-                                std::vector<sim::IdentifiedEffect>* effects) {
+void AddIdentifiedEffect(sim::IdentifiedEffect ie, std::vector<sim::IdentifiedEffect>* effects) {
   const auto same =
       std::find_if(effects->begin(), effects->end(),
                    [&](const sim::IdentifiedEffect& e) { return e.effect == ie.effect; });
@@ -23,7 +22,6 @@ void AddIdentifiedEffect(sim::IdentifiedEffect ie,
   for (size_t k = 0; k < ie.std.size(); ++k) same->std[k] = std::hypot(same->std[k], ie.std[k]);
   same->equivalent = ie.equivalent;
 }
-
 
 // The fitted measurement frames' poses and marker offsets, with their covariances: a fitted
 // offset adds to the declared one (the fit moved the frame the file had already moved).
@@ -67,7 +65,6 @@ sim::DeclaredModel AugmentedModel(const Job& job, const Report& report) {
   return out;
 }
 
-
 // Where the fit holds: the range over the calibration and validation rows of each joint that
 // moves a measured frame (the others, a mast beside the arm, were never measured), and the
 // source directions those rows sized.
@@ -93,8 +90,7 @@ sim::FittedUnder FittedUnder(const Job& job, const Report& report,
     }
   }
   // The loads and reach of the same rows (what a bending link or a compliant mount answers to).
-  const sim::DeclaredChain used =
-      sim::BuildDeclaredChain(mj, augmented, /*with_couplings=*/true);
+  const sim::DeclaredChain used = sim::BuildDeclaredChain(mj, augmented, /*with_couplings=*/true);
   sim::PostureLoadEvaluator load(mj, used);
   sim::PostureLoad at;
   Eigen::VectorXd tau_lo = Eigen::VectorXd::Constant(nq, INFINITY), tau_hi = -tau_lo;
@@ -111,8 +107,7 @@ sim::FittedUnder FittedUnder(const Job& job, const Report& report,
   for (int k = 0; k < nq; ++k) {
     if (!moves[k] || !(lo[k] <= hi[k])) continue;
     const int j = mj_name2id(mj, mjOBJ_JOINT, chain.q_joints[k].c_str());
-    f.joint_ranges.push_back(
-        {chain.q_joints[k], lo[k], hi[k], mj->jnt_type[j] == mjJNT_SLIDE});
+    f.joint_ranges.push_back({chain.q_joints[k], lo[k], hi[k], mj->jnt_type[j] == mjJNT_SLIDE});
     f.gravity_torques.push_back({chain.q_joints[k], tau_lo[k], tau_hi[k]});
   }
   f.has_box = box_lo.x() <= box_hi.x();

@@ -169,9 +169,8 @@ double MeanNees(const NoiseModel& nm, const DataSet& d, const std::vector<Vec3>&
     const Mat3 R = pd.T_base_frame[f].rotation();
     const Mat3 S =
         source_scale * R * pd.Sigma_frame[f].topLeftCorner<3, 3>() * R.transpose() + noise[r];
-    const Vec3 e =
-        p[r] - (d.rows[r].type == ObservationType::kGroup ? mean[d.rows[r].group]
-                                                                    : d.rows[r].p_base);
+    const Vec3 e = p[r] - (d.rows[r].type == ObservationType::kGroup ? mean[d.rows[r].group]
+                                                                     : d.rows[r].p_base);
     sum += e.dot(S.ldlt().solve(e));
   }
   return n > 0 ? sum / n : std::nan("");

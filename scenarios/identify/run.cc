@@ -37,8 +37,8 @@ void RejectOutliers(const Job& job, const std::string& where, const std::string&
     rejected->push_back(d->rows[r].where.empty() ? what + " row " + std::to_string(r)
                                                  : d->rows[r].where);
   }
-  Say(job.log, what + ": " + std::to_string(out.size()) +
-                   " row(s) rejected as outliers, first " + rejected->back());
+  Say(job.log, what + ": " + std::to_string(out.size()) + " row(s) rejected as outliers, first " +
+                   rejected->back());
   *d = WithoutRows(*d, out);
   std::vector<int> kept;
   size_t k = 0;
@@ -143,10 +143,11 @@ void Judge(const Job& job, Report* r) {
                       " times the stated noise after the fit: outliers the rejection missed "
                       "(rejected_rows), wrong units, or a wrong noise level; verdict unexplained");
   }
-  Say(job.log, "verdict: " + r->verdict + "; " + res.finding.message +
-                   (res.finding.significant
-                        ? (res.unlocked.empty() ? " - not in the candidate library" : " - left over")
-                        : " (not significant)"));
+  Say(job.log,
+      "verdict: " + r->verdict + "; " + res.finding.message +
+          (res.finding.significant
+               ? (res.unlocked.empty() ? " - not in the candidate library" : " - left over")
+               : " (not significant)"));
 }
 
 // Sorts the declared sources' directions into those the validation rows constrain (at the
@@ -195,9 +196,10 @@ void ScoreNees(const Job& job, const NoiseModel& nm, Report* r) {
   const std::vector<Mat3> noise_before = RowNoise(nm, val, r->val_loads, nullptr);
   const std::vector<Mat3> noise_after = RowNoise(nm, val, r->val_loads_after, &r->result);
   // Over the rows MeanNees averages: those in metres.
-  const int metres = static_cast<int>(std::count_if(
-      val.rows.begin(), val.rows.end(),
-      [](const Observation& o) { return UnitOf(o.type) == RowUnit::kMetres; }));
+  const int metres =
+      static_cast<int>(std::count_if(val.rows.begin(), val.rows.end(), [](const Observation& o) {
+        return UnitOf(o.type) == RowUnit::kMetres;
+      }));
   r->nees_bounds = stats::MeanChiSquareBounds(3.0, std::max(1, metres));
   r->nees_before = MeanNees(nm, val, r->val_p0, noise_before);
   r->nees_after = MeanNees(nm, val, r->val_p1, noise_after);
@@ -208,16 +210,13 @@ void ScoreNees(const Job& job, const NoiseModel& nm, Report* r) {
   }
   const kinematics::PpoeModel constrained = ConstrainedSources(job, noise_after, r);
   const bool any = std::count(r->constrained.begin(), r->constrained.end(), true) > 0;
-  r->source_scale =
-      any ? SourceScale(nm, val, r->val_p1, noise_after, target, constrained) : 1.0;
-  r->nees_after_scaled =
-      MeanNees(nm, val, r->val_p1, noise_after, r->source_scale, &constrained);
+  r->source_scale = any ? SourceScale(nm, val, r->val_p1, noise_after, target, constrained) : 1.0;
+  r->nees_after_scaled = MeanNees(nm, val, r->val_p1, noise_after, r->source_scale, &constrained);
   // At the largest scale and still above: what is left is not where the sources act.
   r->sources_cover_residual = r->nees_after_scaled <= target + 1e-6;
   if (!r->sources_cover_residual) {
-    Say(job.log,
-        "the declared sources cannot cover what the effects leave: validation mean NEES " +
-            ShortNum(r->nees_after_scaled) + " at the largest source scale");
+    Say(job.log, "the declared sources cannot cover what the effects leave: validation mean NEES " +
+                     ShortNum(r->nees_after_scaled) + " at the largest source scale");
   }
 }
 

@@ -28,7 +28,7 @@ struct Job {
   const mjModel* mj = nullptr;
   const sim::DeclaredChain* chain = nullptr;
   const EffectModel* em = nullptr;
-  DataSet cal, val;  // the calibration and validation rows, as measured
+  DataSet cal, val;                  // the calibration and validation rows, as measured
   std::string cal_where, val_where;  // where each set was named, for messages
   std::vector<int> candidates;       // indices into em->candidates()
   IdentifyOptions opt;

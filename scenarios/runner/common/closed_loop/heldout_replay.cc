@@ -19,7 +19,7 @@ void CheckHeldOutReplay(ClosedLoopSetup& cl) {
   const sim::RecordedLog& log = Log(cl, cl.validation);
   if (log.truth_t.empty() || log.truth_frame != cl.declared.end_effector) {
     cl.log_notes.push_back("held-out replay left out: " + log.dir + " has no truth.tum of the " +
-                         "end effector '" + cl.declared.end_effector + "' to score it against");
+                           "end effector '" + cl.declared.end_effector + "' to score it against");
     return;
   }
   LogEstimatorSetup(log, *cl.chain, cl.declared.end_effector);

@@ -25,7 +25,6 @@ using identify::DataSet;
 // summary is an error the runner reports.
 Json FiniteOrNull(double v) { return std::isfinite(v) ? Json(v) : Json(); }
 
-
 struct Stats {
   double mean = 0, std = 0, max = 0;
 };
@@ -39,9 +38,6 @@ Stats Summarise(const std::vector<double>& e) {
   return s;
 }
 
-
-
-
 std::string JoinNames(const std::vector<std::string>& names) {
   std::string out;
   for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
@@ -49,7 +45,7 @@ std::string JoinNames(const std::vector<std::string>& names) {
 }
 
 void WriteRowErrorStats(const std::string& prefix, const std::string& unit,
-                               const std::vector<double>& errors, Json* m) {
+                        const std::vector<double>& errors, Json* m) {
   if (errors.empty()) return;
   const Stats s = Summarise(errors);
   (*m)[prefix + "_mean" + unit] = s.mean;
@@ -113,14 +109,6 @@ void WriteErrorMetrics(const ClosedLoopSetup& cl, const identify::Report& rep, J
   (*m)["validation_rows"] = val.rows.size();
 }
 
-
-
-
-
-
-
-
-
 // Each marker's fitted offset on its link (m, in its frame's coordinates) and its std.
 Json OffsetsJson(const ClosedLoopSetup& cl, const identify::IdentifyResult& res) {
   Json out = Json::array();
@@ -134,7 +122,6 @@ Json OffsetsJson(const ClosedLoopSetup& cl, const identify::IdentifyResult& res)
   }
   return out;
 }
-
 
 // Each frame's fitted pose, its reference and prior, and the covariance of xi
 // (T_base_frame = T_ref Exp(xi), [rho; theta] in m and rad).
@@ -161,7 +148,6 @@ Json FramesJson(const ClosedLoopSetup& cl, const identify::IdentifyResult& res) 
   }
   return out;
 }
-
 
 Json FindingJson(const identify::ResidualFinding& f) {
   return {{"significant", f.significant},
@@ -206,8 +192,7 @@ void PlotFinding(RunContext& ctx, const identify::ResidualFinding& f) {
     double y = f.coefficients.empty() ? 0.0 : f.coefficients[0];
     if (angle) {
       for (int c = 1; c <= 3 && 2 * c < static_cast<int>(f.coefficients.size()); ++c) {
-        y +=
-            f.coefficients[2 * c - 1] * std::cos(c * v) + f.coefficients[2 * c] * std::sin(c * v);
+        y += f.coefficients[2 * c - 1] * std::cos(c * v) + f.coefficients[2 * c] * std::sin(c * v);
       }
     } else if (f.kind == "load" && f.coefficients.size() == 3) {
       const double scale = std::max(std::abs(*lo), std::abs(*hi));
@@ -234,7 +219,6 @@ void PlotFinding(RunContext& ctx, const identify::ResidualFinding& f) {
                            {title, x_label, y_label}, x, z, cx, cz);
 }
 
-
 // The source directions by their sorting, and the scale on the constrained ones.
 Json SourceScalingJson(const identify::Report& rep) {
   Json constrained = Json::array(), kept = Json::array();
@@ -243,7 +227,6 @@ Json SourceScalingJson(const identify::Report& rep) {
   }
   return {{"constrained", constrained}, {"kept_declared", kept}, {"scale", rep.source_scale}};
 }
-
 
 void WriteAugmented(const ClosedLoopSetup& cl, RunContext& ctx, const identify::Job& job,
                     const identify::Report& rep) {
@@ -261,8 +244,8 @@ void WriteAugmented(const ClosedLoopSetup& cl, RunContext& ctx, const identify::
          << ",\n3 is consistent). Kept as declared (the "
          << "rows do not see them): " << kept << ".\nVerdict: " << rep.verdict
          << (rep.verdict == "ambiguous" ? " (the correction holds; other effect sets explain the "
-                                       "data about as well, so no cause is singled out)"
-                                     : "")
+                                          "data about as well, so no cause is singled out)"
+                                        : "")
          << ".\nfitted_under: the joint ranges, gravity torques and end-effector box of those "
             "rows; a run "
             "outside them is warned of.";
@@ -304,7 +287,6 @@ void WriteCalibratedModel(RunContext& ctx, const identify::Job& job, const ident
   }
 }
 
-
 void WriteResiduals(const ClosedLoopSetup& cl, RunContext& ctx, const DataSet& d,
                     const std::vector<double>& before, const std::vector<double>& after,
                     const identify::RowLoads& loads, const std::vector<Vec3>& p,
@@ -320,9 +302,8 @@ void WriteResiduals(const ClosedLoopSetup& cl, RunContext& ctx, const DataSet& d
     c << r << "," << d.sets[d.rows[r].set] << ","
       << (d.rows[r].type == identify::ObservationType::kGroup ? d.groups[d.rows[r].group] : "")
       << "," << d.rows[r].where << "," << ShortNum(before[r]) << "," << ShortNum(after[r]) << ","
-      << ShortNum(reach) << "," << ShortNum(L.tau.size() ? L.tau.cwiseAbs().maxCoeff() : 0.0)
-      << "," << ShortNum(p[r].x()) << "," << ShortNum(p[r].y()) << "," << ShortNum(p[r].z())
-      << "\n";
+      << ShortNum(reach) << "," << ShortNum(L.tau.size() ? L.tau.cwiseAbs().maxCoeff() : 0.0) << ","
+      << ShortNum(p[r].x()) << "," << ShortNum(p[r].y()) << "," << ShortNum(p[r].z()) << "\n";
   }
   WriteFileAtomic(ctx.out->File(name + "_residuals.csv"), c.str());
 }
@@ -390,20 +371,20 @@ void Plot(const ClosedLoopSetup& cl, RunContext& ctx, const identify::IdentifyRe
   const bool sockets = std::any_of(d.rows.begin(), d.rows.end(), [](const auto& o) {
     return o.type == identify::ObservationType::kGroup;
   });
-  const std::string y_label = unit == identify::RowUnit::kPixels    ? "pixel error of the tags [px]"
-                              : unit == identify::RowUnit::kRadians ? "angle to the measured up [deg]"
+  const std::string y_label = unit == identify::RowUnit::kPixels ? "pixel error of the tags [px]"
+                              : unit == identify::RowUnit::kRadians
+                                  ? "angle to the measured up [deg]"
                               : sockets ? "distance from the socket's mean [mm]"
                                         : "distance from the measured point [mm]";
   render::SaveBeforeAfter(ctx.out->File("residual_before_after.png").string(),
-                          {"Validation residual before and after identification", xl, y_label},
-                          x, b_shown, a_shown);
+                          {"Validation residual before and after identification", xl, y_label}, x,
+                          b_shown, a_shown);
 }
 
 // Conditioning, the fitted scale, what the data leave undetermined, and the verdict.
 void WriteDiagnostics(const ClosedLoopSetup& cl, const identify::Report& rep, Json* m) {
   const identify::IdentifyResult& res = rep.result;
-  (*m)["condition_number"] =
-      FiniteOrNull(res.condition_number);  // null: singular (near_singular)
+  (*m)["condition_number"] = FiniteOrNull(res.condition_number);  // null: singular (near_singular)
   // The fitted distance of each constrained group pair (a check on the scale: the
   // consistency metric alone would reward shrinking the robot).
   std::vector<double> fitted_distances;
@@ -453,7 +434,6 @@ void WriteNees(const ClosedLoopSetup& cl, const identify::Report& rep, Json* m) 
     (*m)["cal_rss_over_reading_noise"] = rep.rss_over_reading_noise;
   }
 }
-
 
 }  // namespace
 

@@ -109,8 +109,6 @@ Source ParseSource(const ConfigNode& n, bool tracker) {
   return s;
 }
 
-
-
 // A frame the declared file gives a pose for (`frames:`, a fit's result) starts its fit there
 // unless the scenario gives its own guess or prior.
 void StartFramesAtDeclaredPoses(ClosedLoopSetup& cl) {
@@ -125,7 +123,6 @@ void StartFramesAtDeclaredPoses(ClosedLoopSetup& cl) {
     }
   }
 }
-
 
 // The identification's settings (noise levels, selection, cross-validation, outliers).
 void ParseOptions(ClosedLoopSetup& cl, const ConfigNode& root) {
@@ -220,7 +217,6 @@ void ParseFramesAndMarkers(ClosedLoopSetup& cl, const ConfigNode& root) {
   }
 }
 
-
 // calibration and validation data sources, checked against the truth block.
 // `sources`: read them from the keys (else they are set already: the identify command's).
 void ParseSources(ClosedLoopSetup& cl, const ConfigNode& root, bool sources) {
@@ -273,7 +269,6 @@ void ParseSources(ClosedLoopSetup& cl, const ConfigNode& root, bool sources) {
   }
 }
 
-
 // The candidates named in `candidates` (all when none is named): each must exist.
 void SelectCandidates(ClosedLoopSetup& cl) {
   if (cl.candidate_specs.empty()) {
@@ -293,14 +288,12 @@ void SelectCandidates(ClosedLoopSetup& cl) {
     }
     for (const identify::EffectModel::Skipped& sk : cl.em->skipped()) {
       if (!any && sk.name == spec) {
-        throw InputError(where + ": candidate effect '" + spec +
-                         "' is not offered: " + sk.reason);
+        throw InputError(where + ": candidate effect '" + spec + "' is not offered: " + sk.reason);
       }
     }
     if (!any) throw InputError(where + ": no candidate effect '" + spec + "' on this chain");
   }
 }
-
 
 // The frames the `markers` key names besides the end effector (observed frames of the
 // declared model); cl.points their names, the end effector first.
@@ -335,7 +328,6 @@ std::vector<char> UnknownOffsets(const ClosedLoopSetup& cl) {
   }
   return out;
 }
-
 
 }  // namespace
 

@@ -60,10 +60,10 @@ std::string Span(const Source& s);
 struct SimulatedTruth {
   bool present = false;
   sim::EffectList effects;
-  std::optional<TrackerTruth> tracker;  // simulated tracker rows instead of sockets
-  int tracker_frame = -1;               // its index in the setup's frames
-  std::vector<int> tracker_points;      // its markers' indices in the setup's points
-  lie::SE3 T_true_tracker;              // drawn per run
+  std::optional<TrackerTruth> tracker;    // simulated tracker rows instead of sockets
+  int tracker_frame = -1;                 // its index in the setup's frames
+  std::vector<int> tracker_points;        // its markers' indices in the setup's points
+  lie::SE3 T_true_tracker;                // drawn per run
   std::map<std::string, double> row_err;  // simulated tracker rows' own error, by `where`
   double socket_distance_m = 0.05;
   double encoder_noise_rad = 0.0;
@@ -89,15 +89,15 @@ struct ClosedLoopSetup {
   std::vector<NamedNode> marker_nodes;
   std::vector<std::string> points;  // measured frames: end effector, then the markers
   std::vector<NamedNode> unknown_offset_nodes;
-  std::vector<char> offset_unknown;             // per points entry
-  std::vector<std::string> base_not_applied;    // identified effects of declared em lacks
-  std::vector<std::string> unused_frames;       // declared.frames no row is measured in
+  std::vector<char> offset_unknown;           // per points entry
+  std::vector<std::string> base_not_applied;  // identified effects of declared em lacks
+  std::vector<std::string> unused_frames;     // declared.frames no row is measured in
   // The data.
   Source calibration, validation;
   std::vector<std::string> truth_names;  // the truth's or `expected_effects`
   std::vector<NamedNode> expected_nodes;
-  render::DetectorSettings detector;               // for a log's images
-  std::map<std::string, sim::RecordedLog> logs;    // by folder (Source::path)
+  render::DetectorSettings detector;             // for a log's images
+  std::map<std::string, sim::RecordedLog> logs;  // by folder (Source::path)
   std::map<const Source*, std::vector<identify::StaticWindow>> still_windows;  // ImuFromLogs
   std::set<std::string> centred_tag_frames;  // log tag frames at their tags' centres
   std::vector<std::string> log_notes;        // said when the run starts

@@ -21,8 +21,9 @@ namespace {
 using identify::DataSet;
 
 // Pixel rows of a log's tags seen by the identification's camera (CameraFromLogs).
-void AppendLogPixels(const ClosedLoopSetup& cl, const sim::RecordedLog& log, const std::vector<int>& column, const Source& s,
-                     const std::string& what, RunContext& ctx, DataSet* d) {
+void AppendLogPixels(const ClosedLoopSetup& cl, const sim::RecordedLog& log,
+                     const std::vector<int>& column, const Source& s, const std::string& what,
+                     RunContext& ctx, DataSet* d) {
   int camera = -1;
   for (size_t c = 0; c < log.cameras.size(); ++c) {
     if (log.cameras[c].frame == cl.camera.name) camera = static_cast<int>(c);
@@ -43,7 +44,8 @@ void AppendLogPixels(const ClosedLoopSetup& cl, const sim::RecordedLog& log, con
 // A log IMU's frame as a measured point (checked on the chain, listed once); returns the
 // variance its readings' rounding gives an up direction there: count^2 / 12 of each joint on
 // its way from the base (a joint about the vertical counts too: on the safe side).
-double ImuPoint(ClosedLoopSetup& cl, const sim::RecordedLog& log, int sensor, const std::vector<double>& steps) {
+double ImuPoint(ClosedLoopSetup& cl, const sim::RecordedLog& log, int sensor,
+                const std::vector<double>& steps) {
   const sim::LogImu& imu = log.imus[sensor];
   const std::string where = log.dir + "/log.yaml: imu.sensors." + imu.name + ".frame";
   kinematics::FrameId f = -1;
@@ -65,8 +67,8 @@ double ImuPoint(ClosedLoopSetup& cl, const sim::RecordedLog& log, int sensor, co
 }
 
 // Gravity rows of a log's static IMU windows (ImuFromLogs).
-void AppendGravity(const ClosedLoopSetup& cl, const sim::RecordedLog& log, const Source& s, const std::string& what,
-                   RunContext& ctx, DataSet* d) {
+void AppendGravity(const ClosedLoopSetup& cl, const sim::RecordedLog& log, const Source& s,
+                   const std::string& what, RunContext& ctx, DataSet* d) {
   const auto it = cl.still_windows.find(&s);
   if (it == cl.still_windows.end() || it->second.empty()) return;
   std::vector<int> imu_points;
@@ -114,7 +116,8 @@ std::string WhyNoLogRows(ClosedLoopSetup& cl, const Source& s) {
 // Simulated rows as the measured data a user brings (`flexbench identify --calibration`).
 // A CSV holds rows of one type: a log's pixel and gravity rows go beside its points,
 // <what>_pixels.csv and <what>_gravity.csv.
-void WriteDataCsv(const ClosedLoopSetup& cl, RunContext& ctx, const DataSet& d, const std::string& what) {
+void WriteDataCsv(const ClosedLoopSetup& cl, RunContext& ctx, const DataSet& d,
+                  const std::string& what) {
   std::vector<std::string> coupled;
   for (const auto& c : cl.chain->couplings) coupled.push_back(cl.chain->q_joints[c.q_index]);
   std::array<std::vector<int>, 3> rows;  // by RowUnit
@@ -167,8 +170,7 @@ DataSet LoadRows(ClosedLoopSetup& cl, const Source& s, RunContext& ctx, const st
         const auto ia = std::find(d.groups.begin(), d.groups.end(), a);
         const auto ib = std::find(d.groups.begin(), d.groups.end(), b);
         if (ia == d.groups.end() || ib == d.groups.end()) {
-          throw InputError(s.where + ": distance between unknown groups '" + a + "', '" + b +
-                           "'");
+          throw InputError(s.where + ": distance between unknown groups '" + a + "', '" + b + "'");
         }
         d.distances.push_back({static_cast<int>(ia - d.groups.begin()),
                                static_cast<int>(ib - d.groups.begin()), dist});
@@ -188,8 +190,9 @@ DataSet LoadRows(ClosedLoopSetup& cl, const Source& s, RunContext& ctx, const st
         throw InputError(log.dir + "/log.yaml: truth.frame '" + log.truth_frame +
                          "' is neither the end effector nor one of 'markers'");
       }
-      const int n = identify::AppendLogPoints(
-          log, column, s.from_s, s.to_s, static_cast<int>(it - cl.points.begin()), &d, LogFrame(cl, s));
+      const int n =
+          identify::AppendLogPoints(log, column, s.from_s, s.to_s,
+                                    static_cast<int>(it - cl.points.begin()), &d, LogFrame(cl, s));
       ctx.log(what + ": " + std::to_string(n) + " rows of " + log.truth_stats.file + " in " +
               Span(s));
       break;
@@ -260,8 +263,8 @@ sim::DeclaredModel WithTagCentres(ClosedLoopSetup& cl) {
     if (!centre.allFinite() ||
         (move && (!d.MarkerOffset(frame).isZero(0.0) || measured.count(frame)))) {
       cl.log_notes.push_back("log tags on '" + frame + "': no pixel rows (two tags on the " +
-                           "frame, corners that are no parallelogram, or a tag centre off a " +
-                           "frame other rows measure or a declared marker offset moves)");
+                             "frame, corners that are no parallelogram, or a tag centre off a " +
+                             "frame other rows measure or a declared marker offset moves)");
       continue;
     }
     if (move) d.marker_offsets.push_back({frame, centre, Mat3::Zero(), ""});
@@ -290,7 +293,8 @@ void CameraFromLogs(ClosedLoopSetup& cl, const ConfigNode& root) {
       throw InputError(where + ": cameras." + cam.name + ".frame: " + e.what());
     }
     kinematics::PpoeData data(cl.chain->model);
-    kinematics::ForwardKinematics(cl.chain->model, data, Eigen::VectorXd::Zero(cl.chain->model.nq()));
+    kinematics::ForwardKinematics(cl.chain->model, data,
+                                  Eigen::VectorXd::Zero(cl.chain->model.nq()));
     const lie::SE3 T_base_cam = data.T_base_frame[f];
     kinematics::ForwardKinematics(cl.chain->model, data,
                                   Eigen::VectorXd::Constant(cl.chain->model.nq(), 0.5));
@@ -315,7 +319,6 @@ void CameraFromLogs(ClosedLoopSetup& cl, const ConfigNode& root) {
     }
   }
 }
-
 
 // A log's IMUs at rest (identify::FindStaticWindows) measure the up direction in their frames:
 // each IMU frame with a window becomes a measured point of gravity rows, and gravity_tilt a
@@ -344,7 +347,7 @@ void ImuFromLogs(ClosedLoopSetup& cl, const ConfigNode& root) {
     }
     if (w.empty()) {
       cl.log_notes.push_back("log IMUs of " + log.dir + ": no window at rest in " + Span(*s) +
-                           " (static: min_s, gyro_max_rad_s, joint_span_rad): no gravity rows");
+                             " (static: min_s, gyro_max_rad_s, joint_span_rad): no gravity rows");
     }
   }
   if (n > 0 && !root.Has("gravity_std_rad")) {
@@ -352,9 +355,6 @@ void ImuFromLogs(ClosedLoopSetup& cl, const ConfigNode& root) {
   }
   if (n > 0 && !root.Has("gravity_tilt")) cl.gravity_tilt = true;
 }
-
-
-
 
 // Index in cl.frames of the frame a log source's points are measured in (-1: the base frame).
 int LogFrame(const ClosedLoopSetup& cl, const Source& s) {
@@ -379,9 +379,8 @@ const sim::RecordedLog& Log(ClosedLoopSetup& cl, const Source& s) {
                      "' (estimate_in): its truth and planes are not in the base frame the "
                      "identification measures in");
   }
-  const std::pair<const char*, bool> has[] = {{"truth", !log.truth_t.empty()},
-                                              {"tags", !log.tag_rows.empty()},
-                                              {"imu", !log.imu.empty()}};
+  const std::pair<const char*, bool> has[] = {
+      {"truth", !log.truth_t.empty()}, {"tags", !log.tag_rows.empty()}, {"imu", !log.imu.empty()}};
   bool any = false;
   for (const auto& [stream, present] : has) {
     if (s.streams_named && s.streams.count(stream) && !present) {

@@ -94,13 +94,15 @@ bool ReachSocket(ClosedLoopSetup& cl, const Vec3& target, std::mt19937_64& rng,
 }
 
 // The encoders' reading of the settled truth, with their noise.
-identify::Observation EncoderRow(ClosedLoopSetup& cl, std::mt19937_64& rng, std::normal_distribution<double>& noise) {
+identify::Observation EncoderRow(ClosedLoopSetup& cl, std::mt19937_64& rng,
+                                 std::normal_distribution<double>& noise) {
   const int nq = cl.chain->model.nq();
   identify::Observation o;
   o.q.resize(nq);
   for (int k = 0; k < nq; ++k) {
     const int jid = mj_name2id(cl.truth.sim->model(), mjOBJ_JOINT, cl.chain->q_joints[k].c_str());
-    o.q[k] = cl.truth.sim->MotorPosition(jid) - cl.truth.sim->JointOffset(jid) + cl.truth.encoder_noise_rad * noise(rng);
+    o.q[k] = cl.truth.sim->MotorPosition(jid) - cl.truth.sim->JointOffset(jid) +
+             cl.truth.encoder_noise_rad * noise(rng);
   }
   return o;
 }
@@ -111,7 +113,8 @@ identify::Observation EncoderRow(ClosedLoopSetup& cl, std::mt19937_64& rng, std:
 // "a | b" counts by its members) holds exactly one truth effect and each truth effect is in
 // one entry; `load_effects_named`, every load-driven truth effect is found by its own name,
 // alone.
-void ScoreNamesUpToEquivalence(const ClosedLoopSetup& cl, const std::vector<std::string>& found, Json* m) {
+void ScoreNamesUpToEquivalence(const ClosedLoopSetup& cl, const std::vector<std::string>& found,
+                               Json* m) {
   const auto members = [](const std::string& name) {
     std::vector<std::string> out;
     for (size_t start = 0;;) {
@@ -189,7 +192,8 @@ void CheckTrackerTruth(ClosedLoopSetup& cl) {
 
 // Tracker rows from the truth settled at random postures; the tracker's true pose is drawn
 // once per run (the same for calibration and validation).
-void SimulateTracker(ClosedLoopSetup& cl, const Source& s, RunContext& ctx, const std::string& what, DataSet* d) {
+void SimulateTracker(ClosedLoopSetup& cl, const Source& s, RunContext& ctx, const std::string& what,
+                     DataSet* d) {
   cl.truth.T_true_tracker = DrawTrackerPose(*cl.truth.tracker, ctx.seed);
   TrackerRowsSetup setup;
   setup.sim = cl.truth.sim.get();
@@ -202,18 +206,16 @@ void SimulateTracker(ClosedLoopSetup& cl, const Source& s, RunContext& ctx, cons
   std::vector<double> truth_errors;
   const size_t first = d->rows.size();
   SimulateTrackerRows(*cl.truth.tracker, setup, s.postures, ctx.seed,
-                      "closed_loop/" + what + "/" + std::to_string(s.seed), what, d,
-                      &truth_errors);
+                      "closed_loop/" + what + "/" + std::to_string(s.seed), what, d, &truth_errors);
   for (size_t r = first; r < d->rows.size(); ++r) {
     cl.truth.row_err[d->rows[r].where] = truth_errors[r - first];
   }
 }
 
-
-
 // The fitted tracker pose against the truth's: the error of xi (T = T_ref Exp(xi)) under the
 // fit's reported covariance, its 99% bound (chi-square, 6 dof) and the largest per-axis z.
-void ScoreTrackerPose(const ClosedLoopSetup& cl, RunContext& ctx, const DataSet& cal, const identify::IdentifyResult& res) {
+void ScoreTrackerPose(const ClosedLoopSetup& cl, RunContext& ctx, const DataSet& cal,
+                      const identify::IdentifyResult& res) {
   const lie::SE3& T_ref = cal.frames[cl.truth.tracker_frame].T_ref;
   const Vec6 e = (T_ref.Inverse() * res.after.T_base_frames[cl.truth.tracker_frame]).Log() -
                  (T_ref.Inverse() * cl.truth.T_true_tracker).Log();
@@ -222,7 +224,8 @@ void ScoreTrackerPose(const ClosedLoopSetup& cl, RunContext& ctx, const DataSet&
   for (int k = 0; k < 6; ++k) max_z = std::max(max_z, std::abs(e[k]) / std::sqrt(C(k, k)));
   const Eigen::Quaterniond q(cl.truth.T_true_tracker.rotation());
   const Vec3& t = cl.truth.T_true_tracker.translation();
-  const lie::SE3 dT = cl.truth.T_true_tracker.Inverse() * res.after.T_base_frames[cl.truth.tracker_frame];
+  const lie::SE3 dT =
+      cl.truth.T_true_tracker.Inverse() * res.after.T_base_frames[cl.truth.tracker_frame];
   (*ctx.summary)["metrics"]["tracker_pose"] = {
       {"frame", cl.truth.tracker->frame},
       {"T_base_frame_true", {t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z()}},
@@ -235,7 +238,8 @@ void ScoreTrackerPose(const ClosedLoopSetup& cl, RunContext& ctx, const DataSet&
 
 // The truth guides its end effector into two sockets per placement, from random starting
 // configurations (a user hand-guiding the ball); the encoders are read there.
-void SimulateSockets(ClosedLoopSetup& cl, const Source& s, RunContext& ctx, const std::string& what, DataSet* d) {
+void SimulateSockets(ClosedLoopSetup& cl, const Source& s, RunContext& ctx, const std::string& what,
+                     DataSet* d) {
   std::mt19937_64 rng(ctx.seed * 1000003ULL + static_cast<std::uint64_t>(s.seed));
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::normal_distribution<double> noise(0.0, 1.0);
@@ -282,14 +286,6 @@ void SimulateSockets(ClosedLoopSetup& cl, const Source& s, RunContext& ctx, cons
   (*ctx.summary)["metrics"][what + "_skipped_configurations"] = failed;
 }
 
-
-
-
-
-
-
-
-
 void ScoreNames(const ClosedLoopSetup& cl, const identify::IdentifyResult& res, Json* m) {
   std::vector<std::string> found;
   for (const auto& e : res.effects) found.push_back(e.name);
@@ -302,7 +298,6 @@ void ScoreNames(const ClosedLoopSetup& cl, const identify::IdentifyResult& res, 
   }
   (*m)["effects_found"] = found;
 }
-
 
 // Simulated tracker rows: the truth's own error per row (its marker against the measured
 // point: the tracker's noise), weighted as the other errors. nullopt when a row has none.
