@@ -51,24 +51,8 @@ void CheckScenarioName(const ConfigNode& node, const std::string& name) {
   }
 }
 
-std::vector<ConfigOverride> ParseOverrides(const std::vector<std::string>& args) {
-  std::vector<ConfigOverride> out;
-  for (const std::string& a : args) out.push_back(ParseOverride(a));
-  return out;
-}
-
-// A loaded scenario with everything checked that can be wrong with the input, before any
-// work is done.
-struct Prepared {
-  std::string name;
-  std::string description;
-  std::uint64_t seed = 0;
-  std::unique_ptr<ScenarioKind> kind;
-  std::vector<GateSpec> gates;
-};
-
-Prepared Prepare(const ConfigNode& root, const RunOptions& options) {
-  Prepared p;
+PreparedRun Prepare(const ConfigNode& root, const RunOptions& options) {
+  PreparedRun p;
   const ConfigNode name_node = root.Child("scenario");
   p.name = name_node.AsString();
   CheckScenarioName(name_node, p.name);
@@ -77,6 +61,7 @@ Prepared Prepare(const ConfigNode& root, const RunOptions& options) {
   if (seed_node.AsInt() < 0) seed_node.Fail("seed must be >= 0");
   p.seed = options.seed ? *options.seed : static_cast<std::uint64_t>(seed_node.AsInt());
   p.kind = MakeKind(root.Child("kind"));
+  p.kind_name = root.GetString("kind");
   p.gates = ParseGates(root);
   if (options.check_gates && p.gates.empty()) {
     throw InputError(root.file() + ": --check-gates, but the scenario has no gates");
@@ -136,10 +121,20 @@ std::string OneLine(std::string m) {
 
 }  // namespace
 
+std::vector<ConfigOverride> ParseOverrides(const std::vector<std::string>& args) {
+  std::vector<ConfigOverride> out;
+  for (const std::string& a : args) out.push_back(ParseOverride(a));
+  return out;
+}
+
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
               const std::vector<fs::path>& inputs) {
+  return RunPrepared(Prepare(root, options), options, shown_path, inputs);
+}
+
+int RunPrepared(PreparedRun prepared, const RunOptions& options, const std::string& shown_path,
+                const std::vector<fs::path>& inputs) {
   const auto t_start = std::chrono::steady_clock::now();
-  Prepared prepared = Prepare(root, options);
   const std::string& name = prepared.name;
   const std::string& description = prepared.description;
   const std::uint64_t seed = prepared.seed;
@@ -153,7 +148,7 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
         if (e.make()->ExportsLog())
           exporting += (exporting.empty() ? "" : ", ") + std::string(e.name);
       }
-      throw InputError("--export-log: scenario kind '" + root.GetString("kind") +
+      throw InputError("--export-log: scenario kind '" + prepared.kind_name +
                        "' does not export its readings (these do: " + exporting + ")");
     }
     std::error_code ec;
@@ -183,7 +178,7 @@ int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::stri
 
   Json summary;
   summary["scenario"] = name;
-  summary["kind"] = root.GetString("kind");
+  summary["kind"] = prepared.kind_name;
   if (!description.empty()) summary["description"] = description;
   summary["seed"] = seed;
   // How to make this result again (it names --out: the same invocation, the same bytes).
@@ -282,7 +277,7 @@ int RunScenario(const RunOptions& options) {
 
 ScenarioCheck CheckScenario(const std::string& path, const std::vector<std::string>& set) {
   const ConfigNode root = ConfigNode::LoadFile(path, ParseOverrides(set));
-  const Prepared p = Prepare(root, RunOptions{});
+  const PreparedRun p = Prepare(root, RunOptions{});
   ScenarioCheck check;
   check.name = p.name;
   for (const GateSpec& g : p.gates) check.gate_names.push_back(g.name);
@@ -320,248 +315,6 @@ int ListScenarios(const std::string& scenarios_dir) {
                 description.c_str());
   }
   return kExitOk;
-}
-
-}  // namespace flexbench::scenarios
-
-namespace flexbench::scenarios {
-namespace {
-
-// A YAML double-quoted scalar holding `s` exactly (control characters escaped).
-std::string Quoted(const std::string& s) {
-  std::string q = "\"";
-  for (char c : s) {
-    if (c == '"' || c == '\\') {
-      q += '\\';
-      q += c;
-    } else if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
-      char b[8];
-      std::snprintf(b, sizeof(b), "\\x%02x", static_cast<unsigned char>(c));
-      q += b;
-    } else {
-      q += c;
-    }
-  }
-  return q + "\"";
-}
-
-// Bad input about a command-line option: "--<option> <value>: <what>".
-[[noreturn]] void OptionError(const std::string& option, const std::string& value,
-                              const std::string& what) {
-  throw InputError(option + " " + CapForMessage(value) + ": " + what);
-}
-
-// The in-memory scenario's name in messages; "<name>:<line>" is replaced by the option that
-// line came from.
-constexpr const char* kIdentifyName = "flexbench identify";
-
-}  // namespace
-
-namespace {
-
-// The input files exist and are regular files; --point-std is a length.
-void CheckIdentifyInputs(const IdentifyCliOptions& o) {
-  for (const auto& [option, path] :
-       {std::pair{"--declared", o.declared}, std::pair{"--calibration", o.calibration_csv},
-        std::pair{"--validation", o.validation_csv}}) {
-    std::error_code ec;
-    const fs::file_status st = fs::status(path, ec);
-    if (ec || !fs::exists(st)) {
-      OptionError(option, path,
-                  "not found" + (ec && ec != std::errc::no_such_file_or_directory
-                                     ? " (" + ec.message() + ")"
-                                     : std::string()));
-    }
-    if (!fs::is_regular_file(st)) OptionError(option, path, "not a regular file");
-  }
-  if (!(std::isfinite(o.point_std_m) && o.point_std_m >= 1e-7 && o.point_std_m <= 1.0)) {
-    char v[32];
-    std::snprintf(v, sizeof(v), "%g", o.point_std_m);  // to_string: 1e-300 -> "0.000000"
-    OptionError("--point-std", v, "must be between 1e-7 and 1 (metres)");
-  }
-}
-
-// The declared model (--declared), and --model, when given, is the file it names.
-sim::DeclaredModel IdentifyDeclared(const IdentifyCliOptions& o, const std::string& declared_abs) {
-  sim::DeclaredModel declared;
-  try {
-    declared = sim::LoadDeclaredModel(declared_abs);
-  } catch (const InputError& e) {
-    throw InputError(std::string("--declared: ") + e.what());
-  }
-  if (!o.model.empty()) {
-    std::error_code ec;
-    if (!fs::exists(o.model, ec)) OptionError("--model", o.model, "not found");
-    if (!fs::equivalent(o.model, declared.model_path, ec)) {
-      OptionError("--model", o.model,
-                  "is not the model the declared file names (" +
-                      CapForMessage(declared.model_path) + "); omit --model or name the same file");
-    }
-  }
-  return declared;
-}
-
-// Size caps before the same-rows comparison reads both files whole.
-void CheckIdentifyRows(const IdentifyCliOptions& o) {
-  for (const auto& [option, path] : {std::pair{"--calibration", o.calibration_csv},
-                                     std::pair{"--validation", o.validation_csv}}) {
-    try {
-      CheckInputFile(path, identify::kMaxCalibrationCsvBytes);
-    } catch (const InputError& e) {
-      throw InputError(std::string(option) + ": " + e.what());
-    }
-  }
-}
-
-// The options own these keys: a --set of one would be ignored (model) or bypass the option's
-// checks (the CSV files), so it is refused and the option named.
-void CheckIdentifyOverrides(const std::vector<std::string>& set) {
-  const std::vector<std::pair<std::string, std::string>> owned = {
-      {"model", "--model (the model is the one --declared names)"},
-      {"declared", "--declared"},
-      {"calibration", "--calibration"},
-      {"validation", "--validation"},
-      {"kind", "another command (identify is the closed_loop kind)"}};
-  for (const ConfigOverride& o : ParseOverrides(set)) {
-    const std::string top = o.key.substr(0, o.key.find('.'));
-    for (const auto& [key, option] : owned) {
-      if (top == key) {
-        throw InputError("--set " + CapForMessage(o.key) + ": identify sets '" + key +
-                         "' from its options; use " + option);
-      }
-    }
-  }
-}
-
-// The command line as a closed_loop scenario, configured in memory, one option a line:
-// option_of_line[k] names the option line k (1-based) came from.
-std::string IdentifyScenario(const IdentifyCliOptions& o, const sim::DeclaredModel& declared,
-                             const std::string& declared_abs,
-                             std::vector<std::string>* option_of_line_out) {
-  std::vector<std::string>& option_of_line = *option_of_line_out;
-  option_of_line = {""};  // 1-based lines
-  std::ostringstream y;
-  const auto line = [&](const std::string& option, const std::string& text) {
-    y << text << "\n";
-    option_of_line.push_back(option);
-  };
-  line("", "scenario: identify");
-  line("", "kind: closed_loop");
-  line("", "seed: 0");
-  line("--declared", "model: " + Quoted(declared.model_path));
-  line("--declared", "declared: " + Quoted(declared_abs));
-  // CSV paths as given (relative ones resolve against the working folder): rows are named
-  // "<path>:<line>" as the user wrote the path, whatever the working folder's location.
-  line("--calibration", "calibration: {csv: " + Quoted(o.calibration_csv) + "}");
-  line("--validation", "validation: {csv: " + Quoted(o.validation_csv) + "}");
-  char num[64];
-  std::snprintf(num, sizeof(num), "%.17g", o.point_std_m);
-  line("--point-std", std::string("point_std_m: ") + num);
-  if (o.reading_std_deg) {
-    if (!(std::isfinite(*o.reading_std_deg) && *o.reading_std_deg > 0.0 &&
-          *o.reading_std_deg <= 10.0)) {
-      OptionError("--reading-std-deg", std::to_string(*o.reading_std_deg),
-                  "must be in (0, 10] (degrees)");
-    }
-    std::snprintf(num, sizeof(num), "%.17g", *o.reading_std_deg);
-    line("--reading-std-deg", std::string("reading_std_deg: ") + num);
-  }
-  if (o.max_effects) line("--max-effects", "max_effects: " + std::to_string(*o.max_effects));
-  if (o.time_budget_s) {
-    std::snprintf(num, sizeof(num), "%.17g", *o.time_budget_s);
-    line("--time-budget", std::string("time_budget_s: ") + num);
-  }
-  if (o.bic_threshold) {
-    std::snprintf(num, sizeof(num), "%.17g", *o.bic_threshold);
-    line("--bic-threshold", std::string("bic_threshold: ") + num);
-  }
-  if (o.folds_by) line("--folds-by", "folds_by: " + Quoted(*o.folds_by));
-  if (o.outlier_iqr) {
-    std::snprintf(num, sizeof(num), "%.17g", *o.outlier_iqr);
-    line("--outlier-iqr", std::string("outlier_iqr: ") + num);
-  }
-  if (o.no_cross_validation) line("--no-cross-validation", "cross_validation: false");
-  if (!o.frames.empty()) {
-    std::string f = "frames: {";
-    for (size_t i = 0; i < o.frames.size(); ++i)
-      f += (i ? ", " : "") + Quoted(o.frames[i]) + ": {}";
-    line("--frame", f + "}");
-  }
-  if (!o.markers.empty()) {
-    std::string m = "markers: [";
-    for (size_t i = 0; i < o.markers.size(); ++i) m += (i ? ", " : "") + Quoted(o.markers[i]);
-    line("--marker", m + "]");
-  }
-  if (!o.unknown_marker_offsets.empty()) {
-    std::string u = "unknown_marker_offsets: [";
-    for (size_t i = 0; i < o.unknown_marker_offsets.size(); ++i) {
-      u += (i ? ", " : "") + Quoted(o.unknown_marker_offsets[i]);
-    }
-    line("--unknown-marker-offset", u + "]");
-  }
-  if (!o.candidates.empty()) {
-    std::string c = "candidates: [";
-    for (size_t i = 0; i < o.candidates.size(); ++i) {
-      c += (i ? ", " : "") + Quoted(o.candidates[i]);
-    }
-    line("--candidates", c + "]");
-  }
-  return y.str();
-}
-
-// "flexbench identify:<line>: ..." names the option that line came from instead.
-InputError WithOptionName(const InputError& e, const std::vector<std::string>& option_of_line) {
-  std::string m = e.what();
-  const std::string prefix = std::string(kIdentifyName) + ":";
-  if (m.compare(0, prefix.size(), prefix) == 0) {
-    size_t end = prefix.size();
-    while (end < m.size() && std::isdigit(static_cast<unsigned char>(m[end]))) ++end;
-    const int ln = std::atoi(m.substr(prefix.size(), end - prefix.size()).c_str());
-    const std::string option =
-        ln > 0 && ln < static_cast<int>(option_of_line.size()) ? option_of_line[ln] : "";
-    std::string rest = m.substr(end);
-    // The option names what the user wrote; the scenario key it became would only confuse.
-    const std::string key_prefix = ": key '";
-    const size_t key_end = rest.find("'", key_prefix.size());
-    if (!option.empty() && rest.compare(0, key_prefix.size(), key_prefix) == 0 &&
-        key_end != std::string::npos) {
-      rest.erase(0, key_end + 1);
-    }
-    m = (option.empty() ? std::string("identify") : option) + rest;
-  }
-  return InputError(m);
-}
-
-}  // namespace
-
-// The command line is checked, written as a closed_loop scenario in memory and run by the
-// closed_loop kind: the CLI and the scenario files share one identification path.
-int IdentifyCommand(const IdentifyCliOptions& o) {
-  try {
-    CheckIdentifyInputs(o);
-    const std::string declared_abs = fs::absolute(o.declared).lexically_normal().string();
-    const sim::DeclaredModel declared = IdentifyDeclared(o, declared_abs);
-    CheckIdentifyRows(o);
-    CheckIdentifyOverrides(o.set);
-    std::vector<std::string> option_of_line;
-    const std::string yaml = IdentifyScenario(o, declared, declared_abs, &option_of_line);
-    const ConfigNode root = ConfigNode::LoadString(yaml, kIdentifyName, ParseOverrides(o.set));
-    RunOptions run;
-    run.out_dir = o.out_dir;
-    run.force = o.force;
-    run.set = o.set;  // recorded in summary.json
-    run.quiet = o.quiet;
-    run.command = o.command;
-    try {
-      return RunLoaded(root, run, "identify command line",
-                       {fs::path(o.declared), fs::path(declared.model_path),
-                        fs::path(o.calibration_csv), fs::path(o.validation_csv)});
-    } catch (const InputError& e) {
-      throw WithOptionName(e, option_of_line);
-    }
-  } catch (const std::exception& e) {
-    return ReportError(e);
-  }
 }
 
 }  // namespace flexbench::scenarios

@@ -3,11 +3,14 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "scenarios/runner/gates.h"
 #include "scenarios/runner/output.h"
+#include "scenarios/runner/scenario_kind.h"
 #include "sim/config.h"
 
 namespace flexbench::scenarios {
@@ -36,6 +39,9 @@ struct RunOptions {
   std::string command;
 };
 
+// The --set KEY=VALUE arguments as overrides (InputError naming a malformed one).
+std::vector<ConfigOverride> ParseOverrides(const std::vector<std::string>& args);
+
 // Runs one scenario; prints one line on stderr for bad input. Returns an exit code.
 int RunScenario(const RunOptions& options);
 
@@ -44,6 +50,19 @@ int RunScenario(const RunOptions& options);
 // Returns an exit code; bad input is thrown (InputError).
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
               const std::vector<std::filesystem::path>& inputs);
+
+// A scenario ready to run: its kind configured, every input checked.
+struct PreparedRun {
+  std::string name;
+  std::string description;
+  std::string kind_name;
+  std::uint64_t seed = 0;
+  std::unique_ptr<ScenarioKind> kind;
+  std::vector<GateSpec> gates;
+};
+// Runs one prepared in memory (a command's own kind, configured without a scenario file).
+int RunPrepared(PreparedRun prepared, const RunOptions& options, const std::string& shown_path,
+                const std::vector<std::filesystem::path>& inputs);
 
 struct IdentifyCliOptions {
   std::string model;  // optional: must be the model the declared file names

@@ -19,6 +19,10 @@ std::unique_ptr<ScenarioKind> MakeJskImuYawDriftKind();
 std::unique_ptr<ScenarioKind> MakeJskDirectFusionKind();
 std::unique_ptr<ScenarioKind> MakeJskParticleSweepKind();
 std::unique_ptr<ScenarioKind> MakeClosedLoopKind();
+// A closed_loop run set up already (the identify command's, from its options): its Configure
+// reads nothing.
+struct ClosedLoopSetup;
+std::unique_ptr<ScenarioKind> MakeClosedLoopKind(std::unique_ptr<ClosedLoopSetup> setup);
 std::unique_ptr<ScenarioKind> MakeClosedLoopEstimatorsKind();
 std::unique_ptr<ScenarioKind> MakeMismatchMatrixKind();
 std::unique_ptr<ScenarioKind> MakeReplayKind();
