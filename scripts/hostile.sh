@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Hostile-user attacks on a built flexbench: the reproducers of the reliability issues (data
 # loss, crashes, hangs, unbounded memory, injection, confusing results), each run bounded and
-# checked against the behaviour the README's "Reliability" section promises.
+# checked against the promises of docs/reliability.md.
 #
 # Usage: scripts/hostile.sh [BUILD_DIR]     (default: build; needs BUILD_DIR/bin/flexbench,
 #                                            and BUILD_DIR/python for the Python attacks)

@@ -34,3 +34,29 @@ def test_readme_python_section_runs(monkeypatch, tmp_path):
     assert namespace["summary"]["overrides"] == ["seed=2"]
     assert namespace["summary"]["seed"] == 2
     assert namespace["T_est"].shape == (4, 4)
+
+
+def _anchor(heading):
+    # GitHub's heading ids: lower case, punctuation other than '-' and '_' dropped, spaces to '-'.
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_links_between_readme_and_docs_resolve():
+    # Text moves between the README and docs/; every relative link and #anchor must follow it.
+    pages = [SOURCE / "README.md"] + sorted((SOURCE / "docs").glob("*.md"))
+    anchors = {}
+    for page in pages:
+        text = re.sub(r"^```.*?^```", "", page.read_text(), flags=re.S | re.M)
+        anchors[page.resolve()] = {_anchor(h) for h in re.findall(r"^#+ (.*)$", text, flags=re.M)}
+    broken = []
+    for page in pages:
+        for link in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
+            if re.match(r"[a-z]+:", link):
+                continue
+            path, _, anchor = link.partition("#")
+            target = (page.parent / path).resolve() if path else page.resolve()
+            if not target.exists():
+                broken.append(f"{page.name}: {link} (no such file)")
+            elif anchor and target.suffix == ".md" and anchor not in anchors.get(target, set()):
+                broken.append(f"{page.name}: {link} (no such heading)")
+    assert not broken, "\n".join(broken)

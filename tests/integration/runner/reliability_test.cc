@@ -1,4 +1,4 @@
-// "Nothing lost, nothing hangs": the README's Reliability promises through the CLI.
+// "Nothing lost, nothing hangs": the promises of docs/reliability.md through the CLI.
 // Exit codes (0 ok, 2 bad input, 3 gate failed, 1 internal), one line on stderr for an error,
 // echoed values capped, results moved into place whole, nothing removed that is not a result.
 #include <gtest/gtest.h>
@@ -281,8 +281,8 @@ TEST(Reliability, CsvGroupDistancesMustBePositiveAndBetweenTwoGroups) {
   }
 }
 
-// The README's size caps (16 MiB YAML, 64 MiB model, 512 MiB CSV): files one byte over are bad
-// input, refused before they are read (sparse files: nothing is written to disk).
+// The size caps of docs/reliability.md (16 MiB YAML, 64 MiB model, 512 MiB CSV): files one byte
+// over are bad input, refused before they are read (sparse files: nothing is written to disk).
 TEST(Reliability, FilesOverTheSizeCapsAreRefusedUnread) {
   TempDir tmp;
   const auto sparse = [&](const std::string& name, std::uintmax_t bytes) {
