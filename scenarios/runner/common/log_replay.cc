@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <utility>
 
 #include "estimators/error.h"
 
@@ -96,6 +97,13 @@ estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
                      "': the estimators estimate the declared end effector '" + end_effector + "'");
   }
   return setup;
+}
+
+DeclaredRig BuildLogRig(const sim::RecordedLog& log, const mjModel* nominal,
+                        sim::DeclaredModel declared) {
+  DeclaredRig rig = BuildDeclaredRig(nominal, std::move(declared));
+  rig.setup = LogEstimatorSetup(log, *rig.chain, rig.declared.end_effector);
+  return rig;
 }
 
 LogIndex IndexLog(const sim::RecordedLog& log, const sim::DeclaredChain& chain,

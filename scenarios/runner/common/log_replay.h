@@ -11,10 +11,16 @@
 #include <vector>
 
 #include "estimators/estimator.h"
+#include "scenarios/runner/common/truth_rig.h"
 #include "sim/declared_chain.h"
 #include "sim/recorded_log.h"
 
 namespace flexbench::scenarios {
+
+// The declared rig of `declared` on `nominal` (BuildDeclaredRig) with the log's sensors in its
+// set-up (LogEstimatorSetup): what replaying the log under that model needs.
+DeclaredRig BuildLogRig(const sim::RecordedLog& log, const mjModel* nominal,
+                        sim::DeclaredModel declared);
 
 // What the estimators know of the log on `chain`: its model and identified effects, the end
 // effector, the log's IMUs and cameras at their declared frames (InputError naming log.yaml's

@@ -51,12 +51,11 @@ class ReplayKind : public ScenarioKind {
     log_ = sim::ReadRecordedLog(root.ResolvePath(root.GetString("log")));
     other_tags_ = DetectLogImages(ParseDetectorSettings(root), &log_);
     const auto declared = root.Optional("declared");
-    declared_ = sim::LoadDeclaredModel(declared ? root.ResolvePath(declared->AsString())
-                                                : log_.declared_path);
-    model_ = sim::LoadModel(declared_.model_path);
-    chain_ = std::make_unique<sim::DeclaredChain>(sim::BuildDeclaredChain(model_.get(), declared_));
-    index_ = IndexLog(log_, *chain_, declared_.file);
-    setup_ = LogEstimatorSetup(log_, *chain_, declared_.end_effector);
+    sim::DeclaredModel d = sim::LoadDeclaredModel(declared ? root.ResolvePath(declared->AsString())
+                                                           : log_.declared_path);
+    model_ = sim::LoadModel(d.model_path);
+    rig_ = BuildLogRig(log_, model_.get(), std::move(d));
+    index_ = IndexLog(log_, *rig_.chain, rig_.declared.file);
     step_hz_ = root.GetDouble("step_hz", 0.0);
     if (!(step_hz_ >= 0.0) || !std::isfinite(step_hz_)) {
       root.Child("step_hz").Fail("must be 0 (a step per joint row) or a rate > 0 in Hz");
@@ -108,7 +107,7 @@ class ReplayKind : public ScenarioKind {
       m["steps_scored"] = stats.count();
       m["rejected_readings"] = rejected;
     }
-    FittedRangeCheck range(declared_, log_.joints, model_.get(), chain_.get());
+    FittedRangeCheck range(rig_.declared, log_.joints, model_.get(), rig_.chain.get());
     const int columns = static_cast<int>(log_.joints.size());
     for (size_t r = 0; r < log_.joint_t.size(); ++r) {
       range.Observe(log_.joint_q.data() + r * columns, columns);
@@ -155,9 +154,9 @@ class ReplayKind : public ScenarioKind {
   // Estimates the IMU clock offset and adds it to the IMU times.
   void AlignImuClock(const RunContext& ctx) {
     std::vector<kinematics::FrameId> frames;
-    for (const estimators::ImuSetup& s : setup_.imus) frames.push_back(s.frame);
+    for (const estimators::ImuSetup& s : rig_.setup.imus) frames.push_back(s.frame);
     const ClockOffset c =
-        EstimateImuClockOffset(log_, chain_->model, index_.column, frames, offset_range_s_);
+        EstimateImuClockOffset(log_, rig_.chain->model, index_.column, frames, offset_range_s_);
     for (estimators::ImuReading& z : log_.imu) z.t += c.offset_s;
     Json& m = (*ctx.summary)["metrics"];
     m["imu_clock_offset_s"] = c.offset_s;
@@ -172,16 +171,14 @@ class ReplayKind : public ScenarioKind {
   }
 
   std::unique_ptr<estimators::Estimator> Make(const EstimatorSpec& e, std::uint64_t seed) const {
-    return MakeEstimatorOf(e, setup_, seed);
+    return rig_.MakeEstimator(e, seed);
   }
 
   sim::RecordedLog log_;
-  sim::DeclaredModel declared_;
   sim::MjModelPtr model_;
-  std::unique_ptr<sim::DeclaredChain> chain_;
+  DeclaredRig rig_;  // the declared model with the log's sensors
   LogIndex index_;
   int other_tags_ = 0;  // detections in the log's images of tags it does not name
-  estimators::EstimatorSetup setup_;
   double step_hz_ = 0.0;
   bool estimate_offset_ = false;
   double offset_range_s_ = 0.5;

@@ -48,10 +48,9 @@ std::string ReplayHeldOut(const ClosedLoopSetup& cl, RunContext& ctx, const iden
   int judge = -1;  // the first estimator that is the model alone at the readings
   const int frame = LogFrame(cl, cl.validation);
   for (const bool after : {false, true}) {
-    const sim::DeclaredModel model = after ? identify::AugmentedModel(job, rep) : cl.declared;
-    const sim::DeclaredChain chain = sim::BuildDeclaredChain(cl.mj.get(), model);
-    const estimators::EstimatorSetup setup = LogEstimatorSetup(log, chain, model.end_effector);
-    const LogIndex index = IndexLog(log, chain, model.file);
+    const DeclaredRig rig =
+        BuildLogRig(log, cl.mj.get(), after ? identify::AugmentedModel(job, rep) : cl.declared);
+    const LogIndex index = IndexLog(log, *rig.chain, rig.declared.file);
     // The tracker's points in the base frame at the frame's pose fitted with the model.
     const lie::SE3 T_base_frame =
         frame < 0 ? lie::SE3() : (after ? res.after : res.before).T_base_frames[frame];
@@ -59,7 +58,7 @@ std::string ReplayHeldOut(const ClosedLoopSetup& cl, RunContext& ctx, const iden
     for (size_t e = 0; e < cl.replay_specs.size(); ++e) {
       const std::string& label = cl.replay_specs[e].label;
       ErrorStats stats;
-      const auto est = MakeEstimatorOf(cl.replay_specs[e], setup, ctx.seed);
+      const auto est = rig.MakeEstimator(cl.replay_specs[e], ctx.seed);
       if (judge < 0 && !est->FusesExternalMeasurements()) judge = static_cast<int>(e);
       const auto on_step = [&](size_t s, const estimators::Belief& b) {
         if (!held_out(steps[s].t)) return;
