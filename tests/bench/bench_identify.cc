@@ -468,8 +468,9 @@ BENCHMARK(BM_IdentifyRowsMemory)
 // The closed loop's DLR-class problem as a user runs it (closed_loop_humanoid_dlr: MuJoCo
 // physics, 17 read joints and a coupled one, 600 calibration rows, an unknown tracker pose and
 // two unknown marker offsets, 227 candidates): `flexbench identify` on the scenario's exported
-// CSVs with every setting at its default (the README's worked example), outputs included. The
-// CSVs are made once, outside the timing, by the scenario with max_effects 0 and no gates.
+// CSVs with every setting at its default (the worked example of docs/identification.md), outputs
+// included. The CSVs are made once, outside the timing, by the scenario with max_effects 0 and no
+// gates.
 const std::string& DlrData() {
   static const std::string dir = [] {
     const std::string out =
