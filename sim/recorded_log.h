@@ -1,5 +1,5 @@
 // A recorded robot log: a folder with one file per sensor stream and a log.yaml that says what
-// they are (README, "Bring your own recorded log"). As in the EuRoC / ASL layout, one CSV per
+// they are (docs/logs.md). As in the EuRoC / ASL layout, one CSV per
 // stream with its time first; unlike it, one folder, times in seconds, and several IMUs in one
 // file told apart by a `sensor` column.
 //

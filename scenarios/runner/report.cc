@@ -237,7 +237,8 @@ bool IsDataFile(const std::string& rel) {
   return kData.count(Extension(rel)) > 0;
 }
 
-// What a figure shows, for the file names the kinds write (README "Outputs").
+// What a figure shows, for the file names the kinds write (docs/scenarios.md, "What each kind
+// writes").
 std::string FigureDescription(const std::string& rel) {
   static const std::pair<const char*, const char*> kKnown[] = {
       {"config_",
@@ -442,7 +443,7 @@ const Json& IdMetric(const Json& s, const std::string& key) {
   return v.is_null() ? At(m, "identification_" + key) : v;
 }
 
-// The verdict in words (README "Verdicts").
+// The verdict in words (docs/identification.md, "Verdicts").
 std::string VerdictWords(const std::string& verdict) {
   static const std::pair<const char*, const char*> kWords[] = {
       {"explained",
@@ -859,8 +860,8 @@ std::string FlagCell(const Json& m) {
   return "yes (step " + Cell(At(m, "mismatch_first_step")) + ")";
 }
 
-// Estimators scored before and after identification (closed_loop_estimators), as the README's
-// table: errors in mm, NEES with its bounds, the mismatch test.
+// Estimators scored before and after identification (closed_loop_estimators), as the table of
+// docs/measurements.md: errors in mm, NEES with its bounds, the mismatch test.
 bool BeforeAfterTable(const Json& estimators, std::ostringstream* h) {
   std::ostringstream rows;
   for (auto it = estimators.begin(); it != estimators.end(); ++it) {
