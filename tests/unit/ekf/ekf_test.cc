@@ -2,25 +2,13 @@
 // [PPOE eqs. 20-23], Monte-Carlo consistency (NEES within chi-square bounds), bad input, no heap.
 #include <gtest/gtest.h>
 
-#include <atomic>
-#include <cstdlib>
-#include <new>
 #include <random>
 
 #include "estimators/ekf/lg_ekf.h"
 #include "estimators/ekf/measurement_model.h"
 #include "estimators/lie/sampling.h"
 #include "estimators/stats/chi_square.h"
-
-// Counts heap allocations in this test binary (the update must not allocate).
-static std::atomic<long> g_allocations{0};
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "tests/common/counting_new.h"
 
 namespace flexbench::estimators {
 namespace {
@@ -241,9 +229,8 @@ TEST(LgEkf, UpdateDoesNotAllocate) {
     for (bool numeric : {false, true}) {
       LgEkfOptions o;
       o.numeric_jacobians = numeric;
-      const long before = g_allocations.load();
-      LgEkfUpdate(*model, o, &X, &P);
-      EXPECT_EQ(g_allocations.load() - before, 0) << "numeric " << numeric;
+      EXPECT_EQ(test::CountAllocations([&] { LgEkfUpdate(*model, o, &X, &P); }), 0)
+          << "numeric " << numeric;
     }
   }
 }

@@ -3,60 +3,20 @@
 // with counting versions (forwarding to malloc/free).
 #include <gtest/gtest.h>
 
-#include <atomic>
 #include <cmath>
-#include <cstdlib>
-#include <new>
 #include <vector>
 
 #include "estimators/estimator.h"
 #include "estimators/kinematics/forward_kinematics.h"
 #include "estimators/pf/circular_quantile.h"
 #include "estimators/pf/particle_filter.h"
+#include "tests/common/counting_new.h"
 #include "tests/unit/pf/pf_test_models.h"
-
-namespace {
-
-std::atomic<long> g_allocations{0};
-
-void* CountedAlloc(std::size_t size) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-
-void* CountedAlignedAlloc(std::size_t size, std::align_val_t align) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  const std::size_t a = static_cast<std::size_t>(align);
-  const std::size_t rounded = (size + a - 1) / a * a;
-  if (void* p = std::aligned_alloc(a, rounded == 0 ? a : rounded)) return p;
-  throw std::bad_alloc();
-}
-
-}  // namespace
-
-void* operator new(std::size_t size) { return CountedAlloc(size); }
-void* operator new[](std::size_t size) { return CountedAlloc(size); }
-void* operator new(std::size_t size, std::align_val_t a) { return CountedAlignedAlloc(size, a); }
-void* operator new[](std::size_t size, std::align_val_t a) { return CountedAlignedAlloc(size, a); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
 
 namespace flexbench::pf {
 namespace {
 
-template <class F>
-long CountAllocations(const F& f) {
-  const long before = g_allocations.load();
-  f();
-  return g_allocations.load() - before;
-}
+using test::CountAllocations;
 
 class NoAllocationTest : public ::testing::TestWithParam<Proposal> {};
 
