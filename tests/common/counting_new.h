@@ -9,7 +9,7 @@
 #include <cstdlib>
 #include <new>
 
-namespace flexbench::test {
+namespace flexbench::testing {
 
 inline std::atomic<long> g_allocations{0};
 
@@ -35,15 +35,15 @@ long CountAllocations(const F& f) {
   return g_allocations.load() - before;
 }
 
-}  // namespace flexbench::test
+}  // namespace flexbench::testing
 
-void* operator new(std::size_t size) { return flexbench::test::CountedAlloc(size); }
-void* operator new[](std::size_t size) { return flexbench::test::CountedAlloc(size); }
+void* operator new(std::size_t size) { return flexbench::testing::CountedAlloc(size); }
+void* operator new[](std::size_t size) { return flexbench::testing::CountedAlloc(size); }
 void* operator new(std::size_t size, std::align_val_t a) {
-  return flexbench::test::CountedAlignedAlloc(size, a);
+  return flexbench::testing::CountedAlignedAlloc(size, a);
 }
 void* operator new[](std::size_t size, std::align_val_t a) {
-  return flexbench::test::CountedAlignedAlloc(size, a);
+  return flexbench::testing::CountedAlignedAlloc(size, a);
 }
 void operator delete(void* p) noexcept { std::free(p); }
 void operator delete[](void* p) noexcept { std::free(p); }

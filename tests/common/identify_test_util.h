@@ -3,6 +3,7 @@
 #pragma once
 
 #include <algorithm>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -12,8 +13,30 @@
 #include "scenarios/identify/effect_model.h"
 #include "scenarios/identify/identify.h"
 #include "scenarios/identify/measurement_frames.h"
+#include "sim/declared_chain.h"
+#include "sim/declared_model.h"
+#include "sim/mujoco_model.h"
+#include "tests/common/test_util.h"
 
 namespace flexbench::testing {
+
+// A model of models/ (`which`: "rover_arm" for models/rover_arm.declared.yaml), its declared
+// chain and the candidate effects on it.
+struct ModelRig {
+  sim::MjModelPtr m;
+  sim::DeclaredChain chain;
+  std::unique_ptr<identify::EffectModel> em;
+};
+
+inline std::unique_ptr<ModelRig> LoadModelRig(const std::string& which) {
+  auto r = std::make_unique<ModelRig>();
+  const sim::DeclaredModel d =
+      sim::LoadDeclaredModel(SourceDir() + "/models/" + which + ".declared.yaml");
+  r->m = sim::LoadModel(d.model_path);
+  r->chain = sim::BuildDeclaredChain(r->m.get(), d);
+  r->em = std::make_unique<identify::EffectModel>(r->m.get(), r->chain, r->chain.end_effector);
+  return r;
+}
 
 // The library's first stage: named families (not needs-evidence, not complete geometry),
 // minus the families in `banned`.

@@ -229,7 +229,7 @@ TEST(LgEkf, UpdateDoesNotAllocate) {
     for (bool numeric : {false, true}) {
       LgEkfOptions o;
       o.numeric_jacobians = numeric;
-      EXPECT_EQ(test::CountAllocations([&] { LgEkfUpdate(*model, o, &X, &P); }), 0)
+      EXPECT_EQ(testing::CountAllocations([&] { LgEkfUpdate(*model, o, &X, &P); }), 0)
           << "numeric " << numeric;
     }
   }

@@ -25,6 +25,7 @@
 #include "sim/declared_chain.h"
 #include "sim/declared_model.h"
 #include "sim/mujoco_model.h"
+#include "tests/common/identify_test_util.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::identify {
@@ -32,21 +33,8 @@ namespace {
 
 constexpr double kTol = 1e-7;
 
-struct Rig {
-  sim::MjModelPtr m;
-  sim::DeclaredChain chain;
-  std::unique_ptr<EffectModel> em;
-};
-
-std::unique_ptr<Rig> MakeRig(const std::string& which) {
-  auto r = std::make_unique<Rig>();
-  const sim::DeclaredModel d =
-      sim::LoadDeclaredModel(testing::SourceDir() + "/models/" + which + ".declared.yaml");
-  r->m = sim::LoadModel(d.model_path);
-  r->chain = sim::BuildDeclaredChain(r->m.get(), d);
-  r->em = std::make_unique<EffectModel>(r->m.get(), r->chain, r->chain.end_effector);
-  return r;
-}
+using Rig = testing::ModelRig;
+const auto MakeRig = testing::LoadModelRig;
 
 // A value of realistic size for parameter k of c (angles ~0.01 rad, so Lie Jacobians matter).
 double Value(const Candidate& c, int k, std::mt19937_64& rng) {

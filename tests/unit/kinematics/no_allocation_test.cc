@@ -15,7 +15,7 @@ namespace {
 
 using lie::CompoundOrder;
 
-using test::CountAllocations;
+using flexbench::testing::CountAllocations;
 
 TEST(NoAllocation, CounterSeesAllocations) {
   // The check has teeth: a vector growing inside the counted region is seen.

@@ -16,7 +16,7 @@
 namespace flexbench::pf {
 namespace {
 
-using test::CountAllocations;
+using flexbench::testing::CountAllocations;
 
 class NoAllocationTest : public ::testing::TestWithParam<Proposal> {};
 
