@@ -356,7 +356,6 @@ void ImuFromLogs(ClosedLoopSetup& cl, const ConfigNode& root) {
   if (n > 0 && !root.Has("gravity_tilt")) cl.gravity_tilt = true;
 }
 
-// Index in cl.frames of the frame a log source's points are measured in (-1: the base frame).
 int LogFrame(const ClosedLoopSetup& cl, const Source& s) {
   if (s.frame.empty()) return -1;
   for (size_t f = 0; f < cl.frames.size(); ++f) {
@@ -366,7 +365,6 @@ int LogFrame(const ClosedLoopSetup& cl, const Source& s) {
                    "' is not declared in the scenario's 'frames'");
 }
 
-// The log a source reads, read once (calibration and validation on one log share it).
 const sim::RecordedLog& Log(ClosedLoopSetup& cl, const Source& s) {
   auto it = cl.logs.find(s.path);
   if (it == cl.logs.end()) {
