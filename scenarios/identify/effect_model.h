@@ -114,10 +114,7 @@ struct Candidate {
   bool after_named = false;
   // Physical bounds per parameter (empty: none); a fit outside them is not accepted.
   std::vector<double> lower, upper;
-  std::string Name() const {
-    return std::string(ToString(type)) +
-           (type == EffectType::kAxisTilt ? (axis ? "_b" : "_a") : "") + "@" + location;
-  }
+  std::string Name() const { return kinematics::FileName(type, axis) + "@" + location; }
 };
 
 // The parts of ConfigLoads that are linear in gravity, for one gravity vector.

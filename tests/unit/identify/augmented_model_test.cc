@@ -253,10 +253,13 @@ TEST_P(AugmentedModel, ParameterStdsMatchMonteCarloThroughTheIdentificationModel
 INSTANTIATE_TEST_SUITE_P(Arms, AugmentedModel, ::testing::Values("arm4", "rover_arm"));
 
 // Every row of the effect table has its maths in both layers: the identification offers it as a
-// candidate (on rover_arm, with its mast camera and gravity's tilt), its values move the pose the
-// identification predicts, and a declared file holding it builds a chain that predicts the same.
-// A row added without its maths fails here. The camera's offset moves the camera, not the hand;
-// a payload and gravity's tilt act only through the load-driven terms (here with j2's gear).
+// candidate (on rover_arm, with its mast camera and gravity's tilt) with the row's value count,
+// unit and bounds, its values move the pose the identification predicts, and a declared file
+// holding it builds a chain that predicts the same. A row added without its maths fails to
+// build (its kind lacks its cases in the switches of effect_model.cc and declared_effects.cc)
+// or fails here (no candidate, or cases that move nothing or disagree). The camera's offset moves
+// the camera, not the hand; a payload and gravity's tilt act only through the load-driven terms
+// (here with j2's gear).
 TEST(EffectTable, EveryRowHasItsMaths) {
   const auto rig = MakeRig("rover_arm");
   EffectModel em(rig->m, rig->chain, rig->chain.end_effector, "mast_camera", {}, true);
@@ -276,7 +279,16 @@ TEST(EffectTable, EveryRowHasItsMaths) {
       const Candidate& cand = em.candidates()[c];
       if (static_cast<int>(cand.type) != kind) continue;
       ++offered;
+      // Its value count, unit and bounds are the row's (a slide's where the row has them).
       EXPECT_EQ(cand.num_params, row.num_values);
+      const bool slide = row.slide_unit != nullptr && cand.unit == row.slide_unit;
+      EXPECT_EQ(cand.unit, slide ? row.slide_unit : row.unit);
+      ASSERT_EQ(cand.lower.size(), static_cast<size_t>(row.num_values));
+      ASSERT_EQ(cand.upper.size(), static_cast<size_t>(row.num_values));
+      for (int k = 0; k < row.num_values; ++k) {
+        EXPECT_EQ(cand.lower[k], slide ? -row.slide_bound : row.lower[k]);
+        EXPECT_EQ(cand.upper[k], slide ? row.slide_bound : row.upper[k]);
+      }
       if (row.kind == kinematics::EffectKind::kCameraOffset) continue;
       const bool through_loads = row.kind == kinematics::EffectKind::kPayload ||
                                  row.kind == kinematics::EffectKind::kGravityTilt;
