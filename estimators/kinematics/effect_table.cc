@@ -18,11 +18,16 @@ constexpr EffectTruth kFitOnly = EffectTruth::kFitOnly;
 // Uniform bounds of n values.
 constexpr std::array<double, 6> All(double x) { return {x, x, x, x, x, x}; }
 
+// The bounds are physical: angles within 10 deg (offsets, tilts, joint origins, gravity),
+// lengths within 0.1 m, a camera within 0.5 m and 0.5 rad of its stated pose. Signs follow the
+// loads (tau_J the torque the joint holds against gravity, M the weight's own moment), so a gear
+// spring fits as c = -1/k <= 0 and compliances that sag under their weight as c >= 0.
 constexpr std::array<EffectRow, kNumEffectKinds> kTable = {{
     {K::kJointOffset, "joint_offset", 1, "rad", false, E::kReadingToAngle, kSimulated, 1e-6,
      All(-10 * kDeg), All(10 * kDeg), "m", 0.1},
     {K::kJointCompliance, "joint_compliance", 1, "rad/Nm", true, E::kReadingToAngle, kSimulated,
      1e-7, All(-1.0), All(0.0)},
+    // Half the play, either sign: the flank convention decides it.
     {K::kBacklash, "backlash", 1, "rad", true, E::kReadingToAngle, kSimulated, 1e-6, All(-5 * kDeg),
      All(5 * kDeg)},
     {K::kLinkLength, "link_length", 1, "m", false, E::kFixedTransform, kFitOnly, 1e-6, All(-0.1),
@@ -35,9 +40,11 @@ constexpr std::array<EffectRow, kNumEffectKinds> kTable = {{
      All(0.0), All(1.0)},
     {K::kBaseCompliance, "base_compliance", 2, "rad/Nm", true, E::kMountTilt, kSimulated, 1e-7,
      All(0.0), All(1.0)},
+    // A strain of 1e-3: about 80 K of steel.
     {K::kThermalExpansion, "thermal_expansion", 1, "-", false, E::kFixedTransform, kSimulated, 1e-6,
      All(-1e-3), All(1e-3)},
-    // Mass, then its first moment m c.
+    // Mass, then its first moment m c. A gram below zero is zero within the fit's precision (the
+    // MUKCa-like data cannot separate it).
     {K::kPayload,
      "payload",
      4,
@@ -77,6 +84,8 @@ constexpr std::array<EffectRow, kNumEffectKinds> kTable = {{
      {0.0, 1.0}},
     {K::kGravityTilt, "gravity_tilt", 2, "rad", true, E::kLoads, kFitOnly, 1e-6, All(-10 * kDeg),
      All(10 * kDeg)},
+    // At most a bearing stiffness of 100 N m/rad: 10 N m would tip the joint by 6 deg, a broken
+    // joint rather than a compliant one.
     {K::kLateralCompliance, "lateral_compliance", 2, "rad/Nm", true, E::kJointAxis, kSimulated,
      1e-7, All(0.0), All(1e-2)},
 }};

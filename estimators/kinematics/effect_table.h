@@ -54,7 +54,7 @@ struct EffectRow {
   EffectKind kind;
   const char* name;  // as identification and declared files name it (an axis tilt adds _a/_b)
   int num_values;
-  const char* unit;  // of its values (a prismatic joint's offset is in m)
+  const char* unit;  // of its values (at a revolute joint; slide_unit at a prismatic one)
   bool load_driven;  // acts through the gravity torques / moments (needs the arm's masses)
   EffectEntry enters;
   EffectTruth truth;

@@ -238,9 +238,8 @@ class JointComplianceEffect : public Effect {
       const auto nums = s.catalog->effect_numbers.find(tag + ":stiffness");
       if (parts == s.catalog->effect_parts.end() || nums == s.catalog->effect_numbers.end() ||
           parts->second.size() != nums->second.size()) {
-        throw InputError(where() + ": " + s.model_name +
-                         " declares no gear stiffness (effect:joint_compliance with "
-                         "effect:joint_compliance:stiffness); give stiffness_Nm_per_rad");
+        throw InputError(where() + ": " + s.model_name + " declares no gear stiffness (effect:" +
+                         tag + " with effect:" + tag + ":stiffness); give stiffness_Nm_per_rad");
       }
       for (size_t i = 0; i < parts->second.size(); ++i) k[parts->second[i]] = nums->second[i];
     }
@@ -325,7 +324,8 @@ class PayloadEffect : public Effect {
   bool SupportedBy(const ModelCatalog& c, const mjModel* m, std::string* why) const override {
     const auto it = c.effect_parts.find(NameOf(K::kPayload));
     if (it != c.effect_parts.end() && !it->second.empty()) return true;
-    *why = "no <custom><text name=\"effect:payload\"> naming the end-effector body (or give body)";
+    *why = "no <custom><text name=\"effect:" + NameOf(K::kPayload) +
+           "\"> naming the end-effector body (or give body)";
     return false;
   }
   void Apply(TruthSetup& s) const override {
@@ -334,7 +334,7 @@ class PayloadEffect : public Effect {
       const auto it = s.catalog->effect_parts.find(NameOf(K::kPayload));
       if (it == s.catalog->effect_parts.end() || it->second.empty()) {
         throw InputError(where() + ": " + s.model_name +
-                         " names no payload body (effect:payload); give body");
+                         " names no payload body (effect:" + NameOf(K::kPayload) + "); give body");
       }
       body = it->second.front();
     }
@@ -528,8 +528,8 @@ class ThermalExpansionEffect : public Effect {
   }
   bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
     if (c.HasEffectParts(NameOf(K::kThermalExpansion))) return true;
-    *why =
-        "no <custom><text name=\"effect:thermal_expansion\"> listing link bodies (or give bodies)";
+    *why = "no <custom><text name=\"effect:" + NameOf(K::kThermalExpansion) +
+           "\"> listing link bodies (or give bodies)";
     return false;
   }
   void Apply(TruthSetup& s) const override {
@@ -537,8 +537,8 @@ class ThermalExpansionEffect : public Effect {
     if (bodies.empty()) {
       const auto it = s.catalog->effect_parts.find(NameOf(K::kThermalExpansion));
       if (it == s.catalog->effect_parts.end()) {
-        throw InputError(where() + ": " + s.model_name +
-                         " lists no bodies for thermal_expansion; give bodies");
+        throw InputError(where() + ": " + s.model_name + " lists no bodies for " +
+                         NameOf(K::kThermalExpansion) + "; give bodies");
       }
       bodies = it->second;
     }

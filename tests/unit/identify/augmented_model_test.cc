@@ -258,8 +258,9 @@ INSTANTIATE_TEST_SUITE_P(Arms, AugmentedModel, ::testing::Values("arm4", "rover_
 // holding it builds a chain that predicts the same. A row added without its maths fails to
 // build (its kind lacks its cases in the switches of effect_model.cc and declared_effects.cc)
 // or fails here (no candidate, or cases that move nothing or disagree). The camera's offset moves
-// the camera, not the hand; a payload and gravity's tilt act only through the load-driven terms
-// (here with j2's gear).
+// the camera, not the hand; a row entering through the loads (a payload, gravity's tilt) acts only
+// through the load-driven terms (here with j2's gear), and any other load-driven row makes the
+// estimators' chain compute the loads.
 TEST(EffectTable, EveryRowHasItsMaths) {
   const auto rig = MakeRig("rover_arm");
   EffectModel em(rig->m, rig->chain, rig->chain.end_effector, "mast_camera", {}, true);
@@ -290,8 +291,7 @@ TEST(EffectTable, EveryRowHasItsMaths) {
         EXPECT_EQ(cand.upper[k], slide ? row.slide_bound : row.upper[k]);
       }
       if (row.kind == kinematics::EffectKind::kCameraOffset) continue;
-      const bool through_loads = row.kind == kinematics::EffectKind::kPayload ||
-                                 row.kind == kinematics::EffectKind::kGravityTilt;
+      const bool through_loads = row.enters == kinematics::EffectEntry::kLoads;
       std::vector<int> set = {static_cast<int>(c)};
       std::vector<double> v = Values(cand, rng);
       sim::DeclaredModel aug = rig->declared;
@@ -305,6 +305,8 @@ TEST(EffectTable, EveryRowHasItsMaths) {
             {"joint_compliance@j2", base_v, {}, "rad/Nm", "test:2", {}});
       }
       const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
+      // The estimators' chain computes the loads for the terms of a load-driven row.
+      if (!through_loads) EXPECT_EQ(chain.effects.NeedsLoads(), row.load_driven);
       for (const Eigen::VectorXd& q : qs) {
         const lie::SE3 with = em.PredictPose(q, em.Loads(q), set, v.data(), ws);
         const lie::SE3 without = em.PredictPose(q, em.Loads(q), base, base_v.data(), ws);
