@@ -9,28 +9,45 @@
 #include "estimators/kinematics/forward_kinematics.h"
 #include "sim/mujoco_model.h"
 
+// Each row of the effect table has its case in the switches below: a kind without one fails to
+// build.
+#pragma GCC diagnostic error "-Wswitch"
+
 namespace flexbench::sim {
 namespace {
 
 using kinematics::FrameId;
 using kinematics::ModelEffects;
 
-// The names declared files give the effects (kinematics' effect table; an axis tilt is written
-// per axis), sorted, for messages.
+using K = kinematics::EffectKind;
+
+// The names declared files give the effects (the effect table's; an axis tilt is written per
+// axis), sorted, for messages.
 std::string KnownEffectNames() {
   std::vector<std::string> names;
   for (const kinematics::EffectRow& r : kinematics::EffectTable()) {
-    if (r.kind == kinematics::EffectKind::kAxisTilt) {
-      names.push_back(std::string(r.name) + "_a");
-      names.push_back(std::string(r.name) + "_b");
-    } else {
-      names.push_back(r.name);
-    }
+    names.push_back(kinematics::FileName(r.kind, 0));
+    if (r.kind == K::kAxisTilt) names.push_back(kinematics::FileName(r.kind, 1));
   }
   std::sort(names.begin(), names.end());
   std::string known;
   for (const std::string& n : names) known += (known.empty() ? "" : ", ") + n;
   return known;
+}
+
+// An identified_effects entry's type@location, split, with its row.
+struct Parsed {
+  const kinematics::EffectRow* row = nullptr;  // nullptr: no effect of that name
+  int axis = 0;                                // an axis tilt's axis (0: a, 1: b)
+  std::string loc;
+};
+
+Parsed Parse(const IdentifiedEffect& ie) {
+  const size_t at = ie.effect.find('@');
+  Parsed p;
+  p.row = kinematics::FindEffect(ie.effect.substr(0, at), &p.axis);
+  if (at != std::string::npos) p.loc = ie.effect.substr(at + 1);
+  return p;
 }
 
 class EffectsBuilder {
@@ -48,14 +65,14 @@ class EffectsBuilder {
     FindMount();
     bool load_driven = false;
     for (const IdentifiedEffect& ie : d_.identified_effects) {
-      load_driven |= Add(ie);
-      AddVariance(ie);
+      const Parsed p = Check(ie);
+      Add(ie, p);
+      AddVariance(ie, p);
+      load_driven |= p.row->load_driven;
     }
     if (load_driven && !HasMasses()) {
       for (const IdentifiedEffect& ie : d_.identified_effects) {
-        const kinematics::EffectRow* row =
-            kinematics::FindEffect(ie.effect.substr(0, ie.effect.find('@')));
-        if (row != nullptr && row->load_driven) {
+        if (Parse(ie).row->load_driven) {
           Fail(ie, "acts through the gravity loads, but the model " + CapForMessage(d_.model_path) +
                        " has no masses on the arm");
         }
@@ -68,75 +85,130 @@ class EffectsBuilder {
     throw InputError(ie.where + ": identified_effects: '" + CapForMessage(ie.effect) + "' " + msg);
   }
 
-  // Returns whether the effect is load-driven.
-  bool Add(const IdentifiedEffect& ie) {
+  // The entry parsed, its name and values checked against its row.
+  Parsed Check(const IdentifiedEffect& ie) const {
     const size_t at = ie.effect.find('@');
     if (at == std::string::npos || at == 0 || at + 1 == ie.effect.size()) {
       Fail(ie, "is not of the form type@location");
     }
-    const std::string type = ie.effect.substr(0, at);
-    const std::string loc = ie.effect.substr(at + 1);
-    const kinematics::EffectRow* info = kinematics::FindEffect(type);
-    if (info == nullptr) Fail(ie, "is not a known effect type (" + KnownEffectNames() + ")");
+    const Parsed p = Parse(ie);
+    if (p.row == nullptr) Fail(ie, "is not a known effect type (" + KnownEffectNames() + ")");
     const std::vector<double>& v = ie.value;
-    if (static_cast<int>(v.size()) != info->num_values) {
-      Fail(ie, "needs " + std::to_string(info->num_values) + " values, got " +
+    if (static_cast<int>(v.size()) != p.row->num_values) {
+      Fail(ie, "needs " + std::to_string(p.row->num_values) + " values, got " +
                    std::to_string(v.size()));
     }
     for (double x : v) {
       if (!std::isfinite(x)) Fail(ie, "has a value that is not a finite number");
     }
+    return p;
+  }
+
+  // The effect's values onto the ModelEffects' terms, at its location (the maths of each row;
+  // identify::EffectModel::AddTerms is the fit's).
+  void Add(const IdentifiedEffect& ie, const Parsed& p) {
     ModelEffects& e = chain_->effects;
-    if (type == "thermal_expansion") {
-      if (loc != "all") Fail(ie, "acts on all links: its location is 'all'");
-      e.thermal += v[0];
-    } else if (type == "camera_offset") {
-      const FrameId f = Frame(ie, "camera/" + loc, "camera");
-      for (int k = 0; k < 6; ++k) e.frames[f].origin[k] += v[k];
-    } else if (type == "link_length" || type == "link_offset") {
-      const FrameId f = AnyFrame(ie, loc);
-      if (type == "link_length") {
+    const std::vector<double>& v = ie.value;
+    const std::string& loc = p.loc;
+    switch (p.row->kind) {
+      case K::kThermalExpansion:
+        if (loc != "all") Fail(ie, "acts on all links: its location is 'all'");
+        e.thermal += v[0];
+        break;
+      case K::kCameraOffset: {
+        const FrameId f = Frame(ie, "camera/" + loc, "camera");
+        for (int k = 0; k < 6; ++k) e.frames[f].origin[k] += v[k];
+        break;
+      }
+      case K::kLinkLength: {
+        const FrameId f = AnyFrame(ie, loc);
         if (model_.frame(f).T_parent_ip.translation().norm() < 0.01) {
           Fail(ie, "names a frame less than 1 cm from its parent: it has no length to change");
         }
         e.frames[f].dlen += v[0];
-      } else {
-        e.frames[f].offset += Vec3(v[0], v[1], v[2]);
+        break;
       }
-    } else if (type == "payload") {
-      const FrameId f = AnyFrame(ie, loc);
-      if (e.payload_frame >= 0 && e.payload_frame != f) Fail(ie, "a second payload frame");
-      e.payload_frame = f;
-      e.payload.mass += v[0];
-      e.payload.first_moment += Vec3(v[1], v[2], v[3]);
-    } else if (type == "gravity_tilt") {
-      // The base mounted tilted: gravity turns in the base frame, and every load with it.
-      if (loc != "base") Fail(ie, "turns gravity in the base frame: its location is 'base'");
-      if (gravity_tilted_) Fail(ie, "is given twice");
-      gravity_tilted_ = true;
-      e.g_base = kinematics::TiltedGravity(e.g_base, v[0], v[1]);
-    } else if (type == "base_compliance") {
-      const FrameId f = AnyFrame(ie, loc);
-      if (f != e.mount) {
-        Fail(ie, "names '" + loc + "', but the arm's mount is '" +
-                     (e.mount > 0 ? model_.frame(e.mount).name : std::string("(none)")) + "'");
+      case K::kLinkOffset:
+        e.frames[AnyFrame(ie, loc)].offset += Vec3(v[0], v[1], v[2]);
+        break;
+      case K::kPayload: {
+        const FrameId f = AnyFrame(ie, loc);
+        if (e.payload_frame >= 0 && e.payload_frame != f) Fail(ie, "a second payload frame");
+        e.payload_frame = f;
+        e.payload.mass += v[0];
+        e.payload.first_moment += Vec3(v[1], v[2], v[3]);
+        break;
       }
-      e.mount_compliance += Eigen::Vector2d(v[0], v[1]);
-    } else {
-      AddJointEffect(ie, type, loc);
+      case K::kGravityTilt:
+        // The base mounted tilted: gravity turns in the base frame, and every load with it.
+        if (loc != "base") Fail(ie, "turns gravity in the base frame: its location is 'base'");
+        if (gravity_tilted_) Fail(ie, "is given twice");
+        gravity_tilted_ = true;
+        e.g_base = kinematics::TiltedGravity(e.g_base, v[0], v[1]);
+        break;
+      case K::kBaseCompliance: {
+        const FrameId f = AnyFrame(ie, loc);
+        if (f != e.mount) {
+          Fail(ie, "names '" + loc + "', but the arm's mount is '" +
+                       (e.mount > 0 ? model_.frame(e.mount).name : std::string("(none)")) + "'");
+        }
+        e.mount_compliance += Eigen::Vector2d(v[0], v[1]);
+        break;
+      }
+      case K::kJointOffset:
+        e.joints[JointIndex(ie, loc)].offset += v[0];
+        break;
+      case K::kJointOrigin: {
+        const FrameId f = model_.joint_frame(JointIndex(ie, loc));
+        for (int i = 0; i < 6; ++i) e.frames[f].origin[i] += v[i];
+        break;
+      }
+      case K::kAxisTilt: {
+        const FrameId f = model_.joint_frame(JointIndex(ie, loc));
+        e.frames[f].tilt += v[0] * TiltAxis(model_.frame(f).joint.axis, p.axis);
+        break;
+      }
+      case K::kJointCompliance:
+        e.joints[RevoluteJoint(ie, loc)].compliance += v[0];
+        break;
+      case K::kBacklash:
+        e.joints[RevoluteJoint(ie, loc)].backlash += v[0];
+        break;
+      case K::kStiffeningSpring: {
+        ModelEffects::JointTerms& j = e.joints[RevoluteJoint(ie, loc)];
+        j.compliance += v[0];
+        j.cubic += v[1] / (kinematics::kStiffeningTau0Nm * kinematics::kStiffeningTau0Nm);
+        break;
+      }
+      case K::kTransmissionError:
+      case K::kJointErrorCurve: {
+        ModelEffects::JointTerms& j = e.joints[RevoluteJoint(ie, loc)];
+        for (size_t i = 0; i < v.size(); ++i) j.harmonic[i] += v[i];
+        break;
+      }
+      case K::kLinkBending: {
+        const FrameId f = model_.joint_frame(RevoluteJoint(ie, loc));
+        SetBendingLink(ie, f);
+        e.frames[f].bend += v[0];
+        break;
+      }
+      case K::kLateralCompliance: {
+        const FrameId f = model_.joint_frame(RevoluteJoint(ie, loc));
+        ModelEffects::FrameTerms& t = e.frames[f];
+        t.lateral += Eigen::Vector2d(v[0], v[1]);
+        kinematics::TiltAxes(model_.frame(f).joint.axis, &t.lateral_a, &t.lateral_b);
+        break;
+      }
     }
-    return info->load_driven;
   }
 
   // The effect's parameter stds (if given) as ModelEffects::Uncertainty: variances per term;
   // the geometric terms as a twist covariance at the frame's source, whose axes are the fixed
   // part's (a translation d in parent axes is R^T d there). A payload's or a gravity tilt's
   // uncertainty is not carried (it would act through every load-driven term at once).
-  void AddVariance(const IdentifiedEffect& ie) {
+  void AddVariance(const IdentifiedEffect& ie, const Parsed& p) {
     if (ie.std.empty()) return;
-    const size_t at = ie.effect.find('@');
-    const std::string type = ie.effect.substr(0, at);
-    const std::string loc = ie.effect.substr(at + 1);
+    const std::string& loc = p.loc;
     std::vector<double> v2(ie.std.size());
     for (size_t i = 0; i < v2.size(); ++i) v2[i] = ie.std[i] * ie.std[i];
     ModelEffects::Uncertainty& u = chain_->effects.uncertainty;
@@ -144,99 +216,85 @@ class EffectsBuilder {
       const Vec3 d = model_.frame(f).T_parent_ip.rotation().transpose() * d_parent;
       u.frames[f].block<3, 3>(kTransIdx, kTransIdx) += var * d * d.transpose();
     };
-    if (type == "thermal_expansion") {
-      u.thermal += v2[0];
-    } else if (type == "camera_offset" || type == "joint_origin") {
-      const FrameId f = type == "camera_offset" ? Frame(ie, "camera/" + loc, "camera")
-                                                : model_.joint_frame(JointIndex(ie, loc));
-      for (int k = 0; k < 6; ++k) u.frames[f](k, k) += v2[k];
-    } else if (type == "link_length") {
-      const FrameId f = AnyFrame(ie, loc);
-      translation(f, model_.frame(f).T_parent_ip.translation().normalized(), v2[0]);
-    } else if (type == "link_offset") {
-      const FrameId f = AnyFrame(ie, loc);
-      for (int k = 0; k < 3; ++k) translation(f, Vec3::Unit(k), v2[k]);
-    } else if (type == "base_compliance") {
-      u.mount_compliance += Eigen::Vector2d(v2[0], v2[1]);
-    } else if (type != "payload" && type != "gravity_tilt") {
-      AddJointVariance(ie, type, JointIndex(ie, loc), v2);
-    }
-  }
-
-  void AddJointVariance(const IdentifiedEffect& ie, const std::string& type, int k,
-                        const std::vector<double>& v2) {
-    const FrameId f = model_.joint_frame(k);
-    ModelEffects::Uncertainty& u = chain_->effects.uncertainty;
-    ModelEffects::JointTerms& j = u.joints[k];
-    if (type == "joint_offset") {
-      j.offset += v2[0];
-    } else if (type == "joint_axis_tilt_a" || type == "joint_axis_tilt_b") {
-      const Vec3 a = TiltAxis(model_.frame(f).joint.axis, type == "joint_axis_tilt_a");
-      u.frames[f].block<3, 3>(kRotIdx, kRotIdx) += v2[0] * a * a.transpose();
-    } else if (type == "joint_compliance") {
-      j.compliance += v2[0];
-    } else if (type == "backlash") {
-      j.backlash += v2[0];
-    } else if (type == "stiffening_spring") {
-      j.compliance += v2[0];
-      j.cubic += v2[1] / std::pow(kinematics::kStiffeningTau0Nm, 4);
-    } else if (type == "transmission_error" || type == "joint_error_curve") {
-      for (size_t i = 0; i < v2.size(); ++i) j.harmonic[i] += v2[i];
-    } else if (type == "link_bending") {
-      u.bend[f] += v2[0];
-    } else if (type == "lateral_compliance") {
-      u.lateral[f] += Eigen::Vector2d(v2[0], v2[1]);
-    } else {
-      Fail(ie, "has no uncertainty model");  // the effect table and this list disagree
+    const auto joint = [&] { return JointIndex(ie, loc); };
+    switch (p.row->kind) {
+      case K::kThermalExpansion:
+        u.thermal += v2[0];
+        break;
+      case K::kCameraOffset:
+      case K::kJointOrigin: {
+        const FrameId f = p.row->kind == K::kCameraOffset ? Frame(ie, "camera/" + loc, "camera")
+                                                          : model_.joint_frame(joint());
+        for (int k = 0; k < 6; ++k) u.frames[f](k, k) += v2[k];
+        break;
+      }
+      case K::kLinkLength: {
+        const FrameId f = AnyFrame(ie, loc);
+        translation(f, model_.frame(f).T_parent_ip.translation().normalized(), v2[0]);
+        break;
+      }
+      case K::kLinkOffset: {
+        const FrameId f = AnyFrame(ie, loc);
+        for (int k = 0; k < 3; ++k) translation(f, Vec3::Unit(k), v2[k]);
+        break;
+      }
+      case K::kBaseCompliance:
+        u.mount_compliance += Eigen::Vector2d(v2[0], v2[1]);
+        break;
+      case K::kPayload:
+      case K::kGravityTilt:
+        break;
+      case K::kJointOffset:
+        u.joints[joint()].offset += v2[0];
+        break;
+      case K::kAxisTilt: {
+        const FrameId f = model_.joint_frame(joint());
+        const Vec3 a = TiltAxis(model_.frame(f).joint.axis, p.axis);
+        u.frames[f].block<3, 3>(kRotIdx, kRotIdx) += v2[0] * a * a.transpose();
+        break;
+      }
+      case K::kJointCompliance:
+        u.joints[joint()].compliance += v2[0];
+        break;
+      case K::kBacklash:
+        u.joints[joint()].backlash += v2[0];
+        break;
+      case K::kStiffeningSpring: {
+        ModelEffects::JointTerms& j = u.joints[joint()];
+        j.compliance += v2[0];
+        j.cubic += v2[1] / std::pow(kinematics::kStiffeningTau0Nm, 4);
+        break;
+      }
+      case K::kTransmissionError:
+      case K::kJointErrorCurve: {
+        ModelEffects::JointTerms& j = u.joints[joint()];
+        for (size_t i = 0; i < v2.size(); ++i) j.harmonic[i] += v2[i];
+        break;
+      }
+      case K::kLinkBending:
+        u.bend[model_.joint_frame(joint())] += v2[0];
+        break;
+      case K::kLateralCompliance:
+        u.lateral[model_.joint_frame(joint())] += Eigen::Vector2d(v2[0], v2[1]);
+        break;
     }
   }
 
   // The identification's tilt axes: a, the first of x, y not along the joint axis w, made
   // normal to w; b = w x a.
-  static Vec3 TiltAxis(const Vec3& axis, bool a_axis) {
+  static Vec3 TiltAxis(const Vec3& axis, int which) {
     Vec3 a, b;
     kinematics::TiltAxes(axis, &a, &b);
-    return a_axis ? a : b;
+    return which == 0 ? a : b;
   }
 
-  void AddJointEffect(const IdentifiedEffect& ie, const std::string& type, const std::string& loc) {
+  // The joint variable a joint effect names, which must be a revolute joint's.
+  int RevoluteJoint(const IdentifiedEffect& ie, const std::string& loc) const {
     const int k = JointIndex(ie, loc);
-    const FrameId f = model_.joint_frame(k);
-    const kinematics::PpoeFrame& fr = model_.frame(f);
-    const bool revolute = fr.joint.type == kinematics::JointType::kRevolute;
-    ModelEffects& e = chain_->effects;
-    ModelEffects::JointTerms& j = e.joints[k];
-    const std::vector<double>& v = ie.value;
-    if (type == "joint_offset") {
-      j.offset += v[0];
-      return;
+    if (model_.frame(model_.joint_frame(k)).joint.type != kinematics::JointType::kRevolute) {
+      Fail(ie, "needs a revolute joint; '" + loc + "' is not");
     }
-    if (type == "joint_origin") {
-      for (int i = 0; i < 6; ++i) e.frames[f].origin[i] += v[i];
-      return;
-    }
-    if (type == "joint_axis_tilt_a" || type == "joint_axis_tilt_b") {
-      e.frames[f].tilt += v[0] * TiltAxis(fr.joint.axis, type == "joint_axis_tilt_a");
-      return;
-    }
-    if (!revolute) Fail(ie, "needs a revolute joint; '" + loc + "' is not");
-    if (type == "joint_compliance") {
-      j.compliance += v[0];
-    } else if (type == "backlash") {
-      j.backlash += v[0];
-    } else if (type == "stiffening_spring") {
-      j.compliance += v[0];
-      j.cubic += v[1] / (kinematics::kStiffeningTau0Nm * kinematics::kStiffeningTau0Nm);
-    } else if (type == "transmission_error" || type == "joint_error_curve") {
-      for (size_t i = 0; i < v.size(); ++i) j.harmonic[i] += v[i];
-    } else if (type == "link_bending") {
-      SetBendingLink(ie, f);
-      e.frames[f].bend += v[0];
-    } else if (type == "lateral_compliance") {
-      ModelEffects::FrameTerms& t = e.frames[f];
-      t.lateral += Eigen::Vector2d(v[0], v[1]);
-      kinematics::TiltAxes(fr.joint.axis, &t.lateral_a, &t.lateral_b);
-    }
+    return k;
   }
 
   // The link that ends at joint frame f starts at the previous joint (fixed frames between

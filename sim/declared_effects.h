@@ -1,6 +1,7 @@
 // The identified effects of a declared file (`identified_effects:`, written by closed_loop and
 // `flexbench identify`) turned into the kinematics' form (estimators/kinematics/model_effects.h):
-// each `type@location` name resolved to the chain's joints and frames, each value checked. The
+// each `type@location` name found in the effect table (estimators/kinematics/effect_table.h),
+// resolved to the chain's joints and frames, its values counted and checked by its row. The
 // structure follows scenarios/identify/effect_model.h, which fitted them: the same link
 // directions, tilt axes, mount and path to the end effector.
 #pragma once

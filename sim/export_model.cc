@@ -13,6 +13,7 @@
 
 #include "estimators/error.h"
 #include "estimators/format.h"
+#include "estimators/kinematics/effect_table.h"
 #include "estimators/kinematics/model_effects.h"
 #include "sim/declared_chain.h"
 #include "sim/mujoco_model.h"
@@ -23,19 +24,21 @@ namespace {
 using kinematics::FrameId;
 using lie::SE3;
 
+using K = kinematics::EffectKind;
+
 // Identified effects that are geometry: folded into the MJCF's poses.
-bool IsGeometric(const std::string& type) {
-  static const std::set<std::string> kTypes = {
-      "joint_offset",      "link_length",       "link_offset",  "joint_axis_tilt_a",
-      "joint_axis_tilt_b", "thermal_expansion", "joint_origin", "camera_offset"};
-  return kTypes.count(type) > 0;
+bool IsGeometric(K kind) {
+  return kind == K::kJointOffset || kind == K::kLinkLength || kind == K::kLinkOffset ||
+         kind == K::kAxisTilt || kind == K::kThermalExpansion || kind == K::kJointOrigin ||
+         kind == K::kCameraOffset;
 }
 
-std::string TypeOf(const std::string& effect) { return effect.substr(0, effect.find('@')); }
-
-// The gear-stiffness annotations of the truth's joint_compliance effect (sim/effects).
-constexpr char kGearText[] = "effect:joint_compliance";
-constexpr char kGearNumbers[] = "effect:joint_compliance:stiffness";
+// The gear-stiffness annotations of the truth's joint_compliance effect (sim/effects): the
+// effect's tag, effect:NAME.
+std::string GearText() {
+  return std::string("effect:") + kinematics::Row(K::kJointCompliance).name;
+}
+std::string GearNumbers() { return GearText() + ":stiffness"; }
 // Their former names: read, and replaced by the current ones in what is written.
 constexpr char kFormerGearText[] = "effect:joint_elasticity";
 constexpr char kFormerGearNumbers[] = "effect:joint_elasticity:stiffness";
@@ -234,9 +237,9 @@ std::map<std::string, double> GearStiffness(const mjModel* m, const DeclaredChai
                                             std::vector<std::string>* skipped) {
   std::map<std::string, double> k;
   // Each of the two under its current name, else its former one (a model may mix them).
-  int t = mj_name2id(m, mjOBJ_TEXT, kGearText);
+  int t = mj_name2id(m, mjOBJ_TEXT, GearText().c_str());
   if (t < 0) t = mj_name2id(m, mjOBJ_TEXT, kFormerGearText);
-  int n = mj_name2id(m, mjOBJ_NUMERIC, kGearNumbers);
+  int n = mj_name2id(m, mjOBJ_NUMERIC, GearNumbers().c_str());
   if (n < 0) n = mj_name2id(m, mjOBJ_NUMERIC, kFormerGearNumbers);
   if (t >= 0 && n >= 0) {
     std::istringstream names(std::string(m->text_data + m->text_adr[t]));  // NUL-terminated
@@ -258,8 +261,9 @@ std::map<std::string, double> GearStiffness(const mjModel* m, const DeclaredChai
 
 // The saved XML with the gear annotation replaced by `k` (nothing when empty).
 std::string WithGearAnnotation(std::string xml, const std::map<std::string, double>& k) {
-  for (const char* name : {kGearText, kGearNumbers, kFormerGearText, kFormerGearNumbers}) {
-    const size_t at = xml.find(std::string("name=\"") + name + "\"");
+  for (const std::string& name :
+       {GearText(), GearNumbers(), std::string(kFormerGearText), std::string(kFormerGearNumbers)}) {
+    const size_t at = xml.find("name=\"" + name + "\"");
     if (at == std::string::npos) continue;
     const size_t start = xml.rfind('\n', at) + 1;
     xml.erase(start, xml.find('\n', at) + 1 - start);
@@ -270,8 +274,8 @@ std::string WithGearAnnotation(std::string xml, const std::map<std::string, doub
     joints += (joints.empty() ? "" : " ") + j;
     values += (values.empty() ? "" : " ") + ExactNum(v);
   }
-  const std::string lines = "    <text name=\"" + std::string(kGearText) + "\" data=\"" + joints +
-                            "\"/>\n    <numeric name=\"" + kGearNumbers + "\" size=\"" +
+  const std::string lines = "    <text name=\"" + GearText() + "\" data=\"" + joints +
+                            "\"/>\n    <numeric name=\"" + GearNumbers() + "\" size=\"" +
                             std::to_string(k.size()) + "\" data=\"" + values + "\"/>\n";
   const size_t custom = xml.find("<custom>");
   if (custom != std::string::npos) return xml.insert(xml.find('\n', custom) + 1, lines);
@@ -312,14 +316,17 @@ Folded Fold(const DeclaredModel& declared) {
   DeclaredModel geometric = declared;
   geometric.identified_effects.clear();
   for (const IdentifiedEffect& e : declared.identified_effects) {
-    const std::string type = TypeOf(e.effect);
-    if (IsGeometric(type)) {
+    const kinematics::EffectRow* row =
+        kinematics::FindEffect(e.effect.substr(0, e.effect.find('@')));
+    if (row == nullptr) {
+      out.skipped.push_back(e.effect);  // refused by BuildDeclaredChain below
+    } else if (IsGeometric(row->kind)) {
       geometric.identified_effects.push_back(e);
-    } else if (type == "gravity_tilt") {
+    } else if (row->kind == K::kGravityTilt) {
       out.tilt = true;
-    } else if (type == "joint_compliance") {
+    } else if (row->kind == K::kJointCompliance) {
       out.compliance.push_back(e.effect);
-    } else if (type == "stiffening_spring") {
+    } else if (row->kind == K::kStiffeningSpring) {
       out.compliance.push_back(e.effect);
       out.skipped.push_back(e.effect + " (its cubic term; the linear one is written)");
     } else {

@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "estimators/error.h"
+#include "estimators/kinematics/effect_table.h"
 #include "sim/config.h"
 #include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
@@ -177,7 +178,7 @@ void ClaimLateralHinges(const mjModel* m, ModelCatalog* c) {
   for (int j = 0; j < m->njnt; ++j) {
     JointEntry& e = c->joints[j];
     if (e.role == JointRole::kPassive && e.effect.empty() && LateralHingeOf(m, j) >= 0) {
-      e.effect = kLateralEffect;
+      e.effect = kinematics::Row(kinematics::EffectKind::kLateralCompliance).name;
     }
   }
 }

@@ -74,7 +74,6 @@ struct ModelCatalog {
 // y not along J's axis w, made normal to w) and b = w x a: the axes of the identification's
 // joint_axis_tilt_a/b@J and lateral_compliance@J. The catalogue claims such hinges for the
 // effect, so they stay locked at their reference unless it releases them.
-inline constexpr char kLateralEffect[] = "lateral_compliance";
 // The name of J's hinge about a (axis 0) or b (axis 1).
 std::string LateralHingeName(const std::string& joint, int axis);
 // J's joint id when joint j is a passive hinge named J_lateral_a or J_lateral_b with J a later

@@ -1,9 +1,10 @@
 // Effects identified from measured data, applied to the declared PPOE chain so that every
 // estimator predicts with the corrected model (the closed loop's last step).
 //
-// The effects are those of scenarios/identify/effect_model.h, in the form the kinematics needs
-// them, indexed by the declared model's frames and joint variables (names are resolved when a
-// declared file is read: sim/declared_chain.cc). At a joint reading q_read they act as
+// The effects are the rows of the effect table (effect_table.h), in the form the kinematics
+// needs them: the terms below, which the rows' values add to, indexed by the declared model's
+// frames and joint variables (a declared file's identified_effects are resolved row by row when
+// it is read: sim/declared_effects.cc). At a joint reading q_read they act as
 //
 //   joint angle   q = q_read + offset + sum_h (a_h cos h q_read + b_h sin h q_read)
 //                     + backlash * flank + compliance * tau + cubic * tau^3

@@ -349,10 +349,11 @@ std::vector<int> CandidatesFor(const EffectModel& em, const ResidualFinding& fin
   for (int c : candidates) {
     const Candidate& cand = em.candidates()[c];
     if (!cand.needs_evidence || cand.q_index != finding.q_index) continue;
-    const std::string type = ToString(cand.type);
-    const bool match = finding.kind == "periodic"
-                           ? (type == "transmission_error" || type == "joint_error_curve")
-                           : finding.kind == "load" && type == "stiffening_spring";
+    const EffectType type = cand.type;
+    const bool match =
+        finding.kind == "periodic"
+            ? (type == EffectType::kTransmissionError || type == EffectType::kJointErrorCurve)
+            : finding.kind == "load" && type == EffectType::kStiffeningSpring;
     if (match) out.push_back(c);
   }
   return out;

@@ -13,6 +13,10 @@
 #include "estimators/lie/sincos.h"
 #include "estimators/lie/so3.h"
 
+// Each row of the effect table has its case in the switches without a default below (the fit's
+// terms and tangents): a kind without one fails to build.
+#pragma GCC diagnostic error "-Wswitch"
+
 namespace flexbench::identify {
 namespace {
 
@@ -47,15 +51,19 @@ int BodyOfFrame(const mjModel* m, const std::string& typed) {
   return -1;
 }
 
-// The table's physical bounds of the candidate's values; a prismatic joint's offset in metres.
-void SetBounds(Candidate* c, bool prismatic) {
+// The table's unit and physical bounds of the candidate's values (at a prismatic joint its
+// row's slide unit and bound, where it has them).
+void SetUnitAndBounds(Candidate* c, bool prismatic) {
   const kinematics::EffectRow& row = kinematics::Row(c->type);
+  if (prismatic && row.slide_unit != nullptr) {
+    c->unit = row.slide_unit;
+    c->lower.assign(c->num_params, -row.slide_bound);
+    c->upper.assign(c->num_params, row.slide_bound);
+    return;
+  }
+  c->unit = row.unit;
   c->lower.assign(row.lower.begin(), row.lower.begin() + c->num_params);
   c->upper.assign(row.upper.begin(), row.upper.begin() + c->num_params);
-  if (c->type == EffectType::kJointOffset && prismatic) {
-    c->lower.assign(1, -0.1);
-    c->upper.assign(1, 0.1);
-  }
 }
 
 // A periodic joint error (transmission error, error curve) at joint angle qj, harmonic by
@@ -193,8 +201,7 @@ Candidate& EffectModel::AddCandidate(EffectType type, const std::string& locatio
   c.frame = f;
   c.num_params = row.num_values;
   c.step = row.fd_step;
-  c.unit = type == EffectType::kJointOffset && prismatic ? "m" : row.unit;
-  SetBounds(&c, prismatic);
+  SetUnitAndBounds(&c, prismatic);
   candidates_.push_back(c);
   return candidates_.back();
 }

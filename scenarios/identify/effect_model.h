@@ -35,7 +35,8 @@
 //   joint_error_curve@J   q_J += sum_{h=1..3} a_h cos hq + b_h sin hq   [rad] (the generic
 //                         fallback for an angle-dependent error; needs_evidence; never named as
 //                         the equivalent of a narrower family)
-//   stiffening_spring@J   q_J += c1 tau + c3 tau^3 / tau0^2, tau0 = 10 N m  [rad/(N m)] (a gear
+//   stiffening_spring@J   q_J += c1 tau + c3 tau^3 / tau0^2, tau0 = kinematics::kStiffeningTau0Nm
+//                         [rad/(N m)] (a gear
 //                         spring whose stiffness grows with deflection: c1 = -1/k1 <= 0 and the
 //                         cubic term takes some deflection back, c3 >= 0; needs_evidence)
 //   joint_origin@J        J's fixed transform T_parent_ip becomes T_parent_ip Exp(xi), xi =
@@ -48,15 +49,8 @@
 //                         unidentifiable until one of them is in the model. A candidate only
 //                         when asked for (EffectModel's `gravity_tilt`); its columns are central
 //                         differences (HasTangent)
-// Physical bounds (Candidate::lower/upper; a fit outside them is not accepted): angles within
-// 10 deg (offsets, tilts, joint origins) and 5 deg (backlash half play, either sign: the flank
-// convention decides it), lengths within 0.1 m, a gear compliance c <= 0 (stiffness k = -1/c
-// > 0), plate, link and lateral compliances c >= 0 (they sag under their weight; a lateral
-// compliance at most 0.01 rad/(N m), a bearing stiffness of 100 N m/rad: 10 N m would tip the
-// joint by 6 deg, a broken joint rather than a compliant one), |thermal strain| <=
-// 1e-3 (about 80 K of steel), a payload mass in [-1 g, 100 kg] (a gram below zero is zero
-// within the fit's precision; the MUKCa-like data cannot separate it), its first moment within
-// 50 kg m, a camera within 0.5 m and 0.5 rad of its stated pose, gravity within 10 deg.
+// Physical bounds (Candidate::lower/upper; a fit outside them is not accepted), units and value
+// counts: the effect table's rows (estimators/kinematics/effect_table.cc, with their reasons).
 // Signs: tau_J is the torque the joint must hold against gravity (MuJoCo's qfrc_bias at rest),
 // so a gear spring of stiffness k fits as c = -1/k and a play resting on the loaded flank as
 // b = -play/2; moments M are those of the weight itself, so plates and links that sag fit with
@@ -114,10 +108,7 @@ struct Candidate {
   bool after_named = false;
   // Physical bounds per parameter (empty: none); a fit outside them is not accepted.
   std::vector<double> lower, upper;
-  std::string Name() const {
-    return std::string(ToString(type)) +
-           (type == EffectType::kAxisTilt ? (axis ? "_b" : "_a") : "") + "@" + location;
-  }
+  std::string Name() const { return kinematics::FileName(type, axis) + "@" + location; }
 };
 
 // The parts of ConfigLoads that are linear in gravity, for one gravity vector.

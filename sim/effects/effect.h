@@ -6,9 +6,11 @@
 //     base_compliance: {}
 //     payload: {mass_kg: 0.5, offset_m: [0, 0, 0.05]}
 //
-// Names are the ones identification reports (scenarios/identify/effect_model.h): the truth's
-// `joint_offset@j3` is what `flexbench identify` names `joint_offset@j3`, with the same sign.
-// docs/design.md ("Effect vocabulary") has the table; each row's former name is still read.
+// Names are the effect table's (estimators/kinematics/effect_table.h): an effect identification
+// can find is a row, whose name it reports (the truth's `joint_offset@j3` is what
+// `flexbench identify` names `joint_offset@j3`, with the same sign); the others are its
+// truth-only rows. docs/design.md ("Effect vocabulary") has the list; each former name is still
+// read.
 #pragma once
 
 #include <memory>
@@ -49,7 +51,7 @@ class Effect {
 };
 
 struct EffectEntry {
-  const char* name;
+  const char* name;  // a simulated row's of the effect table, or a truth-only row's
   const char* description;
   std::unique_ptr<Effect> (*make)();
   // The name scenario files and MJCF annotations (<custom><text name="effect:NAME">) used

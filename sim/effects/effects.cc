@@ -9,6 +9,7 @@
 #include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "estimators/format.h"
+#include "estimators/kinematics/effect_table.h"
 #include "estimators/kinematics/model_effects.h"
 #include "estimators/lie/se3.h"
 #include "sim/effects/effect.h"
@@ -17,9 +18,13 @@
 namespace flexbench::sim {
 namespace {
 
-// Gear stiffnesses a model lists itself: effect:joint_compliance (joints) and
-// effect:joint_compliance:stiffness (numbers).
-constexpr char kGearTag[] = "joint_compliance";
+using K = kinematics::EffectKind;
+using T = kinematics::TruthOnlyKind;
+
+// An effect's name, and the tag of the model's <custom><text name="effect:NAME"> listing the
+// parts it acts on: the effect table's.
+std::string NameOf(K kind) { return kinematics::Row(kind).name; }
+
 // joint_offset's former name, which gave the offset the other sign.
 constexpr char kEncoderOffset[] = "encoder_offset";
 
@@ -85,9 +90,9 @@ class JointGroupEffect : public Effect {
   double scale_ = 1.0;
 };
 
-template <const char* kGroup>
+template <auto kKind>
 std::unique_ptr<Effect> MakeGroup() {
-  return std::make_unique<JointGroupEffect>(kGroup);
+  return std::make_unique<JointGroupEffect>(kinematics::Row(kKind).name);
 }
 
 // ---- Lateral joint compliance: bearing and housing of a joint bend about the two axes normal to
@@ -107,14 +112,14 @@ class LateralComplianceEffect : public Effect {
     for (const std::string& j : c.Keys()) per_joint_[j] = Stiffness(c.Child(j));
   }
   bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
-    if (!c.JointsOfEffect(kLateralEffect).empty()) return true;
+    if (!c.JointsOfEffect(NameOf(K::kLateralCompliance)).empty()) return true;
     *why = "no passive hinges J_lateral_a, J_lateral_b before a joint J in its body";
     return false;
   }
   void Apply(TruthSetup& s) const override {
     std::map<std::string, std::array<double, 2>> k = per_joint_;
     if (per_joint_.empty()) {
-      for (int h : s.catalog->JointsOfEffect(kLateralEffect)) {
+      for (int h : s.catalog->JointsOfEffect(NameOf(K::kLateralCompliance))) {
         k[s.catalog->Joint(LateralHingeOf(s.model, h)).name] = all_;
       }
       if (k.empty()) {
@@ -228,13 +233,13 @@ class JointComplianceEffect : public Effect {
     }
     if (k.empty()) {
       // The model's own values: effect:joint_compliance (joints) + :stiffness (numbers).
-      const auto parts = s.catalog->effect_parts.find(kGearTag);
-      const auto nums = s.catalog->effect_numbers.find(std::string(kGearTag) + ":stiffness");
+      const std::string tag = NameOf(K::kJointCompliance);
+      const auto parts = s.catalog->effect_parts.find(tag);
+      const auto nums = s.catalog->effect_numbers.find(tag + ":stiffness");
       if (parts == s.catalog->effect_parts.end() || nums == s.catalog->effect_numbers.end() ||
           parts->second.size() != nums->second.size()) {
-        throw InputError(where() + ": " + s.model_name +
-                         " declares no gear stiffness (effect:joint_compliance with "
-                         "effect:joint_compliance:stiffness); give stiffness_Nm_per_rad");
+        throw InputError(where() + ": " + s.model_name + " declares no gear stiffness (effect:" +
+                         tag + " with effect:" + tag + ":stiffness); give stiffness_Nm_per_rad");
       }
       for (size_t i = 0; i < parts->second.size(); ++i) k[parts->second[i]] = nums->second[i];
     }
@@ -317,18 +322,19 @@ class PayloadEffect : public Effect {
     body_ = p.GetString("body", "");
   }
   bool SupportedBy(const ModelCatalog& c, const mjModel* m, std::string* why) const override {
-    const auto it = c.effect_parts.find("payload");
+    const auto it = c.effect_parts.find(NameOf(K::kPayload));
     if (it != c.effect_parts.end() && !it->second.empty()) return true;
-    *why = "no <custom><text name=\"effect:payload\"> naming the end-effector body (or give body)";
+    *why = "no <custom><text name=\"effect:" + NameOf(K::kPayload) +
+           "\"> naming the end-effector body (or give body)";
     return false;
   }
   void Apply(TruthSetup& s) const override {
     std::string body = body_;
     if (body.empty()) {
-      const auto it = s.catalog->effect_parts.find("payload");
+      const auto it = s.catalog->effect_parts.find(NameOf(K::kPayload));
       if (it == s.catalog->effect_parts.end() || it->second.empty()) {
         throw InputError(where() + ": " + s.model_name +
-                         " names no payload body (effect:payload); give body");
+                         " names no payload body (effect:" + NameOf(K::kPayload) + "); give body");
       }
       body = it->second.front();
     }
@@ -521,18 +527,18 @@ class ThermalExpansionEffect : public Effect {
     if (1.0 + alpha_ * delta_t_ <= 0.0) p.FailKey("delta_T_K", "shrinks the link to nothing");
   }
   bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
-    if (c.HasEffectParts("thermal_expansion")) return true;
-    *why =
-        "no <custom><text name=\"effect:thermal_expansion\"> listing link bodies (or give bodies)";
+    if (c.HasEffectParts(NameOf(K::kThermalExpansion))) return true;
+    *why = "no <custom><text name=\"effect:" + NameOf(K::kThermalExpansion) +
+           "\"> listing link bodies (or give bodies)";
     return false;
   }
   void Apply(TruthSetup& s) const override {
     std::vector<std::string> bodies = bodies_;
     if (bodies.empty()) {
-      const auto it = s.catalog->effect_parts.find("thermal_expansion");
+      const auto it = s.catalog->effect_parts.find(NameOf(K::kThermalExpansion));
       if (it == s.catalog->effect_parts.end()) {
-        throw InputError(where() + ": " + s.model_name +
-                         " lists no bodies for thermal_expansion; give bodies");
+        throw InputError(where() + ": " + s.model_name + " lists no bodies for " +
+                         NameOf(K::kThermalExpansion) + "; give bodies");
       }
       bodies = it->second;
     }
@@ -695,15 +701,20 @@ class ImuBiasEffect : public Effect {
   std::vector<std::string> sites_;
 };
 
-constexpr char kBasePlate[] = "base_compliance";
-constexpr char kLinks[] = "link_bending";
-constexpr char kNeck[] = "neck_elasticity";
-constexpr char kCameraSag[] = "camera_mount_sag";
-constexpr char kWrist[] = "nonlinear_wrist";
-
-template <class T>
+template <class E>
 std::unique_ptr<Effect> Make() {
-  return std::make_unique<T>();
+  return std::make_unique<E>();
+}
+
+using MakeFn = std::unique_ptr<Effect> (*)();
+
+// A line of the list: the truth physics of a row of the effect table, or of a truth-only
+// effect, under the table's name.
+EffectEntry Line(K kind, const char* description, MakeFn make, const char* former = nullptr) {
+  return {kinematics::Row(kind).name, description, make, former};
+}
+EffectEntry Line(T kind, const char* description, MakeFn make, const char* former = nullptr) {
+  return {kinematics::Row(kind).name, description, make, former};
 }
 
 }  // namespace
@@ -711,49 +722,55 @@ std::unique_ptr<Effect> Make() {
 const std::vector<EffectEntry>& EffectRegistry() {
   // One line per effect.
   static const std::vector<EffectEntry> effects = {
-      {kBasePlate, "base plate bends under load: passive tilt joints (stiffness_scale)",
-       MakeGroup<kBasePlate>, "base_plate_compliance"},
-      {kLinks, "elastic links: passive bending hinges between link segments (stiffness_scale)",
-       MakeGroup<kLinks>, "link_elasticity"},
-      {kNeck, "continuum-elastic neck: chain of passive spring joints (stiffness_scale)",
-       MakeGroup<kNeck>},
-      {kCameraSag, "camera mount sags under the camera's weight: passive joint (stiffness_scale)",
-       MakeGroup<kCameraSag>},
-      {kWrist, "wrist is a nonlinear linkage: coupled joints follow the actuated ones (scale)",
-       MakeGroup<kWrist>},
-      {kLateralEffect,
-       "bearing and housing of a joint bend about the two axes normal to its own: releases the "
-       "MJCF's passive hinges J_lateral_a, J_lateral_b (stiffness_Nm_per_rad: {J: [k_a, k_b]}; "
-       "identification reports compliances 1/k, rad/Nm)",
-       Make<LateralComplianceEffect>},
-      {"joint_compliance",
-       "gear elasticity between motor encoder and link (stiffness_Nm_per_rad; identification "
-       "reports its inverse, rad/Nm)",
-       Make<JointComplianceEffect>, "joint_elasticity"},
-      {"backlash", "play between motor and link, load holds the link on one flank (width_deg)",
-       Make<BacklashEffect>},
-      {"payload", "extra mass at the end effector (mass_kg, offset_m, radius_m, body)",
-       Make<PayloadEffect>},
-      {"joint_offset",
-       "encoder calibration offset: link angle = reading + offset_deg (encoder_offset, its former "
-       "name, takes the encoder's error: reading = link + offset_deg)",
-       Make<JointOffsetEffect>, kEncoderOffset},
-      {"joint_origin",
-       "a joint's frame off its nominal pose, T Exp(xi) before it moves "
-       "(errors: {joint: {pos_mm: [x, y, z], rot_deg: [x, y, z]}})",
-       Make<JointOriginEffect>},
-      {"thermal_expansion", "links grow by alpha * delta_T (delta_T_K, alpha_per_K, bodies)",
-       Make<ThermalExpansionEffect>},
-      {"transmission_error",
-       "strain-wave gear: link ahead of the motor by a periodic error "
-       "(harmonics_deg: {joint: [A1, phase1, A2, phase2]})",
-       Make<TransmissionErrorEffect>},
-      {"stiffening_spring",
-       "gear spring stiffening with deflection, k d + k3 d^3 "
-       "(stiffness_Nm_per_rad, cubic_Nm_per_rad3)",
-       Make<StiffeningSpringEffect>, "stiffening_joint"},
-      {"imu_bias", "IMU constant bias and bias random walk, hence yaw drift (gyro_bias_rad_s, ...)",
-       Make<ImuBiasEffect>},
+      Line(K::kBaseCompliance, "base plate bends under load: passive tilt joints (stiffness_scale)",
+           MakeGroup<K::kBaseCompliance>, "base_plate_compliance"),
+      Line(K::kLinkBending,
+           "elastic links: passive bending hinges between link segments (stiffness_scale)",
+           MakeGroup<K::kLinkBending>, "link_elasticity"),
+      Line(T::kNeckElasticity,
+           "continuum-elastic neck: chain of passive spring joints (stiffness_scale)",
+           MakeGroup<T::kNeckElasticity>),
+      Line(T::kCameraMountSag,
+           "camera mount sags under the camera's weight: passive joint (stiffness_scale)",
+           MakeGroup<T::kCameraMountSag>),
+      Line(T::kNonlinearWrist,
+           "wrist is a nonlinear linkage: coupled joints follow the actuated ones (scale)",
+           MakeGroup<T::kNonlinearWrist>),
+      Line(K::kLateralCompliance,
+           "bearing and housing of a joint bend about the two axes normal to its own: releases "
+           "the MJCF's passive hinges J_lateral_a, J_lateral_b (stiffness_Nm_per_rad: {J: [k_a, "
+           "k_b]}; identification reports compliances 1/k, rad/Nm)",
+           Make<LateralComplianceEffect>),
+      Line(K::kJointCompliance,
+           "gear elasticity between motor encoder and link (stiffness_Nm_per_rad; identification "
+           "reports its inverse, rad/Nm)",
+           Make<JointComplianceEffect>, "joint_elasticity"),
+      Line(K::kBacklash,
+           "play between motor and link, load holds the link on one flank (width_deg)",
+           Make<BacklashEffect>),
+      Line(K::kPayload, "extra mass at the end effector (mass_kg, offset_m, radius_m, body)",
+           Make<PayloadEffect>),
+      Line(K::kJointOffset,
+           "encoder calibration offset: link angle = reading + offset_deg (encoder_offset, its "
+           "former name, takes the encoder's error: reading = link + offset_deg)",
+           Make<JointOffsetEffect>, kEncoderOffset),
+      Line(K::kJointOrigin,
+           "a joint's frame off its nominal pose, T Exp(xi) before it moves "
+           "(errors: {joint: {pos_mm: [x, y, z], rot_deg: [x, y, z]}})",
+           Make<JointOriginEffect>),
+      Line(K::kThermalExpansion, "links grow by alpha * delta_T (delta_T_K, alpha_per_K, bodies)",
+           Make<ThermalExpansionEffect>),
+      Line(K::kTransmissionError,
+           "strain-wave gear: link ahead of the motor by a periodic error "
+           "(harmonics_deg: {joint: [A1, phase1, A2, phase2]})",
+           Make<TransmissionErrorEffect>),
+      Line(K::kStiffeningSpring,
+           "gear spring stiffening with deflection, k d + k3 d^3 "
+           "(stiffness_Nm_per_rad, cubic_Nm_per_rad3)",
+           Make<StiffeningSpringEffect>, "stiffening_joint"),
+      Line(T::kImuBias,
+           "IMU constant bias and bias random walk, hence yaw drift (gyro_bias_rad_s, ...)",
+           Make<ImuBiasEffect>),
   };
   return effects;
 }

@@ -253,10 +253,14 @@ TEST_P(AugmentedModel, ParameterStdsMatchMonteCarloThroughTheIdentificationModel
 INSTANTIATE_TEST_SUITE_P(Arms, AugmentedModel, ::testing::Values("arm4", "rover_arm"));
 
 // Every row of the effect table has its maths in both layers: the identification offers it as a
-// candidate (on rover_arm, with its mast camera and gravity's tilt), its values move the pose the
-// identification predicts, and a declared file holding it builds a chain that predicts the same.
-// A row added without its maths fails here. The camera's offset moves the camera, not the hand;
-// a payload and gravity's tilt act only through the load-driven terms (here with j2's gear).
+// candidate (on rover_arm, with its mast camera and gravity's tilt) with the row's value count,
+// unit and bounds, its values move the pose the identification predicts, and a declared file
+// holding it builds a chain that predicts the same. A row added without its maths fails to
+// build (its kind lacks its cases in the switches of effect_model.cc and declared_effects.cc)
+// or fails here (no candidate, or cases that move nothing or disagree). The camera's offset moves
+// the camera, not the hand; a row entering through the loads (a payload, gravity's tilt) acts only
+// through the load-driven terms (here with j2's gear), and any other load-driven row makes the
+// estimators' chain compute the loads.
 TEST(EffectTable, EveryRowHasItsMaths) {
   const auto rig = MakeRig("rover_arm");
   EffectModel em(rig->m, rig->chain, rig->chain.end_effector, "mast_camera", {}, true);
@@ -276,10 +280,18 @@ TEST(EffectTable, EveryRowHasItsMaths) {
       const Candidate& cand = em.candidates()[c];
       if (static_cast<int>(cand.type) != kind) continue;
       ++offered;
+      // Its value count, unit and bounds are the row's (a slide's where the row has them).
       EXPECT_EQ(cand.num_params, row.num_values);
+      const bool slide = row.slide_unit != nullptr && cand.unit == row.slide_unit;
+      EXPECT_EQ(cand.unit, slide ? row.slide_unit : row.unit);
+      ASSERT_EQ(cand.lower.size(), static_cast<size_t>(row.num_values));
+      ASSERT_EQ(cand.upper.size(), static_cast<size_t>(row.num_values));
+      for (int k = 0; k < row.num_values; ++k) {
+        EXPECT_EQ(cand.lower[k], slide ? -row.slide_bound : row.lower[k]);
+        EXPECT_EQ(cand.upper[k], slide ? row.slide_bound : row.upper[k]);
+      }
       if (row.kind == kinematics::EffectKind::kCameraOffset) continue;
-      const bool through_loads = row.kind == kinematics::EffectKind::kPayload ||
-                                 row.kind == kinematics::EffectKind::kGravityTilt;
+      const bool through_loads = row.enters == kinematics::EffectEntry::kLoads;
       std::vector<int> set = {static_cast<int>(c)};
       std::vector<double> v = Values(cand, rng);
       sim::DeclaredModel aug = rig->declared;
@@ -293,6 +305,8 @@ TEST(EffectTable, EveryRowHasItsMaths) {
             {"joint_compliance@j2", base_v, {}, "rad/Nm", "test:2", {}});
       }
       const sim::DeclaredChain chain = sim::BuildDeclaredChain(rig->m, aug);
+      // The estimators' chain computes the loads for the terms of a load-driven row.
+      if (!through_loads) EXPECT_EQ(chain.effects.NeedsLoads(), row.load_driven);
       for (const Eigen::VectorXd& q : qs) {
         const lie::SE3 with = em.PredictPose(q, em.Loads(q), set, v.data(), ws);
         const lie::SE3 without = em.PredictPose(q, em.Loads(q), base, base_v.data(), ws);

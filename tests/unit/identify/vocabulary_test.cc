@@ -1,40 +1,55 @@
 // One vocabulary for effects: a truth effect that identification can find carries the
 // name identification reports for it, so a scenario's `truth.effects` and `expected:` speak the
-// same words; the effects identification has no family for are listed here by name, so a new
-// truth effect must take a side. Former names are still read and build the same truth.
+// same words. The effect table says which rows the truth simulates and lists the effects only the
+// truth has; the truth's effect list (sim/effects/) must match it, so a new truth effect takes a
+// side there. Former names are still read and build the same truth.
 #include <gtest/gtest.h>
 
+#include <map>
 #include <set>
 #include <string>
 
 #include "estimators/error.h"
+#include "estimators/kinematics/effect_table.h"
 #include "scenarios/identify/effect_model.h"
 #include "sim/effects/effect.h"
 
 namespace flexbench::identify {
 namespace {
 
-std::set<std::string> IdentifiedTypes() {
-  std::set<std::string> names;
-  // kLateralCompliance is the last enumerator (effect_model.h); a type added after it must move
-  // this.
-  for (int t = 0; t <= static_cast<int>(EffectType::kLateralCompliance); ++t) {
-    names.insert(ToString(static_cast<EffectType>(t)));
+TEST(EffectVocabulary, TheTruthSimulatesWhatTheEffectTableSays) {
+  // Every name the truth must have: the simulated rows and the truth-only rows.
+  std::map<std::string, std::string> expected;  // name -> which table
+  std::set<std::string> fit_only;
+  for (const kinematics::EffectRow& r : kinematics::EffectTable()) {
+    if (r.truth == kinematics::EffectTruth::kSimulated) {
+      expected[r.name] = "simulated row";
+    } else {
+      fit_only.insert(r.name);
+    }
   }
-  return names;
+  for (const kinematics::TruthOnlyRow& r : kinematics::TruthOnlyTable()) {
+    EXPECT_TRUE(expected.emplace(r.name, "truth-only row").second) << r.name << " is a row too";
+    EXPECT_EQ(kinematics::FindEffect(r.name), nullptr) << r.name;
+  }
+  std::set<std::string> simulated;
+  for (const sim::EffectEntry& e : sim::EffectRegistry()) {
+    EXPECT_TRUE(expected.count(e.name))
+        << e.name << " is in sim/effects/ but neither a simulated row nor a truth-only row"
+        << (fit_only.count(e.name) ? " (its row says kFitOnly)" : "");
+    simulated.insert(e.name);
+  }
+  for (const auto& [name, table] : expected) {
+    EXPECT_TRUE(simulated.count(name)) << name << " is a " << table << " without truth physics";
+  }
 }
 
-TEST(EffectVocabulary, EveryTruthEffectIsNamedAsIdentificationNamesIt) {
-  // Truth effects no identification family stands for: a neck of many spring joints, a camera
-  // mount's sag (camera_offset is a constant pose error), a nonlinear wrist linkage (declared as
-  // `coupled:`, not found), and IMU biases (not kinematics).
-  const std::set<std::string> truth_only = {"neck_elasticity", "camera_mount_sag",
-                                            "nonlinear_wrist", "imu_bias"};
-  const std::set<std::string> identified = IdentifiedTypes();
-  for (const sim::EffectEntry& e : sim::EffectRegistry()) {
-    EXPECT_TRUE(identified.count(e.name) || truth_only.count(e.name))
-        << e.name << " is neither an identified effect type nor listed as truth-only";
-    EXPECT_FALSE(identified.count(e.name) && truth_only.count(e.name)) << e.name;
+// The identification names its families from the table's rows.
+TEST(EffectVocabulary, IdentificationNamesTheRows) {
+  for (int t = 0; t < kinematics::kNumEffectKinds; ++t) {
+    const auto type = static_cast<EffectType>(t);
+    EXPECT_STREQ(ToString(type), kinematics::Row(type).name);
+    EXPECT_EQ(kinematics::FindEffect(kinematics::FileName(type, 1)), &kinematics::Row(type));
   }
 }
 
