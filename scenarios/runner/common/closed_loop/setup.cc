@@ -8,6 +8,7 @@
 #include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "estimators/format.h"
+#include "estimators/kinematics/effect_table.h"
 #include "scenarios/identify/measurement_frames.h"
 #include "scenarios/runner/common/closed_loop/heldout_replay.h"
 #include "scenarios/runner/common/closed_loop/sources.h"
@@ -190,10 +191,28 @@ void ParseCamera(ClosedLoopSetup& cl, const ConfigNode& root) {
   cl.camera.T_base_cam = lie::SE3(qt.normalized().toRotationMatrix(), Vec3(v[0], v[1], v[2]));
 }
 
+// An effect or candidate name ("gravity_tilt", "gravity_tilt@base") of the base's tilt.
+bool IsGravityTilt(const std::string& name) {
+  const kinematics::EffectRow* row = kinematics::FindEffect(name.substr(0, name.find('@')));
+  return row != nullptr && row->kind == kinematics::EffectKind::kGravityTilt;
+}
+
 // External measurement frames, the gravity-tilt candidate, markers and their offsets.
 void ParseFramesAndMarkers(ClosedLoopSetup& cl, const ConfigNode& root) {
   // External measurement frames (a tracker) the CSV's `frame` column may name.
-  if (const auto f = root.Optional("frames")) cl.frames = identify::ParseMeasurementFrames(*f);
+  // Frames set already (the identify command's --frame) keep their place; a key of the same
+  // name (--set frames.<name>...) is read over one.
+  if (const auto f = root.Optional("frames")) {
+    std::vector<identify::MeasurementFrame> keyed = identify::ParseMeasurementFrames(*f);
+    for (identify::MeasurementFrame& frame : cl.frames) {
+      const auto same = std::find_if(keyed.begin(), keyed.end(),
+                                     [&](const auto& k) { return k.name == frame.name; });
+      if (same == keyed.end()) continue;
+      frame = *same;
+      keyed.erase(same);
+    }
+    cl.frames.insert(cl.frames.end(), keyed.begin(), keyed.end());
+  }
   StartFramesAtDeclaredPoses(cl);
   // The gravity direction (a base mounted tilted) as a candidate: by default with data in an
   // external frame, whose fitted pose leaves the base's tilt to be seen through the loads
@@ -201,19 +220,21 @@ void ParseFramesAndMarkers(ClosedLoopSetup& cl, const ConfigNode& root) {
   cl.gravity_tilt = root.GetBool("gravity_tilt", !cl.frames.empty());
   // A tilt the declared file already carries is applied (EffectModel::SetBaseEffects).
   for (const sim::IdentifiedEffect& e : cl.declared.identified_effects) {
-    cl.gravity_tilt |= e.effect == "gravity_tilt@base";
+    cl.gravity_tilt |= IsGravityTilt(e.effect);
   }
   for (const auto& spec : cl.candidate_specs) {
-    if (spec.first.rfind("gravity_tilt", 0) == 0 && !root.Has("gravity_tilt")) {
-      cl.gravity_tilt = true;
-    }
+    if (IsGravityTilt(spec.first) && !root.Has("gravity_tilt")) cl.gravity_tilt = true;
   }
+  // A key replaces the list set already (the command's --marker, --unknown-marker-offset).
   if (const auto mk = root.Optional("markers")) {
+    cl.marker_nodes.clear();
     for (const ConfigNode& n : mk->Items()) cl.marker_nodes.push_back({n.AsString(), n.Where()});
   }
   if (const auto u = root.Optional("unknown_marker_offsets")) {
-    for (const ConfigNode& n : u->Items())
+    cl.unknown_offset_nodes.clear();
+    for (const ConfigNode& n : u->Items()) {
       cl.unknown_offset_nodes.push_back({n.AsString(), n.Where()});
+    }
   }
 }
 
