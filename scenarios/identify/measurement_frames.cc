@@ -30,9 +30,7 @@ MeasurementFrame ParseFrame(const std::string& name, const ConfigNode& n) {
   MeasurementFrame f;
   f.name = name;
   f.where = n.Where();
-  if (!IsIdentifier(name) || name == "base") {
-    n.Fail("a frame name is letters, digits, '_' or '-' (and not 'base')");
-  }
+  CheckFrameName(name, n.WhereKey());
   if (!n.IsMap() && !(n.IsScalar() && n.AsString().empty())) {
     n.Fail("expected a map ({} for an unknown pose)");
   }
@@ -53,6 +51,12 @@ MeasurementFrame ParseFrame(const std::string& name, const ConfigNode& n) {
 }
 
 }  // namespace
+
+void CheckFrameName(const std::string& name, const std::string& where) {
+  if (!IsIdentifier(name) || name == "base") {
+    throw InputError(where + ": a frame name is letters, digits, '_' or '-' (and not 'base')");
+  }
+}
 
 lie::SE3 ParseFramePose(const ConfigNode& n) {
   const std::vector<double> v = n.AsDoubleList();

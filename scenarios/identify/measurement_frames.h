@@ -22,6 +22,10 @@ namespace flexbench::identify {
 // InputError naming the key and line.
 lie::SE3 ParseFramePose(const ConfigNode& n);
 
+// A measurement frame's name is an identifier and not `base` (the CSV's `frame` column names
+// the base frame so); InputError "<where>: ..." otherwise.
+void CheckFrameName(const std::string& name, const std::string& where);
+
 // The `frames` map of a scenario. Throws InputError (file, key, line) on a name that is not an
 // identifier or is `base`, a prior without a pose or with a non-positive or non-finite
 // standard deviation, a pose that is not [x, y, z, qw, qx, qy, qz] with a unit quaternion.

@@ -220,28 +220,13 @@ void ScoreNees(const Job& job, const NoiseModel& nm, Report* r) {
   }
 }
 
-}  // namespace
-
-bool HasUnit(const DataSet& d, RowUnit unit) {
-  return std::any_of(d.rows.begin(), d.rows.end(),
-                     [&](const auto& o) { return UnitOf(o.type) == unit; });
-}
-
-RowUnit MainUnit(const DataSet& d) {
-  for (const RowUnit u : {RowUnit::kMetres, RowUnit::kPixels}) {
-    if (HasUnit(d, u)) return u;
-  }
-  return RowUnit::kRadians;
-}
-
-Report Run(const Job& job) {
+// The stages on the rows r holds.
+void RunOn(const Job& job, Report* out) {
   if (!job.declared || !job.mj || !job.chain || !job.em) {
     throw std::invalid_argument("identify::Run: a job needs its declared model, chain and effects");
   }
-  Report r;
+  Report& r = *out;
   const Clock::time_point t0 = Clock::now();
-  r.cal = job.cal;
-  r.val = job.val;
   Prepare(job, &r);
   r.prepare_s = SecondsSince(t0);
   Say(job.log, "identify: " + std::to_string(r.cal.rows.size()) + " calibration rows, " +
@@ -263,6 +248,37 @@ Report Run(const Job& job) {
   Score(job, nm, &r);
   Judge(job, &r);
   ScoreNees(job, nm, &r);
+}
+
+}  // namespace
+
+bool HasUnit(const DataSet& d, RowUnit unit) {
+  return std::any_of(d.rows.begin(), d.rows.end(),
+                     [&](const auto& o) { return UnitOf(o.type) == unit; });
+}
+
+RowUnit MainUnit(const DataSet& d) {
+  for (const RowUnit u : {RowUnit::kMetres, RowUnit::kPixels}) {
+    if (HasUnit(d, u)) return u;
+  }
+  return RowUnit::kRadians;
+}
+
+Report Run(const Job& job) {
+  Report r;
+  r.cal = job.cal;
+  r.val = job.val;
+  RunOn(job, &r);
+  return r;
+}
+
+Report Run(Job&& job) {
+  Report r;
+  r.cal = std::move(job.cal);
+  r.val = std::move(job.val);
+  job.cal = DataSet();
+  job.val = DataSet();
+  RunOn(job, &r);
   return r;
 }
 

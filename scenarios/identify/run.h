@@ -68,6 +68,9 @@ struct Report {
 };
 
 Report Run(const Job& job);
+// The same with the job's rows moved into the report (one copy of a large data set, not two);
+// the job's declared side stays valid for AugmentedModel and FittedUnder.
+Report Run(Job&& job);
 
 // The unit a data set is judged in: metres when it has point rows, else pixels when it has
 // pixel rows, else radians (gravity rows alone).

@@ -2,6 +2,7 @@
 // configured from the command line's options (no scenario text in between): an option's value
 // goes into the run's set-up, its checks name the option; --set reads the other closed_loop keys
 // over them.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -13,6 +14,7 @@
 #include "estimators/conventions.h"
 #include "estimators/error.h"
 #include "scenarios/identify/calibration_data.h"
+#include "scenarios/identify/measurement_frames.h"
 #include "scenarios/runner/common/closed_loop/setup.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "scenarios/runner/runner.h"
@@ -119,39 +121,33 @@ Source CsvSource(const std::string& path, const std::string& option) {
   return s;
 }
 
-// The selection options' own checks (a scenario file's keys have the same ones).
+// The options' conditions: those of the closed_loop keys they set (CheckIdentifyOption), and
+// --reading-std-deg's own range.
 void CheckSelectionOptions(const IdentifyCliOptions& o) {
   if (o.reading_std_deg && !(std::isfinite(*o.reading_std_deg) && *o.reading_std_deg > 0.0 &&
                              *o.reading_std_deg <= 10.0)) {
     OptionError("--reading-std-deg", std::to_string(*o.reading_std_deg),
                 "must be in (0, 10] (degrees)");
   }
-  if (o.max_effects && *o.max_effects < 0) {
-    throw InputError("--max-effects: must be >= 0 (leave it out for no cap)");
-  }
-  if (o.time_budget_s && !(*o.time_budget_s > 0.0 && *o.time_budget_s <= 1e6)) {
-    throw InputError("--time-budget: must be in (0, 1e6] seconds (leave it out for none)");
-  }
-  if (o.bic_threshold && !(*o.bic_threshold > 0.0)) {
-    throw InputError("--bic-threshold: must be > 0");
-  }
-  if (o.folds_by && *o.folds_by != "auto" && *o.folds_by != "set" && *o.folds_by != "group" &&
-      *o.folds_by != "row") {
-    throw InputError("--folds-by: expected auto, set, group or row");
-  }
-  if (o.outlier_iqr && !(*o.outlier_iqr >= 0.0)) {
-    throw InputError("--outlier-iqr: must be >= 0 (0: off)");
-  }
+  if (o.max_effects) CheckIdentifyOption("max_effects", *o.max_effects, "--max-effects");
+  if (o.time_budget_s) CheckIdentifyOption("time_budget_s", *o.time_budget_s, "--time-budget");
+  if (o.bic_threshold) CheckIdentifyOption("bic_threshold", *o.bic_threshold, "--bic-threshold");
+  if (o.folds_by) CheckFoldsBy(*o.folds_by, "--folds-by");
+  if (o.outlier_iqr) CheckIdentifyOption("outlier_iqr", *o.outlier_iqr, "--outlier-iqr");
 }
 
-// Each of a repeated option's names once.
-std::vector<NamedNode> Named(const std::vector<std::string>& names, const std::string& option) {
+// A repeated option's names, each once: a name given twice is refused (`refuse_twice`, where
+// the second would be a second thing of that name) or kept once.
+std::vector<NamedNode> Named(const std::vector<std::string>& names, const std::string& option,
+                             bool refuse_twice) {
   std::vector<NamedNode> out;
   for (const std::string& n : names) {
-    for (const NamedNode& e : out) {
-      if (e.first == n) throw InputError(option + " '" + CapForMessage(n) + "': given twice");
+    const bool seen =
+        std::any_of(out.begin(), out.end(), [&](const NamedNode& e) { return e.first == n; });
+    if (seen && refuse_twice) {
+      throw InputError(option + " '" + CapForMessage(n) + "': given twice");
     }
-    out.push_back({n, option});
+    if (!seen) out.push_back({n, option});
   }
   return out;
 }
@@ -172,15 +168,16 @@ void SetupFromOptions(const IdentifyCliOptions& o, sim::DeclaredModel declared,
   if (o.folds_by) opt.folds_by = *o.folds_by;
   if (o.outlier_iqr) opt.outlier_iqr = *o.outlier_iqr;
   if (o.no_cross_validation) opt.cross_validation = false;
-  for (const NamedNode& f : Named(o.frames, "--frame")) {
+  for (const NamedNode& f : Named(o.frames, "--frame", /*refuse_twice=*/true)) {
+    identify::CheckFrameName(f.first, f.second);
     identify::MeasurementFrame frame;
     frame.name = f.first;
     frame.where = f.second;
     cl->frames.push_back(frame);
   }
-  cl->marker_nodes = Named(o.markers, "--marker");
-  cl->unknown_offset_nodes = Named(o.unknown_marker_offsets, "--unknown-marker-offset");
-  cl->candidate_specs = Named(o.candidates, "--candidates");
+  cl->marker_nodes = Named(o.markers, "--marker", false);
+  cl->unknown_offset_nodes = Named(o.unknown_marker_offsets, "--unknown-marker-offset", false);
+  cl->candidate_specs = Named(o.candidates, "--candidates", false);
   ReadClosedLoopKeys(keys, cl, /*sources=*/false);
   BuildClosedLoopSetup(keys, cl);
 }
@@ -197,10 +194,8 @@ int IdentifyCommand(const IdentifyCliOptions& o) {
     CheckSelectionOptions(o);
     const ConfigNode keys = ConfigNode::LoadString("{}", kIdentifyName, ParseOverrides(o.set));
     PreparedRun prepared;
-    prepared.name = keys.GetString("scenario", "identify");
-    prepared.description = keys.GetString("description", "");
+    ReadRunHeader(keys, RunOptions{}, "identify", &prepared);
     prepared.kind_name = "closed_loop";
-    prepared.seed = static_cast<std::uint64_t>(std::max(0, keys.GetInt("seed", 0)));
     prepared.gates = ParseGates(keys);
     auto setup = std::make_unique<ClosedLoopSetup>();
     const std::string model_path = declared.model_path;

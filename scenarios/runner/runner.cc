@@ -53,13 +53,7 @@ void CheckScenarioName(const ConfigNode& node, const std::string& name) {
 
 PreparedRun Prepare(const ConfigNode& root, const RunOptions& options) {
   PreparedRun p;
-  const ConfigNode name_node = root.Child("scenario");
-  p.name = name_node.AsString();
-  CheckScenarioName(name_node, p.name);
-  p.description = root.GetString("description", "");
-  const ConfigNode seed_node = root.Child("seed");
-  if (seed_node.AsInt() < 0) seed_node.Fail("seed must be >= 0");
-  p.seed = options.seed ? *options.seed : static_cast<std::uint64_t>(seed_node.AsInt());
+  ReadRunHeader(root, options, "", &p);
   p.kind = MakeKind(root.Child("kind"));
   p.kind_name = root.GetString("kind");
   p.gates = ParseGates(root);
@@ -125,6 +119,25 @@ std::vector<ConfigOverride> ParseOverrides(const std::vector<std::string>& args)
   std::vector<ConfigOverride> out;
   for (const std::string& a : args) out.push_back(ParseOverride(a));
   return out;
+}
+
+void ReadRunHeader(const ConfigNode& root, const RunOptions& options,
+                   const std::string& default_name, PreparedRun* p) {
+  if (default_name.empty() || root.Has("scenario")) {
+    const ConfigNode name_node = root.Child("scenario");
+    p->name = name_node.AsString();
+    CheckScenarioName(name_node, p->name);
+  } else {
+    p->name = default_name;
+  }
+  p->description = root.GetString("description", "");
+  int seed = 0;
+  if (default_name.empty() || root.Has("seed")) {
+    const ConfigNode seed_node = root.Child("seed");
+    if (seed_node.AsInt() < 0) seed_node.Fail("seed must be >= 0");
+    seed = seed_node.AsInt();
+  }
+  p->seed = options.seed ? *options.seed : static_cast<std::uint64_t>(seed);
 }
 
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,

@@ -45,7 +45,7 @@ std::vector<ConfigOverride> ParseOverrides(const std::vector<std::string>& args)
 // Runs one scenario; prints one line on stderr for bad input. Returns an exit code.
 int RunScenario(const RunOptions& options);
 
-// Runs a scenario loaded or built in memory (a command's own, as identify's and replay's):
+// Runs a scenario loaded or built in memory (a command's own, as replay's):
 // `shown_path` is what messages call it, `inputs` the files it reads (never replaced by --out).
 // Returns an exit code; bad input is thrown (InputError).
 int RunLoaded(const ConfigNode& root, const RunOptions& options, const std::string& shown_path,
@@ -60,6 +60,12 @@ struct PreparedRun {
   std::unique_ptr<ScenarioKind> kind;
   std::vector<GateSpec> gates;
 };
+// A run's `scenario` (its name, checked to be a plain name), `description` and `seed` (>= 0;
+// options.seed replaces it) from root; with a default name, root may hold neither name nor
+// seed (a command's own run: `default_name`, seed 0).
+void ReadRunHeader(const ConfigNode& root, const RunOptions& options,
+                   const std::string& default_name, PreparedRun* p);
+
 // Runs one prepared in memory (a command's own kind, configured without a scenario file).
 int RunPrepared(PreparedRun prepared, const RunOptions& options, const std::string& shown_path,
                 const std::vector<std::filesystem::path>& inputs);

@@ -100,8 +100,9 @@ estimators::EstimatorSetup LogEstimatorSetup(const sim::RecordedLog& log,
 }
 
 DeclaredRig BuildLogRig(const sim::RecordedLog& log, const mjModel* nominal,
-                        sim::DeclaredModel declared) {
+                        sim::DeclaredModel declared, LogIndex* index) {
   DeclaredRig rig = BuildDeclaredRig(nominal, std::move(declared));
+  *index = IndexLog(log, *rig.chain, rig.declared.file);
   rig.setup = LogEstimatorSetup(log, *rig.chain, rig.declared.end_effector);
   return rig;
 }

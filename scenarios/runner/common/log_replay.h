@@ -17,11 +17,6 @@
 
 namespace flexbench::scenarios {
 
-// The declared rig of `declared` on `nominal` (BuildDeclaredRig) with the log's sensors in its
-// set-up (LogEstimatorSetup): what replaying the log under that model needs.
-DeclaredRig BuildLogRig(const sim::RecordedLog& log, const mjModel* nominal,
-                        sim::DeclaredModel declared);
-
 // What the estimators know of the log on `chain`: its model and identified effects, the end
 // effector, the log's IMUs and cameras at their declared frames (InputError naming log.yaml's
 // key when a frame is not an observed frame of the chain, or when the truth is of another frame
@@ -45,6 +40,12 @@ struct LogIndex {
 // InputError naming joints.csv's header or log.yaml's key (`declared_file` for messages).
 LogIndex IndexLog(const sim::RecordedLog& log, const sim::DeclaredChain& chain,
                   const std::string& declared_file);
+
+// The declared rig of `declared` on `nominal` (BuildDeclaredRig) with the log's sensors in its
+// set-up (LogEstimatorSetup), and the log's streams bound to its chain (IndexLog, checked
+// first): what replaying the log under that model needs.
+DeclaredRig BuildLogRig(const sim::RecordedLog& log, const mjModel* nominal,
+                        sim::DeclaredModel declared, LogIndex* index);
 
 struct LogStep {
   double t;

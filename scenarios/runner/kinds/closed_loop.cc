@@ -68,11 +68,13 @@ class ClosedLoopKind : public ScenarioKind {
     job.warn = [](const std::string& line) {
       std::cerr << "[flexbench] warning: " << line << "\n";
     };
-    identify::Report rep = identify::Run(job);
+    // The rows move into the report; the job keeps the declared side the outputs need.
+    identify::Report rep = identify::Run(std::move(job));
     (*ctx.timing)["data_s"] = load_s + rep.prepare_s;
     (*ctx.timing)["identify_s"] = rep.identify_s;
-    if (cl_.truth.tracker) ScoreTrackerPose(cl_, ctx, rep.cal, rep.result);
     Json& m = (*ctx.summary)["metrics"];
+    WriteFitMetrics(cl_, rep, &m);
+    if (cl_.truth.tracker) ScoreTrackerPose(cl_, ctx, rep.cal, rep.result);
     ScoreNames(cl_, rep.result, &m);
     WriteMetrics(cl_, rep, &m);
     if (cl_.replay_held_out) {

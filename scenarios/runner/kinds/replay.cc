@@ -54,8 +54,7 @@ class ReplayKind : public ScenarioKind {
     sim::DeclaredModel d = sim::LoadDeclaredModel(declared ? root.ResolvePath(declared->AsString())
                                                            : log_.declared_path);
     model_ = sim::LoadModel(d.model_path);
-    rig_ = BuildLogRig(log_, model_.get(), std::move(d));
-    index_ = IndexLog(log_, *rig_.chain, rig_.declared.file);
+    rig_ = BuildLogRig(log_, model_.get(), std::move(d), &index_);
     step_hz_ = root.GetDouble("step_hz", 0.0);
     if (!(step_hz_ >= 0.0) || !std::isfinite(step_hz_)) {
       root.Child("step_hz").Fail("must be 0 (a step per joint row) or a rate > 0 in Hz");

@@ -48,9 +48,9 @@ std::string ReplayHeldOut(const ClosedLoopSetup& cl, RunContext& ctx, const iden
   int judge = -1;  // the first estimator that is the model alone at the readings
   const int frame = LogFrame(cl, cl.validation);
   for (const bool after : {false, true}) {
-    const DeclaredRig rig =
-        BuildLogRig(log, cl.mj.get(), after ? identify::AugmentedModel(job, rep) : cl.declared);
-    const LogIndex index = IndexLog(log, *rig.chain, rig.declared.file);
+    LogIndex index;
+    const DeclaredRig rig = BuildLogRig(
+        log, cl.mj.get(), after ? identify::AugmentedModel(job, rep) : cl.declared, &index);
     // The tracker's points in the base frame at the frame's pose fitted with the model.
     const lie::SE3 T_base_frame =
         frame < 0 ? lie::SE3() : (after ? res.after : res.before).T_base_frames[frame];

@@ -429,10 +429,6 @@ void WriteNees(const ClosedLoopSetup& cl, const identify::Report& rep, Json* m) 
   (*m)["source_scaling"] = SourceScalingJson(rep);
   (*m)["sources_cover_residual"] = rep.sources_cover_residual;
   (*m)["nees_after_scaled"] = FiniteOrNull(rep.nees_after_scaled);
-  if (cl.reading_std_rad > 0.0 && std::isfinite(rep.rss_over_reading_noise)) {
-    (*m)["theta_cov_from"] = "readings' noise (least-squares sandwich)";
-    (*m)["cal_rss_over_reading_noise"] = rep.rss_over_reading_noise;
-  }
 }
 
 }  // namespace
@@ -458,10 +454,15 @@ void LogBaseEffects(const ClosedLoopSetup& cl, RunContext& ctx) {
   }
 }
 
+void WriteFitMetrics(const ClosedLoopSetup& cl, const identify::Report& rep, Json* m) {
+  (*m)["rejected_rows"] = rep.rejected.size();
+  if (cl.reading_std_rad > 0.0 && std::isfinite(rep.rss_over_reading_noise)) {
+    (*m)["theta_cov_from"] = "readings' noise (least-squares sandwich)";
+    (*m)["cal_rss_over_reading_noise"] = rep.rss_over_reading_noise;
+  }
+}
+
 void WriteMetrics(const ClosedLoopSetup& cl, const identify::Report& rep, Json* m) {
-  Json rejected = Json::array();
-  for (const std::string& r : rep.rejected) rejected.push_back(r);
-  (*m)["rejected_rows"] = rejected.size();
   WriteErrorMetrics(cl, rep, m);
   WriteDiagnostics(cl, rep, m);
   WriteNees(cl, rep, m);

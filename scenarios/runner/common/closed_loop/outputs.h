@@ -13,6 +13,10 @@ namespace flexbench::scenarios {
 // move none of the measured points), never silently.
 void LogBaseEffects(const ClosedLoopSetup& cl, RunContext& ctx);
 
+// The rows left out and, with the readings' noise stated, where the fit's covariance comes from
+// (summary.json's metrics, written first).
+void WriteFitMetrics(const ClosedLoopSetup& cl, const identify::Report& rep, Json* m);
+
 // Errors before and after, diagnostics, verdict and NEES (summary.json's metrics).
 void WriteMetrics(const ClosedLoopSetup& cl, const identify::Report& rep, Json* m);
 

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <type_traits>
 
 #include "estimators/conventions.h"
 #include "estimators/error.h"
@@ -127,50 +128,42 @@ void StartFramesAtDeclaredPoses(ClosedLoopSetup& cl) {
 
 // The identification's settings (noise levels, selection, cross-validation, outliers).
 void ParseOptions(ClosedLoopSetup& cl, const ConfigNode& root) {
-  cl.opt.point_std_m = root.GetDouble("point_std_m", cl.opt.point_std_m);
-  cl.opt.distance_std_m = root.GetDouble("distance_std_m", cl.opt.distance_std_m);
-  cl.opt.rotation_std_rad = root.GetDouble("rotation_std_rad", cl.opt.rotation_std_rad);
-  cl.opt.pixel_std_px = root.GetDouble("pixel_std_px", cl.opt.pixel_std_px);
-  cl.opt.gravity_std_rad = root.GetDouble("gravity_std_rad", cl.opt.gravity_std_rad);
-  for (const char* key : {"point_std_m", "distance_std_m", "rotation_std_rad", "pixel_std_px",
-                          "gravity_std_rad", "bic_threshold"}) {
-    if (root.Has(key) && !(root.GetDouble(key) > 0.0)) root.Child(key).Fail("must be > 0");
-  }
+  identify::IdentifyOptions& o = cl.opt;
+  const auto read = [&root](const char* key, auto* value) {
+    if (!root.Has(key)) return;
+    if constexpr (std::is_same_v<std::remove_pointer_t<decltype(value)>, int>) {
+      *value = root.GetInt(key);
+    } else {
+      *value = root.GetDouble(key);
+    }
+    CheckIdentifyOption(key, *value, root.Child(key).WhereKey());
+  };
+  read("point_std_m", &o.point_std_m);
+  read("distance_std_m", &o.distance_std_m);
+  read("rotation_std_rad", &o.rotation_std_rad);
+  read("pixel_std_px", &o.pixel_std_px);
+  read("gravity_std_rad", &o.gravity_std_rad);
+  read("bic_threshold", &o.bic_threshold);
   // The joint readings' noise, when known (an encoder's resolution): the validation NEES that
   // sizes the augmented model's sources then takes the rows' noise from it (see RowNoise).
   if (root.Has("reading_std_deg")) {
-    cl.reading_std_rad = root.GetDouble("reading_std_deg") * kDeg;
-    if (!(cl.reading_std_rad > 0.0)) root.Child("reading_std_deg").Fail("must be > 0");
+    const double deg = root.GetDouble("reading_std_deg");
+    CheckIdentifyOption("reading_std_deg", deg, root.Child("reading_std_deg").WhereKey());
+    cl.reading_std_rad = deg * kDeg;
   }
-  cl.opt.bic_threshold = root.GetDouble("bic_threshold", cl.opt.bic_threshold);
-  cl.opt.max_effects = root.GetInt("max_effects", cl.opt.max_effects);
-  if (root.Has("max_effects") && cl.opt.max_effects < 0) {
-    root.Child("max_effects").Fail("must be >= 0 (leave it out for no cap)");
+  read("max_effects", &o.max_effects);
+  read("time_budget_s", &o.time_budget_s);
+  o.cross_validation = root.GetBool("cross_validation", o.cross_validation);
+  if (root.Has("folds_by")) {
+    o.folds_by = root.GetString("folds_by");
+    CheckFoldsBy(o.folds_by, root.Child("folds_by").WhereKey());
   }
-  cl.opt.time_budget_s = root.GetDouble("time_budget_s", cl.opt.time_budget_s);
-  if (root.Has("time_budget_s") && !(cl.opt.time_budget_s > 0.0 && cl.opt.time_budget_s <= 1e6)) {
-    root.Child("time_budget_s").Fail("must be in (0, 1e6] seconds (leave it out for none)");
-  }
-  cl.opt.cross_validation = root.GetBool("cross_validation", cl.opt.cross_validation);
-  cl.opt.folds_by = root.GetString("folds_by", cl.opt.folds_by);
-  if (cl.opt.folds_by != "auto" && cl.opt.folds_by != "set" && cl.opt.folds_by != "group" &&
-      cl.opt.folds_by != "row") {
-    root.Child("folds_by").Fail("expected auto, set, group or row");
-  }
-  cl.opt.cv_min_gain = root.GetDouble("cv_min_gain", cl.opt.cv_min_gain);
-  if (!(cl.opt.cv_min_gain >= 0.0 && cl.opt.cv_min_gain < 1.0)) {
-    root.Child("cv_min_gain").Fail("must be in [0, 1)");
-  }
+  read("cv_min_gain", &o.cv_min_gain);
   // Threads of the identification's row passes (0: one per core); the results' bits do not
   // depend on it.
-  cl.opt.threads = root.GetInt("threads", cl.opt.threads);
-  if (cl.opt.threads < 0 || cl.opt.threads > 64) root.Child("threads").Fail("must be in [0, 64]");
-  cl.opt.outlier_iqr = root.GetDouble("outlier_iqr", cl.opt.outlier_iqr);
-  if (!(cl.opt.outlier_iqr >= 0.0)) root.Child("outlier_iqr").Fail("must be >= 0 (0: off)");
-  cl.opt.diagnostic_p = root.GetDouble("diagnostic_p", cl.opt.diagnostic_p);
-  if (!(cl.opt.diagnostic_p > 0.0 && cl.opt.diagnostic_p < 1.0)) {
-    root.Child("diagnostic_p").Fail("must be in (0, 1)");
-  }
+  read("threads", &o.threads);
+  read("outlier_iqr", &o.outlier_iqr);
+  read("diagnostic_p", &o.diagnostic_p);
 }
 
 // A fixed camera seeing the end-effector point (pixel rows in CSV data).
@@ -398,6 +391,32 @@ void ReadClosedLoopSetup(const ConfigNode& root, ClosedLoopSetup* cl) {
   cl->declared = ReadModelAndDeclared(root, &cl->model_path);
   ReadClosedLoopKeys(root, cl, /*sources=*/true);
   BuildClosedLoopSetup(root, cl);
+}
+
+void CheckIdentifyOption(const std::string& key, double v, const std::string& where) {
+  std::string what;
+  if (key == "max_effects") {
+    if (!(v >= 0.0)) what = "must be >= 0 (leave it out for no cap)";
+  } else if (key == "time_budget_s") {
+    if (!(v > 0.0 && v <= 1e6)) what = "must be in (0, 1e6] seconds (leave it out for none)";
+  } else if (key == "cv_min_gain") {
+    if (!(v >= 0.0 && v < 1.0)) what = "must be in [0, 1)";
+  } else if (key == "threads") {
+    if (!(v >= 0.0 && v <= 64.0)) what = "must be in [0, 64]";
+  } else if (key == "outlier_iqr") {
+    if (!(v >= 0.0)) what = "must be >= 0 (0: off)";
+  } else if (key == "diagnostic_p") {
+    if (!(v > 0.0 && v < 1.0)) what = "must be in (0, 1)";
+  } else if (!(v > 0.0)) {  // the noise levels and bic_threshold
+    what = "must be > 0";
+  }
+  if (!what.empty()) throw InputError(where + ": " + what);
+}
+
+void CheckFoldsBy(const std::string& v, const std::string& where) {
+  if (v != "auto" && v != "set" && v != "group" && v != "row") {
+    throw InputError(where + ": expected auto, set, group or row");
+  }
 }
 
 // A log source's time span, for messages.

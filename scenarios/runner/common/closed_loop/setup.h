@@ -117,6 +117,11 @@ void ReadClosedLoopSetup(const ConfigNode& root, ClosedLoopSetup* cl);
 void ReadClosedLoopKeys(const ConfigNode& root, ClosedLoopSetup* cl, bool sources);
 void BuildClosedLoopSetup(const ConfigNode& root, ClosedLoopSetup* cl);
 
+// The identification options' conditions, one place for a scenario's keys and the identify
+// command's options: InputError "<where>: <what>" when `key`'s value breaks them.
+void CheckIdentifyOption(const std::string& key, double value, const std::string& where);
+void CheckFoldsBy(const std::string& value, const std::string& where);
+
 // The job identify::Run takes for these rows.
 identify::Job MakeJob(const ClosedLoopSetup& s, identify::DataSet cal, identify::DataSet val);
 
