@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <string>
+#include <vector>
 
 #include "tests/common/planar_rows.h"
 #include "tests/common/test_util.h"
@@ -144,6 +146,32 @@ TEST_F(IdentifyReliability, OneRowSaysRowsOnce) {
   EXPECT_NE(LastLine(r.err).find("cross-validation by row needs at least two rows; the data has 1"),
             std::string::npos)
       << r.err;
+}
+
+// The command's options go into the run's set-up directly: each is held to what the scenario key
+// it sets is held to, and a --set of a key is read over the options, not instead of them.
+TEST_F(IdentifyReliability, OptionsAreCheckedAsTheirKeysAndSetKeysReadOverThem) {
+  struct Case {
+    std::string extra, message;
+  };
+  const std::vector<Case> refused = {
+      {"--frame base", "--frame: a frame name is letters, digits, '_' or '-' (and not 'base')"},
+      {"--set seed=-1", "key 'seed': seed must be >= 0"},
+      {"--set scenario=a/b", "key 'scenario': must be a plain name"},
+      {"--max-effects -1", "--max-effects: must be >= 0 (leave it out for no cap)"},
+      {"--set max_effects=-1", "--set max_effects: key 'max_effects': must be >= 0"},
+      // Both frames stay (no row names either): the keyed one does not replace the other.
+      {"--frame a --frame b --set frames.b.T_base_frame=[0,0,0,1,0,0,0]",
+       "frame 'a' is declared but no calibration row is measured in it"}};
+  for (const Case& c : refused) {
+    const CommandResult r = Identify("cal.csv", c.extra);
+    EXPECT_EQ(r.exit_code, 2) << c.extra << "\n" << r.err;
+    EXPECT_NE(LastLine(r.err).find(c.message), std::string::npos) << c.extra << "\n" << r.err;
+  }
+  // A candidate named twice is one candidate, as in a scenario's `candidates`.
+  const CommandResult r =
+      Identify("cal.csv", "--candidates joint_offset --candidates joint_offset --quiet");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
 }
 
 }  // namespace
