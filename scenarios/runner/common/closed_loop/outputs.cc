@@ -281,9 +281,8 @@ void WriteCalibratedModel(RunContext& ctx, const identify::Job& job, const ident
         {"not_in_mjcf", mjcf.skipped},
         {"not_in_urdf", urdf.skipped}};
   if (!mjcf.skipped.empty()) {
-    std::string names;
-    for (const std::string& s : mjcf.skipped) names += (names.empty() ? "" : ", ") + s;
-    ctx.log("calibrated_model.xml cannot hold (MJCF has no form for them): " + names);
+    ctx.log("calibrated_model.xml cannot hold (MJCF has no form for them): " +
+            JoinNames(mjcf.skipped));
   }
 }
 
