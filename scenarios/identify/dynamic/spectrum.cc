@@ -14,9 +14,11 @@ namespace flexbench::identify::dynamic {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-// Half-width (bins) of the band whose median is the noise floor: wide enough that the floor's
-// own scatter stays small next to a bin's, narrow enough to follow a coloured floor.
-constexpr int kFloorHalfWidth = 16;
+// Half-width (bins) of the band the noise floor is fitted over. A wider band scatters less but lets
+// a coloured floor's curvature through: with 12 or 16, AR(1) residuals (coefficients -0.5 .. 0.97)
+// gave false peaks in long logs; with 8 the false-positive rate stays near alpha for windows of
+// 128 samples or more (tests/unit/dynamic_spectrum).
+constexpr int kFloorHalfWidth = 8;
 // Bins either side of a peak that hold a sinusoid's power (the Hann main lobe is +-2 bins).
 constexpr int kPeakHalfWidth = 2;
 
@@ -142,6 +144,95 @@ Eigen::MatrixXd CoefficientCovariance(const Eigen::MatrixXd& X, const Eigen::Vec
   return bread * meat * bread * (n / (n - X.cols()));
 }
 
+// Digamma and trigamma: the mean and variance of log(chi2(dof) / dof) are
+// digamma(dof / 2) - log(dof / 2) and trigamma(dof / 2). Recurrence up to 6, then the asymptotic
+// series (error below 1e-10 there).
+double Digamma(double x) {
+  double r = 0.0;
+  for (; x < 6.0; x += 1.0) r -= 1.0 / x;
+  const double x2 = 1.0 / (x * x);
+  return r + std::log(x) - 0.5 / x - x2 * (1.0 / 12 - x2 * (1.0 / 120 - x2 / 252));
+}
+double Trigamma(double x) {
+  double r = 0.0;
+  for (; x < 6.0; x += 1.0) r += 1.0 / (x * x);
+  const double x2 = 1.0 / (x * x);
+  return r + 1.0 / x + 0.5 * x2 + x2 / x * (1.0 / 6 - x2 * (1.0 / 30 - x2 / 42));
+}
+
+// The PSD's noise floor at each searched bin and the degrees of freedom of its estimate.
+struct NoiseFloor {
+  std::vector<double> mean;  // 0 where the band holds too few bins
+  std::vector<double> dof;
+};
+
+// Per bin k: a line in log PSD, least squares over the band k +- kFloorHalfWidth, evaluated at k.
+// The band is mirrored at DC and Nyquist (a PSD is even about both) so that it stays centred; the
+// line follows a coloured floor's slope (in log, so a steep one too) where a running median over
+// a shifted band would not. Left out of the fit: the peak's own lobe (|m - k| <= kPeakHalfWidth),
+// DC and bin 1 (the means removed per window take power from them), Nyquist (half the dof), and
+// bins standing out of the band's running median at per-bin level 1e-3 (other peaks). A noise
+// bin's log scatters by trigamma(dof / 2) about log(mean) + digamma(dof / 2) - log(dof / 2); the
+// fit's value at k, sum_m W_m log psd_m, by trigamma(dof / 2) sum_m W_m^2 bin_correlation
+// (neighbours correlated). psd_k / floor_k is then taken as F(dof, dof_floor), dof_floor the dof
+// of a chi2 / dof whose log has that variance. (A quadratic, which follows curvature too, costs
+// the floor so much scatter across the lobe's gap that weak peaks go unseen.)
+NoiseFloor FitNoiseFloor(const Spectrum& s, int first, int last) {
+  const int nyquist = static_cast<int>(s.psd.size()) - 1;
+  const int half = std::min(kFloorHalfWidth, nyquist - 1);
+  NoiseFloor floor{std::vector<double>(nyquist + 1, 0.0), std::vector<double>(nyquist + 1, 0.0)};
+  auto mirror = [&](int j) { return j < 0 ? -j : (j > nyquist ? 2 * nyquist - j : j); };
+
+  // Running median of the band, only to flag other peaks.
+  const double median_to_mean = s.dof / stats::ChiSquareQuantile(0.5, s.dof);
+  const double outlier = stats::ChiSquareQuantile(1.0 - 1e-3, s.dof) / s.dof;
+  std::vector<char> flagged(nyquist + 1, 0);
+  std::vector<double> scratch(2 * half + 1);
+  for (int k = 1; k < nyquist; ++k) {
+    int count = 0;
+    for (int j = k - half; j <= k + half; ++j) {
+      if (mirror(j) > 1) scratch[count++] = s.psd[mirror(j)];
+    }
+    if (count == 0) continue;
+    std::nth_element(scratch.begin(), scratch.begin() + count / 2, scratch.begin() + count);
+    flagged[k] = s.psd[k] > outlier * median_to_mean * scratch[count / 2];
+  }
+
+  const double log_bias = Digamma(0.5 * s.dof) - std::log(0.5 * s.dof);
+  std::vector<double> weight(nyquist + 1, 0.0);
+  for (int k = first; k <= last; ++k) {
+    auto usable = [&](int m) {
+      return m > 1 && m < nyquist && std::abs(m - k) > kPeakHalfWidth && !flagged[m] &&
+             s.psd[m] > 0.0;
+    };
+    Eigen::Matrix2d normal = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
+    int points = 0;
+    for (int j = k - half; j <= k + half; ++j) {
+      if (!usable(mirror(j))) continue;
+      const Eigen::Vector2d phi(1.0, j - k);
+      normal += phi * phi.transpose();
+      rhs += phi * std::log(s.psd[mirror(j)]);
+      ++points;
+    }
+    if (points < 6) continue;
+    // The fit's value at k is row . rhs: each point's weight is row . phi.
+    const Eigen::Vector2d row = normal.inverse().col(0);
+    for (int m = std::max(0, k - half); m <= std::min(nyquist, k + half); ++m) weight[m] = 0.0;
+    for (int j = k - half; j <= k + half; ++j) {
+      if (usable(mirror(j))) weight[mirror(j)] += row(0) + row(1) * (j - k);  // mirrored: twice
+    }
+    double sum_w2 = 0.0;
+    for (int m = std::max(0, k - half); m <= std::min(nyquist, k + half); ++m) {
+      sum_w2 += weight[m] * weight[m];
+    }
+    floor.mean[k] = std::exp(row.dot(rhs) - log_bias);
+    // trigamma(x) ~ 1 / (x - 1/2) for the dof of that variance.
+    floor.dof[k] = 2.0 / (Trigamma(0.5 * s.dof) * sum_w2 * s.bin_correlation) + 1.0;
+  }
+  return floor;
+}
+
 }  // namespace
 
 Spectrum Welch(const double* x, int n, double rate_hz, int window) {
@@ -208,32 +299,15 @@ Spectrum Welch(const double* x, int n, double rate_hz, int window) {
 std::vector<SpectrumPeak> FindPeaks(const Spectrum& s, double alpha, int max_peaks, double min_hz) {
   std::vector<SpectrumPeak> peaks;
   const int bins = static_cast<int>(s.psd.size());
-  // The floor's band: +-half bins about each bin, mirrored at DC and Nyquist (a PSD is even about
-  // both), so it stays centred: over a band where the floor is monotone, the median is the
-  // centre's floor however steep the slope. DC itself is left out (the means removed empty it).
-  const int last = bins - 2;
-  const int half = std::min(kFloorHalfWidth, last);
-  if (half < 2 || !(s.dof > 0.0) || !(s.df_hz > 0.0) || max_peaks <= 0) return peaks;
-  const int first = std::max(1, static_cast<int>(std::ceil(min_hz / s.df_hz - 1e-9)));
-  if (first > last) return peaks;
+  // A peak's lobe must stay clear of DC and Nyquist: a slower periodic residual is not told from a
+  // drift (a floor that rises towards DC), nor one closer to Nyquist from aliasing.
+  const int nyquist = bins - 1;
+  const int last = nyquist - kPeakHalfWidth - 1;
+  const int first =
+      std::max(kPeakHalfWidth + 1, static_cast<int>(std::ceil(min_hz / s.df_hz - 1e-9)));
+  if (last < first || !(s.dof > 0.0) || !(s.df_hz > 0.0) || max_peaks <= 0) return peaks;
   const int searched = last - first + 1;
-
-  // The band's median estimates the floor's median; chi2(dof) / dof has median q(0.5) / dof.
-  const double median_to_mean = s.dof / stats::ChiSquareQuantile(0.5, s.dof);
-  std::vector<double> floor(bins, 0.0);
-  std::vector<int> distinct(bins, 0);
-  std::vector<double> scratch(2 * half + 1);
-  for (int k = first; k <= last; ++k) {
-    int count = 0;
-    for (int j = k - half; j <= k + half; ++j) {
-      const int m = j < 0 ? -j : (j > last + 1 ? 2 * (last + 1) - j : j);
-      if (m != 0) scratch[count++] = s.psd[m];
-    }
-    std::nth_element(scratch.begin(), scratch.begin() + count / 2, scratch.begin() + count);
-    floor[k] = scratch[count / 2] * median_to_mean;
-    // Mirrored bins repeat ones already in the band.
-    distinct[k] = std::min(k + half, last + 1) - std::max(1, k - half) + 1;
-  }
+  const NoiseFloor floor = FitNoiseFloor(s, first, last);
 
   struct Candidate {
     int bin;
@@ -242,13 +316,9 @@ std::vector<SpectrumPeak> FindPeaks(const Spectrum& s, double alpha, int max_pea
   };
   std::vector<Candidate> candidates;
   for (int k = first; k <= last; ++k) {
-    if (!(floor[k] > 0.0) || !(s.psd[k] > s.psd[k - 1]) || s.psd[k] < s.psd[k + 1]) continue;
-    const double ratio = s.psd[k] / floor[k];
-    // A median of M values scatters (pi / 2) times as much as their mean, and correlated
-    // neighbours leave M / bin_correlation independent ones: the floor's relative variance is
-    // (pi / 2) (2 / dof) bin_correlation / M, i.e. dof_floor = 2 / that.
-    const double dof_floor = s.dof * distinct[k] / (0.5 * kPi * s.bin_correlation);
-    const double p = std::min(1.0, searched * FSurvival(ratio, s.dof, dof_floor));
+    if (!(floor.mean[k] > 0.0) || !(s.psd[k] > s.psd[k - 1]) || s.psd[k] < s.psd[k + 1]) continue;
+    const double ratio = s.psd[k] / floor.mean[k];
+    const double p = std::min(1.0, searched * FSurvival(ratio, s.dof, floor.dof[k]));
     if (p < alpha) candidates.push_back({k, ratio, p});
   }
   std::sort(candidates.begin(), candidates.end(),
@@ -271,7 +341,7 @@ std::vector<SpectrumPeak> FindPeaks(const Spectrum& s, double alpha, int max_pea
     double weighted_hz = 0.0;
     for (int j = std::max(0, c.bin - kPeakHalfWidth);
          j <= std::min(bins - 1, c.bin + kPeakHalfWidth); ++j) {
-      const double e = s.psd[j] - floor[c.bin];
+      const double e = s.psd[j] - floor.mean[c.bin];
       excess += e;
       weight += std::max(e, 0.0);
       weighted_hz += std::max(e, 0.0) * s.frequency_hz[j];

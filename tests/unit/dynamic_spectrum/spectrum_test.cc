@@ -139,7 +139,7 @@ TEST(DynamicSpectrum, MinHzAndMaxPeaksLimitTheSearch) {
   EXPECT_NEAR(high.front().frequency_hz, 40.0, s.df_hz);
 }
 
-// Fraction of noise-only seeds with any peak at level alpha.
+// Fraction of noise-only seeds with any peak at level alpha (4096 samples, window 256).
 double PeakFalsePositiveRate(double alpha, double phi) {
   int hits = 0;
   const int seeds = 200;
@@ -156,18 +156,21 @@ double PeakFalsePositiveRate(double alpha, double phi) {
 TEST(DynamicSpectrum, PeakPValuesAreCalibratedOnNoise) {
   const double white = PeakFalsePositiveRate(0.01, 0.0);
   const double white_loose = PeakFalsePositiveRate(0.2, 0.0);
-  // A coloured floor (AR(1): the PSD falls by a factor 9 from DC to Nyquist): the running median
-  // follows it.
+  // Coloured floors: AR(1) 0.5 falls by 9 from DC to Nyquist, AR(1) 0.9 by 361 with a hump at DC
+  // a few bins wide; the floor must follow both.
   const double coloured = PeakFalsePositiveRate(0.01, 0.5);
+  const double steep = PeakFalsePositiveRate(0.01, 0.9);
   std::printf(
-      "peaks, noise only, 200 seeds: any peak at alpha 0.01: white %.3f, AR(1) 0.5 %.3f; "
-      "at alpha 0.2: white %.3f\n",
-      white, coloured, white_loose);
+      "peaks, noise only, 200 seeds: any peak at alpha 0.01: white %.3f, AR(1) 0.5 %.3f, "
+      "AR(1) 0.9 %.3f; at alpha 0.2: white %.3f\n",
+      white, coloured, steep, white_loose);
   EXPECT_LE(white, 0.02);
   EXPECT_LE(coloured, 0.02);
-  // Conservative (Bonferroni over correlated bins), but not blind.
-  EXPECT_LE(white_loose, 0.25);
-  EXPECT_GE(white_loose, 0.02);
+  EXPECT_LE(steep, 0.02);
+  // Bonferroni over correlated bins is conservative, but the test is not blind: the rate at 0.2
+  // is within 3 binomial standard errors below (or at most that above) alpha.
+  EXPECT_LE(white_loose, 0.28);
+  EXPECT_GE(white_loose, 0.12);
 }
 
 TEST(DynamicSpectrum, CoulombFrictionIsFoundInTheResidual) {
