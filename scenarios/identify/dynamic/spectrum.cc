@@ -17,7 +17,7 @@ constexpr double kPi = 3.14159265358979323846;
 // Half-width (bins) of the band the noise floor is fitted over. A wider band scatters less but lets
 // a coloured floor's curvature through: with 12 or 16, AR(1) residuals (coefficients -0.5 .. 0.97)
 // gave false peaks in long logs; with 8 the false-positive rate stays near alpha for windows of
-// 128 samples or more (tests/unit/dynamic_spectrum).
+// 256 samples or more (spectrum.h).
 constexpr int kFloorHalfWidth = 8;
 // Bins either side of a peak that hold a sinusoid's power (the Hann main lobe is +-2 bins).
 constexpr int kPeakHalfWidth = 2;
@@ -176,7 +176,9 @@ struct NoiseFloor {
 // fit's value at k, sum_m W_m log psd_m, by trigamma(dof / 2) sum_m W_m^2 bin_correlation
 // (neighbours correlated). psd_k / floor_k is then taken as F(dof, dof_floor), dof_floor the dof
 // of a chi2 / dof whose log has that variance. (A quadratic, which follows curvature too, costs
-// the floor so much scatter across the lobe's gap that weak peaks go unseen.)
+// the floor so much scatter across the lobe's gap that weak peaks go unseen: a sinusoid at 0.12
+// of unit noise, 8192 samples, window 256, was found in 9 % of the seeds against 33 %; switching
+// to it only where the curvature is significant gained little calibration.)
 NoiseFloor FitNoiseFloor(const Spectrum& s, int first, int last) {
   const int nyquist = static_cast<int>(s.psd.size()) - 1;
   const int half = std::min(kFloorHalfWidth, nyquist - 1);
