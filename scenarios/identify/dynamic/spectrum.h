@@ -7,9 +7,10 @@
 //   - ResidualVersusCommandLag: a missing servo delay is a residual proportional to the command's
 //     rate.
 // Residuals of rollouts are serially correlated, so the regressions' standard errors are
-// heteroscedasticity-and-autocorrelation consistent (Newey-West, Bartlett kernel, Andrews' AR(1)
-// bandwidth from the residual) and the correlation test uses an effective sample size (Bartlett's
-// formula); with white residuals both reduce to the ordinary ones.
+// heteroscedasticity-and-autocorrelation consistent (Newey-West: Bartlett kernel, Andrews' AR(1)
+// plug-in bandwidth from the products regressor x residual) and the correlation test's effective
+// sample size comes from the same long-run variance of residual x command rate; with white
+// residuals both reduce to the ordinary ones (samples, not effective samples, cap the latter).
 // Bad input (null pointer, n < 8, a non-finite sample, a non-positive rate) throws
 // std::invalid_argument; a constant residual gives no peak and p-values of 1.
 #pragma once
