@@ -86,6 +86,32 @@ TEST(DynamicSpectrum, WelchOfWhiteNoiseKeepsItsVariance) {
   EXPECT_NEAR(mean_psd * rate_hz / 2 / (sigma * sigma), 1.0, 0.03);
 }
 
+TEST(DynamicSpectrum, OneWindowIsTheDirectTransformOfTheHannWindowedSamples) {
+  // One window: the PSD is the DFT's power, summed directly here, scaled as documented.
+  std::mt19937 rng(13);
+  const int n = 64;
+  const double rate_hz = 50.0;
+  const std::vector<double> x = WhiteNoise(rng, n, 1.0);
+  const Spectrum s = Welch(x.data(), n, rate_hz, n);
+  ASSERT_EQ(s.windows, 1);
+  const double mean = std::accumulate(x.begin(), x.end(), 0.0) / n;
+  double power = 0.0;
+  std::vector<double> w(n);
+  for (int t = 0; t < n; ++t) {
+    w[t] = 0.5 - 0.5 * std::cos(2.0 * kPi * t / n);
+    power += w[t] * w[t];
+  }
+  for (int k = 0; k <= n / 2; ++k) {
+    double re = 0.0, im = 0.0;
+    for (int t = 0; t < n; ++t) {
+      re += (x[t] - mean) * w[t] * std::cos(2.0 * kPi * k * t / n);
+      im -= (x[t] - mean) * w[t] * std::sin(2.0 * kPi * k * t / n);
+    }
+    const double fold = (k == 0 || k == n / 2) ? 1.0 : 2.0;
+    EXPECT_NEAR(s.psd[k], fold * (re * re + im * im) / (rate_hz * power), 1e-12) << "bin " << k;
+  }
+}
+
 TEST(DynamicSpectrum, WindowIsAPowerOfTwoAtMostTheSamples) {
   std::mt19937 rng(12);
   const std::vector<double> x = WhiteNoise(rng, 100, 1.0);
