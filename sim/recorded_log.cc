@@ -169,13 +169,20 @@ using log_internal::Stats;
 using log_internal::TagsCsv;
 using log_internal::TagsYaml;
 
-void ReadJoints(const ConfigNode& node, RecordedLog* log, double* used) {
+// A file of a time column and one column per joint, <joint>_rad (<joint>_m for a slide):
+// joints.csv and commands.csv.
+struct JointColumnsFile {
+  std::vector<std::string> names;
+  std::vector<char> is_slide;
+  std::vector<double> t;
+  std::vector<double> values;  // row-major, names.size() a row
+  StreamStats stats;
+};
+
+JointColumnsFile ReadJointColumnsFile(const ConfigNode& node, double* used) {
+  JointColumnsFile f;
   const std::string file = node.ResolvePath(node.GetString("file"));
   const double offset = ClockOffset(node);
-  log->joint_std = node.GetDouble("std_rad", 0.0);
-  if (!(log->joint_std >= 0.0 && log->joint_std <= 1.0)) {
-    node.Child("std_rad").Fail("must be in [0, 1]");
-  }
   CsvLines csv(file, kMaxLogStreamBytes);
   std::vector<std::string> header;
   if (!csv.Next(&header)) throw InputError(CapForMessage(file) + ": no header row");
@@ -192,17 +199,17 @@ void ReadJoints(const ConfigNode& node, RecordedLog* log, double* used) {
                        "': expected <joint>_rad or <joint>_m (the unit in the name)");
     }
     const std::string joint = h.substr(0, h.size() - (rad ? 4 : 2));
-    if (std::count(log->joints.begin(), log->joints.end(), joint) > 0) {
+    if (std::count(f.names.begin(), f.names.end(), joint) > 0) {
       throw InputError(hdr + ": joint '" + CapForMessage(joint) + "' has two columns");
     }
-    log->joints.push_back(joint);
-    log->joint_is_slide.push_back(!rad);
+    f.names.push_back(joint);
+    f.is_slide.push_back(!rad);
   }
-  if (log->joints.empty()) throw InputError(hdr + ": no joint column after 't_s'");
+  if (f.names.empty()) throw InputError(hdr + ": no joint column after 't_s'");
   // A row: its time, its angles, and its step in the statistics.
-  const std::uintmax_t lines = CheckRows(file, 8.0 * (2 + log->joints.size()), used);
-  log->joint_t.reserve(lines);
-  log->joint_q.reserve(lines * log->joints.size());
+  const std::uintmax_t lines = CheckRows(file, 8.0 * (2 + f.names.size()), used);
+  f.t.reserve(lines);
+  f.values.reserve(lines * f.names.size());
   std::vector<std::string> cells;
   double last = 0.0;
   while (csv.Next(&cells)) {
@@ -211,13 +218,41 @@ void ReadJoints(const ConfigNode& node, RecordedLog* log, double* used) {
       throw InputError(where + ": " + std::to_string(cells.size()) + " columns, the header has " +
                        std::to_string(header.size()));
     }
-    log->joint_t.push_back(RowTime(cells[0], where, offset, &last, !log->joint_t.empty()));
+    f.t.push_back(RowTime(cells[0], where, offset, &last, !f.t.empty()));
     for (size_t c = 1; c < cells.size(); ++c) {
-      log->joint_q.push_back(ParseCsvNumber(cells[c], where, header[c], 1e3));
+      f.values.push_back(ParseCsvNumber(cells[c], where, header[c], 1e3));
     }
   }
-  if (log->joint_t.empty()) throw InputError(CapForMessage(file) + ": no data rows");
-  log->joint_stats = Stats(file, offset, {&log->joint_t});
+  if (f.t.empty()) throw InputError(CapForMessage(file) + ": no data rows");
+  f.stats = Stats(file, offset, {&f.t});
+  return f;
+}
+
+void ReadJoints(const ConfigNode& node, RecordedLog* log, double* used) {
+  log->joint_std = node.GetDouble("std_rad", 0.0);
+  if (!(log->joint_std >= 0.0 && log->joint_std <= 1.0)) {
+    node.Child("std_rad").Fail("must be in [0, 1]");
+  }
+  JointColumnsFile f = ReadJointColumnsFile(node, used);
+  log->joints = std::move(f.names);
+  log->joint_is_slide = std::move(f.is_slide);
+  log->joint_t = std::move(f.t);
+  log->joint_q = std::move(f.values);
+  log->joint_stats = f.stats;
+}
+
+void ReadCommands(const ConfigNode& node, RecordedLog* log, double* used) {
+  const std::string type = node.GetString("type", "position");
+  if (type != "position") {
+    node.Child("type").Fail("'" + CapForMessage(type) +
+                            "': only position targets are read (type: position)");
+  }
+  JointColumnsFile f = ReadJointColumnsFile(node, used);
+  log->command_joints = std::move(f.names);
+  log->command_is_slide = std::move(f.is_slide);
+  log->command_t = std::move(f.t);
+  log->command_q = std::move(f.values);
+  log->command_stats = f.stats;
 }
 
 void ReadImuSensors(const ConfigNode& sensors, RecordedLog* log) {
@@ -248,6 +283,14 @@ void ReadImuSensors(const ConfigNode& sensors, RecordedLog* log) {
 void ReadImu(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string file = node.ResolvePath(node.GetString("file"));
   const double offset = ClockOffset(node);
+  log->gyro_std = node.GetDouble("gyro_std_rad_s", 0.0);
+  log->accel_std = node.GetDouble("accel_std_m_s2", 0.0);
+  if (!(log->gyro_std >= 0.0 && log->gyro_std <= 1e3)) {
+    node.Child("gyro_std_rad_s").Fail("must be in [0, 1000]");
+  }
+  if (!(log->accel_std >= 0.0 && log->accel_std <= 1e4)) {
+    node.Child("accel_std_m_s2").Fail("must be in [0, 10000]");
+  }
   ReadImuSensors(node.Child("sensors"), log);
   CsvLines csv(file, kMaxLogStreamBytes);
   static const std::vector<std::string> kHeader = {"t_s",      "sensor",  "gx_rad_s", "gy_rad_s",
@@ -336,6 +379,7 @@ RecordedLog ReadRecordedLog(const std::string& dir) {
   log.estimate_in = root.GetString("estimate_in", "");
   double used = 0.0;  // bytes the streams' rows take
   ReadJoints(root.Child("joints"), &log, &used);
+  if (const auto c = root.Optional("commands")) ReadCommands(*c, &log, &used);
   if (const auto imu = root.Optional("imu")) ReadImu(*imu, &log, &used);
   if (const auto truth = root.Optional("truth")) ReadTruth(*truth, &log, &used);
   if (const auto cameras = root.Optional("cameras")) ReadCameras(*cameras, &log);
@@ -373,7 +417,10 @@ std::string LogYaml(const RecordedLog& log) {
   if (log.joint_std > 0.0) y << ", std_rad: " << ExactNum(log.joint_std);
   y << "}\n";
   if (!log.imus.empty()) {
-    y << "imu:\n  file: imu.csv\n  sensors:\n";
+    y << "imu:\n  file: imu.csv\n";
+    if (log.gyro_std > 0.0) y << "  gyro_std_rad_s: " << ExactNum(log.gyro_std) << "\n";
+    if (log.accel_std > 0.0) y << "  accel_std_m_s2: " << ExactNum(log.accel_std) << "\n";
+    y << "  sensors:\n";
     for (const LogImu& imu : log.imus) {
       y << "    " << imu.name << ": {frame: " << imu.frame
         << ", filter_beta: " << ExactNum(imu.filter_beta);
@@ -385,11 +432,26 @@ std::string LogYaml(const RecordedLog& log) {
       y << "}\n";
     }
   }
+  if (!log.command_t.empty()) y << "commands: {file: commands.csv, type: position}\n";
   if (!log.truth_t.empty()) y << "truth: {file: truth.tum, frame: " << log.truth_frame << "}\n";
   if (log.static_postures) y << "static_postures: true\n";
   if (!log.estimate_in.empty()) y << "estimate_in: " << log.estimate_in << "\n";
   y << TagsYaml(log) << ContactsYaml(log) << PosesYaml(log);
   return y.str();
+}
+
+std::string JointColumnsCsv(const std::vector<std::string>& names, const std::vector<char>& slide,
+                            const std::vector<double>& t, const std::vector<double>& values) {
+  std::ostringstream j;
+  j << "t_s";
+  for (size_t k = 0; k < names.size(); ++k) j << "," << names[k] << (slide[k] ? "_m" : "_rad");
+  j << "\n";
+  for (size_t r = 0; r < t.size(); ++r) {
+    j << ExactNum(t[r]);
+    for (size_t k = 0; k < names.size(); ++k) j << "," << ExactNum(values[r * names.size() + k]);
+    j << "\n";
+  }
+  return j.str();
 }
 
 // The files of WriteRecordedLog into the folder `tmp`.
@@ -429,18 +491,12 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
                    const std::vector<std::pair<std::string, std::string>>& files) {
   namespace fs = std::filesystem;
   for (const auto& [name, text] : files) WriteText(tmp / name, text);
-  std::ostringstream j;
-  j << "t_s";
-  for (size_t k = 0; k < log.joints.size(); ++k) {
-    j << "," << log.joints[k] << (log.joint_is_slide[k] ? "_m" : "_rad");
+  WriteText(tmp / "joints.csv",
+            JointColumnsCsv(log.joints, log.joint_is_slide, log.joint_t, log.joint_q));
+  if (!log.command_t.empty()) {
+    WriteText(tmp / "commands.csv", JointColumnsCsv(log.command_joints, log.command_is_slide,
+                                                    log.command_t, log.command_q));
   }
-  j << "\n";
-  for (size_t r = 0; r < log.joint_t.size(); ++r) {
-    j << ExactNum(log.joint_t[r]);
-    for (size_t k = 0; k < log.joints.size(); ++k) j << "," << ExactNum(log.q(r)[k]);
-    j << "\n";
-  }
-  WriteText(tmp / "joints.csv", j.str());
   if (!log.imus.empty()) {
     std::ostringstream i;
     i << "t_s,sensor,gx_rad_s,gy_rad_s,gz_rad_s,ax_m_s2,ay_m_s2,az_m_s2\n";

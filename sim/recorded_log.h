@@ -7,7 +7,9 @@
 //               declared: ../models/jsk_arm.declared.yaml   # relative to the folder
 //               joints: {file: joints.csv, clock_offset_s: 0,
 //                        std_rad: 0}   # the readings' noise, each joint (m for a slide)
+//               commands: {file: commands.csv, clock_offset_s: 0, type: position}  # optional
 //               imu: {file: imu.csv, clock_offset_s: 0,     # optional
+//                     gyro_std_rad_s: 0, accel_std_m_s2: 0,   # the readings' noise (0: unknown)
 //                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0],
 //                                      filter_beta: 0.05}}}   # Madgwick's gain, rad/s
 //               truth: {file: truth.tum, frame: grasp_point}  # optional
@@ -30,6 +32,8 @@
 //                                  std_m: 0.001, std_deg: 0.5}},  # or std: [6] (m, rad)
 //                 points: {tip: {frame: grasp_point, p_frame_m: [0, 0, 0]}}}
 //   joints.csv  t_s, then one column per joint: <joint>_rad (<joint>_m for a slide)
+//   commands.csv  t_s, then one column per actuated joint: <joint>_rad (_m): the position
+//               servos' targets as sent
 //   imu.csv     t_s, sensor, gx_rad_s, gy_rad_s, gz_rad_s, ax_m_s2, ay_m_s2, az_m_s2 (sensor
 //               frame; specific force, +g up at rest)
 //   truth.tum   TUM lines "t x y z qx qy qz qw": the frame's pose in the base frame (m, s)
@@ -184,9 +188,18 @@ struct RecordedLog {
   std::vector<double> joint_t;
   std::vector<double> joint_q;  // row-major, joints.size() a row
   double joint_std = 0.0;       // each reading's noise (joints.std_rad), rad or m
+  // commands.csv (optional): the position servos' targets, one column per actuated joint (its
+  // name and unit as in joints.csv), what a controller sent: dynamic identification drives its
+  // rollouts with them.
+  std::vector<std::string> command_joints;
+  std::vector<char> command_is_slide;
+  std::vector<double> command_t;
+  std::vector<double> command_q;  // row-major, command_joints.size() a row
   // imu.csv: the sensors of log.yaml and every reading (`imu` indexes imus), in file order.
   std::vector<LogImu> imus;
   std::vector<estimators::ImuReading> imu;
+  double gyro_std = 0.0;   // each gyro reading's noise, rad/s (imu.gyro_std_rad_s; 0: unknown)
+  double accel_std = 0.0;  // each accelerometer reading's, m/s^2 (imu.accel_std_m_s2)
   // truth.tum (optional).
   std::string truth_frame;
   std::vector<double> truth_t;
@@ -209,10 +222,11 @@ struct RecordedLog {
   std::vector<std::string> sensed_frames;
   std::vector<LogOrientationRow> orientations;
   std::vector<LogPositionRow> positions;
-  StreamStats joint_stats, imu_stats, truth_stats, tag_stats, image_stats, contact_stats,
-      orientation_stats, position_stats;
+  StreamStats joint_stats, command_stats, imu_stats, truth_stats, tag_stats, image_stats,
+      contact_stats, orientation_stats, position_stats;
 
   const double* q(size_t row) const { return joint_q.data() + row * joints.size(); }
+  const double* command(size_t row) const { return command_q.data() + row * command_joints.size(); }
 };
 
 // The pose a log's plane [x, y, z, qw, qx, qy, qz] stands for: the quaternion normalised, as

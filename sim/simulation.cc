@@ -85,6 +85,8 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
   setup_.released.assign(m->njnt, 0);
   setup_.gear.assign(m->njnt, GearSpec{});
   setup_.joint_offset.assign(m->njnt, 0.0);
+  setup_.servo_delay.assign(m->njnt, 0.0);
+  setup_.stribeck.assign(m->njnt, StribeckSpec{});
   // Passive joints and linkages no effect claims are part of the model's own physics: always
   // free (a linkage: always following its drivers).
   for (const JointEntry& j : catalog_.joints) {
@@ -133,6 +135,7 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
   command_.resize(num_actuated());
   for (int i = 0; i < num_actuated(); ++i) {
     command_[i] = m->qpos0[m->jnt_qposadr[catalog_.actuated[i]]];
+    max_delay_ = std::max(max_delay_, setup_.servo_delay[catalog_.actuated[i]]);
   }
   mj_forward(m, data_.get());
   kinematics_current_ = true;
@@ -158,6 +161,79 @@ void Simulation::SetCommand(const Eigen::VectorXd& q_motor) {
                                 " actuated joints");
   }
   command_ = q_motor;
+  if (max_delay_ > 0.0) PushCommandHistory(data_->time);
+}
+
+void Simulation::SetCommandAt(double t, const Eigen::VectorXd& q_motor) {
+  SetCommand(q_motor);
+  if (max_delay_ > 0.0) {
+    history_t_.back() = t;
+    if (history_t_.size() - history_begin_ >= 2 && t < history_t_[history_t_.size() - 2]) {
+      throw std::invalid_argument(model_name_ + ": commands sent out of time order");
+    }
+  }
+}
+
+void Simulation::PushCommandHistory(double t) {
+  if (!history_t_.empty() && t < history_t_.back()) ClearCommandHistory();
+  // Entries older than the one in force at t - max_delay are no longer read.
+  while (history_t_.size() - history_begin_ >= 2 &&
+         history_t_[history_begin_ + 1] <= t - max_delay_) {
+    ++history_begin_;
+  }
+  if (history_begin_ > 0 && 2 * history_begin_ >= history_t_.size()) {
+    const int n = num_actuated();
+    history_t_.erase(history_t_.begin(), history_t_.begin() + history_begin_);
+    history_q_.erase(history_q_.begin(), history_q_.begin() + history_begin_ * n);
+    history_begin_ = 0;
+  }
+  history_t_.push_back(t);
+  history_q_.insert(history_q_.end(), command_.data(), command_.data() + num_actuated());
+}
+
+void Simulation::ClearCommandHistory() {
+  history_t_.clear();
+  history_q_.clear();
+  history_begin_ = 0;
+}
+
+// The command of actuator i in force `delay` seconds ago: the history interpolated linearly
+// between the times commands were sent (a smooth function of the delay, which identification
+// differentiates), the first command before the history begins.
+double Simulation::DelayedCommand(int i, double delay) const {
+  if (delay <= 0.0 || history_t_.size() == history_begin_) return command_[i];
+  const int n = num_actuated();
+  const double t = data_->time - delay;
+  const auto first = history_t_.begin() + static_cast<long>(history_begin_);
+  const auto it = std::upper_bound(first, history_t_.end(), t);
+  if (it == first) return history_q_[history_begin_ * n + i];
+  const size_t b = static_cast<size_t>(it - history_t_.begin());
+  if (b == history_t_.size()) return history_q_[(b - 1) * n + i];
+  const size_t a = b - 1;
+  const double span = history_t_[b] - history_t_[a];
+  const double s = span > 0.0 ? (t - history_t_[a]) / span : 1.0;
+  return (1.0 - s) * history_q_[a * n + i] + s * history_q_[b * n + i];
+}
+
+void Simulation::SetActuatedState(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& qd) {
+  const mjModel* m = truth_.get();
+  mjData* d = data_.get();
+  if (q.size() != num_actuated() || qd.size() != num_actuated()) {
+    throw std::invalid_argument(model_name_ + ": state has " + std::to_string(q.size()) + ", " +
+                                std::to_string(qd.size()) + " values for " +
+                                std::to_string(num_actuated()) + " actuated joints");
+  }
+  ClearCommandHistory();
+  d->time = t;
+  for (int i = 0; i < num_actuated(); ++i) {
+    const int j = catalog_.actuated[i];
+    d->qpos[m->jnt_qposadr[j]] = q[i];
+    d->qvel[m->jnt_dofadr[j]] = qd[i];
+  }
+  mj_forward(m, d);
+  at_rest_ = false;
+  kinematics_current_ = true;
+  accelerations_current_ = false;
 }
 
 void Simulation::SetCommand(const std::string& joint, double q_motor) {
@@ -395,7 +471,8 @@ void Simulation::ApplyServo() const {
     const double q = d->qpos[m->jnt_qposadr[j]];
     const double kp = m->actuator_gainprm[a * mjNGAIN];
     const GearSpec& g = setup_.gear[j];
-    const double link_command = command_[i] + g.TransmissionError(command_[i]);
+    const double command = DelayedCommand(i, setup_.servo_delay[j]);
+    const double link_command = command + g.TransmissionError(command);
     if (g.stiffness <= 0 && g.backlash <= 0) {
       d->ctrl[a] = link_command;
       d->qfrc_applied[dof] = d->qfrc_bias[dof];
@@ -418,6 +495,12 @@ void Simulation::ApplyServo() const {
       d->qfrc_applied[m->jnt_dofadr[linkage.drivers[k]]] +=
           slopes_[k] * d->qfrc_bias[m->jnt_dofadr[c]];
     }
+  }
+  for (int i = 0; i < num_actuated(); ++i) {
+    const int j = catalog_.actuated[i];
+    if (!setup_.stribeck[j].active()) continue;
+    const int dof = m->jnt_dofadr[j];
+    d->qfrc_applied[dof] += setup_.stribeck[j].Torque(d->qvel[dof]);
   }
 }
 

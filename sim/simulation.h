@@ -81,7 +81,16 @@ class Simulation {
   int num_actuated() const { return static_cast<int>(actuated_names_.size()); }
   void SetCommand(const Eigen::VectorXd& q_motor);
   void SetCommand(const std::string& joint, double q_motor);
+  // The command sent at time t (on the simulation's clock; t <= time()), for a servo with a
+  // delay (servo_delay): it acts on the command in force `delay` earlier, so a rollout started
+  // mid-log is given the commands before its start.
+  void SetCommandAt(double t, const Eigen::VectorXd& q_motor);
   const Eigen::VectorXd& command() const { return command_; }
+
+  // ---- Rollouts from a recorded state: the clock at t, the actuated joints at q with velocity
+  // qd (actuator order); every other DoF keeps its state. The commands sent before are forgotten:
+  // send those a delayed servo still acts on again (SetCommandAt).
+  void SetActuatedState(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& qd);
 
   // ---- Quasi-static equilibrium under gravity for the current command (direct solve). Leaves
   // the state at rest (qvel = 0). Throws SimulationError naming the model and the iteration when
@@ -154,6 +163,9 @@ class Simulation {
   // mechanism's linkages following their drivers.
   void SetNominalQpos(const Eigen::VectorXd& q) const;
   void ProjectLocked() const;
+  void PushCommandHistory(double t);
+  void ClearCommandHistory();
+  double DelayedCommand(int i, double delay) const;
   void EnsureKinematics() const;
   void EnsureAccelerations() const;
   void CheckStep() const;
@@ -171,6 +183,11 @@ class Simulation {
   std::vector<std::string> effect_names_;
   std::vector<std::string> actuated_names_;
   Eigen::VectorXd command_;
+  // Commands sent and when, from history_begin_ on (kept only when a servo has a delay).
+  double max_delay_ = 0.0;
+  std::vector<double> history_t_;
+  std::vector<double> history_q_;  // num_actuated() per entry
+  size_t history_begin_ = 0;
   std::vector<double> gear_reference_;   // per actuated joint: unloaded gear-spring position
   std::vector<int> locked_joints_;       // held at qpos0 (effects off)
   std::vector<int> free_joints_;         // solved in Settle: released passive + elastic gears

@@ -39,6 +39,9 @@ const std::vector<KindEntry>& ScenarioKinds() {
       {"mismatch_matrix", "every estimator against every undeclared effect: error and NEES",
        MakeMismatchMatrixKind},
       {"replay", "a recorded log (joints, IMUs, truth) through the estimators", MakeReplayKind},
+      {"closed_loop_dynamic",
+       "the closed loop on a moving arm: the truth's log, the dynamic effect the model lacks",
+       MakeClosedLoopDynamicKind},
   };
   return kinds;
 }

@@ -1,7 +1,9 @@
 // The effects catalogue. Each class edits only the TruthSetup; the simulation does the rest.
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <map>
 #include <optional>
 #include <sstream>
 #include <tuple>
@@ -12,6 +14,7 @@
 #include "estimators/kinematics/effect_table.h"
 #include "estimators/kinematics/model_effects.h"
 #include "estimators/lie/se3.h"
+#include "sim/dynamic_effects.h"
 #include "sim/effects/effect.h"
 #include "sim/mujoco_model.h"
 
@@ -701,6 +704,84 @@ class ImuBiasEffect : public Effect {
   std::vector<std::string> sites_;
 };
 
+// ---- A dynamic effect (sim/dynamic_effects.h), its values per location:
+//   joint_friction: {Nm: {link2_pitch_joint: 0.2}}     # a scalar: every location the row has
+//   link_mode: {stiffness_scale: {link2_b: 0.5}, damping_scale: {link2_b: 3}}
+// A value not given is the row's neutral one (the MJCF as written).
+class DynamicEffect : public Effect {
+ public:
+  explicit DynamicEffect(DynamicKind kind) : kind_(kind) {}
+  void Configure(const ComponentParams& p) override {
+    const DynamicRow& row = Row(kind_);
+    for (int k = 0; k < row.num_values; ++k) {
+      const std::optional<ConfigNode> c = p.Optional(row.value_names[k]);
+      if (!c) continue;
+      if (!c->IsMap()) {
+        all_[k] = c->AsDouble();
+        has_all_[k] = true;
+        continue;
+      }
+      for (const std::string& loc : c->Keys()) {
+        given_[loc][k] = c->GetDouble(loc);
+      }
+    }
+    if (!has_all_[0] && !has_all_[1] && given_.empty()) {
+      throw InputError(p.where() + ": give " + row.value_names[0] +
+                       (row.num_values > 1 ? std::string(" or ") + row.value_names[1] : "") +
+                       " (a value, or {location: value})");
+    }
+  }
+  bool SupportedBy(const ModelCatalog&, const mjModel*, std::string*) const override {
+    return true;
+  }
+  void Apply(TruthSetup& s) const override {
+    const DynamicRow& row = Row(kind_);
+    std::vector<std::string> locations;
+    if (has_all_[0] || has_all_[1]) locations = DynamicLocations(s, kind_);
+    for (const auto& [loc, v] : given_) {
+      if (std::find(locations.begin(), locations.end(), loc) == locations.end()) {
+        locations.push_back(loc);
+      }
+    }
+    for (const std::string& loc : locations) {
+      double v[2] = {row.neutral[0], row.neutral[1]};
+      for (int k = 0; k < row.num_values; ++k) {
+        if (has_all_[k]) v[k] = all_[k];
+        const auto it = given_.find(loc);
+        if (it != given_.end() && it->second.count(k)) v[k] = it->second.at(k);
+      }
+      ApplyDynamic(s, kind_, loc, v, where());
+    }
+    if (kind_ == DynamicKind::kPayloadMass) s.constants_changed = true;
+  }
+  std::string Describe() const override {
+    const DynamicRow& row = Row(kind_);
+    std::string out;
+    for (int k = 0; k < row.num_values; ++k) {
+      if (has_all_[k])
+        out += std::string(out.empty() ? "" : " ") + row.value_names[k] + "=" + ShortNum(all_[k]);
+    }
+    for (const auto& [loc, values] : given_) {
+      for (const auto& [k, v] : values) {
+        out += std::string(out.empty() ? "" : " ") + row.value_names[k] + "@" + loc + "=" +
+               ShortNum(v);
+      }
+    }
+    return out;
+  }
+
+ private:
+  DynamicKind kind_;
+  double all_[2] = {0.0, 0.0};
+  bool has_all_[2] = {false, false};
+  std::map<std::string, std::map<int, double>> given_;
+};
+
+template <DynamicKind kKind>
+std::unique_ptr<Effect> MakeDynamic() {
+  return std::make_unique<DynamicEffect>(kKind);
+}
+
 template <class E>
 std::unique_ptr<Effect> Make() {
   return std::make_unique<E>();
@@ -715,6 +796,10 @@ EffectEntry Line(K kind, const char* description, MakeFn make, const char* forme
 }
 EffectEntry Line(T kind, const char* description, MakeFn make, const char* former = nullptr) {
   return {kinematics::Row(kind).name, description, make, former};
+}
+template <DynamicKind kKind>
+EffectEntry Line() {
+  return {Row(kKind).name, Row(kKind).description, MakeDynamic<kKind>, nullptr};
 }
 
 }  // namespace
@@ -771,7 +856,17 @@ const std::vector<EffectEntry>& EffectRegistry() {
       Line(T::kImuBias,
            "IMU constant bias and bias random walk, hence yaw drift (gyro_bias_rad_s, ...)",
            Make<ImuBiasEffect>),
+      Line<DynamicKind::kJointDamping>(),
+      Line<DynamicKind::kJointFriction>(),
+      Line<DynamicKind::kJointArmature>(),
+      Line<DynamicKind::kServoGain>(),
+      Line<DynamicKind::kServoDelay>(),
+      Line<DynamicKind::kLinkMode>(),
+      Line<DynamicKind::kBaseMode>(),
+      Line<DynamicKind::kPayloadMass>(),
+      Line<DynamicKind::kStribeckFriction>(),
   };
+  static_assert(kNumDynamicKinds == 9, "a dynamic row needs its line above");
   return effects;
 }
 

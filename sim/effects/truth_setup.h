@@ -46,6 +46,23 @@ struct ImuBiasSpec {
   double accel_walk = 0.0;         // m/s^2/sqrt(s)
 };
 
+// Stribeck friction of one joint (a truth-only dynamic effect): a breakaway torque `static_Nm`
+// above the sliding torque `coulomb_Nm` at low speed,
+//   tau = -(Fc + (Fs - Fc) exp(-(v / vs)^2)) v / sqrt(v^2 + eps^2),
+// smoothed over eps so that an explicit step stays stable.
+struct StribeckSpec {
+  double static_Nm = 0.0;
+  double coulomb_Nm = 0.0;
+  double velocity = 0.05;   // vs, rad/s (m/s)
+  double smoothing = 1e-3;  // eps, rad/s (m/s)
+  bool active() const { return static_Nm > 0.0 || coulomb_Nm > 0.0; }
+  double Torque(double v) const {
+    const double level =
+        coulomb_Nm + (static_Nm - coulomb_Nm) * std::exp(-(v / velocity) * (v / velocity));
+    return -level * v / std::sqrt(v * v + smoothing * smoothing);
+  }
+};
+
 struct TruthSetup {
   mjModel* model = nullptr;  // the truth model (a copy; the file's model stays nominal)
   const ModelCatalog* catalog = nullptr;
@@ -56,6 +73,9 @@ struct TruthSetup {
   std::vector<GearSpec> gear;                   // per joint id (actuated joints)
   std::vector<double> joint_offset;             // per joint id: link - reading, rad (m)
   std::map<std::string, ImuBiasSpec> imu_bias;  // by IMU site; "*" applies to every IMU
+  // Per joint id (actuated joints): the servo acts on the command it was sent this long ago (s).
+  std::vector<double> servo_delay;
+  std::vector<StribeckSpec> stribeck;  // per joint id
   // Set by effects that change masses or geometry: the simulation then calls mj_setConst.
   bool constants_changed = false;
 };

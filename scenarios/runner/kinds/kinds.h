@@ -26,5 +26,6 @@ std::unique_ptr<ScenarioKind> MakeClosedLoopKind(std::unique_ptr<ClosedLoopSetup
 std::unique_ptr<ScenarioKind> MakeClosedLoopEstimatorsKind();
 std::unique_ptr<ScenarioKind> MakeMismatchMatrixKind();
 std::unique_ptr<ScenarioKind> MakeReplayKind();
+std::unique_ptr<ScenarioKind> MakeClosedLoopDynamicKind();
 
 }  // namespace flexbench::scenarios

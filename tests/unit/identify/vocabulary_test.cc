@@ -2,7 +2,8 @@
 // name identification reports for it, so a scenario's `truth.effects` and `expected:` speak the
 // same words. The effect table says which rows the truth simulates and lists the effects only the
 // truth has; the truth's effect list (sim/effects/) must match it, so a new truth effect takes a
-// side there. Former names are still read and build the same truth.
+// side there; the dynamic rows (sim/dynamic_effects.h) are truth effects as well. Former names are
+// still read and build the same truth.
 #include <gtest/gtest.h>
 
 #include <map>
@@ -12,6 +13,7 @@
 #include "estimators/error.h"
 #include "estimators/kinematics/effect_table.h"
 #include "scenarios/identify/effect_model.h"
+#include "sim/dynamic_effects.h"
 #include "sim/effects/effect.h"
 
 namespace flexbench::identify {
@@ -31,6 +33,9 @@ TEST(EffectVocabulary, TheTruthSimulatesWhatTheEffectTableSays) {
   for (const kinematics::TruthOnlyRow& r : kinematics::TruthOnlyTable()) {
     EXPECT_TRUE(expected.emplace(r.name, "truth-only row").second) << r.name << " is a row too";
     EXPECT_EQ(kinematics::FindEffect(r.name), nullptr) << r.name;
+  }
+  for (const sim::DynamicRow& r : sim::DynamicTable()) {
+    EXPECT_TRUE(expected.emplace(r.name, "dynamic row").second) << r.name << " is a row too";
   }
   std::set<std::string> simulated;
   for (const sim::EffectEntry& e : sim::EffectRegistry()) {

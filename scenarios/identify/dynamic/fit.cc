@@ -1,0 +1,196 @@
+#include "scenarios/identify/dynamic/fit.h"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "scenarios/identify/parallel.h"
+
+namespace flexbench::identify::dynamic {
+
+std::vector<Candidate> AllCandidates(const sim::Simulation& nominal,
+                                     const std::vector<std::string>& families) {
+  std::vector<Candidate> out;
+  for (const sim::DynamicRow& row : sim::DynamicTable()) {
+    if (!row.fitted) continue;
+    if (!families.empty() &&
+        std::find(families.begin(), families.end(), row.name) == families.end()) {
+      continue;
+    }
+    for (const std::string& loc : sim::DynamicLocations(nominal.setup(), row.kind)) {
+      out.push_back({row.kind, loc});
+    }
+  }
+  return out;
+}
+
+DynamicProblem::DynamicProblem(const RolloutModel& model, const MotionData& data,
+                               std::vector<Candidate> cands, int threads)
+    : model_(model), data_(data), candidates_(std::move(cands)), threads_(std::max(1, threads)) {
+  layout_ = MakeLayout(data_);
+  Prediction raw = Rollout(model_, {}, data_, layout_);
+  SetUnknownNoise(layout_, raw.error, &data_);
+  declared_ = Rollout(model_, {}, data_, layout_);
+}
+
+int DynamicProblem::Offset(const std::vector<int>& active, int index) const {
+  int o = 0;
+  for (int i = 0; i < index; ++i) o += candidates_[active[i]].num_values();
+  return o;
+}
+
+int DynamicProblem::NumParams(const std::vector<int>& active) const {
+  return Offset(active, static_cast<int>(active.size()));
+}
+
+Eigen::VectorXd DynamicProblem::Neutral(const std::vector<int>& active) const {
+  Eigen::VectorXd v(NumParams(active));
+  int o = 0;
+  for (int c : active) {
+    const sim::DynamicRow& row = sim::Row(candidates_[c].kind);
+    for (int k = 0; k < row.num_values; ++k) v[o++] = row.neutral[k];
+  }
+  return v;
+}
+
+Eigen::VectorXd DynamicProblem::Lower(const std::vector<int>& active) const {
+  Eigen::VectorXd v(NumParams(active));
+  int o = 0;
+  for (int c : active) {
+    const sim::DynamicRow& row = sim::Row(candidates_[c].kind);
+    for (int k = 0; k < row.num_values; ++k) v[o++] = row.lower[k];
+  }
+  return v;
+}
+
+Eigen::VectorXd DynamicProblem::Upper(const std::vector<int>& active) const {
+  Eigen::VectorXd v(NumParams(active));
+  int o = 0;
+  for (int c : active) {
+    const sim::DynamicRow& row = sim::Row(candidates_[c].kind);
+    for (int k = 0; k < row.num_values; ++k) v[o++] = row.upper[k];
+  }
+  return v;
+}
+
+std::vector<DynamicTerm> DynamicProblem::Terms(const std::vector<int>& active,
+                                               const Eigen::VectorXd& theta) const {
+  std::vector<DynamicTerm> terms;
+  int o = 0;
+  for (int c : active) {
+    DynamicTerm t;
+    t.kind = candidates_[c].kind;
+    t.location = candidates_[c].location;
+    const sim::DynamicRow& row = sim::Row(t.kind);
+    for (int k = 0; k < 2; ++k) t.values[k] = k < row.num_values ? theta[o + k] : row.neutral[k];
+    o += row.num_values;
+    terms.push_back(t);
+  }
+  return terms;
+}
+
+std::vector<char> DynamicProblem::Mask(int held_out_fold) const {
+  std::vector<char> mask(layout_.size(), 0);
+  for (int k = 0; k < layout_.size(); ++k) {
+    const int s = layout_.segment[k];
+    mask[k] = !declared_.diverged[s] && data_.segments[s].fold != held_out_fold;
+  }
+  return mask;
+}
+
+double DynamicProblem::Cost(const Eigen::VectorXd& r, const std::vector<char>& mask) const {
+  double c = 0.0;
+  for (int k = 0; k < r.size(); ++k) {
+    if (mask[k]) c += r[k] * r[k];
+  }
+  return c;
+}
+
+FitState DynamicProblem::Evaluate(const std::vector<int>& active, const Eigen::VectorXd& theta,
+                                  const std::vector<char>& mask) const {
+  FitState f;
+  f.active = active;
+  f.theta = theta;
+  f.prediction = Rollout(model_, Terms(active, theta), data_, layout_);
+  f.ok = true;
+  for (size_t s = 0; s < f.prediction.diverged.size(); ++s) {
+    if (f.prediction.diverged[s] && !declared_.diverged[s]) f.ok = false;
+  }
+  f.cost = f.ok ? Cost(f.prediction.residual, mask) : std::numeric_limits<double>::infinity();
+  return f;
+}
+
+Eigen::MatrixXd DynamicProblem::Jacobian(const std::vector<int>& active,
+                                         const Eigen::VectorXd& theta,
+                                         const Prediction& at, int from) const {
+  const int n = static_cast<int>(theta.size());
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(layout_.size(), n - from);
+  const Eigen::VectorXd lo = Lower(active), hi = Upper(active);
+  std::vector<double> step(n);
+  int o = 0;
+  for (int c : active) {
+    const sim::DynamicRow& row = sim::Row(candidates_[c].kind);
+    for (int k = 0; k < row.num_values; ++k) step[o++] = row.fd_step[k];
+  }
+  ForEachTask(n - from, threads_, [&](int col) {
+    const int i = from + col;
+    Eigen::VectorXd t = theta;
+    // Forward, or backward at the upper bound.
+    const double h = t[i] + step[i] <= hi[i] ? step[i] : -step[i];
+    t[i] += h;
+    if (t[i] < lo[i]) t[i] = lo[i];
+    const Prediction p = Rollout(model_, Terms(active, t), data_, layout_);
+    J.col(col) = (p.residual - at.residual) / h;
+    for (size_t s = 0; s < p.diverged.size(); ++s) {
+      if (!p.diverged[s]) continue;
+      for (int k = 0; k < layout_.size(); ++k) {
+        if (layout_.segment[k] == static_cast<int>(s)) J(k, col) = 0.0;
+      }
+    }
+  });
+  return J;
+}
+
+FitState DynamicProblem::Fit(const std::vector<int>& active, Eigen::VectorXd theta,
+                             const std::vector<char>& mask, int iterations) const {
+  const Eigen::VectorXd lo = Lower(active), hi = Upper(active);
+  theta = theta.cwiseMax(lo).cwiseMin(hi);
+  FitState best = Evaluate(active, theta, mask);
+  if (!best.ok || theta.size() == 0) return best;
+  double lambda = 1e-3;
+  for (int it = 0; it < iterations; ++it) {
+    Eigen::MatrixXd J = Jacobian(active, best.theta, best.prediction);
+    Eigen::VectorXd r = best.prediction.residual;
+    for (int k = 0; k < J.rows(); ++k) {
+      if (!mask[k]) {
+        J.row(k).setZero();
+        r[k] = 0.0;
+      }
+    }
+    const Eigen::MatrixXd A = J.transpose() * J;
+    const Eigen::VectorXd g = J.transpose() * r;
+    Eigen::VectorXd D = A.diagonal().cwiseMax(1e-12 * std::max(1.0, A.diagonal().maxCoeff()));
+    bool improved = false;
+    for (int tries = 0; tries < 6 && !improved; ++tries) {
+      Eigen::MatrixXd H = A;
+      H.diagonal() += lambda * D;
+      const Eigen::VectorXd step = -H.ldlt().solve(g);
+      const Eigen::VectorXd t = (best.theta + step).cwiseMax(lo).cwiseMin(hi);
+      FitState trial = Evaluate(active, t, mask);
+      if (trial.ok && trial.cost < best.cost) {
+        const double gain = (best.cost - trial.cost) / best.cost;
+        best = std::move(trial);
+        lambda = std::max(1e-7, lambda / 5.0);
+        improved = true;
+        if (gain < 1e-4) return best;
+      } else {
+        lambda *= 8.0;
+      }
+    }
+    if (!improved) break;
+  }
+  return best;
+}
+
+}  // namespace flexbench::identify::dynamic

@@ -1,0 +1,63 @@
+// A moving arm's recorded log arranged for rollouts: the encoder rows, the servo commands and
+// the IMU readings in the MuJoCo model's actuator order and sites, the segments the log is cut
+// into (multiple shooting: each started from the recorded state), and the folds by time that
+// hold segments out.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "sim/recorded_log.h"
+#include "sim/simulation.h"
+
+namespace flexbench::identify::dynamic {
+
+struct MotionImu {
+  std::string name;  // imu.csv's sensor
+  std::string site;  // the MJCF site it is (the log's frame)
+  int site_id = -1;
+  std::vector<double> t;
+  Eigen::MatrixXd gyro;   // rows x 3, rad/s, sensor frame
+  Eigen::MatrixXd accel;  // rows x 3, m/s^2, specific force
+};
+
+struct Segment {
+  int row_begin = 0;  // the encoder row the rollout starts from
+  int row_end = 0;    // one past its last row
+  int fold = 0;
+};
+
+struct MotionData {
+  std::string log_dir;
+  std::vector<std::string> joints;  // the model's actuated joints, actuator order
+  std::vector<double> t;            // encoder rows
+  Eigen::MatrixXd q;                // rows x joints, rad (m)
+  Eigen::MatrixXd qd;               // rows x joints: a local line through nearby rows
+  std::vector<double> command_t;
+  Eigen::MatrixXd command;  // rows x joints: the position targets sent
+  std::vector<MotionImu> imus;
+  // The readings' noise: the log's (joints.std_rad, imu.gyro_std_rad_s, accel_std_m_s2), or,
+  // where it gives none, the spread of the declared model's residual (SetUnknownNoise).
+  double std_q = 0.0, std_gyro = 0.0, std_accel = 0.0;
+  bool noise_from_log[3] = {false, false, false};
+  std::vector<Segment> segments;
+  int folds = 1;
+};
+
+struct MotionOptions {
+  double segment_s = 0.5;    // multiple shooting: each segment a rollout from the recorded state
+  int folds = 3;             // contiguous blocks of segments held out in turn
+  // The span each side of a segment's start whose encoder rows a line is fitted to for its speed.
+  double velocity_window_s = 0.02;
+  bool use_imus = true;
+};
+
+// The log's encoders, commands and IMUs for `sim`'s model. InputError (one line, the file or
+// key) for a log without commands, a joint or command column the model's actuated joints do not
+// match, an IMU frame that is no site of the model, a command outside an actuator's range,
+// segments shorter than the model's time step, or too few rows for two segments.
+MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& sim,
+                          const MotionOptions& options);
+
+}  // namespace flexbench::identify::dynamic

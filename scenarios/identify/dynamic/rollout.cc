@@ -1,0 +1,199 @@
+#include "scenarios/identify/dynamic/rollout.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "estimators/error.h"
+
+namespace flexbench::identify::dynamic {
+namespace {
+
+// The terms as one truth effect of the simulation.
+class TermsEffect : public sim::Effect {
+ public:
+  explicit TermsEffect(std::vector<DynamicTerm> terms) : terms_(std::move(terms)) {
+    set_identity("dynamic_terms", "dynamic identification");
+  }
+  void Configure(const sim::ComponentParams&) override {}
+  bool SupportedBy(const sim::ModelCatalog&, const mjModel*, std::string*) const override {
+    return true;
+  }
+  void Apply(sim::TruthSetup& s) const override {
+    for (const DynamicTerm& t : terms_) {
+      sim::ApplyDynamic(s, t.kind, t.location, t.values, where());
+    }
+  }
+
+ private:
+  std::vector<DynamicTerm> terms_;
+};
+
+// Commands sent before a segment's start that a delayed servo may still act on (beyond the
+// largest delay a row allows).
+constexpr double kCommandLookBackS = 0.25;
+
+double StdOf(const MotionData& d, char stream) {
+  const double s = stream == 0 ? d.std_q : stream == 1 ? d.std_gyro : d.std_accel;
+  return s > 0.0 ? s : 1.0;
+}
+
+}  // namespace
+
+RolloutModel::RolloutModel(sim::MjModelPtr model, std::string name,
+                           std::vector<DynamicTerm> declared)
+    : model_(std::move(model)), name_(std::move(name)), declared_(std::move(declared)) {
+  nominal_ = Make({});
+}
+
+std::unique_ptr<sim::Simulation> RolloutModel::Make(const std::vector<DynamicTerm>& terms) const {
+  std::vector<DynamicTerm> all = declared_;
+  all.insert(all.end(), terms.begin(), terms.end());
+  sim::EffectList effects;
+  if (!all.empty()) effects.push_back(std::make_unique<TermsEffect>(std::move(all)));
+  sim::MjModelPtr copy(mj_copyModel(nullptr, model_.get()));
+  return std::make_unique<sim::Simulation>(std::move(copy), name_, effects);
+}
+
+ResidualLayout MakeLayout(const MotionData& d) {
+  ResidualLayout L;
+  const int nj = static_cast<int>(d.joints.size());
+  struct Entry {
+    double t;
+    char stream;
+    int channel;
+    double value;
+  };
+  std::vector<Entry> entries;
+  for (size_t s = 0; s < d.segments.size(); ++s) {
+    const Segment& g = d.segments[s];
+    const double t0 = d.t[g.row_begin], t1 = d.t[g.row_end - 1];
+    entries.clear();
+    for (int r = g.row_begin + 1; r < g.row_end; ++r) {
+      for (int k = 0; k < nj; ++k) entries.push_back({d.t[r], 0, k, d.q(r, k)});
+    }
+    for (size_t i = 0; i < d.imus.size(); ++i) {
+      const MotionImu& imu = d.imus[i];
+      const auto a = std::upper_bound(imu.t.begin(), imu.t.end(), t0) - imu.t.begin();
+      for (auto r = a; r < static_cast<long>(imu.t.size()) && imu.t[r] <= t1; ++r) {
+        for (int x = 0; x < 3; ++x) {
+          entries.push_back({imu.t[r], 1, static_cast<int>(i) * 3 + x, imu.gyro(r, x)});
+          entries.push_back({imu.t[r], 2, static_cast<int>(i) * 3 + x, imu.accel(r, x)});
+        }
+      }
+    }
+    std::stable_sort(entries.begin(), entries.end(),
+                     [](const Entry& a, const Entry& b) { return a.t < b.t; });
+    for (const Entry& e : entries) {
+      L.segment.push_back(static_cast<int>(s));
+      L.stream.push_back(e.stream);
+      L.channel.push_back(e.channel);
+      L.t.push_back(e.t);
+      L.value.push_back(e.value);
+    }
+  }
+  return L;
+}
+
+Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& terms,
+                   const MotionData& d, const ResidualLayout& L) {
+  std::unique_ptr<sim::Simulation> sim = model.Make(terms);
+  const int nj = static_cast<int>(d.joints.size());
+  const double dt = sim->timestep();
+  const std::vector<int>& actuated = sim->catalog().actuated;
+  Prediction p;
+  p.error = Eigen::VectorXd::Zero(L.size());
+  p.residual = Eigen::VectorXd::Zero(L.size());
+  p.diverged.assign(d.segments.size(), 0);
+  const auto settle_at = [&](int row) {
+    sim->SetCommand(d.q.row(row).transpose());
+    sim->Settle();
+  };
+  settle_at(0);
+  Eigen::VectorXd q0(nj), qd0(nj);
+  int e = 0;
+  for (size_t s = 0; s < d.segments.size(); ++s) {
+    const Segment& g = d.segments[s];
+    const int first = e;
+    while (e < L.size() && L.segment[e] == static_cast<int>(s)) ++e;
+    try {
+      const double t0 = d.t[g.row_begin];
+      q0 = d.q.row(g.row_begin).transpose();
+      qd0 = d.qd.row(g.row_begin).transpose();
+      sim->SetActuatedState(t0, q0, qd0);
+      size_t c = std::lower_bound(d.command_t.begin(), d.command_t.end(), t0 - kCommandLookBackS) -
+                 d.command_t.begin();
+      const auto send_until = [&](double t) {
+        for (; c < d.command_t.size() && d.command_t[c] <= t + 1e-9; ++c) {
+          sim->SetCommandAt(d.command_t[c], d.command.row(static_cast<int>(c)).transpose());
+        }
+      };
+      send_until(t0);
+      double imu_t = -1.0;
+      int imu_i = -1;
+      Vec3 gyro = Vec3::Zero(), accel = Vec3::Zero();
+      for (int k = first; k < e; ++k) {
+        while (sim->time() < L.t[k] - 0.5 * dt) {
+          send_until(sim->time());
+          sim->Step(1);
+        }
+        // A command row is in force from its time on: readings then see it (an accelerometer
+        // reads the servo's force of that instant).
+        send_until(sim->time());
+        double pred = 0.0;
+        if (L.stream[k] == 0) {
+          pred = sim->JointPosition(actuated[L.channel[k]]);
+        } else {
+          const int i = L.channel[k] / 3;
+          if (L.t[k] != imu_t || i != imu_i) {
+            gyro = sim->SiteAngularVelocity(d.imus[i].site_id);
+            accel = sim->SiteSpecificForce(d.imus[i].site_id);
+            imu_t = L.t[k];
+            imu_i = i;
+          }
+          pred = (L.stream[k] == 1 ? gyro : accel)[L.channel[k] % 3];
+        }
+        if (!std::isfinite(pred)) throw SimulationError("a prediction is not finite");
+        p.error[k] = pred - L.value[k];
+        p.residual[k] = p.error[k] / StdOf(d, L.stream[k]);
+      }
+    } catch (const SimulationError& err) {
+      p.diverged[s] = 1;
+      if (p.num_diverged++ == 0) p.first_divergence = err.what();
+      for (int k = first; k < e; ++k) p.error[k] = p.residual[k] = 0.0;
+      try {
+        settle_at(g.row_end - 1);
+      } catch (const SimulationError&) {
+        // The next segment starts from the recorded angles whatever the unobserved joints do.
+      }
+    }
+  }
+  return p;
+}
+
+void SetUnknownNoise(const ResidualLayout& L, const Eigen::VectorXd& err, MotionData* d) {
+  // Per stream and channel: consecutive entries of one channel within one segment.
+  double sum[3] = {0, 0, 0};
+  long count[3] = {0, 0, 0};
+  std::vector<std::vector<int>> last(3);
+  for (auto& v : last) v.assign(64, -1);
+  for (int k = 0; k < L.size(); ++k) {
+    const int s = L.stream[k], c = L.channel[k];
+    if (c >= static_cast<int>(last[s].size())) last[s].resize(c + 1, -1);
+    const int prev = last[s][c];
+    if (prev >= 0 && L.segment[prev] == L.segment[k]) {
+      const double diff = err[k] - err[prev];
+      sum[s] += diff * diff;
+      ++count[s];
+    }
+    last[s][c] = k;
+  }
+  double* std[3] = {&d->std_q, &d->std_gyro, &d->std_accel};
+  for (int s = 0; s < 3; ++s) {
+    if (d->noise_from_log[s] || count[s] == 0) continue;
+    *std[s] = std::sqrt(sum[s] / count[s] / 2.0);
+    if (!(*std[s] > 0.0)) *std[s] = 1e-12;
+  }
+}
+
+}  // namespace flexbench::identify::dynamic

@@ -1,0 +1,300 @@
+// closed_loop_dynamic: the closed loop on a moving arm. The truth (MuJoCo physics with effects
+// the declared model lacks) is driven through a multi-sine by its position servos; its encoders,
+// IMUs and the commands are written as a recorded log (log/), which dynamic identification then
+// reads back as a user's log: rollouts of the declared model's MJCF, candidate families,
+// selection held to the held-out segments' error, verdict (scenarios/identify/dynamic/).
+//
+//   truth:
+//     effects: {joint_friction: {Nm: {link2_pitch_joint: 0.2}}}
+//     duration_s: 12
+//     command_rate_hz: 500
+//     motion: {center_deg: [...], amplitude_deg: [...], frequencies_hz: [f1, f2, f3]}
+//   sensors: [...]            # encoders (link side) and IMUs, sim/sensors
+//   identify: {segment_s: 0.5, folds: 3, max_effects: 3, families: [...], threads: 2}
+//   expected:                 # the truth's effects, as identification names them
+//     - {name: joint_friction@link2_pitch_joint, values: [0.2]}
+#include <cmath>
+#include <filesystem>
+#include <map>
+
+#include "estimators/format.h"
+#include "scenarios/identify/dynamic/select.h"
+#include "scenarios/runner/kinds/kinds.h"
+#include "sim/declared_model.h"
+#include "sim/recorded_log.h"
+#include "sim/rng.h"
+#include "sim/sensors/sensor.h"
+#include "sim/simulation.h"
+
+namespace flexbench::scenarios {
+namespace {
+
+namespace dyn = identify::dynamic;
+
+struct Expected {
+  std::string name;
+  std::vector<double> values;
+};
+
+// Per actuated joint: center + amplitude * (sum of sines at the frequencies, phases from the
+// seed) / count, faded in over the first second so the servos start at rest.
+struct MultiSine {
+  std::vector<double> center, amplitude, frequencies, phase;
+  double At(int joint, double t) const {
+    double s = 0.0;
+    const int nf = static_cast<int>(frequencies.size());
+    for (int i = 0; i < nf; ++i) {
+      // Each joint its own permutation of the frequencies, so their motions differ.
+      const double f = frequencies[(i + joint) % nf] * (1.0 + 0.07 * joint);
+      s += std::sin(2.0 * M_PI * f * t + phase[joint * nf + i]);
+    }
+    const double fade = t < 1.0 ? 0.5 - 0.5 * std::cos(M_PI * t) : 1.0;
+    return center[joint] + fade * amplitude[joint] * s / nf;
+  }
+};
+
+class ClosedLoopDynamicKind : public ScenarioKind {
+ public:
+  void Configure(const ConfigNode& root) override {
+    model_path_ = root.ResolvePath(root.GetString("model"));
+    declared_path_ = root.ResolvePath(root.GetString("declared"));
+    declared_ = sim::LoadDeclaredModel(declared_path_);
+    const ConfigNode truth = root.Child("truth");
+    sim::EffectList effects;
+    if (const auto e = truth.Optional("effects")) effects = sim::ParseEffects(*e);
+    truth_ = sim::Simulation::Load(model_path_, effects);
+    duration_s_ = truth.GetDouble("duration_s", 12.0);
+    if (!(duration_s_ >= 2.0 && duration_s_ <= 600.0)) {
+      truth.Child("duration_s").Fail("must be in [2, 600] s");
+    }
+    command_rate_hz_ = truth.GetDouble("command_rate_hz", 500.0);
+    if (!(command_rate_hz_ > 0.0 && command_rate_hz_ <= 1.0 / truth_->timestep() + 1e-9)) {
+      truth.Child("command_rate_hz").Fail("must be > 0 and at most the model's step rate");
+    }
+    ReadMotion(truth.Child("motion"));
+    sensors_node_ = std::make_unique<ConfigNode>(root.Child("sensors"));
+    sim::SensorSuite::Parse(*sensors_node_, *truth_, 0);  // checked now; Run seeds its own
+    ReadSensorNoise(*sensors_node_);
+    if (const auto id = root.Optional("identify")) ReadIdentify(*id);
+    if (const auto ex = root.Optional("expected")) {
+      for (const ConfigNode& e : ex->Items()) {
+        Expected x;
+        x.name = e.GetString("name");
+        if (e.Has("values")) x.values = e.Child("values").AsDoubleList();
+        expected_.push_back(x);
+      }
+    }
+  }
+
+  void Run(RunContext& ctx) override {
+    const std::string log_dir = ctx.out->File("log").string();
+    {
+      sim::SensorSuite sensors = sim::SensorSuite::Parse(*sensors_node_, *truth_, ctx.seed);
+      sim::RecordedLog log = Simulate(ctx.seed, sensors);
+      sim::WriteRecordedLog(log, log_dir);
+    }
+    ctx.log("wrote the truth's log (" + ShortNum(duration_s_) + " s) to log/");
+    const sim::RecordedLog log = sim::ReadRecordedLog(log_dir);
+    dyn::RolloutModel model(sim::LoadModel(declared_.model_path), declared_.model_path, {});
+    const dyn::MotionData data = dyn::ReadMotionData(log, model.nominal(), motion_options_);
+    dyn::DynamicProblem problem(model, data, dyn::AllCandidates(model.nominal(), families_),
+                                threads_);
+    const dyn::DynamicReport rep = dyn::IdentifyDynamics(problem, options_);
+    for (const std::string& line : rep.log) ctx.log(line);
+    WriteSummary(rep, ctx);
+  }
+
+ private:
+  void ReadMotion(const ConfigNode& m) {
+    const int n = truth_->num_actuated();
+    const auto list = [&](const char* key, double scale) {
+      std::vector<double> v = m.Child(key).AsDoubleList();
+      if (static_cast<int>(v.size()) != n) {
+        m.Child(key).Fail("expected " + std::to_string(n) + " values (the actuated joints)");
+      }
+      for (double& x : v) x *= scale;
+      return v;
+    };
+    motion_.center = list("center_deg", M_PI / 180.0);
+    motion_.amplitude = list("amplitude_deg", M_PI / 180.0);
+    motion_.frequencies = m.Child("frequencies_hz").AsDoubleList();
+    if (motion_.frequencies.empty()) m.Child("frequencies_hz").Fail("give at least one");
+    for (double f : motion_.frequencies) {
+      if (!(f > 0.0 && f < 50.0)) m.Child("frequencies_hz").Fail("each in (0, 50) Hz");
+    }
+  }
+
+  // The noise the sensors are configured with: what the log states as its readings' noise.
+  void ReadSensorNoise(const ConfigNode& list) {
+    for (const ConfigNode& s : list.Items()) {
+      const std::string kind = s.GetString("kind");
+      if (kind == "encoder") std_q_ = s.GetDouble("noise_std_deg", 0.0) * M_PI / 180.0;
+      if (kind == "imu") {
+        std_gyro_ = s.GetDouble("gyro_noise_std_rad_s", 0.0);
+        std_accel_ = s.GetDouble("accel_noise_std_m_s2", 0.0);
+      }
+    }
+  }
+
+  void ReadIdentify(const ConfigNode& id) {
+    motion_options_.segment_s = id.GetDouble("segment_s", motion_options_.segment_s);
+    motion_options_.folds = id.GetInt("folds", motion_options_.folds);
+    motion_options_.velocity_window_s =
+        id.GetDouble("velocity_window_s", motion_options_.velocity_window_s);
+    options_.max_effects = id.GetInt("max_effects", options_.max_effects);
+    options_.cv_min_gain = id.GetDouble("cv_min_gain", options_.cv_min_gain);
+    options_.iterations = id.GetInt("iterations", options_.iterations);
+    threads_ = id.GetInt("threads", threads_);
+    if (id.Has("families")) {
+      for (const ConfigNode& item : id.Child("families").Items()) {
+        const std::string f = item.AsString();
+        families_.push_back(f);
+        const sim::DynamicRow* row = sim::FindDynamic(f);
+        if (!row || !row->fitted) id.Child("families").Fail("'" + f + "' is no fitted family");
+      }
+    }
+  }
+
+  sim::RecordedLog Simulate(std::uint64_t seed, sim::SensorSuite& sensors) {
+    sim::Simulation& s = *truth_;
+    const int n = s.num_actuated();
+    sim::NoiseStream rng(seed, "closed_loop_dynamic/phases");
+    motion_.phase.resize(n * motion_.frequencies.size());
+    for (double& p : motion_.phase) p = 2.0 * M_PI * rng.Uniform();
+    Eigen::VectorXd cmd(n);
+    for (int k = 0; k < n; ++k) cmd[k] = motion_.At(k, 0.0);
+    s.SetCommand(cmd);
+    s.Settle();
+    sim::RecordedLog log;
+    log.robot = truth_->model_name();
+    log.declared_path = std::filesystem::absolute(declared_path_).lexically_normal().string();
+    log.joints = s.actuated_joints();
+    log.joint_is_slide.assign(n, 0);
+    log.command_joints = log.joints;
+    log.command_is_slide = log.joint_is_slide;
+    log.joint_std = std_q_;
+    log.gyro_std = std_gyro_;
+    log.accel_std = std_accel_;
+    std::map<std::string, int> imu_index;
+    for (const auto& sensor : sensors.sensors()) {
+      if (sensor->kind() != "imu") continue;
+      imu_index[sensor->name()] = static_cast<int>(log.imus.size());
+      log.imus.push_back({sensor->name(), "", false, Quat::Identity()});
+    }
+    const long steps = std::lround(duration_s_ / s.timestep());
+    const long per_command = std::max(1L, std::lround(1.0 / (command_rate_hz_ * s.timestep())));
+    std::vector<sim::SensorReading> readings;
+    std::map<double, std::vector<double>> rows;  // encoder rows by time
+    for (long k = 0; k <= steps; ++k) {
+      if (k % per_command == 0) {
+        const double t = s.time();
+        for (int j = 0; j < n; ++j) cmd[j] = motion_.At(j, t);
+        s.SetCommand(cmd);
+        log.command_t.push_back(t);
+        log.command_q.insert(log.command_q.end(), cmd.data(), cmd.data() + n);
+      }
+      readings.clear();
+      sensors.Poll(s, &readings);
+      for (const sim::SensorReading& r : readings) {
+        if (const auto* e = std::get_if<sim::EncoderReading>(&r)) {
+          std::vector<double>& row = rows[e->t];
+          row.resize(n, 0.0);
+          for (int j = 0; j < n; ++j) {
+            if (log.joints[j] == e->joint) row[j] = e->position;
+          }
+        } else if (const auto* z = std::get_if<sim::ImuReading>(&r)) {
+          estimators::ImuReading reading = *z;
+          reading.imu = imu_index.at(z->sensor);
+          log.imus[reading.imu].frame = z->site;
+          log.imu.push_back(reading);
+        }
+      }
+      if (k < steps) s.Step(1);
+    }
+    for (const auto& [t, row] : rows) {
+      log.joint_t.push_back(t);
+      log.joint_q.insert(log.joint_q.end(), row.begin(), row.end());
+    }
+    return log;
+  }
+
+  void WriteSummary(const dyn::DynamicReport& rep, RunContext& ctx) const {
+    Json& m = (*ctx.summary)["metrics"];
+    m["verdict"] = rep.verdict;
+    m["segments"] = rep.segments;
+    m["diverged_segments"] = rep.diverged_declared;
+    m["heldout_before"] = rep.heldout_before;
+    m["heldout_after"] = rep.heldout_after;
+    m["heldout_ratio"] = rep.heldout_after / rep.heldout_before;
+    m["rollouts"] = rep.rollouts;
+    Json chosen = Json::array();
+    bool named = !expected_.empty();
+    bool within = true;
+    std::vector<bool> found(expected_.size(), false);
+    for (const dyn::ChosenEffect& c : rep.chosen) {
+      Json e;
+      e["name"] = c.name;
+      for (size_t k = 0; k < c.values.size(); ++k) {
+        e["values"][c.value_names[k]] = c.values[k];
+        e["std_errors"][c.value_names[k]] = c.std_errors[k];
+      }
+      e["equivalent"] = c.equivalent;
+      chosen.push_back(e);
+      bool matched = false;
+      for (size_t x = 0; x < expected_.size(); ++x) {
+        const bool same = c.name == expected_[x].name ||
+                          std::find(c.equivalent.begin(), c.equivalent.end(),
+                                    expected_[x].name) != c.equivalent.end();
+        if (!same) continue;
+        matched = found[x] = true;
+        if (c.name != expected_[x].name) continue;
+        for (size_t k = 0; k < expected_[x].values.size() && k < c.values.size(); ++k) {
+          within &= std::abs(c.values[k] - expected_[x].values[k]) <= 3.0 * c.std_errors[k];
+        }
+      }
+      named &= matched;
+    }
+    for (bool f : found) named &= f;
+    m["effects_named"] = named;
+    m["params_within_3sigma"] = within;
+    m["explained"] = rep.verdict == "explained";
+    Json streams = Json::array();
+    for (const dyn::StreamError& s : rep.streams) {
+      Json e;
+      e["stream"] = s.stream;
+      e["unit"] = s.unit;
+      e["noise"] = s.noise;
+      e["noise_from_log"] = s.noise_from_log;
+      e["entries"] = s.entries;
+      e["rms_before"] = s.rms_before;
+      e["rms_after"] = s.rms_after;
+      streams.push_back(e);
+    }
+    Json& d = (*ctx.summary)["dynamic_identification"];
+    d["chosen"] = chosen;
+    d["streams"] = streams;
+    d["log"] = rep.log;
+    if (!rep.first_divergence.empty()) d["first_divergence"] = rep.first_divergence;
+  }
+
+  std::string model_path_, declared_path_;
+  sim::DeclaredModel declared_;
+  std::unique_ptr<sim::Simulation> truth_;
+  double duration_s_ = 12.0, command_rate_hz_ = 500.0;
+  MultiSine motion_;
+  std::unique_ptr<ConfigNode> sensors_node_;
+  double std_q_ = 0.0, std_gyro_ = 0.0, std_accel_ = 0.0;
+  dyn::MotionOptions motion_options_;
+  dyn::DynamicIdentifyOptions options_;
+  std::vector<std::string> families_;
+  int threads_ = 2;
+  std::vector<Expected> expected_;
+};
+
+}  // namespace
+
+std::unique_ptr<ScenarioKind> MakeClosedLoopDynamicKind() {
+  return std::make_unique<ClosedLoopDynamicKind>();
+}
+
+}  // namespace flexbench::scenarios

@@ -1,0 +1,71 @@
+// Dynamic effects: what a moving arm shows and a static posture does not — joint damping, dry
+// friction, rotor inertia, servo stiffness and lag, the first bending mode of an elastic link,
+// the base plate's sway, a payload's mass. One table, read by the truth (sim/effects: a scenario
+// switches them on by name) and by dynamic identification (scenarios/identify/dynamic: each
+// fitted row is a candidate family, evaluated by MuJoCo rollouts); both change the model through
+// ApplyDynamic, so the parameter identification reports is the parameter the truth was given.
+//
+// A row acts at a location: a joint (damping, friction, armature), an actuated joint (servo gain,
+// delay), a body holding passive bending joints (a link's mode), the base plate's joints, or the
+// end-effector body (payload). Values add to the MJCF's own (damping, friction, armature, mass)
+// or scale them (servo gain; a mode's stiffness and damping), so zero added / scale one is the
+// MJCF as written.
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "sim/effects/truth_setup.h"
+
+namespace flexbench::sim {
+
+enum class DynamicKind {
+  kJointDamping,
+  kJointFriction,
+  kJointArmature,
+  kServoGain,
+  kServoDelay,
+  kLinkMode,
+  kBaseMode,
+  kPayloadMass,
+  // Truth only: no family of the identification stands for it.
+  kStribeckFriction,
+};
+inline constexpr int kNumDynamicKinds = 9;
+
+enum class DynamicLocation { kJoint, kActuatedJoint, kBendingBody, kBasePlate, kBody };
+
+struct DynamicRow {
+  DynamicKind kind;
+  const char* name;  // the truth's effects: key, identification's family name
+  DynamicLocation location;
+  int num_values;
+  std::array<const char*, 2> value_names;  // as scenario files give them, with the unit
+  std::array<double, 2> lower;             // physical bounds of each value
+  std::array<double, 2> upper;
+  std::array<double, 2> neutral;  // the MJCF as written
+  std::array<double, 2> fd_step;  // finite-difference step of each value
+  bool fitted;                    // a candidate family of dynamic identification
+  const char* description;
+};
+
+const std::array<DynamicRow, kNumDynamicKinds>& DynamicTable();
+const DynamicRow& Row(DynamicKind kind);
+// The row called `name`, nullptr when none.
+const DynamicRow* FindDynamic(const std::string& name);
+
+// The model's parts at a location: joint ids (a joint, an actuated joint, the passive joints of
+// a bending body or the base plate) or the body id (payload). Empty when the model lacks them.
+std::vector<int> DynamicParts(const TruthSetup& setup, DynamicKind kind,
+                              const std::string& location);
+// Every location of the model a fitted row can act at, in model order.
+std::vector<std::string> DynamicLocations(const TruthSetup& setup, DynamicKind kind);
+
+// Changes the truth `setup` (its model, released joints, servo delays, Stribeck friction) by the
+// row's values at `location`. Throws InputError (prefixed `where`) when the location is not the
+// model's or a value is outside the row's bounds.
+void ApplyDynamic(TruthSetup& setup, DynamicKind kind, const std::string& location,
+                  const double* values, const std::string& where);
+
+}  // namespace flexbench::sim
