@@ -34,12 +34,12 @@ using State = Eigen::Matrix<double, 6, 1>;  // q1, q2, bend, then their speeds
 struct Arm {
   double l1 = 0.30, h = 0.15;  // joint 1 to joint 2; joint 2 to the bend hinge
   double m[3] = {0.8, 0.3, 0.4};
-  double c[3] = {0.15, 0.075, 0.12};    // centre of mass along the body's x
-  double I[3] = {0.006, 0.0006, 0.001}; // about the centre of mass, y
+  double c[3] = {0.15, 0.075, 0.12};     // centre of mass along the body's x
+  double I[3] = {0.006, 0.0006, 0.001};  // about the centre of mass, y
   double armature[3] = {0.01, 0.01, 0.0};
   double damping[3] = {1.0, 0.5, 0.05};  // joint 1, joint 2, bend (the MJCF's)
   double kp[2] = {40.0, 20.0};
-  double k_bend = 40.0;                            // the MJCF's bend stiffness
+  double k_bend = 40.0;                                // the MJCF's bend stiffness
   Vec2 imu[2] = {Vec2(0.20, 0.02), Vec2(0.12, 0.02)};  // site (x, z) on link1, on link2_b
   double g = 9.81;
 };
@@ -48,7 +48,7 @@ struct Arm {
 struct Truth {
   bool flexible = true;  // false: the bend held at 0 (the MJCF's locked joint)
   double stiffness_scale = 0.5, damping_scale = 1.0;
-  double friction_Nm = 0.25;     // Coulomb friction of joint 2 ...
+  double friction_Nm = 0.25;       // Coulomb friction of joint 2 ...
   double friction_v_rad_s = 0.01;  // ... smoothed as F tanh(qd / v)
 };
 
@@ -72,17 +72,23 @@ std::string MakeXml(const Arm& a, double timestep) {
            Num(a.imu[k].y()) + "\"/>";
   };
   return "<mujoco model=\"indep_arm\"><compiler angle=\"radian\"/>"
-         "<option timestep=\"" + Num(timestep) + "\" integrator=\"Euler\" gravity=\"0 0 -" +
-         Num(a.g) + "\"><flag contact=\"disable\"/></option>"
+         "<option timestep=\"" +
+         Num(timestep) + "\" integrator=\"Euler\" gravity=\"0 0 -" + Num(a.g) +
+         "\"><flag contact=\"disable\"/></option>"
          "<custom><text name=\"effect:link_bending\" data=\"link2_bend\"/></custom>"
-         "<worldbody><body name=\"link1\" pos=\"0 0 0.5\">" + joint("joint1", 0) + "/>" +
-         inertial(0) + site("imu_link1", 0) + "<body name=\"link2\" pos=\"" + Num(a.l1) +
-         " 0 0\">" + joint("joint2", 1) + "/>" + inertial(1) + "<body name=\"link2_b\" pos=\"" +
-         Num(a.h) + " 0 0\">" + joint("link2_bend", 2) + " stiffness=\"" + Num(a.k_bend) +
-         "\"/>" + inertial(2) + site("imu_link2", 1) +
+         "<worldbody><body name=\"link1\" pos=\"0 0 0.5\">" +
+         joint("joint1", 0) + "/>" + inertial(0) + site("imu_link1", 0) +
+         "<body name=\"link2\" pos=\"" + Num(a.l1) + " 0 0\">" + joint("joint2", 1) + "/>" +
+         inertial(1) + "<body name=\"link2_b\" pos=\"" + Num(a.h) + " 0 0\">" +
+         joint("link2_bend", 2) + " stiffness=\"" + Num(a.k_bend) + "\"/>" + inertial(2) +
+         site("imu_link2", 1) +
          "</body></body></body></worldbody><actuator>"
-         "<position name=\"joint1\" joint=\"joint1\" kp=\"" + Num(a.kp[0]) + "\"/>"
-         "<position name=\"joint2\" joint=\"joint2\" kp=\"" + Num(a.kp[1]) + "\"/>"
+         "<position name=\"joint1\" joint=\"joint1\" kp=\"" +
+         Num(a.kp[0]) +
+         "\"/>"
+         "<position name=\"joint2\" joint=\"joint2\" kp=\"" +
+         Num(a.kp[1]) +
+         "\"/>"
          "</actuator></mujoco>";
 }
 
@@ -133,8 +139,7 @@ class PlanarArm {
     }
     for (int i = 0; i < 2; ++i) tau[i] += a_.kp[i] * (cmd[i] - x[i]) + bias[i];
     tau[1] -= t_.friction_Nm * std::tanh(x[4] / t_.friction_v_rad_s);
-    tau[2] = -t_.stiffness_scale * a_.k_bend * x[2] -
-             t_.damping_scale * a_.damping[2] * x[5];
+    tau[2] = -t_.stiffness_scale * a_.k_bend * x[2] - t_.damping_scale * a_.damping[2] * x[5];
     Eigen::Vector3d qdd = Eigen::Vector3d::Zero();
     if (t_.flexible) {
       qdd = M.ldlt().solve(tau - bias);
@@ -248,8 +253,8 @@ std::vector<Eigen::Vector3d> Trajectory(const Arm& arm, const Truth& truth, doub
         own.Rk4(&x, cmd, kHoldS / sub);
       }
     }
-    out.push_back(dt > 0 ? Eigen::Vector3d(mj->JointPosition("joint1"),
-                                           mj->JointPosition("joint2"), mj->JointPosition(bend))
+    out.push_back(dt > 0 ? Eigen::Vector3d(mj->JointPosition("joint1"), mj->JointPosition("joint2"),
+                                           mj->JointPosition(bend))
                          : Eigen::Vector3d(x.head<3>()));
   }
   return out;
