@@ -122,8 +122,8 @@ FitState DynamicProblem::Evaluate(const std::vector<int>& active, const Eigen::V
 }
 
 Eigen::MatrixXd DynamicProblem::Jacobian(const std::vector<int>& active,
-                                         const Eigen::VectorXd& theta,
-                                         const Prediction& at, int from) const {
+                                         const Eigen::VectorXd& theta, const Prediction& at,
+                                         int from) const {
   const int n = static_cast<int>(theta.size());
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(layout_.size(), n - from);
   const Eigen::VectorXd lo = Lower(active), hi = Upper(active);

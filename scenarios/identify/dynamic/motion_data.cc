@@ -1,5 +1,6 @@
 #include "scenarios/identify/dynamic/motion_data.h"
 
+#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 
@@ -19,8 +20,8 @@ std::vector<int> ColumnsOf(const std::vector<std::string>& actuated,
   for (const std::string& j : actuated) {
     const auto it = std::find(names.begin(), names.end(), j);
     if (it == names.end()) {
-      throw InputError(file + ":1: no column for actuated joint '" + j + "' of " + model +
-                       " (" + j + "_rad)");
+      throw InputError(file + ":1: no column for actuated joint '" + j + "' of " + model + " (" +
+                       j + "_rad)");
     }
     col.push_back(static_cast<int>(it - names.begin()));
   }
@@ -58,24 +59,29 @@ void CheckCommandRange(const MotionData& d, const sim::Simulation& sim, const st
   }
 }
 
-// Each row's speed: the slope of a least-squares line through the rows within `half_s` each
-// side (fewer at the ends), which averages the encoders' noise and quantisation; a centred line
-// is unbiased for a parabola, so the window is a trade of noise against the motion's jerk.
-Eigen::MatrixXd LocalSlopes(const std::vector<double>& t, const Eigen::MatrixXd& q,
-                            double half_s) {
+// Each row's speed: the slope at the row of a least-squares polynomial through the rows within
+// `half_s` each side (fewer at the ends), which averages the encoders' noise and quantisation.
+// A centred cubic is unbiased up to the motion's fourth derivative, so its window can be wider
+// than a line's for the same bias, and its noise lower.
+Eigen::MatrixXd LocalSlopes(const std::vector<double>& t, const Eigen::MatrixXd& q, double half_s,
+                            int degree) {
   const int n = static_cast<int>(t.size());
   Eigen::MatrixXd qd = Eigen::MatrixXd::Zero(n, q.cols());
   int a = 0, b = 0;
   for (int r = 0; r < n; ++r) {
     while (t[a] < t[r] - half_s - 1e-9) ++a;
     while (b + 1 < n && t[b + 1] <= t[r] + half_s + 1e-9) ++b;
-    double tm = 0.0;
-    for (int i = a; i <= b; ++i) tm += t[i];
-    tm /= (b - a + 1);
-    double stt = 0.0;
-    for (int i = a; i <= b; ++i) stt += (t[i] - tm) * (t[i] - tm);
-    if (!(stt > 0.0)) continue;
-    for (int i = a; i <= b; ++i) qd.row(r) += (t[i] - tm) / stt * q.row(i);
+    const int m = b - a + 1;
+    const int deg = std::min(degree, m - 1);
+    if (deg < 1) continue;
+    Eigen::MatrixXd V(m, deg + 1);
+    for (int i = 0; i < m; ++i) {
+      const double x = (t[a + i] - t[r]) / half_s;
+      double p = 1.0;
+      for (int k = 0; k <= deg; ++k, p *= x) V(i, k) = p;
+    }
+    const Eigen::MatrixXd coef = V.colPivHouseholderQr().solve(q.middleRows(a, m));
+    qd.row(r) = coef.row(1) / half_s;
   }
   return qd;
 }
@@ -112,11 +118,13 @@ MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& si
   d.joints = sim.actuated_joints();
   const std::string model = sim.model_name();
   if (log.command_t.empty()) {
-    throw InputError(log.dir + "/log.yaml: no `commands` (commands.csv): dynamic identification "
-                               "drives its rollouts with the commands the servos were sent");
+    throw InputError(log.dir +
+                     "/log.yaml: no `commands` (commands.csv): dynamic identification "
+                     "drives its rollouts with the commands the servos were sent");
   }
   const std::vector<int> qc = ColumnsOf(d.joints, log.joints, log.joint_stats.file, model);
-  const std::vector<int> cc = ColumnsOf(d.joints, log.command_joints, log.command_stats.file, model);
+  const std::vector<int> cc =
+      ColumnsOf(d.joints, log.command_joints, log.command_stats.file, model);
   const int nj = static_cast<int>(d.joints.size());
   d.t = log.joint_t;
   d.q.resize(static_cast<int>(d.t.size()), nj);
@@ -129,7 +137,7 @@ MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& si
     for (int k = 0; k < nj; ++k) d.command(static_cast<int>(r), k) = log.command(r)[cc[k]];
   }
   CheckCommandRange(d, sim, log.command_stats.file);
-  d.qd = LocalSlopes(d.t, d.q, o.velocity_window_s);
+  d.qd = LocalSlopes(d.t, d.q, o.velocity_window_s, o.velocity_degree);
   if (o.use_imus) {
     for (size_t i = 0; i < log.imus.size(); ++i) {
       MotionImu imu;

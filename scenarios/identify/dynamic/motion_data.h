@@ -46,10 +46,11 @@ struct MotionData {
 };
 
 struct MotionOptions {
-  double segment_s = 0.5;    // multiple shooting: each segment a rollout from the recorded state
-  int folds = 3;             // contiguous blocks of segments held out in turn
+  double segment_s = 0.5;  // multiple shooting: each segment a rollout from the recorded state
+  int folds = 3;           // contiguous blocks of segments held out in turn
   // The span each side of a segment's start whose encoder rows a line is fitted to for its speed.
   double velocity_window_s = 0.02;
+  int velocity_degree = 1;  // of the polynomial
   bool use_imus = true;
 };
 

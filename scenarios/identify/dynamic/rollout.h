@@ -53,11 +53,11 @@ struct ResidualLayout {
 ResidualLayout MakeLayout(const MotionData& data);
 
 struct Prediction {
-  Eigen::VectorXd error;             // prediction - reading, per layout entry
-  Eigen::VectorXd residual;          // error / the stream's std (1 while unknown)
-  std::vector<char> diverged;        // per segment
+  Eigen::VectorXd error;       // prediction - reading, per layout entry
+  Eigen::VectorXd residual;    // error / the stream's std (1 while unknown)
+  std::vector<char> diverged;  // per segment
   int num_diverged = 0;
-  std::string first_divergence;      // the simulation's message
+  std::string first_divergence;  // the simulation's message
 };
 
 // Rolls the model with `terms` over every segment of `data`.

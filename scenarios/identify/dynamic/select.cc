@@ -198,6 +198,165 @@ StreamError StreamStats(const DynamicProblem& p, const FitState& before, const F
 
 }  // namespace
 
+namespace {
+
+// A fit of a set and its held-out error.
+struct Scored {
+  FitState fit;
+  double heldout = std::numeric_limits<double>::infinity();
+};
+
+// The values of `active` without its i-th effect.
+Eigen::VectorXd Without(const DynamicProblem& p, const FitState& f, int i) {
+  const int off = p.Offset(f.active, i);
+  const int nv = p.candidates()[f.active[i]].num_values();
+  Eigen::VectorXd t(f.theta.size() - nv);
+  t << f.theta.head(off), f.theta.tail(f.theta.size() - off - nv);
+  return t;
+}
+
+std::vector<int> Erase(std::vector<int> v, int i) {
+  v.erase(v.begin() + i);
+  return v;
+}
+
+std::string Names(const DynamicProblem& p, const std::vector<int>& active) {
+  std::string s;
+  for (int c : active) s += (s.empty() ? "" : ", ") + p.candidates()[c].Name();
+  return s.empty() ? "none" : s;
+}
+
+}  // namespace
+
+bool Better(double heldout, double than, const DynamicIdentifyOptions& o) {
+  return heldout < (1.0 - o.cv_min_gain) * than;
+}
+
+class Stages {
+ public:
+  Stages(const DynamicProblem& p, const DynamicIdentifyOptions& o, DynamicReport* rep)
+      : p_(p), o_(o), rep_(rep), sel_(p, o, rep) {}
+
+  Scored Score(const std::vector<int>& active, const Eigen::VectorXd& theta0) {
+    Scored s;
+    s.fit = p_.Fit(active, theta0, sel_.all(), o_.iterations);
+    if (s.fit.ok) s.heldout = sel_.HeldOut(s.fit);
+    return s;
+  }
+  bool Better(double heldout, double than) const { return dynamic::Better(heldout, than, o_); }
+
+  // Forward rounds, each followed by removal of effects no longer needed.
+  Scored Forward(Scored state) {
+    const auto& cands = p_.candidates();
+    for (int round = 1; round <= o_.max_effects; ++round) {
+      const std::vector<Screened> screened = sel_.Screen(state.fit);
+      const double bic_now = sel_.Bic(state.fit.cost, static_cast<int>(state.fit.theta.size()));
+      std::vector<Screened> kept;
+      for (const Screened& s : screened) {
+        if (s.bic < bic_now - o_.bic_threshold) kept.push_back(s);
+      }
+      std::sort(kept.begin(), kept.end(),
+                [](const Screened& a, const Screened& b) { return a.bic < b.bic; });
+      if (kept.size() > static_cast<size_t>(o_.screen_keep)) kept.resize(o_.screen_keep);
+      Scored best;
+      for (const Screened& s : kept) {
+        std::vector<int> ext = state.fit.active;
+        ext.push_back(s.candidate);
+        Scored t = Score(ext, s.start);
+        Log("round " + std::to_string(round) + ": " + cands[s.candidate].Name() + " screened BIC " +
+            ShortNum(s.bic - bic_now) + ", held-out " + ShortNum(t.heldout) + " (now " +
+            ShortNum(state.heldout) + ")");
+        if (t.heldout < best.heldout) best = std::move(t);
+      }
+      if (kept.empty() || !Better(best.heldout, state.heldout)) {
+        Log("round " + std::to_string(round) + ": " +
+            (kept.empty() ? "no candidate lowers BIC by " + ShortNum(o_.bic_threshold)
+                          : "no candidate lowers the held-out error by " +
+                                ShortNum(100 * o_.cv_min_gain) + " %") +
+            "; selection ends");
+        break;
+      }
+      Log("round " + std::to_string(round) + ": chose " + cands[best.fit.active.back()].Name());
+      state = Remove(std::move(best), static_cast<int>(best.fit.active.size()) - 1);
+    }
+    return state;
+  }
+
+  // Drops each effect (but `keep`) whose removal costs less than cv_min_gain of held-out error.
+  Scored Remove(Scored state, int keep) {
+    for (int i = static_cast<int>(state.fit.active.size()) - 1; i >= 0; --i) {
+      if (i == keep || state.fit.active.size() < 2) continue;
+      Scored w = Score(Erase(state.fit.active, i), Without(p_, state.fit, i));
+      if (w.fit.ok && !Better(state.heldout, w.heldout)) {
+        Log("removed " + p_.candidates()[state.fit.active[i]].Name() + ": held-out " +
+            ShortNum(w.heldout) + " without it (" + ShortNum(state.heldout) + " with)");
+        if (keep > i) --keep;
+        state = std::move(w);
+      }
+    }
+    return state;
+  }
+
+  // Each chosen effect replaced by the candidates that best explain its share (linearised),
+  // refitted; a swap is kept when it lowers the held-out error by cv_min_gain.
+  Scored Swap(Scored state) {
+    for (int pass = 0; pass < 3 * o_.max_effects; ++pass) {
+      bool changed = false;
+      for (size_t i = 0; i < state.fit.active.size(); ++i) {
+        const std::vector<int> others = Erase(state.fit.active, static_cast<int>(i));
+        const FitState wo =
+            p_.Evaluate(others, Without(p_, state.fit, static_cast<int>(i)), sel_.all());
+        if (!wo.ok) continue;
+        std::vector<Screened> alt = sel_.Screen(wo);
+        std::sort(alt.begin(), alt.end(),
+                  [](const Screened& a, const Screened& b) { return a.bic < b.bic; });
+        for (int k = 0; k < std::min<int>(o_.screen_keep, static_cast<int>(alt.size())); ++k) {
+          if (alt[k].candidate == state.fit.active[i] || !std::isfinite(alt[k].bic)) continue;
+          std::vector<int> ext = others;
+          ext.push_back(alt[k].candidate);
+          Scored t = Score(ext, alt[k].start);
+          if (!Better(t.heldout, state.heldout)) continue;
+          Log("swapped " + p_.candidates()[state.fit.active[i]].Name() + " for " +
+              p_.candidates()[alt[k].candidate].Name() + ": held-out " + ShortNum(t.heldout) +
+              " (" + ShortNum(state.heldout) + " before)");
+          state = Remove(std::move(t), static_cast<int>(ext.size()) - 1);
+          changed = true;
+          break;
+        }
+        if (changed) break;
+      }
+      if (!changed) break;
+    }
+    return state;
+  }
+
+  // Candidates that, in place of chosen effect i, explain all but `equivalence` of its share:
+  // each fitted alone beside the others (linearised from the fit without i).
+  std::vector<std::string> Equivalent(const FitState& state, int i) {
+    const std::vector<int> others = Erase(state.active, i);
+    const FitState wo = p_.Evaluate(others, Without(p_, state, i), sel_.all());
+    std::vector<std::string> out;
+    if (!wo.ok) return out;
+    const double share = wo.cost - state.cost;
+    for (const Screened& s : sel_.Screen(wo)) {
+      if (s.candidate == state.active[i] || !std::isfinite(s.bic)) continue;
+      if (s.rss - state.cost <= o_.equivalence * share) {
+        out.push_back(p_.candidates()[s.candidate].Name());
+      }
+    }
+    return out;
+  }
+
+  void Log(const std::string& line) { rep_->log.push_back(line); }
+  Selection& selection() { return sel_; }
+
+ private:
+  const DynamicProblem& p_;
+  const DynamicIdentifyOptions& o_;
+  DynamicReport* rep_;
+  Selection sel_;
+};
+
 DynamicReport IdentifyDynamics(const DynamicProblem& p, const DynamicIdentifyOptions& o) {
   DynamicReport rep;
   const MotionData& d = p.data();
@@ -205,107 +364,49 @@ DynamicReport IdentifyDynamics(const DynamicProblem& p, const DynamicIdentifyOpt
   rep.folds = d.folds;
   rep.diverged_declared = p.declared().num_diverged;
   rep.first_divergence = p.declared().first_divergence;
-  Selection sel(p, o, &rep);
-  FitState state = p.Evaluate({}, Eigen::VectorXd(), sel.all());
-  const FitState declared = state;
-  rep.heldout_before = sel.HeldOut(state);
-  double heldout = rep.heldout_before;
-  const auto& cands = p.candidates();
-  std::vector<Screened> last;
-  for (int round = 0;; ++round) {
-    last = sel.Screen(state);
-    if (round >= o.max_effects) break;
-    const double bic_now = sel.Bic(state.cost, static_cast<int>(state.theta.size()));
-    std::vector<Screened> kept;
-    for (const Screened& s : last) {
-      if (s.bic < bic_now - o.bic_threshold) kept.push_back(s);
-    }
-    std::sort(kept.begin(), kept.end(),
-              [](const Screened& a, const Screened& b) { return a.bic < b.bic; });
-    if (kept.size() > static_cast<size_t>(o.screen_keep)) kept.resize(o.screen_keep);
-    FitState best;
-    double best_cv = std::numeric_limits<double>::infinity();
-    for (const Screened& s : kept) {
-      std::vector<int> ext = state.active;
-      ext.push_back(s.candidate);
-      FitState fit = p.Fit(ext, s.start, sel.all(), o.iterations);
-      const double cv = fit.ok ? sel.HeldOut(fit) : std::numeric_limits<double>::infinity();
-      rep.log.push_back("round " + std::to_string(round + 1) + ": " + cands[s.candidate].Name() +
-                        " screened BIC " + ShortNum(s.bic - bic_now) + ", held-out " +
-                        ShortNum(cv) + " (now " + ShortNum(heldout) + ")");
-      if (cv < best_cv) {
-        best_cv = cv;
-        best = std::move(fit);
-      }
-    }
-    if (kept.empty() || !(best_cv < (1.0 - o.cv_min_gain) * heldout)) {
-      rep.log.push_back("round " + std::to_string(round + 1) + ": " +
-                        (kept.empty() ? "no candidate lowers BIC by " + ShortNum(o.bic_threshold)
-                                      : "no candidate lowers the held-out error by " +
-                                            ShortNum(100 * o.cv_min_gain) + " %") +
-                        "; selection ends");
-      break;
-    }
-    rep.log.push_back("round " + std::to_string(round + 1) + ": chose " +
-                      cands[best.active.back()].Name());
-    state = std::move(best);
-    heldout = best_cv;
-  }
-  rep.heldout_after = heldout;
-  // Equivalence: a swap of a chosen effect for another candidate that leaves the fit's RSS
-  // within `equivalence` of what the chosen effects explained.
-  const Eigen::MatrixXd Ja = state.theta.size() > 0
-                                 ? p.Jacobian(state.active, state.theta, state.prediction)
-                                 : Eigen::MatrixXd();
-  const Eigen::MatrixXd cov = state.theta.size() > 0 ? ClusterCovariance(p, state, sel.all())
-                                                     : Eigen::MatrixXd();
-  const double explained = declared.cost - state.cost;
-  for (size_t i = 0; i < state.active.size(); ++i) {
+  Stages stages(p, o, &rep);
+  Selection& sel = stages.selection();
+  Scored start;
+  start.fit = p.Evaluate({}, Eigen::VectorXd(), sel.all());
+  start.heldout = sel.HeldOut(start.fit);
+  const FitState declared = start.fit;
+  rep.heldout_before = start.heldout;
+  Scored state = stages.Swap(stages.Forward(start));
+  rep.heldout_after = state.heldout;
+  const FitState& fit = state.fit;
+  const Eigen::MatrixXd cov =
+      fit.theta.size() > 0 ? ClusterCovariance(p, fit, sel.all()) : Eigen::MatrixXd();
+  for (size_t i = 0; i < fit.active.size(); ++i) {
     ChosenEffect ce;
-    const Candidate& c = cands[state.active[i]];
+    const Candidate& c = p.candidates()[fit.active[i]];
     const sim::DynamicRow& row = sim::Row(c.kind);
     ce.name = c.Name();
-    const int off = p.Offset(state.active, static_cast<int>(i));
+    const int off = p.Offset(fit.active, static_cast<int>(i));
     for (int k = 0; k < row.num_values; ++k) {
       ce.value_names.push_back(row.value_names[k]);
-      ce.values.push_back(state.theta[off + k]);
+      ce.values.push_back(fit.theta[off + k]);
       ce.std_errors.push_back(std::sqrt(std::max(0.0, cov(off + k, off + k))));
     }
-    for (size_t c2 = 0; c2 < cands.size(); ++c2) {
-      const auto& [Jc, rc] = sel.columns()[c2];
-      if (Jc.size() == 0 || NeutralChangesModel(cands[c2].kind)) continue;
-      // The chosen set without i, plus c2, linearised at the final fit.
-      std::vector<int> cols;
-      for (int k = 0; k < static_cast<int>(state.theta.size()); ++k) {
-        if (k < off || k >= off + row.num_values) cols.push_back(k);
-      }
-      Eigen::MatrixXd J(Ja.rows(), static_cast<int>(cols.size()) + Jc.cols());
-      for (size_t k = 0; k < cols.size(); ++k) J.col(static_cast<int>(k)) = Ja.col(cols[k]);
-      J.rightCols(Jc.cols()) = Jc;
-      Eigen::VectorXd r = state.prediction.residual;
-      Eigen::MatrixXd Jm = J;
-      ZeroUnmasked(sel.all(), &Jm, &r);
-      // Undo chosen i's part of the fit: r at the fit with i's values back at neutral.
-      r += Ja.middleCols(off, row.num_values) *
-           (p.Neutral({state.active[i]}) - state.theta.segment(off, row.num_values));
-      ZeroUnmasked(sel.all(), &Jm, &r);
-      const double rss = (r - Jm * Jm.colPivHouseholderQr().solve(r)).squaredNorm();
-      if (rss - state.cost <= o.equivalence * explained) ce.equivalent.push_back(cands[c2].Name());
-    }
+    ce.equivalent = stages.Equivalent(fit, static_cast<int>(i));
     rep.chosen.push_back(std::move(ce));
   }
   for (int s = 0; s < 3; ++s) {
-    StreamError e = StreamStats(p, declared, state, sel.all(), s);
+    StreamError e = StreamStats(p, declared, fit, sel.all(), s);
     if (e.entries > 0) rep.streams.push_back(e);
   }
-  bool all_explained = true;
-  for (const StreamError& e : rep.streams) {
-    all_explained &= e.rms_after <= o.explained_rms * e.noise;
+  rep.diagnostics = Diagnose(p, fit.prediction);
+  for (const MotionFinding& f : rep.diagnostics.findings) rep.log.push_back("left: " + f.text);
+  const bool helped = !rep.chosen.empty() && Better(rep.heldout_after, rep.heldout_before, o);
+  if (helped && rep.heldout_after > o.explained_heldout) {
+    rep.log.push_back("left: the held-out residual is " + ShortNum(rep.heldout_after) +
+                      " times the readings' noise (explained needs at most " +
+                      ShortNum(o.explained_heldout) + ")");
   }
-  rep.verdict = rep.chosen.empty()                ? "unexplained"
-                : all_explained                   ? "explained"
-                                                  : "partly_explained";
-  rep.final_state = std::move(state);
+  rep.verdict = !helped ? "unexplained"
+                : rep.diagnostics.findings.empty() && rep.heldout_after <= o.explained_heldout
+                    ? "explained"
+                    : "partly_explained";
+  rep.final_state = std::move(state.fit);
   return rep;
 }
 

@@ -141,6 +141,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     motion_options_.folds = id.GetInt("folds", motion_options_.folds);
     motion_options_.velocity_window_s =
         id.GetDouble("velocity_window_s", motion_options_.velocity_window_s);
+    motion_options_.velocity_degree = id.GetInt("velocity_degree", motion_options_.velocity_degree);
     options_.max_effects = id.GetInt("max_effects", options_.max_effects);
     options_.cv_min_gain = id.GetDouble("cv_min_gain", options_.cv_min_gain);
     options_.iterations = id.GetInt("iterations", options_.iterations);
@@ -243,8 +244,8 @@ class ClosedLoopDynamicKind : public ScenarioKind {
       bool matched = false;
       for (size_t x = 0; x < expected_.size(); ++x) {
         const bool same = c.name == expected_[x].name ||
-                          std::find(c.equivalent.begin(), c.equivalent.end(),
-                                    expected_[x].name) != c.equivalent.end();
+                          std::find(c.equivalent.begin(), c.equivalent.end(), expected_[x].name) !=
+                              c.equivalent.end();
         if (!same) continue;
         matched = found[x] = true;
         if (c.name != expected_[x].name) continue;

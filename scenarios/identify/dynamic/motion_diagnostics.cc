@@ -1,0 +1,131 @@
+#include "scenarios/identify/dynamic/motion_diagnostics.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "estimators/format.h"
+
+namespace flexbench::identify::dynamic {
+namespace {
+
+const char* kAxes[3] = {"x", "y", "z"};
+
+struct Channel {
+  std::string name;
+  std::vector<double> t, r;  // r: reading - model, over the stream's noise
+  int joint = -1;            // encoders: the joint (its velocity and command)
+};
+
+std::vector<Channel> Channels(const DynamicProblem& p, const Prediction& pred) {
+  const MotionData& d = p.data();
+  const ResidualLayout& L = p.layout();
+  std::vector<Channel> ch;
+  const int nj = static_cast<int>(d.joints.size());
+  const int ni = static_cast<int>(d.imus.size());
+  for (int j = 0; j < nj; ++j) ch.push_back({"encoder " + d.joints[j], {}, {}, j});
+  for (int s = 1; s <= 2; ++s) {
+    for (int i = 0; i < ni; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        ch.push_back({std::string(s == 1 ? "gyro " : "accel ") + d.imus[i].name + " " + kAxes[a],
+                      {},
+                      {},
+                      -1});
+      }
+    }
+  }
+  for (int k = 0; k < L.size(); ++k) {
+    if (pred.diverged[L.segment[k]] || p.declared().diverged[L.segment[k]]) continue;
+    const int s = L.stream[k];
+    const int c = s == 0 ? L.channel[k] : nj + (s - 1) * 3 * ni + L.channel[k];
+    ch[c].t.push_back(L.t[k]);
+    ch[c].r.push_back(-pred.residual[k]);
+  }
+  return ch;
+}
+
+double MedianStep(const std::vector<double>& t) {
+  std::vector<double> dt;
+  for (size_t i = 1; i < t.size(); ++i) {
+    if (t[i] > t[i - 1]) dt.push_back(t[i] - t[i - 1]);
+  }
+  if (dt.empty()) return 0.0;
+  std::nth_element(dt.begin(), dt.begin() + dt.size() / 2, dt.end());
+  return dt[dt.size() / 2];
+}
+
+// A series of the log at the times `t`: column j of rows (times rt), linearly interpolated.
+std::vector<double> At(const std::vector<double>& rt, const Eigen::MatrixXd& rows, int j,
+                       const std::vector<double>& t) {
+  std::vector<double> out(t.size());
+  for (size_t i = 0; i < t.size(); ++i) {
+    const size_t b = std::min<size_t>(
+        std::max<size_t>(1, std::lower_bound(rt.begin(), rt.end(), t[i]) - rt.begin()),
+        rt.size() - 1);
+    const double span = rt[b] - rt[b - 1];
+    const double s = span > 0 ? std::clamp((t[i] - rt[b - 1]) / span, 0.0, 1.0) : 1.0;
+    out[i] = (1 - s) * rows(static_cast<int>(b - 1), j) + s * rows(static_cast<int>(b), j);
+  }
+  return out;
+}
+
+Eigen::MatrixXd CommandRate(const MotionData& d) {
+  const int n = static_cast<int>(d.command_t.size());
+  Eigen::MatrixXd rate = Eigen::MatrixXd::Zero(n, d.command.cols());
+  for (int r = 0; r < n; ++r) {
+    const int a = std::max(0, r - 1), b = std::min(n - 1, r + 1);
+    const double span = d.command_t[b] - d.command_t[a];
+    if (span > 0) rate.row(r) = (d.command.row(b) - d.command.row(a)) / span;
+  }
+  return rate;
+}
+
+}  // namespace
+
+MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
+                           const DiagnoseOptions& o) {
+  MotionDiagnostics out;
+  const MotionData& d = p.data();
+  const std::vector<Channel> channels = Channels(p, pred);
+  const Eigen::MatrixXd rate = CommandRate(d);
+  // Bonferroni over the channels and the three tests.
+  const double alpha = o.alpha / (3.0 * channels.size());
+  for (const Channel& c : channels) {
+    const int n = static_cast<int>(c.r.size());
+    const double dt = MedianStep(c.t);
+    if (n < 4 * o.window || !(dt > 0)) continue;
+    const double hz = 1.0 / dt;
+    ChannelSpectrum cs{c.name, Welch(c.r.data(), n, hz, o.window)};
+    for (const SpectrumPeak& pk : FindPeaks(cs.spectrum, alpha, 3)) {
+      if (pk.power_ratio < o.min_power_ratio) continue;
+      out.findings.push_back({"spectrum_peak", c.name, pk.p_value, pk.frequency_hz, pk.amplitude,
+                              c.name + ": a peak at " + ShortNum(pk.frequency_hz) +
+                                  " Hz, amplitude " + ShortNum(pk.amplitude) + " noise std, " +
+                                  ShortNum(pk.power_ratio) +
+                                  "x the floor (p = " + ShortNum(pk.p_value) + ")"});
+    }
+    out.spectra.push_back(std::move(cs));
+    if (c.joint < 0) continue;
+    const std::vector<double> v = At(d.t, d.qd, c.joint, c.t);
+    const VelocityTrend vt = ResidualVersusVelocity(c.r.data(), v.data(), n, 16);
+    const double p_v = std::min(vt.coulomb_p, vt.viscous_p);
+    if (p_v < alpha && vt.explained_fraction >= o.min_velocity_share) {
+      out.findings.push_back(
+          {"velocity_trend", c.name, p_v, 0.0, vt.explained_fraction,
+           c.name + ": the residual follows the velocity (Coulomb " + ShortNum(vt.coulomb) +
+               ", viscous " + ShortNum(vt.viscous) + " noise std per unit/s, " +
+               ShortNum(100 * vt.explained_fraction) + " % of it; p = " + ShortNum(p_v) + ")"});
+    }
+    const std::vector<double> cr = At(d.command_t, rate, c.joint, c.t);
+    const LagTrend lt = ResidualVersusCommandLag(c.r.data(), cr.data(), n, hz, o.max_lag_s);
+    if (lt.p_value < alpha && std::abs(lt.correlation) >= o.min_lag_correlation) {
+      out.findings.push_back({"command_lag", c.name, lt.p_value, 0.0, lt.correlation,
+                              c.name + ": the residual follows the command's rate (correlation " +
+                                  ShortNum(lt.correlation) + " at " + ShortNum(1e3 * lt.lag_s) +
+                                  " ms; a delay of " + ShortNum(1e3 * lt.delay_s) +
+                                  " ms; p = " + ShortNum(lt.p_value) + ")"});
+    }
+  }
+  return out;
+}
+
+}  // namespace flexbench::identify::dynamic
