@@ -513,10 +513,16 @@ void Simulation::ProjectLocked() const {
   }
 }
 
-void Simulation::CheckStep() const {
+void Simulation::CheckStep(double time_before) const {
   const mjModel* m = truth_.get();
   const mjData* d = data_.get();
   std::string reason;
+  // MuJoCo resets the state on a bad acceleration; the warning's count restarts with it, so a
+  // reset the count hides still shows as the clock going back.
+  if (!(d->time > time_before)) {
+    reason = "MuJoCo reset the state (the clock went back from " + ShortNum(time_before) +
+             " s to " + ShortNum(d->time) + " s)";
+  }
   for (int w : {mjWARN_BADQACC, mjWARN_BADQVEL, mjWARN_BADQPOS}) {
     if (d->warning[w].number != warning_counts_[w]) {
       const int dof = d->warning[w].lastinfo;
@@ -553,12 +559,13 @@ void Simulation::Step(int steps) {
   StepWarningScope scope(&warning);
   for (int w = 0; w < mjNWARNING; ++w) warning_counts_[w] = d->warning[w].number;
   for (int k = 0; k < steps; ++k) {
+    const double time_before = d->time;
     mj_step1(m, d);
     ApplyServo();
     mj_step2(m, d);
     ProjectLocked();
     ++steps_;
-    CheckStep();
+    CheckStep(time_before);
   }
   at_rest_ = false;
   kinematics_current_ = false;

@@ -168,7 +168,7 @@ class Simulation {
   double DelayedCommand(int i, double delay) const;
   void EnsureKinematics() const;
   void EnsureAccelerations() const;
-  void CheckStep() const;
+  void CheckStep(double time_before) const;
 
   std::string model_name_;
   MjModelPtr nominal_;

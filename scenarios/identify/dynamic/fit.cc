@@ -194,3 +194,40 @@ FitState DynamicProblem::Fit(const std::vector<int>& active, Eigen::VectorXd the
 }
 
 }  // namespace flexbench::identify::dynamic
+
+namespace flexbench::identify::dynamic {
+
+FitState DynamicProblem::RefineStarts(const FitState& fit, int iterations) {
+  const int nj = static_cast<int>(data_.joints.size());
+  const int ns = static_cast<int>(data_.segments.size());
+  constexpr double kStep = 1e-3;  // rad/s
+  std::vector<Prediction> moved(nj);
+  const Eigen::MatrixXd start = data_.start_qd;
+  ForEachTask(nj, threads_, [&](int k) {
+    MotionData d = data_;
+    d.start_qd.col(k).array() += kStep;
+    moved[k] = Rollout(model_, Terms(fit.active, fit.theta), d, layout_);
+  });
+  const Eigen::VectorXd& r = fit.prediction.residual;
+  int k = 0;
+  for (int s = 0; s < ns; ++s) {
+    const int first = k;
+    while (k < layout_.size() && layout_.segment[k] == s) ++k;
+    if (declared_.diverged[s] || fit.prediction.diverged[s]) continue;
+    Eigen::MatrixXd J(k - first, nj);
+    for (int j = 0; j < nj; ++j) {
+      J.col(j) = (moved[j].residual.segment(first, k - first) - r.segment(first, k - first)) / kStep;
+    }
+    Eigen::MatrixXd A = J.transpose() * J;
+    A.diagonal() += 1e-9 * A.diagonal().cwiseMax(1e-12);
+    data_.start_qd.row(s) += (-A.ldlt().solve(J.transpose() * r.segment(first, k - first))).transpose();
+  }
+  FitState refit = Fit(fit.active, fit.theta, Mask(-1), iterations);
+  if (!refit.ok || refit.cost >= fit.cost) {
+    data_.start_qd = start;
+    return fit;
+  }
+  return refit;
+}
+
+}  // namespace flexbench::identify::dynamic

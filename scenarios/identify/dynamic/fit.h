@@ -59,6 +59,11 @@ class DynamicProblem {
                const std::vector<char>& mask, int iterations) const;
   // Entries in the folds other than `fold` (-1: every fold), minus diverged segments.
   std::vector<char> Mask(int held_out_fold) const;
+  // Multiple shooting's nuisance: one Gauss-Newton step on every segment's starting speeds at
+  // `fit` (a rollout per joint: a segment's speeds move only its own rollout, to first order, so
+  // one perturbation serves all segments), kept where it lowers the segment's cost. Returns the
+  // refitted state of `fit`'s effects from the new starts.
+  FitState RefineStarts(const FitState& fit, int iterations);
   double Cost(const Eigen::VectorXd& residual, const std::vector<char>& mask) const;
   Eigen::VectorXd Lower(const std::vector<int>& active) const;
   Eigen::VectorXd Upper(const std::vector<int>& active) const;

@@ -170,6 +170,10 @@ MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& si
   d.noise_from_log[1] = d.std_gyro > 0.0;
   d.noise_from_log[2] = d.std_accel > 0.0;
   CutSegments(o, sim.timestep(), &d);
+  d.start_qd.resize(static_cast<int>(d.segments.size()), nj);
+  for (size_t s = 0; s < d.segments.size(); ++s) {
+    d.start_qd.row(static_cast<int>(s)) = d.qd.row(d.segments[s].row_begin);
+  }
   return d;
 }
 

@@ -42,6 +42,9 @@ struct MotionData {
   double std_q = 0.0, std_gyro = 0.0, std_accel = 0.0;
   bool noise_from_log[3] = {false, false, false};
   std::vector<Segment> segments;
+  // Each segment's starting speeds (segments x joints): qd at its first row, until the final fit
+  // refines them (DynamicProblem::RefineStarts).
+  Eigen::MatrixXd start_qd;
   int folds = 1;
 };
 

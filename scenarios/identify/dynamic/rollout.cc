@@ -119,7 +119,7 @@ Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& te
     try {
       const double t0 = d.t[g.row_begin];
       q0 = d.q.row(g.row_begin).transpose();
-      qd0 = d.qd.row(g.row_begin).transpose();
+      qd0 = d.start_qd.row(static_cast<int>(s)).transpose();
       sim->SetActuatedState(t0, q0, qd0);
       size_t c = std::lower_bound(d.command_t.begin(), d.command_t.end(), t0 - kCommandLookBackS) -
                  d.command_t.begin();

@@ -357,7 +357,7 @@ class Stages {
   Selection sel_;
 };
 
-DynamicReport IdentifyDynamics(const DynamicProblem& p, const DynamicIdentifyOptions& o) {
+DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& o) {
   DynamicReport rep;
   const MotionData& d = p.data();
   rep.segments = static_cast<int>(d.segments.size());
@@ -373,6 +373,12 @@ DynamicReport IdentifyDynamics(const DynamicProblem& p, const DynamicIdentifyOpt
   rep.heldout_before = start.heldout;
   Scored state = stages.Swap(stages.Forward(start));
   rep.heldout_after = state.heldout;
+  for (int i = 0; i < o.start_refinements && !state.fit.active.empty(); ++i) {
+    const double before = state.fit.cost;
+    state.fit = p.RefineStarts(state.fit, o.iterations);
+    rep.log.push_back("segment starts refined: cost " + ShortNum(before) + " -> " +
+                      ShortNum(state.fit.cost));
+  }
   const FitState& fit = state.fit;
   const Eigen::MatrixXd cov =
       fit.theta.size() > 0 ? ClusterCovariance(p, fit, sel.all()) : Eigen::MatrixXd();

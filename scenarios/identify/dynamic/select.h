@@ -31,6 +31,7 @@ struct DynamicIdentifyOptions {
   int screen_keep = 3;          // screened candidates refitted per round
   double cv_min_gain = 0.05;    // relative held-out error drop a candidate must bring
   int iterations = 8;           // Levenberg-Marquardt iterations per fit
+  int start_refinements = 2;    // rounds of RefineStarts on the final fit
   // The part of the declared model's explained excess a swap may leave unexplained and still be
   // an equivalent effect.
   double equivalence = 0.05;
@@ -77,7 +78,8 @@ struct DynamicReport {
   FitState final_state;
 };
 
-DynamicReport IdentifyDynamics(const DynamicProblem& problem,
-                               const DynamicIdentifyOptions& options);
+// Selects, then refines the segments' starting speeds with the chosen effects and refits them
+// (`problem` keeps the refined starts).
+DynamicReport IdentifyDynamics(DynamicProblem& problem, const DynamicIdentifyOptions& options);
 
 }  // namespace flexbench::identify::dynamic

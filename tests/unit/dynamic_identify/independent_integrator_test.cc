@@ -357,7 +357,7 @@ TEST(IndependentIntegrator, IdentifiesBendingModeAndFriction) {
   const sim::RecordedLog log = IntegratorLog(arm, truth, 10.0);
   RolloutModel model(sim::LoadModelFromString(MakeXml(arm, 1e-3), "indep_arm"), "indep_arm", {});
   const MotionData data = ReadMotionData(log, model.nominal(), MotionOptions{});
-  const DynamicProblem problem(model, data, AllCandidates(model.nominal(), {}), 2);
+  DynamicProblem problem(model, data, AllCandidates(model.nominal(), {}), 2);
   const DynamicReport rep = IdentifyDynamics(problem, DynamicIdentifyOptions{});
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "estimators/error.h"
@@ -414,6 +415,70 @@ TEST(RecordedLog, ImagesAreNamedByTheirTime) {
     ADD_FAILURE() << "tags.csv and images were both read";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("tags.csv or images, not both"), std::string::npos)
+        << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace flexbench::sim
+
+namespace flexbench::sim {
+namespace {
+
+// Commands (the servos' position targets) and the IMUs' noise: written, they read back as the
+// same numbers; a command file like joints.csv is checked like it, and only position targets
+// are read.
+TEST(RecordedLog, CommandsAndImuNoiseRoundTrip) {
+  testing::TempDir dir;
+  RecordedLog log;
+  log.declared_path = "/a/declared.yaml";
+  log.joints = {"a", "b"};
+  log.joint_is_slide = {0, 1};
+  log.joint_t = {0.0, 0.002};
+  log.joint_q = {0.1, 0.01, 0.2, 0.02};
+  log.command_joints = {"b", "a"};
+  log.command_is_slide = {1, 0};
+  log.command_t = {0.0, 0.002, 0.004};
+  log.command_q = {0.011, 0.12, 0.021, 0.22, 0.031, 0.32};
+  log.imus.push_back({"imu2", "imu_link2", false, Quat::Identity()});
+  log.imu.push_back({});
+  log.gyro_std = 0.003;
+  log.accel_std = 0.05;
+  const std::string path = (dir.path() / "log").string();
+  WriteRecordedLog(log, path);
+  const RecordedLog back = ReadRecordedLog(path);
+  EXPECT_EQ(back.command_joints, log.command_joints);
+  EXPECT_EQ(back.command_is_slide, log.command_is_slide);
+  EXPECT_EQ(back.command_t, log.command_t);
+  EXPECT_EQ(back.command_q, log.command_q);
+  EXPECT_EQ(back.command_stats.rows, 3);
+  EXPECT_EQ(back.gyro_std, 0.003);
+  EXPECT_EQ(back.accel_std, 0.05);
+  EXPECT_EQ(back.command(1)[1], 0.22);
+
+  std::ofstream(std::filesystem::path(path) / "commands.csv") << "t_s,a_rad\n0,nan\n";
+  try {
+    ReadRecordedLog(path);
+    ADD_FAILURE() << "a NaN command was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("commands.csv:2: column 'a_rad' is nan"),
+              std::string::npos)
+        << e.what();
+  }
+  std::string yaml;
+  {
+    std::ifstream in(std::filesystem::path(path) / "log.yaml");
+    yaml.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const size_t at = yaml.find("type: position");
+  ASSERT_NE(at, std::string::npos);
+  yaml.replace(at, 14, "type: torque");
+  std::ofstream(std::filesystem::path(path) / "log.yaml") << yaml;
+  try {
+    ReadRecordedLog(path);
+    ADD_FAILURE() << "torque commands were read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("only position targets are read"), std::string::npos)
         << e.what();
   }
 }

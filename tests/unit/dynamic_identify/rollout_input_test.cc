@@ -1,0 +1,116 @@
+// What dynamic identification refuses and what it survives: a log without commands, a command
+// outside an actuator's range, segments shorter than the model's step are one line each; a
+// rollout that diverges is a counted segment, not a crash. And the servo delay the rollouts and
+// the truth share: a delayed servo follows the same commands the same way, later by the delay.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "estimators/error.h"
+#include "scenarios/identify/dynamic/fit.h"
+#include "sim/mujoco_model.h"
+#include "sim/simulation.h"
+
+namespace flexbench::identify::dynamic {
+namespace {
+
+// A pendulum on a position servo; kp is the test's (a huge one makes Euler steps diverge).
+std::string Pendulum(double kp) {
+  return R"(<mujoco model="pendulum"><compiler autolimits="true" angle="radian"/><option timestep="0.001" integrator="Euler"/>
+  <worldbody><body name="arm" pos="0 0 1">
+    <joint name="j" axis="0 1 0" range="-2 2" damping="0.1" armature="0.01"/>
+    <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02" mass="0.5"/>
+    <site name="imu" pos="0.3 0 0"/></body></worldbody>
+  <actuator><position name="j" joint="j" kp=")" +
+         std::to_string(kp) + R"(" ctrlrange="-1.5 1.5"/></actuator></mujoco>)";
+}
+
+// One second at 500 Hz following a sine, the readings the commands themselves.
+sim::RecordedLog SineLog(double amplitude) {
+  sim::RecordedLog log;
+  log.dir = "/tmp/pendulum_log";
+  log.joints = log.command_joints = {"j"};
+  log.joint_is_slide = log.command_is_slide = {0};
+  log.joint_std = 1e-3;
+  for (int k = 0; k <= 500; ++k) {
+    const double t = 0.002 * k, q = amplitude * std::sin(2 * M_PI * t);
+    log.joint_t.push_back(t);
+    log.joint_q.push_back(q);
+    log.command_t.push_back(t);
+    log.command_q.push_back(q);
+  }
+  return log;
+}
+
+std::string ErrorOf(const sim::RecordedLog& log, const MotionOptions& o) {
+  RolloutModel model(sim::LoadModelFromString(Pendulum(20), "pendulum"), "pendulum", {});
+  try {
+    ReadMotionData(log, model.nominal(), o);
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << "one line: " << e.what();
+    return e.what();
+  }
+  return "";
+}
+
+TEST(DynamicInput, BadLogsAreOneLineNamingWhatIsWrong) {
+  sim::RecordedLog no_commands = SineLog(0.5);
+  no_commands.command_t.clear();
+  EXPECT_NE(ErrorOf(no_commands, {}).find("no `commands`"), std::string::npos);
+  EXPECT_NE(ErrorOf(SineLog(1.8), {}).find("outside its actuator's range [-1.5, 1.5]"),
+            std::string::npos);
+  MotionOptions short_segments;
+  short_segments.segment_s = 0.0005;
+  EXPECT_NE(ErrorOf(SineLog(0.5), short_segments).find("shorter than the model's time step"),
+            std::string::npos);
+  MotionOptions one_segment;
+  one_segment.segment_s = 5.0;
+  EXPECT_NE(ErrorOf(SineLog(0.5), one_segment).find("fewer than two segments"),
+            std::string::npos);
+  EXPECT_EQ(ErrorOf(SineLog(0.5), {}), "");
+}
+
+TEST(DynamicInput, ADivergingRolloutIsACountedSegment) {
+  // kp 1e9 on 0.01 kg m^2 at 1 ms: explicit Euler blows up within a few steps.
+  RolloutModel model(sim::LoadModelFromString(Pendulum(1e9), "pendulum"), "pendulum", {});
+  const MotionData data = ReadMotionData(SineLog(0.5), model.nominal(), {});
+  const ResidualLayout layout = MakeLayout(data);
+  const Prediction p = Rollout(model, {}, data, layout);
+  EXPECT_EQ(p.num_diverged, static_cast<int>(data.segments.size()));
+  EXPECT_NE(p.first_divergence.find("diverged"), std::string::npos) << p.first_divergence;
+  EXPECT_TRUE(p.residual.allFinite());
+}
+
+TEST(ServoDelay, ADelayedServoFollowsTheSameCommandsLater) {
+  const double dt = 0.001, delay = 0.02;
+  auto plain = sim::Simulation::FromString(Pendulum(20), "pendulum");
+  auto late = sim::Simulation::FromString(Pendulum(20), "pendulum",
+                                          [] {
+                                            sim::EffectList e;
+                                            e.push_back(sim::MakeEffect("servo_delay", "{s: 0.02}"));
+                                            return e;
+                                          }());
+  const int lag = static_cast<int>(std::lround(delay / dt));
+  std::vector<double> q_plain, q_late;
+  for (int k = 0; k < 400; ++k) {
+    const double c = k * dt < 0.1 ? 0.0 : 0.4 * std::sin(8 * (k * dt - 0.1));
+    Eigen::VectorXd cmd(1);
+    cmd << c;
+    plain->SetCommand(cmd);
+    late->SetCommand(cmd);
+    q_plain.push_back(plain->JointPosition("j"));
+    q_late.push_back(late->JointPosition("j"));
+    plain->Step(1);
+    late->Step(1);
+  }
+  double moved = 0.0;
+  for (int k = 0; k + lag < 400; ++k) {
+    EXPECT_NEAR(q_late[k + lag], q_plain[k], 1e-12) << "step " << k;
+    moved = std::max(moved, std::abs(q_plain[k]));
+  }
+  EXPECT_GT(moved, 0.1) << "q at the end " << q_plain.back();  // the commands moved the arm
+}
+
+}  // namespace
+}  // namespace flexbench::identify::dynamic
