@@ -190,6 +190,29 @@ std::vector<int> DynamicParts(const TruthSetup& s, DynamicKind kind, const std::
   return {};
 }
 
+bool DynamicSupported(const ModelCatalog& c, DynamicKind kind, std::string* why) {
+  switch (Row(kind).location) {
+    case L::kJoint:
+    case L::kActuatedJoint:
+      if (!c.actuated.empty()) return true;
+      *why = "no actuated joint";
+      return false;
+    case L::kBendingBody:
+      if (!c.JointsOfEffect("link_bending").empty()) return true;
+      *why = "no <custom><text name=\"effect:link_bending\"> listing passive joints";
+      return false;
+    case L::kBasePlate:
+      if (!c.JointsOfEffect("base_compliance").empty()) return true;
+      *why = "no <custom><text name=\"effect:base_compliance\"> listing passive joints";
+      return false;
+    case L::kBody:
+      if (c.effect_parts.count("payload") && !c.effect_parts.at("payload").empty()) return true;
+      *why = "no <custom><text name=\"effect:payload\"> naming a body";
+      return false;
+  }
+  return false;
+}
+
 std::vector<std::string> DynamicLocations(const TruthSetup& s, DynamicKind kind) {
   std::vector<std::string> out;
   switch (Row(kind).location) {

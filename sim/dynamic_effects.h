@@ -59,6 +59,8 @@ const DynamicRow* FindDynamic(const std::string& name);
 // a bending body or the base plate) or the body id (payload). Empty when the model lacks them.
 std::vector<int> DynamicParts(const TruthSetup& setup, DynamicKind kind,
                               const std::string& location);
+// Whether the model has any location for the row; `why` says what is missing.
+bool DynamicSupported(const ModelCatalog& catalog, DynamicKind kind, std::string* why);
 // Every location of the model a fitted row can act at, in model order.
 std::vector<std::string> DynamicLocations(const TruthSetup& setup, DynamicKind kind);
 

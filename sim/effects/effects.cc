@@ -731,8 +731,8 @@ class DynamicEffect : public Effect {
                        " (a value, or {location: value})");
     }
   }
-  bool SupportedBy(const ModelCatalog&, const mjModel*, std::string*) const override {
-    return true;
+  bool SupportedBy(const ModelCatalog& c, const mjModel*, std::string* why) const override {
+    return DynamicSupported(c, kind_, why);
   }
   void Apply(TruthSetup& s) const override {
     const DynamicRow& row = Row(kind_);

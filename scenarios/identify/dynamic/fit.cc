@@ -29,9 +29,15 @@ DynamicProblem::DynamicProblem(const RolloutModel& model, const MotionData& data
                                std::vector<Candidate> cands, int threads)
     : model_(model), data_(data), candidates_(std::move(cands)), threads_(std::max(1, threads)) {
   layout_ = MakeLayout(data_);
-  Prediction raw = Rollout(model_, {}, data_, layout_);
+  Prediction raw = Roll({}, data_);
   SetUnknownNoise(layout_, raw.error, &data_);
-  declared_ = Rollout(model_, {}, data_, layout_);
+  declared_ = Roll({}, data_);
+}
+
+Prediction DynamicProblem::Roll(const std::vector<DynamicTerm>& terms,
+                                const MotionData& data) const {
+  ++rollouts_;
+  return Rollout(model_, terms, data, layout_);
 }
 
 int DynamicProblem::Offset(const std::vector<int>& active, int index) const {
@@ -112,7 +118,7 @@ FitState DynamicProblem::Evaluate(const std::vector<int>& active, const Eigen::V
   FitState f;
   f.active = active;
   f.theta = theta;
-  f.prediction = Rollout(model_, Terms(active, theta), data_, layout_);
+  f.prediction = Roll(Terms(active, theta), data_);
   f.ok = true;
   for (size_t s = 0; s < f.prediction.diverged.size(); ++s) {
     if (f.prediction.diverged[s] && !declared_.diverged[s]) f.ok = false;
@@ -140,7 +146,7 @@ Eigen::MatrixXd DynamicProblem::Jacobian(const std::vector<int>& active,
     const double h = t[i] + step[i] <= hi[i] ? step[i] : -step[i];
     t[i] += h;
     if (t[i] < lo[i]) t[i] = lo[i];
-    const Prediction p = Rollout(model_, Terms(active, t), data_, layout_);
+    const Prediction p = Roll(Terms(active, t), data_);
     J.col(col) = (p.residual - at.residual) / h;
     for (size_t s = 0; s < p.diverged.size(); ++s) {
       if (!p.diverged[s]) continue;
@@ -206,7 +212,7 @@ FitState DynamicProblem::RefineStarts(const FitState& fit, int iterations) {
   ForEachTask(nj, threads_, [&](int k) {
     MotionData d = data_;
     d.start_qd.col(k).array() += kStep;
-    moved[k] = Rollout(model_, Terms(fit.active, fit.theta), d, layout_);
+    moved[k] = Roll(Terms(fit.active, fit.theta), d);
   });
   const Eigen::VectorXd& r = fit.prediction.residual;
   int k = 0;
@@ -216,11 +222,13 @@ FitState DynamicProblem::RefineStarts(const FitState& fit, int iterations) {
     if (declared_.diverged[s] || fit.prediction.diverged[s]) continue;
     Eigen::MatrixXd J(k - first, nj);
     for (int j = 0; j < nj; ++j) {
-      J.col(j) = (moved[j].residual.segment(first, k - first) - r.segment(first, k - first)) / kStep;
+      J.col(j) =
+          (moved[j].residual.segment(first, k - first) - r.segment(first, k - first)) / kStep;
     }
     Eigen::MatrixXd A = J.transpose() * J;
     A.diagonal() += 1e-9 * A.diagonal().cwiseMax(1e-12);
-    data_.start_qd.row(s) += (-A.ldlt().solve(J.transpose() * r.segment(first, k - first))).transpose();
+    data_.start_qd.row(s) +=
+        (-A.ldlt().solve(J.transpose() * r.segment(first, k - first))).transpose();
   }
   FitState refit = Fit(fit.active, fit.theta, Mask(-1), iterations);
   if (!refit.ok || refit.cost >= fit.cost) {

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <atomic>
 #include <string>
 #include <vector>
 
@@ -68,6 +69,8 @@ class DynamicProblem {
   Eigen::VectorXd Lower(const std::vector<int>& active) const;
   Eigen::VectorXd Upper(const std::vector<int>& active) const;
   int threads() const { return threads_; }
+  // Rollouts of the log so far (each a pass over every segment).
+  long rollouts() const { return rollouts_; }
 
  private:
   const RolloutModel& model_;
@@ -76,6 +79,8 @@ class DynamicProblem {
   ResidualLayout layout_;
   Prediction declared_;
   int threads_ = 1;
+  mutable std::atomic<long> rollouts_{0};
+  Prediction Roll(const std::vector<DynamicTerm>& terms, const MotionData& data) const;
 };
 
 }  // namespace flexbench::identify::dynamic

@@ -91,6 +91,9 @@ MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
   const double alpha = o.alpha / (3.0 * channels.size());
   for (const Channel& c : channels) {
     const int n = static_cast<int>(c.r.size());
+    double sq = 0.0;
+    for (double r : c.r) sq += r * r;
+    if (n > 0) out.levels.push_back({c.name, std::sqrt(sq / n)});
     const double dt = MedianStep(c.t);
     if (n < 4 * o.window || !(dt > 0)) continue;
     const double hz = 1.0 / dt;
@@ -125,6 +128,8 @@ MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
                                   " ms; p = " + ShortNum(lt.p_value) + ")"});
     }
   }
+  std::stable_sort(out.levels.begin(), out.levels.end(),
+                   [](const ChannelLevel& a, const ChannelLevel& b) { return a.rms > b.rms; });
   return out;
 }
 

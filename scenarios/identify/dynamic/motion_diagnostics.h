@@ -36,9 +36,15 @@ struct ChannelSpectrum {
   Spectrum spectrum;
 };
 
+struct ChannelLevel {
+  std::string channel;
+  double rms = 0.0;  // the residual's, in its stream's noise
+};
+
 struct MotionDiagnostics {
   std::vector<MotionFinding> findings;
   std::vector<ChannelSpectrum> spectra;
+  std::vector<ChannelLevel> levels;  // every channel, largest first
 };
 
 // Diagnoses `prediction` (a rollout of `problem`'s log) channel by channel.

@@ -57,16 +57,14 @@ class Selection {
 
   double Bic(double rss, int k) const { return n_ * std::log(rss / n_) + k * std::log(n_); }
 
-  // Screens every candidate beside `state`'s; also keeps each one's columns for equivalence.
+  // Screens every candidate beside `state`'s.
   std::vector<Screened> Screen(const FitState& state) {
     const std::vector<int>& active = state.active;
     Eigen::MatrixXd Ja = p_.Jacobian(active, state.theta, state.prediction);
-    rep_->rollouts += static_cast<int>(state.theta.size());
     Eigen::VectorXd ra = state.prediction.residual;
     ZeroUnmasked(all_, &Ja, &ra);
     const int nc = static_cast<int>(p_.candidates().size());
     std::vector<Screened> out(nc);
-    columns_.assign(nc, {});
     ForEachTask(nc, p_.threads(), [&](int c) {
       out[c].candidate = c;
       out[c].bic = std::numeric_limits<double>::infinity();
@@ -92,7 +90,6 @@ class Selection {
       out[c].rss = rss;
       out[c].bic = Bic(std::max(rss, 1e-300), static_cast<int>(theta.size()));
       out[c].start = theta + d;
-      columns_[c] = {std::move(Jc), std::move(r)};
     });
     return out;
   }
@@ -109,7 +106,6 @@ class Selection {
     const auto& L = p_.layout();
     if (fit.theta.size() == 0) return std::sqrt(p_.Cost(fit.prediction.residual, all_) / n_);
     const Eigen::MatrixXd J = p_.Jacobian(fit.active, fit.theta, fit.prediction);
-    rep_->rollouts += static_cast<int>(fit.theta.size());
     const int folds = p_.data().folds;
     std::vector<double> cost(folds, 0.0);
     ForEachTask(folds, p_.threads(), [&](int f) {
@@ -125,7 +121,6 @@ class Selection {
         if (all_[k] && p_.data().segments[L.segment[k]].fold == f) cost[f] += res[k] * res[k];
       }
     });
-    rep_->rollouts += folds;
     double sum = 0.0;
     for (double c : cost) sum += c;
     return std::sqrt(sum / n_);
@@ -133,9 +128,6 @@ class Selection {
 
   const std::vector<char>& all() const { return all_; }
   double n() const { return n_; }
-  const std::vector<std::pair<Eigen::MatrixXd, Eigen::VectorXd>>& columns() const {
-    return columns_;
-  }
 
  private:
   const DynamicProblem& p_;
@@ -143,7 +135,6 @@ class Selection {
   DynamicReport* rep_;
   std::vector<char> all_;
   double n_ = 0.0;
-  std::vector<std::pair<Eigen::MatrixXd, Eigen::VectorXd>> columns_;
 };
 
 // Sandwich covariance with segments as clusters.
@@ -218,12 +209,6 @@ Eigen::VectorXd Without(const DynamicProblem& p, const FitState& f, int i) {
 std::vector<int> Erase(std::vector<int> v, int i) {
   v.erase(v.begin() + i);
   return v;
-}
-
-std::string Names(const DynamicProblem& p, const std::vector<int>& active) {
-  std::string s;
-  for (int c : active) s += (s.empty() ? "" : ", ") + p.candidates()[c].Name();
-  return s.empty() ? "none" : s;
 }
 
 }  // namespace
@@ -404,14 +389,20 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   for (const MotionFinding& f : rep.diagnostics.findings) rep.log.push_back("left: " + f.text);
   const bool helped = !rep.chosen.empty() && Better(rep.heldout_after, rep.heldout_before, o);
   if (helped && rep.heldout_after > o.explained_heldout) {
+    std::string where;
+    for (size_t k = 0; k < rep.diagnostics.levels.size() && k < 3; ++k) {
+      where += (k ? ", " : "") + rep.diagnostics.levels[k].channel + " " +
+               ShortNum(rep.diagnostics.levels[k].rms);
+    }
     rep.log.push_back("left: the held-out residual is " + ShortNum(rep.heldout_after) +
                       " times the readings' noise (explained needs at most " +
-                      ShortNum(o.explained_heldout) + ")");
+                      ShortNum(o.explained_heldout) + "); largest in " + where);
   }
   rep.verdict = !helped ? "unexplained"
                 : rep.diagnostics.findings.empty() && rep.heldout_after <= o.explained_heldout
                     ? "explained"
                     : "partly_explained";
+  rep.rollouts = p.rollouts();
   rep.final_state = std::move(state.fit);
   return rep;
 }

@@ -74,7 +74,7 @@ struct DynamicReport {
   // nothing left; partly_explained: they help, but something is left.
   std::string verdict;
   std::vector<std::string> log;
-  int rollouts = 0;
+  long rollouts = 0;  // of the whole log, the declared model's included
   FitState final_state;
 };
 

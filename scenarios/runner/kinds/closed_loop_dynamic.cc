@@ -15,9 +15,11 @@
 //     - {name: joint_friction@link2_pitch_joint, values: [0.2]}
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <map>
 
 #include "estimators/format.h"
+#include "render/plot.h"
 #include "scenarios/identify/dynamic/select.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_model.h"
@@ -102,6 +104,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     const dyn::DynamicReport rep = dyn::IdentifyDynamics(problem, options_);
     for (const std::string& line : rep.log) ctx.log(line);
     WriteSummary(rep, ctx);
+    WriteFigures(problem, rep, ctx);
   }
 
  private:
@@ -276,6 +279,77 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     d["streams"] = streams;
     d["log"] = rep.log;
     if (!rep.first_divergence.empty()) d["first_divergence"] = rep.first_divergence;
+  }
+
+  // The declared model's residual spectrum against the fit's, for the channel whose residual the
+  // fit lowered most, and an encoder's residual in time, before and after; spectra.csv holds
+  // every channel's.
+  void WriteFigures(const dyn::DynamicProblem& p, const dyn::DynamicReport& rep,
+                    RunContext& ctx) const {
+    const dyn::MotionDiagnostics before = dyn::Diagnose(p, p.declared());
+    const auto& after = rep.diagnostics.spectra;
+    std::ofstream csv(ctx.out->File("spectra.csv"));
+    csv << "channel,frequency_hz,psd_before,psd_after\n";
+    int best = -1;
+    double best_drop = 0.0;
+    for (size_t c = 0; c < before.spectra.size() && c < after.size(); ++c) {
+      const dyn::Spectrum& b = before.spectra[c].spectrum;
+      const dyn::Spectrum& a = after[c].spectrum;
+      double sb = 0.0, sa = 0.0;
+      for (size_t k = 0; k < b.psd.size() && k < a.psd.size(); ++k) {
+        csv << before.spectra[c].channel << "," << ExactNum(b.frequency_hz[k]) << ","
+            << ExactNum(b.psd[k]) << "," << ExactNum(a.psd[k]) << "\n";
+        sb += b.psd[k];
+        sa += a.psd[k];
+      }
+      if (before.spectra[c].channel.rfind("encoder", 0) != 0 && sb - sa > best_drop) {
+        best_drop = sb - sa;
+        best = static_cast<int>(c);
+      }
+    }
+    render::Figure fig(1000, 800, 2, 1);
+    if (best >= 0) {
+      render::Axes& ax = fig.axes(0, 0);
+      ax.title = "residual spectrum: " + before.spectra[best].channel;
+      ax.x_label = "frequency [Hz]";
+      ax.y_label = "PSD [noise std^2 / Hz]";
+      ax.y_log = true;
+      ax.x_min = 0.0;
+      ax.x_max = before.spectra[best].spectrum.rate_hz / 2;
+      ax.legend_position = render::LegendPosition::kTopRight;
+      ax.AddLine("declared model", before.spectra[best].spectrum.frequency_hz,
+                 before.spectra[best].spectrum.psd);
+      ax.AddLine("with the chosen effects", after[best].spectrum.frequency_hz,
+                 after[best].spectrum.psd);
+    }
+    const dyn::ResidualLayout& L = p.layout();
+    int joint = 0;
+    double worst = -1.0;
+    for (int j = 0; j < static_cast<int>(p.data().joints.size()); ++j) {
+      double e = 0.0;
+      for (int k = 0; k < L.size(); ++k) {
+        if (L.stream[k] == 0 && L.channel[k] == j) e += std::pow(p.declared().error[k], 2);
+      }
+      if (e > worst) worst = e, joint = j;
+    }
+    std::vector<double> t, eb, ea;
+    for (int k = 0; k < L.size(); ++k) {
+      if (L.stream[k] != 0 || L.channel[k] != joint || L.t[k] > p.data().t.front() + 4.0) continue;
+      t.push_back(L.t[k]);
+      eb.push_back(1e3 * p.declared().error[k]);
+      ea.push_back(1e3 * rep.final_state.prediction.error[k]);
+    }
+    render::Axes& ax = fig.axes(1, 0);
+    ax.title = "encoder " + p.data().joints[joint] + ": prediction - reading, first 4 s";
+    ax.x_label = "time [s]";
+    if (!t.empty()) {
+      ax.x_min = t.front();
+      ax.x_max = t.back();
+    }
+    ax.y_label = "residual [mrad]";
+    ax.AddLine("declared model", t, eb);
+    ax.AddLine("with the chosen effects", t, ea);
+    fig.SavePng(ctx.out->File("dynamic_residual.png").string());
   }
 
   std::string model_path_, declared_path_;

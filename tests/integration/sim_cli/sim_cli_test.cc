@@ -68,7 +68,10 @@ TEST(Inspect, RoverModelAsJson) {
   EXPECT_TRUE(supported["stiffening_spring"]);
   EXPECT_FALSE(supported["lateral_compliance"]);  // no J_lateral_a/b hinges
   EXPECT_TRUE(supported["joint_origin"]);
-  EXPECT_EQ(supported.size(), 15u);
+  EXPECT_TRUE(supported["joint_friction"]);
+  EXPECT_TRUE(supported["link_mode"]);
+  EXPECT_TRUE(supported["base_mode"]);
+  EXPECT_EQ(supported.size(), 24u);
   std::map<std::string, std::vector<std::string>> parts;
   for (const Json& e : j["effects"]) {
     if (e.contains("parts")) parts[e["name"]] = e["parts"].get<std::vector<std::string>>();

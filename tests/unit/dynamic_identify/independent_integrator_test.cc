@@ -375,7 +375,7 @@ TEST(IndependentIntegrator, IdentifiesBendingModeAndFriction) {
                 e.rms_before, e.rms_after);
   }
   const double ratio = rep.heldout_after / rep.heldout_before;
-  std::printf("held-out %.4g -> %.4g (ratio %.3g), verdict %s, %d rollouts, %.1f s\n",
+  std::printf("held-out %.4g -> %.4g (ratio %.3g), verdict %s, %ld rollouts, %.1f s\n",
               rep.heldout_before, rep.heldout_after, ratio, rep.verdict.c_str(), rep.rollouts,
               seconds);
 

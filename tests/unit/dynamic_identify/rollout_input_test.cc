@@ -66,8 +66,7 @@ TEST(DynamicInput, BadLogsAreOneLineNamingWhatIsWrong) {
             std::string::npos);
   MotionOptions one_segment;
   one_segment.segment_s = 5.0;
-  EXPECT_NE(ErrorOf(SineLog(0.5), one_segment).find("fewer than two segments"),
-            std::string::npos);
+  EXPECT_NE(ErrorOf(SineLog(0.5), one_segment).find("fewer than two segments"), std::string::npos);
   EXPECT_EQ(ErrorOf(SineLog(0.5), {}), "");
 }
 
@@ -85,12 +84,11 @@ TEST(DynamicInput, ADivergingRolloutIsACountedSegment) {
 TEST(ServoDelay, ADelayedServoFollowsTheSameCommandsLater) {
   const double dt = 0.001, delay = 0.02;
   auto plain = sim::Simulation::FromString(Pendulum(20), "pendulum");
-  auto late = sim::Simulation::FromString(Pendulum(20), "pendulum",
-                                          [] {
-                                            sim::EffectList e;
-                                            e.push_back(sim::MakeEffect("servo_delay", "{s: 0.02}"));
-                                            return e;
-                                          }());
+  auto late = sim::Simulation::FromString(Pendulum(20), "pendulum", [] {
+    sim::EffectList e;
+    e.push_back(sim::MakeEffect("servo_delay", "{s: 0.02}"));
+    return e;
+  }());
   const int lag = static_cast<int>(std::lround(delay / dt));
   std::vector<double> q_plain, q_late;
   for (int k = 0; k < 400; ++k) {
