@@ -268,6 +268,9 @@ std::string FigureDescription(const std::string& rel) {
        "joint estimates with their 95% bands against the commanded reference angles; the "
        "flexible arm bends between its joints, so there is no true joint angle to draw: its "
        "truth is the gripper's position (fig8_gripper_error.png)"},
+      {"dynamic_residual",
+       "the channel the chosen effects helped most: its residual spectrum, and an encoder's "
+       "residual in time, with the declared model and with the effects"},
       {"fig9_direct_fusion", "the gripper's height per estimator and the reference joint angles"},
       {"fig9_", "joint estimates with their 95% bands against the commanded reference angles"},
       {"fig10_yaw_drift", "the IMU orientation filter's yaw drift against the truth"},
@@ -767,6 +770,40 @@ Json IdentificationSummary(const Json& s, const fs::path& dir, std::string* sub)
   return At(s, "identification").is_object() ? s : Json();
 }
 
+// What a dynamic identification (closed_loop_dynamic) found: verdict, effects, streams, what is
+// left.
+void DynamicAnswer(const Json& run, std::ostringstream* h) {
+  const Json& d = At(run, "dynamic_identification");
+  if (!d.is_object()) return;
+  const std::string verdict = Text(At(At(run, "metrics"), "verdict"));
+  *h << "<h2>The answer</h2>\n<p class=\"verdict\">Verdict: <b>" << HtmlEscape(verdict)
+     << "</b></p>\n<h3>What was found</h3>\n";
+  const Json& chosen = At(d, "chosen");
+  if (chosen.is_array() && !chosen.empty()) {
+    *h << "<table><tr><th>effect</th><th>value</th><th>std</th><th>equivalent</th></tr>\n";
+    for (const Json& c : chosen) {
+      for (const auto& [name, v] : At(c, "values").items()) {
+        *h << "<tr><td>" << HtmlEscape(Text(At(c, "name"))) << "</td><td>" << Cell(v) << " "
+           << HtmlEscape(name) << "</td>" << Td(At(At(c, "std_errors"), name)) << "<td>"
+           << HtmlEscape(Joined(At(c, "equivalent"), ", ")) << "</td></tr>\n";
+      }
+    }
+    *h << "</table>\n";
+  } else {
+    *h << "<p>No effect was chosen.</p>\n";
+  }
+  *h << "<h3>How much better</h3>\n<table><tr><th>stream</th><th>unit</th><th>noise</th>"
+     << "<th>residual RMS before</th><th>after</th></tr>\n";
+  for (const Json& st : At(d, "streams")) {
+    *h << "<tr><td>" << HtmlEscape(Text(At(st, "stream"))) << "</td><td>"
+       << HtmlEscape(Text(At(st, "unit"))) << "</td>" << Td(At(st, "noise"))
+       << Td(At(st, "rms_before")) << Td(At(st, "rms_after")) << "</tr>\n";
+  }
+  *h << "</table>\n<h3>Selection and what is left</h3>\n<ul>\n";
+  for (const Json& line : At(d, "log")) *h << "<li>" << HtmlEscape(Text(line)) << "</li>\n";
+  *h << "</ul>\n";
+}
+
 // What an identification found, above everything else on its page.
 void Answer(const Json& run, const fs::path& dir, const std::vector<FileEntry>& files,
             std::ostringstream* h) {
@@ -936,6 +973,7 @@ std::string RunReportUnchecked(const fs::path& dir) {
   const Json& estimators = At(s, "estimators");
   const bool before_after = estimators.is_object() && BeforeAfterTable(estimators, &h);
   Answer(s, dir, files, &h);
+  DynamicAnswer(s, &h);
   // With an answer above, the full tables are there for who wants them, folded.
   const bool fold = before_after || At(s, "identification").is_object();
   if (fold) h << "<h2>How this was made</h2>\n";
