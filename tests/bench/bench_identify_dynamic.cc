@@ -21,6 +21,7 @@
 
 #include "scenarios/identify/dynamic/select.h"
 #include "sim/config.h"
+#include "sim/motion_log.h"
 #include "sim/mujoco_model.h"
 #include "sim/recorded_log.h"
 #include "sim/rng.h"
@@ -123,93 +124,27 @@ const char* const kCandidates[] = {"joint_friction@j2", "joint_friction@j4", "se
 constexpr double kDurationS = 60.0;
 constexpr double kCommandRateHz = 500.0;
 
-// Per joint: center + amplitude * (sum of sines, each joint its own permutation of the
-// frequencies and its own phases) / count, faded in over the first second (as the
-// closed_loop_dynamic kind drives its truth).
-struct MultiSine {
-  std::vector<double> center, amplitude, frequencies = {0.23, 0.61, 1.3}, phase;
-  double At(int joint, double t) const {
-    double s = 0.0;
-    const int nf = static_cast<int>(frequencies.size());
-    for (int i = 0; i < nf; ++i) {
-      const double f = frequencies[(i + joint) % nf] * (1.0 + 0.07 * joint);
-      s += std::sin(2.0 * M_PI * f * t + phase[joint * nf + i]);
-    }
-    const double fade = t < 1.0 ? 0.5 - 0.5 * std::cos(M_PI * t) : 1.0;
-    return center[joint] + fade * amplitude[joint] * s / nf;
-  }
-};
-
 sim::RecordedLog SimulateTruth() {
   const sim::EffectList effects =
       sim::ParseEffects(ConfigNode::LoadString(kTruthEffects, "bench truth effects"));
   const std::unique_ptr<sim::Simulation> truth =
       sim::Simulation::FromString(kArmXml, "arm7", effects);
-  sim::Simulation& s = *truth;
-  sim::SensorSuite sensors =
-      sim::SensorSuite::Parse(ConfigNode::LoadString(kSensors, "bench").Child("sensors"), s, 1);
-  const int n = s.num_actuated();
+  sim::SensorSuite sensors = sim::SensorSuite::Parse(
+      ConfigNode::LoadString(kSensors, "bench").Child("sensors"), *truth, 1);
   const double deg = M_PI / 180.0;
-  MultiSine motion;
+  sim::MultiSine motion;
+  motion.frequencies = {0.23, 0.61, 1.3};
   for (double c : {0.0, 30.0, 0.0, 40.0, 0.0, 20.0, 0.0}) motion.center.push_back(c * deg);
   for (double a : {40.0, 25.0, 40.0, 30.0, 40.0, 30.0, 40.0}) motion.amplitude.push_back(a * deg);
-  sim::NoiseStream rng(1, "bench_identify_dynamic/phases");
-  motion.phase.resize(n * motion.frequencies.size());
-  for (double& p : motion.phase) p = 2.0 * M_PI * rng.Uniform();
-  Eigen::VectorXd cmd(n);
-  for (int k = 0; k < n; ++k) cmd[k] = motion.At(k, 0.0);
-  s.SetCommand(cmd);
-  s.Settle();
-  sim::RecordedLog log;
+  motion.DrawPhases(1, "bench_identify_dynamic/phases", truth->num_actuated());
+  sim::MotionLogOptions o;
+  o.duration_s = kDurationS;
+  o.command_rate_hz = kCommandRateHz;
+  o.encoder_std = 0.02 * deg;
+  o.gyro_std = 0.003;
+  o.accel_std = 0.05;
+  sim::RecordedLog log = sim::SimulateMotionLog(*truth, sensors, motion, o);
   log.dir = "arm7 (simulated)";
-  log.robot = s.model_name();
-  log.joints = s.actuated_joints();
-  log.joint_is_slide.assign(n, 0);
-  log.command_joints = log.joints;
-  log.command_is_slide = log.joint_is_slide;
-  log.joint_std = 0.02 * deg;
-  log.gyro_std = 0.003;
-  log.accel_std = 0.05;
-  std::map<std::string, int> imu_index;
-  for (const auto& sensor : sensors.sensors()) {
-    if (sensor->kind() != "imu") continue;
-    imu_index[sensor->name()] = static_cast<int>(log.imus.size());
-    log.imus.push_back({sensor->name(), "", false, Quat::Identity()});
-  }
-  const long steps = std::lround(kDurationS / s.timestep());
-  const long per_command = std::max(1L, std::lround(1.0 / (kCommandRateHz * s.timestep())));
-  std::vector<sim::SensorReading> readings;
-  std::map<double, std::vector<double>> rows;  // encoder rows by time
-  for (long k = 0; k <= steps; ++k) {
-    if (k % per_command == 0) {
-      const double t = s.time();
-      for (int j = 0; j < n; ++j) cmd[j] = motion.At(j, t);
-      s.SetCommand(cmd);
-      log.command_t.push_back(t);
-      log.command_q.insert(log.command_q.end(), cmd.data(), cmd.data() + n);
-    }
-    readings.clear();
-    sensors.Poll(s, &readings);
-    for (const sim::SensorReading& r : readings) {
-      if (const auto* e = std::get_if<sim::EncoderReading>(&r)) {
-        std::vector<double>& row = rows[e->t];
-        row.resize(n, 0.0);
-        for (int j = 0; j < n; ++j) {
-          if (log.joints[j] == e->joint) row[j] = e->position;
-        }
-      } else if (const auto* z = std::get_if<sim::ImuReading>(&r)) {
-        estimators::ImuReading reading = *z;
-        reading.imu = imu_index.at(z->sensor);
-        log.imus[reading.imu].frame = z->site;
-        log.imu.push_back(reading);
-      }
-    }
-    if (k < steps) s.Step(1);
-  }
-  for (const auto& [t, row] : rows) {
-    log.joint_t.push_back(t);
-    log.joint_q.insert(log.joint_q.end(), row.begin(), row.end());
-  }
   return log;
 }
 

@@ -23,8 +23,8 @@
 #include "scenarios/identify/dynamic/select.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_model.h"
+#include "sim/motion_log.h"
 #include "sim/recorded_log.h"
-#include "sim/rng.h"
 #include "sim/sensors/sensor.h"
 #include "sim/simulation.h"
 
@@ -36,23 +36,6 @@ namespace dyn = identify::dynamic;
 struct Expected {
   std::string name;
   std::vector<double> values;
-};
-
-// Per actuated joint: center + amplitude * (sum of sines at the frequencies, phases from the
-// seed) / count, faded in over the first second so the servos start at rest.
-struct MultiSine {
-  std::vector<double> center, amplitude, frequencies, phase;
-  double At(int joint, double t) const {
-    double s = 0.0;
-    const int nf = static_cast<int>(frequencies.size());
-    for (int i = 0; i < nf; ++i) {
-      // Each joint its own permutation of the frequencies, so their motions differ.
-      const double f = frequencies[(i + joint) % nf] * (1.0 + 0.07 * joint);
-      s += std::sin(2.0 * M_PI * f * t + phase[joint * nf + i]);
-    }
-    const double fade = t < 1.0 ? 0.5 - 0.5 * std::cos(M_PI * t) : 1.0;
-    return center[joint] + fade * amplitude[joint] * s / nf;
-  }
 };
 
 class ClosedLoopDynamicKind : public ScenarioKind {
@@ -160,66 +143,16 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   }
 
   sim::RecordedLog Simulate(std::uint64_t seed, sim::SensorSuite& sensors) {
-    sim::Simulation& s = *truth_;
-    const int n = s.num_actuated();
-    sim::NoiseStream rng(seed, "closed_loop_dynamic/phases");
-    motion_.phase.resize(n * motion_.frequencies.size());
-    for (double& p : motion_.phase) p = 2.0 * M_PI * rng.Uniform();
-    Eigen::VectorXd cmd(n);
-    for (int k = 0; k < n; ++k) cmd[k] = motion_.At(k, 0.0);
-    s.SetCommand(cmd);
-    s.Settle();
-    sim::RecordedLog log;
-    log.robot = truth_->model_name();
-    log.declared_path = std::filesystem::absolute(declared_path_).lexically_normal().string();
-    log.joints = s.actuated_joints();
-    log.joint_is_slide.assign(n, 0);
-    log.command_joints = log.joints;
-    log.command_is_slide = log.joint_is_slide;
-    log.joint_std = std_q_;
-    log.gyro_std = std_gyro_;
-    log.accel_std = std_accel_;
-    std::map<std::string, int> imu_index;
-    for (const auto& sensor : sensors.sensors()) {
-      if (sensor->kind() != "imu") continue;
-      imu_index[sensor->name()] = static_cast<int>(log.imus.size());
-      log.imus.push_back({sensor->name(), "", false, Quat::Identity()});
-    }
-    const long steps = std::lround(duration_s_ / s.timestep());
-    const long per_command = std::max(1L, std::lround(1.0 / (command_rate_hz_ * s.timestep())));
-    std::vector<sim::SensorReading> readings;
-    std::map<double, std::vector<double>> rows;  // encoder rows by time
-    for (long k = 0; k <= steps; ++k) {
-      if (k % per_command == 0) {
-        const double t = s.time();
-        for (int j = 0; j < n; ++j) cmd[j] = motion_.At(j, t);
-        s.SetCommand(cmd);
-        log.command_t.push_back(t);
-        log.command_q.insert(log.command_q.end(), cmd.data(), cmd.data() + n);
-      }
-      readings.clear();
-      sensors.Poll(s, &readings);
-      for (const sim::SensorReading& r : readings) {
-        if (const auto* e = std::get_if<sim::EncoderReading>(&r)) {
-          std::vector<double>& row = rows[e->t];
-          row.resize(n, 0.0);
-          for (int j = 0; j < n; ++j) {
-            if (log.joints[j] == e->joint) row[j] = e->position;
-          }
-        } else if (const auto* z = std::get_if<sim::ImuReading>(&r)) {
-          estimators::ImuReading reading = *z;
-          reading.imu = imu_index.at(z->sensor);
-          log.imus[reading.imu].frame = z->site;
-          log.imu.push_back(reading);
-        }
-      }
-      if (k < steps) s.Step(1);
-    }
-    for (const auto& [t, row] : rows) {
-      log.joint_t.push_back(t);
-      log.joint_q.insert(log.joint_q.end(), row.begin(), row.end());
-    }
-    return log;
+    sim::MultiSine motion = motion_;
+    motion.DrawPhases(seed, "closed_loop_dynamic/phases", truth_->num_actuated());
+    sim::MotionLogOptions o;
+    o.duration_s = duration_s_;
+    o.command_rate_hz = command_rate_hz_;
+    o.encoder_std = std_q_;
+    o.gyro_std = std_gyro_;
+    o.accel_std = std_accel_;
+    o.declared_path = std::filesystem::absolute(declared_path_).lexically_normal().string();
+    return sim::SimulateMotionLog(*truth_, sensors, motion, o);
   }
 
   void WriteSummary(const dyn::DynamicReport& rep, RunContext& ctx) const {
@@ -356,7 +289,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   sim::DeclaredModel declared_;
   std::unique_ptr<sim::Simulation> truth_;
   double duration_s_ = 12.0, command_rate_hz_ = 500.0;
-  MultiSine motion_;
+  sim::MultiSine motion_;
   std::unique_ptr<ConfigNode> sensors_node_;
   double std_q_ = 0.0, std_gyro_ = 0.0, std_accel_ = 0.0;
   dyn::MotionOptions motion_options_;

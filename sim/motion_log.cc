@@ -1,0 +1,91 @@
+#include "sim/motion_log.h"
+
+#include <cmath>
+#include <map>
+#include <variant>
+
+#include "sim/rng.h"
+
+namespace flexbench::sim {
+
+void MultiSine::DrawPhases(std::uint64_t seed, const std::string& name, int joints) {
+  NoiseStream rng(seed, name);
+  phase.resize(joints * frequencies.size());
+  for (double& p : phase) p = 2.0 * M_PI * rng.Uniform();
+}
+
+double MultiSine::At(int joint, double t) const {
+  double s = 0.0;
+  const int nf = static_cast<int>(frequencies.size());
+  for (int i = 0; i < nf; ++i) {
+    const double f = frequencies[(i + joint) % nf] * (1.0 + 0.07 * joint);
+    s += std::sin(2.0 * M_PI * f * t + phase[joint * nf + i]);
+  }
+  const double fade = t < 1.0 ? 0.5 - 0.5 * std::cos(M_PI * t) : 1.0;
+  return center[joint] + fade * amplitude[joint] * s / nf;
+}
+
+RecordedLog SimulateMotionLog(Simulation& s, SensorSuite& sensors, const MultiSine& motion,
+                              const MotionLogOptions& o) {
+  const int n = s.num_actuated();
+  Eigen::VectorXd cmd(n);
+  for (int k = 0; k < n; ++k) cmd[k] = motion.At(k, 0.0);
+  s.SetCommand(cmd);
+  s.Settle();
+  RecordedLog log;
+  log.robot = s.model_name();
+  log.declared_path = o.declared_path;
+  log.joints = s.actuated_joints();
+  log.joint_is_slide.assign(n, 0);
+  for (int k = 0; k < n; ++k) {
+    log.joint_is_slide[k] = s.model()->jnt_type[s.catalog().actuated[k]] == mjJNT_SLIDE;
+  }
+  log.command_joints = log.joints;
+  log.command_is_slide = log.joint_is_slide;
+  log.joint_std = o.encoder_std;
+  log.gyro_std = o.gyro_std;
+  log.accel_std = o.accel_std;
+  std::map<std::string, int> imu_index;
+  for (const auto& sensor : sensors.sensors()) {
+    if (sensor->kind() != "imu") continue;
+    imu_index[sensor->name()] = static_cast<int>(log.imus.size());
+    log.imus.push_back({sensor->name(), "", false, Quat::Identity()});
+  }
+  const long steps = std::lround(o.duration_s / s.timestep());
+  const long per_command = std::max(1L, std::lround(1.0 / (o.command_rate_hz * s.timestep())));
+  std::vector<SensorReading> readings;
+  std::map<double, std::vector<double>> rows;  // encoder rows by time
+  for (long k = 0; k <= steps; ++k) {
+    if (k % per_command == 0) {
+      const double t = s.time();
+      for (int j = 0; j < n; ++j) cmd[j] = motion.At(j, t);
+      s.SetCommand(cmd);
+      log.command_t.push_back(t);
+      log.command_q.insert(log.command_q.end(), cmd.data(), cmd.data() + n);
+    }
+    readings.clear();
+    sensors.Poll(s, &readings);
+    for (const SensorReading& r : readings) {
+      if (const auto* e = std::get_if<EncoderReading>(&r)) {
+        std::vector<double>& row = rows[e->t];
+        row.resize(n, 0.0);
+        for (int j = 0; j < n; ++j) {
+          if (log.joints[j] == e->joint) row[j] = e->position;
+        }
+      } else if (const auto* z = std::get_if<ImuReading>(&r)) {
+        estimators::ImuReading reading = *z;
+        reading.imu = imu_index.at(z->sensor);
+        log.imus[reading.imu].frame = z->site;
+        log.imu.push_back(reading);
+      }
+    }
+    if (k < steps) s.Step(1);
+  }
+  for (const auto& [t, row] : rows) {
+    log.joint_t.push_back(t);
+    log.joint_q.insert(log.joint_q.end(), row.begin(), row.end());
+  }
+  return log;
+}
+
+}  // namespace flexbench::sim
