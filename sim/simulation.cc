@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <mutex>
 #include <set>
 #include <stdexcept>
 #include <tuple>
@@ -27,21 +28,32 @@ constexpr double kBacklashLoadEps = 1e-9;
 constexpr int kMaxBacklashPasses = 8;
 
 // MuJoCo prints its first warning of each kind through mju_user_warning (and writes
-// MUJOCO_LOG.TXT by default). While stepping, keep the text for our error message instead.
+// MUJOCO_LOG.TXT by default). While a thread steps, keep the text for our error message instead.
+// The handler is global and rollouts step on several threads, so it is installed once and reads
+// a per-thread sink; with none it does what MuJoCo does without a handler.
 thread_local std::string* g_step_warning = nullptr;
+void (*g_previous_warning)(const char*) = nullptr;
 void CaptureWarning(const char* msg) {
-  if (g_step_warning) *g_step_warning = msg;
+  if (g_step_warning) {
+    *g_step_warning = msg;
+  } else if (g_previous_warning) {
+    g_previous_warning(msg);
+  } else {
+    mju_writeLog("WARNING", msg);
+    std::printf("WARNING: %s\n\n", msg);
+  }
 }
 struct StepWarningScope {
-  explicit StepWarningScope(std::string* sink) : previous(mju_user_warning) {
+  explicit StepWarningScope(std::string* sink) : previous(g_step_warning) {
+    static std::once_flag installed;
+    std::call_once(installed, [] {
+      g_previous_warning = mju_user_warning;
+      mju_user_warning = CaptureWarning;
+    });
     g_step_warning = sink;
-    mju_user_warning = CaptureWarning;
   }
-  ~StepWarningScope() {
-    mju_user_warning = previous;
-    g_step_warning = nullptr;
-  }
-  void (*previous)(const char*);
+  ~StepWarningScope() { g_step_warning = previous; }
+  std::string* previous;
 };
 
 double DeadZone(double x, double half_width) {
@@ -165,13 +177,11 @@ void Simulation::SetCommand(const Eigen::VectorXd& q_motor) {
 }
 
 void Simulation::SetCommandAt(double t, const Eigen::VectorXd& q_motor) {
-  SetCommand(q_motor);
-  if (max_delay_ > 0.0) {
-    history_t_.back() = t;
-    if (history_t_.size() - history_begin_ >= 2 && t < history_t_[history_t_.size() - 2]) {
-      throw std::invalid_argument(model_name_ + ": commands sent out of time order");
-    }
+  if (max_delay_ > 0.0 && history_t_.size() > history_begin_ && t < history_t_.back()) {
+    throw std::invalid_argument(model_name_ + ": commands sent out of time order");
   }
+  SetCommand(q_motor);
+  if (max_delay_ > 0.0) history_t_.back() = t;
 }
 
 void Simulation::PushCommandHistory(double t) {
@@ -240,6 +250,7 @@ void Simulation::SetCommand(const std::string& joint, double q_motor) {
   for (int i = 0; i < num_actuated(); ++i) {
     if (actuated_names_[i] == joint) {
       command_[i] = q_motor;
+      if (max_delay_ > 0.0) PushCommandHistory(data_->time);
       return;
     }
   }
@@ -548,7 +559,7 @@ void Simulation::CheckStep(double time_before) const {
   }
   if (!reason.empty()) {
     throw SimulationError(model_name_ + ": simulation diverged at step " + std::to_string(steps_) +
-                          " (t = " + ShortNum(steps_ * m->opt.timestep) + " s): " + reason);
+                          " (t = " + ShortNum(time_before + m->opt.timestep) + " s): " + reason);
   }
 }
 

@@ -49,12 +49,14 @@ struct ImuBiasSpec {
 // Stribeck friction of one joint (a truth-only dynamic effect): a breakaway torque `static_Nm`
 // above the sliding torque `coulomb_Nm` at low speed,
 //   tau = -(Fc + (Fs - Fc) exp(-(v / vs)^2)) v / sqrt(v^2 + eps^2),
-// smoothed over eps so that an explicit step stays stable.
+// smoothed over eps: near v = 0 it acts as a damper of (Fs / eps), which an explicit step keeps
+// stable while Fs dt / (eps I) < 2 (I the joint's inertia): 0.02 rad/s keeps Fs / eps to 30
+// N m s/rad for closed_loop_dynamic_stribeck's 0.6 N m breakaway.
 struct StribeckSpec {
   double static_Nm = 0.0;
   double coulomb_Nm = 0.0;
   double velocity = 0.05;   // vs, rad/s (m/s)
-  double smoothing = 1e-3;  // eps, rad/s (m/s)
+  double smoothing = 0.02;  // eps, rad/s (m/s)
   bool active() const { return static_Nm > 0.0 || coulomb_Nm > 0.0; }
   double Torque(double v) const {
     const double level =

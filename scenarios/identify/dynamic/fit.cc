@@ -148,11 +148,10 @@ Eigen::MatrixXd DynamicProblem::Jacobian(const std::vector<int>& active,
     if (t[i] < lo[i]) t[i] = lo[i];
     const Prediction p = Roll(Terms(active, t), data_);
     J.col(col) = (p.residual - at.residual) / h;
-    for (size_t s = 0; s < p.diverged.size(); ++s) {
-      if (!p.diverged[s]) continue;
-      for (int k = 0; k < layout_.size(); ++k) {
-        if (layout_.segment[k] == static_cast<int>(s)) J(k, col) = 0.0;
-      }
+    // A diverged segment has no derivative, nor the next one, which starts from a settled state.
+    for (int k = 0; k < layout_.size(); ++k) {
+      const int s = layout_.segment[k];
+      if (p.diverged[s] || (s > 0 && p.diverged[s - 1] && !at.diverged[s - 1])) J(k, col) = 0.0;
     }
   });
   return J;
@@ -219,7 +218,11 @@ FitState DynamicProblem::RefineStarts(const FitState& fit, int iterations) {
   for (int s = 0; s < ns; ++s) {
     const int first = k;
     while (k < layout_.size() && layout_.segment[k] == s) ++k;
-    if (declared_.diverged[s] || fit.prediction.diverged[s]) continue;
+    bool lost = declared_.diverged[s] || fit.prediction.diverged[s];
+    for (int j = 0; j < nj; ++j) {
+      lost |= moved[j].diverged[s] || (s > 0 && moved[j].diverged[s - 1]);
+    }
+    if (lost) continue;
     Eigen::MatrixXd J(k - first, nj);
     for (int j = 0; j < nj; ++j) {
       J.col(j) =

@@ -62,8 +62,9 @@ class DynamicProblem {
   std::vector<char> Mask(int held_out_fold) const;
   // Multiple shooting's nuisance: one Gauss-Newton step on every segment's starting speeds at
   // `fit` (a rollout per joint: a segment's speeds move only its own rollout, to first order, so
-  // one perturbation serves all segments), kept where it lowers the segment's cost. Returns the
-  // refitted state of `fit`'s effects from the new starts.
+  // one perturbation serves all segments; a segment whose perturbed rollout diverged keeps its
+  // start). Returns the refitted state of `fit`'s effects from the new starts, or `fit` with the
+  // starts as they were when the refit does not lower the cost.
   FitState RefineStarts(const FitState& fit, int iterations);
   double Cost(const Eigen::VectorXd& residual, const std::vector<char>& mask) const;
   Eigen::VectorXd Lower(const std::vector<int>& active) const;

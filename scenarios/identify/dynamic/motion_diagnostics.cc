@@ -79,6 +79,54 @@ Eigen::MatrixXd CommandRate(const MotionData& d) {
   return rate;
 }
 
+// The residual's mean square while `joint` reverses (speed below `slow`) over its mean square
+// elsewhere, and a one-sided p-value for it: the two means compared with their standard errors
+// from blocks of `block` samples (a rollout's residual is correlated over its segment).
+struct Reversal {
+  double ratio = 0.0;
+  double p_value = 1.0;
+};
+Reversal AtReversals(const Channel& c, const std::vector<double>& v, double slow, int block) {
+  Reversal out;
+  std::vector<double> slow_blocks, fast_blocks;
+  double s_sum = 0, f_sum = 0;
+  int s_n = 0, f_n = 0;
+  const int n = static_cast<int>(c.r.size());
+  for (int b = 0; b + block <= n; b += block) {
+    double ss = 0, fs = 0;
+    int sn = 0, fn = 0;
+    for (int i = b; i < b + block; ++i) {
+      const double r2 = c.r[i] * c.r[i];
+      if (std::abs(v[i]) < slow) {
+        ss += r2;
+        ++sn;
+      } else {
+        fs += r2;
+        ++fn;
+      }
+    }
+    if (sn > 0) slow_blocks.push_back(ss / sn);
+    if (fn > 0) fast_blocks.push_back(fs / fn);
+    s_sum += ss;
+    s_n += sn;
+    f_sum += fs;
+    f_n += fn;
+  }
+  if (slow_blocks.size() < 5 || fast_blocks.size() < 5 || f_sum <= 0) return out;
+  const auto var_of_mean = [](const std::vector<double>& x) {
+    double m = 0, v = 0;
+    for (double a : x) m += a;
+    m /= x.size();
+    for (double a : x) v += (a - m) * (a - m);
+    return v / (x.size() - 1) / x.size();
+  };
+  const double ms = s_sum / s_n, mf = f_sum / f_n;
+  out.ratio = ms / mf;
+  const double z = (ms - mf) / std::sqrt(var_of_mean(slow_blocks) + var_of_mean(fast_blocks));
+  out.p_value = 0.5 * std::erfc(z / std::sqrt(2.0));
+  return out;
+}
+
 }  // namespace
 
 MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
@@ -107,6 +155,18 @@ MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
                                   "x the floor (p = " + ShortNum(pk.p_value) + ")"});
     }
     out.spectra.push_back(std::move(cs));
+    // Each joint's reversals, seen in this channel.
+    for (int j = 0; j < static_cast<int>(d.joints.size()); ++j) {
+      const std::vector<double> vj = At(d.t, d.qd, j, c.t);
+      const Reversal rv = AtReversals(c, vj, o.reversal_speed, static_cast<int>(hz / 10));
+      if (rv.p_value < alpha / d.joints.size() && rv.ratio >= o.min_reversal_ratio) {
+        out.findings.push_back({"reversal", c.name, rv.p_value, 0.0, rv.ratio,
+                                c.name + ": the residual is " + ShortNum(rv.ratio) +
+                                    " times larger while " + d.joints[j] + " reverses (|speed| < " +
+                                    ShortNum(o.reversal_speed) + "; p = " + ShortNum(rv.p_value) +
+                                    ")"});
+      }
+    }
     if (c.joint < 0) continue;
     const std::vector<double> v = At(d.t, d.qd, c.joint, c.t);
     const VelocityTrend vt = ResidualVersusVelocity(c.r.data(), v.data(), n, 16);
@@ -128,6 +188,9 @@ MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
                                   " ms; p = " + ShortNum(lt.p_value) + ")"});
     }
   }
+  std::stable_sort(
+      out.findings.begin(), out.findings.end(),
+      [](const MotionFinding& a, const MotionFinding& b) { return a.p_value < b.p_value; });
   std::stable_sort(out.levels.begin(), out.levels.end(),
                    [](const ChannelLevel& a, const ChannelLevel& b) { return a.rms > b.rms; });
   return out;

@@ -1,8 +1,9 @@
 // What a dynamic fit's residual still shows, located: a peak of a channel's spectrum (a mode the
 // model lacks: its frequency, and the IMU or joint that shows it), a residual that follows a
-// joint's velocity (friction), one that follows its command's rate (a servo delay). Each finding
-// is significant (p below alpha, Bonferroni over the channels) and large enough to matter (its
-// share of the channel's residual).
+// joint's velocity (friction), one that follows its command's rate (a servo delay), one that
+// grows while a joint reverses (friction at low speed: Stribeck's breakaway, stiction). Each
+// finding is significant (p below alpha, Bonferroni over the channels) and large enough to matter
+// (its share of the channel's residual).
 #pragma once
 
 #include <string>
@@ -20,10 +21,14 @@ struct DiagnoseOptions {
   double min_velocity_share = 0.05;  // of the channel's residual variance
   double min_lag_correlation = 0.2;
   double max_lag_s = 0.1;
+  // A joint "reverses" while its speed is below this; the residual's mean square there against
+  // elsewhere (friction at low speed the model lacks: Stribeck's breakaway, stiction).
+  double reversal_speed = 0.05;
+  double min_reversal_ratio = 2.0;
 };
 
 struct MotionFinding {
-  std::string kind;     // spectrum_peak, velocity_trend, command_lag
+  std::string kind;     // spectrum_peak, velocity_trend, command_lag, reversal
   std::string channel;  // "encoder link2_pitch_joint", "gyro imu2 y", ...
   double p_value = 1.0;
   double frequency_hz = 0.0;  // spectrum_peak
@@ -42,7 +47,7 @@ struct ChannelLevel {
 };
 
 struct MotionDiagnostics {
-  std::vector<MotionFinding> findings;
+  std::vector<MotionFinding> findings;  // smallest p first
   std::vector<ChannelSpectrum> spectra;
   std::vector<ChannelLevel> levels;  // every channel, largest first
 };

@@ -109,8 +109,16 @@ Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& te
     sim->SetCommand(d.q.row(row).transpose());
     sim->Settle();
   };
-  settle_at(0);
-  Eigen::VectorXd q0(nj), qd0(nj);
+  try {
+    settle_at(0);
+  } catch (const SimulationError& err) {
+    // No state to start from: every segment is lost.
+    p.diverged.assign(d.segments.size(), 1);
+    p.num_diverged = static_cast<int>(d.segments.size());
+    p.first_divergence = err.what();
+    return p;
+  }
+  Eigen::VectorXd q0(nj), qd0(nj), c_row(nj);
   int e = 0;
   for (size_t s = 0; s < d.segments.size(); ++s) {
     const Segment& g = d.segments[s];
@@ -121,11 +129,14 @@ Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& te
       q0 = d.q.row(g.row_begin).transpose();
       qd0 = d.start_qd.row(static_cast<int>(s)).transpose();
       sim->SetActuatedState(t0, q0, qd0);
-      size_t c = std::lower_bound(d.command_t.begin(), d.command_t.end(), t0 - kCommandLookBackS) -
+      // From the command in force at the look-back's start (the last sent before it) on.
+      size_t c = std::upper_bound(d.command_t.begin(), d.command_t.end(), t0 - kCommandLookBackS) -
                  d.command_t.begin();
+      if (c > 0) --c;
       const auto send_until = [&](double t) {
         for (; c < d.command_t.size() && d.command_t[c] <= t + 1e-9; ++c) {
-          sim->SetCommandAt(d.command_t[c], d.command.row(static_cast<int>(c)).transpose());
+          c_row = d.command.row(static_cast<int>(c)).transpose();
+          sim->SetCommandAt(d.command_t[c], c_row);
         }
       };
       send_until(t0);

@@ -27,16 +27,45 @@ void ZeroUnmasked(const std::vector<char>& mask, Eigen::MatrixXd* J, Eigen::Vect
   }
 }
 
-// min |r + J d| over d with lo <= theta + d <= hi (clamped once, the free part re-solved).
+// min |r + J d| over d with lo <= theta + d <= hi: an active-set loop (a coordinate the
+// unconstrained step pushes past its bound is held there, the others solved again, until no
+// free coordinate leaves its bounds).
 double LinearRss(const Eigen::MatrixXd& J, const Eigen::VectorXd& r, const Eigen::VectorXd& theta,
                  const Eigen::VectorXd& lo, const Eigen::VectorXd& hi, Eigen::VectorXd* d_out) {
+  const int n = static_cast<int>(theta.size());
   const Eigen::MatrixXd A = J.transpose() * J;
   const Eigen::VectorXd g = J.transpose() * r;
-  Eigen::MatrixXd H = A;
-  H.diagonal() += 1e-9 * A.diagonal().cwiseMax(1e-12);
-  Eigen::VectorXd d = -H.ldlt().solve(g);
-  const Eigen::VectorXd clamped = (theta + d).cwiseMax(lo).cwiseMin(hi) - theta;
-  if ((clamped - d).norm() > 0.0) d = clamped;
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(n);
+  std::vector<char> held(n, 0);
+  for (int pass = 0; pass <= n; ++pass) {
+    std::vector<int> free;
+    for (int i = 0; i < n; ++i) {
+      if (!held[i]) free.push_back(i);
+    }
+    const int m = static_cast<int>(free.size());
+    Eigen::MatrixXd Af(m, m);
+    Eigen::VectorXd gf(m);
+    for (int a = 0; a < m; ++a) {
+      gf[a] = g[free[a]];
+      for (int i = 0; i < n; ++i) {
+        if (held[i]) gf[a] += A(free[a], i) * d[i];
+      }
+      for (int b = 0; b < m; ++b) Af(a, b) = A(free[a], free[b]);
+    }
+    Af.diagonal() += 1e-9 * Af.diagonal().cwiseMax(1e-12);
+    const Eigen::VectorXd df = m > 0 ? Eigen::VectorXd(-Af.ldlt().solve(gf)) : Eigen::VectorXd();
+    bool changed = false;
+    for (int a = 0; a < m; ++a) {
+      const int i = free[a];
+      d[i] = df[a];
+      if (theta[i] + d[i] < lo[i] || theta[i] + d[i] > hi[i]) {
+        d[i] = std::clamp(theta[i] + d[i], lo[i], hi[i]) - theta[i];
+        held[i] = 1;
+        changed = true;
+      }
+    }
+    if (!changed) break;
+  }
   if (d_out) *d_out = d;
   return (r + J * d).squaredNorm();
 }
@@ -116,7 +145,11 @@ class Selection {
       Eigen::VectorXd d;
       LinearRss(Jt, r, fit.theta, p_.Lower(fit.active), p_.Upper(fit.active), &d);
       const FitState at = p_.Evaluate(fit.active, fit.theta + d, train);
-      const Eigen::VectorXd& res = at.ok ? at.prediction.residual : fit.prediction.residual;
+      if (!at.ok) {
+        cost[f] = std::numeric_limits<double>::infinity();  // the fold's fit does not hold
+        return;
+      }
+      const Eigen::VectorXd& res = at.prediction.residual;
       for (int k = 0; k < L.size(); ++k) {
         if (all_[k] && p_.data().segments[L.segment[k]].fold == f) cost[f] += res[k] * res[k];
       }
@@ -158,7 +191,9 @@ Eigen::MatrixXd ClusterCovariance(const DynamicProblem& p, const FitState& fit,
     }
     s += J.row(k).transpose() * r[k];
   }
-  const Eigen::MatrixXd Ainv = A.fullPivLu().inverse();
+  const Eigen::FullPivLU<Eigen::MatrixXd> lu(A);
+  if (!lu.isInvertible()) return Eigen::MatrixXd::Constant(n, n, std::nan(""));
+  const Eigen::MatrixXd Ainv = lu.inverse();
   return Ainv * B * Ainv;
 }
 
@@ -262,7 +297,8 @@ class Stages {
         break;
       }
       Log("round " + std::to_string(round) + ": chose " + cands[best.fit.active.back()].Name());
-      state = Remove(std::move(best), static_cast<int>(best.fit.active.size()) - 1);
+      const int added = static_cast<int>(best.fit.active.size()) - 1;
+      state = Remove(std::move(best), added);
     }
     return state;
   }
@@ -304,7 +340,8 @@ class Stages {
           Log("swapped " + p_.candidates()[state.fit.active[i]].Name() + " for " +
               p_.candidates()[alt[k].candidate].Name() + ": held-out " + ShortNum(t.heldout) +
               " (" + ShortNum(state.heldout) + " before)");
-          state = Remove(std::move(t), static_cast<int>(ext.size()) - 1);
+          const int added = static_cast<int>(ext.size()) - 1;
+          state = Remove(std::move(t), added);
           changed = true;
           break;
         }
@@ -354,7 +391,6 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   Scored start;
   start.fit = p.Evaluate({}, Eigen::VectorXd(), sel.all());
   start.heldout = sel.HeldOut(start.fit);
-  const FitState declared = start.fit;
   rep.heldout_before = start.heldout;
   Scored state = stages.Swap(stages.Forward(start));
   rep.heldout_after = state.heldout;
@@ -365,6 +401,8 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
                       ShortNum(state.fit.cost));
   }
   const FitState& fit = state.fit;
+  // "Before" from the same starts as the fit: the refined speeds are not the effects' credit.
+  rep.declared_state = p.Evaluate({}, Eigen::VectorXd(), sel.all());
   const Eigen::MatrixXd cov =
       fit.theta.size() > 0 ? ClusterCovariance(p, fit, sel.all()) : Eigen::MatrixXd();
   for (size_t i = 0; i < fit.active.size(); ++i) {
@@ -376,13 +414,15 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
     for (int k = 0; k < row.num_values; ++k) {
       ce.value_names.push_back(row.value_names[k]);
       ce.values.push_back(fit.theta[off + k]);
-      ce.std_errors.push_back(std::sqrt(std::max(0.0, cov(off + k, off + k))));
+      // NaN when the data cannot fix the value (a singular fit), never a false zero.
+      const double var = cov(off + k, off + k);
+      ce.std_errors.push_back(var >= 0.0 ? std::sqrt(var) : std::nan(""));
     }
     ce.equivalent = stages.Equivalent(fit, static_cast<int>(i));
     rep.chosen.push_back(std::move(ce));
   }
   for (int s = 0; s < 3; ++s) {
-    StreamError e = StreamStats(p, declared, fit, sel.all(), s);
+    StreamError e = StreamStats(p, rep.declared_state, fit, sel.all(), s);
     if (e.entries > 0) rep.streams.push_back(e);
   }
   rep.diagnostics = Diagnose(p, fit.prediction);

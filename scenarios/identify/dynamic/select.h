@@ -76,6 +76,7 @@ struct DynamicReport {
   std::vector<std::string> log;
   long rollouts = 0;  // of the whole log, the declared model's included
   FitState final_state;
+  FitState declared_state;  // the declared model from the final fit's segment starts
 };
 
 // Selects, then refines the segments' starting speeds with the chosen effects and refits them

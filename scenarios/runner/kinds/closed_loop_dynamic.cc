@@ -123,15 +123,23 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   }
 
   void ReadIdentify(const ConfigNode& id) {
-    motion_options_.segment_s = id.GetDouble("segment_s", motion_options_.segment_s);
-    motion_options_.folds = id.GetInt("folds", motion_options_.folds);
+    const auto positive = [&](const char* key, double fallback, double lo, double hi) {
+      const double v = id.GetDouble(key, fallback);
+      if (!(v >= lo && v <= hi)) {
+        id.Child(key).Fail("must be in [" + ShortNum(lo) + ", " + ShortNum(hi) + "]");
+      }
+      return v;
+    };
+    motion_options_.segment_s = positive("segment_s", motion_options_.segment_s, 1e-6, 60.0);
+    motion_options_.folds = static_cast<int>(positive("folds", motion_options_.folds, 2, 20));
     motion_options_.velocity_window_s =
-        id.GetDouble("velocity_window_s", motion_options_.velocity_window_s);
-    motion_options_.velocity_degree = id.GetInt("velocity_degree", motion_options_.velocity_degree);
-    options_.max_effects = id.GetInt("max_effects", options_.max_effects);
-    options_.cv_min_gain = id.GetDouble("cv_min_gain", options_.cv_min_gain);
-    options_.iterations = id.GetInt("iterations", options_.iterations);
-    threads_ = id.GetInt("threads", threads_);
+        positive("velocity_window_s", motion_options_.velocity_window_s, 1e-4, 1.0);
+    motion_options_.velocity_degree =
+        static_cast<int>(positive("velocity_degree", motion_options_.velocity_degree, 1, 3));
+    options_.max_effects = static_cast<int>(positive("max_effects", options_.max_effects, 0, 20));
+    options_.cv_min_gain = positive("cv_min_gain", options_.cv_min_gain, 0.0, 0.9);
+    options_.iterations = static_cast<int>(positive("iterations", options_.iterations, 1, 100));
+    threads_ = static_cast<int>(positive("threads", threads_, 1, 64));
     if (id.Has("families")) {
       for (const ConfigNode& item : id.Child("families").Items()) {
         const std::string f = item.AsString();
@@ -219,7 +227,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   // every channel's.
   void WriteFigures(const dyn::DynamicProblem& p, const dyn::DynamicReport& rep,
                     RunContext& ctx) const {
-    const dyn::MotionDiagnostics before = dyn::Diagnose(p, p.declared());
+    const dyn::MotionDiagnostics before = dyn::Diagnose(p, rep.declared_state.prediction);
     const auto& after = rep.diagnostics.spectra;
     std::ofstream csv(ctx.out->File("spectra.csv"));
     csv << "channel,frequency_hz,psd_before,psd_after\n";
@@ -261,7 +269,9 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     for (int j = 0; j < static_cast<int>(p.data().joints.size()); ++j) {
       double e = 0.0;
       for (int k = 0; k < L.size(); ++k) {
-        if (L.stream[k] == 0 && L.channel[k] == j) e += std::pow(p.declared().error[k], 2);
+        if (L.stream[k] == 0 && L.channel[k] == j) {
+          e += std::pow(rep.declared_state.prediction.error[k], 2);
+        }
       }
       if (e > worst) worst = e, joint = j;
     }
@@ -269,7 +279,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     for (int k = 0; k < L.size(); ++k) {
       if (L.stream[k] != 0 || L.channel[k] != joint || L.t[k] > p.data().t.front() + 4.0) continue;
       t.push_back(L.t[k]);
-      eb.push_back(1e3 * p.declared().error[k]);
+      eb.push_back(1e3 * rep.declared_state.prediction.error[k]);
       ea.push_back(1e3 * rep.final_state.prediction.error[k]);
     }
     render::Axes& ax = fig.axes(1, 0);
