@@ -50,32 +50,14 @@ int DynamicProblem::NumParams(const std::vector<int>& active) const {
   return Offset(active, static_cast<int>(active.size()));
 }
 
-Eigen::VectorXd DynamicProblem::Neutral(const std::vector<int>& active) const {
+// A column of the dynamic table (neutral, lower or upper) stacked over `active`'s values.
+Eigen::VectorXd DynamicProblem::Stacked(const std::vector<int>& active,
+                                        std::array<double, 2> sim::DynamicRow::*column) const {
   Eigen::VectorXd v(NumParams(active));
   int o = 0;
   for (int c : active) {
     const sim::DynamicRow& row = sim::Row(candidates_[c].kind);
-    for (int k = 0; k < row.num_values; ++k) v[o++] = row.neutral[k];
-  }
-  return v;
-}
-
-Eigen::VectorXd DynamicProblem::Lower(const std::vector<int>& active) const {
-  Eigen::VectorXd v(NumParams(active));
-  int o = 0;
-  for (int c : active) {
-    const sim::DynamicRow& row = sim::Row(candidates_[c].kind);
-    for (int k = 0; k < row.num_values; ++k) v[o++] = row.lower[k];
-  }
-  return v;
-}
-
-Eigen::VectorXd DynamicProblem::Upper(const std::vector<int>& active) const {
-  Eigen::VectorXd v(NumParams(active));
-  int o = 0;
-  for (int c : active) {
-    const sim::DynamicRow& row = sim::Row(candidates_[c].kind);
-    for (int k = 0; k < row.num_values; ++k) v[o++] = row.upper[k];
+    for (int k = 0; k < row.num_values; ++k) v[o++] = (row.*column)[k];
   }
   return v;
 }

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <atomic>
 #include <string>
 #include <vector>
@@ -46,7 +47,9 @@ class DynamicProblem {
   const Prediction& declared() const { return declared_; }
   int Offset(const std::vector<int>& active, int index) const;
   int NumParams(const std::vector<int>& active) const;
-  Eigen::VectorXd Neutral(const std::vector<int>& active) const;
+  Eigen::VectorXd Neutral(const std::vector<int>& active) const {
+    return Stacked(active, &sim::DynamicRow::neutral);
+  }
 
   std::vector<DynamicTerm> Terms(const std::vector<int>& active, const Eigen::VectorXd& t) const;
   FitState Evaluate(const std::vector<int>& active, const Eigen::VectorXd& theta,
@@ -67,8 +70,12 @@ class DynamicProblem {
   // starts as they were when the refit does not lower the cost.
   FitState RefineStarts(const FitState& fit, int iterations);
   double Cost(const Eigen::VectorXd& residual, const std::vector<char>& mask) const;
-  Eigen::VectorXd Lower(const std::vector<int>& active) const;
-  Eigen::VectorXd Upper(const std::vector<int>& active) const;
+  Eigen::VectorXd Lower(const std::vector<int>& active) const {
+    return Stacked(active, &sim::DynamicRow::lower);
+  }
+  Eigen::VectorXd Upper(const std::vector<int>& active) const {
+    return Stacked(active, &sim::DynamicRow::upper);
+  }
   int threads() const { return threads_; }
   // Rollouts of the log so far (each a pass over every segment).
   long rollouts() const { return rollouts_; }
@@ -81,6 +88,8 @@ class DynamicProblem {
   Prediction declared_;
   int threads_ = 1;
   mutable std::atomic<long> rollouts_{0};
+  Eigen::VectorXd Stacked(const std::vector<int>& active,
+                          std::array<double, 2> sim::DynamicRow::*column) const;
   Prediction Roll(const std::vector<DynamicTerm>& terms, const MotionData& data) const;
 };
 
