@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 
 #include "estimators/error.h"
 #include "estimators/kinematics/effect_table.h"
 #include "estimators/kinematics/forward_kinematics.h"
+#include "sim/dynamic_effects.h"
 #include "sim/mujoco_model.h"
 
 // Each row of the effect table has its case in the switches below: a kind without one fails to
@@ -65,6 +67,10 @@ class EffectsBuilder {
     FindMount();
     bool load_driven = false;
     for (const IdentifiedEffect& ie : d_.identified_effects) {
+      if (IsDynamicEffect(ie.effect)) {
+        load_driven |= AddStaticPartOf(ie, DynamicEntries({ie}).front());
+        continue;
+      }
       const Parsed p = Check(ie);
       Add(ie, p);
       AddVariance(ie, p);
@@ -72,7 +78,7 @@ class EffectsBuilder {
     }
     if (load_driven && !HasMasses()) {
       for (const IdentifiedEffect& ie : d_.identified_effects) {
-        if (Parse(ie).row->load_driven) {
+        if (IsDynamicEffect(ie.effect) || Parse(ie).row->load_driven) {
           Fail(ie, "acts through the gravity loads, but the model " + CapForMessage(d_.model_path) +
                        " has no masses on the arm");
         }
@@ -297,6 +303,66 @@ class EffectsBuilder {
     return k;
   }
 
+  // What a dynamic effect does to a standing arm's poses (sim/dynamic_effects.h): a link's mode
+  // bends the link under its load as a spring of the bending joints' stiffness, c = 1 / (scale
+  // k), k their mean (the MJCF's pair of bending hinges is isotropic across the link); a payload
+  // adds its mass at the body's centre of mass, where ApplyDynamic adds it. The rest (damping,
+  // friction, armature, the servo's gain and delay) move nothing at given joint readings, and the
+  // base plate's sway has no static form here yet. Returns whether the part acts through loads.
+  bool AddStaticPartOf(const IdentifiedEffect& ie, const DeclaredDynamic& dd) {
+    ModelEffects& e = chain_->effects;
+    const DynamicKind kind = dd.row->kind;
+    if (!catalog_)
+      catalog_ = std::make_unique<ModelCatalog>(ModelCatalog::Build(m_, d_.model_path));
+    // Read only: DynamicParts looks the location up.
+    const TruthSetup setup = NominalSetup(const_cast<mjModel*>(m_), catalog_.get(), d_.model_path);
+    const std::vector<int> parts = DynamicParts(setup, kind, dd.location);
+    if (parts.empty()) {
+      std::string known;
+      for (const std::string& l : DynamicLocations(setup, kind)) {
+        known += (known.empty() ? "" : ", ") + l;
+      }
+      Fail(ie, "names '" + CapForMessage(dd.location) + "', which " + d_.model_path + " has no " +
+                   dd.row->name + " at (it has: " + (known.empty() ? "none" : known) + ")");
+    }
+    if (kind != DynamicKind::kLinkMode && kind != DynamicKind::kPayloadMass) return false;
+    if (kind == DynamicKind::kPayloadMass) {
+      const FrameId f = Frame(ie, "body/" + dd.location, "body");
+      if (e.payload_frame >= 0 && e.payload_frame != f) Fail(ie, "a second payload frame");
+      e.payload_frame = f;
+      e.payload.mass += dd.values[0];
+      e.payload.first_moment += dd.values[0] * Eigen::Map<const Vec3>(m_->body_ipos + 3 * parts[0]);
+      return true;
+    }
+    double k = 0.0;
+    for (int j : parts) k += m_->jnt_stiffness[j] / parts.size();
+    if (!(k > 0.0)) Fail(ie, "bends joints without stiffness in the MJCF: no standing bend");
+    const FrameId f = LinkEndBelow(ie, dd.location);
+    if (f < 0) return false;
+    SetBendingLink(ie, f);
+    const double c = 1.0 / (dd.values[0] * k);
+    e.frames[f].bend += c;
+    if (dd.stds[0] > 0.0) {
+      const double sc = c * dd.stds[0] / dd.values[0];  // |dc/ds| std(s)
+      e.uncertainty.bend[f] += sc * sc;
+    }
+    return true;
+  }
+
+  // The frame a bending body's link ends at on the way to the end effector: the next joint's
+  // frame below the body, else (the last link) the body below it. -1 when the body is off that
+  // way: its bend moves no frame the estimators report.
+  FrameId LinkEndBelow(const IdentifiedEffect& ie, const std::string& body) const {
+    const FrameId b = Frame(ie, "body/" + body, "body");
+    FrameId joint = -1, child_body = -1;
+    for (FrameId f = chain_->end_effector; f > 0; f = model_.frame(f).parent) {
+      if (f == b) return joint >= 0 ? joint : child_body;
+      if (model_.frame(f).q_index >= 0) joint = f;
+      if (model_.frame(f).name.rfind("body/", 0) == 0) child_body = f;
+    }
+    return -1;
+  }
+
   // The link that ends at joint frame f starts at the previous joint (fixed frames between
   // belong to the link); shorter than 5 cm it does not bend (the identification's rule).
   void SetBendingLink(const IdentifiedEffect& ie, FrameId f) {
@@ -384,6 +450,7 @@ class EffectsBuilder {
   const kinematics::PpoeModel& model_;
   kinematics::PpoeData pd_;
   bool gravity_tilted_ = false;
+  std::unique_ptr<ModelCatalog> catalog_;  // built for the first dynamic entry
 };
 
 }  // namespace

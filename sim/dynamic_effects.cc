@@ -6,6 +6,7 @@
 
 #include "estimators/error.h"
 #include "estimators/format.h"
+#include "sim/config.h"
 #include "sim/mujoco_model.h"
 
 namespace flexbench::sim {
@@ -287,6 +288,49 @@ void ApplyDynamic(TruthSetup& s, DynamicKind kind, const std::string& loc, const
       s.stribeck.at(j).coulomb_Nm = v[1];
       break;
   }
+}
+
+bool IsDynamicEffect(const std::string& effect) {
+  return FindDynamic(effect.substr(0, effect.find('@'))) != nullptr;
+}
+
+std::vector<DeclaredDynamic> DynamicEntries(const std::vector<IdentifiedEffect>& effects) {
+  std::vector<DeclaredDynamic> out;
+  for (const IdentifiedEffect& ie : effects) {
+    if (!IsDynamicEffect(ie.effect)) continue;
+    const auto fail = [&](const std::string& msg) {
+      throw InputError(ie.where + ": identified_effects: '" + CapForMessage(ie.effect) + "' " +
+                       msg);
+    };
+    const size_t at = ie.effect.find('@');
+    if (at == std::string::npos || at + 1 == ie.effect.size()) {
+      fail("is not of the form type@location");
+    }
+    DeclaredDynamic d;
+    d.row = FindDynamic(ie.effect.substr(0, at));
+    if (!d.row->fitted) fail("is an effect of the truth only: no model carries it");
+    d.location = ie.effect.substr(at + 1);
+    d.where = ie.where;
+    const int n = d.row->num_values;
+    if (static_cast<int>(ie.value.size()) != n) {
+      fail("needs " + std::to_string(n) + " values, got " + std::to_string(ie.value.size()));
+    }
+    if (!ie.std.empty() && static_cast<int>(ie.std.size()) != n) {
+      fail("needs " + std::to_string(n) + " stds, got " + std::to_string(ie.std.size()));
+    }
+    for (int k = 0; k < n; ++k) {
+      const double v = ie.value[k];
+      if (!std::isfinite(v)) fail("has a value that is not a finite number");
+      if (!(v >= d.row->lower[k] && v <= d.row->upper[k])) {
+        fail(std::string(d.row->value_names[k]) + " = " + ShortNum(v) + " is outside [" +
+             ShortNum(d.row->lower[k]) + ", " + ShortNum(d.row->upper[k]) + "]");
+      }
+      d.values[k] = v;
+      if (!ie.std.empty()) d.stds[k] = ie.std[k];
+    }
+    out.push_back(d);
+  }
+  return out;
 }
 
 }  // namespace flexbench::sim

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "sim/declared_model.h"
 #include "sim/effects/truth_setup.h"
 
 namespace flexbench::sim {
@@ -69,5 +70,23 @@ std::vector<std::string> DynamicLocations(const TruthSetup& setup, DynamicKind k
 // model's or a value is outside the row's bounds.
 void ApplyDynamic(TruthSetup& setup, DynamicKind kind, const std::string& location,
                   const double* values, const std::string& where);
+
+// An identified effect of a fitted dynamic row in a declared file (identified_effects: an entry
+// whose type is a row's name), as dynamic identification writes the augmented model.
+struct DeclaredDynamic {
+  const DynamicRow* row = nullptr;
+  std::string location;
+  std::array<double, 2> values{};
+  std::array<double, 2> stds{};  // 0 where the entry gives none
+  std::string where;             // the entry, for messages
+};
+
+// Whether `effect` (type@location) is a dynamic row's.
+bool IsDynamicEffect(const std::string& effect);
+
+// The dynamic entries of `effects`, each checked: a fitted row, of the form type@location, its
+// number of finite values within the row's bounds. Throws InputError naming the entry; the
+// location is checked where the entry is applied (ApplyDynamic).
+std::vector<DeclaredDynamic> DynamicEntries(const std::vector<IdentifiedEffect>& effects);
 
 }  // namespace flexbench::sim

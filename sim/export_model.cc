@@ -3,6 +3,7 @@
 #include <mujoco/mujoco.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -16,6 +17,7 @@
 #include "estimators/kinematics/effect_table.h"
 #include "estimators/kinematics/model_effects.h"
 #include "sim/declared_chain.h"
+#include "sim/dynamic_effects.h"
 #include "sim/mujoco_model.h"
 
 namespace flexbench::sim {
@@ -151,19 +153,26 @@ void SetAttribute(std::string* line, const std::string& key, const std::string& 
   line->insert(tag_end, pat + value + "\"");
 }
 
-// MuJoCo's writer keeps six digits: every pose and inertial inside <worldbody> gets all of them
-// again (the elements come in the model's order, type by type), and relative asset folders are
-// made absolute (the file is written elsewhere). A mesh geom's pose in the model includes the
-// mesh's own frame (centroid, principal axes), which the compiler adds to the written one: it is
-// written as `mesh_geom_poses` gives it (identity when null).
+// MuJoCo's writer keeps six digits: every pose and inertial inside <worldbody>, and the joints'
+// and actuators' dynamic numbers it wrote, get all of them again (the elements come in the model's
+// order, type by type), and relative asset folders are made absolute (the file is written
+// elsewhere). A mesh geom's pose in the model includes the mesh's own frame (centroid, principal
+// axes), which the compiler adds to the written one: it is written as `mesh_geom_poses` gives it
+// (identity when null).
 std::string WithFullPrecision(const std::string& xml, const mjModel* m,
                               const std::filesystem::path& model_dir,
                               const std::vector<SE3>* mesh_geom_poses) {
   std::istringstream in(xml);
   std::ostringstream out;
   std::string line;
-  bool world = false;
-  int body = 1, joint = 0, geom = 0, site = 0, cam = 0;
+  bool world = false, actuators = false;
+  int body = 1, joint = 0, geom = 0, site = 0, cam = 0, actuator = 0;
+  // Rewritten only where the writer wrote it (a value equal to its class default is left out).
+  const auto set_present = [&](const char* key, const std::string& value) {
+    if (line.find(std::string(" ") + key + "=\"") != std::string::npos) {
+      SetAttribute(&line, key, value);
+    }
+  };
   const auto is = [&](const char* tag) {
     return line.find(std::string("<") + tag + " ") != std::string::npos ||
            line.find(std::string("<") + tag + "/>") != std::string::npos ||
@@ -172,6 +181,14 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
   while (std::getline(in, line)) {
     if (line.find("<worldbody") != std::string::npos) world = true;
     if (line.find("</worldbody") != std::string::npos) world = false;
+    if (line.find("<actuator>") != std::string::npos) actuators = true;
+    if (line.find("</actuator>") != std::string::npos) actuators = false;
+    if (actuators && line.find("<actuator>") == std::string::npos &&
+        line.find("</actuator>") == std::string::npos && line.find('<') != std::string::npos) {
+      set_present("gainprm", Nums(m->actuator_gainprm + mjNGAIN * actuator, mjNGAIN));
+      set_present("biasprm", Nums(m->actuator_biasprm + mjNBIAS * actuator, mjNBIAS));
+      ++actuator;
+    }
     if (line.find("<compiler") != std::string::npos) {
       for (const char* key : {"meshdir", "texturedir"}) {
         const std::string pat = std::string(" ") + key + "=\"";
@@ -193,6 +210,11 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
       } else if (is("joint")) {
         SetAttribute(&line, "pos", Nums(m->jnt_pos + 3 * joint, 3));
         SetAttribute(&line, "axis", Nums(m->jnt_axis + 3 * joint, 3));
+        const int dof = m->jnt_dofadr[joint];
+        set_present("stiffness", ExactNum(m->jnt_stiffness[joint]));
+        set_present("damping", ExactNum(m->dof_damping[dof]));
+        set_present("armature", ExactNum(m->dof_armature[dof]));
+        set_present("frictionloss", ExactNum(m->dof_frictionloss[dof]));
         ++joint;
       } else if (is("freejoint")) {
         ++joint;
@@ -226,7 +248,7 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
     out << line << "\n";
   }
   if (body != m->nbody || joint != m->njnt || geom != m->ngeom || site != m->nsite ||
-      cam != m->ncam) {
+      cam != m->ncam || actuator != m->nu) {
     throw std::logic_error("export: MuJoCo's saved XML does not list the model's elements");
   }
   return out.str();
@@ -304,7 +326,64 @@ struct Folded {
   std::vector<std::string> compliance;  // the identified compliances (written as gear)
   bool tilt = false;                    // <option gravity> turned
   std::vector<std::string> skipped;
+  // Passive joints a dynamic effect released (a link's mode, the base plate's sway): no longer
+  // an undeclared effect's, they leave the effect's joint list and move as the model's own.
+  std::vector<std::string> released;
 };
+
+// The dynamic effects (sim/dynamic_effects.h) onto the model's own numbers: damping,
+// frictionloss, armature, the servo's kp, the bending or plate joints' stiffness and damping, a
+// body's mass. A servo delay has no MJCF form.
+void ApplyDynamics(const DeclaredModel& declared, mjModel* m, Folded* out) {
+  const std::vector<DeclaredDynamic> entries = DynamicEntries(declared.identified_effects);
+  if (entries.empty()) return;
+  const ModelCatalog catalog = ModelCatalog::Build(m, declared.model_path);
+  TruthSetup setup = NominalSetup(m, &catalog, declared.model_path);
+  const std::vector<char> released_before = setup.released;
+  for (const DeclaredDynamic& d : entries) {
+    const std::string name = std::string(d.row->name) + "@" + d.location;
+    ApplyDynamic(setup, d.row->kind, d.location, d.values.data(), d.where + ": " + name);
+    if (d.row->kind == DynamicKind::kServoDelay) {
+      out->skipped.push_back(name + " (MuJoCo has no actuator delay)");
+    }
+  }
+  for (int j = 0; j < m->njnt; ++j) {
+    if (setup.released[j] && !released_before[j]) {
+      out->released.push_back(ObjectName(m, mjOBJ_JOINT, j));
+    }
+  }
+}
+
+// The saved XML with `joints` left out of every effect's joint list (a list left empty goes).
+std::string WithoutEffectJoints(std::string xml, const std::vector<std::string>& joints) {
+  if (joints.empty()) return xml;
+  size_t at = 0;
+  while ((at = xml.find("<text name=\"effect:", at)) != std::string::npos) {
+    const size_t end = xml.find('\n', at);
+    const size_t data = xml.find("data=\"", at);
+    if (data == std::string::npos || data > end) {
+      at = end;
+      continue;
+    }
+    const size_t from = data + 6, to = xml.find('"', from);
+    std::istringstream names(xml.substr(from, to - from));
+    std::string kept, name;
+    while (names >> name) {
+      if (std::find(joints.begin(), joints.end(), name) == joints.end()) {
+        kept += (kept.empty() ? "" : " ") + name;
+      }
+    }
+    if (kept.empty()) {
+      const size_t start = xml.rfind('\n', at) + 1;
+      xml.erase(start, end + 1 - start);
+      at = start;
+    } else {
+      xml.replace(from, to - from, kept);
+      at = xml.find('\n', at);
+    }
+  }
+  return xml;
+}
 
 Folded Fold(const DeclaredModel& declared) {
   const std::string ext = std::filesystem::path(declared.model_path).extension().string();
@@ -316,6 +395,7 @@ Folded Fold(const DeclaredModel& declared) {
   DeclaredModel geometric = declared;
   geometric.identified_effects.clear();
   for (const IdentifiedEffect& e : declared.identified_effects) {
+    if (IsDynamicEffect(e.effect)) continue;  // ApplyDynamics below
     const kinematics::EffectRow* row =
         kinematics::FindEffect(e.effect.substr(0, e.effect.find('@')));
     if (row == nullptr) {
@@ -345,6 +425,7 @@ Folded Fold(const DeclaredModel& declared) {
   }
   out.gear = GearStiffness(m, full, &out.skipped);
   Folder(m, chain, &out.skipped).Fold();
+  ApplyDynamics(declared, m, &out);
   if (out.tilt) {
     MjDataPtr data = MakeData(m);
     mj_kinematics(m, data.get());
@@ -529,9 +610,11 @@ ExportedModel ExportMjcf(const DeclaredModel& declared) {
   Folded f = Fold(declared);
   ExportedModel out;
   out.skipped = std::move(f.skipped);
-  out.text = WithGearAnnotation(
-      SavedMjcf(f.model.get(), std::filesystem::absolute(declared.model_path).parent_path()),
-      f.gear);
+  out.text = WithoutEffectJoints(
+      WithGearAnnotation(
+          SavedMjcf(f.model.get(), std::filesystem::absolute(declared.model_path).parent_path()),
+          f.gear),
+      f.released);
   return out;
 }
 
@@ -541,6 +624,12 @@ ExportedModel ExportUrdf(const DeclaredModel& declared) {
   out.skipped = std::move(f.skipped);
   for (const std::string& c : f.compliance) out.skipped.push_back(c + " (URDF has no spring)");
   if (f.tilt) out.skipped.push_back("gravity_tilt@base (URDF has no gravity)");
+  for (const DeclaredDynamic& d : DynamicEntries(declared.identified_effects)) {
+    const DynamicKind k = d.row->kind;
+    if (k == DynamicKind::kPayloadMass || k == DynamicKind::kServoDelay) continue;  // done
+    out.skipped.push_back(std::string(d.row->name) + "@" + d.location +
+                          " (the URDF writer has no joint dynamics; the MJCF holds it)");
+  }
   out.text = UrdfWriter(f.model.get(), &out.skipped).Write();
   return out;
 }

@@ -13,6 +13,11 @@
 //     effect:joint_compliance and numeric effect:joint_compliance:stiffness, k = -1/c). Not
 //     <joint stiffness>: that spring pulls the link towards a fixed springref, whereas a gear
 //     spring sits between the motor and the link, which is what the truth effect simulates.
+//   - dynamic effects (sim/dynamic_effects.h) become the joints' damping, frictionloss and
+//     armature, the position servo's kp, a body's mass, and a link's mode or the base plate's
+//     sway the stiffness and damping of its passive joints, which leave the effect:link_bending
+//     (effect:base_compliance) list: they move as the model's own physics. servo_delay has no
+//     MJCF form.
 // Everything else (backlash, link_bending, base_compliance, payload, transmission_error,
 // joint_error_curve, stiffening_spring's cubic term, a moved body frame) has no MJCF form: the
 // caller names it in one warning line.

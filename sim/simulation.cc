@@ -91,19 +91,7 @@ Simulation::Simulation(MjModelPtr model, std::string model_name, const EffectLis
   catalog_ = ModelCatalog::Build(nm, model_name_);
   truth_.reset(mj_copyModel(nullptr, nm));
   mjModel* m = truth_.get();
-  setup_.model = m;
-  setup_.catalog = &catalog_;
-  setup_.model_name = model_name_;
-  setup_.released.assign(m->njnt, 0);
-  setup_.gear.assign(m->njnt, GearSpec{});
-  setup_.joint_offset.assign(m->njnt, 0.0);
-  setup_.servo_delay.assign(m->njnt, 0.0);
-  setup_.stribeck.assign(m->njnt, StribeckSpec{});
-  // Passive joints and linkages no effect claims are part of the model's own physics: always
-  // free (a linkage: always following its drivers).
-  for (const JointEntry& j : catalog_.joints) {
-    if (j.role != JointRole::kActuated && j.effect.empty()) setup_.released[j.id] = 1;
-  }
+  setup_ = NominalSetup(m, &catalog_, model_name_);
   std::set<std::string> seen;
   for (const auto& effect : effects) {
     // Under its former name an effect is still the same effect: given twice it would apply twice.

@@ -82,4 +82,8 @@ struct TruthSetup {
   bool constants_changed = false;
 };
 
+// The nominal setup over `model` (which `catalog` describes): nothing released but the passive
+// joints and linkages no effect claims, which are the model's own physics.
+TruthSetup NominalSetup(mjModel* model, const ModelCatalog* catalog, const std::string& name);
+
 }  // namespace flexbench::sim

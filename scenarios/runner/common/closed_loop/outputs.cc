@@ -13,6 +13,7 @@
 #include "render/residual_figures.h"
 #include "scenarios/runner/common/closed_loop/truth.h"
 #include "scenarios/runner/output.h"
+#include "sim/dynamic_effects.h"
 #include "sim/export_model.h"
 
 namespace flexbench::scenarios {
@@ -448,8 +449,10 @@ void LogBaseEffects(const ClosedLoopSetup& cl, RunContext& ctx) {
             "' (frames:) is not a measurement frame of this run (--frame / frames): unused");
   }
   for (const std::string& name : cl.base_not_applied) {
-    ctx.log("declared model: identified effect '" + name +
-            "' moves none of the measured points here: not applied by the identification");
+    ctx.log("declared model: identified effect '" + name + "' " +
+            (sim::IsDynamicEffect(name)
+                 ? "is dynamic: the estimators and the export carry it, this fit does not"
+                 : "moves none of the measured points here: not applied by the identification"));
   }
 }
 
