@@ -55,6 +55,9 @@ RecordedLog SimulateMotionLog(Simulation& s, SensorSuite& sensors, const MultiSi
   const long per_command = std::max(1L, std::lround(1.0 / (o.command_rate_hz * s.timestep())));
   std::vector<SensorReading> readings;
   std::map<double, std::vector<double>> rows;  // encoder rows by time
+  std::map<double, lie::SE3> truth;            // the truth frame's pose by encoder row time
+  log.truth_frame = o.truth_frame;
+  const bool world_base = o.base_body.empty() || o.base_body == "world";
   for (long k = 0; k <= steps; ++k) {
     if (k % per_command == 0) {
       const double t = s.time();
@@ -72,6 +75,12 @@ RecordedLog SimulateMotionLog(Simulation& s, SensorSuite& sensors, const MultiSi
         for (int j = 0; j < n; ++j) {
           if (log.joints[j] == e->joint) row[j] = e->position;
         }
+        if (!o.truth_frame.empty() && !truth.count(e->t)) {
+          const Eigen::Isometry3d T_w_base =
+              world_base ? Eigen::Isometry3d::Identity() : s.BodyPose(o.base_body);
+          const Eigen::Isometry3d T_base_frame = T_w_base.inverse() * s.Pose(o.truth_frame);
+          truth[e->t] = lie::SE3(T_base_frame.linear(), T_base_frame.translation());
+        }
       } else if (const auto* z = std::get_if<ImuReading>(&r)) {
         estimators::ImuReading reading = *z;
         reading.imu = imu_index.at(z->sensor);
@@ -84,6 +93,10 @@ RecordedLog SimulateMotionLog(Simulation& s, SensorSuite& sensors, const MultiSi
   for (const auto& [t, row] : rows) {
     log.joint_t.push_back(t);
     log.joint_q.insert(log.joint_q.end(), row.begin(), row.end());
+  }
+  for (const auto& [t, T] : truth) {
+    log.truth_t.push_back(t);
+    log.truth.push_back(T);
   }
   return log;
 }

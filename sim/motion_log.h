@@ -30,11 +30,14 @@ struct MotionLogOptions {
   // What the log states as its readings' noise (0: unknown).
   double encoder_std = 0.0, gyro_std = 0.0, accel_std = 0.0;
   std::string declared_path;  // the log's declared model
+  // The truth's pose of this frame in the base body's (truth.tum) at each encoder row; none
+  // when empty. The base body "world" (or empty) is the world.
+  std::string truth_frame, base_body;
 };
 
 // Settles `truth` at the motion's start, then steps it for the duration, sending the motion's
 // command at the command rate (in force from its time on) and polling `sensors` after each
-// command: encoders become joint rows, IMUs their readings.
+// command: encoders become joint rows, IMUs their readings, the truth frame's pose truth rows.
 RecordedLog SimulateMotionLog(Simulation& truth, SensorSuite& sensors, const MultiSine& motion,
                               const MotionLogOptions& options);
 

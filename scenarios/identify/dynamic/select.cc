@@ -129,6 +129,17 @@ class Selection {
     return p_.Jacobian(ext, theta, at, from);
   }
 
+  // The fit's values from the entries of every fold but `f`: a Gauss-Newton step from `fit`
+  // (J its Jacobian).
+  Eigen::VectorXd FoldValues(const FitState& fit, const Eigen::MatrixXd& J, int f) const {
+    Eigen::MatrixXd Jt = J;
+    Eigen::VectorXd r = fit.prediction.residual;
+    ZeroUnmasked(p_.Mask(f), &Jt, &r);
+    Eigen::VectorXd d;
+    LinearRss(Jt, r, fit.theta, p_.Lower(fit.active), p_.Upper(fit.active), &d);
+    return fit.theta + d;
+  }
+
   // Held-out normalised RMS: per fold a Gauss-Newton step from the fit on the other folds'
   // entries, then the held-out fold's rollout at it.
   double HeldOut(const FitState& fit) {
@@ -138,13 +149,7 @@ class Selection {
     const int folds = p_.data().folds;
     std::vector<double> cost(folds, 0.0);
     ForEachTask(folds, p_.threads(), [&](int f) {
-      const std::vector<char> train = p_.Mask(f);
-      Eigen::MatrixXd Jt = J;
-      Eigen::VectorXd r = fit.prediction.residual;
-      ZeroUnmasked(train, &Jt, &r);
-      Eigen::VectorXd d;
-      LinearRss(Jt, r, fit.theta, p_.Lower(fit.active), p_.Upper(fit.active), &d);
-      const FitState at = p_.Evaluate(fit.active, fit.theta + d, train);
+      const FitState at = p_.Evaluate(fit.active, FoldValues(fit, J, f), p_.Mask(f));
       if (!at.ok) {
         cost[f] = std::numeric_limits<double>::infinity();  // the fold's fit does not hold
         return;
@@ -394,7 +399,9 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   rep.heldout_before = start.heldout;
   Scored state = stages.Swap(stages.Forward(start));
   rep.heldout_after = state.heldout;
-  for (int i = 0; i < o.start_refinements && !state.fit.active.empty(); ++i) {
+  // The starts are the fit's nuisance whatever it chose: the residual the verdict reads is taken
+  // from refined starts, with effects or without.
+  for (int i = 0; i < o.start_refinements; ++i) {
     const double before = state.fit.cost;
     state.fit = p.RefineStarts(state.fit, o.iterations);
     rep.log.push_back("segment starts refined: cost " + ShortNum(before) + " -> " +
@@ -405,6 +412,17 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   rep.declared_state = p.Evaluate({}, Eigen::VectorXd(), sel.all());
   const Eigen::MatrixXd cov =
       fit.theta.size() > 0 ? ClusterCovariance(p, fit, sel.all()) : Eigen::MatrixXd();
+  // The last fold, for a replay of the log's end that the values it gets never saw.
+  const int last = d.folds - 1;
+  for (const Segment& s : d.segments) {
+    if (s.fold != last) continue;
+    if (rep.heldout_to_s <= rep.heldout_from_s) rep.heldout_from_s = d.t[s.row_begin];
+    rep.heldout_to_s = d.t[s.row_end - 1];
+  }
+  const Eigen::VectorXd last_values =
+      fit.theta.size() > 0
+          ? sel.FoldValues(fit, p.Jacobian(fit.active, fit.theta, fit.prediction), last)
+          : Eigen::VectorXd();
   for (size_t i = 0; i < fit.active.size(); ++i) {
     ChosenEffect ce;
     const Candidate& c = p.candidates()[fit.active[i]];
@@ -414,6 +432,7 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
     for (int k = 0; k < row.num_values; ++k) {
       ce.value_names.push_back(row.value_names[k]);
       ce.values.push_back(fit.theta[off + k]);
+      ce.heldout_values.push_back(last_values[off + k]);
       // NaN when the data cannot fix the value (a singular fit), never a false zero.
       const double var = cov(off + k, off + k);
       ce.std_errors.push_back(var >= 0.0 ? std::sqrt(var) : std::nan(""));
@@ -438,10 +457,10 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
                       " times the readings' noise (explained needs at most " +
                       ShortNum(o.explained_heldout) + "); largest in " + where);
   }
-  rep.verdict = !helped ? "unexplained"
-                : rep.diagnostics.findings.empty() && rep.heldout_after <= o.explained_heldout
-                    ? "explained"
-                    : "partly_explained";
+  const bool fits = rep.diagnostics.findings.empty() && rep.heldout_after <= o.explained_heldout;
+  rep.verdict = helped ? (fits ? "explained" : "partly_explained")
+                : fits ? "no_effect"  // the declared model already holds the log
+                       : "unexplained";
   rep.rollouts = p.rollouts();
   rep.final_state = std::move(state.fit);
   return rep;

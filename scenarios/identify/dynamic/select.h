@@ -47,6 +47,7 @@ struct ChosenEffect {
   std::vector<double> values;
   std::vector<double> std_errors;
   std::vector<std::string> equivalent;  // other candidates that explain the same
+  std::vector<double> heldout_values;   // fitted without the last fold (DynamicReport)
 };
 
 struct StreamError {
@@ -67,11 +68,14 @@ struct DynamicReport {
   double heldout_before = 0.0;  // held-out normalised RMS, declared model
   double heldout_after = 0.0;   // with the chosen effects
   std::vector<ChosenEffect> chosen;
+  // The last fold's time span (encoder rows), which ChosenEffect::heldout_values never saw.
+  double heldout_from_s = 0.0, heldout_to_s = 0.0;
   // What the residual still shows (motion_diagnostics.h), located.
   MotionDiagnostics diagnostics;
-  // unexplained: no effect lowers the held-out error by cv_min_gain; explained: the chosen ones
-  // do, the held-out error is within explained_heldout of the noise and the residual shows
-  // nothing left; partly_explained: they help, but something is left.
+  // unexplained: no effect lowers the held-out error by cv_min_gain and the declared model does
+  // not hold the log; no_effect: none is needed (the declared model's held-out error is within
+  // explained_heldout of the noise, the residual shows nothing left); explained: the chosen ones
+  // lower it to there; partly_explained: they help, but something is left.
   std::string verdict;
   std::vector<std::string> log;
   long rollouts = 0;  // of the whole log, the declared model's included

@@ -11,8 +11,12 @@
 //     motion: {center_deg: [...], amplitude_deg: [...], frequencies_hz: [f1, f2, f3]}
 //   sensors: [...]            # encoders (link side) and IMUs, sim/sensors
 //   identify: {segment_s: 0.5, folds: 3, max_effects: 3, families: [...], threads: 2}
+//   replay_estimators: {fk: {}, ppoe_ekf: {}}   # replay the last fold (default: fk)
 //   expected:                 # the truth's effects, as identification names them
 //     - {name: joint_friction@link2_pitch_joint, values: [0.2]}
+// or, for a recorded log (a user's robot), instead of model/truth/sensors:
+//   log: path/to/log          # log.yaml with commands.csv (docs/logs.md)
+//   declared: ...             # optional: the log's own declared model by default
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -21,6 +25,8 @@
 #include "estimators/format.h"
 #include "render/plot.h"
 #include "scenarios/identify/dynamic/select.h"
+#include "scenarios/runner/common/dynamic_replay.h"
+#include "scenarios/runner/common/estimator_config.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_model.h"
 #include "sim/motion_log.h"
@@ -41,6 +47,34 @@ struct Expected {
 class ClosedLoopDynamicKind : public ScenarioKind {
  public:
   void Configure(const ConfigNode& root) override {
+    if (root.Has("log")) {
+      // A recorded log (a user's): its readings are the data; no truth is simulated.
+      for (const char* key : {"truth", "sensors", "model"}) {
+        if (root.Has(key)) root.Child(key).Fail("a log is given: nothing is simulated");
+      }
+      log_dir_ = root.ResolvePath(root.GetString("log"));
+      declared_path_ = root.Has("declared") ? root.ResolvePath(root.GetString("declared"))
+                                            : sim::ReadRecordedLog(log_dir_).declared_path;
+      declared_ = sim::LoadDeclaredModel(declared_path_);
+    } else {
+      ConfigureTruth(root);
+    }
+    if (const auto id = root.Optional("identify")) ReadIdentify(*id);
+    replay_specs_ =
+        root.Has("replay_estimators")
+            ? ParseEstimators(root.Child("replay_estimators"), EstimatorLabels::kAllowed)
+            : std::vector<EstimatorSpec>{{"fk", {}, "fk", ""}};
+    if (const auto ex = root.Optional("expected")) {
+      for (const ConfigNode& e : ex->Items()) {
+        Expected x;
+        x.name = e.GetString("name");
+        if (e.Has("values")) x.values = e.Child("values").AsDoubleList();
+        expected_.push_back(x);
+      }
+    }
+  }
+
+  void ConfigureTruth(const ConfigNode& root) {
     model_path_ = root.ResolvePath(root.GetString("model"));
     declared_path_ = root.ResolvePath(root.GetString("declared"));
     declared_ = sim::LoadDeclaredModel(declared_path_);
@@ -60,27 +94,25 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     sensors_node_ = std::make_unique<ConfigNode>(root.Child("sensors"));
     sim::SensorSuite::Parse(*sensors_node_, *truth_, 0);  // checked now; Run seeds its own
     ReadSensorNoise(*sensors_node_);
-    if (const auto id = root.Optional("identify")) ReadIdentify(*id);
-    if (const auto ex = root.Optional("expected")) {
-      for (const ConfigNode& e : ex->Items()) {
-        Expected x;
-        x.name = e.GetString("name");
-        if (e.Has("values")) x.values = e.Child("values").AsDoubleList();
-        expected_.push_back(x);
-      }
-    }
   }
 
   void Run(RunContext& ctx) override {
-    const std::string log_dir = ctx.out->File("log").string();
-    {
+    std::string log_dir = log_dir_;
+    if (log_dir.empty()) {
+      log_dir = ctx.out->File("log").string();
       sim::SensorSuite sensors = sim::SensorSuite::Parse(*sensors_node_, *truth_, ctx.seed);
       sim::RecordedLog log = Simulate(ctx.seed, sensors);
       sim::WriteRecordedLog(log, log_dir);
+      ctx.log("wrote the truth's log (" + ShortNum(duration_s_) + " s) to log/");
     }
-    ctx.log("wrote the truth's log (" + ShortNum(duration_s_) + " s) to log/");
     const sim::RecordedLog log = sim::ReadRecordedLog(log_dir);
-    dyn::RolloutModel model(sim::LoadModel(declared_.model_path), declared_.model_path, {});
+    // The declared file's own dynamic effects stay; the candidates act on top of them.
+    std::vector<dyn::DynamicTerm> declared_terms;
+    for (const sim::DeclaredDynamic& e : sim::DynamicEntries(declared_.identified_effects)) {
+      declared_terms.push_back({e.row->kind, e.location, {e.values[0], e.values[1]}});
+    }
+    dyn::RolloutModel model(sim::LoadModel(declared_.model_path), declared_.model_path,
+                            declared_terms);
     const dyn::MotionData data = dyn::ReadMotionData(log, model.nominal(), motion_options_);
     dyn::DynamicProblem problem(model, data, dyn::AllCandidates(model.nominal(), families_),
                                 threads_);
@@ -88,6 +120,9 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     for (const std::string& line : rep.log) ctx.log(line);
     WriteSummary(rep, ctx);
     WriteFigures(problem, rep, ctx);
+    WriteDynamicAugmented(declared_, rep, ctx);
+    const sim::MjModelPtr nominal = sim::LoadModel(declared_.model_path);
+    ReplayDynamicHeldOut(log, nominal.get(), declared_, rep, replay_specs_, ctx);
   }
 
  private:
@@ -160,6 +195,8 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     o.gyro_std = std_gyro_;
     o.accel_std = std_accel_;
     o.declared_path = std::filesystem::absolute(declared_path_).lexically_normal().string();
+    o.truth_frame = declared_.end_effector;
+    o.base_body = declared_.base;
     return sim::SimulateMotionLog(*truth_, sensors, motion, o);
   }
 
@@ -296,6 +333,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   }
 
   std::string model_path_, declared_path_;
+  std::string log_dir_;  // a recorded log to identify from; empty: the truth's, simulated
   sim::DeclaredModel declared_;
   std::unique_ptr<sim::Simulation> truth_;
   double duration_s_ = 12.0, command_rate_hz_ = 500.0;
@@ -307,6 +345,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   std::vector<std::string> families_;
   int threads_ = 2;
   std::vector<Expected> expected_;
+  std::vector<EstimatorSpec> replay_specs_;
 };
 
 }  // namespace
