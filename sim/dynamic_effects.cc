@@ -104,7 +104,7 @@ constexpr std::array<DynamicRow, kNumDynamicKinds> kRows = {{
      {0, 0},
      {0.005, 0},
      true,
-     "mass added at a payload body's origin (no added inertia)"},
+     "a point mass added at a payload body's centre of mass"},
     {K::kStribeckFriction,
      "stribeck_friction",
      L::kActuatedJoint,
@@ -329,6 +329,56 @@ std::vector<DeclaredDynamic> DynamicEntries(const std::vector<IdentifiedEffect>&
       if (!ie.std.empty()) d.stds[k] = ie.std[k];
     }
     out.push_back(d);
+  }
+  return out;
+}
+
+std::vector<StaticCounterpart> DynamicCounterparts(const mjModel* m, const ModelCatalog& c,
+                                                   const DeclaredModel& d) {
+  std::vector<StaticCounterpart> out;
+  const auto add = [&](const IdentifiedEffect& ie, DynamicKind kind, const std::string& loc,
+                       double v0, double v1) {
+    StaticCounterpart sc;
+    sc.static_effect = ie.effect;
+    sc.dynamic.row = &Row(kind);
+    sc.dynamic.location = loc;
+    sc.dynamic.values = {std::clamp(v0, Row(kind).lower[0], Row(kind).upper[0]),
+                         std::clamp(v1, Row(kind).lower[1], Row(kind).upper[1])};
+    sc.dynamic.where = ie.where;
+    out.push_back(sc);
+  };
+  const std::vector<int> bending = c.JointsOfEffect("link_bending");
+  for (const IdentifiedEffect& ie : d.identified_effects) {
+    const size_t at = ie.effect.find('@');
+    if (at == std::string::npos || ie.value.empty() || !(ie.value[0] > 0.0)) continue;
+    const std::string type = ie.effect.substr(0, at), loc = ie.effect.substr(at + 1);
+    if (type == "link_bending") {
+      const int j = mj_name2id(m, mjOBJ_JOINT, loc.c_str());
+      if (j < 0) continue;
+      // Up from the joint's body to the link's bending body, not past the joint before.
+      for (int b = m->body_parentid[m->jnt_bodyid[j]]; b > 0; b = m->body_parentid[b]) {
+        double k = 0.0;
+        int n = 0;
+        for (int bj : bending) {
+          if (m->jnt_bodyid[bj] == b) k += m->jnt_stiffness[bj], ++n;
+        }
+        if (n > 0 && k > 0.0) {
+          add(ie, DynamicKind::kLinkMode, ObjectName(m, mjOBJ_BODY, b), n / (ie.value[0] * k), 1.0);
+          break;
+        }
+        bool actuated = false;
+        for (int a = m->body_jntadr[b]; a >= 0 && a < m->body_jntadr[b] + m->body_jntnum[b]; ++a) {
+          actuated |= c.Joint(a).role == JointRole::kActuated;
+        }
+        if (actuated) break;
+      }
+    } else if (type == "payload") {
+      const auto it = c.effect_parts.find("payload");
+      if (it != c.effect_parts.end() &&
+          std::find(it->second.begin(), it->second.end(), loc) != it->second.end()) {
+        add(ie, DynamicKind::kPayloadMass, loc, ie.value[0], 0.0);
+      }
+    }
   }
   return out;
 }

@@ -89,4 +89,20 @@ bool IsDynamicEffect(const std::string& effect);
 // location is checked where the entry is applied (ApplyDynamic).
 std::vector<DeclaredDynamic> DynamicEntries(const std::vector<IdentifiedEffect>& effects);
 
+// A declared file's static effect (closed_loop's, from postures) that a dynamic row stands for
+// in motion: where dynamic identification starts from when both kinds of data exist.
+struct StaticCounterpart {
+  std::string static_effect;  // type@location as the file names it
+  DeclaredDynamic dynamic;
+};
+
+// link_bending@J: link_mode at the bending body of the link that ends at J, stiffness scale
+// 1 / (c k) (k the body's bending joints' mean MJCF stiffness; the inverse of the mode's standing
+// part, sim/declared_effects.h), damping scale 1; payload@B, B an effect:payload body:
+// payload_mass@B, its mass. Values are clamped to the dynamic row's bounds. The other static
+// effects have no dynamic counterpart.
+std::vector<StaticCounterpart> DynamicCounterparts(const mjModel* model,
+                                                   const ModelCatalog& catalog,
+                                                   const DeclaredModel& declared);
+
 }  // namespace flexbench::sim

@@ -772,7 +772,7 @@ Json IdentificationSummary(const Json& s, const fs::path& dir, std::string* sub)
 
 // What a dynamic identification (closed_loop_dynamic) found: verdict, effects, streams, what is
 // left.
-void DynamicAnswer(const Json& run, std::ostringstream* h) {
+void DynamicAnswer(const Json& run, const std::vector<FileEntry>& files, std::ostringstream* h) {
   const Json& d = At(run, "dynamic_identification");
   if (!d.is_object()) return;
   const std::string verdict = Text(At(At(run, "metrics"), "verdict"));
@@ -799,7 +799,22 @@ void DynamicAnswer(const Json& run, std::ostringstream* h) {
        << HtmlEscape(Text(At(st, "unit"))) << "</td>" << Td(At(st, "noise"))
        << Td(At(st, "rms_before")) << Td(At(st, "rms_after")) << "</tr>\n";
   }
-  *h << "</table>\n<h3>Selection and what is left</h3>\n<ul>\n";
+  *h << "</table>\n";
+  const Json& replay = At(At(run, "metrics"), "heldout_replay");
+  if (replay.is_object()) {
+    *h << "<h3>The estimators on the held-out last fold</h3>\n<table><tr><th>estimator</th>"
+       << "<th>mean position error, declared model [mm]</th><th>augmented model [mm]</th></tr>\n";
+    for (const auto& [label, r] : replay.items()) {
+      const auto mm = [&](const char* part) {
+        const Json& v = At(At(r, part), "pos_err_mean_m");
+        return v.is_number() ? Td(Json(1e3 * v.get<double>())) : Td(Json());
+      };
+      *h << "<tr><td>" << HtmlEscape(label) << "</td>" << mm("before") << mm("after") << "</tr>\n";
+    }
+    *h << "</table>\n";
+  }
+  ModelLinks(d, files, h);
+  *h << "<h3>Selection and what is left</h3>\n<ul>\n";
   for (const Json& line : At(d, "log")) *h << "<li>" << HtmlEscape(Text(line)) << "</li>\n";
   *h << "</ul>\n";
 }
@@ -973,7 +988,7 @@ std::string RunReportUnchecked(const fs::path& dir) {
   const Json& estimators = At(s, "estimators");
   const bool before_after = estimators.is_object() && BeforeAfterTable(estimators, &h);
   Answer(s, dir, files, &h);
-  DynamicAnswer(s, &h);
+  DynamicAnswer(s, files, &h);
   // With an answer above, the full tables are there for who wants them, folded.
   const bool fold = before_after || At(s, "identification").is_object();
   if (fold) h << "<h2>How this was made</h2>\n";

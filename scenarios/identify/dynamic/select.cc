@@ -384,7 +384,35 @@ class Stages {
   Selection sel_;
 };
 
-DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& o) {
+// The warm start's effects among the candidates, fitted: the starting set when they lower the
+// held-out error by cv_min_gain (then each that does not earn its place leaves), else `start`.
+Scored WarmStart(const DynamicProblem& p, const DynamicIdentifyOptions& o,
+                 const std::vector<sim::StaticCounterpart>& warm, Stages& stages, Scored start,
+                 DynamicReport* rep) {
+  std::vector<int> active;
+  std::vector<double> theta;
+  std::string names;
+  for (const sim::StaticCounterpart& w : warm) {
+    const std::string name = std::string(w.dynamic.row->name) + "@" + w.dynamic.location;
+    const auto& c = p.candidates();
+    const auto it =
+        std::find_if(c.begin(), c.end(), [&](const Candidate& x) { return x.Name() == name; });
+    if (it == c.end()) continue;
+    active.push_back(static_cast<int>(it - c.begin()));
+    for (int k = 0; k < w.dynamic.row->num_values; ++k) theta.push_back(w.dynamic.values[k]);
+    names += (names.empty() ? "" : ", ") + w.static_effect + " -> " + name;
+  }
+  if (active.empty()) return start;
+  Scored s = stages.Score(active, Eigen::Map<const Eigen::VectorXd>(theta.data(), theta.size()));
+  const bool kept = s.fit.ok && Better(s.heldout, start.heldout, o);
+  rep->log.push_back("warm start from the declared file's static effects (" + names +
+                     "): held-out " + ShortNum(s.heldout) + " (declared " +
+                     ShortNum(start.heldout) + "); " + (kept ? "kept" : "not kept"));
+  return kept ? stages.Remove(std::move(s), -1) : start;
+}
+
+DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& o,
+                               const std::vector<sim::StaticCounterpart>& warm) {
   DynamicReport rep;
   const MotionData& d = p.data();
   rep.segments = static_cast<int>(d.segments.size());
@@ -397,7 +425,7 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   start.fit = p.Evaluate({}, Eigen::VectorXd(), sel.all());
   start.heldout = sel.HeldOut(start.fit);
   rep.heldout_before = start.heldout;
-  Scored state = stages.Swap(stages.Forward(start));
+  Scored state = stages.Swap(stages.Forward(WarmStart(p, o, warm, stages, start, &rep)));
   rep.heldout_after = state.heldout;
   // The starts are the fit's nuisance whatever it chose: the residual the verdict reads is taken
   // from refined starts, with effects or without.
@@ -438,6 +466,11 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
       ce.std_errors.push_back(var >= 0.0 ? std::sqrt(var) : std::nan(""));
     }
     ce.equivalent = stages.Equivalent(fit, static_cast<int>(i));
+    for (const sim::StaticCounterpart& w : warm) {
+      if (std::string(w.dynamic.row->name) + "@" + w.dynamic.location == ce.name) {
+        rep.replaced_static.push_back(w.static_effect);
+      }
+    }
     rep.chosen.push_back(std::move(ce));
   }
   for (int s = 0; s < 3; ++s) {

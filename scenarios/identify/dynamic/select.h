@@ -68,6 +68,9 @@ struct DynamicReport {
   double heldout_before = 0.0;  // held-out normalised RMS, declared model
   double heldout_after = 0.0;   // with the chosen effects
   std::vector<ChosenEffect> chosen;
+  // The warm start's static effects whose dynamic counterpart was chosen: the augmented model
+  // carries the counterpart in their place.
+  std::vector<std::string> replaced_static;
   // The last fold's time span (encoder rows), which ChosenEffect::heldout_values never saw.
   double heldout_from_s = 0.0, heldout_to_s = 0.0;
   // What the residual still shows (motion_diagnostics.h), located.
@@ -84,7 +87,10 @@ struct DynamicReport {
 };
 
 // Selects, then refines the segments' starting speeds with the chosen effects and refits them
-// (`problem` keeps the refined starts).
-DynamicReport IdentifyDynamics(DynamicProblem& problem, const DynamicIdentifyOptions& options);
+// (`problem` keeps the refined starts). `warm`: the declared file's static effects in their
+// dynamic families (sim::DynamicCounterparts), fitted first and kept as the starting set when
+// they lower the held-out error; selection goes on from there and may remove them.
+DynamicReport IdentifyDynamics(DynamicProblem& problem, const DynamicIdentifyOptions& options,
+                               const std::vector<sim::StaticCounterpart>& warm = {});
 
 }  // namespace flexbench::identify::dynamic

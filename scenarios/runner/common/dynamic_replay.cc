@@ -1,5 +1,7 @@
 #include "scenarios/runner/common/dynamic_replay.h"
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include "estimators/error.h"
@@ -36,6 +38,14 @@ bool MovesStandingArm(const std::string& effect) {
 sim::DeclaredModel DynamicAugmented(const sim::DeclaredModel& declared,
                                     const dyn::DynamicReport& rep, bool heldout_values) {
   sim::DeclaredModel out = declared;
+  // A static effect whose dynamic counterpart was chosen gives its place to it.
+  auto& fx = out.identified_effects;
+  fx.erase(std::remove_if(fx.begin(), fx.end(),
+                          [&](const sim::IdentifiedEffect& e) {
+                            return std::find(rep.replaced_static.begin(), rep.replaced_static.end(),
+                                             e.effect) != rep.replaced_static.end();
+                          }),
+           fx.end());
   for (const dyn::ChosenEffect& c : rep.chosen) {
     sim::IdentifiedEffect ie;
     ie.effect = c.name;

@@ -17,7 +17,8 @@
 namespace flexbench::scenarios {
 
 // `declared` with the chosen effects added to its identified_effects: their values (with their
-// standard errors), or the values fitted without the last fold.
+// standard errors), or the values fitted without the last fold; a static effect the fit started
+// from and replaced by its dynamic counterpart (DynamicReport::replaced_static) leaves.
 sim::DeclaredModel DynamicAugmented(const sim::DeclaredModel& declared,
                                     const identify::dynamic::DynamicReport& rep,
                                     bool heldout_values);

@@ -116,7 +116,10 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     const dyn::MotionData data = dyn::ReadMotionData(log, model.nominal(), motion_options_);
     dyn::DynamicProblem problem(model, data, dyn::AllCandidates(model.nominal(), families_),
                                 threads_);
-    const dyn::DynamicReport rep = dyn::IdentifyDynamics(problem, options_);
+    // The static identification's effects, where the declared file has them, as the start.
+    const std::vector<sim::StaticCounterpart> warm =
+        sim::DynamicCounterparts(model.nominal().model(), model.nominal().catalog(), declared_);
+    const dyn::DynamicReport rep = dyn::IdentifyDynamics(problem, options_, warm);
     for (const std::string& line : rep.log) ctx.log(line);
     WriteSummary(rep, ctx);
     WriteFigures(problem, rep, ctx);
