@@ -167,11 +167,17 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
   std::string line;
   bool world = false, actuators = false;
   int body = 1, joint = 0, geom = 0, site = 0, cam = 0, actuator = 0;
-  // Rewritten only where the writer wrote it (a value equal to its class default is left out).
-  const auto set_present = [&](const char* key, const std::string& value) {
-    if (line.find(std::string(" ") + key + "=\"") != std::string::npos) {
-      SetAttribute(&line, key, value);
-    }
+  // Rewritten only where the writer wrote it (a value equal to its class default is left out)
+  // and its six digits do not read back as the value.
+  const auto set_present = [&](const char* key, const double* v, int n) {
+    const std::string pat = std::string(" ") + key + "=\"";
+    const size_t at = line.find(pat);
+    if (at == std::string::npos) return;
+    std::istringstream written(line.substr(at + pat.size(), line.find('"', at + pat.size())));
+    bool exact = true;
+    double x = 0.0;
+    for (int k = 0; k < n; ++k) exact = exact && (written >> x) && x == v[k];
+    if (!exact) SetAttribute(&line, key, Nums(v, n));
   };
   const auto is = [&](const char* tag) {
     return line.find(std::string("<") + tag + " ") != std::string::npos ||
@@ -185,8 +191,8 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
     if (line.find("</actuator>") != std::string::npos) actuators = false;
     if (actuators && line.find("<actuator>") == std::string::npos &&
         line.find("</actuator>") == std::string::npos && line.find('<') != std::string::npos) {
-      set_present("gainprm", Nums(m->actuator_gainprm + mjNGAIN * actuator, mjNGAIN));
-      set_present("biasprm", Nums(m->actuator_biasprm + mjNBIAS * actuator, mjNBIAS));
+      set_present("gainprm", m->actuator_gainprm + mjNGAIN * actuator, mjNGAIN);
+      set_present("biasprm", m->actuator_biasprm + mjNBIAS * actuator, mjNBIAS);
       ++actuator;
     }
     if (line.find("<compiler") != std::string::npos) {
@@ -211,10 +217,10 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
         SetAttribute(&line, "pos", Nums(m->jnt_pos + 3 * joint, 3));
         SetAttribute(&line, "axis", Nums(m->jnt_axis + 3 * joint, 3));
         const int dof = m->jnt_dofadr[joint];
-        set_present("stiffness", ExactNum(m->jnt_stiffness[joint]));
-        set_present("damping", ExactNum(m->dof_damping[dof]));
-        set_present("armature", ExactNum(m->dof_armature[dof]));
-        set_present("frictionloss", ExactNum(m->dof_frictionloss[dof]));
+        set_present("stiffness", m->jnt_stiffness + joint, 1);
+        set_present("damping", m->dof_damping + dof, 1);
+        set_present("armature", m->dof_armature + dof, 1);
+        set_present("frictionloss", m->dof_frictionloss + dof, 1);
         ++joint;
       } else if (is("freejoint")) {
         ++joint;

@@ -41,6 +41,7 @@ RecordedLog SimulateMotionLog(Simulation& s, SensorSuite& sensors, const MultiSi
     log.joint_is_slide[k] = s.model()->jnt_type[s.catalog().actuated[k]] == mjJNT_SLIDE;
   }
   log.command_joints = log.joints;
+  log.command_torque = o.torque_commands;
   log.command_is_slide = log.joint_is_slide;
   log.joint_std = o.encoder_std;
   log.gyro_std = o.gyro_std;
@@ -63,8 +64,10 @@ RecordedLog SimulateMotionLog(Simulation& s, SensorSuite& sensors, const MultiSi
       const double t = s.time();
       for (int j = 0; j < n; ++j) cmd[j] = motion.At(j, t);
       s.SetCommand(cmd);
-      log.command_t.push_back(t);
-      log.command_q.insert(log.command_q.end(), cmd.data(), cmd.data() + n);
+      if (!o.torque_commands) {
+        log.command_t.push_back(t);
+        log.command_q.insert(log.command_q.end(), cmd.data(), cmd.data() + n);
+      }
     }
     readings.clear();
     sensors.Poll(s, &readings);
@@ -88,7 +91,14 @@ RecordedLog SimulateMotionLog(Simulation& s, SensorSuite& sensors, const MultiSi
         log.imu.push_back(reading);
       }
     }
-    if (k < steps) s.Step(1);
+    if (k < steps) {
+      const double t = s.time();
+      s.Step(1);
+      if (o.torque_commands) {
+        log.command_t.push_back(t);
+        for (int j = 0; j < n; ++j) log.command_q.push_back(s.MotorTorque(j));
+      }
+    }
   }
   for (const auto& [t, row] : rows) {
     log.joint_t.push_back(t);

@@ -33,6 +33,9 @@ struct MotionLogOptions {
   // The truth's pose of this frame in the base body's (truth.tum) at each encoder row; none
   // when empty. The base body "world" (or empty) is the world.
   std::string truth_frame, base_body;
+  // The log's commands: the position targets sent (false), or the torque each motor applied
+  // at its joint in each step (true: commands.csv type torque, a row per step).
+  bool torque_commands = false;
 };
 
 // Settles `truth` at the motion's start, then steps it for the duration, sending the motion's

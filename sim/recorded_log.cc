@@ -179,7 +179,21 @@ struct JointColumnsFile {
   StreamStats stats;
 };
 
-JointColumnsFile ReadJointColumnsFile(const ConfigNode& node, double* used) {
+// The unit suffixes of a joint-columns file: angles (rad, m) or torques (N m, N).
+struct ColumnUnits {
+  const char* hinge;
+  const char* slide;
+};
+constexpr ColumnUnits kAngleUnits{"_rad", "_m"};
+constexpr ColumnUnits kTorqueUnits{"_Nm", "_N"};
+
+bool EndsWith(const std::string& s, const std::string& suffix) {
+  return s.size() > suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+JointColumnsFile ReadJointColumnsFile(const ConfigNode& node, double* used,
+                                      ColumnUnits units = kAngleUnits) {
   JointColumnsFile f;
   const std::string file = node.ResolvePath(node.GetString("file"));
   const double offset = ClockOffset(node);
@@ -192,13 +206,14 @@ JointColumnsFile ReadJointColumnsFile(const ConfigNode& node, double* used) {
   }
   for (size_t c = 1; c < header.size(); ++c) {
     const std::string& h = header[c];
-    const bool rad = h.size() > 4 && h.compare(h.size() - 4, 4, "_rad") == 0;
-    const bool m = h.size() > 2 && h.compare(h.size() - 2, 2, "_m") == 0;
+    const bool rad = EndsWith(h, units.hinge);
+    const bool m = !rad && EndsWith(h, units.slide);
     if (!rad && !m) {
-      throw InputError(hdr + ": column '" + CapForMessage(h) +
-                       "': expected <joint>_rad or <joint>_m (the unit in the name)");
+      throw InputError(hdr + ": column '" + CapForMessage(h) + "': expected <joint>" + units.hinge +
+                       " or <joint>" + units.slide + " (the unit in the name)");
     }
-    const std::string joint = h.substr(0, h.size() - (rad ? 4 : 2));
+    const std::string joint =
+        h.substr(0, h.size() - std::string(rad ? units.hinge : units.slide).size());
     if (std::count(f.names.begin(), f.names.end(), joint) > 0) {
       throw InputError(hdr + ": joint '" + CapForMessage(joint) + "' has two columns");
     }
@@ -243,11 +258,13 @@ void ReadJoints(const ConfigNode& node, RecordedLog* log, double* used) {
 
 void ReadCommands(const ConfigNode& node, RecordedLog* log, double* used) {
   const std::string type = node.GetString("type", "position");
-  if (type != "position") {
+  if (type != "position" && type != "torque") {
     node.Child("type").Fail("'" + CapForMessage(type) +
-                            "': only position targets are read (type: position)");
+                            "': position (the servos' targets) or torque (the motors')");
   }
-  JointColumnsFile f = ReadJointColumnsFile(node, used);
+  log->command_torque = type == "torque";
+  JointColumnsFile f =
+      ReadJointColumnsFile(node, used, log->command_torque ? kTorqueUnits : kAngleUnits);
   log->command_joints = std::move(f.names);
   log->command_is_slide = std::move(f.is_slide);
   log->command_t = std::move(f.t);
@@ -432,7 +449,10 @@ std::string LogYaml(const RecordedLog& log) {
       y << "}\n";
     }
   }
-  if (!log.command_t.empty()) y << "commands: {file: commands.csv, type: position}\n";
+  if (!log.command_t.empty()) {
+    y << "commands: {file: commands.csv, type: " << (log.command_torque ? "torque" : "position")
+      << "}\n";
+  }
   if (!log.truth_t.empty()) y << "truth: {file: truth.tum, frame: " << log.truth_frame << "}\n";
   if (log.static_postures) y << "static_postures: true\n";
   if (!log.estimate_in.empty()) y << "estimate_in: " << log.estimate_in << "\n";
@@ -441,10 +461,13 @@ std::string LogYaml(const RecordedLog& log) {
 }
 
 std::string JointColumnsCsv(const std::vector<std::string>& names, const std::vector<char>& slide,
-                            const std::vector<double>& t, const std::vector<double>& values) {
+                            const std::vector<double>& t, const std::vector<double>& values,
+                            ColumnUnits units = kAngleUnits) {
   std::ostringstream j;
   j << "t_s";
-  for (size_t k = 0; k < names.size(); ++k) j << "," << names[k] << (slide[k] ? "_m" : "_rad");
+  for (size_t k = 0; k < names.size(); ++k) {
+    j << "," << names[k] << (slide[k] ? units.slide : units.hinge);
+  }
   j << "\n";
   for (size_t r = 0; r < t.size(); ++r) {
     j << ExactNum(t[r]);
@@ -494,8 +517,9 @@ void WriteLogFiles(const RecordedLog& log, const std::filesystem::path& tmp,
   WriteText(tmp / "joints.csv",
             JointColumnsCsv(log.joints, log.joint_is_slide, log.joint_t, log.joint_q));
   if (!log.command_t.empty()) {
-    WriteText(tmp / "commands.csv", JointColumnsCsv(log.command_joints, log.command_is_slide,
-                                                    log.command_t, log.command_q));
+    WriteText(tmp / "commands.csv",
+              JointColumnsCsv(log.command_joints, log.command_is_slide, log.command_t,
+                              log.command_q, log.command_torque ? kTorqueUnits : kAngleUnits));
   }
   if (!log.imus.empty()) {
     std::ostringstream i;

@@ -7,7 +7,8 @@
 //               declared: ../models/jsk_arm.declared.yaml   # relative to the folder
 //               joints: {file: joints.csv, clock_offset_s: 0,
 //                        std_rad: 0}   # the readings' noise, each joint (m for a slide)
-//               commands: {file: commands.csv, clock_offset_s: 0, type: position}  # optional
+//               commands: {file: commands.csv, clock_offset_s: 0,  # optional
+//                          type: position}   # or torque
 //               imu: {file: imu.csv, clock_offset_s: 0,     # optional
 //                     gyro_std_rad_s: 0, accel_std_m_s2: 0,   # the readings' noise (0: unknown)
 //                     sensors: {imu2: {frame: imu_link2, initial_wxyz: [1, 0, 0, 0],
@@ -33,7 +34,7 @@
 //                 points: {tip: {frame: grasp_point, p_frame_m: [0, 0, 0]}}}
 //   joints.csv  t_s, then one column per joint: <joint>_rad (<joint>_m for a slide)
 //   commands.csv  t_s, then one column per actuated joint: <joint>_rad (_m): the position
-//               servos' targets as sent
+//               servos' targets as sent; type torque: <joint>_Nm (_N), the motors' torques
 //   imu.csv     t_s, sensor, gx_rad_s, gy_rad_s, gz_rad_s, ax_m_s2, ay_m_s2, az_m_s2 (sensor
 //               frame; specific force, +g up at rest)
 //   truth.tum   TUM lines "t x y z qx qy qz qw": the frame's pose in the base frame (m, s)
@@ -195,6 +196,9 @@ struct RecordedLog {
   std::vector<char> command_is_slide;
   std::vector<double> command_t;
   std::vector<double> command_q;  // row-major, command_joints.size() a row
+  // type: torque: the motors' torques at the joints (N m; N on a slide), each in force from its
+  // time to the next row's, instead of position targets.
+  bool command_torque = false;
   // imu.csv: the sensors of log.yaml and every reading (`imu` indexes imus), in file order.
   std::vector<LogImu> imus;
   std::vector<estimators::ImuReading> imu;

@@ -161,7 +161,25 @@ void Simulation::SetCommand(const Eigen::VectorXd& q_motor) {
                                 " actuated joints");
   }
   command_ = q_motor;
+  torque_mode_ = false;
   if (max_delay_ > 0.0) PushCommandHistory(data_->time);
+}
+
+void Simulation::SetTorque(const Eigen::VectorXd& tau) {
+  if (tau.size() != num_actuated()) {
+    throw std::invalid_argument(model_name_ + ": torque has " + std::to_string(tau.size()) +
+                                " values for " + std::to_string(num_actuated()) +
+                                " actuated joints");
+  }
+  torque_ = tau;
+  torque_mode_ = true;
+}
+
+double Simulation::MotorTorque(int i) const {
+  const mjModel* m = truth_.get();
+  const int a = catalog_.Joint(catalog_.actuated[i]).actuator;
+  const double ff = feedforward_.size() > i ? feedforward_[i] : 0.0;
+  return data_->actuator_force[a] * m->actuator_gear[6 * a] + ff;
 }
 
 void Simulation::SetCommandAt(double t, const Eigen::VectorXd& q_motor) {
@@ -463,12 +481,20 @@ SettleReport Simulation::Settle(const SettleOptions& options) {
 void Simulation::ApplyServo() const {
   const mjModel* m = truth_.get();
   mjData* d = data_.get();
+  feedforward_.resize(num_actuated());
   for (int i = 0; i < num_actuated(); ++i) {
     const int j = catalog_.actuated[i];
     const int a = catalog_.Joint(j).actuator;
     const int dof = m->jnt_dofadr[j];
     const double q = d->qpos[m->jnt_qposadr[j]];
     const double kp = m->actuator_gainprm[a * mjNGAIN];
+    if (torque_mode_) {
+      // The servo off: the control at which its force (gain ctrl + bias) is zero here.
+      const double* b = m->actuator_biasprm + a * mjNBIAS;
+      d->ctrl[a] = kp != 0.0 ? -(b[0] + b[1] * q + b[2] * d->qvel[dof]) / kp : 0.0;
+      d->qfrc_applied[dof] = torque_[i];
+      continue;
+    }
     const GearSpec& g = setup_.gear[j];
     const double command = DelayedCommand(i, setup_.servo_delay[j]);
     const double link_command = command + g.TransmissionError(command);
@@ -485,6 +511,7 @@ void Simulation::ApplyServo() const {
   // A rigid gear holds the load of the linkages it drives as well (virtual work), as the
   // static solve's drivers do.
   for (int c : released_linkages_) {
+    if (torque_mode_) break;  // the logged torques are the motors' whole torques
     const JointEntry& linkage = catalog_.Joint(c);
     double dy;
     CoupledValue(m, linkage, d->qpos, &dy, &slopes_);
@@ -494,6 +521,9 @@ void Simulation::ApplyServo() const {
       d->qfrc_applied[m->jnt_dofadr[linkage.drivers[k]]] +=
           slopes_[k] * d->qfrc_bias[m->jnt_dofadr[c]];
     }
+  }
+  for (int i = 0; i < num_actuated(); ++i) {
+    feedforward_[i] = d->qfrc_applied[m->jnt_dofadr[catalog_.actuated[i]]];
   }
   for (int i = 0; i < num_actuated(); ++i) {
     const int j = catalog_.actuated[i];

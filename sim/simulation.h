@@ -86,6 +86,14 @@ class Simulation {
   // mid-log is given the commands before its start.
   void SetCommandAt(double t, const Eigen::VectorXd& q_motor);
   const Eigen::VectorXd& command() const { return command_; }
+  // Torque commands instead (a log of the motors' torques): from now on each actuated joint is
+  // driven by `tau` (N m; N on a slide; actuator order) with its servo off, until the next
+  // SetTorque, or a SetCommand switches the servos back on. Gear springs and play are not
+  // modelled under torque.
+  void SetTorque(const Eigen::VectorXd& tau);
+  // The torque the motor of actuated joint i applied at its joint in the last step (the servo's
+  // force and feed-forward, or the torque set), friction not included.
+  double MotorTorque(int i) const;
 
   // ---- Rollouts from a recorded state: the clock at t, the actuated joints at q with velocity
   // qd (actuator order); every other DoF keeps its state. The commands sent before are forgotten:
@@ -183,6 +191,9 @@ class Simulation {
   std::vector<std::string> effect_names_;
   std::vector<std::string> actuated_names_;
   Eigen::VectorXd command_;
+  bool torque_mode_ = false;
+  Eigen::VectorXd torque_;               // SetTorque's, actuator order
+  mutable Eigen::VectorXd feedforward_;  // the servos' qfrc_applied of the last step
   // Commands sent and when, from history_begin_ on (kept only when a servo has a delay).
   double max_delay_ = 0.0;
   std::vector<double> history_t_;

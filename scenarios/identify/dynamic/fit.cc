@@ -184,43 +184,127 @@ FitState DynamicProblem::Fit(const std::vector<int>& active, Eigen::VectorXd the
 
 namespace flexbench::identify::dynamic {
 
-FitState DynamicProblem::RefineStarts(const FitState& fit, int iterations) {
+Eigen::MatrixXd DynamicProblem::StartJacobian(const FitState& fit) const {
   const int nj = static_cast<int>(data_.joints.size());
-  const int ns = static_cast<int>(data_.segments.size());
   constexpr double kStep = 1e-3;  // rad/s
-  std::vector<Prediction> moved(nj);
-  const Eigen::MatrixXd start = data_.start_qd;
-  ForEachTask(nj, threads_, [&](int k) {
+  Eigen::MatrixXd Js = Eigen::MatrixXd::Zero(layout_.size(), nj);
+  ForEachTask(nj, threads_, [&](int j) {
     MotionData d = data_;
-    d.start_qd.col(k).array() += kStep;
-    moved[k] = Roll(Terms(fit.active, fit.theta), d);
+    d.start_qd.col(j).array() += kStep;
+    const Prediction p = Roll(Terms(fit.active, fit.theta), d);
+    for (int k = 0; k < layout_.size(); ++k) {
+      const int s = layout_.segment[k];
+      const bool lost = p.diverged[s] || fit.prediction.diverged[s] || declared_.diverged[s];
+      Js(k, j) = lost ? 0.0 : (p.residual[k] - fit.prediction.residual[k]) / kStep;
+    }
   });
-  const Eigen::VectorXd& r = fit.prediction.residual;
-  int k = 0;
-  for (int s = 0; s < ns; ++s) {
+  return Js;
+}
+
+namespace {
+
+// The row span of each segment in the layout (entries are in segment order).
+std::vector<std::pair<int, int>> SegmentRows(const ResidualLayout& L, int segments) {
+  std::vector<std::pair<int, int>> rows(segments, {0, 0});
+  for (int k = 0; k < L.size();) {
+    const int s = L.segment[k];
     const int first = k;
-    while (k < layout_.size() && layout_.segment[k] == s) ++k;
-    bool lost = declared_.diverged[s] || fit.prediction.diverged[s];
-    for (int j = 0; j < nj; ++j) {
-      lost |= moved[j].diverged[s] || (s > 0 && moved[j].diverged[s - 1]);
-    }
-    if (lost) continue;
-    Eigen::MatrixXd J(k - first, nj);
-    for (int j = 0; j < nj; ++j) {
-      J.col(j) =
-          (moved[j].residual.segment(first, k - first) - r.segment(first, k - first)) / kStep;
-    }
-    Eigen::MatrixXd A = J.transpose() * J;
-    A.diagonal() += 1e-9 * A.diagonal().cwiseMax(1e-12);
-    data_.start_qd.row(s) +=
-        (-A.ldlt().solve(J.transpose() * r.segment(first, k - first))).transpose();
+    while (k < L.size() && L.segment[k] == s) ++k;
+    rows[s] = {first, k - first};
   }
-  FitState refit = Fit(fit.active, fit.theta, Mask(-1), iterations);
-  if (!refit.ok || refit.cost >= fit.cost) {
-    data_.start_qd = start;
-    return fit;
+  return rows;
+}
+
+// A segment's start-speed block made invertible: a joint the segment does not move (a zero
+// column) is held.
+Eigen::MatrixXd Regularised(Eigen::MatrixXd A, double lambda) {
+  const double scale = std::max(1.0, A.diagonal().maxCoeff());
+  for (int i = 0; i < A.rows(); ++i) A(i, i) += lambda * A(i, i) + 1e-12 * scale;
+  return A;
+}
+
+}  // namespace
+
+Eigen::MatrixXd DynamicProblem::WithoutStarts(const Eigen::MatrixXd& J,
+                                              const Eigen::MatrixXd& Js) const {
+  Eigen::MatrixXd out = J;
+  for (const auto& [first, n] : SegmentRows(layout_, static_cast<int>(data_.segments.size()))) {
+    if (n == 0) continue;
+    const auto Jss = Js.middleRows(first, n);
+    const Eigen::MatrixXd A = Regularised(Jss.transpose() * Jss, 0.0);
+    out.middleRows(first, n) -= Jss * A.ldlt().solve(Jss.transpose() * J.middleRows(first, n));
   }
-  return refit;
+  return out;
+}
+
+FitState DynamicProblem::JointFit(const FitState& fit, const std::vector<char>& mask,
+                                  int iterations) {
+  const Eigen::VectorXd lo = Lower(fit.active), hi = Upper(fit.active);
+  const int np = static_cast<int>(fit.theta.size());
+  const auto rows = SegmentRows(layout_, static_cast<int>(data_.segments.size()));
+  FitState best = fit;
+  if (!best.ok) return best;
+  double lambda = 1e-3;
+  for (int it = 0; it < iterations; ++it) {
+    Eigen::MatrixXd J = np > 0 ? Jacobian(best.active, best.theta, best.prediction)
+                               : Eigen::MatrixXd(layout_.size(), 0);
+    Eigen::MatrixXd Js = StartJacobian(best);
+    Eigen::VectorXd r = best.prediction.residual;
+    for (int k = 0; k < layout_.size(); ++k) {
+      if (mask[k]) continue;
+      J.row(k).setZero();
+      Js.row(k).setZero();
+      r[k] = 0.0;
+    }
+    const Eigen::MatrixXd A = J.transpose() * J;
+    const Eigen::VectorXd g = J.transpose() * r;
+    bool improved = false;
+    for (int tries = 0; tries < 6 && !improved; ++tries) {
+      // The starts eliminated: H dtheta = -g' with H = A - sum B_s' A_s^-1 B_s.
+      Eigen::MatrixXd H = A;
+      Eigen::VectorXd gr = g;
+      std::vector<Eigen::LDLT<Eigen::MatrixXd>> solve(rows.size());
+      std::vector<Eigen::MatrixXd> B(rows.size());
+      std::vector<Eigen::VectorXd> gs(rows.size());
+      for (size_t s = 0; s < rows.size(); ++s) {
+        const auto [first, n] = rows[s];
+        if (n == 0) continue;
+        const auto Jss = Js.middleRows(first, n);
+        solve[s].compute(Regularised(Jss.transpose() * Jss, lambda));
+        B[s] = Jss.transpose() * J.middleRows(first, n);
+        gs[s] = Jss.transpose() * r.segment(first, n);
+        H -= B[s].transpose() * solve[s].solve(B[s]);
+        gr -= B[s].transpose() * solve[s].solve(gs[s]);
+      }
+      Eigen::VectorXd t = best.theta;
+      if (np > 0) {
+        const Eigen::VectorXd D =
+            H.diagonal().cwiseMax(1e-12 * std::max(1.0, H.diagonal().maxCoeff()));
+        H.diagonal() += lambda * D;
+        t = (best.theta - H.ldlt().solve(gr)).cwiseMax(lo).cwiseMin(hi);
+      }
+      const Eigen::VectorXd dtheta = t - best.theta;
+      const Eigen::MatrixXd starts = data_.start_qd;
+      for (size_t s = 0; s < rows.size(); ++s) {
+        if (rows[s].second == 0) continue;
+        const Eigen::VectorXd rhs = np > 0 ? Eigen::VectorXd(gs[s] + B[s] * dtheta) : gs[s];
+        data_.start_qd.row(static_cast<int>(s)) -= solve[s].solve(rhs).transpose();
+      }
+      FitState trial = Evaluate(best.active, t, mask);
+      if (trial.ok && trial.cost < best.cost) {
+        const double gain = (best.cost - trial.cost) / best.cost;
+        best = std::move(trial);
+        lambda = std::max(1e-7, lambda / 5.0);
+        improved = true;
+        if (gain < 1e-5) return best;
+      } else {
+        data_.start_qd = starts;
+        lambda *= 8.0;
+      }
+    }
+    if (!improved) break;
+  }
+  return best;
 }
 
 }  // namespace flexbench::identify::dynamic

@@ -63,12 +63,18 @@ class DynamicProblem {
                const std::vector<char>& mask, int iterations) const;
   // Entries in the folds other than `fold` (-1: every fold), minus diverged segments.
   std::vector<char> Mask(int held_out_fold) const;
-  // Multiple shooting's nuisance: one Gauss-Newton step on every segment's starting speeds at
-  // `fit` (a rollout per joint: a segment's speeds move only its own rollout, to first order, so
-  // one perturbation serves all segments; a segment whose perturbed rollout diverged keeps its
-  // start). Returns the refitted state of `fit`'s effects from the new starts, or `fit` with the
-  // starts as they were when the refit does not lower the cost.
-  FitState RefineStarts(const FitState& fit, int iterations);
+  // Multiple shooting's nuisance, the segments' starting speeds, fitted jointly with `fit`'s
+  // effects: bounded Levenberg-Marquardt on both, the starts eliminated segment by segment
+  // (Schur complement: a segment's speeds move only its own rollout). `fit` must be the current
+  // starts' evaluation; the problem keeps the starts of the returned state.
+  FitState JointFit(const FitState& fit, const std::vector<char>& mask, int iterations);
+  // d residual / d start speeds: per joint a rollout with every segment's start speed of that
+  // joint moved (to first order a segment's speeds move only its own rollout, so one
+  // perturbation serves all); zero on segments whose perturbed rollout diverged.
+  Eigen::MatrixXd StartJacobian(const FitState& fit) const;
+  // J with the start speeds projected out, segment by segment (J - Js (Js'Js)^-1 Js'J, Js
+  // StartJacobian's): the effects' Jacobian with the starts free, for their covariance.
+  Eigen::MatrixXd WithoutStarts(const Eigen::MatrixXd& J, const Eigen::MatrixXd& Js) const;
   double Cost(const Eigen::VectorXd& residual, const std::vector<char>& mask) const;
   Eigen::VectorXd Lower(const std::vector<int>& active) const {
     return Stacked(active, &sim::DynamicRow::lower);

@@ -120,7 +120,8 @@ MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& si
   if (log.command_t.empty()) {
     throw InputError(log.dir +
                      "/log.yaml: no `commands` (commands.csv): dynamic identification "
-                     "drives its rollouts with the commands the servos were sent");
+                     "drives its rollouts with the commands the servos were sent (or the "
+                     "motors' torques)");
   }
   const std::vector<int> qc = ColumnsOf(d.joints, log.joints, log.joint_stats.file, model);
   const std::vector<int> cc =
@@ -136,7 +137,8 @@ MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& si
   for (size_t r = 0; r < d.command_t.size(); ++r) {
     for (int k = 0; k < nj; ++k) d.command(static_cast<int>(r), k) = log.command(r)[cc[k]];
   }
-  CheckCommandRange(d, sim, log.command_stats.file);
+  d.torque = log.command_torque;
+  if (!d.torque) CheckCommandRange(d, sim, log.command_stats.file);
   d.qd = LocalSlopes(d.t, d.q, o.velocity_window_s, o.velocity_degree);
   if (o.use_imus) {
     for (size_t i = 0; i < log.imus.size(); ++i) {

@@ -35,7 +35,8 @@ struct MotionData {
   Eigen::MatrixXd q;                // rows x joints, rad (m)
   Eigen::MatrixXd qd;               // rows x joints: a local line through nearby rows
   std::vector<double> command_t;
-  Eigen::MatrixXd command;  // rows x joints: the position targets sent
+  Eigen::MatrixXd command;  // rows x joints: the position targets sent, or the torques
+  bool torque = false;      // commands are the motors' torques (the log's type: torque)
   std::vector<MotionImu> imus;
   // The readings' noise: the log's (joints.std_rad, imu.gyro_std_rad_s, accel_std_m_s2), or,
   // where it gives none, the spread of the declared model's residual (SetUnknownNoise).
@@ -43,7 +44,7 @@ struct MotionData {
   bool noise_from_log[3] = {false, false, false};
   std::vector<Segment> segments;
   // Each segment's starting speeds (segments x joints): qd at its first row, until the final fit
-  // refines them (DynamicProblem::RefineStarts).
+  // fits them with the effects (DynamicProblem::JointFit).
   Eigen::MatrixXd start_qd;
   int folds = 1;
 };

@@ -136,7 +136,11 @@ Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& te
       const auto send_until = [&](double t) {
         for (; c < d.command_t.size() && d.command_t[c] <= t + 1e-9; ++c) {
           c_row = d.command.row(static_cast<int>(c)).transpose();
-          sim->SetCommandAt(d.command_t[c], c_row);
+          if (d.torque) {
+            sim->SetTorque(c_row);
+          } else {
+            sim->SetCommandAt(d.command_t[c], c_row);
+          }
         }
       };
       send_until(t0);

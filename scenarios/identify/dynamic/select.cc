@@ -178,7 +178,10 @@ class Selection {
 // Sandwich covariance with segments as clusters.
 Eigen::MatrixXd ClusterCovariance(const DynamicProblem& p, const FitState& fit,
                                   const std::vector<char>& mask) {
-  Eigen::MatrixXd J = p.Jacobian(fit.active, fit.theta, fit.prediction);
+  // The starts are free parameters of the fit too: the effects' Jacobian with them projected
+  // out (their uncertainty is part of the effects').
+  Eigen::MatrixXd J =
+      p.WithoutStarts(p.Jacobian(fit.active, fit.theta, fit.prediction), p.StartJacobian(fit));
   Eigen::VectorXd r = fit.prediction.residual;
   ZeroUnmasked(mask, &J, &r);
   const int n = static_cast<int>(fit.theta.size());
@@ -427,13 +430,13 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   rep.heldout_before = start.heldout;
   Scored state = stages.Swap(stages.Forward(WarmStart(p, o, warm, stages, start, &rep)));
   rep.heldout_after = state.heldout;
-  // The starts are the fit's nuisance whatever it chose: the residual the verdict reads is taken
-  // from refined starts, with effects or without.
-  for (int i = 0; i < o.start_refinements; ++i) {
+  // The starts are the fit's nuisance whatever it chose: the effects are refitted with them, and
+  // the residual the verdict reads is taken from there, with effects or without.
+  if (o.joint_iterations > 0) {
     const double before = state.fit.cost;
-    state.fit = p.RefineStarts(state.fit, o.iterations);
-    rep.log.push_back("segment starts refined: cost " + ShortNum(before) + " -> " +
-                      ShortNum(state.fit.cost));
+    state.fit = p.JointFit(state.fit, sel.all(), o.joint_iterations);
+    rep.log.push_back("effects and segment start speeds fitted jointly: cost " + ShortNum(before) +
+                      " -> " + ShortNum(state.fit.cost));
   }
   const FitState& fit = state.fit;
   // "Before" from the same starts as the fit: the refined speeds are not the effects' credit.

@@ -31,7 +31,7 @@ struct DynamicIdentifyOptions {
   int screen_keep = 3;          // screened candidates refitted per round
   double cv_min_gain = 0.05;    // relative held-out error drop a candidate must bring
   int iterations = 8;           // Levenberg-Marquardt iterations per fit
-  int start_refinements = 2;    // rounds of RefineStarts on the final fit
+  int joint_iterations = 10;    // of the final fit of the effects with the segments' starts
   // The part of the declared model's explained excess a swap may leave unexplained and still be
   // an equivalent effect.
   double equivalence = 0.05;

@@ -8,6 +8,7 @@
 //     effects: {joint_friction: {Nm: {link2_pitch_joint: 0.2}}}
 //     duration_s: 12
 //     command_rate_hz: 500
+//     commands: position      # or torque: the log holds each step's motor torques instead
 //     motion: {center_deg: [...], amplitude_deg: [...], frequencies_hz: [f1, f2, f3]}
 //   sensors: [...]            # encoders (link side) and IMUs, sim/sensors
 //   identify: {segment_s: 0.5, folds: 3, max_effects: 3, families: [...], threads: 2}
@@ -17,6 +18,7 @@
 // or, for a recorded log (a user's robot), instead of model/truth/sensors:
 //   log: path/to/log          # log.yaml with commands.csv (docs/logs.md)
 //   declared: ...             # optional: the log's own declared model by default
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -91,6 +93,11 @@ class ClosedLoopDynamicKind : public ScenarioKind {
       truth.Child("command_rate_hz").Fail("must be > 0 and at most the model's step rate");
     }
     ReadMotion(truth.Child("motion"));
+    const std::string commands = truth.GetString("commands", "position");
+    if (commands != "position" && commands != "torque") {
+      truth.Child("commands").Fail("position (the servos' targets) or torque (the motors')");
+    }
+    torque_commands_ = commands == "torque";
     sensors_node_ = std::make_unique<ConfigNode>(root.Child("sensors"));
     sim::SensorSuite::Parse(*sensors_node_, *truth_, 0);  // checked now; Run seeds its own
     ReadSensorNoise(*sensors_node_);
@@ -114,8 +121,17 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     dyn::RolloutModel model(sim::LoadModel(declared_.model_path), declared_.model_path,
                             declared_terms);
     const dyn::MotionData data = dyn::ReadMotionData(log, model.nominal(), motion_options_);
-    dyn::DynamicProblem problem(model, data, dyn::AllCandidates(model.nominal(), families_),
-                                threads_);
+    std::vector<dyn::Candidate> candidates = dyn::AllCandidates(model.nominal(), families_);
+    if (data.torque) {
+      // The servo is not in the loop of a torque log: its gain and delay act on nothing.
+      const auto servo = [](const dyn::Candidate& c) {
+        return c.kind == sim::DynamicKind::kServoGain || c.kind == sim::DynamicKind::kServoDelay;
+      };
+      candidates.erase(std::remove_if(candidates.begin(), candidates.end(), servo),
+                       candidates.end());
+      ctx.log("torque commands: the servo's gain and delay are not candidates (no servo acts)");
+    }
+    dyn::DynamicProblem problem(model, data, std::move(candidates), threads_);
     // The static identification's effects, where the declared file has them, as the start.
     const std::vector<sim::StaticCounterpart> warm =
         sim::DynamicCounterparts(model.nominal().model(), model.nominal().catalog(), declared_);
@@ -177,6 +193,8 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     options_.max_effects = static_cast<int>(positive("max_effects", options_.max_effects, 0, 20));
     options_.cv_min_gain = positive("cv_min_gain", options_.cv_min_gain, 0.0, 0.9);
     options_.iterations = static_cast<int>(positive("iterations", options_.iterations, 1, 100));
+    options_.joint_iterations =
+        static_cast<int>(positive("joint_iterations", options_.joint_iterations, 0, 100));
     threads_ = static_cast<int>(positive("threads", threads_, 1, 64));
     if (id.Has("families")) {
       for (const ConfigNode& item : id.Child("families").Items()) {
@@ -198,6 +216,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     o.gyro_std = std_gyro_;
     o.accel_std = std_accel_;
     o.declared_path = std::filesystem::absolute(declared_path_).lexically_normal().string();
+    o.torque_commands = torque_commands_;
     o.truth_frame = declared_.end_effector;
     o.base_body = declared_.base;
     return sim::SimulateMotionLog(*truth_, sensors, motion, o);
@@ -340,6 +359,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   sim::DeclaredModel declared_;
   std::unique_ptr<sim::Simulation> truth_;
   double duration_s_ = 12.0, command_rate_hz_ = 500.0;
+  bool torque_commands_ = false;  // the log's commands: the motors' torques
   sim::MultiSine motion_;
   std::unique_ptr<ConfigNode> sensors_node_;
   double std_q_ = 0.0, std_gyro_ = 0.0, std_accel_ = 0.0;

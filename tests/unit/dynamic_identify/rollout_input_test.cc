@@ -2,14 +2,19 @@
 // outside an actuator's range, segments shorter than the model's step are one line each; a
 // rollout that diverges is a counted segment, not a crash. And the servo delay the rollouts and
 // the truth share: a delayed servo follows the same commands the same way, later by the delay.
+// A torque log replays the servo's trajectory with the servo off.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "estimators/error.h"
 #include "scenarios/identify/dynamic/fit.h"
 #include "sim/mujoco_model.h"
+#include "sim/recorded_log.h"
 #include "sim/simulation.h"
 
 namespace flexbench::identify::dynamic {
@@ -108,6 +113,62 @@ TEST(ServoDelay, ADelayedServoFollowsTheSameCommandsLater) {
     moved = std::max(moved, std::abs(q_plain[k]));
   }
   EXPECT_GT(moved, 0.1) << "q at the end " << q_plain.back();  // the commands moved the arm
+}
+
+// A torque log is what the motor did: the servo-driven pendulum's torque of each step, applied
+// to a second pendulum with its servo off from the same state, gives the same trajectory (the
+// same model: to the last bits the float sums allow).
+TEST(TorqueCommands, TheLoggedMotorTorquesReplayTheServosTrajectory) {
+  auto servo = sim::Simulation::FromString(Pendulum(20), "pendulum");
+  auto motor = sim::Simulation::FromString(Pendulum(20), "pendulum");
+  Eigen::VectorXd cmd(1), tau(1), q0(1), qd0(1);
+  cmd << 0.2;
+  servo->SetCommand(cmd);
+  servo->Settle();
+  q0 << servo->JointPosition("j");
+  qd0 << 0.0;
+  motor->SetCommand(cmd);
+  motor->Settle();
+  motor->SetActuatedState(servo->time(), q0, qd0);
+  double worst = 0.0, moved = 0.0, torque = 0.0;
+  for (int k = 0; k < 600; ++k) {
+    cmd << 0.2 + 0.5 * std::sin(6.0 * k * 0.001);
+    servo->SetCommand(cmd);
+    servo->Step(1);
+    tau << servo->MotorTorque(0);
+    torque = std::max(torque, std::abs(tau[0]));
+    motor->SetTorque(tau);
+    motor->Step(1);
+    worst = std::max(worst, std::abs(motor->JointPosition("j") - servo->JointPosition("j")));
+    moved = std::max(moved, std::abs(servo->JointPosition("j") - q0[0]));
+  }
+  EXPECT_GT(moved, 0.2);
+  EXPECT_GT(torque, 0.5);
+  EXPECT_LT(worst, 1e-12);
+  // SetCommand switches the servo back on: it pulls towards the command again.
+  cmd << 0.0;
+  motor->SetCommand(cmd);
+  motor->Step(300);
+  EXPECT_LT(std::abs(motor->JointPosition("j")), 0.1);
+}
+
+// A torque log written and read back: type torque, <joint>_Nm columns, every digit.
+TEST(TorqueCommands, ATorqueLogRoundTrips) {
+  sim::RecordedLog log = SineLog(0.3);
+  log.command_torque = true;
+  log.robot = "pendulum";
+  log.declared_path = "pendulum.declared.yaml";
+  const std::string dir = "/tmp/flexbench_torque_log_" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  sim::WriteRecordedLog(log, dir);
+  std::ifstream in(dir + "/commands.csv");
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header, "t_s,j_Nm");
+  const sim::RecordedLog back = sim::ReadRecordedLog(dir);
+  EXPECT_TRUE(back.command_torque);
+  EXPECT_EQ(back.command_q, log.command_q);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
