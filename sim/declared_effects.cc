@@ -66,6 +66,7 @@ class EffectsBuilder {
     for (FrameId f = chain_->end_effector; f > 0; f = model_.frame(f).parent) e.on_path[f] = 1;
     FindMount();
     bool load_driven = false;
+    DynamicEntries(d_.identified_effects);  // checked as a whole (an entry given twice)
     for (const IdentifiedEffect& ie : d_.identified_effects) {
       if (IsDynamicEffect(ie.effect)) {
         load_driven |= AddStaticPartOf(ie, DynamicEntries({ie}).front());
@@ -78,7 +79,10 @@ class EffectsBuilder {
     }
     if (load_driven && !HasMasses()) {
       for (const IdentifiedEffect& ie : d_.identified_effects) {
-        if (IsDynamicEffect(ie.effect) || Parse(ie).row->load_driven) {
+        const bool loads = IsDynamicEffect(ie.effect)
+                               ? HasStandingPart(DynamicEntries({ie}).front().row->kind)
+                               : Parse(ie).row->load_driven;
+        if (loads) {
           Fail(ie, "acts through the gravity loads, but the model " + CapForMessage(d_.model_path) +
                        " has no masses on the arm");
         }
@@ -325,7 +329,7 @@ class EffectsBuilder {
       Fail(ie, "names '" + CapForMessage(dd.location) + "', which " + d_.model_path + " has no " +
                    dd.row->name + " at (it has: " + (known.empty() ? "none" : known) + ")");
     }
-    if (kind != DynamicKind::kLinkMode && kind != DynamicKind::kPayloadMass) return false;
+    if (!HasStandingPart(kind)) return false;
     if (kind == DynamicKind::kPayloadMass) {
       const FrameId f = Frame(ie, "body/" + dd.location, "body");
       if (e.payload_frame >= 0 && e.payload_frame != f) Fail(ie, "a second payload frame");
@@ -350,15 +354,16 @@ class EffectsBuilder {
   }
 
   // The frame a bending body's link ends at on the way to the end effector: the next joint's
-  // frame below the body, else (the last link) the body below it. -1 when the body is off that
-  // way: its bend moves no frame the estimators report.
+  // frame below the body, else (the last link) the frame right below it (a body, or the end
+  // effector's site). -1 when the body is off that way: its bend moves no frame the estimators
+  // report.
   FrameId LinkEndBelow(const IdentifiedEffect& ie, const std::string& body) const {
     const FrameId b = Frame(ie, "body/" + body, "body");
-    FrameId joint = -1, child_body = -1;
+    FrameId joint = -1, below = -1;
     for (FrameId f = chain_->end_effector; f > 0; f = model_.frame(f).parent) {
-      if (f == b) return joint >= 0 ? joint : child_body;
+      if (f == b) return joint >= 0 ? joint : below;
       if (model_.frame(f).q_index >= 0) joint = f;
-      if (model_.frame(f).name.rfind("body/", 0) == 0) child_body = f;
+      below = f;
     }
     return -1;
   }

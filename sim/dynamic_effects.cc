@@ -290,6 +290,28 @@ void ApplyDynamic(TruthSetup& s, DynamicKind kind, const std::string& loc, const
   }
 }
 
+std::array<double, 2> Combined(DynamicKind kind, const std::array<double, 2>& first,
+                               const std::array<double, 2>& second) {
+  switch (kind) {
+    case K::kServoGain:
+      return {first[0] * second[0], 0.0};
+    case K::kLinkMode:
+    case K::kBaseMode:
+      return {first[0] * second[0], first[1] * second[1]};
+    case K::kServoDelay:
+    case K::kStribeckFriction:
+      return second;
+    case K::kJointDamping:
+    case K::kJointFriction:
+    case K::kJointArmature:
+    case K::kPayloadMass:
+      break;
+  }
+  return {first[0] + second[0], first[1] + second[1]};
+}
+
+bool HasStandingPart(DynamicKind kind) { return kind == K::kLinkMode || kind == K::kPayloadMass; }
+
 bool IsDynamicEffect(const std::string& effect) {
   return FindDynamic(effect.substr(0, effect.find('@'))) != nullptr;
 }
@@ -318,9 +340,15 @@ std::vector<DeclaredDynamic> DynamicEntries(const std::vector<IdentifiedEffect>&
     if (!ie.std.empty() && static_cast<int>(ie.std.size()) != n) {
       fail("needs " + std::to_string(n) + " stds, got " + std::to_string(ie.std.size()));
     }
+    for (const DeclaredDynamic& earlier : out) {
+      if (earlier.row == d.row && earlier.location == d.location) fail("is given twice");
+    }
     for (int k = 0; k < n; ++k) {
       const double v = ie.value[k];
       if (!std::isfinite(v)) fail("has a value that is not a finite number");
+      if (!ie.std.empty() && !(ie.std[k] >= 0.0 && std::isfinite(ie.std[k]))) {
+        fail("has a std that is not a finite number >= 0");
+      }
       if (!(v >= d.row->lower[k] && v <= d.row->upper[k])) {
         fail(std::string(d.row->value_names[k]) + " = " + ShortNum(v) + " is outside [" +
              ShortNum(d.row->lower[k]) + ", " + ShortNum(d.row->upper[k]) + "]");

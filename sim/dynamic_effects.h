@@ -71,6 +71,16 @@ std::vector<std::string> DynamicLocations(const TruthSetup& setup, DynamicKind k
 void ApplyDynamic(TruthSetup& setup, DynamicKind kind, const std::string& location,
                   const double* values, const std::string& where);
 
+// The values that act as `first` then `second` applied at one location (ApplyDynamic twice):
+// added (damping, friction, armature, mass), multiplied (a servo gain, a mode's scales), or the
+// second (a delay). An augmented model merges a refit of a declared effect with it so.
+std::array<double, 2> Combined(DynamicKind kind, const std::array<double, 2>& first,
+                               const std::array<double, 2>& second);
+
+// Whether a row changes where a standing arm is at given joint readings (a link's mode bends
+// the link under its load, a payload's mass loads the arm); the others change only its motion.
+bool HasStandingPart(DynamicKind kind);
+
 // An identified effect of a fitted dynamic row in a declared file (identified_effects: an entry
 // whose type is a row's name), as dynamic identification writes the augmented model.
 struct DeclaredDynamic {
@@ -84,9 +94,9 @@ struct DeclaredDynamic {
 // Whether `effect` (type@location) is a dynamic row's.
 bool IsDynamicEffect(const std::string& effect);
 
-// The dynamic entries of `effects`, each checked: a fitted row, of the form type@location, its
-// number of finite values within the row's bounds. Throws InputError naming the entry; the
-// location is checked where the entry is applied (ApplyDynamic).
+// The dynamic entries of `effects`, each checked: a fitted row, of the form type@location, given
+// once, its number of finite values within the row's bounds, finite non-negative stds. Throws
+// InputError naming the entry; the location is checked where the entry is applied (ApplyDynamic).
 std::vector<DeclaredDynamic> DynamicEntries(const std::vector<IdentifiedEffect>& effects);
 
 // A declared file's static effect (closed_loop's, from postures) that a dynamic row stands for

@@ -173,10 +173,14 @@ std::string WithFullPrecision(const std::string& xml, const mjModel* m,
     const std::string pat = std::string(" ") + key + "=\"";
     const size_t at = line.find(pat);
     if (at == std::string::npos) return;
-    std::istringstream written(line.substr(at + pat.size(), line.find('"', at + pat.size())));
+    const size_t from = at + pat.size();
+    std::istringstream written(line.substr(from, line.find('"', from) - from));
     bool exact = true;
-    double x = 0.0;
-    for (int k = 0; k < n; ++k) exact = exact && (written >> x) && x == v[k];
+    for (int k = 0; k < n; ++k) {
+      double x = 0.0;  // the writer leaves trailing zeros out
+      if (!(written >> x)) x = 0.0;
+      exact = exact && x == v[k];
+    }
     if (!exact) SetAttribute(&line, key, Nums(v, n));
   };
   const auto is = [&](const char* tag) {

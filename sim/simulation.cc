@@ -256,6 +256,7 @@ void Simulation::SetCommand(const std::string& joint, double q_motor) {
   for (int i = 0; i < num_actuated(); ++i) {
     if (actuated_names_[i] == joint) {
       command_[i] = q_motor;
+      torque_mode_ = false;
       if (max_delay_ > 0.0) PushCommandHistory(data_->time);
       return;
     }
@@ -489,10 +490,16 @@ void Simulation::ApplyServo() const {
     const double q = d->qpos[m->jnt_qposadr[j]];
     const double kp = m->actuator_gainprm[a * mjNGAIN];
     if (torque_mode_) {
-      // The servo off: the control at which its force (gain ctrl + bias) is zero here.
+      // The servo off: the control at which its force (gain ctrl + bias) is zero here, within
+      // its range; what a clamped control leaves is taken off the torque applied.
       const double* b = m->actuator_biasprm + a * mjNBIAS;
-      d->ctrl[a] = kp != 0.0 ? -(b[0] + b[1] * q + b[2] * d->qvel[dof]) / kp : 0.0;
-      d->qfrc_applied[dof] = torque_[i];
+      const double bias = b[0] + b[1] * d->actuator_length[a] + b[2] * d->actuator_velocity[a];
+      double ctrl = kp != 0.0 ? -bias / kp : 0.0;
+      if (m->actuator_ctrllimited[a]) {
+        ctrl = std::clamp(ctrl, m->actuator_ctrlrange[2 * a], m->actuator_ctrlrange[2 * a + 1]);
+      }
+      d->ctrl[a] = ctrl;
+      d->qfrc_applied[dof] = torque_[i] - m->actuator_gear[6 * a] * (kp * ctrl + bias);
       continue;
     }
     const GearSpec& g = setup_.gear[j];

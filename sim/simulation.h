@@ -88,8 +88,9 @@ class Simulation {
   const Eigen::VectorXd& command() const { return command_; }
   // Torque commands instead (a log of the motors' torques): from now on each actuated joint is
   // driven by `tau` (N m; N on a slide; actuator order) with its servo off, until the next
-  // SetTorque, or a SetCommand switches the servos back on. Gear springs and play are not
-  // modelled under torque.
+  // SetTorque, or a SetCommand switches the servos back on (Settle holds the joints at the
+  // command: send one first). Gear springs and play are not modelled under torque; an
+  // actuator with activation dynamics is not switched off.
   void SetTorque(const Eigen::VectorXd& tau);
   // The torque the motor of actuated joint i applied at its joint in the last step (the servo's
   // force and feed-forward, or the torque set), friction not included.

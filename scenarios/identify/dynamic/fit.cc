@@ -25,6 +25,16 @@ std::vector<Candidate> AllCandidates(const sim::Simulation& nominal,
   return out;
 }
 
+namespace {
+
+// Whether segment s of the perturbed rollout `moved` has no derivative against `at`: it diverged,
+// or the segment before did (not at `at`), so s started from a settled state instead.
+bool NoDerivative(const Prediction& moved, const Prediction& at, int s) {
+  return moved.diverged[s] || (s > 0 && moved.diverged[s - 1] && !at.diverged[s - 1]);
+}
+
+}  // namespace
+
 DynamicProblem::DynamicProblem(const RolloutModel& model, const MotionData& data,
                                std::vector<Candidate> cands, int threads)
     : model_(model), data_(data), candidates_(std::move(cands)), threads_(std::max(1, threads)) {
@@ -130,10 +140,8 @@ Eigen::MatrixXd DynamicProblem::Jacobian(const std::vector<int>& active,
     if (t[i] < lo[i]) t[i] = lo[i];
     const Prediction p = Roll(Terms(active, t), data_);
     J.col(col) = (p.residual - at.residual) / h;
-    // A diverged segment has no derivative, nor the next one, which starts from a settled state.
     for (int k = 0; k < layout_.size(); ++k) {
-      const int s = layout_.segment[k];
-      if (p.diverged[s] || (s > 0 && p.diverged[s - 1] && !at.diverged[s - 1])) J(k, col) = 0.0;
+      if (NoDerivative(p, at, layout_.segment[k])) J(k, col) = 0.0;
     }
   });
   return J;
@@ -194,7 +202,8 @@ Eigen::MatrixXd DynamicProblem::StartJacobian(const FitState& fit) const {
     const Prediction p = Roll(Terms(fit.active, fit.theta), d);
     for (int k = 0; k < layout_.size(); ++k) {
       const int s = layout_.segment[k];
-      const bool lost = p.diverged[s] || fit.prediction.diverged[s] || declared_.diverged[s];
+      const bool lost =
+          NoDerivative(p, fit.prediction, s) || fit.prediction.diverged[s] || declared_.diverged[s];
       Js(k, j) = lost ? 0.0 : (p.residual[k] - fit.prediction.residual[k]) / kStep;
     }
   });

@@ -15,13 +15,13 @@ namespace {
 // file when one is missing or extra.
 std::vector<int> ColumnsOf(const std::vector<std::string>& actuated,
                            const std::vector<std::string>& names, const std::string& file,
-                           const std::string& model) {
+                           const std::string& model, const char* unit = "_rad") {
   std::vector<int> col;
   for (const std::string& j : actuated) {
     const auto it = std::find(names.begin(), names.end(), j);
     if (it == names.end()) {
       throw InputError(file + ":1: no column for actuated joint '" + j + "' of " + model + " (" +
-                       j + "_rad)");
+                       j + unit + ")");
     }
     col.push_back(static_cast<int>(it - names.begin()));
   }
@@ -124,8 +124,8 @@ MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& si
                      "motors' torques)");
   }
   const std::vector<int> qc = ColumnsOf(d.joints, log.joints, log.joint_stats.file, model);
-  const std::vector<int> cc =
-      ColumnsOf(d.joints, log.command_joints, log.command_stats.file, model);
+  const std::vector<int> cc = ColumnsOf(d.joints, log.command_joints, log.command_stats.file, model,
+                                        log.command_torque ? "_Nm" : "_rad");
   const int nj = static_cast<int>(d.joints.size());
   d.t = log.joint_t;
   d.q.resize(static_cast<int>(d.t.size()), nj);

@@ -175,13 +175,11 @@ class Selection {
   double n_ = 0.0;
 };
 
-// Sandwich covariance with segments as clusters.
+// Sandwich covariance with segments as clusters. `J`: the effects' Jacobian at `fit` with the
+// starts projected out (DynamicProblem::WithoutStarts): the starts are free parameters of the
+// fit too, their uncertainty the effects'.
 Eigen::MatrixXd ClusterCovariance(const DynamicProblem& p, const FitState& fit,
-                                  const std::vector<char>& mask) {
-  // The starts are free parameters of the fit too: the effects' Jacobian with them projected
-  // out (their uncertainty is part of the effects').
-  Eigen::MatrixXd J =
-      p.WithoutStarts(p.Jacobian(fit.active, fit.theta, fit.prediction), p.StartJacobian(fit));
+                                  const std::vector<char>& mask, Eigen::MatrixXd J) {
   Eigen::VectorXd r = fit.prediction.residual;
   ZeroUnmasked(mask, &J, &r);
   const int n = static_cast<int>(fit.theta.size());
@@ -441,8 +439,12 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   const FitState& fit = state.fit;
   // "Before" from the same starts as the fit: the refined speeds are not the effects' credit.
   rep.declared_state = p.Evaluate({}, Eigen::VectorXd(), sel.all());
+  const Eigen::MatrixXd J_free =
+      fit.theta.size() > 0
+          ? p.WithoutStarts(p.Jacobian(fit.active, fit.theta, fit.prediction), p.StartJacobian(fit))
+          : Eigen::MatrixXd();
   const Eigen::MatrixXd cov =
-      fit.theta.size() > 0 ? ClusterCovariance(p, fit, sel.all()) : Eigen::MatrixXd();
+      fit.theta.size() > 0 ? ClusterCovariance(p, fit, sel.all(), J_free) : Eigen::MatrixXd();
   // The last fold, for a replay of the log's end that the values it gets never saw.
   const int last = d.folds - 1;
   for (const Segment& s : d.segments) {
@@ -451,9 +453,7 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
     rep.heldout_to_s = d.t[s.row_end - 1];
   }
   const Eigen::VectorXd last_values =
-      fit.theta.size() > 0
-          ? sel.FoldValues(fit, p.Jacobian(fit.active, fit.theta, fit.prediction), last)
-          : Eigen::VectorXd();
+      fit.theta.size() > 0 ? sel.FoldValues(fit, J_free, last) : Eigen::VectorXd();
   for (size_t i = 0; i < fit.active.size(); ++i) {
     ChosenEffect ce;
     const Candidate& c = p.candidates()[fit.active[i]];
@@ -494,9 +494,9 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
                       ShortNum(o.explained_heldout) + "); largest in " + where);
   }
   const bool fits = rep.diagnostics.findings.empty() && rep.heldout_after <= o.explained_heldout;
-  rep.verdict = helped ? (fits ? "explained" : "partly_explained")
-                : fits ? "no_effect"  // the declared model already holds the log
-                       : "unexplained";
+  rep.verdict = helped                       ? (fits ? "explained" : "partly_explained")
+                : rep.chosen.empty() && fits ? "no_effect"  // the declared model holds the log
+                                             : "unexplained";
   rep.rollouts = p.rollouts();
   rep.final_state = std::move(state.fit);
   return rep;

@@ -86,8 +86,9 @@ struct DynamicReport {
   FitState declared_state;  // the declared model from the final fit's segment starts
 };
 
-// Selects, then refines the segments' starting speeds with the chosen effects and refits them
-// (`problem` keeps the refined starts). `warm`: the declared file's static effects in their
+// Selects (each segment started at the encoders' speeds), then fits the chosen effects jointly
+// with every segment's start speeds (`problem` keeps the fitted starts). The held-out errors are
+// the selection's. `warm`: the declared file's static effects in their
 // dynamic families (sim::DynamicCounterparts), fitted first and kept as the starting set when
 // they lower the held-out error; selection goes on from there and may remove them.
 DynamicReport IdentifyDynamics(DynamicProblem& problem, const DynamicIdentifyOptions& options,

@@ -1,6 +1,7 @@
 #include "scenarios/runner/common/dynamic_replay.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 
@@ -33,6 +34,29 @@ bool MovesStandingArm(const std::string& effect) {
          (row->kind == sim::DynamicKind::kLinkMode || row->kind == sim::DynamicKind::kPayloadMass);
 }
 
+// `declared` with `fitted` applied on top of it (sim::Combined): one entry that acts as both.
+// A scale's std scales with the declared factor, a sum's stds add in quadrature, a delay's is
+// the fit's.
+void MergeInto(sim::IdentifiedEffect& declared, sim::IdentifiedEffect fitted) {
+  const sim::DynamicKind kind =
+      sim::FindDynamic(fitted.effect.substr(0, fitted.effect.find('@')))->kind;
+  std::array<double, 2> a{}, b{};
+  for (size_t k = 0; k < fitted.value.size(); ++k) a[k] = declared.value[k], b[k] = fitted.value[k];
+  const std::array<double, 2> v = sim::Combined(kind, a, b);
+  const bool scale = kind == sim::DynamicKind::kServoGain || kind == sim::DynamicKind::kLinkMode ||
+                     kind == sim::DynamicKind::kBaseMode;
+  for (size_t k = 0; k < fitted.value.size(); ++k) {
+    const double s0 = declared.std.size() > k ? declared.std[k] : 0.0;
+    if (scale) {
+      fitted.std[k] *= std::abs(a[k]);
+    } else if (kind != sim::DynamicKind::kServoDelay) {
+      fitted.std[k] = std::hypot(fitted.std[k], s0);
+    }
+    fitted.value[k] = v[k];
+  }
+  declared = std::move(fitted);
+}
+
 }  // namespace
 
 sim::DeclaredModel DynamicAugmented(const sim::DeclaredModel& declared,
@@ -54,7 +78,14 @@ sim::DeclaredModel DynamicAugmented(const sim::DeclaredModel& declared,
     ie.unit = Joined(c.value_names);
     ie.where = "dynamic identification";
     ie.equivalent = c.equivalent;
-    out.identified_effects.push_back(std::move(ie));
+    // The declared file's own entry of that effect: the fit acted on top of it.
+    const auto same = std::find_if(
+        fx.begin(), fx.end(), [&](const sim::IdentifiedEffect& e) { return e.effect == c.name; });
+    if (same == fx.end()) {
+      fx.push_back(std::move(ie));
+    } else {
+      MergeInto(*same, std::move(ie));
+    }
   }
   return out;
 }
@@ -63,19 +94,16 @@ void WriteDynamicAugmented(const sim::DeclaredModel& declared, const dyn::Dynami
                            RunContext& ctx) {
   Json& cm = (*ctx.summary)["dynamic_identification"]["calibrated_model"];
   if (rep.chosen.empty() || rep.verdict == "unexplained") {
-    cm = {
-        {"not_written", "no effect explains the held-out segments (verdict " + rep.verdict + ")"}};
+    cm = {{"not_written",
+           rep.chosen.empty() && rep.verdict == "no_effect"
+               ? "nothing to add: the declared model holds the log"
+               : "no effect explains the held-out segments (verdict " + rep.verdict + ")"}};
     return;
   }
   sim::DeclaredModel out = DynamicAugmented(declared, rep, false);
-  // Relative to the result folder, so the file loads from where it is written.
-  out.model_path = fs::absolute(declared.model_path)
-                       .lexically_normal()
-                       .lexically_relative(fs::absolute(ctx.out->final_dir()).lexically_normal())
-                       .generic_string();
   sim::ExportedModel mjcf;
   try {
-    mjcf = sim::ExportMjcf(DynamicAugmented(declared, rep, false));
+    mjcf = sim::ExportMjcf(out);
   } catch (const InputError& e) {
     cm = {{"not_written", e.what()}};
     ctx.log(std::string("calibrated model not exported: ") + e.what());
@@ -85,8 +113,14 @@ void WriteDynamicAugmented(const sim::DeclaredModel& declared, const dyn::Dynami
       "Declared model augmented by flexbench closed_loop_dynamic: the dynamic effects found in\n"
       "the log, with their fitted values and standard errors. Verdict: " +
       rep.verdict + ".";
-  WriteFileAtomic(ctx.out->File("declared_augmented.yaml"), sim::EmitDeclaredModel(out, header));
+  // Relative to the result folder, so the file loads from where it is written.
+  out.model_path = fs::absolute(declared.model_path)
+                       .lexically_normal()
+                       .lexically_relative(fs::absolute(ctx.out->final_dir()).lexically_normal())
+                       .generic_string();
+  // The MJCF first: a declared file is never there without the model it names.
   WriteFileAtomic(ctx.out->File("calibrated_model.xml"), mjcf.text);
+  WriteFileAtomic(ctx.out->File("declared_augmented.yaml"), sim::EmitDeclaredModel(out, header));
   cm = {{"declared", "declared_augmented.yaml"},
         {"mjcf", "calibrated_model.xml"},
         {"not_in_mjcf", mjcf.skipped}};
@@ -106,6 +140,10 @@ void ReplayDynamicHeldOut(const sim::RecordedLog& log, const mjModel* nominal,
   }
   if (rep.chosen.empty()) {
     ctx.log("held-out replay left out: no effect was chosen");
+    return;
+  }
+  if (rep.folds < 2) {
+    ctx.log("held-out replay left out: one fold only, nothing is held out");
     return;
   }
   std::vector<std::string> standing, moving;
