@@ -33,6 +33,23 @@ bool NoDerivative(const Prediction& moved, const Prediction& at, int s) {
   return moved.diverged[s] || (s > 0 && moved.diverged[s - 1] && !at.diverged[s - 1]);
 }
 
+// Levenberg-Marquardt's damping and acceptance: a trial that lowers the cost is kept and the
+// damping eased (converged when it gained less than `tol` of the cost); else the damping grows.
+struct LmDamping {
+  double lambda = 1e-3;
+  bool converged = false;
+  bool Accept(FitState trial, FitState* best, double tol) {
+    if (!trial.ok || !(trial.cost < best->cost)) {
+      lambda *= 8.0;
+      return false;
+    }
+    converged = (best->cost - trial.cost) / best->cost < tol;
+    *best = std::move(trial);
+    lambda = std::max(1e-7, lambda / 5.0);
+    return true;
+  }
+};
+
 }  // namespace
 
 DynamicProblem::DynamicProblem(const RolloutModel& model, const MotionData& data,
@@ -153,7 +170,7 @@ FitState DynamicProblem::Fit(const std::vector<int>& active, Eigen::VectorXd the
   theta = theta.cwiseMax(lo).cwiseMin(hi);
   FitState best = Evaluate(active, theta, mask);
   if (!best.ok || theta.size() == 0) return best;
-  double lambda = 1e-3;
+  LmDamping lm;
   for (int it = 0; it < iterations; ++it) {
     Eigen::MatrixXd J = Jacobian(active, best.theta, best.prediction);
     Eigen::VectorXd r = best.prediction.residual;
@@ -169,19 +186,11 @@ FitState DynamicProblem::Fit(const std::vector<int>& active, Eigen::VectorXd the
     bool improved = false;
     for (int tries = 0; tries < 6 && !improved; ++tries) {
       Eigen::MatrixXd H = A;
-      H.diagonal() += lambda * D;
+      H.diagonal() += lm.lambda * D;
       const Eigen::VectorXd step = -H.ldlt().solve(g);
       const Eigen::VectorXd t = (best.theta + step).cwiseMax(lo).cwiseMin(hi);
-      FitState trial = Evaluate(active, t, mask);
-      if (trial.ok && trial.cost < best.cost) {
-        const double gain = (best.cost - trial.cost) / best.cost;
-        best = std::move(trial);
-        lambda = std::max(1e-7, lambda / 5.0);
-        improved = true;
-        if (gain < 1e-4) return best;
-      } else {
-        lambda *= 8.0;
-      }
+      improved = lm.Accept(Evaluate(active, t, mask), &best, 1e-4);
+      if (improved && lm.converged) return best;
     }
     if (!improved) break;
   }
@@ -253,7 +262,7 @@ FitState DynamicProblem::JointFit(const FitState& fit, const std::vector<char>& 
   const auto rows = SegmentRows(layout_, static_cast<int>(data_.segments.size()));
   FitState best = fit;
   if (!best.ok) return best;
-  double lambda = 1e-3;
+  LmDamping lm;
   for (int it = 0; it < iterations; ++it) {
     Eigen::MatrixXd J = np > 0 ? Jacobian(best.active, best.theta, best.prediction)
                                : Eigen::MatrixXd(layout_.size(), 0);
@@ -279,7 +288,7 @@ FitState DynamicProblem::JointFit(const FitState& fit, const std::vector<char>& 
         const auto [first, n] = rows[s];
         if (n == 0) continue;
         const auto Jss = Js.middleRows(first, n);
-        solve[s].compute(Regularised(Jss.transpose() * Jss, lambda));
+        solve[s].compute(Regularised(Jss.transpose() * Jss, lm.lambda));
         B[s] = Jss.transpose() * J.middleRows(first, n);
         gs[s] = Jss.transpose() * r.segment(first, n);
         H -= B[s].transpose() * solve[s].solve(B[s]);
@@ -289,7 +298,7 @@ FitState DynamicProblem::JointFit(const FitState& fit, const std::vector<char>& 
       if (np > 0) {
         const Eigen::VectorXd D =
             H.diagonal().cwiseMax(1e-12 * std::max(1.0, H.diagonal().maxCoeff()));
-        H.diagonal() += lambda * D;
+        H.diagonal() += lm.lambda * D;
         t = (best.theta - H.ldlt().solve(gr)).cwiseMax(lo).cwiseMin(hi);
       }
       const Eigen::VectorXd dtheta = t - best.theta;
@@ -299,17 +308,9 @@ FitState DynamicProblem::JointFit(const FitState& fit, const std::vector<char>& 
         const Eigen::VectorXd rhs = np > 0 ? Eigen::VectorXd(gs[s] + B[s] * dtheta) : gs[s];
         data_.start_qd.row(static_cast<int>(s)) -= solve[s].solve(rhs).transpose();
       }
-      FitState trial = Evaluate(best.active, t, mask);
-      if (trial.ok && trial.cost < best.cost) {
-        const double gain = (best.cost - trial.cost) / best.cost;
-        best = std::move(trial);
-        lambda = std::max(1e-7, lambda / 5.0);
-        improved = true;
-        if (gain < 1e-5) return best;
-      } else {
-        data_.start_qd = starts;
-        lambda *= 8.0;
-      }
+      improved = lm.Accept(Evaluate(best.active, t, mask), &best, 1e-5);
+      if (!improved) data_.start_qd = starts;
+      if (improved && lm.converged) return best;
     }
     if (!improved) break;
   }
