@@ -472,14 +472,20 @@ TEST(RecordedLog, CommandsAndImuNoiseRoundTrip) {
   }
   const size_t at = yaml.find("type: position");
   ASSERT_NE(at, std::string::npos);
-  yaml.replace(at, 14, "type: torque");
-  std::ofstream(std::filesystem::path(path) / "log.yaml") << yaml;
-  try {
-    ReadRecordedLog(path);
-    ADD_FAILURE() << "torque commands were read";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("only position targets are read"), std::string::npos)
-        << e.what();
+  // Torques need torque columns; a type that is neither is one line naming the key.
+  for (const auto& [type, says] :
+       {std::pair<std::string, std::string>{"type: torque", "expected <joint>_Nm or <joint>_N"},
+        {"type: velocity", "position (the servos' targets) or torque"}}) {
+    std::string y = yaml;
+    y.replace(at, 14, type);
+    std::ofstream(std::filesystem::path(path) / "log.yaml") << y;
+    try {
+      ReadRecordedLog(path);
+      ADD_FAILURE() << type << ": read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+    }
   }
 }
 
