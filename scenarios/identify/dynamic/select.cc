@@ -258,6 +258,9 @@ bool Better(double heldout, double than, const DynamicIdentifyOptions& o) {
   return heldout < (1.0 - o.cv_min_gain) * than;
 }
 
+// Forward rounds per possible effect before selection gives up (an add-remove cycle).
+constexpr int kMaxRounds = 4;
+
 class Stages {
  public:
   Stages(const DynamicProblem& p, const DynamicIdentifyOptions& o, DynamicReport* rep)
@@ -271,10 +274,13 @@ class Stages {
   }
   bool Better(double heldout, double than) const { return dynamic::Better(heldout, than, o_); }
 
-  // Forward rounds, each followed by removal of effects no longer needed.
+  // Forward rounds, each followed by removal of effects no longer needed, until no candidate
+  // lowers the held-out error or max_effects are chosen and one still would (rep.capped). The
+  // round limit only guards against an add-remove cycle.
   Scored Forward(Scored state) {
     const auto& cands = p_.candidates();
-    for (int round = 1; round <= o_.max_effects; ++round) {
+    for (int n = 0; n < kMaxRounds * (o_.max_effects + 1); ++n) {
+      const int round = ++rounds_;
       const std::vector<Screened> screened = sel_.Screen(state.fit);
       const double bic_now = sel_.Bic(state.fit.cost, static_cast<int>(state.fit.theta.size()));
       std::vector<Screened> kept;
@@ -294,7 +300,19 @@ class Stages {
             ShortNum(state.heldout) + ")");
         if (t.heldout < best.heldout) best = std::move(t);
       }
-      if (kept.empty() || !Better(best.heldout, state.heldout)) {
+      const bool more = !kept.empty() && Better(best.heldout, state.heldout);
+      if (more && static_cast<int>(state.fit.active.size()) >= o_.max_effects) {
+        // The cap, not the data, ends selection: said in the log, the summary and the verdict.
+        const std::string would = cands[best.fit.active.back()].Name() +
+                                  " would still lower the held-out error to " +
+                                  ShortNum(best.heldout);
+        rep_->capped = "selection stopped by max_effects = " + std::to_string(o_.max_effects) +
+                       ": " + would + " (identify.max_effects to go on)";
+        Log("round " + std::to_string(round) + ": max_effects = " + std::to_string(o_.max_effects) +
+            " chosen; " + would);
+        break;
+      }
+      if (!more) {
         Log("round " + std::to_string(round) + ": " +
             (kept.empty() ? "no candidate lowers BIC by " + ShortNum(o_.bic_threshold)
                           : "no candidate lowers the held-out error by " +
@@ -383,6 +401,7 @@ class Stages {
   const DynamicIdentifyOptions& o_;
   DynamicReport* rep_;
   Selection sel_;
+  int rounds_ = 0;  // forward rounds so far (the log numbers them)
 };
 
 // The warm start's effects among the candidates, fitted: the starting set when they lower the
@@ -427,6 +446,12 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   start.heldout = sel.HeldOut(start.fit);
   rep.heldout_before = start.heldout;
   Scored state = stages.Swap(stages.Forward(WarmStart(p, o, warm, stages, start, &rep)));
+  if (!rep.capped.empty()) {
+    // The swaps may have made room (a stand-in and what it stood for became one effect): the
+    // rounds go on from the swapped set, and say again whether the cap ends them.
+    rep.capped.clear();
+    state = stages.Forward(std::move(state));
+  }
   rep.heldout_after = state.heldout;
   // The starts are the fit's nuisance whatever it chose: the effects are refitted with them, and
   // the residual the verdict reads is taken from there, with effects or without.
@@ -493,7 +518,9 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
                       " times the readings' noise (explained needs at most " +
                       ShortNum(o.explained_heldout) + "); largest in " + where);
   }
-  const bool fits = rep.diagnostics.findings.empty() && rep.heldout_after <= o.explained_heldout;
+  if (!rep.capped.empty()) rep.log.push_back("left: " + rep.capped);
+  const bool fits = rep.diagnostics.findings.empty() && rep.capped.empty() &&
+                    rep.heldout_after <= o.explained_heldout;
   rep.verdict = helped                       ? (fits ? "explained" : "partly_explained")
                 : rep.chosen.empty() && fits ? "no_effect"  // the declared model holds the log
                                              : "unexplained";

@@ -26,7 +26,7 @@
 namespace flexbench::identify::dynamic {
 
 struct DynamicIdentifyOptions {
-  int max_effects = 3;
+  int max_effects = 3;          // chosen at most; a round at it only checks that no more is needed
   double bic_threshold = 10.0;  // a screened candidate lowers BIC by more than this
   int screen_keep = 3;          // screened candidates refitted per round
   double cv_min_gain = 0.05;    // relative held-out error drop a candidate must bring
@@ -73,6 +73,9 @@ struct DynamicReport {
   std::vector<std::string> replaced_static;
   // The last fold's time span (encoder rows), which ChosenEffect::heldout_values never saw.
   double heldout_from_s = 0.0, heldout_to_s = 0.0;
+  // Not empty when max_effects, not the held-out error, ended selection (a candidate would still
+  // have been kept): then the verdict is not explained.
+  std::string capped;
   // What the residual still shows (motion_diagnostics.h), located.
   MotionDiagnostics diagnostics;
   // unexplained: no effect lowers the held-out error by cv_min_gain and the declared model does

@@ -231,6 +231,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     m["heldout_after"] = rep.heldout_after;
     m["heldout_ratio"] = rep.heldout_after / rep.heldout_before;
     m["rollouts"] = rep.rollouts;
+    m["selection_capped"] = !rep.capped.empty();
     Json chosen = Json::array();
     bool named = !expected_.empty();
     bool within = true;
