@@ -66,10 +66,17 @@ class EffectsBuilder {
     for (FrameId f = chain_->end_effector; f > 0; f = model_.frame(f).parent) e.on_path[f] = 1;
     FindMount();
     bool load_driven = false;
-    DynamicEntries(d_.identified_effects);  // checked as a whole (an entry given twice)
-    for (const IdentifiedEffect& ie : d_.identified_effects) {
-      if (IsDynamicEffect(ie.effect)) {
-        load_driven |= AddStaticPartOf(ie, DynamicEntries({ie}).front());
+    // Checked as a whole (an entry given twice); in the file's order.
+    const std::vector<DeclaredDynamic> dynamic = DynamicEntries(d_.identified_effects);
+    std::vector<const DeclaredDynamic*> dynamic_of;  // per entry, its dynamic row or nullptr
+    for (size_t i = 0, k = 0; i < d_.identified_effects.size(); ++i) {
+      const bool is = IsDynamicEffect(d_.identified_effects[i].effect);
+      dynamic_of.push_back(is ? &dynamic[k++] : nullptr);
+    }
+    for (size_t i = 0; i < d_.identified_effects.size(); ++i) {
+      const IdentifiedEffect& ie = d_.identified_effects[i];
+      if (dynamic_of[i]) {
+        load_driven |= AddStaticPartOf(ie, *dynamic_of[i]);
         continue;
       }
       const Parsed p = Check(ie);
@@ -78,10 +85,10 @@ class EffectsBuilder {
       load_driven |= p.row->load_driven;
     }
     if (load_driven && !HasMasses()) {
-      for (const IdentifiedEffect& ie : d_.identified_effects) {
-        const bool loads = IsDynamicEffect(ie.effect)
-                               ? HasStandingPart(DynamicEntries({ie}).front().row->kind)
-                               : Parse(ie).row->load_driven;
+      for (size_t i = 0; i < d_.identified_effects.size(); ++i) {
+        const IdentifiedEffect& ie = d_.identified_effects[i];
+        const bool loads =
+            dynamic_of[i] ? HasStandingPart(dynamic_of[i]->row->kind) : Parse(ie).row->load_driven;
         if (loads) {
           Fail(ie, "acts through the gravity loads, but the model " + CapForMessage(d_.model_path) +
                        " has no masses on the arm");

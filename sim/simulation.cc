@@ -154,23 +154,24 @@ std::unique_ptr<Simulation> Simulation::FromString(const std::string& xml, const
 
 // ---------------------------------------------------------------- commands
 
-void Simulation::SetCommand(const Eigen::VectorXd& q_motor) {
-  if (q_motor.size() != num_actuated()) {
-    throw std::invalid_argument(model_name_ + ": command has " + std::to_string(q_motor.size()) +
+// A vector given per actuated joint (`what`: command, torque) must have one value for each.
+void Simulation::CheckPerActuated(const Eigen::VectorXd& v, const char* what) const {
+  if (v.size() != num_actuated()) {
+    throw std::invalid_argument(model_name_ + ": " + what + " has " + std::to_string(v.size()) +
                                 " values for " + std::to_string(num_actuated()) +
                                 " actuated joints");
   }
+}
+
+void Simulation::SetCommand(const Eigen::VectorXd& q_motor) {
+  CheckPerActuated(q_motor, "command");
   command_ = q_motor;
   torque_mode_ = false;
   if (max_delay_ > 0.0) PushCommandHistory(data_->time);
 }
 
 void Simulation::SetTorque(const Eigen::VectorXd& tau) {
-  if (tau.size() != num_actuated()) {
-    throw std::invalid_argument(model_name_ + ": torque has " + std::to_string(tau.size()) +
-                                " values for " + std::to_string(num_actuated()) +
-                                " actuated joints");
-  }
+  CheckPerActuated(tau, "torque");
   torque_ = tau;
   torque_mode_ = true;
 }

@@ -191,6 +191,7 @@ class Simulation {
   TruthSetup setup_;
   std::vector<std::string> effect_names_;
   std::vector<std::string> actuated_names_;
+  void CheckPerActuated(const Eigen::VectorXd& v, const char* what) const;
   Eigen::VectorXd command_;
   bool torque_mode_ = false;
   Eigen::VectorXd torque_;               // SetTorque's, actuator order
