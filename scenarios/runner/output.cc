@@ -615,6 +615,10 @@ OutputDir::OutputDir(const fs::path& final_dir, bool force, const std::vector<fs
   signal_slot_ = RegisterTemporary(tmp_);
 }
 
+void RemoveEndedTemporaries(const fs::path& final_dir) {
+  RemoveStaleTemporaries(final_dir, Self());
+}
+
 OutputDir::~OutputDir() {
   if (!committed_) {
     std::error_code ec;

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <climits>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -157,6 +158,32 @@ inline int CountLines(const std::string& s) {
   int n = 0;
   for (char c : s) n += c == '\n';
   return n;
+}
+
+// A process as an output temporary's marker names it (scenarios/runner/output.h): this host,
+// this PID namespace, and the start time of a live process.
+inline std::string Host() {
+  char h[HOST_NAME_MAX + 1] = {};
+  gethostname(h, sizeof(h) - 1);
+  return h;
+}
+inline std::string PidNamespace() {
+  char ns[256];
+  const ssize_t n = readlink("/proc/self/ns/pid", ns, sizeof(ns) - 1);
+  return n > 0 ? std::string(ns, static_cast<size_t>(n)) : "";
+}
+inline unsigned long long StartTime(pid_t pid) {
+  const std::string stat = ReadFile("/proc/" + std::to_string(pid) + "/stat");
+  std::istringstream f(stat.substr(stat.rfind(')') + 2));
+  std::string field;
+  for (int k = 3; k <= 22; ++k) f >> field;
+  return std::stoull(field);
+}
+// The text of a temporary's marker.
+inline std::string Marker(const std::string& host, const std::string& ns, long pid,
+                          unsigned long long start) {
+  return "flexbench temporary folder\nhost=" + host + "\npid_namespace=" + ns +
+         "\npid=" + std::to_string(pid) + "\nstart_time=" + std::to_string(start) + "\n";
 }
 
 }  // namespace flexbench::testing

@@ -63,30 +63,6 @@ std::vector<std::string> Temporaries(const fs::path& dir) {
   return out;
 }
 
-// This process as a temporary's marker names it.
-std::string Host() {
-  char h[HOST_NAME_MAX + 1] = {};
-  gethostname(h, sizeof(h) - 1);
-  return h;
-}
-std::string PidNamespace() {
-  char ns[256];
-  const ssize_t n = readlink("/proc/self/ns/pid", ns, sizeof(ns) - 1);
-  return n > 0 ? std::string(ns, static_cast<size_t>(n)) : "";
-}
-unsigned long long StartTime(pid_t pid) {
-  const std::string stat = ReadFile("/proc/" + std::to_string(pid) + "/stat");
-  std::istringstream f(stat.substr(stat.rfind(')') + 2));
-  std::string field;
-  for (int k = 3; k <= 22; ++k) f >> field;
-  return std::stoull(field);
-}
-std::string Marker(const std::string& host, const std::string& ns, long pid,
-                   unsigned long long start) {
-  return "flexbench temporary folder\nhost=" + host + "\npid_namespace=" + ns +
-         "\npid=" + std::to_string(pid) + "\nstart_time=" + std::to_string(start) + "\n";
-}
-
 // Only a temporary with a marker of this host and PID namespace whose process has ended
 // (gone, its PID reused, or a zombie), or one that holds nothing but a partial marker and whose
 // PID runs nowhere, is removed; a user's folder named like one, a live run's and one of another

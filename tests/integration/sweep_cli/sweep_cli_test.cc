@@ -57,12 +57,21 @@ TEST(SweepCli, LocalSweepIsDeterministicResumableAndIndependentOfWorkers) {
   EXPECT_EQ(g["n"], 4);
   EXPECT_TRUE(fs::exists(tmp.path() / "a" / "sweep.png"));
 
-  // Resumed: nothing to do, the same bytes.
+  // Resumed: nothing to do, the same bytes. The temporary of a worker that ended (one killed
+  // while the resumed sweep had already redone its run) is removed; a folder named alike
+  // without a marker is the user's and is kept.
+  const fs::path runs = tmp.path() / "a" / "runs" / "distance_std_m_0.001";
+  ASSERT_TRUE(fs::exists(runs / "seed_1")) << "the sweep's run folders moved";
+  WriteFile(runs / "seed_1.tmp-1999999997" / ".flexbench-temporary",
+            Marker(Host(), PidNamespace(), 1999999997, 5));
+  WriteFile(runs / "seed_1.tmp-1999999998" / "notes.txt", "mine");
   r = Sweep(file, tmp.path() / "a", "-j 2");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("0 runs to do"), std::string::npos) << r.err;
   EXPECT_EQ(ReadFile(tmp.path() / "a" / "sweep.csv"), csv);
   EXPECT_EQ(ReadFile(tmp.path() / "a" / "aggregate.json"), agg);
+  EXPECT_FALSE(fs::exists(runs / "seed_1.tmp-1999999997"));
+  EXPECT_EQ(ReadFile(runs / "seed_1.tmp-1999999998" / "notes.txt"), "mine");
 
   // One worker, so another finishing order: the same bytes.
   r = Sweep(file, tmp.path() / "b", "-j 1");
