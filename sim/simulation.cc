@@ -597,7 +597,16 @@ void Simulation::Step(int steps) {
   for (int w = 0; w < mjNWARNING; ++w) warning_counts_[w] = d->warning[w].number;
   for (int k = 0; k < steps; ++k) {
     const double time_before = d->time;
-    mj_step1(m, d);
+    if (ForwardIsCurrent()) {
+      // Positions and velocities were computed at this very state for a reading
+      // (EnsureAccelerations): step1's checks only, unless one reset the state.
+      mj_checkPos(m, d);
+      mj_checkVel(m, d);
+      if (!ForwardIsCurrent()) mj_step1(m, d);
+    } else {
+      mj_step1(m, d);
+    }
+    forward_key_.clear();
     ApplyServo();
     mj_step2(m, d);
     ProjectLocked();
@@ -632,6 +641,17 @@ double Simulation::SettleDynamic(double max_time_s, double velocity_tol) {
 
 // ---------------------------------------------------------------- ground truth
 
+bool Simulation::ForwardIsCurrent() const {
+  const mjModel* m = truth_.get();
+  const mjData* d = data_.get();
+  if (forward_key_.size() != static_cast<size_t>(m->nq + m->nv + m->na + 1)) return false;
+  const mjtNum* key = forward_key_.data();
+  return std::equal(d->qpos, d->qpos + m->nq, key) &&
+         std::equal(d->qvel, d->qvel + m->nv, key + m->nq) &&
+         std::equal(d->act, d->act + m->na, key + m->nq + m->nv) &&
+         d->time == key[m->nq + m->nv + m->na];
+}
+
 void Simulation::EnsureKinematics() const {
   if (kinematics_current_) return;
   const mjModel* m = truth_.get();
@@ -648,12 +668,23 @@ void Simulation::EnsureAccelerations() const {
   if (accelerations_current_) return;
   const mjModel* m = truth_.get();
   mjData* d = data_.get();
-  std::vector<mjtNum> warmstart(d->qacc_warmstart, d->qacc_warmstart + m->nv);
-  mj_forward(m, d);
+  // Positions and velocities first: the servo's force depends on them (ApplyServo), and the
+  // acceleration stages then run once, with it.
+  warmstart_.assign(d->qacc_warmstart, d->qacc_warmstart + m->nv);
+  mj_fwdPosition(m, d);
+  mj_sensorPos(m, d);
+  if (mjENABLED(mjENBL_ENERGY)) mj_energyPos(m, d);
+  mj_fwdVelocity(m, d);
+  mj_sensorVel(m, d);
+  if (mjENABLED(mjENBL_ENERGY)) mj_energyVel(m, d);
   ApplyServo();
   mj_forwardSkip(m, d, mjSTAGE_VEL, 0);
   mj_rnePostConstraint(m, d);
-  std::copy(warmstart.begin(), warmstart.end(), d->qacc_warmstart);
+  std::copy(warmstart_.begin(), warmstart_.end(), d->qacc_warmstart);
+  forward_key_.assign(d->qpos, d->qpos + m->nq);
+  forward_key_.insert(forward_key_.end(), d->qvel, d->qvel + m->nv);
+  forward_key_.insert(forward_key_.end(), d->act, d->act + m->na);
+  forward_key_.push_back(d->time);
   kinematics_current_ = true;
   accelerations_current_ = true;
 }

@@ -211,6 +211,11 @@ class Simulation {
   bool at_rest_ = false;
   mutable bool kinematics_current_ = false;
   mutable bool accelerations_current_ = false;
+  mutable std::vector<mjtNum> warmstart_;  // EnsureAccelerations' scratch
+  // The state (qpos, qvel, act, time) EnsureAccelerations last computed positions and velocities
+  // at: a step from that same state skips step1's stages (ForwardIsCurrent). Empty: none.
+  mutable std::vector<mjtNum> forward_key_;
+  bool ForwardIsCurrent() const;
   mutable int warning_counts_[mjNWARNING] = {};
 };
 
