@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 
 #include "scenarios/identify/parallel.h"
 
@@ -28,9 +29,11 @@ std::vector<Candidate> AllCandidates(const sim::Simulation& nominal,
 namespace {
 
 // Whether segment s of the perturbed rollout `moved` has no derivative against `at`: it diverged,
-// or the segment before did (not at `at`), so s started from a settled state instead.
-bool NoDerivative(const Prediction& moved, const Prediction& at, int s) {
-  return moved.diverged[s] || (s > 0 && moved.diverged[s - 1] && !at.diverged[s - 1]);
+// or the segment before in its fold did (not at `at`), so s started from a settled state
+// instead.
+bool NoDerivative(const MotionData& d, const Prediction& moved, const Prediction& at, int s) {
+  return moved.diverged[s] || (s > 0 && d.segments[s - 1].fold == d.segments[s].fold &&
+                               moved.diverged[s - 1] && !at.diverged[s - 1]);
 }
 
 // Levenberg-Marquardt's damping and acceptance: a trial that lowers the cost is kept and the
@@ -50,21 +53,47 @@ struct LmDamping {
   }
 };
 
+const Eigen::MatrixXd* Pointer(const Eigen::MatrixXd* p) { return p; }
+const Eigen::MatrixXd* Pointer(const std::unique_ptr<Eigen::MatrixXd>& p) { return p.get(); }
+
 }  // namespace
 
 DynamicProblem::DynamicProblem(const RolloutModel& model, const MotionData& data,
                                std::vector<Candidate> cands, int threads)
     : model_(model), data_(data), candidates_(std::move(cands)), threads_(std::max(1, threads)) {
   layout_ = MakeLayout(data_);
-  Prediction raw = Roll({}, data_);
+  Prediction raw = Roll({});
   SetUnknownNoise(layout_, raw.error, &data_);
-  declared_ = Roll({}, data_);
+  declared_ = Roll({});
 }
 
-Prediction DynamicProblem::Roll(const std::vector<DynamicTerm>& terms,
-                                const MotionData& data) const {
-  ++rollouts_;
-  return Rollout(model_, terms, data, layout_);
+template <typename TermsOf, typename StartsOf>
+void DynamicProblem::RollVariants(int variants, TermsOf terms_of, StartsOf starts_of,
+                                  std::vector<Prediction>* out) const {
+  const int folds = data_.folds;
+  out->assign(variants, NewPrediction(data_, layout_));
+  std::vector<std::string> divergence(static_cast<size_t>(variants) * folds);
+  // Folds write disjoint entries and segments of their variant's prediction.
+  ForEachTask(variants * folds, threads_, [&](int task) {
+    const int v = task / folds, f = task % folds;
+    const auto starts = starts_of(v);
+    divergence[task] =
+        RolloutFold(model_, terms_of(v), data_, layout_, f, &(*out)[v], Pointer(starts));
+  });
+  fold_rollouts_ += static_cast<long>(variants) * folds;
+  for (int v = 0; v < variants; ++v) {
+    FinishPrediction({divergence.begin() + static_cast<long>(v) * folds,
+                      divergence.begin() + static_cast<long>(v + 1) * folds},
+                     &(*out)[v]);
+  }
+}
+
+Prediction DynamicProblem::Roll(const std::vector<DynamicTerm>& terms) const {
+  std::vector<Prediction> out;
+  RollVariants(
+      1, [&](int) -> const std::vector<DynamicTerm>& { return terms; },
+      [](int) -> const Eigen::MatrixXd* { return nullptr; }, &out);
+  return std::move(out[0]);
 }
 
 int DynamicProblem::Offset(const std::vector<int>& active, int index) const {
@@ -127,10 +156,33 @@ FitState DynamicProblem::Evaluate(const std::vector<int>& active, const Eigen::V
   FitState f;
   f.active = active;
   f.theta = theta;
-  f.prediction = Roll(Terms(active, theta), data_);
+  f.prediction = Roll(Terms(active, theta));
   f.ok = true;
   for (size_t s = 0; s < f.prediction.diverged.size(); ++s) {
     if (f.prediction.diverged[s] && !declared_.diverged[s]) f.ok = false;
+  }
+  f.cost = f.ok ? Cost(f.prediction.residual, mask) : std::numeric_limits<double>::infinity();
+  return f;
+}
+
+FitState DynamicProblem::EvaluateFold(const std::vector<int>& active, const Eigen::VectorXd& theta,
+                                      int fold) const {
+  FitState f;
+  f.active = active;
+  f.theta = theta;
+  f.prediction = NewPrediction(data_, layout_);
+  const std::string divergence =
+      RolloutFold(model_, Terms(active, theta), data_, layout_, fold, &f.prediction);
+  FinishPrediction({divergence}, &f.prediction);
+  ++fold_rollouts_;
+  f.ok = true;
+  for (size_t s = 0; s < f.prediction.diverged.size(); ++s) {
+    if (f.prediction.diverged[s] && !declared_.diverged[s]) f.ok = false;
+  }
+  std::vector<char> mask(layout_.size(), 0);
+  for (int k = 0; k < layout_.size(); ++k) {
+    const int s = layout_.segment[k];
+    mask[k] = !declared_.diverged[s] && data_.segments[s].fold == fold;
   }
   f.cost = f.ok ? Cost(f.prediction.residual, mask) : std::numeric_limits<double>::infinity();
   return f;
@@ -148,19 +200,24 @@ Eigen::MatrixXd DynamicProblem::Jacobian(const std::vector<int>& active,
     const sim::DynamicRow& row = sim::Row(candidates_[c].kind);
     for (int k = 0; k < row.num_values; ++k) step[o++] = row.fd_step[k];
   }
-  ForEachTask(n - from, threads_, [&](int col) {
+  // Forward, or backward at the upper bound.
+  std::vector<Eigen::VectorXd> moved(n - from, theta);
+  std::vector<double> h(n - from);
+  for (int col = 0; col < n - from; ++col) {
     const int i = from + col;
-    Eigen::VectorXd t = theta;
-    // Forward, or backward at the upper bound.
-    const double h = t[i] + step[i] <= hi[i] ? step[i] : -step[i];
-    t[i] += h;
-    if (t[i] < lo[i]) t[i] = lo[i];
-    const Prediction p = Roll(Terms(active, t), data_);
-    J.col(col) = (p.residual - at.residual) / h;
+    h[col] = theta[i] + step[i] <= hi[i] ? step[i] : -step[i];
+    moved[col][i] = std::max(theta[i] + h[col], lo[i]);
+  }
+  std::vector<Prediction> p;
+  RollVariants(
+      n - from, [&](int col) { return Terms(active, moved[col]); },
+      [](int) -> const Eigen::MatrixXd* { return nullptr; }, &p);
+  for (int col = 0; col < n - from; ++col) {
+    J.col(col) = (p[col].residual - at.residual) / h[col];
     for (int k = 0; k < layout_.size(); ++k) {
-      if (NoDerivative(p, at, layout_.segment[k])) J(k, col) = 0.0;
+      if (NoDerivative(data_, p[col], at, layout_.segment[k])) J(k, col) = 0.0;
     }
-  });
+  }
   return J;
 }
 
@@ -205,17 +262,25 @@ Eigen::MatrixXd DynamicProblem::StartJacobian(const FitState& fit) const {
   const int nj = static_cast<int>(data_.joints.size());
   constexpr double kStep = 1e-3;  // rad/s
   Eigen::MatrixXd Js = Eigen::MatrixXd::Zero(layout_.size(), nj);
-  ForEachTask(nj, threads_, [&](int j) {
-    MotionData d = data_;
-    d.start_qd.col(j).array() += kStep;
-    const Prediction p = Roll(Terms(fit.active, fit.theta), d);
+  // One joint's speeds moved at a time: a copy of the starts per task, not of the log.
+  const auto moved = [&](int j) {
+    auto m = std::make_unique<Eigen::MatrixXd>(data_.start_qd);
+    m->col(j).array() += kStep;
+    return m;
+  };
+  const std::vector<DynamicTerm> terms = Terms(fit.active, fit.theta);
+  std::vector<Prediction> p;
+  RollVariants(
+      nj, [&](int) -> const std::vector<DynamicTerm>& { return terms; },
+      [&](int j) { return moved(j); }, &p);
+  for (int j = 0; j < nj; ++j) {
     for (int k = 0; k < layout_.size(); ++k) {
       const int s = layout_.segment[k];
-      const bool lost =
-          NoDerivative(p, fit.prediction, s) || fit.prediction.diverged[s] || declared_.diverged[s];
-      Js(k, j) = lost ? 0.0 : (p.residual[k] - fit.prediction.residual[k]) / kStep;
+      const bool lost = NoDerivative(data_, p[j], fit.prediction, s) ||
+                        fit.prediction.diverged[s] || declared_.diverged[s];
+      Js(k, j) = lost ? 0.0 : (p[j].residual[k] - fit.prediction.residual[k]) / kStep;
     }
-  });
+  }
   return Js;
 }
 

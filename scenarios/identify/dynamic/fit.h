@@ -54,6 +54,10 @@ class DynamicProblem {
   std::vector<DynamicTerm> Terms(const std::vector<int>& active, const Eigen::VectorXd& t) const;
   FitState Evaluate(const std::vector<int>& active, const Eigen::VectorXd& theta,
                     const std::vector<char>& mask) const;
+  // Evaluate on fold `fold` alone (its rollout only; the other folds' entries are zero and out
+  // of the cost): a held-out fold's error.
+  FitState EvaluateFold(const std::vector<int>& active, const Eigen::VectorXd& theta,
+                        int fold) const;
   // d residual / d theta at theta (whose rollout is `at`), the columns from `from` on, each a
   // forward-difference rollout (backward at the upper bound).
   Eigen::MatrixXd Jacobian(const std::vector<int>& active, const Eigen::VectorXd& theta,
@@ -83,8 +87,8 @@ class DynamicProblem {
     return Stacked(active, &sim::DynamicRow::upper);
   }
   int threads() const { return threads_; }
-  // Rollouts of the log so far (each a pass over every segment).
-  long rollouts() const { return rollouts_; }
+  // Rollouts of the log so far, in passes over every segment (fold rollouts / folds).
+  long rollouts() const { return fold_rollouts_ / data_.folds; }
 
  private:
   const RolloutModel& model_;
@@ -93,10 +97,16 @@ class DynamicProblem {
   ResidualLayout layout_;
   Prediction declared_;
   int threads_ = 1;
-  mutable std::atomic<long> rollouts_{0};
+  mutable std::atomic<long> fold_rollouts_{0};
   Eigen::VectorXd Stacked(const std::vector<int>& active,
                           std::array<double, 2> sim::DynamicRow::*column) const;
-  Prediction Roll(const std::vector<DynamicTerm>& terms, const MotionData& data) const;
+  // Every fold of the log rolled with `terms`, the folds as tasks on the threads.
+  Prediction Roll(const std::vector<DynamicTerm>& terms) const;
+  // Rolls the log with variant v's terms and segment start speeds (nullptr: the log's) for
+  // every v < `variants`, into out[v]; each (variant, fold) pair is a task on the threads.
+  template <typename TermsOf, typename StartsOf>
+  void RollVariants(int variants, TermsOf terms_of, StartsOf starts_of,
+                    std::vector<Prediction>* out) const;
 };
 
 }  // namespace flexbench::identify::dynamic

@@ -109,6 +109,35 @@ void CutSegments(const MotionOptions& o, double timestep, MotionData* d) {
   for (int k = 0; k < s; ++k) d->segments[k].fold = k * d->folds / s;
 }
 
+// The log's cameras, tags and detections (tags.csv) for the model: frames by their model names.
+void ReadTags(const sim::RecordedLog& log, const sim::Simulation& sim, MotionData* d) {
+  if (log.tag_rows.empty()) {
+    if (!log.images.empty()) {
+      throw InputError(log.dir +
+                       "/log.yaml: the tags are given as images only: dynamic "
+                       "identification reads their detections (tags.csv; `flexbench replay` "
+                       "of the log writes them)");
+    }
+    return;
+  }
+  const auto frame = [&](const std::string& name, const std::string& what) {
+    try {
+      return sim.Frame(name);
+    } catch (const InputError& e) {
+      throw InputError(log.dir + "/log.yaml: " + what + ": frame '" + name + "': " + e.what());
+    }
+  };
+  for (const sim::LogCamera& c : log.cameras) {
+    d->cameras.push_back({c.name, frame(c.frame, "camera '" + c.name + "'"), c.intrinsics});
+  }
+  for (const sim::LogTag& t : log.tags) {
+    d->tags.push_back({t.id, frame(t.frame, "tag " + std::to_string(t.id)), t.corners_m});
+  }
+  for (const sim::LogTagRow& r : log.tag_rows) d->tag_rows.push_back({r.t, r.camera, r.tag, r.uv});
+  std::stable_sort(d->tag_rows.begin(), d->tag_rows.end(),
+                   [](const MotionTagRow& a, const MotionTagRow& b) { return a.t < b.t; });
+}
+
 }  // namespace
 
 MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& sim,
@@ -165,12 +194,12 @@ MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& si
       d.imus.push_back(std::move(imu));
     }
   }
+  if (o.use_tags) ReadTags(log, sim, &d);
   d.std_q = log.joint_std;
   d.std_gyro = log.gyro_std;
   d.std_accel = log.accel_std;
-  d.noise_from_log[0] = d.std_q > 0.0;
-  d.noise_from_log[1] = d.std_gyro > 0.0;
-  d.noise_from_log[2] = d.std_accel > 0.0;
+  d.std_px = d.tag_rows.empty() ? 0.0 : log.pixel_std_px;
+  for (int s = 0; s < 4; ++s) d.noise_from_log[s] = d.Noise(s) > 0.0;
   CutSegments(o, sim.timestep(), &d);
   d.start_qd.resize(static_cast<int>(d.segments.size()), nj);
   for (size_t s = 0; s < d.segments.size(); ++s) {

@@ -5,9 +5,11 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <string>
 #include <vector>
 
+#include "estimators/camera/pinhole.h"
 #include "sim/recorded_log.h"
 #include "sim/simulation.h"
 
@@ -20,6 +22,28 @@ struct MotionImu {
   std::vector<double> t;
   Eigen::MatrixXd gyro;   // rows x 3, rad/s, sensor frame
   Eigen::MatrixXd accel;  // rows x 3, m/s^2, specific force
+};
+
+// A camera of the log's tags: its optical frame in the model and its intrinsics.
+struct MotionCamera {
+  std::string name;
+  sim::FrameRef frame;
+  PinholeCamera intrinsics;
+};
+
+// A tag of the log: the model frame it is fixed to and its corners there (libapriltag's order).
+struct MotionTag {
+  int id = -1;
+  sim::FrameRef frame;
+  std::array<Vec3, 4> corners_m;
+};
+
+// One detection: a tag's four corners in one camera's image, libapriltag's pixel convention.
+struct MotionTagRow {
+  double t = 0.0;
+  int camera = 0;  // MotionData::cameras
+  int tag = 0;     // MotionData::tags
+  std::array<Eigen::Vector2d, 4> uv;
 };
 
 struct Segment {
@@ -38,10 +62,21 @@ struct MotionData {
   Eigen::MatrixXd command;  // rows x joints: the position targets sent, or the torques
   bool torque = false;      // commands are the motors' torques (the log's type: torque)
   std::vector<MotionImu> imus;
-  // The readings' noise: the log's (joints.std_rad, imu.gyro_std_rad_s, accel_std_m_s2), or,
-  // where it gives none, the spread of the declared model's residual (SetUnknownNoise).
-  double std_q = 0.0, std_gyro = 0.0, std_accel = 0.0;
-  bool noise_from_log[3] = {false, false, false};
+  std::vector<MotionCamera> cameras;
+  std::vector<MotionTag> tags;
+  std::vector<MotionTagRow> tag_rows;  // in time order
+  // The readings' noise: the log's (joints.std_rad, imu.gyro_std_rad_s, accel_std_m_s2,
+  // tags.pixel_std_px), or, where it gives none, the spread of the declared model's residual
+  // (SetUnknownNoise).
+  double std_q = 0.0, std_gyro = 0.0, std_accel = 0.0, std_px = 0.0;
+  bool noise_from_log[4] = {false, false, false, false};
+  // The noise of stream s (rollout.h's Stream order: encoders, gyro, accel, tag pixels).
+  double Noise(int s) const {
+    return s == 0 ? std_q : s == 1 ? std_gyro : s == 2 ? std_accel : std_px;
+  }
+  double* MutableNoise(int s) {
+    return s == 0 ? &std_q : s == 1 ? &std_gyro : s == 2 ? &std_accel : &std_px;
+  }
   std::vector<Segment> segments;
   // Each segment's starting speeds (segments x joints): qd at its first row, until the final fit
   // fits them with the effects (DynamicProblem::JointFit).
@@ -56,11 +91,14 @@ struct MotionOptions {
   double velocity_window_s = 0.02;
   int velocity_degree = 1;  // of the polynomial
   bool use_imus = true;
+  bool use_tags = true;  // the tags' corner pixels (tags.csv rows), when the log has them
 };
 
 // The log's encoders, commands and IMUs for `sim`'s model. InputError (one line, the file or
 // key) for a log without commands, a joint or command column the model's actuated joints do not
-// match, an IMU frame that is no site of the model, a command outside an actuator's range,
+// match, an IMU frame that is no site of the model, a camera or tag frame the model does not
+// name, tags given as images only (detect them first: flexbench replay writes tags.csv), a
+// command outside an actuator's range,
 // segments shorter than the model's time step, or too few rows for two segments.
 MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& sim,
                           const MotionOptions& options);

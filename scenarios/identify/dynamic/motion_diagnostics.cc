@@ -14,6 +14,9 @@ struct Channel {
   std::string name;
   std::vector<double> t, r;  // r: reading - model, over the stream's noise
   int joint = -1;            // encoders: the joint (its velocity and command)
+  // Sampled at a steady rate: the tags' are not (a frame may miss a tag), so they have no
+  // spectrum and no trend over time, only their level.
+  bool regular = true;
 };
 
 std::vector<Channel> Channels(const DynamicProblem& p, const Prediction& pred) {
@@ -33,10 +36,25 @@ std::vector<Channel> Channels(const DynamicProblem& p, const Prediction& pred) {
       }
     }
   }
+  const int tags_from = static_cast<int>(ch.size());
+  static const char* kCorner[8] = {"c0 u", "c0 v", "c1 u", "c1 v", "c2 u", "c2 v", "c3 u", "c3 v"};
+  for (const MotionCamera& cam : d.cameras) {
+    for (const MotionTag& tag : d.tags) {
+      for (const char* corner : kCorner) {
+        ch.push_back({"tag " + std::to_string(tag.id) + " in " + cam.name + " " + corner,
+                      {},
+                      {},
+                      -1,
+                      false});
+      }
+    }
+  }
   for (int k = 0; k < L.size(); ++k) {
     if (pred.diverged[L.segment[k]] || p.declared().diverged[L.segment[k]]) continue;
     const int s = L.stream[k];
-    const int c = s == 0 ? L.channel[k] : nj + (s - 1) * 3 * ni + L.channel[k];
+    const int c = s == 0   ? L.channel[k]
+                  : s == 3 ? tags_from + L.channel[k]
+                           : nj + (s - 1) * 3 * ni + L.channel[k];
     ch[c].t.push_back(L.t[k]);
     ch[c].r.push_back(-pred.residual[k]);
   }
@@ -143,7 +161,7 @@ MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
     for (double r : c.r) sq += r * r;
     if (n > 0) out.levels.push_back({c.name, std::sqrt(sq / n)});
     const double dt = MedianStep(c.t);
-    if (n < 4 * o.window || !(dt > 0)) continue;
+    if (!c.regular || n < 4 * o.window || !(dt > 0)) continue;
     const double hz = 1.0 / dt;
     ChannelSpectrum cs{c.name, Welch(c.r.data(), n, hz, o.window)};
     for (const SpectrumPeak& pk : FindPeaks(cs.spectrum, alpha, 3)) {

@@ -34,8 +34,23 @@ class TermsEffect : public sim::Effect {
 constexpr double kCommandLookBackS = 0.25;
 
 double StdOf(const MotionData& d, char stream) {
-  const double s = stream == 0 ? d.std_q : stream == 1 ? d.std_gyro : d.std_accel;
+  const double s = d.Noise(stream);
   return s > 0.0 ? s : 1.0;
+}
+
+// The four corners of a tag seen by a camera at the simulation's state, in pixels; throws
+// SimulationError when a corner is behind the camera.
+std::array<Eigen::Vector2d, 4> TagCorners(const sim::Simulation& sim, const MotionCamera& cam,
+                                          const MotionTag& tag) {
+  const Eigen::Isometry3d T_cam_tag = sim.Pose(cam.frame).inverse() * sim.Pose(tag.frame);
+  std::array<Eigen::Vector2d, 4> uv;
+  for (int c = 0; c < 4; ++c) {
+    if (!cam.intrinsics.Project(T_cam_tag * tag.corners_m[c], &uv[c])) {
+      throw SimulationError("tag " + std::to_string(tag.id) + " is behind camera '" + cam.name +
+                            "'");
+    }
+  }
+  return uv;
 }
 
 }  // namespace
@@ -82,6 +97,17 @@ ResidualLayout MakeLayout(const MotionData& d) {
         }
       }
     }
+    const int nt = static_cast<int>(d.tags.size());
+    const auto first_row =
+        std::upper_bound(d.tag_rows.begin(), d.tag_rows.end(), t0,
+                         [](double t, const MotionTagRow& r) { return t < r.t; });
+    for (auto r = first_row; r != d.tag_rows.end() && r->t <= t1; ++r) {
+      for (int c = 0; c < 4; ++c) {
+        for (int x = 0; x < 2; ++x) {
+          entries.push_back({r->t, 3, TagChannel(r->camera, r->tag, nt, c, x), r->uv[c][x]});
+        }
+      }
+    }
     std::stable_sort(entries.begin(), entries.end(),
                      [](const Entry& a, const Entry& b) { return a.t < b.t; });
     for (const Entry& e : entries) {
@@ -95,39 +121,48 @@ ResidualLayout MakeLayout(const MotionData& d) {
   return L;
 }
 
-Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& terms,
-                   const MotionData& d, const ResidualLayout& L) {
-  std::unique_ptr<sim::Simulation> sim = model.Make(terms);
-  const int nj = static_cast<int>(d.joints.size());
-  const double dt = sim->timestep();
-  const std::vector<int>& actuated = sim->catalog().actuated;
+Prediction NewPrediction(const MotionData& d, const ResidualLayout& L) {
   Prediction p;
   p.error = Eigen::VectorXd::Zero(L.size());
   p.residual = Eigen::VectorXd::Zero(L.size());
   p.diverged.assign(d.segments.size(), 0);
+  return p;
+}
+
+std::string RolloutFold(const RolloutModel& model, const std::vector<DynamicTerm>& terms,
+                        const MotionData& d, const ResidualLayout& L, int fold, Prediction* p,
+                        const Eigen::MatrixXd* start_qd) {
+  const Eigen::MatrixXd& starts = start_qd ? *start_qd : d.start_qd;
+  std::unique_ptr<sim::Simulation> sim = model.Make(terms);
+  const int nj = static_cast<int>(d.joints.size());
+  const double dt = sim->timestep();
+  const std::vector<int>& actuated = sim->catalog().actuated;
   const auto settle_at = [&](int row) {
     sim->SetCommand(d.q.row(row).transpose());
     sim->Settle();
   };
+  size_t s = 0;
+  while (s < d.segments.size() && d.segments[s].fold != fold) ++s;
+  int e = 0;
+  while (e < L.size() && L.segment[e] < static_cast<int>(s)) ++e;
+  if (s == d.segments.size()) return "";
+  std::string first_divergence;
   try {
-    settle_at(0);
+    settle_at(d.segments[s].row_begin);
   } catch (const SimulationError& err) {
-    // No state to start from: every segment is lost.
-    p.diverged.assign(d.segments.size(), 1);
-    p.num_diverged = static_cast<int>(d.segments.size());
-    p.first_divergence = err.what();
-    return p;
+    // No state to start from: every segment of the fold is lost.
+    for (; s < d.segments.size() && d.segments[s].fold == fold; ++s) p->diverged[s] = 1;
+    return err.what();
   }
   Eigen::VectorXd q0(nj), qd0(nj), c_row(nj);
-  int e = 0;
-  for (size_t s = 0; s < d.segments.size(); ++s) {
+  for (; s < d.segments.size() && d.segments[s].fold == fold; ++s) {
     const Segment& g = d.segments[s];
     const int first = e;
     while (e < L.size() && L.segment[e] == static_cast<int>(s)) ++e;
     try {
       const double t0 = d.t[g.row_begin];
       q0 = d.q.row(g.row_begin).transpose();
-      qd0 = d.start_qd.row(static_cast<int>(s)).transpose();
+      qd0 = starts.row(static_cast<int>(s)).transpose();
       sim->SetActuatedState(t0, q0, qd0);
       // From the command in force at the look-back's start (the last sent before it) on.
       size_t c = std::upper_bound(d.command_t.begin(), d.command_t.end(), t0 - kCommandLookBackS) -
@@ -144,9 +179,11 @@ Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& te
         }
       };
       send_until(t0);
-      double imu_t = -1.0;
-      int imu_i = -1;
+      double imu_t = -1.0, tag_t = -1.0;
+      int imu_i = -1, tag_i = -1;
       Vec3 gyro = Vec3::Zero(), accel = Vec3::Zero();
+      std::array<Eigen::Vector2d, 4> corners;
+      const int nt = static_cast<int>(d.tags.size());
       for (int k = first; k < e; ++k) {
         while (sim->time() < L.t[k] - 0.5 * dt) {
           send_until(sim->time());
@@ -158,6 +195,14 @@ Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& te
         double pred = 0.0;
         if (L.stream[k] == 0) {
           pred = sim->JointPosition(actuated[L.channel[k]]);
+        } else if (L.stream[k] == 3) {
+          const int pair = L.channel[k] / 8;  // camera * tags + tag
+          if (L.t[k] != tag_t || pair != tag_i) {
+            corners = TagCorners(*sim, d.cameras[pair / nt], d.tags[pair % nt]);
+            tag_t = L.t[k];
+            tag_i = pair;
+          }
+          pred = corners[(L.channel[k] % 8) / 2][L.channel[k] % 2];
         } else {
           const int i = L.channel[k] / 3;
           if (L.t[k] != imu_t || i != imu_i) {
@@ -169,13 +214,13 @@ Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& te
           pred = (L.stream[k] == 1 ? gyro : accel)[L.channel[k] % 3];
         }
         if (!std::isfinite(pred)) throw SimulationError("a prediction is not finite");
-        p.error[k] = pred - L.value[k];
-        p.residual[k] = p.error[k] / StdOf(d, L.stream[k]);
+        p->error[k] = pred - L.value[k];
+        p->residual[k] = p->error[k] / StdOf(d, L.stream[k]);
       }
     } catch (const SimulationError& err) {
-      p.diverged[s] = 1;
-      if (p.num_diverged++ == 0) p.first_divergence = err.what();
-      for (int k = first; k < e; ++k) p.error[k] = p.residual[k] = 0.0;
+      p->diverged[s] = 1;
+      if (first_divergence.empty()) first_divergence = err.what();
+      for (int k = first; k < e; ++k) p->error[k] = p->residual[k] = 0.0;
       try {
         settle_at(g.row_end - 1);
       } catch (const SimulationError&) {
@@ -183,14 +228,35 @@ Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& te
       }
     }
   }
+  return first_divergence;
+}
+
+void FinishPrediction(const std::vector<std::string>& fold_divergence, Prediction* p) {
+  p->num_diverged = 0;
+  for (char x : p->diverged) p->num_diverged += x != 0;
+  p->first_divergence.clear();
+  for (const std::string& m : fold_divergence) {
+    if (!m.empty()) {
+      p->first_divergence = m;
+      break;
+    }
+  }
+}
+
+Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& terms,
+                   const MotionData& d, const ResidualLayout& L) {
+  Prediction p = NewPrediction(d, L);
+  std::vector<std::string> divergence(d.folds);
+  for (int f = 0; f < d.folds; ++f) divergence[f] = RolloutFold(model, terms, d, L, f, &p);
+  FinishPrediction(divergence, &p);
   return p;
 }
 
 void SetUnknownNoise(const ResidualLayout& L, const Eigen::VectorXd& err, MotionData* d) {
   // Per stream and channel: consecutive entries of one channel within one segment.
-  double sum[3] = {0, 0, 0};
-  long count[3] = {0, 0, 0};
-  std::vector<std::vector<int>> last(3);
+  double sum[kStreams] = {0, 0, 0, 0};
+  long count[kStreams] = {0, 0, 0, 0};
+  std::vector<std::vector<int>> last(kStreams);
   for (auto& v : last) v.assign(64, -1);
   for (int k = 0; k < L.size(); ++k) {
     const int s = L.stream[k], c = L.channel[k];
@@ -203,11 +269,11 @@ void SetUnknownNoise(const ResidualLayout& L, const Eigen::VectorXd& err, Motion
     }
     last[s][c] = k;
   }
-  double* std[3] = {&d->std_q, &d->std_gyro, &d->std_accel};
-  for (int s = 0; s < 3; ++s) {
+  for (int s = 0; s < kStreams; ++s) {
     if (d->noise_from_log[s] || count[s] == 0) continue;
-    *std[s] = std::sqrt(sum[s] / count[s] / 2.0);
-    if (!(*std[s] > 0.0)) *std[s] = 1e-12;
+    double* std = d->MutableNoise(s);
+    *std = std::sqrt(sum[s] / count[s] / 2.0);
+    if (!(*std > 0.0)) *std = 1e-12;
   }
 }
 

@@ -1,8 +1,10 @@
 // Rollouts of the declared model's MJCF over a recorded log (multiple shooting): each segment
 // starts from the recorded encoder angles and speeds, the logged commands drive the servos, and
-// the joints no encoder sees (bending, base plate) carry their state from the segment before.
+// the joints no encoder sees (bending, base plate) carry their state from the segment before
+// in the same fold (a fold's first segment: the static state at its first row).
 // The residual is each prediction minus its reading over the reading's noise: encoder angles,
-// then each IMU's gyro and accelerometer.
+// each IMU's gyro and accelerometer, and the tags' corner pixels (the model's tag frame seen from
+// its camera frame through the pinhole).
 #pragma once
 
 #include <Eigen/Core>
@@ -39,13 +41,19 @@ class RolloutModel {
   std::unique_ptr<sim::Simulation> nominal_;
 };
 
-enum class Stream { kEncoder = 0, kGyro = 1, kAccel = 2 };
+enum class Stream { kEncoder = 0, kGyro = 1, kAccel = 2, kTagPixel = 3 };
+inline constexpr int kStreams = 4;
+
+// A tag pixel entry's channel: (camera * tags + tag) * 8 + corner * 2 + axis (0 u, 1 v).
+inline int TagChannel(int camera, int tag, int tags, int corner, int axis) {
+  return ((camera * tags + tag) * 4 + corner) * 2 + axis;
+}
 
 // Where each residual entry comes from.
 struct ResidualLayout {
   std::vector<int> segment;   // per entry
   std::vector<char> stream;   // Stream
-  std::vector<int> channel;   // joint (encoders), IMU * 3 + axis (gyro, accel)
+  std::vector<int> channel;   // joint (encoders), IMU * 3 + axis (gyro, accel), TagChannel
   std::vector<double> t;      // its reading's time
   std::vector<double> value;  // the reading
   int size() const { return static_cast<int>(segment.size()); }
@@ -60,7 +68,22 @@ struct Prediction {
   std::string first_divergence;  // the simulation's message
 };
 
-// Rolls the model with `terms` over every segment of `data`.
+// A prediction of nothing yet: zero entries, no segment diverged.
+Prediction NewPrediction(const MotionData& data, const ResidualLayout& layout);
+
+// Rolls the model with `terms` over the segments of fold `fold` into their entries of `p` (made
+// by NewPrediction; other entries are left alone, so folds may be rolled side by side into one
+// prediction). A fold starts from the static state at its first row: no fold's rollout sees
+// another's, so a held-out fold is rolled alone and the folds of one rollout in parallel.
+// `start_qd` replaces data.start_qd when given. Returns the message of the fold's first
+// divergence ("" if none).
+std::string RolloutFold(const RolloutModel& model, const std::vector<DynamicTerm>& terms,
+                        const MotionData& data, const ResidualLayout& layout, int fold,
+                        Prediction* p, const Eigen::MatrixXd* start_qd = nullptr);
+// num_diverged and first_divergence (the first fold's that has one) once the folds are rolled.
+void FinishPrediction(const std::vector<std::string>& fold_divergence, Prediction* p);
+
+// Rolls the model with `terms` over every fold of `data`, one after the other.
 Prediction Rollout(const RolloutModel& model, const std::vector<DynamicTerm>& terms,
                    const MotionData& data, const ResidualLayout& layout);
 

@@ -149,7 +149,7 @@ class Selection {
     const int folds = p_.data().folds;
     std::vector<double> cost(folds, 0.0);
     ForEachTask(folds, p_.threads(), [&](int f) {
-      const FitState at = p_.Evaluate(fit.active, FoldValues(fit, J, f), p_.Mask(f));
+      const FitState at = p_.EvaluateFold(fit.active, FoldValues(fit, J, f), f);
       if (!at.ok) {
         cost[f] = std::numeric_limits<double>::infinity();  // the fold's fit does not hold
         return;
@@ -205,13 +205,13 @@ Eigen::MatrixXd ClusterCovariance(const DynamicProblem& p, const FitState& fit,
 
 StreamError StreamStats(const DynamicProblem& p, const FitState& before, const FitState& after,
                         const std::vector<char>& mask, int stream) {
-  static const char* kNames[3] = {"encoders", "gyro", "accel"};
-  static const char* kUnits[3] = {"rad", "rad/s", "m/s^2"};
+  static const char* kNames[kStreams] = {"encoders", "gyro", "accel", "tags"};
+  static const char* kUnits[kStreams] = {"rad", "rad/s", "m/s^2", "px"};
   const MotionData& d = p.data();
   StreamError e;
   e.stream = kNames[stream];
   e.unit = kUnits[stream];
-  e.noise = stream == 0 ? d.std_q : stream == 1 ? d.std_gyro : d.std_accel;
+  e.noise = d.Noise(stream);
   e.noise_from_log = d.noise_from_log[stream];
   double b = 0.0, a = 0.0;
   const auto& L = p.layout();
@@ -501,7 +501,7 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
     }
     rep.chosen.push_back(std::move(ce));
   }
-  for (int s = 0; s < 3; ++s) {
+  for (int s = 0; s < kStreams; ++s) {
     StreamError e = StreamStats(p, rep.declared_state, fit, sel.all(), s);
     if (e.entries > 0) rep.streams.push_back(e);
   }
