@@ -91,6 +91,7 @@ RecordedLog SimulateMotionLog(Simulation& s, SensorSuite& sensors, const MultiSi
         log.imu.push_back(reading);
       }
     }
+    if (o.after_poll) o.after_poll(s);
     if (k < steps) {
       const double t = s.time();
       s.Step(1);

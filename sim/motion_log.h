@@ -3,6 +3,7 @@
 // (sim/recorded_log.h) that dynamic identification reads as a user's.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,9 @@ struct MotionLogOptions {
   // The log's commands: the position targets sent (false), or the torque each motor applied
   // at its joint in each step (true: commands.csv type torque, a row per step).
   bool torque_commands = false;
+  // Called after each step's sensors are polled (the state of their readings): a camera of a
+  // higher layer renders and detects here.
+  std::function<void(const Simulation&)> after_poll;
 };
 
 // Settles `truth` at the motion's start, then steps it for the duration, sending the motion's

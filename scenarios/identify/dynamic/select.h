@@ -26,7 +26,7 @@
 namespace flexbench::identify::dynamic {
 
 struct DynamicIdentifyOptions {
-  int max_effects = 3;          // chosen at most; a round at it only checks that no more is needed
+  int max_effects = 6;          // chosen at most; a round at it only checks that no more is needed
   double bic_threshold = 10.0;  // a screened candidate lowers BIC by more than this
   int screen_keep = 3;          // screened candidates refitted per round
   double cv_min_gain = 0.05;    // relative held-out error drop a candidate must bring

@@ -11,6 +11,8 @@
 //     commands: position      # or torque: the log holds each step's motor torques instead
 //     motion: {center_deg: [...], amplitude_deg: [...], frequencies_hz: [f1, f2, f3]}
 //   sensors: [...]            # encoders (link side) and IMUs, sim/sensors
+//   tag_camera: {camera: external_camera, rate_hz: 30}   # optional: rendered tags, detected
+//                             # by libapriltag, in the log (common/motion_camera.h)
 //   identify: {segment_s: 0.5, folds: 3, max_effects: 3, families: [...], threads: 2}
 //   replay_estimators: {fk: {}, ppoe_ekf: {}}   # replay the last fold (default: fk)
 //   expected:                 # the truth's effects, as identification names them
@@ -29,6 +31,7 @@
 #include "scenarios/identify/dynamic/select.h"
 #include "scenarios/runner/common/dynamic_replay.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/motion_camera.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_model.h"
 #include "sim/motion_log.h"
@@ -51,7 +54,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   void Configure(const ConfigNode& root) override {
     if (root.Has("log")) {
       // A recorded log (a user's): its readings are the data; no truth is simulated.
-      for (const char* key : {"truth", "sensors", "model"}) {
+      for (const char* key : {"truth", "sensors", "model", "tag_camera"}) {
         if (root.Has(key)) root.Child(key).Fail("a log is given: nothing is simulated");
       }
       log_dir_ = root.ResolvePath(root.GetString("log"));
@@ -101,6 +104,14 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     sensors_node_ = std::make_unique<ConfigNode>(root.Child("sensors"));
     sim::SensorSuite::Parse(*sensors_node_, *truth_, 0);  // checked now; Run seeds its own
     ReadSensorNoise(*sensors_node_);
+    if (const auto c = root.Optional("tag_camera")) {
+      try {
+        camera_ = std::make_unique<MotionTagCamera>(*truth_, ParseMotionCamera(*c, root),
+                                                    declared_.observed_frames);
+      } catch (const InputError& e) {
+        c->Child("camera").Fail(e.what());
+      }
+    }
   }
 
   void Run(RunContext& ctx) override {
@@ -109,6 +120,11 @@ class ClosedLoopDynamicKind : public ScenarioKind {
       log_dir = ctx.out->File("log").string();
       sim::SensorSuite sensors = sim::SensorSuite::Parse(*sensors_node_, *truth_, ctx.seed);
       sim::RecordedLog log = Simulate(ctx.seed, sensors);
+      if (camera_) {
+        const int frames = camera_->AddTo(&log);
+        ctx.log("tag camera: " + std::to_string(log.tag_rows.size()) + " detections in " +
+                std::to_string(frames) + " rendered frames");
+      }
       sim::WriteRecordedLog(log, log_dir);
       ctx.log("wrote the truth's log (" + ShortNum(duration_s_) + " s) to log/");
     }
@@ -219,6 +235,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     o.torque_commands = torque_commands_;
     o.truth_frame = declared_.end_effector;
     o.base_body = declared_.base;
+    if (camera_) o.after_poll = [this](const sim::Simulation& s) { camera_->AfterPoll(s); };
     return sim::SimulateMotionLog(*truth_, sensors, motion, o);
   }
 
@@ -232,6 +249,10 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     m["heldout_ratio"] = rep.heldout_after / rep.heldout_before;
     m["rollouts"] = rep.rollouts;
     m["selection_capped"] = !rep.capped.empty();
+    // Per stream, the residual's RMS with the chosen effects over without (gates read it).
+    for (const dyn::StreamError& st : rep.streams) {
+      if (st.rms_before > 0.0) m["stream_rms_ratio"][st.stream] = st.rms_after / st.rms_before;
+    }
     Json chosen = Json::array();
     bool named = !expected_.empty();
     bool within = true;
@@ -363,6 +384,7 @@ class ClosedLoopDynamicKind : public ScenarioKind {
   bool torque_commands_ = false;  // the log's commands: the motors' torques
   sim::MultiSine motion_;
   std::unique_ptr<ConfigNode> sensors_node_;
+  std::unique_ptr<MotionTagCamera> camera_;  // tag_camera: the truth's rendered tags
   double std_q_ = 0.0, std_gyro_ = 0.0, std_accel_ = 0.0;
   dyn::MotionOptions motion_options_;
   dyn::DynamicIdentifyOptions options_;
