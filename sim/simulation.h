@@ -176,6 +176,8 @@ class Simulation {
   void ClearCommandHistory();
   double DelayedCommand(int i, double delay) const;
   void EnsureKinematics() const;
+  // Whether the data's position and velocity stages are those of its current state (forward_key_).
+  bool ForwardIsCurrent() const;
   void EnsureAccelerations() const;
   void CheckStep(double time_before) const;
 
@@ -215,7 +217,6 @@ class Simulation {
   // The state (qpos, qvel, act, time) EnsureAccelerations last computed positions and velocities
   // at: a step from that same state skips step1's stages (ForwardIsCurrent). Empty: none.
   mutable std::vector<mjtNum> forward_key_;
-  bool ForwardIsCurrent() const;
   mutable int warning_counts_[mjNWARNING] = {};
 };
 

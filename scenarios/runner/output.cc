@@ -615,8 +615,9 @@ OutputDir::OutputDir(const fs::path& final_dir, bool force, const std::vector<fs
   signal_slot_ = RegisterTemporary(tmp_);
 }
 
-void RemoveEndedTemporaries(const fs::path& final_dir) {
-  RemoveStaleTemporaries(final_dir, Self());
+void RemoveEndedTemporaries(const std::vector<fs::path>& final_dirs) {
+  const Maker self = Self();
+  for (const fs::path& d : final_dirs) RemoveStaleTemporaries(d, self);
 }
 
 OutputDir::~OutputDir() {

@@ -86,10 +86,10 @@ bool IsFlexbenchResult(const std::filesystem::path& dir);
 // whole name, so that it stays within NAME_MAX.
 std::string TemporaryName(const std::string& name, const char* tag, long pid, int k = 0);
 
-// Removes the temporaries beside `final_dir` of ended runs of this host (what a new OutputDir to
-// `final_dir` removes first). A sweep calls it for every run once its workers are done: a
+// Removes the temporaries beside each of `final_dirs` of ended runs of this host (what a new
+// OutputDir to one removes first). A sweep calls it for every run once its workers are done: a
 // killed worker may still be dying while the resumed sweep runs its run again.
-void RemoveEndedTemporaries(const std::filesystem::path& final_dir);
+void RemoveEndedTemporaries(const std::vector<std::filesystem::path>& final_dirs);
 
 // Writes `text` to `path` through a temporary file and a rename.
 void WriteFileAtomic(const std::filesystem::path& path, const std::string& text);

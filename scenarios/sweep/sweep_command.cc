@@ -110,7 +110,9 @@ void WriteSweepCommand(const fs::path& out, const SweepSpec& spec, const std::st
 int CollectAndGate(const SweepSpec& spec, const std::vector<SweepPoint>& points,
                    const std::vector<SweepRun>& runs, const RunKeys& keys, const fs::path& out,
                    const std::string& command) {
-  for (const SweepRun& run : runs) RemoveEndedTemporaries(out / run.dir);
+  std::vector<fs::path> run_dirs;
+  for (const SweepRun& run : runs) run_dirs.push_back(out / run.dir);
+  RemoveEndedTemporaries(run_dirs);
   std::map<std::string, size_t> stale;
   const std::vector<RunOutcome> outcomes = ReadOutcomes(out, points, runs, keys, &stale);
   if (!stale.empty()) {

@@ -115,8 +115,8 @@ void ReadTags(const sim::RecordedLog& log, const sim::Simulation& sim, MotionDat
     if (!log.images.empty()) {
       throw InputError(log.dir +
                        "/log.yaml: the tags are given as images only: dynamic "
-                       "identification reads their detections (tags.csv; `flexbench replay` "
-                       "of the log writes them)");
+                       "identification reads their detections (closed_loop_dynamic detects "
+                       "the images first)");
     }
     return;
   }

@@ -36,6 +36,7 @@ std::vector<Channel> Channels(const DynamicProblem& p, const Prediction& pred) {
       }
     }
   }
+  // In TagChannel's order, so that a tag entry's channel is its index from here.
   const int tags_from = static_cast<int>(ch.size());
   static const char* kCorner[8] = {"c0 u", "c0 v", "c1 u", "c1 v", "c2 u", "c2 v", "c3 u", "c3 v"};
   for (const MotionCamera& cam : d.cameras) {
@@ -153,8 +154,13 @@ MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
   const MotionData& d = p.data();
   const std::vector<Channel> channels = Channels(p, pred);
   const Eigen::MatrixXd rate = CommandRate(d);
-  // Bonferroni over the channels and the three tests.
-  const double alpha = o.alpha / (3.0 * channels.size());
+  // Bonferroni over the channels the tests run on (steady ones with enough samples) and the
+  // three tests.
+  int tested = 0;
+  for (const Channel& c : channels) {
+    tested += c.regular && static_cast<int>(c.r.size()) >= 4 * o.window && MedianStep(c.t) > 0;
+  }
+  const double alpha = o.alpha / (3.0 * std::max(1, tested));
   for (const Channel& c : channels) {
     const int n = static_cast<int>(c.r.size());
     double sq = 0.0;

@@ -196,13 +196,13 @@ std::string RolloutFold(const RolloutModel& model, const std::vector<DynamicTerm
         if (L.stream[k] == 0) {
           pred = sim->JointPosition(actuated[L.channel[k]]);
         } else if (L.stream[k] == 3) {
-          const int pair = L.channel[k] / 8;  // camera * tags + tag
+          const int pair = TagPairOf(L.channel[k]);
           if (L.t[k] != tag_t || pair != tag_i) {
             corners = TagCorners(*sim, d.cameras[pair / nt], d.tags[pair % nt]);
             tag_t = L.t[k];
             tag_i = pair;
           }
-          pred = corners[(L.channel[k] % 8) / 2][L.channel[k] % 2];
+          pred = corners[TagCornerOf(L.channel[k])][TagAxisOf(L.channel[k])];
         } else {
           const int i = L.channel[k] / 3;
           if (L.t[k] != imu_t || i != imu_i) {

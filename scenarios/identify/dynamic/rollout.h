@@ -48,6 +48,9 @@ inline constexpr int kStreams = 4;
 inline int TagChannel(int camera, int tag, int tags, int corner, int axis) {
   return ((camera * tags + tag) * 4 + corner) * 2 + axis;
 }
+inline int TagPairOf(int channel) { return channel / 8; }  // camera * tags + tag
+inline int TagCornerOf(int channel) { return (channel % 8) / 2; }
+inline int TagAxisOf(int channel) { return channel % 2; }
 
 // Where each residual entry comes from.
 struct ResidualLayout {

@@ -136,8 +136,10 @@ class Selection {
     Eigen::VectorXd r = fit.prediction.residual;
     ZeroUnmasked(p_.Mask(f), &Jt, &r);
     Eigen::VectorXd d;
-    LinearRss(Jt, r, fit.theta, p_.Lower(fit.active), p_.Upper(fit.active), &d);
-    return fit.theta + d;
+    const Eigen::VectorXd lo = p_.Lower(fit.active), hi = p_.Upper(fit.active);
+    LinearRss(Jt, r, fit.theta, lo, hi, &d);
+    // Clamped again: theta + (bound - theta) can round to just outside the bound.
+    return (fit.theta + d).cwiseMax(lo).cwiseMin(hi);
   }
 
   // Held-out normalised RMS: per fold a Gauss-Newton step from the fit on the other folds'

@@ -52,19 +52,24 @@ void MotionTagCamera::AfterPoll(const sim::Simulation& s) {
     renderer_ = std::make_unique<render::Renderer>(model_, spec_.mode);
     detector_ = std::make_unique<render::TagDetector>(spec_.detector);
   }
+  // On the camera's own clock; a rate above the step rate renders at every step.
   next_t_ = (next_t_ < 0.0 ? s.time() : next_t_) + 1.0 / spec_.rate_hz;
+  if (next_t_ <= s.time()) next_t_ = s.time() + 1.0 / spec_.rate_hz;
+  // The body poses of this state: after a step MuJoCo's are still the step's start's until
+  // something asks for them.
+  s.Pose(sim::FrameRef{sim::FrameType::kCamera, cam_id_, spec_.camera});
   renderer_->RenderRgbInto(const_cast<mjData*>(s.data()), cam_id_, &image_);
   seen_.emplace_back(s.time(), detector_->Detect(image_));
   ++frames_;
 }
 
-int MotionTagCamera::AddTo(sim::RecordedLog* log) const {
+int MotionTagCamera::AddTo(sim::RecordedLog* log) {
   std::map<int, kinematics::FrameId> on_observed;
   for (const render::TagInModel& t : tags_) on_observed[t.id] = kinematics::FrameId{};
   AddTagCameraToLog(model_, spec_.camera, intrinsics_, tags_, on_observed, spec_.pixel_std_px,
                     /*centres=*/false, log);
   const int camera = static_cast<int>(log->cameras.size()) - 1;
-  for (const auto& [t, det] : seen_) AddDetectionsToLog(det, t, camera, log);
+  for (const auto& [t, det] : seen_) others_ += AddDetectionsToLog(det, t, camera, log);
   return frames_;
 }
 

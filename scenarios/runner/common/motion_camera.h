@@ -45,7 +45,9 @@ class MotionTagCamera {
   // first call): the hook of sim::MotionLogOptions::after_poll.
   void AfterPoll(const sim::Simulation& s);
   // The camera, its tags and every detection so far into `log`; returns the frames rendered.
-  int AddTo(sim::RecordedLog* log) const;
+  int AddTo(sim::RecordedLog* log);
+  // Detections of tags on no observed frame (AddTo leaves them out).
+  int others() const { return others_; }
 
  private:
   MotionCameraSpec spec_;
@@ -58,6 +60,7 @@ class MotionTagCamera {
   render::Image image_;
   double next_t_ = -1.0;
   int frames_ = 0;
+  int others_ = 0;
   std::vector<std::pair<double, render::DetectionResult>> seen_;
 };
 

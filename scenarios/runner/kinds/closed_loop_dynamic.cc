@@ -11,9 +11,11 @@
 //     commands: position      # or torque: the log holds each step's motor torques instead
 //     motion: {center_deg: [...], amplitude_deg: [...], frequencies_hz: [f1, f2, f3]}
 //   sensors: [...]            # encoders (link side) and IMUs, sim/sensors
-//   tag_camera: {camera: external_camera, rate_hz: 30}   # optional: rendered tags, detected
-//                             # by libapriltag, in the log (common/motion_camera.h)
-//   identify: {segment_s: 0.5, folds: 3, max_effects: 3, families: [...], threads: 2}
+//   tag_camera: {camera: external_camera, rate_hz: 30, pixel_std_px: 1}   # optional: the
+//                             # rendered tags libapriltag finds, in the log
+//                             (common/motion_camera.h)
+//   identify: {segment_s: 0.5, folds: 3, max_effects: 3, families: [...], threads: 2,
+//              streams: [encoders, imu, tags]}   # the log's streams the residual holds
 //   replay_estimators: {fk: {}, ppoe_ekf: {}}   # replay the last fold (default: fk)
 //   expected:                 # the truth's effects, as identification names them
 //     - {name: joint_friction@link2_pitch_joint, values: [0.2]}
@@ -31,6 +33,7 @@
 #include "scenarios/identify/dynamic/select.h"
 #include "scenarios/runner/common/dynamic_replay.h"
 #include "scenarios/runner/common/estimator_config.h"
+#include "scenarios/runner/common/log_images.h"
 #include "scenarios/runner/common/motion_camera.h"
 #include "scenarios/runner/kinds/kinds.h"
 #include "sim/declared_model.h"
@@ -105,9 +108,10 @@ class ClosedLoopDynamicKind : public ScenarioKind {
     sim::SensorSuite::Parse(*sensors_node_, *truth_, 0);  // checked now; Run seeds its own
     ReadSensorNoise(*sensors_node_);
     if (const auto c = root.Optional("tag_camera")) {
+      MotionCameraSpec spec = ParseMotionCamera(*c, root);
       try {
-        camera_ = std::make_unique<MotionTagCamera>(*truth_, ParseMotionCamera(*c, root),
-                                                    declared_.observed_frames);
+        camera_ =
+            std::make_unique<MotionTagCamera>(*truth_, std::move(spec), declared_.observed_frames);
       } catch (const InputError& e) {
         c->Child("camera").Fail(e.what());
       }
@@ -123,12 +127,19 @@ class ClosedLoopDynamicKind : public ScenarioKind {
       if (camera_) {
         const int frames = camera_->AddTo(&log);
         ctx.log("tag camera: " + std::to_string(log.tag_rows.size()) + " detections in " +
-                std::to_string(frames) + " rendered frames");
+                std::to_string(frames) + " rendered frames (" + std::to_string(camera_->others()) +
+                " of tags on no observed frame left out)");
       }
       sim::WriteRecordedLog(log, log_dir);
       ctx.log("wrote the truth's log (" + ShortNum(duration_s_) + " s) to log/");
     }
-    const sim::RecordedLog log = sim::ReadRecordedLog(log_dir);
+    sim::RecordedLog log = sim::ReadRecordedLog(log_dir);
+    if (log.tag_rows.empty() && !log.images.empty()) {
+      // A log's camera frames: their tags through libapriltag, as tags.csv would give them.
+      DetectLogImages(render::DetectorSettings{}, &log);
+      ctx.log("detected " + std::to_string(log.tag_rows.size()) + " tags in " +
+              std::to_string(log.images.size()) + " frames of the log's images/");
+    }
     // The declared file's own dynamic effects stay; the candidates act on top of them.
     std::vector<dyn::DynamicTerm> declared_terms;
     for (const sim::DeclaredDynamic& e : sim::DynamicEntries(declared_.identified_effects)) {
@@ -218,6 +229,20 @@ class ClosedLoopDynamicKind : public ScenarioKind {
         families_.push_back(f);
         const sim::DynamicRow* row = sim::FindDynamic(f);
         if (!row || !row->fitted) id.Child("families").Fail("'" + f + "' is no fitted family");
+      }
+    }
+    if (id.Has("streams")) {
+      // The encoders drive every segment's start: always in.
+      motion_options_.use_imus = motion_options_.use_tags = false;
+      for (const ConfigNode& item : id.Child("streams").Items()) {
+        const std::string s = item.AsString();
+        if (s == "imu") {
+          motion_options_.use_imus = true;
+        } else if (s == "tags") {
+          motion_options_.use_tags = true;
+        } else if (s != "encoders") {
+          id.Child("streams").Fail("'" + s + "': expected encoders, imu or tags");
+        }
       }
     }
   }

@@ -12,6 +12,7 @@
 #include <sstream>
 #include <thread>
 
+#include "scenarios/runner/output.h"
 #include "tests/common/test_util.h"
 
 namespace flexbench::testing {
@@ -62,16 +63,18 @@ TEST(SweepCli, LocalSweepIsDeterministicResumableAndIndependentOfWorkers) {
   // without a marker is the user's and is kept.
   const fs::path runs = tmp.path() / "a" / "runs" / "distance_std_m_0.001";
   ASSERT_TRUE(fs::exists(runs / "seed_1")) << "the sweep's run folders moved";
-  WriteFile(runs / "seed_1.tmp-1999999997" / ".flexbench-temporary",
+  const std::string ended = scenarios::TemporaryName("seed_1", "tmp", 1999999997);
+  const std::string users = scenarios::TemporaryName("seed_1", "tmp", 1999999998);
+  WriteFile(runs / ended / scenarios::kTemporaryMarker,
             Marker(Host(), PidNamespace(), 1999999997, 5));
-  WriteFile(runs / "seed_1.tmp-1999999998" / "notes.txt", "mine");
+  WriteFile(runs / users / "notes.txt", "mine");
   r = Sweep(file, tmp.path() / "a", "-j 2");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("0 runs to do"), std::string::npos) << r.err;
   EXPECT_EQ(ReadFile(tmp.path() / "a" / "sweep.csv"), csv);
   EXPECT_EQ(ReadFile(tmp.path() / "a" / "aggregate.json"), agg);
-  EXPECT_FALSE(fs::exists(runs / "seed_1.tmp-1999999997"));
-  EXPECT_EQ(ReadFile(runs / "seed_1.tmp-1999999998" / "notes.txt"), "mine");
+  EXPECT_FALSE(fs::exists(runs / ended));
+  EXPECT_EQ(ReadFile(runs / users / "notes.txt"), "mine");
 
   // One worker, so another finishing order: the same bytes.
   r = Sweep(file, tmp.path() / "b", "-j 1");
