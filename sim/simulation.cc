@@ -177,9 +177,13 @@ void Simulation::SetTorque(const Eigen::VectorXd& tau) {
 }
 
 double Simulation::MotorTorque(int i) const {
+  if (i < 0 || i >= num_actuated()) {
+    throw std::invalid_argument(model_name_ + ": MotorTorque(" + std::to_string(i) + ") of " +
+                                std::to_string(num_actuated()) + " actuated joints");
+  }
   const mjModel* m = truth_.get();
   const int a = catalog_.Joint(catalog_.actuated[i]).actuator;
-  const double ff = feedforward_.size() > i ? feedforward_[i] : 0.0;
+  const double ff = static_cast<int>(feedforward_.size()) > i ? feedforward_[i] : 0.0;
   return data_->actuator_force[a] * m->actuator_gear[6 * a] + ff;
 }
 

@@ -29,6 +29,10 @@ class TermsEffect : public sim::Effect {
   std::vector<DynamicTerm> terms_;
 };
 
+// Segments before a fold rolled (not scored) before its own: the joints no encoder sees (a
+// link's mode) reach the state the segments before would have carried into the fold.
+constexpr int kFoldWarmUpSegments = 4;
+
 // Commands sent before a segment's start that a delayed servo may still act on (beyond the
 // largest delay a row allows).
 constexpr double kCommandLookBackS = 0.25;
@@ -143,20 +147,25 @@ std::string RolloutFold(const RolloutModel& model, const std::vector<DynamicTerm
   };
   size_t s = 0;
   while (s < d.segments.size() && d.segments[s].fold != fold) ++s;
+  if (s == d.segments.size()) return "";
+  // The warm-up: the segments before the fold, rolled and not scored.
+  s = s > static_cast<size_t>(kFoldWarmUpSegments) ? s - kFoldWarmUpSegments : 0;
   int e = 0;
   while (e < L.size() && L.segment[e] < static_cast<int>(s)) ++e;
-  if (s == d.segments.size()) return "";
   std::string first_divergence;
   try {
     settle_at(d.segments[s].row_begin);
   } catch (const SimulationError& err) {
     // No state to start from: every segment of the fold is lost.
-    for (; s < d.segments.size() && d.segments[s].fold == fold; ++s) p->diverged[s] = 1;
+    for (; s < d.segments.size() && d.segments[s].fold <= fold; ++s) {
+      if (d.segments[s].fold == fold) p->diverged[s] = 1;
+    }
     return err.what();
   }
   Eigen::VectorXd q0(nj), qd0(nj), c_row(nj);
-  for (; s < d.segments.size() && d.segments[s].fold == fold; ++s) {
+  for (; s < d.segments.size() && d.segments[s].fold <= fold; ++s) {
     const Segment& g = d.segments[s];
+    const bool scored = g.fold == fold;
     const int first = e;
     while (e < L.size() && L.segment[e] == static_cast<int>(s)) ++e;
     try {
@@ -192,6 +201,7 @@ std::string RolloutFold(const RolloutModel& model, const std::vector<DynamicTerm
         // A command row is in force from its time on: readings then see it (an accelerometer
         // reads the servo's force of that instant).
         send_until(sim->time());
+        if (!scored) continue;
         double pred = 0.0;
         if (L.stream[k] == 0) {
           pred = sim->JointPosition(actuated[L.channel[k]]);
@@ -218,9 +228,11 @@ std::string RolloutFold(const RolloutModel& model, const std::vector<DynamicTerm
         p->residual[k] = p->error[k] / StdOf(d, L.stream[k]);
       }
     } catch (const SimulationError& err) {
-      p->diverged[s] = 1;
-      if (first_divergence.empty()) first_divergence = err.what();
-      for (int k = first; k < e; ++k) p->error[k] = p->residual[k] = 0.0;
+      if (scored) {
+        p->diverged[s] = 1;
+        if (first_divergence.empty()) first_divergence = err.what();
+        for (int k = first; k < e; ++k) p->error[k] = p->residual[k] = 0.0;
+      }
       try {
         settle_at(g.row_end - 1);
       } catch (const SimulationError&) {

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <stdexcept>
 #include <string>
 
 #include "estimators/error.h"
@@ -145,6 +146,8 @@ TEST(TorqueCommands, TheLoggedMotorTorquesReplayTheServosTrajectory) {
   EXPECT_GT(moved, 0.2);
   EXPECT_GT(torque, 0.5);
   EXPECT_LT(worst, 1e-12);
+  EXPECT_THROW(servo->MotorTorque(1), std::invalid_argument);  // one actuated joint
+  EXPECT_THROW(servo->MotorTorque(-1), std::invalid_argument);
   // SetCommand switches the servo back on: it pulls towards the command again.
   cmd << 0.0;
   motor->SetCommand(cmd);
