@@ -1,7 +1,8 @@
 // Rollouts of the declared model's MJCF over a recorded log (multiple shooting): each segment
 // starts from the recorded encoder angles and speeds, the logged commands drive the servos, and
-// the joints no encoder sees (bending, base plate) carry their state from the segment before
-// in the same fold (a fold's first segment: the static state at its first row).
+// the joints no encoder sees (bending, base plate) carry their state from the segment before.
+// A fold's rollout starts from the static state four segments before it, those rolled and not
+// scored, so that it reaches the fold with about the state the segments before carry.
 // The residual is each prediction minus its reading over the reading's noise: encoder angles,
 // each IMU's gyro and accelerometer, and the tags' corner pixels (the model's tag frame seen from
 // its camera frame through the pinhole).
@@ -76,8 +77,9 @@ Prediction NewPrediction(const MotionData& data, const ResidualLayout& layout);
 
 // Rolls the model with `terms` over the segments of fold `fold` into their entries of `p` (made
 // by NewPrediction; other entries are left alone, so folds may be rolled side by side into one
-// prediction). A fold starts from the static state at its first row: no fold's rollout sees
-// another's, so a held-out fold is rolled alone and the folds of one rollout in parallel.
+// prediction). A fold starts from the static state four segments before its first (those
+// rolled, not scored): no fold's rollout depends on another's, so a held-out fold is rolled
+// alone and the folds of one rollout in parallel.
 // `start_qd` replaces data.start_qd when given. Returns the message of the fold's first
 // divergence ("" if none).
 std::string RolloutFold(const RolloutModel& model, const std::vector<DynamicTerm>& terms,
