@@ -86,10 +86,10 @@ class Selection {
 
   double Bic(double rss, int k) const { return n_ * std::log(rss / n_) + k * std::log(n_); }
 
-  // Screens every candidate beside `state`'s.
-  std::vector<Screened> Screen(const FitState& state) {
+  // Screens every candidate beside `state`'s; `J_state`: the Jacobian at `state` when known.
+  std::vector<Screened> Screen(const FitState& state, const Eigen::MatrixXd* J_state = nullptr) {
     const std::vector<int>& active = state.active;
-    Eigen::MatrixXd Ja = p_.Jacobian(active, state.theta, state.prediction);
+    Eigen::MatrixXd Ja = J_state ? *J_state : p_.Jacobian(active, state.theta, state.prediction);
     Eigen::VectorXd ra = state.prediction.residual;
     ZeroUnmasked(all_, &Ja, &ra);
     const int nc = static_cast<int>(p_.candidates().size());
@@ -144,10 +144,11 @@ class Selection {
 
   // Held-out normalised RMS: per fold a Gauss-Newton step from the fit on the other folds'
   // entries, then the held-out fold's rollout at it.
-  double HeldOut(const FitState& fit) {
+  // `J_out`: the fit's Jacobian, which this computes (a later Screen of the fit reuses it).
+  double HeldOut(const FitState& fit, Eigen::MatrixXd* J_out = nullptr) {
     const auto& L = p_.layout();
     if (fit.theta.size() == 0) return std::sqrt(p_.Cost(fit.prediction.residual, all_) / n_);
-    const Eigen::MatrixXd J = p_.Jacobian(fit.active, fit.theta, fit.prediction);
+    Eigen::MatrixXd J = p_.Jacobian(fit.active, fit.theta, fit.prediction);
     const int folds = p_.data().folds;
     std::vector<double> cost(folds, 0.0);
     ForEachTask(folds, p_.threads(), [&](int f) {
@@ -163,6 +164,7 @@ class Selection {
     });
     double sum = 0.0;
     for (double c : cost) sum += c;
+    if (J_out) *J_out = std::move(J);
     return std::sqrt(sum / n_);
   }
 
@@ -234,10 +236,11 @@ StreamError StreamStats(const DynamicProblem& p, const FitState& before, const F
 
 namespace {
 
-// A fit of a set and its held-out error.
+// A fit of a set, its held-out error and its Jacobian (empty until HeldOut computed it).
 struct Scored {
   FitState fit;
   double heldout = std::numeric_limits<double>::infinity();
+  Eigen::MatrixXd J;
 };
 
 // The values of `active` without its i-th effect.
@@ -271,7 +274,7 @@ class Stages {
   Scored Score(const std::vector<int>& active, const Eigen::VectorXd& theta0) {
     Scored s;
     s.fit = p_.Fit(active, theta0, sel_.all(), o_.iterations);
-    if (s.fit.ok) s.heldout = sel_.HeldOut(s.fit);
+    if (s.fit.ok) s.heldout = sel_.HeldOut(s.fit, &s.J);
     return s;
   }
   bool Better(double heldout, double than) const { return dynamic::Better(heldout, than, o_); }
@@ -283,7 +286,8 @@ class Stages {
     const auto& cands = p_.candidates();
     for (int n = 0; n < kMaxRounds * (o_.max_effects + 1); ++n) {
       const int round = ++rounds_;
-      const std::vector<Screened> screened = sel_.Screen(state.fit);
+      const bool known = state.fit.theta.size() > 0 && state.J.cols() == state.fit.theta.size();
+      const std::vector<Screened> screened = sel_.Screen(state.fit, known ? &state.J : nullptr);
       const double bic_now = sel_.Bic(state.fit.cost, static_cast<int>(state.fit.theta.size()));
       std::vector<Screened> kept;
       for (const Screened& s : screened) {
@@ -460,6 +464,7 @@ DynamicReport IdentifyDynamics(DynamicProblem& p, const DynamicIdentifyOptions& 
   if (o.joint_iterations > 0) {
     const double before = state.fit.cost;
     state.fit = p.JointFit(state.fit, sel.all(), o.joint_iterations);
+    state.J.resize(0, 0);  // of the fit before
     rep.log.push_back("effects and segment start speeds fitted jointly: cost " + ShortNum(before) +
                       " -> " + ShortNum(state.fit.cost));
   }
