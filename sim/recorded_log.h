@@ -211,8 +211,9 @@ struct RecordedLog {
   // cameras, tags and tags.csv (optional; every row's camera and tag are declared).
   std::vector<LogCamera> cameras;
   std::vector<LogTag> tags;
-  double pixel_std_px = 1.0;  // each corner's, in u and in v
-  bool tag_centres = false;   // tags.measurement: centre (the estimators fuse the centre pixel)
+  double pixel_std_px = 1.0;      // each corner's, in u and in v
+  bool pixel_std_stated = false;  // the log gives it (else the 1 px above is the format's default)
+  bool tag_centres = false;       // tags.measurement: centre (the estimators fuse the centre pixel)
   bool has_centre_columns = false;  // tags.csv holds the detector's centres (uc_px, vc_px)
   std::vector<LogTagRow> tag_rows;
   // images/ (optional, instead of tags.csv): the frames in time order (cameras in their order at

@@ -89,7 +89,10 @@ void ReadCameras(const ConfigNode& node, RecordedLog* log) {
 
 void ReadTags(const ConfigNode& node, RecordedLog* log, double* used) {
   if (log->cameras.empty()) node.Fail("needs `cameras` (those that see the tags)");
-  if (node.Has("pixel_std_px")) log->pixel_std_px = Positive(node, "pixel_std_px", 1e3);
+  if (node.Has("pixel_std_px")) {
+    log->pixel_std_px = Positive(node, "pixel_std_px", 1e3);
+    log->pixel_std_stated = true;
+  }
   const std::string measurement = node.GetString("measurement", "corners");
   if (measurement != "corners" && measurement != "centre") {
     node.Child("measurement").Fail("expected corners or centre");

@@ -198,7 +198,7 @@ MotionData ReadMotionData(const sim::RecordedLog& log, const sim::Simulation& si
   d.std_q = log.joint_std;
   d.std_gyro = log.gyro_std;
   d.std_accel = log.accel_std;
-  d.std_px = d.tag_rows.empty() ? 0.0 : log.pixel_std_px;
+  d.std_px = d.tag_rows.empty() || !log.pixel_std_stated ? 0.0 : log.pixel_std_px;
   for (int s = 0; s < 4; ++s) d.noise_from_log[s] = d.Noise(s) > 0.0;
   CutSegments(o, sim.timestep(), &d);
   d.start_qd.resize(static_cast<int>(d.segments.size()), nj);

@@ -69,6 +69,7 @@ void AddTagCameraToLog(const mjModel* m, const std::string& camera, const Pinhol
                        bool centres, sim::RecordedLog* log) {
   log->cameras.push_back({camera, camera, intrinsics});
   log->pixel_std_px = pixel_std;
+  log->pixel_std_stated = true;
   log->tag_centres = log->has_centre_columns = centres;
   for (const render::TagInModel& tag : tags) {
     if (!tag_frames.count(tag.id)) continue;

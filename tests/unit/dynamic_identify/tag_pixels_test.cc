@@ -65,6 +65,7 @@ sim::RecordedLog TaggedLog() {
                    Vec3(kHalf, -0.002, -kHalf), Vec3(-kHalf, -0.002, -kHalf)};
   log.tags.push_back(tag);
   log.pixel_std_px = 0.5;
+  log.pixel_std_stated = true;
   return log;
 }
 
@@ -229,6 +230,22 @@ TEST(TagPixels, BadTagInputIsOneLineNamingIt) {
   images.images.push_back({0.1, 0, "images/cam/100000000.png"});
   EXPECT_NE(ErrorOf(images).find("images only"), std::string::npos);
   EXPECT_EQ(ErrorOf(TaggedLog()), "");
+}
+
+// A log that does not state its pixels' noise: the format's 1 px is not taken for it; the
+// spread of the declared model's residual is (as for every stream a log leaves out).
+TEST(TagPixels, UnstatedPixelNoiseComesFromTheResidual) {
+  RolloutModel model(sim::LoadModelFromString(kXml, "tagged"), "tagged", {});
+  sim::RecordedLog log = TaggedLog();
+  log.pixel_std_stated = false;
+  MotionData data = ReadMotionData(log, model.nominal(), {});
+  EXPECT_FALSE(data.noise_from_log[3]);
+  EXPECT_EQ(data.std_px, 0.0);
+  const ResidualLayout L = MakeLayout(data);
+  SetUnknownNoise(L, Rollout(model, {}, data, L).error, &data);
+  // The readings are all (0, 0) while the tag moves: its first differences are the motion's.
+  EXPECT_GT(data.std_px, 1.0);
+  EXPECT_TRUE(std::isfinite(data.std_px));
 }
 
 }  // namespace
