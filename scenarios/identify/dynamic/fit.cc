@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <memory>
 
 #include "scenarios/identify/parallel.h"
 
@@ -53,9 +52,6 @@ struct LmDamping {
   }
 };
 
-const Eigen::MatrixXd* Pointer(const Eigen::MatrixXd* p) { return p; }
-const Eigen::MatrixXd* Pointer(const std::unique_ptr<Eigen::MatrixXd>& p) { return p.get(); }
-
 }  // namespace
 
 DynamicProblem::DynamicProblem(const RolloutModel& model, const MotionData& data,
@@ -76,9 +72,8 @@ void DynamicProblem::RollVariants(int variants, TermsOf terms_of, StartsOf start
   // Folds write disjoint entries and segments of their variant's prediction.
   ForEachTask(variants * folds, threads_, [&](int task) {
     const int v = task / folds, f = task % folds;
-    const auto starts = starts_of(v);
     divergence[task] =
-        RolloutFold(model_, terms_of(v), data_, layout_, f, &(*out)[v], Pointer(starts));
+        RolloutFold(model_, terms_of(v), data_, layout_, f, &(*out)[v], starts_of(v));
   });
   fold_rollouts_ += static_cast<long>(variants) * folds;
   for (int v = 0; v < variants; ++v) {
@@ -151,12 +146,12 @@ double DynamicProblem::Cost(const Eigen::VectorXd& r, const std::vector<char>& m
   return c;
 }
 
-FitState DynamicProblem::Evaluate(const std::vector<int>& active, const Eigen::VectorXd& theta,
-                                  const std::vector<char>& mask) const {
+FitState DynamicProblem::Judged(const std::vector<int>& active, const Eigen::VectorXd& theta,
+                                Prediction prediction, const std::vector<char>& mask) const {
   FitState f;
   f.active = active;
   f.theta = theta;
-  f.prediction = Roll(Terms(active, theta));
+  f.prediction = std::move(prediction);
   f.ok = true;
   for (size_t s = 0; s < f.prediction.diverged.size(); ++s) {
     if (f.prediction.diverged[s] && !declared_.diverged[s]) f.ok = false;
@@ -165,27 +160,21 @@ FitState DynamicProblem::Evaluate(const std::vector<int>& active, const Eigen::V
   return f;
 }
 
+FitState DynamicProblem::Evaluate(const std::vector<int>& active, const Eigen::VectorXd& theta,
+                                  const std::vector<char>& mask) const {
+  return Judged(active, theta, Roll(Terms(active, theta)), mask);
+}
+
 FitState DynamicProblem::EvaluateFold(const std::vector<int>& active, const Eigen::VectorXd& theta,
                                       int fold) const {
-  FitState f;
-  f.active = active;
-  f.theta = theta;
-  f.prediction = NewPrediction(data_, layout_);
-  const std::string divergence =
-      RolloutFold(model_, Terms(active, theta), data_, layout_, fold, &f.prediction);
-  FinishPrediction({divergence}, &f.prediction);
+  Prediction p = NewPrediction(data_, layout_);
+  FinishPrediction({RolloutFold(model_, Terms(active, theta), data_, layout_, fold, &p)}, &p);
   ++fold_rollouts_;
-  f.ok = true;
-  for (size_t s = 0; s < f.prediction.diverged.size(); ++s) {
-    if (f.prediction.diverged[s] && !declared_.diverged[s]) f.ok = false;
-  }
-  std::vector<char> mask(layout_.size(), 0);
+  std::vector<char> mask = Mask(-1);
   for (int k = 0; k < layout_.size(); ++k) {
-    const int s = layout_.segment[k];
-    mask[k] = !declared_.diverged[s] && data_.segments[s].fold == fold;
+    mask[k] = mask[k] && data_.segments[layout_.segment[k]].fold == fold;
   }
-  f.cost = f.ok ? Cost(f.prediction.residual, mask) : std::numeric_limits<double>::infinity();
-  return f;
+  return Judged(active, theta, std::move(p), mask);
 }
 
 Eigen::MatrixXd DynamicProblem::Jacobian(const std::vector<int>& active,
@@ -262,17 +251,14 @@ Eigen::MatrixXd DynamicProblem::StartJacobian(const FitState& fit) const {
   const int nj = static_cast<int>(data_.joints.size());
   constexpr double kStep = 1e-3;  // rad/s
   Eigen::MatrixXd Js = Eigen::MatrixXd::Zero(layout_.size(), nj);
-  // One joint's speeds moved at a time: a copy of the starts per task, not of the log.
-  const auto moved = [&](int j) {
-    auto m = std::make_unique<Eigen::MatrixXd>(data_.start_qd);
-    m->col(j).array() += kStep;
-    return m;
-  };
+  // One joint's speeds moved at a time (the starts, segments x joints, not the log).
+  std::vector<Eigen::MatrixXd> moved(nj, data_.start_qd);
+  for (int j = 0; j < nj; ++j) moved[j].col(j).array() += kStep;
   const std::vector<DynamicTerm> terms = Terms(fit.active, fit.theta);
   std::vector<Prediction> p;
   RollVariants(
       nj, [&](int) -> const std::vector<DynamicTerm>& { return terms; },
-      [&](int j) { return moved(j); }, &p);
+      [&](int j) { return &moved[j]; }, &p);
   for (int j = 0; j < nj; ++j) {
     for (int k = 0; k < layout_.size(); ++k) {
       const int s = layout_.segment[k];

@@ -100,6 +100,10 @@ class DynamicProblem {
   mutable std::atomic<long> fold_rollouts_{0};
   Eigen::VectorXd Stacked(const std::vector<int>& active,
                           std::array<double, 2> sim::DynamicRow::*column) const;
+  // The state of `prediction`: ok unless a segment diverged that the declared model's did not,
+  // its cost on `mask`'s entries.
+  FitState Judged(const std::vector<int>& active, const Eigen::VectorXd& theta,
+                  Prediction prediction, const std::vector<char>& mask) const;
   // Every fold of the log rolled with `terms`, the folds as tasks on the threads.
   Prediction Roll(const std::vector<DynamicTerm>& terms) const;
   // Rolls the log with variant v's terms and segment start speeds (nullptr: the log's) for

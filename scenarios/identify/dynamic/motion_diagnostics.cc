@@ -156,18 +156,22 @@ MotionDiagnostics Diagnose(const DynamicProblem& p, const Prediction& pred,
   const Eigen::MatrixXd rate = CommandRate(d);
   // Bonferroni over the channels the tests run on (steady ones with enough samples) and the
   // three tests.
+  std::vector<double> step(channels.size(), 0.0);  // the sampling step; 0: not tested
   int tested = 0;
-  for (const Channel& c : channels) {
-    tested += c.regular && static_cast<int>(c.r.size()) >= 4 * o.window && MedianStep(c.t) > 0;
+  for (size_t i = 0; i < channels.size(); ++i) {
+    const Channel& c = channels[i];
+    if (c.regular && static_cast<int>(c.r.size()) >= 4 * o.window) step[i] = MedianStep(c.t);
+    tested += step[i] > 0;
   }
   const double alpha = o.alpha / (3.0 * std::max(1, tested));
-  for (const Channel& c : channels) {
+  for (size_t i = 0; i < channels.size(); ++i) {
+    const Channel& c = channels[i];
     const int n = static_cast<int>(c.r.size());
     double sq = 0.0;
     for (double r : c.r) sq += r * r;
     if (n > 0) out.levels.push_back({c.name, std::sqrt(sq / n)});
-    const double dt = MedianStep(c.t);
-    if (!c.regular || n < 4 * o.window || !(dt > 0)) continue;
+    const double dt = step[i];
+    if (!(dt > 0)) continue;
     const double hz = 1.0 / dt;
     ChannelSpectrum cs{c.name, Welch(c.r.data(), n, hz, o.window)};
     for (const SpectrumPeak& pk : FindPeaks(cs.spectrum, alpha, 3)) {

@@ -17,6 +17,7 @@
 #include "sim/mujoco_model.h"
 #include "sim/recorded_log.h"
 #include "sim/simulation.h"
+#include "tests/unit/dynamic_identify/sine_log.h"
 
 namespace flexbench::identify::dynamic {
 namespace {
@@ -30,23 +31,6 @@ std::string Pendulum(double kp) {
     <site name="imu" pos="0.3 0 0"/></body></worldbody>
   <actuator><position name="j" joint="j" kp=")" +
          std::to_string(kp) + R"(" ctrlrange="-1.5 1.5"/></actuator></mujoco>)";
-}
-
-// One second at 500 Hz following a sine, the readings the commands themselves.
-sim::RecordedLog SineLog(double amplitude) {
-  sim::RecordedLog log;
-  log.dir = "/tmp/pendulum_log";
-  log.joints = log.command_joints = {"j"};
-  log.joint_is_slide = log.command_is_slide = {0};
-  log.joint_std = 1e-3;
-  for (int k = 0; k <= 500; ++k) {
-    const double t = 0.002 * k, q = amplitude * std::sin(2 * M_PI * t);
-    log.joint_t.push_back(t);
-    log.joint_q.push_back(q);
-    log.command_t.push_back(t);
-    log.command_q.push_back(q);
-  }
-  return log;
 }
 
 std::string ErrorOf(const sim::RecordedLog& log, const MotionOptions& o) {

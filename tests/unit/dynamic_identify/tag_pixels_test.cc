@@ -14,6 +14,7 @@
 #include "sim/camera.h"
 #include "sim/mujoco_model.h"
 #include "sim/recorded_log.h"
+#include "tests/unit/dynamic_identify/sine_log.h"
 
 namespace flexbench::identify::dynamic {
 namespace {
@@ -37,23 +38,12 @@ constexpr double kHalf = 0.03;  // the tag's half side
 // One and a half seconds at 500 Hz following a sine, the readings the commands themselves,
 // and a tag row every 10 encoder rows whose corners are all (0, 0): its error is the prediction.
 sim::RecordedLog TaggedLog() {
-  sim::RecordedLog log;
-  log.dir = "/tmp/tagged_log";
-  log.joints = log.command_joints = {"j"};
-  log.joint_is_slide = log.command_is_slide = {0};
-  log.joint_std = 1e-3;
-  for (int k = 0; k <= 750; ++k) {
-    const double t = 0.002 * k, q = 0.5 * std::sin(2 * M_PI * t);
-    log.joint_t.push_back(t);
-    log.joint_q.push_back(q);
-    log.command_t.push_back(t);
-    log.command_q.push_back(q);
-    if (k % 10 == 5) {
-      sim::LogTagRow r;
-      r.t = t;
-      for (auto& uv : r.uv) uv.setZero();
-      log.tag_rows.push_back(r);
-    }
+  sim::RecordedLog log = SineLog(0.5, 1.5);
+  for (size_t k = 5; k < log.joint_t.size(); k += 10) {
+    sim::LogTagRow r;
+    r.t = log.joint_t[k];
+    for (auto& uv : r.uv) uv.setZero();
+    log.tag_rows.push_back(r);
   }
   const sim::MjModelPtr m = sim::LoadModelFromString(kXml, "tagged");
   log.cameras.push_back({"cam", "cam", sim::CameraIntrinsics(m.get(), 0)});
@@ -157,20 +147,11 @@ constexpr char kFlexXml[] = R"(<mujoco model="flex"><compiler autolimits="true" 
 // moves no later fold.
 TEST(Folds, AFoldRollsAloneFromTheSegmentsJustBeforeIt) {
   RolloutModel model(sim::LoadModelFromString(kFlexXml, "flex"), "flex", {});
-  sim::RecordedLog log;
-  log.dir = "/tmp/flex_log";
-  log.joints = log.command_joints = {"j"};
-  log.joint_is_slide = log.command_is_slide = {0};
-  log.joint_std = 1e-3;
+  sim::RecordedLog log = SineLog(0.6, 6.0, 0.7);  // 12 segments, 4 a fold
   log.imus.push_back({"imu", "imu", false, Quat::Identity()});
   log.gyro_std = 0.01;
   log.accel_std = 0.1;
-  for (int k = 0; k <= 3000; ++k) {  // 6 s: 12 segments, 4 a fold
-    const double t = 0.002 * k, q = 0.6 * std::sin(2 * M_PI * 0.7 * t);
-    log.joint_t.push_back(t);
-    log.joint_q.push_back(q);
-    log.command_t.push_back(t);
-    log.command_q.push_back(q);
+  for (double t : log.joint_t) {
     estimators::ImuReading z;
     z.t = t;
     z.imu = 0;
