@@ -80,25 +80,13 @@ void ValidateConfig(const ParticleFilterConfig& config, const kinematics::PpoeMo
 }
 
 namespace {
-// Orientation-only frames need no translation.
-std::vector<bool> TranslationNeeded(const ParticleFilterConfig& c) {
-  std::vector<bool> out;
-  std::vector<FrameId> frames;
-  const auto add = [&](FrameId f) {
-    if (f < 0 || std::find(frames.begin(), frames.end(), f) != frames.end()) return;
-    frames.push_back(f);
-    const bool position =
-        f == c.end_effector ||
-        std::find(c.position_frames.begin(), c.position_frames.end(), f) != c.position_frames.end();
-    out.push_back(position);
-  };
-  for (FrameId f : c.position_frames) add(f);
-  for (FrameId f : c.orientation_frames) add(f);
-  add(c.end_effector);
-  return out;
+bool RaoBlackwellised(const ParticleFilterConfig& c) {
+  return c.proposal == Proposal::kLaplace && c.rao_blackwell;
 }
 
-std::vector<FrameId> KinematicOutputs(const ParticleFilterConfig& c) {
+// The readings' frames, the end effector, and (Rao-Blackwellised) the joint frames above them.
+std::vector<FrameId> KinematicOutputs(const ParticleFilterConfig& c,
+                                      const kinematics::PpoeModel& model) {
   std::vector<FrameId> out;
   const auto add = [&](FrameId f) {
     if (f >= 0 && std::find(out.begin(), out.end(), f) == out.end()) out.push_back(f);
@@ -106,6 +94,33 @@ std::vector<FrameId> KinematicOutputs(const ParticleFilterConfig& c) {
   for (FrameId f : c.position_frames) add(f);
   for (FrameId f : c.orientation_frames) add(f);
   add(c.end_effector);
+  if (RaoBlackwellised(c)) {
+    for (FrameId f :
+         ConditionalMoments::JointFrames(model, c.position_frames, c.orientation_frames)) {
+      add(f);
+    }
+  }
+  return out;
+}
+
+// Orientation-only frames need no translation (a joint frame's locates its axis).
+std::vector<bool> TranslationNeeded(const ParticleFilterConfig& c,
+                                    const kinematics::PpoeModel& model) {
+  std::vector<bool> out;
+  std::vector<FrameId> joint_frames;
+  if (RaoBlackwellised(c)) {
+    joint_frames = ConditionalMoments::JointFrames(model, c.position_frames, c.orientation_frames);
+  }
+  for (FrameId f : KinematicOutputs(c, model)) {
+    const bool orientation_only =
+        f != c.end_effector &&
+        std::find(joint_frames.begin(), joint_frames.end(), f) == joint_frames.end() &&
+        std::find(c.position_frames.begin(), c.position_frames.end(), f) ==
+            c.position_frames.end() &&
+        std::find(c.orientation_frames.begin(), c.orientation_frames.end(), f) !=
+            c.orientation_frames.end();
+    out.push_back(!orientation_only);
+  }
   return out;
 }
 
@@ -130,7 +145,8 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
       conjugate_sampler_(std::abs(config.kappa_v - config.kappa_w),
                          config.kappa_v + config.kappa_w),
       log_i0_(std::abs(config.kappa_v - config.kappa_w), config.kappa_v + config.kappa_w),
-      fk_(model, KinematicOutputs(config), config.num_particles, TranslationNeeded(config)),
+      fk_(model, KinematicOutputs(config, model), config.num_particles,
+          TranslationNeeded(config, model)),
       lin_data_(model),
       fk_data_(model) {
   position_info_ = config_.position_cov.inverse();
@@ -170,6 +186,13 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
       log_i0_bands_.emplace_back(std::ldexp(k_hi, b), std::ldexp(k_hi, b + 1));
     }
   }
+  if (RaoBlackwellised(config_)) {
+    rb_ = std::make_unique<ConditionalMoments>(model, config_.position_frames,
+                                               config_.orientation_frames, position_info_, stride_);
+    rb_->Bind(fk_);
+    prev_c_.assign(total, 1.0);
+    prev_s_.assign(total, 0.0);
+  }
   Reset();
 }
 
@@ -187,6 +210,7 @@ void ParticleFilter::Reset() {
   }
   std::fill(log_w_.begin(), log_w_.end(), 0.0);
   pending_move_ = false;
+  rb_valid_ = false;
   kept_u_valid_ = false;
   num_kept_positions_ = num_kept_orientations_ = 0;
   awaiting_first_reading_ = config_.initial_at_first_reading;
@@ -202,6 +226,7 @@ void ParticleFilter::Reset() {
 // vM(kappa_0, 0) turned by u is vM(kappa_0, u): each joint's particles rotate by its reading.
 void ParticleFilter::CentreOnReading(const double* u) {
   awaiting_first_reading_ = false;
+  rb_valid_ = false;
   for (int j = 0; j < nq_; ++j) {
     const double cu = std::cos(u[j]), su = std::sin(u[j]);
     double* c = cos_.data() + static_cast<size_t>(j) * stride_;
@@ -261,12 +286,14 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::ResampleIfNeeded() {
   }
   cos_.swap(cos2_);
   sin_.swap(sin2_);
+  rb_valid_ = false;
   std::fill(log_w_.begin(), log_w_.end(), 0.0);
   log_norm_at_step_start_ = std::log(static_cast<double>(n_));
   ++resample_count_;
 }
 
 void ParticleFilter::PropagateBootstrap() {
+  rb_valid_ = false;
   // Rounding moves |(cos, sin)| by about an ulp per rotation: renormalise every 16 steps.
   const bool renormalise = (++moves_ & 15) == 0;
   for (int j = 0; j < nq_; ++j) {
@@ -277,6 +304,7 @@ void ParticleFilter::PropagateBootstrap() {
 }
 
 void ParticleFilter::PropagateConjugate(const double* u) {
+  rb_valid_ = false;
   std::fill(ll_.begin(), ll_.end(), 0.0);
   const double kv = config_.kappa_v;
   const double kw = config_.kappa_w;
@@ -329,11 +357,11 @@ bool ParticleFilter::KeepReading(const double* u, FrameId frame, const Vec3* p_f
     return true;
   }
   if (p_frame != nullptr && num_kept_positions_ < kept_positions_.size()) {
-    kept_positions_[num_kept_positions_++] = {frame, *p_frame, *p_base};
+    kept_positions_[num_kept_positions_++] = {frame, *p_frame, *p_base, false};
     return true;
   }
   if (q != nullptr && num_kept_orientations_ < kept_orientations_.size()) {
-    kept_orientations_[num_kept_orientations_++] = {frame, *q};
+    kept_orientations_[num_kept_orientations_++] = {frame, *q, false};
     return true;
   }
   // A second reading of a kind in the step: the move takes what it has, this one is a weight.
@@ -344,13 +372,17 @@ bool ParticleFilter::KeepReading(const double* u, FrameId frame, const Vec3* p_f
 FLEXBENCH_PARTICLE_LOOP void ParticleFilter::CompleteStep() {
   if (config_.proposal != Proposal::kLaplace || !pending_move_) return;
   pending_move_ = false;
-  if (!kept_u_valid_) {
+  ResampleIfNeeded();
+  if (rb_) {
+    std::copy(cos_.begin(), cos_.end(), prev_c_.begin());
+    std::copy(sin_.begin(), sin_.end(), prev_s_.begin());
+  }
+  const bool with_u = kept_u_valid_;
+  if (!with_u) {
     // Without encoders the step has no conjugate centre: the system model moves the particles.
-    ResampleIfNeeded();
     PropagateBootstrap();
     ComputeKinematics();
   } else {
-    ResampleIfNeeded();
     LaplaceMove();
   }
   kept_u_valid_ = false;
@@ -358,11 +390,40 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::CompleteStep() {
   num_kept_positions_ = num_kept_orientations_ = 0;
   for (size_t a = 0; a < np; ++a) {
     const KeptPosition& r = kept_positions_[a];
-    UpdatePosition(r.frame, r.p_frame, r.p_base);
+    kept_positions_[a].applied =
+        UpdatePosition(r.frame, r.p_frame, r.p_base) == PfStatus::kAccepted;
   }
   for (size_t a = 0; a < no; ++a) {
-    UpdateOrientation(kept_orientations_[a].frame, kept_orientations_[a].q_base_frame);
+    KeptOrientation& r = kept_orientations_[a];
+    r.applied = UpdateOrientation(r.frame, r.q_base_frame) == PfStatus::kAccepted;
   }
+  if (rb_) RaoBlackwellise(with_u ? kept_u_ : nullptr, np, no);
+}
+
+// The step's conditional moments from the move's parents, its encoder reading u (or none) and
+// the first np / no kept readings that were applied.
+void ParticleFilter::RaoBlackwellise(const double* u, size_t np, size_t no) {
+  rb_->Begin(prev_c_.data(), prev_s_.data(), u, config_.kappa_v, config_.kappa_w, n_);
+  for (size_t a = 0; a < np; ++a) {
+    if (!kept_positions_[a].applied) continue;
+    const KeptPosition& r = kept_positions_[a];
+    for (size_t f = 0; f < config_.position_frames.size(); ++f) {
+      if (config_.position_frames[f] != r.frame) continue;
+      rb_->AddPosition(*model_, fk_, static_cast<int>(f), position_outputs_[f], r.p_frame,
+                       r.p_base, n_);
+    }
+  }
+  for (size_t a = 0; a < no; ++a) {
+    if (!kept_orientations_[a].applied) continue;
+    const KeptOrientation& r = kept_orientations_[a];
+    const Mat3 C = bingham_.RotationForm(r.q_base_frame).C;
+    for (size_t f = 0; f < config_.orientation_frames.size(); ++f) {
+      if (config_.orientation_frames[f] != r.frame) continue;
+      rb_->AddOrientation(*model_, fk_, static_cast<int>(f), orientation_outputs_[f], C, n_);
+    }
+  }
+  rb_->Finish(cos_.data(), sin_.data(), n_);
+  rb_valid_ = true;
 }
 
 void ParticleFilter::LinearisedReadings() {
@@ -424,15 +485,24 @@ inline double LinearAngle(double c, double s) {
 }  // namespace
 
 // Per particle: target k_j cos(x_j - mu_j) + l(x) with l the readings' log-likelihood to second
-// order about xbar: precision P = diag(k) + H, mean xbar + P^-1 (k o wrap(mu - xbar) + g).
-// With P = L L^T, L^T (x - mean) is standard normal, so x_j given the later joints has mean
-// c_j = mean_j - sum_{k>j} L_kj e_k / L_jj and precision L_jj^2; it is drawn as
-// vM(L_jj^2, c_j), e_j its deviation in the linear coordinate.
+// order about xbar. The proposal is one Gaussian shape for all particles, precision
+// P = diag(kbar) + H (kbar: the weighted mean of the conjugate k), about each particle's own mean
+// xbar + P^-1 (k o wrap(mu - xbar) + g). With P = L L^T, L^T (x - mean) is standard normal, so
+// x_j given the later joints has mean c_j = mean_j - sum_{k>j} L_kj e_k / L_jj and precision
+// L_jj^2; it is drawn as vM(L_jj^2, c_j), e_j its deviation in the linear coordinate. Particles
+// 2i and 2i + 1 are antithetic: the second takes the mirror image of the first's von Mises
+// draws, a draw of the same law, so each particle's proposal and weight are as if drawn alone,
+// while the pair's mean deviation cancels to first order (Hammersley and Morton 1956).
 FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
   const int m = nq_;
   const double kv = config_.kappa_v;
   const double kw = config_.kappa_w;
+  double* __restrict w = w_.data();
+  for (int i = 0; i < n_; ++i) w[i] = std::exp(log_w_[i]);
+  double wsum = 0.0;
+  for (int i = 0; i < n_; ++i) wsum += w[i];
   // The conjugate centres: k e^{i mu} = kappa_v e^{i x_prev} + kappa_w e^{i u}, (c, s) := e^{i mu}.
+  double kbar[kMaxPfJoints];
   for (int j = 0; j < m; ++j) {
     const double cu = kw * std::cos(kept_u_[j]);
     const double su = kw * std::sin(kept_u_[j]);
@@ -440,6 +510,7 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
     double* __restrict c = cos_.data() + off;
     double* __restrict s = sin_.data() + off;
     double* __restrict k = k_.data() + off;
+    double ksum = 0.0;
     for (int i = 0; i < n_; ++i) {
       const double zc = kv * c[i] + cu;
       const double zs = kv * s[i] + su;
@@ -448,11 +519,11 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
       k[i] = ok ? ki : 1e-300;
       c[i] = ok ? zc / ki : 1.0;
       s[i] = ok ? zs / ki : 0.0;
+      ksum += w[i] * k[i];
     }
+    kbar[j] = ksum / wsum;
   }
   // The linearisation point: the weighted circular mean of the centres.
-  double* __restrict w = w_.data();
-  for (int i = 0; i < n_; ++i) w[i] = std::exp(log_w_[i]);
   double cbar[kMaxPfJoints], sbar[kMaxPfJoints];
   for (int j = 0; j < m; ++j) {
     double sc = 0.0, ss = 0.0;
@@ -462,31 +533,43 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
     sbar[j] = std::sin(lin_q_[j]);
   }
   LinearisedReadings();
-  double L[kMaxPfJoints * kMaxPfJoints];
-  double mean[kMaxPfJoints], e[kMaxPfJoints];
+  // P = diag(kbar) + H = L L^T, once for the step.
   constexpr double kMinKappa = 1e-3;  // keeps the draws proper where nothing constrains a joint
+  double L[kMaxPfJoints * kMaxPfJoints];
+  for (int a = 0; a < m; ++a) {
+    for (int b = 0; b <= a; ++b) L[a * m + b] = H_[a * m + b];
+    L[a * m + a] += kbar[a];
+  }
+  for (int a = 0; a < m; ++a) {
+    double d = L[a * m + a];
+    for (int b = 0; b < a; ++b) d -= L[a * m + b] * L[a * m + b];
+    d = std::sqrt(std::max(d, kMinKappa));
+    L[a * m + a] = d;
+    for (int r = a + 1; r < m; ++r) {
+      double v = L[r * m + a];
+      for (int b = 0; b < a; ++b) v -= L[r * m + b] * L[a * m + b];
+      L[r * m + a] = v / d;
+    }
+  }
+  double kappa[kMaxPfJoints];
+  BestFisherEnvelope env[kMaxPfJoints];
+  double log_norm_q = 0.0;  // sum_j log(2 pi I0(kappa_j)) less m log 2 pi
+  for (int j = 0; j < m; ++j) {
+    kappa[j] = L[j * m + j] * L[j * m + j];
+    env[j] = OptimalBestFisherEnvelope(kappa[j]);
+    log_norm_q += LogI0(kappa[j]);
+  }
+  double mean[kMaxPfJoints], e[kMaxPfJoints];
+  UnitAngle draw[kMaxPfJoints];
   for (int i = 0; i < n_; ++i) {
-    // P = diag(k) + H and its right-hand side, then P = L L^T in place.
+    const bool mirror = (i & 1) != 0;
+    // rhs = k o wrap(mu - xbar) + g, then mean := P^-1 rhs (forward then backward substitution).
     for (int a = 0; a < m; ++a) {
       const size_t ia = static_cast<size_t>(a) * stride_ + i;
       const double delta = LinearAngle(cos_[ia] * cbar[a] + sin_[ia] * sbar[a],
                                        sin_[ia] * cbar[a] - cos_[ia] * sbar[a]);
       mean[a] = k_[ia] * delta + g_[a];
-      for (int b = 0; b <= a; ++b) L[a * m + b] = H_[a * m + b];
-      L[a * m + a] += k_[ia];
     }
-    for (int a = 0; a < m; ++a) {
-      double d = L[a * m + a];
-      for (int b = 0; b < a; ++b) d -= L[a * m + b] * L[a * m + b];
-      d = std::sqrt(std::max(d, kMinKappa));
-      L[a * m + a] = d;
-      for (int r = a + 1; r < m; ++r) {
-        double v = L[r * m + a];
-        for (int b = 0; b < a; ++b) v -= L[r * m + b] * L[a * m + b];
-        L[r * m + a] = v / d;
-      }
-    }
-    // mean := P^-1 rhs (forward then backward substitution).
     for (int a = 0; a < m; ++a) {
       double v = mean[a];
       for (int b = 0; b < a; ++b) v -= L[a * m + b] * mean[b];
@@ -497,26 +580,30 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
       for (int b = a + 1; b < m; ++b) v -= L[b * m + a] * mean[b];
       mean[a] = v / L[a * m + a];
     }
-    double log_target = 0.0, log_q = 0.0;  // log q + m log 2 pi
+    double log_target = 0.0, log_q = 0.0;  // log q + log_norm_q + m log 2 pi
     for (int j = m - 1; j >= 0; --j) {
       double cj = mean[j];
       for (int b = j + 1; b < m; ++b) cj -= L[b * m + j] * e[b] / L[j * m + j];
-      const double kappa = L[j * m + j] * L[j * m + j];
-      const UnitAngle v = BestFisherDraw(kappa, OptimalBestFisherEnvelope(kappa), rng_);
+      if (!mirror) {
+        draw[j] = BestFisherDraw(kappa[j], env[j], rng_);
+      } else {
+        draw[j].s = -draw[j].s;
+      }
+      const UnitAngle v = draw[j];
       e[j] = cj - mean[j] + LinearAngle(v.c, v.s);
       const double a = lin_q_[j] + cj;
       const double ca = std::cos(a), sa = std::sin(a);
       const double cx = ca * v.c - sa * v.s, sx = sa * v.c + ca * v.s;  // x = a + the draw
       const size_t ij = static_cast<size_t>(j) * stride_ + i;
       log_target += k_[ij] * (cx * cos_[ij] + sx * sin_[ij]);
-      log_q += kappa * v.c - LogI0(kappa);
+      log_q += kappa[j] * v.c;
       cos_[ij] = cx;
       sin_[ij] = sx;
     }
     ll_[i] = log_target - log_q;
   }
   ComputeKinematics();
-  ApplyLogLikelihood(m * log_norm_conjugate_);
+  ApplyLogLikelihood(m * log_norm_conjugate_ + log_norm_q);
 }
 
 FLEXBENCH_PARTICLE_LOOP bool ParticleFilter::ApplyLogLikelihood(double constant) {
@@ -533,6 +620,7 @@ FLEXBENCH_PARTICLE_LOOP bool ParticleFilter::ApplyLogLikelihood(double constant)
   for (int i = 0; i < n_; ++i) lw[i] = ll[i] - m;
   shift_ += m + constant;
   summary_valid_ = false;
+  rb_valid_ = false;
   return true;
 }
 
@@ -696,7 +784,11 @@ const ParticleSummary& ParticleFilter::Summary() const {
     const double* c = cos_.data() + static_cast<size_t>(j) * stride_;
     const double* s = sin_.data() + static_cast<size_t>(j) * stride_;
     double sc = 0.0, ss = 0.0;
-    WeightedResultant(c, s, w, n_, &sc, &ss);
+    if (rb_valid_) {
+      WeightedResultant(rb_->moment_c(j), rb_->moment_s(j), w, n_, &sc, &ss);
+    } else {
+      WeightedResultant(c, s, w, n_, &sc, &ss);
+    }
     const double mean = std::atan2(ss, sc);
     const double r = std::min(1.0, std::hypot(sc, ss));
     out.mean[j] = mean >= M_PI ? -M_PI : mean;

@@ -37,7 +37,9 @@
 // is weighted vM(k, mu)(x) C / q(x) before the readings' likelihoods are applied, so the
 // posterior is the paper's whatever the linearisation's quality.
 //
-// Output (Summary): per-joint circular mean [PF eq. 5], circular standard deviation and 95%
+// Output (Summary): per-joint circular mean [PF eq. 5] (with kLaplace and rao_blackwell, of each
+// particle's exact conditional first moment given its other joints, its parent and the step's
+// readings: ConditionalMoments), circular standard deviation and 95%
 // interval (2.5% and 97.5% weighted quantiles of the deviations from the mean), and the
 // end-effector pose at the mean angles (the paper's gripper "from estimated effective joint
 // angles") with the second moment of the particles' poses about it, in its local tangent space
@@ -47,6 +49,7 @@
 // the heap (tests/unit/pf_alloc/).
 #pragma once
 
+#include <memory>
 #include <random>
 #include <vector>
 
@@ -58,6 +61,7 @@
 #include "estimators/pf/batch_kinematics.h"
 #include "estimators/pf/bingham.h"
 #include "estimators/pf/circular_quantile.h"
+#include "estimators/pf/conditional_moments.h"
 #include "estimators/pf/particle_moments.h"
 #include "estimators/pf/resampling.h"
 #include "estimators/pf/von_mises.h"
@@ -88,6 +92,9 @@ struct ParticleFilterConfig {
   ResamplingScheme resampling = ResamplingScheme::kStratified;
   double ess_threshold = 0.5;  // resample when ESS < ess_threshold * N; in (0, 1]
   Proposal proposal = Proposal::kBootstrap;
+  // kLaplace: the joint means from each particle's exact conditional moments (conditional_moments.h)
+  // instead of its own angles; same posterior, less Monte-Carlo noise.
+  bool rao_blackwell = true;
   FrameId end_effector = -1;  // pose reported by Summary (-1: none)
 };
 
@@ -216,16 +223,24 @@ class ParticleFilter {
   struct KeptPosition {
     FrameId frame;
     Vec3 p_frame, p_base;
+    bool applied;  // its likelihood was applied (CompleteStep)
   };
   struct KeptOrientation {
     FrameId frame;
     Quat q_base_frame;
+    bool applied;
   };
   bool kept_u_valid_ = false;
   double kept_u_[kMaxPfJoints] = {};
   std::vector<KeptPosition> kept_positions_;        // capacity: one per F_P frame
   std::vector<KeptOrientation> kept_orientations_;  // capacity: one per F_Q frame
   size_t num_kept_positions_ = 0, num_kept_orientations_ = 0;
+  // kLaplace with rao_blackwell: the parents of the step's move and the conditional moments,
+  // valid from CompleteStep until the particles or weights change.
+  std::unique_ptr<ConditionalMoments> rb_;
+  std::vector<double> prev_c_, prev_s_;  // [nq][stride_]
+  bool rb_valid_ = false;
+  void RaoBlackwellise(const double* u, size_t np, size_t no);
   kinematics::PpoeData lin_data_;
   Eigen::VectorXd lin_q_;
   kinematics::Matrix6Xd J_frame_q_;

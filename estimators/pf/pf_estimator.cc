@@ -91,6 +91,7 @@ pf::ParticleFilterConfig MakePfConfig(const EstimatorSetup& setup,
   c.proposal = laplace     ? pf::Proposal::kLaplace
                : conjugate ? pf::Proposal::kEncoderConjugate
                            : pf::Proposal::kBootstrap;
+  c.rao_blackwell = Flag(p, "rao_blackwell", true, name);
   c.initial_at_first_reading = Flag(p, "initial_at_first_reading", false, name);
   c.end_effector = setup.end_effector;
   if (Flag(p, "ee_position", variant.ee_position, name)) {

@@ -36,6 +36,8 @@
 //   conjugate_proposal (0): 1 = the encoder-conjugate proposal (particle_filter.h)
 //   laplace_proposal (0): 1 = the proposal that folds in every reading of the step
 //     (particle_filter.h); excludes conjugate_proposal
+//   rao_blackwell (1): with laplace_proposal, the joint means from each particle's exact
+//     conditional moments (conditional_moments.h); 0 = from the particles' own angles
 //   initial_at_first_reading (0): 1 = initial particles vM(kappa_0, first reading), not about 0
 //
 // Predict(t) makes one system-model step [PF eq. 30] when t is later than the last step.
