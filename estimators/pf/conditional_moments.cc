@@ -60,6 +60,8 @@ ConditionalMoments::ConditionalMoments(const kinematics::PpoeModel& model,
   b_.assign(total, 0.0);
   mc_.assign(total, 0.0);
   ms_.assign(total, 0.0);
+  for (auto& v : axis_) v.assign(total, 0.0);
+  for (auto& v : scratch_) v.assign(stride_, 0.0);
 }
 
 void ConditionalMoments::Bind(const BatchKinematics& fk) {
@@ -70,20 +72,8 @@ void ConditionalMoments::Bind(const BatchKinematics& fk) {
   }
 }
 
-void ConditionalMoments::Axis(const kinematics::PpoeModel& model, const BatchKinematics& fk,
-                              int j, int i, Vec3* w, Vec3* o) const {
-  const int k = joint_output_[j];
-  const kinematics::Joint& joint = model.frame(joint_frame_ids_[j]).joint;
-  Mat3 R;
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) R(r, c) = fk.R(k, r, c)[i];
-  }
-  const Vec3 t(fk.t(k, 0)[i], fk.t(k, 1)[i], fk.t(k, 2)[i]);
-  *w = R * joint.axis;
-  *o = R * joint.point + t;
-}
-
-void ConditionalMoments::Begin(const double* prev_c, const double* prev_s, const double* u,
+void ConditionalMoments::Begin(const kinematics::PpoeModel& model, const BatchKinematics& fk,
+                               const double* prev_c, const double* prev_s, const double* u,
                                double kappa_v, double kappa_w, int n) {
   for (int j = 0; j < nq_; ++j) {
     const std::size_t off = static_cast<std::size_t>(j) * stride_;
@@ -95,55 +85,102 @@ void ConditionalMoments::Begin(const double* prev_c, const double* prev_s, const
       a_[off + i] = 0.0;
       b_[off + i] = 0.0;
     }
+    const int k = joint_output_[j];
+    if (k < 0) continue;
+    // The joint's axis line in the world: direction R w, through R r + t.
+    const kinematics::Joint& joint = model.frame(joint_frame_ids_[j]).joint;
+    double* __restrict w[3] = {&axis_[0][off], &axis_[1][off], &axis_[2][off]};
+    double* __restrict o[3] = {&axis_[3][off], &axis_[4][off], &axis_[5][off]};
+    for (int r = 0; r < 3; ++r) {
+      const double* R0 = fk.R(k, r, 0);
+      const double* R1 = fk.R(k, r, 1);
+      const double* R2 = fk.R(k, r, 2);
+      const double* t = fk.t(k, r);
+      for (int i = 0; i < n; ++i) {
+        w[r][i] = R0[i] * joint.axis.x() + R1[i] * joint.axis.y() + R2[i] * joint.axis.z();
+        o[r][i] = R0[i] * joint.point.x() + R1[i] * joint.point.y() + R2[i] * joint.point.z() +
+                  t[i];
+      }
+    }
   }
 }
 
 // -|y - o - Rot(w, d) r|^2 / (2 sigma^2) = const + s (y - o)^T Rot(w, d) r, with
 // Rot r = cos d r + sin d (w x r) + (1 - cos d) w (w . r).
-void ConditionalMoments::AddPosition(const kinematics::PpoeModel& model, const BatchKinematics& fk,
-                                     int a, int k_frame, const Vec3& p_frame, const Vec3& p_base,
-                                     int n) {
+void ConditionalMoments::AddPosition(const BatchKinematics& fk, int a, int k_frame,
+                                     const Vec3& p_frame, const Vec3& p_base, int n) {
   const std::uint32_t joints = position_below_[a] & exact_;
-  const double s = position_scale_;
+  if (joints == 0) return;
+  const double sc = position_scale_;
+  double* __restrict p[3] = {scratch_[0].data(), scratch_[1].data(), scratch_[2].data()};
+  for (int r = 0; r < 3; ++r) {
+    const double* R0 = fk.R(k_frame, r, 0);
+    const double* R1 = fk.R(k_frame, r, 1);
+    const double* R2 = fk.R(k_frame, r, 2);
+    const double* t = fk.t(k_frame, r);
+    for (int i = 0; i < n; ++i) {
+      p[r][i] = R0[i] * p_frame.x() + R1[i] * p_frame.y() + R2[i] * p_frame.z() + t[i];
+    }
+  }
+  const double y0 = p_base.x(), y1 = p_base.y(), y2 = p_base.z();
   for (int j = 0; j < nq_; ++j) {
     if (!((joints >> j) & 1u)) continue;
     const std::size_t off = static_cast<std::size_t>(j) * stride_;
+    const double* __restrict w0 = &axis_[0][off];
+    const double* __restrict w1 = &axis_[1][off];
+    const double* __restrict w2 = &axis_[2][off];
+    const double* __restrict o0 = &axis_[3][off];
+    const double* __restrict o1 = &axis_[4][off];
+    const double* __restrict o2 = &axis_[5][off];
+    double* __restrict A = &a_[off];
+    double* __restrict B = &b_[off];
     for (int i = 0; i < n; ++i) {
-      Vec3 p;
-      for (int r = 0; r < 3; ++r) {
-        p(r) = fk.R(k_frame, r, 0)[i] * p_frame.x() + fk.R(k_frame, r, 1)[i] * p_frame.y() +
-               fk.R(k_frame, r, 2)[i] * p_frame.z() + fk.t(k_frame, r)[i];
-      }
-      Vec3 w, o;
-      Axis(model, fk, j, i, &w, &o);
-      const Vec3 d = p_base - o;
-      const Vec3 r = p - o;
-      a_[off + i] += s * (d.dot(r) - d.dot(w) * r.dot(w));
-      b_[off + i] += s * w.dot(r.cross(d));
+      const double d0 = y0 - o0[i], d1 = y1 - o1[i], d2 = y2 - o2[i];
+      const double r0 = p[0][i] - o0[i], r1 = p[1][i] - o1[i], r2 = p[2][i] - o2[i];
+      const double dw = d0 * w0[i] + d1 * w1[i] + d2 * w2[i];
+      const double rw = r0 * w0[i] + r1 * w1[i] + r2 * w2[i];
+      A[i] += sc * (d0 * r0 + d1 * r1 + d2 * r2 - dw * rw);
+      // w . (r x d)
+      B[i] += sc * (w0[i] * (r1 * d2 - r2 * d1) + w1[i] * (r2 * d0 - r0 * d2) +
+                    w2[i] * (r0 * d1 - r1 * d0));
     }
   }
 }
 
 // tr(C^T Rot(w, d) R) = tr(G Rot) with G = R C^T: cos d (tr G - w^T G w) + sin d w . v(G) +
 // w^T G w, v(G) = (G12 - G21, G20 - G02, G01 - G10).
-void ConditionalMoments::AddOrientation(const kinematics::PpoeModel& model,
-                                        const BatchKinematics& fk, int a, int k_frame,
+void ConditionalMoments::AddOrientation(const BatchKinematics& fk, int a, int k_frame,
                                         const Mat3& C, int n) {
   const std::uint32_t joints = orientation_below_[a] & exact_;
+  if (joints == 0) return;
+  // G = R C^T, entry by entry.
+  double* __restrict G[9];
+  for (int e = 0; e < 9; ++e) G[e] = scratch_[e].data();
+  for (int r = 0; r < 3; ++r) {
+    const double* R0 = fk.R(k_frame, r, 0);
+    const double* R1 = fk.R(k_frame, r, 1);
+    const double* R2 = fk.R(k_frame, r, 2);
+    for (int c = 0; c < 3; ++c) {
+      const double c0 = C(c, 0), c1 = C(c, 1), c2 = C(c, 2);
+      double* __restrict g = G[r * 3 + c];
+      for (int i = 0; i < n; ++i) g[i] = R0[i] * c0 + R1[i] * c1 + R2[i] * c2;
+    }
+  }
   for (int j = 0; j < nq_; ++j) {
     if (!((joints >> j) & 1u)) continue;
     const std::size_t off = static_cast<std::size_t>(j) * stride_;
+    const double* __restrict w0 = &axis_[0][off];
+    const double* __restrict w1 = &axis_[1][off];
+    const double* __restrict w2 = &axis_[2][off];
+    double* __restrict A = &a_[off];
+    double* __restrict B = &b_[off];
     for (int i = 0; i < n; ++i) {
-      Mat3 R;
-      for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 3; ++c) R(r, c) = fk.R(k_frame, r, c)[i];
-      }
-      const Mat3 G = R * C.transpose();
-      Vec3 w, o;
-      Axis(model, fk, j, i, &w, &o);
-      const Vec3 v(G(1, 2) - G(2, 1), G(2, 0) - G(0, 2), G(0, 1) - G(1, 0));
-      a_[off + i] += G.trace() - w.dot(G * w);
-      b_[off + i] += w.dot(v);
+      const double x = w0[i], y = w1[i], z = w2[i];
+      const double Gw0 = G[0][i] * x + G[1][i] * y + G[2][i] * z;
+      const double Gw1 = G[3][i] * x + G[4][i] * y + G[5][i] * z;
+      const double Gw2 = G[6][i] * x + G[7][i] * y + G[8][i] * z;
+      A[i] += G[0][i] + G[4][i] + G[8][i] - (x * Gw0 + y * Gw1 + z * Gw2);
+      B[i] += x * (G[5][i] - G[7][i]) + y * (G[6][i] - G[2][i]) + z * (G[1][i] - G[3][i]);
     }
   }
 }

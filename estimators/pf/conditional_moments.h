@@ -45,16 +45,16 @@ class ConditionalMoments {
   bool exact(int j) const { return (exact_ >> j) & 1u; }
 
   // Starts a step: the system term kappa_v e^{i x_prev} for every joint and, when u is given,
-  // the encoder term kappa_w e^{i u}. Clears the readings' terms.
-  void Begin(const double* prev_c, const double* prev_s, const double* u, double kappa_v,
-             double kappa_w, int n);
-  // Adds position reading a (index into F_P) of point p_frame read at p_base. `fk` holds the
-  // particles' poses of the reading's frame (output k_frame) and of joint_frames().
-  void AddPosition(const kinematics::PpoeModel& model, const BatchKinematics& fk, int a,
-                   int k_frame, const Vec3& p_frame, const Vec3& p_base, int n);
+  // the encoder term kappa_w e^{i u}; the joints' axes from `fk`, which holds the particles'
+  // poses of joint_frames() (Bind). Clears the readings' terms.
+  void Begin(const kinematics::PpoeModel& model, const BatchKinematics& fk, const double* prev_c,
+             const double* prev_s, const double* u, double kappa_v, double kappa_w, int n);
+  // Adds position reading a (index into F_P) of point p_frame read at p_base; `fk` output
+  // k_frame holds the particles' poses of its frame.
+  void AddPosition(const BatchKinematics& fk, int a, int k_frame, const Vec3& p_frame,
+                   const Vec3& p_base, int n);
   // Adds orientation reading a (index into F_Q), log B = c0 + tr(C^T R).
-  void AddOrientation(const kinematics::PpoeModel& model, const BatchKinematics& fk, int a,
-                      int k_frame, const Mat3& C, int n);
+  void AddOrientation(const BatchKinematics& fk, int a, int k_frame, const Mat3& C, int n);
   // The moments at the particles' angles (cos, sin), [nq][stride]: moment_c()/moment_s().
   void Finish(const double* cos, const double* sin, int n);
 
@@ -62,10 +62,6 @@ class ConditionalMoments {
   const double* moment_s(int j) const { return ms_.data() + j * stride_; }
 
  private:
-  // Joint j's world axis w and a point o on it for particle i, from its joint frame's pose.
-  void Axis(const kinematics::PpoeModel& model, const BatchKinematics& fk, int j, int i, Vec3* w,
-            Vec3* o) const;
-
   int nq_;
   std::size_t stride_;
   std::uint32_t exact_ = 0;
@@ -77,6 +73,8 @@ class ConditionalMoments {
   std::vector<double> zc_, zs_;    // system + encoder phasors
   std::vector<double> a_, b_;      // the readings' a cos d + b sin d about the particle's angle
   std::vector<double> mc_, ms_;
+  std::vector<double> axis_[6];     // [nq][stride]: the joint's world axis w (0-2), a point o (3-5)
+  std::vector<double> scratch_[9];  // [stride]: a reading's point or G = R C^T per particle
 };
 
 }  // namespace flexbench::pf

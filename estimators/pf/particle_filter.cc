@@ -403,14 +403,14 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::CompleteStep() {
 // The step's conditional moments from the move's parents, its encoder reading u (or none) and
 // the first np / no kept readings that were applied.
 void ParticleFilter::RaoBlackwellise(const double* u, size_t np, size_t no) {
-  rb_->Begin(prev_c_.data(), prev_s_.data(), u, config_.kappa_v, config_.kappa_w, n_);
+  rb_->Begin(*model_, fk_, prev_c_.data(), prev_s_.data(), u, config_.kappa_v, config_.kappa_w,
+             n_);
   for (size_t a = 0; a < np; ++a) {
     if (!kept_positions_[a].applied) continue;
     const KeptPosition& r = kept_positions_[a];
     for (size_t f = 0; f < config_.position_frames.size(); ++f) {
       if (config_.position_frames[f] != r.frame) continue;
-      rb_->AddPosition(*model_, fk_, static_cast<int>(f), position_outputs_[f], r.p_frame,
-                       r.p_base, n_);
+      rb_->AddPosition(fk_, static_cast<int>(f), position_outputs_[f], r.p_frame, r.p_base, n_);
     }
   }
   for (size_t a = 0; a < no; ++a) {
@@ -419,7 +419,7 @@ void ParticleFilter::RaoBlackwellise(const double* u, size_t np, size_t no) {
     const Mat3 C = bingham_.RotationForm(r.q_base_frame).C;
     for (size_t f = 0; f < config_.orientation_frames.size(); ++f) {
       if (config_.orientation_frames[f] != r.frame) continue;
-      rb_->AddOrientation(*model_, fk_, static_cast<int>(f), orientation_outputs_[f], C, n_);
+      rb_->AddOrientation(fk_, static_cast<int>(f), orientation_outputs_[f], C, n_);
     }
   }
   rb_->Finish(cos_.data(), sin_.data(), n_);

@@ -125,13 +125,13 @@ TEST_P(ConditionalMomentsTest, MatchTheNumericalConditionalMoment) {
     }
   }
   fk.Compute(qc.data(), qs.data(), static_cast<int>(stride), kParticles);
-  cm.Begin(pc.data(), ps.data(), u.data(), kKappaV, kKappaW, kParticles);
+  cm.Begin(c.model, fk, pc.data(), ps.data(), u.data(), kKappaV, kKappaW, kParticles);
   for (size_t a = 0; a < c.positions.size(); ++a) {
-    cm.AddPosition(c.model, fk, static_cast<int>(a), fk.OutputIndex(c.positions[a].frame),
+    cm.AddPosition(fk, static_cast<int>(a), fk.OutputIndex(c.positions[a].frame),
                    c.positions[a].p_frame, c.positions[a].p_base, kParticles);
   }
   for (size_t a = 0; a < c.orientations.size(); ++a) {
-    cm.AddOrientation(c.model, fk, static_cast<int>(a), fk.OutputIndex(c.orientations[a].frame),
+    cm.AddOrientation(fk, static_cast<int>(a), fk.OutputIndex(c.orientations[a].frame),
                       bingham.RotationForm(c.orientations[a].q_obs).C, kParticles);
   }
   cm.Finish(qc.data(), qs.data(), kParticles);

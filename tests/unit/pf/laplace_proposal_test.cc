@@ -211,7 +211,7 @@ TEST(LaplaceProposal, WeightedParticlesMatchTheGridPosterior) {
 
 // The joint means from the particles' conditional moments (rao_blackwell) estimate the grid's
 // posterior circular mean without bias, with no larger a spread over seeds than the particles' own
-// angles give (the same particles: the moments draw no random numbers). Joint 1 given joint 2 is
+// angles give (the same particles: the moments draw no random numbers). Joint 0 given joint 1 is
 // nearly fixed by the tip and the orientation, so its moment varies as the particle does.
 TEST(LaplaceProposal, ConditionalMomentMeansMatchTheGridWithLessSpread) {
   const std::vector<double> grid = GridPosterior();
@@ -252,7 +252,7 @@ TEST(LaplaceProposal, ConditionalMomentMeansMatchTheGridWithLessSpread) {
       EXPECT_LT(std::abs(mean), 4.0 * sd[rb] / std::sqrt(kSeeds) + 1e-3)
           << "joint " << j << " rao_blackwell " << rb;
     }
-    // Measured 1.00x (joint 1, which the tip and the orientation tie to joint 2) and 0.71x.
+    // Measured 1.00x (joint 0) and 0.71x (joint 1).
     EXPECT_LT(sd[1], (j == 0 ? 1.1 : 0.85) * sd[0]) << "joint " << j;
   }
 }
