@@ -39,8 +39,8 @@ ConditionalMoments::ConditionalMoments(const kinematics::PpoeModel& model,
                                        const Mat3& position_info, std::size_t stride)
     : nq_(model.nq()), stride_(stride) {
   const double s = position_info(0, 0);
-  const bool isotropic = (position_info - s * Mat3::Identity()).cwiseAbs().maxCoeff() <=
-                         1e-12 * std::abs(s);
+  const bool isotropic =
+      (position_info - s * Mat3::Identity()).cwiseAbs().maxCoeff() <= 1e-12 * std::abs(s);
   position_scale_ = s;
   std::uint32_t with_position = 0;
   for (FrameId f : position_frames) {
@@ -98,8 +98,8 @@ void ConditionalMoments::Begin(const kinematics::PpoeModel& model, const BatchKi
       const double* t = fk.t(k, r);
       for (int i = 0; i < n; ++i) {
         w[r][i] = R0[i] * joint.axis.x() + R1[i] * joint.axis.y() + R2[i] * joint.axis.z();
-        o[r][i] = R0[i] * joint.point.x() + R1[i] * joint.point.y() + R2[i] * joint.point.z() +
-                  t[i];
+        o[r][i] =
+            R0[i] * joint.point.x() + R1[i] * joint.point.y() + R2[i] * joint.point.z() + t[i];
       }
     }
   }
@@ -203,7 +203,7 @@ void ConditionalMoments::Finish(const double* cos, const double* sin, int n) {
       const double zc = zc_[off + i] + A * c[i] - B * s[i];
       const double zs = zs_[off + i] + A * s[i] + B * c[i];
       const double kappa = std::sqrt(zc * zc + zs * zs);
-      const double scale = kappa > 1e-300 ? BesselRatioA1(kappa) / kappa : 0.0;
+      const double scale = kappa > 1e-300 ? a1_.Evaluate(kappa) / kappa : 0.0;
       mc[i] = scale * zc;
       ms[i] = scale * zs;
     }

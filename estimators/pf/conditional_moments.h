@@ -23,6 +23,7 @@
 #include "estimators/conventions.h"
 #include "estimators/kinematics/ppoe_model.h"
 #include "estimators/pf/batch_kinematics.h"
+#include "estimators/pf/bessel.h"
 
 namespace flexbench::pf {
 
@@ -69,10 +70,11 @@ class ConditionalMoments {
   std::vector<std::uint32_t> position_below_, orientation_below_;  // joints above each frame
   std::vector<FrameId> joint_frames_;
   std::vector<FrameId> joint_frame_ids_;  // joint_frame(j) of the model, every j
-  std::vector<int> joint_output_;  // joint -> fk output of its joint frame (-1: none)
-  std::vector<double> zc_, zs_;    // system + encoder phasors
-  std::vector<double> a_, b_;      // the readings' a cos d + b sin d about the particle's angle
+  std::vector<int> joint_output_;         // joint -> fk output of its joint frame (-1: none)
+  std::vector<double> zc_, zs_;           // system + encoder phasors
+  std::vector<double> a_, b_;  // the readings' a cos d + b sin d about the particle's angle
   std::vector<double> mc_, ms_;
+  BesselRatioA1Interpolant a1_;
   std::vector<double> axis_[6];     // [nq][stride]: the joint's world axis w (0-2), a point o (3-5)
   std::vector<double> scratch_[9];  // [stride]: a reading's point or G = R C^T per particle
 };

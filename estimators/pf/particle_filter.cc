@@ -181,10 +181,6 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
     lin_q_ = Eigen::VectorXd::Zero(nq_);
     J_frame_q_ = kinematics::Matrix6Xd::Zero(6, nq_);
     k_.assign(total, 0.0);
-    const double k_hi = config_.kappa_v + config_.kappa_w;
-    for (int b = 0; b < kLogI0Bands; ++b) {
-      log_i0_bands_.emplace_back(std::ldexp(k_hi, b), std::ldexp(k_hi, b + 1));
-    }
   }
   if (RaoBlackwellised(config_)) {
     rb_ = std::make_unique<ConditionalMoments>(model, config_.position_frames,
@@ -198,6 +194,7 @@ ParticleFilter::ParticleFilter(const kinematics::PpoeModel& model,
 
 void ParticleFilter::Reset() {
   rng_.seed(seed_);
+  normal_.reset();
   // [PF eq. 29]: every joint of every particle from vM(kappa_0, 0), joint by joint.
   for (int j = 0; j < nq_; ++j) {
     double* c = cos_.data() + static_cast<size_t>(j) * stride_;
@@ -403,8 +400,7 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::CompleteStep() {
 // The step's conditional moments from the move's parents, its encoder reading u (or none) and
 // the first np / no kept readings that were applied.
 void ParticleFilter::RaoBlackwellise(const double* u, size_t np, size_t no) {
-  rb_->Begin(*model_, fk_, prev_c_.data(), prev_s_.data(), u, config_.kappa_v, config_.kappa_w,
-             n_);
+  rb_->Begin(*model_, fk_, prev_c_.data(), prev_s_.data(), u, config_.kappa_v, config_.kappa_w, n_);
   for (size_t a = 0; a < np; ++a) {
     if (!kept_positions_[a].applied) continue;
     const KeptPosition& r = kept_positions_[a];
@@ -466,15 +462,6 @@ void ParticleFilter::LinearisedReadings() {
   }
 }
 
-// The proposal's kappa is at least the conjugate k >= |kappa_v - kappa_w| (a Schur complement
-// of diag(k) + H, H >= 0): below kappa_v + kappa_w the conjugate interpolant, then octaves.
-double ParticleFilter::LogI0(double kappa) const {
-  const double k_hi = config_.kappa_v + config_.kappa_w;
-  if (kappa <= k_hi) return log_i0_.Evaluate(kappa);
-  const int b = std::ilogb(kappa / k_hi);
-  return b < kLogI0Bands ? log_i0_bands_[b].Evaluate(kappa) : LogBesselI0(kappa);
-}
-
 namespace {
 // A coordinate of the angle of (c, s) on the line: 2 tan(angle / 2) (the angle to third order,
 // one division) up to 120 degrees, the angle beyond. The proposal below needs a deterministic
@@ -485,14 +472,16 @@ inline double LinearAngle(double c, double s) {
 }  // namespace
 
 // Per particle: target k_j cos(x_j - mu_j) + l(x) with l the readings' log-likelihood to second
-// order about xbar. The proposal is one Gaussian shape for all particles, precision
-// P = diag(kbar) + H (kbar: the weighted mean of the conjugate k), about each particle's own mean
-// xbar + P^-1 (k o wrap(mu - xbar) + g). With P = L L^T, L^T (x - mean) is standard normal, so
-// x_j given the later joints has mean c_j = mean_j - sum_{k>j} L_kj e_k / L_jj and precision
-// L_jj^2; it is drawn as vM(L_jj^2, c_j), e_j its deviation in the linear coordinate. Particles
-// 2i and 2i + 1 are antithetic: the second takes the mirror image of the first's von Mises
-// draws, a draw of the same law, so each particle's proposal and weight are as if drawn alone,
-// while the pair's mean deviation cancels to first order (Hammersley and Morton 1956).
+// order about xbar, in the chart l_j = 2 tan((x_j - xbar_j) / 2) (LinearAngle). The proposal is
+// one Gaussian shape for all particles, precision P = diag(kbar) + H (kbar: the weighted mean of
+// the conjugate k), about each particle's own mean P^-1 (k o l(mu) + g): l = mean + L^-T z,
+// z standard normal, P = L L^T, mapped to the torus by x = xbar + 2 atan(l / 2). Its density is
+// exact and needs no trigonometry: N(l; mean, P^-1) prod_j (1 + l_j^2 / 4). A defensive
+// share eps of the draws is uniform on the torus (Hesterberg 1995), so the weights stay bounded
+// where the Gaussian's tails are thinner than the target's. Particles 2i and 2i + 1 are
+// antithetic: the second takes -z (or the mirror image of the uniform draw), a draw of the same
+// law, so each particle's weight is as if drawn alone while the pair's mean deviation cancels
+// to first order (Hammersley and Morton 1956).
 FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
   const int m = nq_;
   const double kv = config_.kappa_v;
@@ -516,9 +505,10 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
       const double zs = kv * s[i] + su;
       const double ki = std::sqrt(zc * zc + zs * zs);
       const bool ok = ki > 1e-300;
+      const double inv = ok ? 1.0 / ki : 0.0;
       k[i] = ok ? ki : 1e-300;
-      c[i] = ok ? zc / ki : 1.0;
-      s[i] = ok ? zs / ki : 0.0;
+      c[i] = ok ? zc * inv : 1.0;
+      s[i] = ok ? zs * inv : 0.0;
       ksum += w[i] * k[i];
     }
     kbar[j] = ksum / wsum;
@@ -551,19 +541,19 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
       L[r * m + a] = v / d;
     }
   }
-  double kappa[kMaxPfJoints];
-  BestFisherEnvelope env[kMaxPfJoints];
-  double log_norm_q = 0.0;  // sum_j log(2 pi I0(kappa_j)) less m log 2 pi
-  for (int j = 0; j < m; ++j) {
-    kappa[j] = L[j * m + j] * L[j * m + j];
-    env[j] = OptimalBestFisherEnvelope(kappa[j]);
-    log_norm_q += LogI0(kappa[j]);
-  }
-  double mean[kMaxPfJoints], e[kMaxPfJoints];
-  UnitAngle draw[kMaxPfJoints];
+  // log N(l; mean, P^-1) = -|z|^2 / 2 + log_norm_gauss; the uniform share's log density.
+  double log_norm_gauss = -0.5 * m * std::log(2.0 * M_PI);
+  for (int j = 0; j < m; ++j) log_norm_gauss += std::log(L[j * m + j]);
+  const double log_gauss_share = std::log1p(-kDefensiveShare);
+  const double log_uniform = std::log(kDefensiveShare) - m * std::log(2.0 * M_PI);
+  // Divisions hoisted out of the particle loop: 1 / L_jj.
+  double inv_diag[kMaxPfJoints];
+  for (int j = 0; j < m; ++j) inv_diag[j] = 1.0 / L[j * m + j];
+  double mean[kMaxPfJoints], e[kMaxPfJoints], z[kMaxPfJoints], ell[kMaxPfJoints];
+  bool uniform = false;
   for (int i = 0; i < n_; ++i) {
     const bool mirror = (i & 1) != 0;
-    // rhs = k o wrap(mu - xbar) + g, then mean := P^-1 rhs (forward then backward substitution).
+    // rhs = k o l(mu) + g, then mean := P^-1 rhs (forward then backward substitution).
     for (int a = 0; a < m; ++a) {
       const size_t ia = static_cast<size_t>(a) * stride_ + i;
       const double delta = LinearAngle(cos_[ia] * cbar[a] + sin_[ia] * sbar[a],
@@ -573,37 +563,58 @@ FLEXBENCH_PARTICLE_LOOP void ParticleFilter::LaplaceMove() {
     for (int a = 0; a < m; ++a) {
       double v = mean[a];
       for (int b = 0; b < a; ++b) v -= L[a * m + b] * mean[b];
-      mean[a] = v / L[a * m + a];
+      mean[a] = v * inv_diag[a];
     }
     for (int a = m - 1; a >= 0; --a) {
       double v = mean[a];
       for (int b = a + 1; b < m; ++b) v -= L[b * m + a] * mean[b];
-      mean[a] = v / L[a * m + a];
+      mean[a] = v * inv_diag[a];
     }
-    double log_target = 0.0, log_q = 0.0;  // log q + log_norm_q + m log 2 pi
-    for (int j = m - 1; j >= 0; --j) {
-      double cj = mean[j];
-      for (int b = j + 1; b < m; ++b) cj -= L[b * m + j] * e[b] / L[j * m + j];
-      if (!mirror) {
-        draw[j] = BestFisherDraw(kappa[j], env[j], rng_);
-      } else {
-        draw[j].s = -draw[j].s;
+    if (!mirror) uniform = Uniform53(rng_) < kDefensiveShare;
+    if (!uniform) {
+      // L^T (l - mean) = z, last joint first.
+      for (int j = m - 1; j >= 0; --j) {
+        z[j] = mirror ? -z[j] : normal_(rng_);
+        double v = z[j];
+        for (int b = j + 1; b < m; ++b) v -= L[b * m + j] * e[b];
+        e[j] = v * inv_diag[j];
+        ell[j] = mean[j] + e[j];
       }
-      const UnitAngle v = draw[j];
-      e[j] = cj - mean[j] + LinearAngle(v.c, v.s);
-      const double a = lin_q_[j] + cj;
-      const double ca = std::cos(a), sa = std::sin(a);
-      const double cx = ca * v.c - sa * v.s, sx = sa * v.c + ca * v.s;  // x = a + the draw
+    } else {
+      // Uniform angles (the mirror: their negatives about xbar), and their z for the density.
+      for (int j = 0; j < m; ++j) {
+        if (!mirror)
+          ell[j] = 2.0 * std::tan(M_PI * (Uniform53(rng_) - 0.5));
+        else
+          ell[j] = -ell[j];
+        e[j] = ell[j] - mean[j];
+      }
+      for (int j = 0; j < m; ++j) {
+        double v = L[j * m + j] * e[j];
+        for (int b = j + 1; b < m; ++b) v += L[b * m + j] * e[b];
+        z[j] = v;
+      }
+    }
+    double log_target = 0.0, zz = 0.0, jacobian = 1.0;
+    for (int j = 0; j < m; ++j) {
+      // x = xbar + 2 atan(l / 2): cos and sin of the offset are rational in h = l / 2.
+      const double h = 0.5 * ell[j], h2 = h * h, inv = 1.0 / (1.0 + h2);
+      const double cd = (1.0 - h2) * inv, sd = 2.0 * h * inv;
+      const double cx = cbar[j] * cd - sbar[j] * sd, sx = sbar[j] * cd + cbar[j] * sd;
       const size_t ij = static_cast<size_t>(j) * stride_ + i;
       log_target += k_[ij] * (cx * cos_[ij] + sx * sin_[ij]);
-      log_q += kappa[j] * v.c;
+      zz += z[j] * z[j];
+      jacobian *= 1.0 + h2;  // dl/dx
       cos_[ij] = cx;
       sin_[ij] = sx;
     }
-    ll_[i] = log_target - log_q;
+    const double log_gauss = log_gauss_share + log_norm_gauss - 0.5 * zz + std::log(jacobian);
+    const double hi = std::max(log_gauss, log_uniform), lo = std::min(log_gauss, log_uniform);
+    ll_[i] = log_target - (hi + std::log1p(std::exp(lo - hi)));
   }
   ComputeKinematics();
-  ApplyLogLikelihood(m * log_norm_conjugate_ + log_norm_q);
+  // The target's normaliser: vM(kappa_v) vM(kappa_w) per joint, 1 / (2 pi)^2 I0 I0.
+  ApplyLogLikelihood(m * (log_norm_conjugate_ - std::log(2.0 * M_PI)));
 }
 
 FLEXBENCH_PARTICLE_LOOP bool ParticleFilter::ApplyLogLikelihood(double constant) {

@@ -92,8 +92,8 @@ struct ParticleFilterConfig {
   ResamplingScheme resampling = ResamplingScheme::kStratified;
   double ess_threshold = 0.5;  // resample when ESS < ess_threshold * N; in (0, 1]
   Proposal proposal = Proposal::kBootstrap;
-  // kLaplace: the joint means from each particle's exact conditional moments (conditional_moments.h)
-  // instead of its own angles; same posterior, less Monte-Carlo noise.
+  // kLaplace: the joint means from each particle's exact conditional moments
+  // (conditional_moments.h) instead of its own angles; same posterior, less Monte-Carlo noise.
   bool rao_blackwell = true;
   FrameId end_effector = -1;  // pose reported by Summary (-1: none)
 };
@@ -247,10 +247,9 @@ class ParticleFilter {
   double H_[kMaxPfJoints * kMaxPfJoints] = {};
   double g_[kMaxPfJoints] = {};
   std::vector<double> k_;  // [nq][stride_]: each particle's conjugate concentrations
-  // log I0 on [kappa_v + kappa_w] * [2^b, 2^(b+1)], b < kLogI0Bands (the proposal's kappas).
-  static constexpr int kLogI0Bands = 12;
-  std::vector<LogBesselI0Interpolant> log_i0_bands_;
-  double LogI0(double kappa) const;
+  // The proposal's Gaussian draws, and the share of its draws that are uniform on the torus.
+  std::normal_distribution<double> normal_;
+  static constexpr double kDefensiveShare = 1.0 / 128.0;
 
   bool pending_move_ = false;
   bool awaiting_first_reading_ = false;  // initial_at_first_reading: centre on the next reading

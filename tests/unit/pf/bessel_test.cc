@@ -115,5 +115,24 @@ TEST(Bessel, InterpolantMatchesLogI0) {
   EXPECT_THROW(LogBesselI0Interpolant(2.0, 1.0), InputError);
 }
 
+// The fast A1 against the standard library's I1 / I0 (an independent implementation) where
+// those do not overflow, and against BesselRatioA1 beyond, on log-spaced points.
+TEST(Bessel, RatioInterpolantMatchesI1OverI0) {
+  const BesselRatioA1Interpolant a1;
+  std::vector<double> xs = {0.0, 1.0, 7.0, 64.0};
+  for (int i = 0; i <= 400; ++i) xs.push_back(std::pow(10.0, -6.0 + 10.0 * i / 400.0));
+  for (double x : xs) {
+    const double expected =
+        x < 600.0 ? (x == 0.0 ? 0.0 : std::cyl_bessel_i(1.0, x) / std::cyl_bessel_i(0.0, x))
+                  : BesselRatioA1(x);
+    EXPECT_NEAR(a1.Evaluate(x), expected, 1e-13) << x;
+    EXPECT_NEAR(a1.Evaluate(x), BesselRatioA1(x), 1e-13) << x;
+  }
+  EXPECT_LT(a1.max_error(), 1e-13);
+  EXPECT_EQ(a1.Evaluate(INFINITY), 1.0);
+  EXPECT_THROW(a1.Evaluate(-1.0), InputError);
+  EXPECT_THROW(a1.Evaluate(NAN), InputError);
+}
+
 }  // namespace
 }  // namespace flexbench::pf

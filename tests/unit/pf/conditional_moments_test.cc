@@ -7,7 +7,6 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/QR>
-
 #include <cmath>
 #include <complex>
 #include <random>
