@@ -32,10 +32,10 @@
 // drawn from a Gaussian approximation of its own target vM(k, mu) * p(readings | x) [PF eq. 23]
 // with the position and Bingham terms linearised once per step at the particles' circular mean
 // through the declared chain's frame Jacobians (Doucet, Godsill, Andrieu 2000, sec. II-D). The
-// Gaussian is drawn joint by joint as von Mises conditionals (last joint first, from the
-// precision's Cholesky factor), whose product density q is exact on the torus, and the particle
-// is weighted vM(k, mu)(x) C / q(x) before the readings' likelihoods are applied, so the
-// posterior is the paper's whatever the linearisation's quality.
+// Gaussian lives in the chart l = 2 tan((x - xbar) / 2), whose density on the torus is exact and
+// rational, with a small uniform share (bounded weights) and antithetic particle pairs; the
+// particle is weighted vM(k, mu)(x) C / q(x) before the readings' likelihoods are applied, so the
+// posterior is the paper's whatever the linearisation's quality (docs/particle_filter.md).
 //
 // Output (Summary): per-joint circular mean [PF eq. 5] (with kLaplace and rao_blackwell, of each
 // particle's exact conditional first moment given its other joints, its parent and the step's

@@ -13,7 +13,7 @@
 //   base_kappa_v: 5
 //   seeds: 3
 //   burn_in_steps: 5
-//   converged_rmse_deg: 0.202   # optional: the N = 65,536 RMSE, a line in the N panel
+//   converged_rmse_deg: 0.159   # optional: the N = 65,536 RMSE, a line in the N panel
 //
 // Metrics (means over seeds; '.' in numbers spelled 'p'): <variant>.particles.<N>.joint_rmse_deg
 // / joint_err_max_deg / ess_mean and <variant>.kappa_v.<k>.{...}; every run also under
@@ -291,6 +291,20 @@ class JskParticleSweepKind : public jsk::SyntheticKind {
     jsk::FitAxes(ax, 0, 0.45);
     ax->x_min = *ax->x_min - 0.3;
     ax->x_max = *ax->x_max + 0.3;
+    if (!ess) {
+      // Errors on a log scale: the proposals and the converged line are decades apart. Room
+      // above the curves for the legend.
+      double lo = converged_rmse_deg_ > 0.0 ? converged_rmse_deg_ : 1e300, hi = 0.0;
+      for (const Curve& c : curves) {
+        for (double v : c.rmse) lo = v > 0.0 ? std::min(lo, v) : lo;
+        for (double v : c.max) hi = std::max(hi, v);
+      }
+      if (hi > 0.0 && lo < hi) {
+        ax->y_log = true;
+        ax->y_min = lo / 2.0;
+        ax->y_max = hi * 30.0;
+      }
+    }
   }
 
   EstimatorSpec Make(size_t variant, double n, double k, const std::string& label) const {
