@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "estimators/pf/bessel.h"
 
@@ -38,6 +39,7 @@ ConditionalMoments::ConditionalMoments(const kinematics::PpoeModel& model,
                                        const std::vector<FrameId>& orientation_frames,
                                        const Mat3& position_info, std::size_t stride)
     : nq_(model.nq()), stride_(stride) {
+  if (nq_ > 32) throw std::invalid_argument("ConditionalMoments: more than 32 joints");
   const double s = position_info(0, 0);
   const bool isotropic =
       (position_info - s * Mat3::Identity()).cwiseAbs().maxCoeff() <= 1e-12 * std::abs(s);
@@ -54,8 +56,6 @@ ConditionalMoments::ConditionalMoments(const kinematics::PpoeModel& model,
   for (int j = 0; j < nq_; ++j) joint_frame_ids_.push_back(model.joint_frame(j));
   joint_frames_ = JointFrames(model, position_frames, orientation_frames);
   const std::size_t total = static_cast<std::size_t>(nq_) * stride_;
-  zc_.assign(total, 0.0);
-  zs_.assign(total, 0.0);
   a_.assign(total, 0.0);
   b_.assign(total, 0.0);
   mc_.assign(total, 0.0);
@@ -75,16 +75,15 @@ void ConditionalMoments::Bind(const BatchKinematics& fk) {
 void ConditionalMoments::Begin(const kinematics::PpoeModel& model, const BatchKinematics& fk,
                                const double* prev_c, const double* prev_s, const double* u,
                                double kappa_v, double kappa_w, int n) {
+  prev_c_ = prev_c;
+  prev_s_ = prev_s;
+  kappa_v_ = kappa_v;
   for (int j = 0; j < nq_; ++j) {
     const std::size_t off = static_cast<std::size_t>(j) * stride_;
-    const double cu = u != nullptr ? kappa_w * std::cos(u[j]) : 0.0;
-    const double su = u != nullptr ? kappa_w * std::sin(u[j]) : 0.0;
-    for (int i = 0; i < n; ++i) {
-      zc_[off + i] = kappa_v * prev_c[off + i] + cu;
-      zs_[off + i] = kappa_v * prev_s[off + i] + su;
-      a_[off + i] = 0.0;
-      b_[off + i] = 0.0;
-    }
+    cu_[j] = u != nullptr ? kappa_w * std::cos(u[j]) : 0.0;
+    su_[j] = u != nullptr ? kappa_w * std::sin(u[j]) : 0.0;
+    std::fill(a_.begin() + off, a_.begin() + off + n, 0.0);
+    std::fill(b_.begin() + off, b_.begin() + off + n, 0.0);
     const int k = joint_output_[j];
     if (k < 0) continue;
     // The joint's axis line in the world: direction R w, through R r + t.
@@ -200,8 +199,8 @@ void ConditionalMoments::Finish(const double* cos, const double* sin, int n) {
     for (int i = 0; i < n; ++i) {
       // a cos(x - x_i) + b sin(x - x_i) = Re(conj((a + i b) e^{i x_i}) e^{i x}).
       const double A = a_[off + i], B = b_[off + i];
-      const double zc = zc_[off + i] + A * c[i] - B * s[i];
-      const double zs = zs_[off + i] + A * s[i] + B * c[i];
+      const double zc = kappa_v_ * prev_c_[off + i] + cu_[j] + A * c[i] - B * s[i];
+      const double zs = kappa_v_ * prev_s_[off + i] + su_[j] + A * s[i] + B * c[i];
       const double kappa = std::sqrt(zc * zc + zs * zs);
       const double scale = kappa > 1e-300 ? a1_.Evaluate(kappa) / kappa : 0.0;
       mc[i] = scale * zc;

@@ -45,8 +45,9 @@ class ConditionalMoments {
   // Whether joint j's conditional is exactly von Mises (see above).
   bool exact(int j) const { return (exact_ >> j) & 1u; }
 
-  // Starts a step: the system term kappa_v e^{i x_prev} for every joint and, when u is given,
-  // the encoder term kappa_w e^{i u}; the joints' axes from `fk`, which holds the particles'
+  // Starts a step: the system term kappa_v e^{i x_prev} for every joint (prev_c and prev_s are
+  // read again by Finish) and, when u is given, the encoder term kappa_w e^{i u}; the joints'
+  // axes from `fk`, which holds the particles'
   // poses of joint_frames() (Bind). Clears the readings' terms.
   void Begin(const kinematics::PpoeModel& model, const BatchKinematics& fk, const double* prev_c,
              const double* prev_s, const double* u, double kappa_v, double kappa_w, int n);
@@ -71,7 +72,12 @@ class ConditionalMoments {
   std::vector<FrameId> joint_frames_;
   std::vector<FrameId> joint_frame_ids_;  // joint_frame(j) of the model, every j
   std::vector<int> joint_output_;         // joint -> fk output of its joint frame (-1: none)
-  std::vector<double> zc_, zs_;           // system + encoder phasors
+  // The step's system and encoder terms: kappa_v e^{i x_prev} (the caller's arrays, which must
+  // outlive Finish) and kappa_w e^{i u} per joint.
+  const double* prev_c_ = nullptr;
+  const double* prev_s_ = nullptr;
+  double kappa_v_ = 0.0;
+  double cu_[32] = {}, su_[32] = {};
   std::vector<double> a_, b_;  // the readings' a cos d + b sin d about the particle's angle
   std::vector<double> mc_, ms_;
   BesselRatioA1Interpolant a1_;

@@ -404,18 +404,23 @@ void ParticleFilter::RaoBlackwellise(const double* u, size_t np, size_t no) {
   for (size_t a = 0; a < np; ++a) {
     if (!kept_positions_[a].applied) continue;
     const KeptPosition& r = kept_positions_[a];
-    for (size_t f = 0; f < config_.position_frames.size(); ++f) {
-      if (config_.position_frames[f] != r.frame) continue;
-      rb_->AddPosition(fk_, static_cast<int>(f), position_outputs_[f], r.p_frame, r.p_base, n_);
+    // The entry UpdatePosition applied (the last one of a frame listed twice).
+    int f = -1;
+    for (size_t b = 0; b < config_.position_frames.size(); ++b) {
+      if (config_.position_frames[b] == r.frame) f = static_cast<int>(b);
     }
+    if (f >= 0) rb_->AddPosition(fk_, f, position_outputs_[f], r.p_frame, r.p_base, n_);
   }
   for (size_t a = 0; a < no; ++a) {
     if (!kept_orientations_[a].applied) continue;
     const KeptOrientation& r = kept_orientations_[a];
-    const Mat3 C = bingham_.RotationForm(r.q_base_frame).C;
-    for (size_t f = 0; f < config_.orientation_frames.size(); ++f) {
-      if (config_.orientation_frames[f] != r.frame) continue;
-      rb_->AddOrientation(fk_, static_cast<int>(f), orientation_outputs_[f], C, n_);
+    int f = -1;
+    for (size_t b = 0; b < config_.orientation_frames.size(); ++b) {
+      if (config_.orientation_frames[b] == r.frame) f = static_cast<int>(b);
+    }
+    if (f >= 0) {
+      rb_->AddOrientation(fk_, f, orientation_outputs_[f], bingham_.RotationForm(r.q_base_frame).C,
+                          n_);
     }
   }
   rb_->Finish(cos_.data(), sin_.data(), n_);

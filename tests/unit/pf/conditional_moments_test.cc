@@ -17,6 +17,7 @@
 #include "estimators/lie/so3.h"
 #include "estimators/pf/batch_kinematics.h"
 #include "estimators/pf/bingham.h"
+#include "estimators/pf/particle_filter.h"
 #include "tests/unit/pf/pf_test_models.h"
 
 namespace flexbench::pf {
@@ -157,6 +158,85 @@ TEST_P(ConditionalMomentsTest, MatchTheNumericalConditionalMoment) {
       EXPECT_NEAR(cm.moment_c(j)[i], m1.real(), 1e-9) << "particle " << i << " joint " << j;
       EXPECT_NEAR(cm.moment_s(j)[i], m1.imag(), 1e-9) << "particle " << i << " joint " << j;
     }
+  }
+}
+
+// The filter's glue: after a step, Summary's joint means are the weighted circular means of each
+// particle's conditional moment, computed here by numerical integration from the particle's own
+// angles, its parent (no resampling: particle i's parent is particle i) and the step's readings
+// (encoders, two orientations, one of them on a joint frame, and the grasp point).
+TEST(ConditionalMoments, FilterMeansAreTheWeightedMomentsOfItsParticles) {
+  const testing::JskLikeArm arm;
+  ParticleFilterConfig c;
+  c.num_particles = 8;
+  c.kappa_0 = 2.0;
+  c.kappa_v = kKappaV;
+  c.kappa_w = kKappaW;
+  c.position_frames = {arm.grasp};
+  c.position_cov = kPosStd * kPosStd * Mat3::Identity();
+  c.orientation_frames = {arm.imu2, arm.finger};
+  c.bingham_lambda = Vec4(-300.0, -300.0, -40.0, 0.0);
+  c.ess_threshold = 1e-9;  // never resample
+  c.proposal = Proposal::kLaplace;
+  ParticleFilter pf(arm.model, c, 7);
+  const Bingham bingham(c.bingham_lambda);
+  Eigen::VectorXd q_true(4), u(4);
+  q_true << 0.3, 0.7, -0.4, 0.2;
+  u << 0.35, 0.62, -0.3, 0.28;
+  kinematics::PpoeData data(arm.model);
+  kinematics::ForwardKinematics(arm.model, data, q_true);
+  const Quat q2(data.T_base_frame[arm.imu2].rotation()),
+      qf(data.T_base_frame[arm.finger].rotation());
+  const Vec3 p = data.T_base_frame[arm.grasp].translation() + Vec3(0.02, -0.01, 0.03);
+  std::vector<Eigen::VectorXd> prev(c.num_particles, Eigen::VectorXd(4));
+  for (int step = 0; step < 2; ++step) {
+    for (int i = 0; i < c.num_particles; ++i) {
+      for (int j = 0; j < 4; ++j) prev[i](j) = pf.Angle(j, i);
+    }
+    pf.Predict();
+    ASSERT_EQ(pf.UpdateReference(u.data(), 4), PfStatus::kAccepted);
+    ASSERT_EQ(pf.UpdateOrientation(arm.imu2, q2), PfStatus::kAccepted);
+    ASSERT_EQ(pf.UpdateOrientation(arm.finger, qf), PfStatus::kAccepted);
+    ASSERT_EQ(pf.UpdatePosition(arm.grasp, Vec3::Zero(), p), PfStatus::kAccepted);
+    pf.CompleteStep();
+  }
+  ASSERT_EQ(pf.resample_count(), 0);
+  const auto log_target = [&](const Eigen::VectorXd& x, const Eigen::VectorXd& parent) {
+    kinematics::ForwardKinematics(arm.model, data, x);
+    double l =
+        -0.5 * (p - data.T_base_frame[arm.grasp].translation()).squaredNorm() / (kPosStd * kPosStd);
+    for (const auto& [frame, q_obs] : {std::pair{arm.imu2, q2}, std::pair{arm.finger, qf}}) {
+      const Quat q_pred(data.T_base_frame[frame].rotation());
+      l += bingham.UnnormalisedLogDensity(Xyzw(q_obs * q_pred.inverse()));
+    }
+    for (int j = 0; j < 4; ++j) {
+      l += kKappaV * std::cos(x(j) - parent(j)) + kKappaW * std::cos(u(j) - x(j));
+    }
+    return l;
+  };
+  constexpr int kNodes = 4096;
+  for (int j = 0; j < 4; ++j) {
+    std::complex<double> sum = 0.0;
+    for (int i = 0; i < c.num_particles; ++i) {
+      Eigen::VectorXd x(4);
+      for (int k = 0; k < 4; ++k) x(k) = pf.Angle(k, i);
+      std::vector<double> logs(kNodes);
+      double mx = -1e300;
+      for (int k = 0; k < kNodes; ++k) {
+        x(j) = -M_PI + 2.0 * M_PI * k / kNodes;
+        logs[k] = log_target(x, prev[i]);
+        mx = std::max(mx, logs[k]);
+      }
+      std::complex<double> m1 = 0.0;
+      double z = 0.0;
+      for (int k = 0; k < kNodes; ++k) {
+        const double w = std::exp(logs[k] - mx);
+        z += w;
+        m1 += w * std::polar(1.0, -M_PI + 2.0 * M_PI * k / kNodes);
+      }
+      sum += pf.Weight(i) * m1 / z;
+    }
+    EXPECT_NEAR(pf.Summary().mean[j], std::arg(sum), 1e-8) << "joint " << j;
   }
 }
 
