@@ -196,6 +196,9 @@ CLI::App* AddSweep(CLI::App& app, Options& o) {
   sweep_cmd->add_option("-j,--jobs", sw.jobs, "local worker processes (default: cores)");
   sweep_cmd->add_option("--executor", sw.executor, "local (default) or slurm");
   sweep_cmd->add_option("--shard", sw.shard, "run only shard i/n of the runs, no collect");
+  sweep_cmd->add_option("--run-files", sw.run_files,
+                        "all (default: each run keeps its CSVs and trajectories) or summary "
+                        "(summary.json and report.html only; the aggregate is the same)");
   sweep_cmd->add_flag("--collect", sw.collect,
                       "merge the runs in --out into sweep.csv and aggregate.json, gate");
   sweep_cmd->add_option("--tasks", sw.slurm.tasks,

@@ -648,6 +648,28 @@ void OutputDir::RemoveImages() {
   for (const fs::path& p : images) fs::remove(p, ec);
 }
 
+void OutputDir::RemoveDataFiles() {
+  std::vector<fs::path> files, dirs;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(tmp_, ec); !ec && it != fs::end(it);
+       it.increment(ec)) {
+    std::error_code type_ec;
+    if (it->is_directory(type_ec)) {
+      dirs.push_back(it->path());
+    } else if (it->path().filename() != kTemporaryMarker) {
+      files.push_back(it->path());
+    }
+  }
+  for (const fs::path& p : files) fs::remove(p, ec);
+  // Deepest first; frames/ stays, as the folder was made.
+  std::sort(dirs.begin(), dirs.end(), [](const fs::path& a, const fs::path& b) {
+    return a.native().size() > b.native().size();
+  });
+  for (const fs::path& d : dirs) {
+    if (d != FramesDir() && fs::is_empty(d, ec)) fs::remove(d, ec);
+  }
+}
+
 void OutputDir::Commit() {
   CheckReplaceable(final_, force_, inputs_);
   // Fixed bytes: two runs of the same command stay identical, file for file.

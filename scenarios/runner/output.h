@@ -55,6 +55,9 @@ class OutputDir {
   std::filesystem::path FramesDir() const { return tmp_ / "frames"; }
   // Removes every PNG written so far (--frames none): one place, whichever kind drew them.
   void RemoveImages();
+  // Removes every file written so far, and the folders left empty (a sweep's runs with
+  // --run-files summary keep only the summary.json and report.html written after this).
+  void RemoveDataFiles();
 
   // Replaces `final_dir` with the temporary folder (checked again, with the inputs read since:
   // refused when something that is not a result appeared there meanwhile). A signal that

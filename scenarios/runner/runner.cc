@@ -228,6 +228,7 @@ int RunPrepared(PreparedRun prepared, const RunOptions& options, const std::stri
   kind->Run(ctx);
 
   if (options.frames == FrameOutput::kNone) out.RemoveImages();
+  if (!options.data_files) out.RemoveDataFiles();
   CheckMetricsFinite(summary["metrics"], "");
   CheckMetricsFinite(summary["estimators"], "estimators");
   CheckGateMetricsExist(gates, summary);

@@ -34,6 +34,8 @@ struct RunOptions {
   std::string export_log;
   // --frames: which images the run writes (default: the key frames and every figure).
   FrameOutput frames = FrameOutput::kKey;
+  // false: the run keeps only its summary.json and report.html (a sweep's --run-files summary).
+  bool data_files = true;
   // The command line as typed (shell-quoted), recorded in summary.json and the report; empty
   // (a sweep's run): the equivalent `flexbench run` line is recorded.
   std::string command;

@@ -50,6 +50,7 @@ std::string LastLine(const fs::path& log) {
   o.out_dir = (out / run.dir).string();
   o.seed = run.seed;
   o.frames = spec.frames;
+  o.data_files = spec.run_data_files;
   o.set = spec.set;
   o.set.insert(o.set.end(), point.set.begin(), point.set.end());
   int rc = RunScenario(o);

@@ -218,7 +218,8 @@ std::string SlurmJobScript(const SweepSpec& spec, const fs::path& out, const Slu
   if (!o.mem.empty()) job << "#SBATCH --mem=" << ShellQuote(o.mem) << "\n";
   job << ShellQuote(exe) << " sweep "
       << ShellQuote(fs::absolute(spec.file).lexically_normal().string()) << " --out "
-      << ShellQuote(abs_out.string()) << " --shard \"$SLURM_ARRAY_TASK_ID/" << n << "\" -j 1\n"
+      << ShellQuote(abs_out.string()) << (spec.run_data_files ? "" : " --run-files summary")
+      << " --shard \"$SLURM_ARRAY_TASK_ID/" << n << "\" -j 1\n"
       << "rc=$?\n"
       << "echo $rc > " << ShellQuote((dir / "task_").string()) << "\"$SLURM_ARRAY_TASK_ID"
       << ".exit\"\n"

@@ -204,7 +204,8 @@ int SweepCommand(const SweepCliOptions& o) {
     int shard_index = 0, shard_count = 0;
     if (!o.shard.empty()) ParseShard(o.shard, &shard_index, &shard_count);
     if (o.executor == "slurm") CheckSlurmClients();
-    const SweepSpec spec = LoadSweep(o.sweep_path);
+    SweepSpec spec = LoadSweep(o.sweep_path);
+    if (!o.run_files.empty()) spec.run_data_files = ParseRunFiles(o.run_files, "--run-files");
     const std::vector<SweepPoint> points = ExpandPoints(spec);
     const std::vector<SweepRun> runs = ExpandRuns(spec, points);
     const fs::path out =

@@ -12,8 +12,9 @@ struct SweepCliOptions {
   std::string out_dir;  // default: out/sweeps/<sweep name>
   int jobs = 0;         // local workers; 0: the number of cores
   std::string executor = "local";
-  std::string shard;     // "i/n": run only shard i of n (what a Slurm task does), no collect
-  bool collect = false;  // only merge the runs already in the folder
+  std::string shard;      // "i/n": run only shard i of n (what a Slurm task does), no collect
+  std::string run_files;  // --run-files all|summary (empty: the sweep file's run_files)
+  bool collect = false;   // only merge the runs already in the folder
   SlurmOptions slurm;
   std::string command;  // the command line as typed: recorded beside aggregate.json
 };

@@ -220,6 +220,12 @@ Statistic ParseStatistic(const std::string& text, const std::string& where) {
   return s;
 }
 
+bool ParseRunFiles(const std::string& text, const std::string& option) {
+  if (text == "all") return true;
+  if (text == "summary") return false;
+  throw InputError(option + " '" + CapForMessage(text) + "': expected all or summary");
+}
+
 SweepSpec LoadSweep(const std::string& path) {
   const ConfigNode root = ConfigNode::LoadFile(path);
   SweepSpec spec;
@@ -234,6 +240,13 @@ SweepSpec LoadSweep(const std::string& path) {
   if (const auto plot = root.Optional("plot")) ParsePlot(*plot, &spec);
   if (const auto b = root.Optional("bootstrap_resamples")) {
     spec.bootstrap_resamples = ParseBootstrapResamples(*b);
+  }
+  if (const auto f = root.Optional("run_files")) {
+    try {
+      spec.run_data_files = ParseRunFiles(f->AsString(), "run_files");
+    } catch (const InputError& e) {
+      f->Fail(e.what());
+    }
   }
   if (const auto f = root.Optional("frames")) {
     try {

@@ -80,10 +80,16 @@ struct SweepSpec {
   int bootstrap_resamples = 2000;
   // Images each run writes (`frames:`; default none: a sweep keeps its runs' numbers).
   FrameOutput frames = FrameOutput::kNone;
+  // Files each run keeps (`run_files:` all, or summary: summary.json and report.html only;
+  // --run-files overrides it). The aggregate is made from the summaries either way.
+  bool run_data_files = true;
 };
 
 // Reads and checks a sweep file (not the scenario); throws InputError naming file and line.
 SweepSpec LoadSweep(const std::string& path);
+
+// "all" (true) or "summary" (false); anything else is InputError naming `option`.
+bool ParseRunFiles(const std::string& text, const std::string& option);
 
 // Parses STAT(ARG); throws InputError "<where>: ..." when malformed.
 Statistic ParseStatistic(const std::string& text, const std::string& where);

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -101,6 +102,48 @@ TEST(SweepCli, LocalSweepIsDeterministicResumableAndIndependentOfWorkers) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(ReadFile(c / "sweep.csv"), csv);
   EXPECT_EQ(ReadFile(c / "aggregate.json"), agg);
+}
+
+// --run-files summary (or the file's run_files: summary): each run keeps its summary.json and
+// report.html only, and the sweep's table, aggregate and figure are the same bytes.
+TEST(SweepCli, RunFilesSummaryKeepsTheSameAggregate) {
+  TempDir tmp;
+  const fs::path file = tmp.path() / "s.yaml";
+  WriteFile(file, SweepYaml("plot: {metrics: [estimators.ppoe_ekf.metrics.pos_err_final_m]}\n"));
+  CommandResult r = Sweep(file, tmp.path() / "all", "-j 2");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = Sweep(file, tmp.path() / "small", "-j 2 --run-files summary");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* f : {"sweep.csv", "aggregate.json", "sweep.png"}) {
+    EXPECT_EQ(ReadFile(tmp.path() / "small" / f), ReadFile(tmp.path() / "all" / f)) << f;
+  }
+  const auto files = [](const fs::path& dir) {
+    std::set<std::string> out;
+    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+      if (e.is_regular_file()) out.insert(fs::relative(e.path(), dir).string());
+    }
+    return out;
+  };
+  const fs::path run = fs::path("runs") / "distance_std_m_0.002" / "seed_3";
+  const std::set<std::string> kept = files(tmp.path() / "small" / run);
+  EXPECT_EQ(kept, (std::set<std::string>{"summary.json", "report.html", "run.key",
+                                         scenarios::kResultMarker}));
+  EXPECT_GT(files(tmp.path() / "all" / run).size(), kept.size() + 2);
+  EXPECT_EQ(Json::parse(ReadFile(tmp.path() / "small" / run / "summary.json"))["estimators"],
+            Json::parse(ReadFile(tmp.path() / "all" / run / "summary.json"))["estimators"]);
+
+  WriteFile(file, SweepYaml("run_files: summary\n"));
+  r = Sweep(file, tmp.path() / "file", "-j 2");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(files(tmp.path() / "file" / run), kept);
+  WriteFile(file, SweepYaml("run_files: some\n"));
+  r = Sweep(file, tmp.path() / "bad", "-j 2");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("run_files 'some': expected all or summary"), std::string::npos) << r.err;
+  WriteFile(file, SweepYaml());
+  r = Sweep(file, tmp.path() / "bad", "--run-files most");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--run-files 'most'"), std::string::npos) << r.err;
 }
 
 // A run that fails inside a sweep (here: its output folder is blocked by a file, exit 2 from
