@@ -2,7 +2,7 @@
 # The main job: sets up, builds and runs every scenario in scenarios/ with its gates, then every
 # sweep at the top of scenarios/sweeps/ (not its subfolders: converged/), writing
 # results/<scenario>/{summary.json, report.html, *.csv, frames/*.png, log.txt} and
-# results/sweeps/<sweep>/.
+# results/sweeps/<sweep>/ (each run's summary.json and report.html: --run-files summary).
 # Prints one line per scenario as it ends (name, gates passed of total, time, folder) and a
 # table at the end (`flexbench summary`); each run's full output is its folder's log.txt.
 # Usage: scripts/run_all.sh [--summary | --verbose] [--no-build] [--only GLOB] [output folder]
@@ -116,8 +116,10 @@ for sweep in scenarios/sweeps/*.yaml; do
   [[ $name == $only ]] || continue
   mkdir -p "$out/sweeps"
   rm -rf "${out:?}/sweeps/$name"
+  # Each run keeps its summary.json and report.html; the sweep's table, aggregate and figures are
+  # the same as with every run's CSVs and trajectories (`flexbench sweep` alone keeps those).
   run_one "sweep_$name" "$out/sweeps/$name" "$bin" sweep "$sweep" \
-    --out "$out/sweeps/$name" -j "$(nproc 2>/dev/null || echo 2)"
+    --out "$out/sweeps/$name" -j "$(nproc 2>/dev/null || echo 2)" --run-files summary
 done
 
 echo
