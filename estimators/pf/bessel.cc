@@ -155,51 +155,6 @@ void LogBesselI0Interpolant::AddTo(const double* x, double* acc, int n) const {
   }
 }
 
-namespace {
-// Chebyshev coefficients of f on [a, b] from its values at the n + 1 Chebyshev (Gauss) nodes, for
-// n = 8, 16, 32, 64 until the largest error over 2001 points is below 1e-14 * max(1, |f|);
-// `evaluate(x)` evaluates the series with the coefficients written so far. Returns whether the
-// tolerance was reached; *degree and *max_error describe the last try.
-template <class F, class Eval>
-bool FitChebyshev(const F& f, double a, double b, double* coef, int* degree, double* max_error,
-                  const Eval& evaluate) {
-  for (int n = 8; n <= 64; n *= 2) {
-    const int m = n + 1;
-    double v[65];
-    for (int j = 0; j < m; ++j) {
-      const double t = std::cos(M_PI * (j + 0.5) / m);
-      v[j] = f(0.5 * (a + b) + 0.5 * (b - a) * t);
-    }
-    for (int k = 0; k < m; ++k) {
-      double sum = 0.0;
-      for (int j = 0; j < m; ++j) sum += v[j] * std::cos(M_PI * k * (j + 0.5) / m);
-      coef[k] = (k == 0 ? 1.0 : 2.0) * sum / m;
-    }
-    *degree = n;
-    double worst = 0.0;
-    for (int i = 0; i <= 2000; ++i) {
-      const double x = a + (b - a) * i / 2000.0;
-      const double exact = f(x);
-      worst = std::max(worst, std::abs(evaluate(x) - exact) / std::max(1.0, std::abs(exact)));
-    }
-    *max_error = worst;
-    if (worst <= 1e-14) return true;
-  }
-  return false;
-}
-
-double Clenshaw(const double* coef, int degree, double t) {
-  const double t2 = 2.0 * t;
-  double b1 = 0.0, b2 = 0.0;
-  for (int k = degree; k >= 1; --k) {
-    const double b0 = coef[k] + t2 * b1 - b2;
-    b2 = b1;
-    b1 = b0;
-  }
-  return coef[0] + t * b1 - b2;
-}
-}  // namespace
-
 LogBesselI0Interpolant::LogBesselI0Interpolant(double a, double b) : a_(a), b_(b) {
   if (!(a >= 0.0) || !(b > a) || !std::isfinite(b)) {
     std::ostringstream msg;
@@ -207,9 +162,31 @@ LogBesselI0Interpolant::LogBesselI0Interpolant(double a, double b) : a_(a), b_(b
     throw InputError(msg.str());
   }
   inv_half_width_ = 2.0 / (b - a);
-  interpolated_ = true;  // Evaluate interpolates while the fit is checked
-  interpolated_ = FitChebyshev([](double x) { return LogBesselI0(x); }, a, b, coef_, &degree_,
-                               &max_error_, [this](double x) { return Evaluate(x); });
+  for (int n = 8; n <= 64; n *= 2) {
+    // Chebyshev coefficients from the values at the n + 1 Chebyshev (Gauss) nodes.
+    const int m = n + 1;
+    double f[65];
+    for (int j = 0; j < m; ++j) {
+      const double t = std::cos(M_PI * (j + 0.5) / m);
+      f[j] = LogBesselI0(0.5 * (a + b) + 0.5 * (b - a) * t);
+    }
+    for (int k = 0; k < m; ++k) {
+      double sum = 0.0;
+      for (int j = 0; j < m; ++j) sum += f[j] * std::cos(M_PI * k * (j + 0.5) / m);
+      coef_[k] = (k == 0 ? 1.0 : 2.0) * sum / m;
+    }
+    degree_ = n;
+    interpolated_ = true;
+    double worst = 0.0;
+    for (int i = 0; i <= 2000; ++i) {
+      const double x = a + (b - a) * i / 2000.0;
+      const double exact = LogBesselI0(x);
+      worst = std::max(worst, std::abs(Evaluate(x) - exact) / std::max(1.0, std::abs(exact)));
+    }
+    max_error_ = worst;
+    if (worst <= 1e-14) return;
+  }
+  interpolated_ = false;  // not accurate enough: Evaluate uses LogBesselI0
 }
 
 BesselRatioA1Interpolant::BesselRatioA1Interpolant() {
